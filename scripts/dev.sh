@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Set up a local virtual environment (.venv) and run one job in it.
+#
+#   bash scripts/dev.sh run     # set-up, then the main job
+#   bash scripts/dev.sh test    # set-up, then the test suite
+#   bash scripts/dev.sh bench   # set-up, then the benchmarks (they print figures)
+#
+# Needs only Python >= 3.11 with venv (Debian/Ubuntu: python3 python3-venv). PYTHON picks
+# the interpreter (default python3). The set-up is skipped when nothing it depends on
+# changed since the last run.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+job=${1:-}
+case "$job" in
+  run|test|bench) ;;
+  *) echo "usage: bash scripts/dev.sh run|test|bench" >&2; exit 2 ;;
+esac
+shift
+
+PYTHON=${PYTHON:-python3}
+VENV=.venv
+
+setup() {
+  if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+    echo "dev.sh: Python >= 3.11 is required ($PYTHON is $("$PYTHON" -V 2>&1))" >&2
+    exit 2
+  fi
+  if [ ! -x "$VENV/bin/python" ]; then
+    "$PYTHON" -m venv "$VENV"
+  fi
+  local want
+  want=$(cat scripts/requirements.txt scripts/requirements-test.txt setup.py setup.cfg package.xml \
+         | "$VENV/bin/python" -c 'import hashlib,sys; print(hashlib.sha256(sys.stdin.buffer.read()).hexdigest())')
+  if [ "$(cat "$VENV/.wmm-setup" 2>/dev/null)" != "$want" ]; then
+    "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check \
+      -r scripts/requirements.txt -r scripts/requirements-test.txt
+    "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps -e .
+    echo "$want" > "$VENV/.wmm-setup"
+  fi
+}
+
+setup
+case "$job" in
+  run)   exec "$VENV/bin/python" -m wmm_control.cli.model_info "$@" ;;
+  test)  exec "$VENV/bin/python" -m pytest test -q "$@" ;;
+  bench) for b in benchmarks/bench_*.py; do echo "== $b"; "$VENV/bin/python" "$b"; done ;;
+esac

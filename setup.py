@@ -1,0 +1,42 @@
+"""ament_python build of wmm_control (colcon build, or pip install)."""
+
+from pathlib import Path
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'wmm_control'
+HERE = Path(__file__).resolve().parent
+
+
+def config_data_files():
+    """Everything under config/ goes to share/wmm_control/config/, folder by folder."""
+    entries = {}
+    for path in sorted((HERE / 'config').rglob('*')):
+        if path.is_file():
+            rel = path.relative_to(HERE)
+            entries.setdefault(str(Path('share') / PACKAGE / rel.parent), []).append(str(rel))
+    return sorted(entries.items())
+
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(include=['wmm_control', 'wmm_control.*', 'sim_bridge', 'sim_bridge.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        *config_data_files(),
+    ],
+    install_requires=['setuptools', 'numpy', 'pyyaml'],
+    zip_safe=True,
+    maintainer='wmm_control maintainers',
+    maintainer_email='maintainers@wmm-control.dev',
+    description='Whole-body motion control of wheeled mobile manipulators.',
+    license='Apache-2.0',
+    extras_require={'test': ['pytest', 'hypothesis']},
+    entry_points={
+        'console_scripts': [
+            'wmm_model = wmm_control.cli.model_info:main',
+        ],
+    },
+)

@@ -1,0 +1,21 @@
+"""Shared fixtures: one kinematic model per robot, built once per session."""
+
+import pytest
+
+from wmm_control.kinematics import KinematicModel
+
+
+@pytest.fixture(scope='session', params=['steerable', 'mecanum'])
+def model(request):
+    """A KinematicModel of each robot (the test runs once per robot)."""
+    return KinematicModel(request.param)
+
+
+@pytest.fixture(scope='session')
+def steerable_model():
+    return KinematicModel('steerable')
+
+
+@pytest.fixture(scope='session')
+def mecanum_model():
+    return KinematicModel('mecanum')

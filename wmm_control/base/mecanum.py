@@ -1,0 +1,78 @@
+"""Mecanum base kinematics (Xing et al., eq 16).
+
+Wheel order ``[fl, fr, rl, rr]`` (Xing's ``[fl, fr, bl, br]``). With wheel radius ``R``,
+half wheelbase ``d1`` and half track ``d2``, the base-frame twist is ``J_V ω_w`` with::
+
+    J_V = R/4 [[   1,    1,    1,    1],
+               [  -1,    1,    1,   -1],
+               [-1/k,  1/k, -1/k,  1/k]],   k = d1 + d2
+
+and the world-frame rate of (x, y, θ) is ``J_I(θ) J_V ω_w`` (eq 16, ``P = J_I J_V``).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wmm_control.checks import as_finite_vector
+from wmm_control.errors import ConfigError
+
+__all__ = ['MecanumKinematics']
+
+
+@dataclass(frozen=True)
+class MecanumKinematics:
+    """Eq (16) of Xing et al. and its exact inverse.
+
+    Attributes:
+        wheel_radius: R [m].
+        d1: half wheelbase, along x [m].
+        d2: half track, along y [m].
+    """
+
+    wheel_radius: float
+    d1: float
+    d2: float
+
+    def __post_init__(self):
+        for name in ('wheel_radius', 'd1', 'd2'):
+            val = getattr(self, name)
+            if not (np.isfinite(val) and val > 0):
+                raise ConfigError(f'{name} must be finite and > 0, got {val}')
+        k = self.d1 + self.d2
+        jv = self.wheel_radius / 4.0 * np.array([
+            [1.0, 1.0, 1.0, 1.0],
+            [-1.0, 1.0, 1.0, -1.0],
+            [-1.0 / k, 1.0 / k, -1.0 / k, 1.0 / k],
+        ])
+        object.__setattr__(self, '_jv', jv)
+        # J_V has full row rank; its right inverse is exact: J_V @ J_V⁺ = I₃.
+        object.__setattr__(self, '_jv_pinv', np.linalg.pinv(jv))
+
+    @classmethod
+    def from_config(cls, mecanum_config):
+        """Build from a :class:`wmm_control.robot_config.MecanumConfig`."""
+        return cls(mecanum_config.wheel_radius, mecanum_config.d1, mecanum_config.d2)
+
+    @property
+    def jv(self):
+        """J_V. Shape (3, 4)."""
+        return self._jv.copy()
+
+    def twist_from_wheels(self, wheel_rates):
+        """Base-frame twist (vx, vy, ω) from wheel rates [rad/s]. Shape (3,)."""
+        return self._jv @ as_finite_vector(wheel_rates, 4, 'wheel_rates')
+
+    def world_rates(self, theta, wheel_rates):
+        """World-frame (ẋ, ẏ, θ̇) = J_I(θ) J_V ω_w (eq 16). Shape (3,)."""
+        c, s = np.cos(theta), np.sin(theta)
+        vx, vy, w = self.twist_from_wheels(wheel_rates)
+        return np.array([c * vx - s * vy, s * vx + c * vy, w])
+
+    def wheel_rates(self, twist):
+        """Wheel rates [rad/s] that realise a base-frame twist exactly. Shape (4,).
+
+        The inverse is ``(1/R) [[1, -1, -k], [1, 1, k], [1, 1, -k], [1, -1, k]] ξ̇``, the
+        minimum-norm solution of ``J_V ω_w = ξ̇``.
+        """
+        return self._jv_pinv @ as_finite_vector(twist, 3, 'twist')

@@ -1,0 +1,36 @@
+"""Input validation helpers shared by the core (shape and finiteness checks)."""
+
+import numpy as np
+
+from wmm_control.errors import NonFiniteError, ShapeError
+
+__all__ = ['as_vector', 'as_finite_vector']
+
+
+def as_vector(value, size, name):
+    """Return ``value`` as a float64 vector of length ``size``.
+
+    Raises:
+        ShapeError: if ``value`` does not hold exactly ``size`` numbers.
+    """
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ShapeError(f'{name}: expected {size} numbers, got {value!r}') from exc
+    if arr.shape != (size,):
+        raise ShapeError(f'{name}: expected shape ({size},), got {arr.shape}')
+    return arr
+
+
+def as_finite_vector(value, size, name):
+    """Like :func:`as_vector`, and also reject NaN and infinity.
+
+    Raises:
+        ShapeError: wrong length.
+        NonFiniteError: any entry is NaN or infinite.
+    """
+    arr = as_vector(value, size, name)
+    if not np.all(np.isfinite(arr)):
+        bad = np.flatnonzero(~np.isfinite(arr)).tolist()
+        raise NonFiniteError(f'{name}: non-finite entries at indices {bad}: {arr.tolist()}')
+    return arr

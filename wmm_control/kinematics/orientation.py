@@ -1,0 +1,97 @@
+"""Orientation utilities: RPY (ZYX Euler) angles, Sorour's Ω_RPY, pose errors.
+
+RPY convention (Sorour §II-A): θ = [γ, β, α] = [roll, pitch, yaw] with
+``R = Rz(α) Ry(β) Rx(γ)``.
+"""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+from wmm_control.checks import as_finite_vector
+
+__all__ = [
+    'wrap_angle', 'rpy_from_matrix', 'matrix_from_rpy', 'omega_rpy', 'rpy_rate_map',
+    'pose_error_rpy', 'pose_error_log',
+]
+
+
+def wrap_angle(angle):
+    """Wrap angles [rad] to the interval (−π, π]. Works on scalars and arrays."""
+    wrapped = np.remainder(np.asarray(angle, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
+    wrapped = np.where(wrapped == -np.pi, np.pi, wrapped)
+    return float(wrapped) if np.ndim(wrapped) == 0 else wrapped
+
+
+def rpy_from_matrix(rot):
+    """RPY angles [roll, pitch, yaw] of a rotation matrix (ZYX Euler). Shape (3,).
+
+    Pitch is in [−π/2, π/2]; at the singularity (|pitch| = π/2) roll is set to 0.
+    """
+    r20 = float(rot[2, 0])
+    pitch = math.asin(min(1.0, max(-1.0, -r20)))
+    if abs(r20) > 1.0 - 1e-12:
+        return np.array([0.0, pitch, math.atan2(-float(rot[0, 1]), float(rot[1, 1]))])
+    return np.array([math.atan2(float(rot[2, 1]), float(rot[2, 2])), pitch,
+                     math.atan2(float(rot[1, 0]), float(rot[0, 0]))])
+
+
+def matrix_from_rpy(rpy):
+    """Rotation matrix ``Rz(yaw) Ry(pitch) Rx(roll)`` from RPY angles. Shape (3, 3)."""
+    roll, pitch, yaw = as_finite_vector(rpy, 3, 'rpy')
+    return pin.rpy.rpyToMatrix(roll, pitch, yaw)
+
+
+def omega_rpy(rpy):
+    """Sorour's Ω_RPY: maps RPY rates [γ̇, β̇, α̇] to the angular velocity ω. Shape (3, 3).
+
+    ``det Ω = cos β``: singular at pitch ±π/2.
+    """
+    _, beta, alpha = rpy
+    ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
+    return np.array([[ca * cb, -sa, 0.0], [sa * cb, ca, 0.0], [-sb, 0.0, 1.0]])
+
+
+def rpy_rate_map(rpy, damping=1e-6):
+    """Map from a twist (v, ω) to pose rates (v, θ̇): blockdiag(I₃, Ω⁻¹). Shape (6, 6).
+
+    Closed form of Ω⁻¹ with the one singular factor 1/cos β replaced by the damped
+    ``cos β / (cos² β + ρ²)``, so the map stays finite at the pitch singularity; with the
+    default ρ = 1e-6 it equals the exact inverse to about 1e-12 away from it.
+    """
+    _, beta, alpha = rpy
+    ca, sa, cb, sb = math.cos(alpha), math.sin(alpha), math.cos(beta), math.sin(beta)
+    inv_cb = cb / (cb * cb + damping * damping)
+    out = np.eye(6)
+    out[3, 3], out[3, 4] = ca * inv_cb, sa * inv_cb
+    out[4, 3], out[4, 4] = -sa, ca
+    out[5, 3], out[5, 4] = ca * sb * inv_cb, sa * sb * inv_cb
+    return out
+
+
+def pose_error_rpy(desired, current):
+    """Sorour eq (12) pose error ``e_p = p* − p`` with wrapped RPY differences. Shape (6,).
+
+    Args:
+        desired: [x, y, z, roll, pitch, yaw] [m, rad]. Shape (6,).
+        current: same layout. Shape (6,).
+    """
+    d = as_finite_vector(desired, 6, 'desired pose')
+    c = as_finite_vector(current, 6, 'current pose')
+    err = d - c
+    err[3:] = wrap_angle(err[3:])
+    return err
+
+
+def pose_error_log(desired_pos, desired_rot, current_pos, current_rot):
+    """Pose error with an SO(3) log-map orientation part: ``[p* − p; log(R* Rᵀ)]``. Shape (6,).
+
+    The rotation part is the world-frame rotation vector that takes the current
+    orientation to the desired one; it has no singularity short of a half turn.
+    """
+    err = np.empty(6)
+    err[:3] = as_finite_vector(desired_pos, 3, 'desired position') - as_finite_vector(
+        current_pos, 3, 'current position')
+    err[3:] = pin.log3(np.asarray(desired_rot, dtype=float) @ np.asarray(current_rot, dtype=float).T)
+    return err

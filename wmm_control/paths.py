@@ -1,0 +1,43 @@
+"""Locate the package's data files (robot descriptions and parameter files).
+
+An installed package (``colcon build``, ``pip install``) keeps them under
+``<prefix>/share/wmm_control``; a source checkout keeps them next to the code.
+The installed share directory wins when it exists.
+"""
+
+import os
+import sys
+from pathlib import Path
+
+PACKAGE = 'wmm_control'
+_SOURCE_ROOT = Path(__file__).resolve().parent.parent
+
+__all__ = ['share_dir', 'config_path']
+
+
+def _candidates():
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            yield Path(prefix) / 'share' / PACKAGE
+    yield Path(sys.prefix) / 'share' / PACKAGE
+    # colcon install layout: <prefix>/lib/pythonX.Y/site-packages/wmm_control
+    yield _SOURCE_ROOT.parent.parent.parent / 'share' / PACKAGE
+
+
+def share_dir():
+    """Return the directory that holds ``config/`` for this package.
+
+    The source tree is used when it has a ``config`` folder (a checkout or an
+    editable install); otherwise the first installed share directory found.
+    """
+    if (_SOURCE_ROOT / 'config').is_dir():
+        return _SOURCE_ROOT
+    for cand in _candidates():
+        if (cand / 'config').is_dir():
+            return cand
+    return _SOURCE_ROOT
+
+
+def config_path(*parts):
+    """Path of a file under ``config/``, e.g. ``config_path('robots', 'steerable.yaml')``."""
+    return share_dir().joinpath('config', *parts)
