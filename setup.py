@@ -37,6 +37,7 @@ setup(
     entry_points={
         'console_scripts': [
             'wmm_model = wmm_control.cli.model_info:main',
+            'wmm_sim = sim_bridge.node:main',
         ],
     },
 )

@@ -15,6 +15,7 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 
 from wmm_control.errors import ConfigError, WmmError
@@ -94,7 +95,13 @@ def declare_parameters(node, yaml_name, specs):
                 and isinstance(spec.lo, float):
             default = float(default)
         try:
-            value = node.declare_parameter(spec.name, default, _descriptor(spec, default)).value
+            if isinstance(default, list) and not default:
+                # rclpy cannot infer a type from []: an empty default is an optional double array.
+                value = node.declare_parameter(
+                    spec.name, Parameter.Type.DOUBLE_ARRAY, _descriptor(spec, default)).value
+                value = [] if value is None else list(value)
+            else:
+                value = node.declare_parameter(spec.name, default, _descriptor(spec, default)).value
         except (rclpy.exceptions.InvalidParameterValueException,
                 rclpy.exceptions.InvalidParameterTypeException) as exc:
             raise ConfigError(f'parameter {spec.name}: {exc}') from exc
@@ -189,7 +196,16 @@ def diagnostic_array(stamp, statuses):
     return msg
 
 
-def run_node(node_factory, args=None, executor_factory=SingleThreadedExecutor):
+def default_executor():
+    """rclpy's events executor (several times faster per message in Jazzy), else single-threaded."""
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:
+        return SingleThreadedExecutor()
+    return EventsExecutor()
+
+
+def run_node(node_factory, args=None, executor_factory=default_executor):
     """Standard main(): init, build the node, spin until Ctrl-C or shutdown, clean up.
 
     A configuration error at start-up is logged and gives exit code 2.
@@ -200,7 +216,10 @@ def run_node(node_factory, args=None, executor_factory=SingleThreadedExecutor):
         node = node_factory()
         executor = executor_factory()
         executor.add_node(node)
-        executor.spin()
+        # spin_once in a loop rather than spin(): the events executor's spin() does not
+        # return on SIGINT, while this loop sees the shutdown that rclpy's handler triggers.
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except WmmError as exc:

@@ -1,0 +1,15 @@
+"""Simulator bridge: a ROS-free PyBullet world (:class:`SimWorld`), its slip model and renderer.
+
+The ROS node that wraps the world lives in ``sim_bridge/node.py`` and is not imported here,
+so this package needs no rclpy.
+"""
+
+from sim_bridge.render import VIEWS, render_png, render_rgb
+from sim_bridge.slip import SlipModel, SlipParams
+from sim_bridge.world import BASE_MODES, CommandResult, SimWorld, se2_step
+
+__all__ = [
+    'SimWorld', 'CommandResult', 'BASE_MODES', 'se2_step',
+    'SlipParams', 'SlipModel',
+    'render_png', 'render_rgb', 'VIEWS',
+]

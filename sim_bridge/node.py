@@ -1,0 +1,259 @@
+"""``wmm_sim``: the PyBullet simulator node standing in for the robot hardware.
+
+Subscribes (``std_msgs/Float64MultiArray``, ros2_control JointGroupVelocityController style,
+joint order = the robot YAML's):
+  ``/arm_controller/commands`` (7); robot A ``/steer_controller/commands`` and
+  ``/drive_controller/commands`` (4 each); robot B ``/wheel_controller/commands`` (4).
+Publishes, every period:
+  ``/joint_states`` (``sensor_msgs/JointState``: every simulated joint, position and velocity),
+  ``/ee_pose`` (``geometry_msgs/PoseStamped``, ground-truth end effector, frame ``world``),
+  ``/odom`` (``nav_msgs/Odometry``: wheel odometry, dead reckoning through the nominal
+  model, frame ``odom`` = ``world`` at the start, child ``base_link``),
+  ``/ground_truth/odom`` (``nav_msgs/Odometry``: true base pose and twist, frame ``world``),
+  ``/clock`` (sim time; always in lockstep), and ``/diagnostics`` every ``diagnostics_period``.
+
+Timing: ``realtime`` steps on a wall-clock timer. ``lockstep`` publishes the state at t,
+waits (event-driven) until every group of ``lockstep_groups`` has sent a command, or
+``lockstep_timeout`` wall seconds pass, then steps one period and publishes the state at
+t + period.
+
+Safety: a group's command older than ``command_timeout``, judged by this node's clock at
+receipt (sim time in lockstep), is replaced by zero velocity; NaN/inf or wrong-length
+commands are rejected with a throttled warning and never applied; values beyond the URDF
+velocity limits are clamped, counted and reported on ``/diagnostics``.
+"""
+
+import math
+import time
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import Float64MultiArray
+
+from sim_bridge.slip import SlipParams
+from sim_bridge.world import BASE_MODES, SimWorld
+from wmm_control.errors import ConfigError
+from wmm_control.nodes.common import (
+    Freshness, Param, declare_parameters, diagnostic_array, diagnostic_status, parse_command,
+    run_node)
+
+__all__ = ['SimNode', 'main']
+
+PARAMS = (
+    Param('robot', 'Robot: steerable (A, Sorour) or mecanum (B, Xing), or A/B.',
+          choices=('steerable', 'mecanum', 'A', 'B', 'a', 'b'), read_only=True),
+    Param('base_mode', 'kinematic: rolling model + seeded slip; physics: PyBullet wheel contact.',
+          choices=BASE_MODES, read_only=True),
+    Param('timing', 'realtime: wall-clock steps; lockstep: step when the commands answer the state.',
+          choices=('realtime', 'lockstep'), read_only=True),
+    Param('period', 'Control period [s].', lo=1e-4, hi=1.0, read_only=True),
+    Param('substeps', 'Physics steps per period [-].', lo=1, hi=1000, read_only=True),
+    Param('command_timeout', 'Command age [s] (receiver clock) after which a group is zeroed.',
+          lo=1e-3, hi=10.0),
+    Param('lockstep_groups', 'Comma-separated command groups lockstep waits for, or "all".'),
+    Param('lockstep_timeout', 'Wall time [s] lockstep waits for commands before stepping.', lo=1e-3, hi=60.0),
+    Param('publish_clock', 'Publish /clock in realtime mode too.'),
+    Param('diagnostics_period', 'Simulated time [s] between /diagnostics messages.', lo=0.0, hi=3600.0),
+    Param('slip_gain', 'Slip fraction per unit rim speed [1/(m/s)], kinematic mode.', lo=0.0, hi=10.0,
+          read_only=True),
+    Param('slip_drift', 'Base-frame twist bias (vx, vy, ω) [m/s, m/s, rad/s] while moving.', read_only=True),
+    Param('slip_noise', 'Std of the base twist noise (vx, vy, ω).', read_only=True),
+    Param('seed', 'Seed of the slip noise.', lo=0, hi=2**31 - 1, read_only=True),
+    Param('start_base_pose', 'Start base pose (x, y, θ); empty = the paper start.', read_only=True),
+    Param('start_arm', 'Start arm joints [rad] (7); empty = the paper start.', read_only=True),
+    Param('gui', 'Open the PyBullet GUI.', read_only=True),
+)
+
+
+def _stamp(seconds):
+    sec = math.floor(seconds)
+    return Time(sec=int(sec), nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
+
+
+class SimNode(Node):
+    """Wraps one :class:`sim_bridge.world.SimWorld`; all physics and kinematics live there."""
+
+    def __init__(self, **kwargs):
+        super().__init__('wmm_sim', **kwargs)
+        self.p = declare_parameters(self, 'wmm_sim.yaml', PARAMS)
+        slip = SlipParams(gain=self.p.slip_gain, drift=tuple(self.p.slip_drift) or (0.0, 0.0, 0.0),
+                          noise_std=tuple(self.p.slip_noise) or (0.0, 0.0, 0.0))
+        self.world = SimWorld(
+            robot=self.p.robot, base_mode=self.p.base_mode, dt=self.p.period, substeps=self.p.substeps,
+            slip=slip, seed=self.p.seed, gui=self.p.gui,
+            start_base_pose=self.p.start_base_pose or None, start_arm=self.p.start_arm or None)
+        self.lockstep = self.p.timing == 'lockstep'
+        groups = self.world.command_groups
+        if self.p.lockstep_groups.strip() == 'all':
+            self.wait_groups = frozenset(groups)
+        else:
+            self.wait_groups = frozenset(g.strip() for g in self.p.lockstep_groups.split(',') if g.strip())
+            unknown = sorted(self.wait_groups - set(groups))
+            if unknown:
+                raise ConfigError(f'lockstep_groups: unknown groups {unknown}; this robot has {sorted(groups)}')
+        self.fresh = {g: Freshness(self.p.command_timeout) for g in groups}
+        self.timed_out = {g: True for g in groups}
+        self.subs = [self.create_subscription(Float64MultiArray, f'/{g}_controller/commands',
+                                              lambda msg, g=g: self._on_command(g, msg), 10)
+                     for g in groups]
+        self.pub_joints = self.create_publisher(JointState, '/joint_states', 10)
+        self.pub_ee = self.create_publisher(PoseStamped, '/ee_pose', 10)
+        self.pub_odom = self.create_publisher(Odometry, '/odom', 10)
+        self.pub_truth = self.create_publisher(Odometry, '/ground_truth/odom', 10)
+        self.pub_clock = self.create_publisher(Clock, '/clock', 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._arrived = set()
+        self._waiting_since = None
+        self._steps = 0
+        self._next_diag = 0.0
+        self._wall_start = time.monotonic()
+        if self.lockstep:
+            # Wall-clock poll: start once every awaited controller is connected, and step
+            # anyway when the commands do not come within lockstep_timeout.
+            self._started = False
+            self.poll = self.create_timer(min(0.01, self.p.lockstep_timeout / 4), self._lockstep_poll)
+        else:
+            self.timer = self.create_timer(self.p.period, self._realtime_tick)
+        self.get_logger().info(
+            f'simulating {self.world.robot.name} ({self.p.base_mode} base, {self.p.timing}, '
+            f'period {self.p.period} s); command groups {sorted(groups)}')
+
+    # ------------------------------------------------------------------ time
+    def now_s(self):
+        """This node's clock [s]: sim time in lockstep, the ROS clock otherwise."""
+        return self.world.time if self.lockstep else self.get_clock().now().nanoseconds * 1e-9
+
+    def _stamp_now(self):
+        return _stamp(self.world.time) if self.lockstep else self.get_clock().now().to_msg()
+
+    # ------------------------------------------------------------------ commands
+    def _on_command(self, group, msg):
+        values, reason = parse_command(msg, len(self.world.command_groups[group]))
+        if values is None:
+            self.world.counters[group]['rejected'] += 1
+            self.get_logger().warn(f'rejected {group} command: {reason}', throttle_duration_sec=1.0)
+            return
+        result = self.world.set_command(group, values)
+        if not result.accepted:
+            self.get_logger().warn(f'rejected {group} command: {result.reason}', throttle_duration_sec=1.0)
+            return
+        if result.clamped:
+            self.get_logger().warn(f'{group} command clamped to the velocity limits '
+                                   f'({result.clamped} entries)', throttle_duration_sec=1.0)
+        self.fresh[group].mark(self.now_s())
+        if self.timed_out[group]:
+            self.timed_out[group] = False
+        if self.lockstep and self._waiting_since is not None:
+            self._arrived.add(group)
+            if self.wait_groups <= self._arrived:
+                self._advance()
+
+    def _apply_watchdog(self):
+        now = self.now_s()
+        for group, fresh in self.fresh.items():
+            if not fresh.fresh(now) and not self.timed_out[group]:
+                self.world.zero_command(group)
+                self.timed_out[group] = True
+                self.get_logger().warn(f'{group} command timed out (age {fresh.age(now):.3f} s > '
+                                       f'{fresh.timeout} s): zero velocity', throttle_duration_sec=1.0)
+
+    # ------------------------------------------------------------------ stepping
+    def _realtime_tick(self):
+        self._apply_watchdog()
+        self.world.step()
+        self._publish_state()
+
+    def _lockstep_poll(self):
+        if not self._started:
+            topics = [f'/{g}_controller/commands' for g in self.wait_groups]
+            connected = all(self.count_publishers(t) > 0 for t in topics)
+            if connected or time.monotonic() - self._wall_start > self.p.lockstep_timeout:
+                self._started = True
+                self._publish_state()
+            return
+        if self._waiting_since is not None and time.monotonic() - self._waiting_since > self.p.lockstep_timeout:
+            missing = sorted(self.wait_groups - self._arrived)
+            self.get_logger().warn(f'lockstep: no command from {missing} within {self.p.lockstep_timeout} s; '
+                                   'stepping anyway', throttle_duration_sec=5.0)
+            self._advance()
+
+    def _advance(self):
+        self._waiting_since = None
+        self._arrived.clear()
+        self.world.step()
+        self._apply_watchdog()
+        self._publish_state()
+
+    # ------------------------------------------------------------------ output
+    def _publish_state(self):
+        stamp = self._stamp_now()
+        if self.lockstep or self.p.publish_clock:
+            self.pub_clock.publish(Clock(clock=stamp))
+        names, pos, vel = self.world.joint_state()
+        js = JointState()
+        js.header.stamp = stamp
+        js.name = list(names)
+        js.position = pos.tolist()
+        js.velocity = vel.tolist()
+        ee_pos, ee_quat = self.world.ee_pose()
+        ee = PoseStamped()
+        ee.header.stamp = stamp
+        ee.header.frame_id = 'world'
+        ee.pose.position.x, ee.pose.position.y, ee.pose.position.z = (float(v) for v in ee_pos)
+        (ee.pose.orientation.x, ee.pose.orientation.y, ee.pose.orientation.z,
+         ee.pose.orientation.w) = (float(v) for v in ee_quat)
+        self.pub_ee.publish(ee)
+        self.pub_odom.publish(_odometry(stamp, 'odom', self.world.odom_pose(), self.world.odom_twist()))
+        self.pub_truth.publish(_odometry(stamp, 'world', self.world.base_pose(), self.world.base_twist()))
+        if self.now_s() + 1e-9 >= self._next_diag and self.p.diagnostics_period > 0:
+            self._next_diag = self.now_s() + self.p.diagnostics_period
+            self.pub_diag.publish(self._diagnostics(stamp))
+        self._steps += 1
+        if self.lockstep:
+            self._waiting_since = time.monotonic()
+            self._arrived.clear()
+        # Joint states last: in lockstep the controllers answer them, and their answer may
+        # arrive (in-process) before this method returns.
+        self.pub_joints.publish(js)
+
+    def _diagnostics(self, stamp):
+        statuses = []
+        wall = time.monotonic() - self._wall_start
+        for group, counts in self.world.counters.items():
+            stale = self.timed_out[group]
+            level = 'warn' if stale or counts['clamped'] or counts['rejected'] else 'ok'
+            message = 'no fresh command (zero velocity)' if stale else 'commanded'
+            statuses.append(diagnostic_status(
+                f'wmm_sim: {group} commands', self.world.robot.name, level, message,
+                {**counts, 'command_age_s': self.fresh[group].age(self.now_s())}))
+        statuses.append(diagnostic_status(
+            'wmm_sim: simulation', self.world.robot.name, 'ok', f'{self.p.timing}, {self.p.base_mode}',
+            {'sim_time_s': self.world.time, 'steps': self._steps,
+             'real_time_factor': self.world.time / wall if wall > 0 else 0.0}))
+        return diagnostic_array(stamp, statuses)
+
+
+def _odometry(stamp, frame, pose, twist):
+    msg = Odometry()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame
+    msg.child_frame_id = 'base_link'
+    x, y, th = (float(v) for v in pose)
+    msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(th / 2), math.cos(th / 2)
+    vx, vy, w = (float(v) for v in twist)
+    msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z = vx, vy, w
+    return msg
+
+
+def main(args=None):
+    return run_node(SimNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,99 @@
+"""In-process ROS test helpers: a private context per test, spinning until a condition holds,
+and a scripted controller that answers each joint state with commands."""
+
+import time
+
+import numpy as np
+import rclpy
+from nav_msgs.msg import Odometry
+from geometry_msgs.msg import PoseStamped
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from wmm_control.nodes.common import float_array
+
+
+def overrides(**params):
+    return [Parameter(k, value=v) for k, v in params.items()]
+
+
+class RosHarness:
+    """A private rclpy Context and executor; nodes added to it are destroyed at close()."""
+
+    def __init__(self):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.nodes = []
+
+    def add(self, node):
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def spin_until(self, predicate, timeout=20.0):
+        """Spin until ``predicate()`` is true; False if the wall-clock timeout passes first."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return True
+            self.executor.spin_once(timeout_sec=0.005)
+        return predicate()
+
+    def spin_for(self, seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.005)
+
+    def close(self):
+        for node in self.nodes:
+            self.executor.remove_node(node)
+            node.destroy_node()
+        self.executor.shutdown()
+        rclpy.try_shutdown(context=self.context)
+
+
+class ScriptedController(Node):
+    """Answers every /joint_states message with one command per group and records the topics.
+
+    ``script(t, joint_state_msg) -> {group: values}``; groups not returned get nothing.
+    """
+
+    def __init__(self, context, groups, script, name='scripted_controller'):
+        super().__init__(name, context=context)
+        self.script = script
+        self.pubs = {g: self.create_publisher(Float64MultiArray, f'/{g}_controller/commands', 10)
+                     for g in groups}
+        self.joint_states, self.ee_poses, self.odom, self.truth, self.diagnostics = [], [], [], [], []
+        self.create_subscription(JointState, '/joint_states', self._on_joints, 10)
+        self.create_subscription(PoseStamped, '/ee_pose', self.ee_poses.append, 10)
+        self.create_subscription(Odometry, '/odom', self.odom.append, 10)
+        self.create_subscription(Odometry, '/ground_truth/odom', self.truth.append, 10)
+        self.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
+
+    def _on_joints(self, msg):
+        self.joint_states.append(msg)
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        for group, values in (self.script(t, msg) or {}).items():
+            self.pubs[group].publish(values if isinstance(values, Float64MultiArray) else float_array(values))
+
+    def positions(self, index=-1):
+        msg = self.joint_states[index]
+        return dict(zip(msg.name, msg.position))
+
+    def velocities(self, index=-1):
+        msg = self.joint_states[index]
+        return dict(zip(msg.name, msg.velocity))
+
+
+def stamp_s(msg):
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def pose2d(odom_msg):
+    p = odom_msg.pose.pose
+    return np.array([p.position.x, p.position.y, 2.0 * np.arctan2(p.orientation.z, p.orientation.w)])
