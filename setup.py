@@ -38,6 +38,7 @@ setup(
         'console_scripts': [
             'wmm_model = wmm_control.cli.model_info:main',
             'wmm_sim = sim_bridge.node:main',
+            'swmr_controller = wmm_control.nodes.swmr_controller:main',
         ],
     },
 )

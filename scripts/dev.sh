@@ -44,5 +44,8 @@ setup
 case "$job" in
   run)   exec "$VENV/bin/python" -m wmm_control.cli.model_info "$@" ;;
   test)  exec "$VENV/bin/python" -m pytest test -q "$@" ;;
-  bench) for b in benchmarks/bench_*.py; do echo "== $b"; "$VENV/bin/python" "$b"; done ;;
+  bench)
+    # pink (a QP-based IK) is a comparison point of bench_swmr.py only, not a dependency.
+    "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check pin-pink quadprog
+    for b in benchmarks/bench_*.py; do echo "== $b"; "$VENV/bin/python" "$b"; done ;;
 esac

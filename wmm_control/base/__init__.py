@@ -1,0 +1,26 @@
+"""Mobile-base kinematics and controllers: steerable (Sorour §IV) and Mecanum (Xing eq 16)."""
+
+from wmm_control.base.icr import Icr, choose_route
+from wmm_control.base.mecanum import MecanumKinematics
+from wmm_control.base.steerable_kinematics import SteerableGeometry
+from wmm_control.base.swmr_controller import (
+    IcrQp,
+    OsqpIcrSolver,
+    QpResult,
+    SwmrController,
+    SwmrOutput,
+    SwmrParams,
+)
+
+__all__ = [
+    'Icr',
+    'IcrQp',
+    'MecanumKinematics',
+    'OsqpIcrSolver',
+    'QpResult',
+    'SteerableGeometry',
+    'SwmrController',
+    'SwmrOutput',
+    'SwmrParams',
+    'choose_route',
+]

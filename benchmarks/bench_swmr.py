@@ -1,0 +1,117 @@
+"""Per-cycle cost of SwmrController.step (robot A geometry, Table I period).
+
+Runs ~5000 cycles of a varying reference (arcs, translations in all directions, spins, arc
+switches through infinity, reversals, stops) and prints the median and p99 wall time of
+``step`` and of the OSQP solve inside it, in µs, plus how often the elastic QP was needed.
+
+Side by side, in the same run: one differential-IK step of pink (``pin-pink`` with the
+quadprog solver, a frame task on the end effector and a posture task) on robot A's
+10-DOF model, the kind of per-cycle work a QP-based whole-body IK does. pink is installed
+for the benchmark only (``bash scripts/dev.sh bench`` installs it); without it that part
+is skipped with a message.
+
+    python benchmarks/bench_swmr.py [--cycles 5000]
+"""
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run from a source checkout
+
+from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams  # noqa: E402
+from wmm_control.robot_config import load_robot  # noqa: E402
+
+
+def reference(k, dt):
+    """A reference twist (vx, vy, ω) [m/s, m/s, rad/s] that changes character every 2 s."""
+    t = k * dt
+    phase = int(t // 2.0) % 8
+    s = np.sin(0.7 * t)
+    if phase == 0:
+        return np.array([0.5, 0.0, 0.25 * s])                     # arcs left/right
+    if phase == 1:
+        return np.array([0.4 * np.cos(t), 0.4 * np.sin(t), 0.0])  # rotating translation
+    if phase == 2:
+        return np.array([0.0, 0.0, 0.6 * s])                      # spin
+    if phase == 3:
+        return np.array([-0.4, 0.2, 0.3])                         # reversal-ish arc
+    if phase == 4:
+        return np.zeros(3)                                        # stop
+    if phase == 5:
+        return np.array([0.3, -0.3, -0.4 * s])
+    if phase == 6:
+        return np.array([0.3 * s, -0.24 * 0.3, 0.3])              # ICR sweeping past the hips
+    return np.array([0.6, 0.1, 0.0])
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--cycles', type=int, default=5000)
+    args = parser.parse_args()
+    robot = load_robot('steerable')
+    geometry = SteerableGeometry.from_config(robot.steerable)
+    params = SwmrParams.from_robot_config(robot)
+    ctrl = SwmrController(geometry, params)
+    for k in range(50):                                  # warm-up (imports, caches)
+        ctrl.step(reference(k, params.dt))
+    ctrl.reset(np.zeros(geometry.n_wheels))
+    step_us, solve_us, statuses = [], [], {}
+    for k in range(args.cycles):
+        ref = reference(k, params.dt)
+        t0 = time.perf_counter()
+        out = ctrl.step(ref)
+        step_us.append((time.perf_counter() - t0) * 1e6)
+        if out.solve_time_s > 0:
+            solve_us.append(out.solve_time_s * 1e6)
+        statuses[out.qp_status] = statuses.get(out.qp_status, 0) + 1
+    step_us, solve_us = np.array(step_us), np.array(solve_us)
+    print(f'SwmrController.step over {args.cycles} cycles (dt = {params.dt} s):')
+    print(f'  step   median {np.median(step_us):7.1f} us   p99 {np.percentile(step_us, 99):7.1f} us   '
+          f'max {step_us.max():7.1f} us')
+    print(f'  solve  median {np.median(solve_us):7.1f} us   p99 {np.percentile(solve_us, 99):7.1f} us   '
+          f'({len(solve_us)} QP solves)')
+    print('  qp status counts:', ', '.join(f'{k}: {v}' for k, v in sorted(statuses.items())))
+    pink_us = bench_pink(args.cycles)
+    if pink_us is None:
+        print('pink not installed (pip install pin-pink quadprog): comparison skipped')
+        return
+    med, p99 = np.median(step_us), np.percentile(step_us, 99)
+    pmed = np.median(pink_us)
+    print(f'pink solve_ik (quadprog), robot A: median {pmed:7.1f} us   p99 {np.percentile(pink_us, 99):7.1f} us')
+    print(f'  ratio: our median / pink median = {med / pmed:.2f} (target <= 0.5); '
+          f'our p99 / our median = {p99 / med:.2f} (target <= 3)')
+
+
+def bench_pink(cycles):
+    """Wall time [µs] of one pink IK step per cycle, tracking a moving end-effector target."""
+    try:
+        import pink
+        from pink.tasks import FrameTask, PostureTask
+    except ImportError:
+        return None
+    from wmm_control.kinematics import KinematicModel
+    km = KinematicModel('steerable')
+    q0, _ = km.configuration(np.zeros(3), km.config.arm.dexterous)
+    conf = pink.Configuration(km.model, km.model.createData(), q0)
+    ee = FrameTask(km.ee_frame, position_cost=1.0, orientation_cost=1.0)
+    posture = PostureTask(cost=1e-3)
+    posture.set_target(q0)
+    start = conf.get_transform_frame_to_world(km.ee_frame).copy()
+    times = []
+    for k in range(cycles + 50):
+        target = start.copy()
+        target.translation = start.translation + np.array([0.3 * np.sin(0.01 * k), 0.2 * np.cos(0.01 * k), 0.0])
+        ee.set_target(target)
+        t0 = time.perf_counter()
+        v = pink.solve_ik(conf, [ee, posture], 0.025, solver='quadprog')
+        times.append((time.perf_counter() - t0) * 1e6)
+        conf.integrate_inplace(v, 0.025)
+    return np.array(times[50:])
+
+
+if __name__ == '__main__':
+    main()

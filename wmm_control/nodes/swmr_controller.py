@@ -1,0 +1,191 @@
+"""``swmr_controller``: the steerable-base controller of Sorour §IV as a node.
+
+Subscribes:
+  ``/base/reference`` (``geometry_msgs/TwistStamped``, frame ``base_frame``): ξ̇* = (ẋ, ẏ, ω);
+  ``/joint_states`` (``sensor_msgs/JointState``): steer angles; each message runs one cycle.
+Publishes, every cycle:
+  ``/steer_controller/commands`` (``std_msgs/Float64MultiArray``): β̇_ref, order ``steer_joints``;
+  ``/drive_controller/commands`` (``Float64MultiArray``): φ̇_ref, order ``drive_joints``;
+  ``/base/feasible_twist`` (``TwistStamped``): q̇_bf, the twist the base executes over the
+  coming period (compatible with the next ICR, corrected for the steering during the period);
+  ``/diagnostics``: ICR, route, active constraints, solve time, every ``diagnostics_period``.
+
+Safety: a reference older than ``reference_timeout`` (by this node's clock at receipt) is
+replaced by zero: the drive ramps to zero within the limits and the steer angles are held.
+When joint states stop for ``joint_state_timeout``, zero steer and drive rates are
+published, and the controller re-reads the measured steer angles when they come back.
+"""
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TwistStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
+from wmm_control.errors import ConfigError
+from wmm_control.nodes.common import (
+    Freshness, Param, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node,
+    seconds)
+
+__all__ = ['SwmrControllerNode', 'main']
+
+PARAMS = (
+    Param('period', 'Control period t_s [s].', lo=1e-3, hi=1.0, read_only=True),
+    Param('wheel_radius', 'Wheel radius r_w [m].', lo=1e-3, hi=2.0, read_only=True),
+    Param('wheel_offset', 'Steer axis to wheel centre d [m].', lo=0.0, hi=1.0, read_only=True),
+    Param('hip_x', 'Steer-axis x positions h_x,i in the base frame [m].', read_only=True),
+    Param('hip_y', 'Steer-axis y positions h_y,i in the base frame [m].', read_only=True),
+    Param('kp', 'Gain K_p of the twist controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
+    Param('icr_gain', 'Gain λ of the ICR P-controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
+    Param('steer_rate_limit', 'β̇_max [rad/s].', lo=1e-3, hi=30.0, read_only=True),
+    Param('steer_accel_limit', 'β̈_max [rad/s²].', lo=1e-3, hi=1000.0, read_only=True),
+    Param('drive_rate_limit', 'Drive rate limit [rad/s].', lo=1e-3, hi=1000.0, read_only=True),
+    Param('drive_accel_limit', 'Drive deceleration after a solver failure [rad/s²].', lo=1e-3, hi=1e4,
+          read_only=True),
+    Param('base_velocity_limit', '|vx|, |vy|, |ω| limits [m/s, m/s, rad/s].', read_only=True),
+    Param('base_accel_limit', 'Twist controller acceleration limits [m/s², m/s², rad/s²].', read_only=True),
+    Param('steer_joints', 'Steer joint names, command order.', read_only=True),
+    Param('drive_joints', 'Drive joint names, command order.', read_only=True),
+    Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
+    Param('reference_timeout', 'Reference age [s] after which the base stops.', lo=1e-3, hi=60.0),
+    Param('joint_state_timeout', 'Joint-state age [s] after which zero rates are commanded.', lo=1e-3, hi=60.0),
+    Param('diagnostics_period', 'Time [s] between /diagnostics messages.', lo=0.0, hi=3600.0),
+)
+
+
+class SwmrControllerNode(Node):
+    """Wraps one :class:`wmm_control.base.SwmrController`."""
+
+    def __init__(self, **kwargs):
+        super().__init__('swmr_controller', **kwargs)
+        p = declare_parameters(self, 'swmr_controller.yaml', PARAMS)
+        self.p = p
+        n = len(p.hip_x)
+        if len(p.hip_y) != n or len(p.steer_joints) != n or len(p.drive_joints) != n:
+            raise ConfigError(f'hip_x, hip_y, steer_joints and drive_joints must have the same length, got '
+                              f'{len(p.hip_x)}, {len(p.hip_y)}, {len(p.steer_joints)}, {len(p.drive_joints)}')
+        geometry = SteerableGeometry(np.column_stack((p.hip_x, p.hip_y)), p.wheel_radius, p.wheel_offset)
+        params = SwmrParams(dt=p.period, kp=p.kp, icr_gain=p.icr_gain, steer_rate_limit=p.steer_rate_limit,
+                            steer_accel_limit=p.steer_accel_limit, drive_rate_limit=p.drive_rate_limit,
+                            drive_accel_limit=p.drive_accel_limit,
+                            base_velocity_limit=tuple(p.base_velocity_limit),
+                            base_accel_limit=tuple(p.base_accel_limit))
+        self.controller = SwmrController(geometry, params)
+        self.reference = np.zeros(3)
+        self.ref_fresh = Freshness(p.reference_timeout)
+        self.js_fresh = Freshness(p.joint_state_timeout)
+        self.need_resync = True
+        self._index = None
+        self._next_diag = 0.0
+        self._last = None
+        self._ref_stale_logged = False
+        self.pub_steer = self.create_publisher(Float64MultiArray, '/steer_controller/commands', 10)
+        self.pub_drive = self.create_publisher(Float64MultiArray, '/drive_controller/commands', 10)
+        self.pub_feasible = self.create_publisher(TwistStamped, '/base/feasible_twist', 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(TwistStamped, '/base/reference', self._on_reference, 10)
+        self.create_subscription(JointState, '/joint_states', self._on_joint_states, 10)
+        self.watchdog = self.create_timer(p.period, self._check_joint_states)
+        self.get_logger().info(f'steerable base controller: {n} modules, t_s {p.period} s, '
+                               f'β̇ ≤ {p.steer_rate_limit} rad/s, β̈ ≤ {p.steer_accel_limit} rad/s²')
+
+    def _on_reference(self, msg):
+        ref = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
+        if not np.all(np.isfinite(ref)):
+            self.get_logger().warn(f'rejected /base/reference with non-finite values {ref.tolist()}',
+                                   throttle_duration_sec=1.0)
+            return
+        if msg.header.frame_id not in ('', self.p.base_frame):
+            self.get_logger().warn(f'rejected /base/reference in frame {msg.header.frame_id!r}: expected '
+                                   f'{self.p.base_frame!r}', throttle_duration_sec=1.0)
+            return
+        other = (msg.twist.linear.z, msg.twist.angular.x, msg.twist.angular.y)
+        if any(abs(v) > 1e-9 for v in other):
+            self.get_logger().warn('/base/reference: linear.z, angular.x, angular.y are ignored (planar base)',
+                                   throttle_duration_sec=10.0)
+        self.reference = ref
+        self.ref_fresh.mark(seconds(self.get_clock()))
+        self._ref_stale_logged = False
+
+    def _steer_state(self, msg):
+        if self._index is None or len(msg.name) != self._index[0]:
+            names = list(msg.name)
+            try:
+                idx = [names.index(j) for j in self.p.steer_joints]
+            except ValueError:
+                missing = [j for j in self.p.steer_joints if j not in names]
+                self.get_logger().error(f'/joint_states lacks steer joints {missing}', throttle_duration_sec=5.0)
+                return None
+            self._index = (len(names), np.array(idx))
+        idx = self._index[1]
+        if len(msg.position) != len(msg.name):
+            return None
+        beta = np.asarray(msg.position, dtype=float)[idx]
+        return beta if np.all(np.isfinite(beta)) else None
+
+    def _on_joint_states(self, msg):
+        beta = self._steer_state(msg)
+        if beta is None:
+            self.get_logger().warn('joint state without finite steer angles: cycle skipped',
+                                   throttle_duration_sec=1.0)
+            return
+        now = seconds(self.get_clock())
+        self.js_fresh.mark(now)
+        if self.need_resync:
+            self.controller.reset(beta)
+            self.need_resync = False
+        if self.ref_fresh.fresh(now):
+            reference = self.reference
+        else:
+            reference = np.zeros(3)
+            if not self._ref_stale_logged and np.any(self.reference):
+                self.get_logger().warn(f'/base/reference older than {self.p.reference_timeout} s: stopping')
+                self._ref_stale_logged = True
+        out = self.controller.step(reference)
+        if out.status == 'solver_failure':
+            self.get_logger().error(f'ICR QP failed ({out.qp_status}): steering held, drive ramping down',
+                                    throttle_duration_sec=1.0)
+        self.pub_steer.publish(float_array(out.beta_dot_ref))
+        self.pub_drive.publish(float_array(out.phi_dot_ref))
+        twist = TwistStamped()
+        twist.header.stamp = msg.header.stamp
+        twist.header.frame_id = self.p.base_frame
+        twist.twist.linear.x, twist.twist.linear.y = float(out.twist_executed[0]), float(out.twist_executed[1])
+        twist.twist.angular.z = float(out.twist_executed[2])
+        self.pub_feasible.publish(twist)
+        self._last = out
+        if self.p.diagnostics_period > 0 and now >= self._next_diag:
+            self._next_diag = now + self.p.diagnostics_period
+            self.pub_diag.publish(self._diagnostics(msg.header.stamp, out))
+
+    def _check_joint_states(self):
+        now = seconds(self.get_clock())
+        if self.js_fresh.age(now) > self.p.joint_state_timeout and not self.need_resync:
+            self.get_logger().warn(f'no /joint_states for {self.p.joint_state_timeout} s: zero steer and drive '
+                                   'rates; will resync from the measured angles')
+            self.need_resync = True
+        if self.need_resync and self.js_fresh.age(now) != float('inf'):
+            n = len(self.p.steer_joints)
+            self.pub_steer.publish(float_array(np.zeros(n)))
+            self.pub_drive.publish(float_array(np.zeros(n)))
+
+    def _diagnostics(self, stamp, out):
+        icr = out.icr_next
+        level = 'error' if out.status == 'solver_failure' else 'ok'
+        values = {'status': out.status, 'route': out.route, 'qp_status': out.qp_status,
+                  'icr_next_xy': icr.point, 'icr_at_infinity': icr.at_infinity,
+                  'active_constraints': list(out.active_constraints),
+                  'solve_time_us': out.solve_time_s * 1e6,
+                  'beta_ref': out.beta_ref, 'feasible_twist': out.twist_executed, 'reference': self.reference}
+        return diagnostic_array(stamp, [diagnostic_status('swmr_controller', 'steerable base', level,
+                                                          out.status, values)])
+
+
+def main(args=None):
+    return run_node(SwmrControllerNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
