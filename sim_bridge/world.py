@@ -23,8 +23,8 @@ Base motion (``base_mode``)
     robot B: Xing eq. 16 ``MecanumKinematics.twist_from_wheels``) and the pose is
     integrated with the SE(2) exponential, the twist held constant in the base frame.
     While robot A steers, the twist is re-evaluated at the midpoint of each of the
-    ``substeps`` sub-intervals (β changes within the period; batched, see
-    :func:`steerable_twists`); otherwise one exact
+    ``substeps`` sub-intervals (β changes within the period; batched by
+    ``SteerableGeometry.twists_from_wheels``); otherwise one exact
     exponential covers the period. The true twist then passes through the seeded slip
     model (:mod:`sim_bridge.slip`). Limits: no contact, no tipping, no wheel-lift; a wheel
     set that violates the no-side-slip condition (inconsistent ICR) is resolved by the
@@ -81,7 +81,7 @@ from wmm_control.robot_config import RobotConfig, load_robot
 
 from sim_bridge.slip import SlipModel
 
-__all__ = ['SimWorld', 'CommandResult', 'se2_step', 'steerable_twists', 'BASE_MODES']
+__all__ = ['SimWorld', 'CommandResult', 'se2_step', 'BASE_MODES']
 
 BASE_MODES = ('kinematic', 'physics')
 GRAVITY = 9.81              # [m/s²]
@@ -91,38 +91,6 @@ SETTLE_TIME = 0.25          # [s] of zero-command physics before t = 0 (physics 
 _SMALL_ANGLE = 1e-6         # [rad] below this the SE(2) exponential uses its Taylor series
 # Mecanum roller axes (base frame, unit) per wheel fl, fr, rl, rr; reproduce Xing eq. 16.
 _ROLLER_AXES = ((1.0, -1.0), (1.0, 1.0), (1.0, 1.0), (1.0, -1.0))
-
-
-def steerable_twists(geom, beta, beta_dot, phi_dot):
-    """Batched ``SteerableGeometry.twist_from_wheels`` over several steer-angle sets.
-
-    The same least-squares fit (rolling rows ``f(β_i)``, no-side-slip rows ``g(β_i)``), solved
-    through its 3 × 3 normal equations for all sets at once; used for the sub-intervals of a
-    steering period (≈ 20 µs for 10 sets instead of ≈ 300 µs). Falls back to
-    ``twist_from_wheels`` if a normal matrix is singular.
-
-    Args:
-        geom: :class:`~wmm_control.base.steerable_kinematics.SteerableGeometry`.
-        beta: steer angles [rad]. Shape (S, N).
-        beta_dot: steer rates [rad/s]. Shape (N,).
-        phi_dot: drive rates [rad/s]. Shape (N,).
-
-    Returns:
-        Base twists (vx, vy, ω) [m/s, m/s, rad/s]. Shape (S, 3).
-    """
-    n = geom.n_wheels
-    hx, hy, d = geom.hips[:, 0], geom.hips[:, 1], geom.wheel_offset
-    c, s = np.cos(beta), np.sin(beta)
-    a = np.empty((beta.shape[0], 2 * n, 3))
-    a[:, :n, 0], a[:, :n, 1], a[:, :n, 2] = c, s, d - hy * c + hx * s
-    a[:, n:, 0], a[:, n:, 1], a[:, n:, 2] = -s, c, hx * c + hy * s
-    b = np.zeros((beta.shape[0], 2 * n, 1))
-    b[:, :n, 0] = geom.wheel_radius * phi_dot - d * beta_dot
-    at = a.transpose(0, 2, 1)
-    try:
-        return np.linalg.solve(at @ a, at @ b)[:, :, 0]
-    except np.linalg.LinAlgError:
-        return np.array([geom.twist_from_wheels(bb, beta_dot, phi_dot) for bb in beta])
 
 
 class CommandResult(NamedTuple):
@@ -507,7 +475,7 @@ class SimWorld:
                 return [(self._twist_cache[1], self.dt)], rim
             h = self._h
             beta = beta0 + np.outer((np.arange(self.substeps) + 0.5) * h, beta_dot)
-            return [(tuple(tw), h) for tw in steerable_twists(self._geom, beta, beta_dot, phi_dot).tolist()], rim
+            return [(tuple(tw), h) for tw in self._geom.twists_from_wheels(beta, beta_dot, phi_dot).tolist()], rim
         w = vel[self._slices['wheel']]
         rim = self._r_wheel * float(np.mean(np.abs(w)))
         return [(tuple(self._geom.twist_from_wheels(w).tolist()), self.dt)], rim

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 from sim_bridge import SimWorld, SlipParams, render_png, se2_step
-from sim_bridge.world import steerable_twists
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
@@ -172,15 +171,6 @@ def test_se2_step_is_exact_for_constant_twist():
     # Pure translation (ω = 0) uses the series branch.
     np.testing.assert_allclose(se2_step((0, 0, math.pi / 2), (1.0, 0.5, 0.0), 2.0), (-1.0, 2.0, math.pi / 2),
                                atol=1e-15)
-
-
-def test_batched_rolling_model_equals_twist_from_wheels():
-    geom = SteerableGeometry(np.array(HIPS), R_W, D_OFF)
-    rng = np.random.default_rng(5)
-    beta = rng.uniform(-3.0, 3.0, (10, 4))
-    beta_dot, phi_dot = rng.uniform(-1.0, 1.0, 4), rng.uniform(-10.0, 10.0, 4)
-    expected = np.array([geom.twist_from_wheels(b, beta_dot, phi_dot) for b in beta])
-    np.testing.assert_allclose(steerable_twists(geom, beta, beta_dot, phi_dot), expected, atol=1e-12)
 
 
 # ----------------------------------------------------------------------------- base, robot B

@@ -53,16 +53,16 @@ class SteerableGeometry:
         return self.hips.shape[0]
 
     def rolling_rows(self, beta):
-        """Rows ``f(β_i)`` of the rolling constraint. Shape (N, 3)."""
+        """Rows ``f(β_i)`` of the rolling constraint. Shape (..., N, 3) for β of shape (..., N)."""
         c, s = np.cos(beta), np.sin(beta)
         hx, hy = self.hips[:, 0], self.hips[:, 1]
-        return np.column_stack((c, s, self.wheel_offset - hy * c + hx * s))
+        return np.stack((c, s, self.wheel_offset - hy * c + hx * s), axis=-1)
 
     def slip_rows(self, beta):
-        """Rows ``g(β_i)`` of the no-side-slip constraint. Shape (N, 3)."""
+        """Rows ``g(β_i)`` of the no-side-slip constraint. Shape (..., N, 3) for β of shape (..., N)."""
         c, s = np.cos(beta), np.sin(beta)
         hx, hy = self.hips[:, 0], self.hips[:, 1]
-        return np.column_stack((-s, c, hx * c + hy * s))
+        return np.stack((-s, c, hx * c + hy * s), axis=-1)
 
     def wheel_rates(self, beta, beta_dot, twist):
         """Inverse actuation: drive rates φ̇ [rad/s] for a base twist.
@@ -97,6 +97,31 @@ class SteerableGeometry:
         a = np.vstack((self.rolling_rows(beta), self.slip_rows(beta)))
         b = np.concatenate((self.wheel_radius * phi_dot - self.wheel_offset * beta_dot, np.zeros(n)))
         return np.linalg.lstsq(a, b, rcond=None)[0]
+
+    def twists_from_wheels(self, beta_sets, beta_dot, phi_dot):
+        """:meth:`twist_from_wheels` for several steer-angle sets at once (same rates).
+
+        The same least-squares fit, solved through its 3 × 3 normal equations for every set
+        together; a simulator uses it for the sub-intervals of a steering period. Falls back
+        to :meth:`twist_from_wheels` if a normal matrix is singular.
+
+        Args:
+            beta_sets: steer angles [rad]. Shape (S, N).
+            beta_dot: steer rates [rad/s]. Shape (N,).
+            phi_dot: drive rates [rad/s]. Shape (N,).
+
+        Returns:
+            Base twists (vx, vy, ω) [m/s, m/s, rad/s]. Shape (S, 3).
+        """
+        n = self.n_wheels
+        a = np.concatenate((self.rolling_rows(beta_sets), self.slip_rows(beta_sets)), axis=-2)
+        b = np.zeros((a.shape[0], 2 * n, 1))
+        b[:, :n, 0] = self.wheel_radius * np.asarray(phi_dot) - self.wheel_offset * np.asarray(beta_dot)
+        at = a.transpose(0, 2, 1)
+        try:
+            return np.linalg.solve(at @ a, at @ b)[:, :, 0]
+        except np.linalg.LinAlgError:
+            return np.array([self.twist_from_wheels(bb, beta_dot, phi_dot) for bb in beta_sets])
 
     def steer_angles_for_icr(self, icr):
         """Steer angles β_i = atan2(Y − hy_i, X − hx_i) − π/2 for a finite ICR (X, Y) [m]. Shape (N,)."""

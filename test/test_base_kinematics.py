@@ -1,0 +1,76 @@
+"""Wheel-level kinematics of the two bases: Mecanum (Xing eq 16) and steerable (Sorour §IV)."""
+
+import numpy as np
+import pytest
+
+from wmm_control.base import MecanumKinematics, SteerableGeometry
+from wmm_control.errors import ConfigError, NonFiniteError, ShapeError
+from wmm_control.robot_config import load_robot
+
+HIPS = np.array([[0.24, 0.19], [0.24, -0.19], [-0.24, 0.19], [-0.24, -0.19]])
+
+
+@pytest.fixture
+def mecanum():
+    return MecanumKinematics(wheel_radius=0.1, d1=0.3, d2=0.2)
+
+
+def test_mecanum_eq16_by_hand(mecanum):
+    # R/4 = 0.025, k = d1 + d2 = 0.5.
+    np.testing.assert_allclose(mecanum.twist_from_wheels([1, 1, 1, 1]), [0.1, 0.0, 0.0])
+    np.testing.assert_allclose(mecanum.twist_from_wheels([-1, 1, 1, -1]), [0.0, 0.1, 0.0])
+    np.testing.assert_allclose(mecanum.twist_from_wheels([-1, 1, -1, 1]), [0.0, 0.0, 0.2])
+    np.testing.assert_allclose(mecanum.twist_from_wheels([2, 0, 0, 0]), [0.05, -0.05, -0.1])
+
+
+def test_mecanum_inverse_is_exact_and_world_rates_rotate(mecanum):
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        twist = rng.normal(size=3)
+        np.testing.assert_allclose(mecanum.twist_from_wheels(mecanum.wheel_rates(twist)), twist, atol=1e-12)
+    # Strafing left (+y in the base) while facing +y in the world moves along −x.
+    w = mecanum.wheel_rates([0.0, 0.3, 0.0])
+    np.testing.assert_allclose(w, [-3.0, 3.0, 3.0, -3.0])
+    np.testing.assert_allclose(mecanum.world_rates(np.pi / 2, w), [-0.3, 0.0, 0.0], atol=1e-12)
+
+
+def test_mecanum_from_robot_b_config_and_errors():
+    kin = MecanumKinematics.from_config(load_robot('mecanum').mecanum)
+    assert kin.wheel_radius == 0.076 and kin.d1 + kin.d2 == pytest.approx(0.47)
+    with pytest.raises(ConfigError, match='d1 must be finite and > 0'):
+        MecanumKinematics(0.1, 0.0, 0.2)
+    with pytest.raises(ShapeError, match='wheel_rates'):
+        kin.twist_from_wheels([1.0, 2.0, 3.0])
+    with pytest.raises(NonFiniteError, match='twist'):
+        kin.wheel_rates([np.nan, 0.0, 0.0])
+
+
+def test_steerable_inverse_then_forward_recovers_the_twist():
+    geom = SteerableGeometry(HIPS, 0.09, 0.045)
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        twist = rng.normal(size=3)
+        icr = np.array([-twist[1], twist[0]]) / twist[2]
+        beta = geom.steer_angles_for_icr(icr) + np.pi * rng.integers(0, 2, 4)   # either twin
+        beta_dot = rng.normal(size=4)
+        phi = geom.wheel_rates(beta, beta_dot, twist)
+        np.testing.assert_allclose(geom.slip_rows(beta) @ twist, 0.0, atol=1e-12)
+        np.testing.assert_allclose(geom.twist_from_wheels(beta, beta_dot, phi), twist, atol=1e-10)
+
+
+def test_batched_rolling_model_equals_twist_from_wheels():
+    geom = SteerableGeometry(HIPS, 0.09, 0.045)
+    rng = np.random.default_rng(5)
+    beta = rng.uniform(-3.0, 3.0, (10, 4))
+    beta_dot, phi_dot = rng.uniform(-1.0, 1.0, 4), rng.uniform(-10.0, 10.0, 4)
+    expected = np.array([geom.twist_from_wheels(b, beta_dot, phi_dot) for b in beta])
+    np.testing.assert_allclose(geom.twists_from_wheels(beta, beta_dot, phi_dot), expected, atol=1e-12)
+
+
+def test_steerable_geometry_rejects_bad_values():
+    with pytest.raises(ConfigError, match='hips'):
+        SteerableGeometry(np.zeros((4, 3)), 0.09, 0.045)
+    with pytest.raises(ConfigError, match='wheel_radius'):
+        SteerableGeometry(HIPS, -0.09, 0.045)
+    with pytest.raises(ConfigError, match='wheel_offset'):
+        SteerableGeometry(HIPS, 0.09, -0.01)
