@@ -129,19 +129,3 @@ class SlipModel:
             sx, sy, sw = prm.noise_std
             dx, dy, dw = dx + sx * float(n[0]), dy + sy * float(n[1]), dw + sw * float(n[2])
         return keep, (dx, dy, dw)
-
-    def apply(self, twist, rim_speed):
-        """True base twist for one period (one :meth:`sample` applied to ``twist``).
-
-        Args:
-            twist: nominal base twist (vx, vy, ω) [m/s, m/s, rad/s]. Tuple or shape (3,).
-            rim_speed: mean absolute rim speed of the wheels [m/s], >= 0.
-
-        Returns:
-            The true twist (vx, vy, ω) as a tuple of 3 floats; ``twist`` itself
-            (unchanged) when the model is off.
-        """
-        if self._off:
-            return twist
-        keep, (bx, by, bw) = self.sample(rim_speed)
-        return (keep * float(twist[0]) + bx, keep * float(twist[1]) + by, keep * float(twist[2]) + bw)
