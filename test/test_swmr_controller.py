@@ -192,6 +192,50 @@ def test_wedge_rows_bound_the_steer_change(geometry):
             assert change == pytest.approx(rate * DT, abs=1e-9)
 
 
+def test_feasible_reference_is_returned_without_osqp(geometry):
+    """x_ref inside every wedge is the QP's optimum: returned as is ('unconstrained'), OSQP agrees."""
+    ctrl = make(geometry)
+    run(ctrl, [(0.4, 0.0, 0.2)] * 200)                     # settled on the arc: ICR_ref ≈ ICR_curr
+    qp = ctrl.build_qp([0.4, 0.0, 0.2])
+    assert np.all(qp.A @ qp.x_ref >= qp.l) and np.all(qp.A @ qp.x_ref <= qp.u)
+    res = ctrl.solver(qp)
+    assert res.status == 'unconstrained'
+    np.testing.assert_array_equal(res.x, qp.x_ref)
+    x_osqp, status, _ = ctrl.solver._run(ctrl.solver._osqp, qp.q, qp.A.ravel(order='F'), qp.l, qp.u)
+    assert status == 'solved'
+    np.testing.assert_allclose(x_osqp, qp.x_ref, atol=1e-5)
+    assert ctrl.step([0.4, 0.0, 0.2]).qp_status == 'unconstrained'
+
+
+class _PublicApiOnly:
+    """An OSQP solver seen through its public update()/solve() only."""
+
+    def __init__(self, inner):
+        self._inner = inner
+
+    def update(self, **kwargs):
+        return self._inner.update(**kwargs)
+
+    def solve(self):
+        return self._inner.solve()
+
+
+def test_public_osqp_api_path_gives_the_same_commands(geometry):
+    """The fast path through osqp's extension object and the public API agree."""
+    fast, public = make(geometry), make(geometry)
+    public.solver._osqp = _PublicApiOnly(public.solver._osqp)
+    public.solver._elastic = _PublicApiOnly(public.solver._elastic)
+    refs = [(0.5, 0.0, 0.3)] * 60 + [(0.0, 0.4, -0.3)] * 60 + [(0.3, -0.2, 0.0)] * 60
+    statuses = set()
+    for ref in refs:
+        a, b = fast.step(ref), public.step(ref)
+        statuses.add(a.qp_status)
+        assert a.qp_status == b.qp_status
+        np.testing.assert_allclose(a.beta_ref, b.beta_ref, atol=1e-9)
+        np.testing.assert_allclose(a.phi_dot_ref, b.phi_dot_ref, atol=1e-9)
+    assert 'solved' in statuses
+
+
 def test_osqp_is_set_up_once_and_warm_started(geometry, monkeypatch):
     import osqp
     calls = {'setup': 0}

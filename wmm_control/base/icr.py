@@ -36,6 +36,7 @@ __all__ = [
     'choose_route',
     'hip_velocity_matrices',
     'tangent_basis',
+    'tangent_pair',
     'wrap_half_turn',
     'DEFAULT_ICR_BORDER',
     'DEFAULT_ICR_SCALE',
@@ -64,14 +65,20 @@ def tangent_basis(z):
     Returns:
         E with ``Eᵀ E = I``, ``Eᵀ z = 0``. Shape (3, 2).
     """
-    z0, z1, z2 = float(z[0]), float(z[1]), float(z[2])
-    k = min(range(3), key=lambda j: abs((z0, z1, z2)[j]))
-    e1 = -z[k] * np.asarray(z, dtype=float)
-    e1[k] += 1.0
-    e1 /= math.sqrt(e1 @ e1)
-    a0, a1, a2 = e1
-    e2 = np.array([z1 * a2 - z2 * a1, z2 * a0 - z0 * a2, z0 * a1 - z1 * a0])   # z × e1
-    return np.column_stack((e1, e2))
+    e1, e2 = tangent_pair(float(z[0]), float(z[1]), float(z[2]))
+    return np.array((e1, e2)).T
+
+
+def tangent_pair(z0, z1, z2):
+    """:func:`tangent_basis` of the unit vector (z0, z1, z2) as two 3-tuples of floats (e1, e2)."""
+    a = (abs(z0), abs(z1), abs(z2))
+    k = 0 if a[0] <= a[1] and a[0] <= a[2] else (1 if a[1] <= a[2] else 2)
+    zk = (z0, z1, z2)[k]
+    e = [-zk * z0, -zk * z1, -zk * z2]
+    e[k] += 1.0
+    n = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    a0, a1, a2 = e[0] / n, e[1] / n, e[2] / n
+    return (a0, a1, a2), (z1 * a2 - z2 * a1, z2 * a0 - z0 * a2, z0 * a1 - z1 * a0)   # e2 = z × e1
 
 
 def _check_positive(value, name):
@@ -141,6 +148,7 @@ class Icr:
 
     def _with_z_unchecked(self, z):
         """:meth:`with_z` for a finite, non-zero ``z`` computed internally (no input checks)."""
+        z = np.array(z, dtype=float)
         icr = object.__new__(Icr)
         object.__setattr__(icr, 'z', z / math.sqrt(float(z @ z)))
         object.__setattr__(icr, 'scale', self.scale)
@@ -194,8 +202,15 @@ class Icr:
         return hip_velocity_matrices(hips, self.scale) @ self.z
 
     def angle_to(self, other):
-        """Distance to another ICR on the projective plane [rad], in [0, π/2]."""
-        return float(np.arccos(min(1.0, abs(float(self.z @ other.z)))))
+        """Distance to another ICR on the projective plane [rad], in [0, π/2].
+
+        ``atan2(‖z × z'‖, |z · z'|)``: accurate for nearly equal ICRs too (the arc cosine of the
+        dot product cannot resolve angles below ~1e-8 rad).
+        """
+        a0, a1, a2 = self.z.tolist()
+        b0, b1, b2 = other.z.tolist()
+        c = math.hypot(a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
+        return math.atan2(c, abs(a0 * b0 + a1 * b1 + a2 * b2))
 
 
 def hip_velocity_matrices(hips, scale):

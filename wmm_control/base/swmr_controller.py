@@ -11,7 +11,8 @@ feasible twist q̇_bf that those commands realise:
    ``ICR_ref`` is ICR_curr moved a fraction ``λ dt`` of the way along the route.
 3. QP (OSQP, 2 variables, fixed dense pattern, warm-started, values updated each cycle):
    ``min ‖ICR_next − ICR_ref‖²`` subject to, for each wheel, the wedge of two lines through its
-   hip that bounds the steer change in one period by β̇_max and β̈_max.
+   hip that bounds the steer change in one period by β̇_max and β̈_max. When ICR_ref already
+   lies in every wedge it is the optimum and OSQP is not called.
 4. β_ref of ICR_next, the twin (β or β + π, drive reversed) nearest the current angle; the
    steer rate is then clipped into the per-period interval (hard limits), β̇_ref by differencing.
 5. ξ̈ = K_p (ξ̇* − ξ̇), integrated, projected onto the motion compatible with the new steer
@@ -46,10 +47,8 @@ from wmm_control.base.icr import (
     DEFAULT_ICR_BORDER,
     DEFAULT_ICR_SCALE,
     Icr,
-    choose_route,
     hip_velocity_matrices,
-    tangent_basis,
-    wrap_half_turn,
+    tangent_pair,
 )
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError, ShapeError
@@ -59,6 +58,8 @@ __all__ = ['SwmrParams', 'SwmrOutput', 'IcrQp', 'QpResult', 'OsqpIcrSolver', 'Sw
 _INF = 1e30            # OSQP's infinity
 _ROW_TOL = 1e-6        # a normalised wedge row within this of its bound counts as active
 _RATE_TOL = 1e-9       # [rad/s] a steer rate clipped by more than this counts as active
+_ANGLE_TOL = 1e-12     # [rad] a steer change below this is round-off
+_FEAS_TOL = 1e-9       # a normalised row violated by at most this counts as satisfied
 ELASTIC_WEIGHT = 1e4   # penalty on the common wedge relaxation s of the elastic QP
 
 
@@ -198,28 +199,31 @@ class IcrQp:
         (the steer rates are then clipped into their limits per wheel). Shapes (3, 3), (3,),
         (2N + 3, 3), (2N + 3,), (2N + 3,).
         """
-        m = self.A.shape[0]
         p = np.diag([1.0, 1.0, ELASTIC_WEIGHT])
         q = np.concatenate((self.q, [0.0]))
-        a = np.zeros((m + 1, 3))
-        a[:m, :2] = self.A
-        a[:m - 2, 2] = 1.0
-        a[m, 2] = 1.0
-        lb = np.concatenate((self.l, [0.0]))
-        ub = np.concatenate((self.u, [_INF]))
-        return p, q, a, lb, ub
+        return (p, q) + _elastic_rows(self.A, self.l, self.u)
 
     def icr_of(self, x):
         """The ICR at chart coordinates ``x`` (Shape (2,))."""
         return self.icr_curr.with_z(self.icr_curr.z + self.basis @ np.asarray(x, dtype=float))
 
 
+def _elastic_rows(a, lb, ub):
+    """Rows ``(A, l, u)`` of the elastic problem (:meth:`IcrQp.elastic`) from the QP's ``a, lb, ub``."""
+    m = a.shape[0]
+    ae = np.zeros((m + 1, 3))
+    ae[:m, :2] = a
+    ae[:m - 2, 2] = 1.0
+    ae[m, 2] = 1.0
+    return ae, np.concatenate((lb, [0.0])), np.concatenate((ub, [_INF]))
+
+
 @dataclass(frozen=True)
 class QpResult:
     """What a solver returns: ``x`` (Shape (2,)), a status string and the duals (or None).
 
-    Status ``'solved'``, ``'solved_inaccurate'`` or ``'max_iter_reached'`` with a finite ``x`` is
-    used; ``'primal_infeasible'`` makes the controller fall back to per-wheel clipping; anything
+    Status ``'solved'``, ``'solved_inaccurate'``, ``'max_iter_reached'``, ``'elastic'`` or
+    ``'unconstrained'`` (``x_ref`` satisfies every row) with a finite ``x`` is used; ``'primal_infeasible'`` makes the controller fall back to per-wheel clipping; anything
     else, or a non-finite ``x``, is a solver failure (safe stop).
     """
 
@@ -229,7 +233,7 @@ class QpResult:
 
 
 _USABLE = ('solved', 'solved_inaccurate', 'max_iter_reached')
-_USED = _USABLE + ('elastic',)
+_USED = _USABLE + ('elastic', 'unconstrained')
 _OSQP_STATUS = {1: 'solved', 2: 'solved_inaccurate', 3: 'primal_infeasible',
                 4: 'primal_infeasible_inaccurate', 5: 'dual_infeasible', 6: 'dual_infeasible_inaccurate',
                 7: 'max_iter_reached', 8: 'time_limit_reached', 9: 'non_convex', 10: 'interrupted',
@@ -242,7 +246,9 @@ class OsqpIcrSolver:
 
     Holds a second OSQP instance, also set up once, for the elastic problem
     (:meth:`IcrQp.elastic`), solved only when the first reports primal infeasibility; its
-    result is returned with status ``'elastic'``.
+    result is returned with status ``'elastic'``. An ``x_ref`` (the unconstrained optimum,
+    ``q = −x_ref``) that satisfies every row is the optimum itself: it is returned with status
+    ``'unconstrained'`` and OSQP is not called.
 
     Args:
         n_rows: number of constraint rows (2N + 2).
@@ -251,11 +257,13 @@ class OsqpIcrSolver:
     """
 
     def __init__(self, n_rows, eps=1e-6, max_iter=4000):
-        self.n_rows = int(n_rows)
+        self.n_rows = m = int(n_rows)
         settings = dict(verbose=False, polishing=False, warm_starting=True, eps_abs=eps, eps_rel=eps,
                         max_iter=int(max_iter))
-        self._osqp = self._setup(np.eye(2), self.n_rows, settings)
-        self._elastic = self._setup(np.diag([1.0, 1.0, ELASTIC_WEIGHT]), self.n_rows + 1, settings)
+        self._osqp = self._setup(np.eye(2), m, settings)
+        # The elastic rows are normalised already; OSQP's Ruiz scaling, fighting the heavy weight
+        # on s, would multiply its iteration count by ~15 (median ~2000, often max_iter).
+        self._elastic = self._setup(np.diag([1.0, 1.0, ELASTIC_WEIGHT]), m + 1, dict(settings, scaling=0))
 
     @staticmethod
     def _setup(p_dense, m, settings):
@@ -269,11 +277,45 @@ class OsqpIcrSolver:
         return solver
 
     @staticmethod
-    def _run(solver, q, a, lb, ub):
-        solver.update(q=q, l=lb, u=ub, Ax=a.ravel(order='F'))
-        res = solver.solve(raise_error=False)
-        status = _OSQP_STATUS.get(int(res.info.status_val), str(res.info.status))
-        return np.array(res.x, dtype=float), status, np.array(res.y, dtype=float)
+    def _run(solver, q, a_x, lb, ub):
+        # osqp 1.x keeps its C-extension solver as ``_solver``; updating and solving through
+        # it skips ~30 µs of wrapper overhead per call. That attribute is not public API, so
+        # any other osqp release takes the public update()/solve() path, with equal results.
+        ext = getattr(solver, '_solver', None)
+        if ext is not None and hasattr(ext, 'update_data_vec') and hasattr(ext, 'update_data_mat'):
+            ext.update_data_vec(q, lb, ub)
+            ext.update_data_mat(None, None, a_x, None)
+            ext.solve()
+            info, sol = ext.info, ext.solution
+        else:
+            solver.update(q=q, l=lb, u=ub, Ax=a_x)
+            res = solver.solve()
+            info, sol = res.info, res
+        status = _OSQP_STATUS.get(int(info.status_val), str(info.status))
+        return np.array(sol.x, dtype=float), status, np.array(sol.y, dtype=float)
+
+    def solve(self, x_ref, a, lb, ub):
+        """Solve ``min ‖x − x_ref‖²  s.t.  lb ≤ a x ≤ ub`` (rows laid out as :class:`IcrQp`).
+
+        Args:
+            x_ref: the unconstrained optimum. Shape (2,).
+            a: Shape (n_rows, 2).  lb, ub: Shape (n_rows,).
+
+        Returns:
+            ``(x, status, y)``; ``y`` (the duals) is None when OSQP was not called.
+        """
+        ax = a @ x_ref
+        if (lb - ax <= _FEAS_TOL).all() and (ax - ub <= _FEAS_TOL).all():
+            return x_ref.copy(), 'unconstrained', None
+        a_x = a.ravel(order='F')
+        x, status, y = self._run(self._osqp, -x_ref, a_x, lb, ub)
+        if status not in _INFEASIBLE:
+            return x, status, y
+        ae, le, ue = _elastic_rows(a, lb, ub)
+        xe, estatus, ye = self._run(self._elastic, np.concatenate((-x_ref, [0.0])), ae.ravel(order='F'), le, ue)
+        if estatus in _USABLE:
+            return xe[:2], 'elastic', ye
+        return x, f'{status} (elastic: {estatus})', y
 
     def __call__(self, problem):
         """Solve ``problem`` (an :class:`IcrQp`) with updated values; returns a :class:`QpResult`.
@@ -283,14 +325,7 @@ class OsqpIcrSolver:
         """
         if problem.A.shape != (self.n_rows, 2):
             raise ShapeError(f'ICR QP: A has shape {problem.A.shape}, solver set up for ({self.n_rows}, 2)')
-        x, status, y = self._run(self._osqp, problem.q, problem.A, problem.l, problem.u)
-        if status in _INFEASIBLE:
-            _, qe, ae, le, ue = problem.elastic()
-            xe, estatus, ye = self._run(self._elastic, qe, ae, le, ue)
-            if estatus in _USABLE:
-                return QpResult(xe[:2], 'elastic', ye)
-            return QpResult(x, f'{status} (elastic: {estatus})', y)
-        return QpResult(x, status, y)
+        return QpResult(*self.solve(-np.asarray(problem.q, dtype=float), problem.A, problem.l, problem.u))
 
 
 @dataclass(frozen=True)
@@ -316,6 +351,7 @@ class SwmrOutput:
         solve_time_s: wall time of the QP solve [s] (0 when no QP was solved).
         status: 'ok', 'stopped' or 'solver_failure'.
         qp_status: the solver's status: 'solved', 'solved_inaccurate', 'max_iter_reached',
+            'unconstrained' (ICR_ref satisfies every wedge, it is the optimum; OSQP not called),
             'elastic' (wedges infeasible, elastic QP used), 'primal_infeasible' (fallback:
             per-wheel clipping towards ICR_ref), 'not_solved' (steering held at rest), or the
             failure reason.
@@ -361,12 +397,13 @@ class SwmrController:
                 f'drive_rate_limit = {p.drive_rate_limit}')
         self.n_rows = 2 * n + 2
         self.solver = solver if solver is not None else OsqpIcrSolver(self.n_rows, p.eps, p.max_iter)
-        self._m = hip_velocity_matrices(geometry.hips, p.icr_scale)
+        m = hip_velocity_matrices(geometry.hips, p.icr_scale)
+        # Hip i: M_i z = (z1 + my_i z2, −z0 + mx_i z2); tol_i flags an ICR on the hip.
+        self._wheels = [(float(hx), float(hy), float(mi[0, 2]), float(mi[1, 2]),
+                         1e-9 * max(1.0, float(np.linalg.norm(mi)))) for (hx, hy), mi in zip(geometry.hips, m)]
         self._icr_proto = Icr(np.array([0.0, 0.0, 1.0]), p.icr_scale, p.icr_border)
-        self._m2 = np.repeat(self._m, 2, axis=0)          # one matrix per wedge row
-        self._m_norm = np.maximum(1.0, np.linalg.norm(self._m, axis=(1, 2)))
-        self._vmax = np.asarray(p.base_velocity_limit)
-        self._amax = np.asarray(p.base_accel_limit)
+        self._box = math.tan(p.max_icr_step)
+        self._ub = np.concatenate((np.full(2 * n, _INF), [self._box, self._box]))
         self.reset(np.zeros(n))
 
     # ------------------------------------------------------------------ state
@@ -413,31 +450,139 @@ class SwmrController:
 
     def _icr_of_beta(self, beta, like=None):
         """ICR of steer angles β (least squares, as :meth:`Icr.from_steer_angles`), sign of ``like``."""
-        p = self.params
-        c, s = np.cos(beta), np.sin(beta)
-        hips = self.geometry.hips
-        g = np.column_stack((-s, c, (hips[:, 0] * c + hips[:, 1] * s) / p.icr_scale))
-        t = np.linalg.svd(g)[2][-1]
-        z = np.array([-t[1], t[0], t[2]])
-        if like is not None and float(z @ like) < 0:
-            z = -z
+        beta = np.asarray(beta, dtype=float)
+        return self._icr_of_cs(np.cos(beta).tolist(), np.sin(beta).tolist(), like)
+
+    def _icr_of_cs(self, cos_beta, sin_beta, like):
+        """:meth:`_icr_of_beta` from the cosines and sines of β (sequences of floats).
+
+        The least-squares twist direction t (rows g_i = (−sin, cos, (hx cos + hy sin)/ℓ)) is the
+        eigenvector of the smallest eigenvalue λ of S = GᵀG: closed-form λ (trigonometric
+        method), t the largest cross product of two rows of S − λI. An ill-conditioned case
+        (repeated eigenvalues) falls back to the SVD of G.
+        """
+        ell = self.params.icr_scale
+        g = [(-s, c, (hx * c + hy * s) / ell) for c, s, (hx, hy, _, _, _) in zip(cos_beta, sin_beta, self._wheels)]
+        s00 = s01 = s02 = s11 = s12 = s22 = 0.0
+        for g0, g1, g2 in g:
+            s00 += g0 * g0
+            s01 += g0 * g1
+            s02 += g0 * g2
+            s11 += g1 * g1
+            s12 += g1 * g2
+            s22 += g2 * g2
+        q = (s00 + s11 + s22) / 3.0
+        off = s01 * s01 + s02 * s02 + s12 * s12
+        pp = math.sqrt(((s00 - q) ** 2 + (s11 - q) ** 2 + (s22 - q) ** 2 + 2.0 * off) / 6.0)
+        t = None
+        if pp > 1e-9 * q:
+            b00, b11, b22 = (s00 - q) / pp, (s11 - q) / pp, (s22 - q) / pp
+            b01, b02, b12 = s01 / pp, s02 / pp, s12 / pp
+            det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
+            phi = math.acos(min(1.0, max(-1.0, 0.5 * det))) / 3.0
+            lam = q + 2.0 * pp * math.cos(phi + 2.0 * math.pi / 3.0)
+            r0 = (s00 - lam, s01, s02)
+            r1 = (s01, s11 - lam, s12)
+            r2 = (s02, s12, s22 - lam)
+            best, bn = None, 0.0
+            for u, v in ((r0, r1), (r0, r2), (r1, r2)):
+                c = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+                cn = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+                if cn > bn:
+                    best, bn = c, cn
+            # The cross product scales with the two other eigenvalue gaps; too small: degenerate.
+            if bn > 1e-12 * (pp * pp) ** 2:
+                t = best
+        if t is None:
+            t = np.linalg.svd(np.array(g))[2][-1].tolist()
+        z = (-t[1], t[0], t[2])
+        if like is not None and z[0] * like[0] + z[1] * like[1] + z[2] * like[2] < 0:
+            z = (-z[0], -z[1], -z[2])
         return self._icr_proto._with_z_unchecked(z)
 
     def _rate_interval(self):
-        """Per-period steer-rate interval [rad/s]: |β̇| ≤ β̇_max and |β̇ − β̇_prev| ≤ β̈_max dt."""
+        """Per-period steer-rate interval [rad/s]: |β̇| ≤ β̇_max and |β̇ − β̇_prev| ≤ β̈_max dt.
+
+        Returns:
+            ``(lower, upper)``, lists of floats, one per wheel.
+        """
         p = self.params
         dv = p.steer_accel_limit * p.dt
-        lo = np.maximum(-p.steer_rate_limit, self._beta_dot - dv)
-        hi = np.minimum(p.steer_rate_limit, self._beta_dot + dv)
-        # A resynced (measured) rate beyond β̇_max + β̈_max dt: brake as hard as β̈_max allows.
-        bad = lo > hi
-        if np.any(bad):
-            brake = self._beta_dot[bad] - np.sign(self._beta_dot[bad]) * dv
-            lo[bad] = brake
-            hi[bad] = brake
-        return lo, hi
+        vmax = p.steer_rate_limit
+        lower, upper = [], []
+        for rate in self._beta_dot.tolist():
+            lo, hi = max(-vmax, rate - dv), min(vmax, rate + dv)
+            if lo > hi:   # a resynced (measured) rate beyond β̇_max + β̈_max dt: brake as hard as β̈_max allows
+                lo = hi = rate - math.copysign(dv, rate)
+            lower.append(lo)
+            upper.append(hi)
+        return lower, upper
 
     # ------------------------------------------------------------------ QP
+    def _problem(self, vx, vy, wz):
+        """This period's QP data for the reference twist (vx, vy, ω), from the controller state.
+
+        Returns:
+            ``(x_ref, (e1, e2), a, lb, rate_lower, rate_upper, target_z, route, stopped)``:
+            x_ref (Shape (2,)), the tangent basis as two 3-tuples, the rows ``a`` (Shape (2N + 2, 2))
+            and lower bounds ``lb`` (Shape (2N + 2,)) laid out as in :class:`IcrQp` (upper bounds
+            are the constant ``self._ub``), the rate interval as lists, ICR* as a 3-tuple (the
+            representative on the chosen route), the route and the stop flag.
+        """
+        p = self.params
+        z0, z1, z2 = self._icr.z.tolist()
+        e1, e2 = tangent_pair(z0, z1, z2)
+        stopped = math.sqrt(vx * vx + vy * vy + wz * wz) < p.stop_threshold
+        x0 = x1 = 0.0
+        if stopped:
+            t0, t1, t2, route = z0, z1, z2, 'hold'
+        else:
+            t0, t1, t2 = -vy, vx, p.icr_scale * wz
+            tn = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+            t0, t1, t2 = t0 / tn, t1 / tn, t2 / tn
+            cos = z0 * t0 + z1 * t1 + z2 * t2
+            if cos < 0.0:            # choose_route: the representative on the current hemisphere
+                t0, t1, t2, cos = -t0, -t1, -t2, -cos
+            route = 'complementary' if z2 * t2 < 0.0 else 'direct'
+            theta = math.acos(min(1.0, cos))
+            d0 = e1[0] * t0 + e1[1] * t1 + e1[2] * t2
+            d1 = e2[0] * t0 + e2[1] * t1 + e2[2] * t2
+            dn = math.sqrt(d0 * d0 + d1 * d1)
+            if dn > 1e-12:
+                k = math.tan(min(p.icr_gain * p.dt * theta, p.max_icr_step)) / dn
+                x0, x1 = k * d0, k * d1
+        rate_lo, rate_hi = self._rate_interval()
+
+        # cross(e_lo, v) >= 0 and cross(v, e_hi) >= 0 with e = σ (cos, sin), v = M_i (z_c + E x):
+        # rows r = c M_i with c_lo = σ (−sin a_lo, cos a_lo), c_hi = σ (sin a_hi, −cos a_hi),
+        # i.e. r = (−c1, c0, my c0 + mx c1); σ orients the wheel along the hip velocity.
+        dt = p.dt
+        rows, lb = [], []
+        for beta, lo, hi, (_, _, my, mx, tol) in zip(self._beta.tolist(), rate_lo, rate_hi, self._wheels):
+            cb, sb = math.cos(beta), math.sin(beta)
+            side = cb * (z1 + my * z2) + sb * (mx * z2 - z0)
+            if abs(side) < tol:      # ICR on the hip: open the wedge towards the goal
+                side = cb * (t1 + my * t2) + sb * (mx * t2 - t0)
+            sig = -1.0 if side < 0 else 1.0
+            a_lo, a_hi = beta + dt * lo, beta + dt * hi
+            for c0, c1 in ((-sig * math.sin(a_lo), sig * math.cos(a_lo)),
+                           (sig * math.sin(a_hi), -sig * math.cos(a_hi))):
+                r2 = my * c0 + mx * c1
+                w0 = -c1 * e1[0] + c0 * e1[1] + r2 * e1[2]
+                w1 = -c1 * e2[0] + c0 * e2[1] + r2 * e2[2]
+                nr = math.sqrt(w0 * w0 + w1 * w1)
+                if nr > 1e-12:
+                    rows += (w0 / nr, w1 / nr)
+                    lb.append((c1 * z0 - c0 * z1 - r2 * z2) / nr)
+                else:
+                    rows += (0.0, 0.0)
+                    lb.append(-_INF)
+        rows += (1.0, 0.0, 0.0, 1.0)
+        lb += (-self._box, -self._box)
+        a = np.array(rows).reshape(-1, 2)
+        return (np.array((x0, x1)), (e1, e2), a, np.array(lb), rate_lo, rate_hi, (t0, t1, t2), route,
+                stopped)
+
     def build_qp(self, twist_ref):
         """Build this period's ICR QP for the reference twist, from the controller state.
 
@@ -447,62 +592,25 @@ class SwmrController:
         Returns:
             :class:`IcrQp`.
         """
-        p = self.params
         twist_ref = as_finite_vector(twist_ref, 3, 'twist_ref')
-        curr = self._icr
-        zc = curr.z
-        basis = tangent_basis(zc)
-        stopped = bool(math.sqrt(float(twist_ref @ twist_ref)) < p.stop_threshold)
-        if stopped:
-            target_z, route = zc, 'hold'
-            x_ref = np.zeros(2)
-        else:
-            target = curr._with_z_unchecked(
-                np.array([-twist_ref[1], twist_ref[0], p.icr_scale * twist_ref[2]]))
-            target_z, route = choose_route(curr, target)
-            theta = math.acos(min(1.0, max(-1.0, float(zc @ target_z))))
-            d = basis.T @ target_z
-            dn = math.sqrt(float(d @ d))
-            step = min(p.icr_gain * p.dt * theta, p.max_icr_step)
-            x_ref = math.tan(step) * d / dn if dn > 1e-12 else np.zeros(2)
-        rate_lo, rate_hi = self._rate_interval()
+        return self._as_icr_qp(self._problem(*twist_ref.tolist()))
 
-        beta = self._beta
-        cb, sb = np.cos(beta), np.sin(beta)
-        v_curr = self._m @ zc                      # (N, 2) hip velocity directions now
-        side = cb * v_curr[:, 0] + sb * v_curr[:, 1]
-        on_hip = np.abs(side) < 1e-9 * self._m_norm
-        if np.any(on_hip):                         # ICR on a hip: open the wedge towards the goal
-            v_goal = self._m[on_hip] @ target_z
-            side[on_hip] = cb[on_hip] * v_goal[:, 0] + sb[on_hip] * v_goal[:, 1]
-        sigma = np.where(side < 0, -1.0, 1.0)
-        a_lo = beta + p.dt * rate_lo
-        a_hi = beta + p.dt * rate_hi
-        # cross(e_lo, v) >= 0 and cross(v, e_hi) >= 0 with e = σ (cos, sin), v = M_i (z_c + E x):
-        # rows r_lo = σ (−sin a_lo, cos a_lo) M_i, r_hi = σ (sin a_hi, −cos a_hi) M_i.  Shape (2N, 3).
-        c = np.empty((2 * beta.size, 2))
-        c[0::2, 0], c[0::2, 1] = -np.sin(a_lo), np.cos(a_lo)
-        c[1::2, 0], c[1::2, 1] = np.sin(a_hi), -np.cos(a_hi)
-        c *= np.repeat(sigma, 2)[:, None]
-        r = np.einsum('kj,kjl->kl', c, self._m2)
-        rows = r @ basis
-        nr = np.sqrt(np.einsum('kj,kj->k', rows, rows))
-        ok = nr > 1e-12
-        a = np.zeros((self.n_rows, 2))
-        lb = np.full(self.n_rows, -_INF)
-        ub = np.full(self.n_rows, _INF)
-        a[:-2][ok] = rows[ok] / nr[ok, None]
-        lb[:-2][ok] = -(r[ok] @ zc) / nr[ok]
-        box = np.tan(p.max_icr_step)
-        a[-2, 0] = 1.0
-        a[-1, 1] = 1.0
-        lb[-2:] = -box
-        ub[-2:] = box
+    def _as_icr_qp(self, data):
+        """The :class:`IcrQp` of :meth:`_problem`'s ``data``."""
+        x_ref, (e1, e2), a, lb, rate_lo, rate_hi, target_z, route, stopped = data
+        curr = self._icr
+        basis = np.array((e1, e2)).T
         return IcrQp(
-            P=np.eye(2), q=-x_ref, A=a, l=lb, u=ub, basis=basis, x_ref=x_ref,
+            P=np.eye(2), q=-x_ref, A=a, l=lb, u=self._ub.copy(), basis=basis, x_ref=x_ref,
             icr_curr=curr, icr_target=curr._with_z_unchecked(target_z),
-            icr_ref=curr._with_z_unchecked(zc + basis @ x_ref),
-            rate_lower=rate_lo, rate_upper=rate_hi, route=route, stopped=stopped)
+            icr_ref=self._icr_at(e1, e2, *x_ref.tolist()),
+            rate_lower=np.array(rate_lo), rate_upper=np.array(rate_hi), route=route, stopped=stopped)
+
+    def _icr_at(self, e1, e2, x0, x1):
+        """The ICR at chart coordinates (x0, x1) around the current ICR (tangent basis e1, e2)."""
+        z0, z1, z2 = self._icr.z.tolist()
+        return self._icr_proto._with_z_unchecked(
+            (z0 + e1[0] * x0 + e2[0] * x1, z1 + e1[1] * x0 + e2[1] * x1, z2 + e1[2] * x0 + e2[2] * x1))
 
     def solve_qp(self, problem):
         """Solve ``problem`` with :attr:`solver`.
@@ -512,17 +620,25 @@ class SwmrController:
             On primal infeasibility ``x`` is the unconstrained optimum ``x_ref`` (the steer
             rates are clipped per wheel afterwards).
         """
+        return self._timed_solve(self.solver, (problem,), problem.x_ref)
+
+    @staticmethod
+    def _timed_solve(call, args, x_ref):
+        """``call(*args)`` (a :class:`QpResult` or an ``(x, status, y)`` tuple), timed and checked."""
         t0 = time.perf_counter()
         try:
-            res = self.solver(problem)
+            res = call(*args)
         except Exception as exc:  # noqa: BLE001 — any solver exception means a safe stop
             return None, f'error: {type(exc).__name__}: {exc}', time.perf_counter() - t0
         elapsed = time.perf_counter() - t0
-        status = str(getattr(res, 'status', 'unknown'))
-        x = np.asarray(getattr(res, 'x', None), dtype=float) if getattr(res, 'x', None) is not None else None
+        if isinstance(res, tuple):
+            x, status = res[0], res[1]
+        else:
+            x, status = getattr(res, 'x', None), str(getattr(res, 'status', 'unknown'))
+        x = np.asarray(x, dtype=float) if x is not None else None
         if status.startswith(_INFEASIBLE):
-            return problem.x_ref.copy(), status, elapsed
-        if status not in _USED or x is None or x.shape != (2,) or not np.all(np.isfinite(x)):
+            return x_ref.copy(), status, elapsed
+        if status not in _USED or x is None or x.shape != (2,) or not np.isfinite(x).all():
             return None, status if status not in _USED else f'{status} (non-finite x)', elapsed
         return x, status, elapsed
 
@@ -550,80 +666,147 @@ class SwmrController:
         if beta_dot_meas is not None:
             self._beta_dot = as_finite_vector(beta_dot_meas, n, 'beta_dot_meas').copy()
 
-        problem = self.build_qp(twist_ref)
-        hold = problem.stopped and not np.any(self._beta_dot)
+        vx, vy, wz = twist_ref.tolist()
+        data = self._problem(vx, vy, wz)
+        x_ref, (e1, e2), a, lb, rate_lo, rate_hi, _, route, stopped = data
+        z0, z1, z2 = self._icr.z.tolist()
+        icr_ref = self._icr_at(e1, e2, *x_ref.tolist())
+        beta_dot = self._beta_dot.tolist()
+        hold = stopped and not any(beta_dot)
         if hold:
-            x, qp_status, solve_time = np.zeros(2), 'not_solved', 0.0
+            x0 = x1 = 0.0
+            qp_status, solve_time = 'not_solved', 0.0
         else:
-            x, qp_status, solve_time = self.solve_qp(problem)
+            if isinstance(self.solver, OsqpIcrSolver):
+                x, qp_status, solve_time = self._timed_solve(self.solver.solve, (x_ref, a, lb, self._ub), x_ref)
+            else:
+                x, qp_status, solve_time = self.solve_qp(self._as_icr_qp(data))
             if x is None:
-                return self._safe_stop(problem, qp_status, solve_time)
+                return self._safe_stop(rate_lo, rate_hi, icr_ref, qp_status, solve_time)
+            x0, x1 = x.tolist()
 
         # Steer: ICR_next -> nearest twin -> hard clip into the period's rate interval.
-        z_next = self._icr.z + problem.basis @ x
-        z_next /= math.sqrt(float(z_next @ z_next))
-        v = self._m @ z_next
-        vn = np.linalg.norm(v, axis=1)
-        delta = wrap_half_turn(np.arctan2(v[:, 1], v[:, 0]) - self._beta)
-        delta[vn < 1e-9] = 0.0                      # ICR on a hip: any angle fits, keep it
-        if hold:
-            delta[:] = 0.0
-        wanted = delta / p.dt
-        rate = np.clip(wanted, problem.rate_lower, problem.rate_upper)
-        beta_new = self._beta + p.dt * rate
-        active = set(np.flatnonzero(np.abs(wanted - rate) > _RATE_TOL).tolist())
+        n0, n1, n2 = z0 + e1[0] * x0 + e2[0] * x1, z1 + e1[1] * x0 + e2[1] * x1, z2 + e1[2] * x0 + e2[2] * x1
+        nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        n0, n1, n2 = n0 / nn, n1 / nn, n2 / nn
+        dt = p.dt
+        half_pi = 0.5 * math.pi
+        beta_new, rate, active = [], [], set()
+        for i, (beta, lo, hi, (_, _, my, mx, _)) in enumerate(zip(self._beta.tolist(), rate_lo, rate_hi,
+                                                                   self._wheels)):
+            v0, v1 = n1 + my * n2, mx * n2 - n0
+            if hold or math.sqrt(v0 * v0 + v1 * v1) < 1e-9:   # ICR on a hip: any angle fits, keep it
+                wanted = 0.0
+            else:
+                delta = (math.atan2(v1, v0) - beta + half_pi) % math.pi - half_pi
+                # A change at the round-off of the ICR ↔ β round trip is none: at rest the wheels stay put.
+                wanted = delta / dt if abs(delta) > _ANGLE_TOL else 0.0
+            r = min(max(wanted, lo), hi)
+            if abs(wanted - r) > _RATE_TOL:
+                active.add(i)
+            rate.append(r)
+            beta_new.append(beta + dt * r)
         if qp_status in _USED:
-            slack = problem.A[:-2] @ x - problem.l[:-2]
-            active.update((np.flatnonzero(slack <= _ROW_TOL) // 2).tolist())
-        icr_next = self._icr_of_beta(beta_new, like=z_next)
+            for k, ((a0, a1), low) in enumerate(zip(a[:-2].tolist(), lb[:-2].tolist())):
+                if a0 * x0 + a1 * x1 - low <= _ROW_TOL:
+                    active.add(k // 2)
+        cos_new = [math.cos(b) for b in beta_new]
+        sin_new = [math.sin(b) for b in beta_new]
+        icr_next = self._icr_of_cs(cos_new, sin_new, (n0, n1, n2))
 
         # Drive: K_p twist controller, projection on the motion compatible with icr_next, limits.
-        goal = np.zeros(3) if problem.stopped else twist_ref
-        acc = p.kp * (goal - self._twist)
-        acc *= min(1.0, float(np.min(self._amax / np.maximum(np.abs(acc), 1e-300))))
-        if problem.stopped and np.all(np.abs(self._twist) <= self._amax * p.dt):
-            acc = -self._twist / p.dt        # the last step to rest, within the limits
-        init = self._twist + p.dt * acc
-        c = icr_next.twist_direction
-        feasible = (c @ init) * c
-        feasible *= self._velocity_scale(feasible, beta_new, rate)
-        phi_dot = (self.geometry.rolling_rows(beta_new) @ feasible
-                   + self.geometry.wheel_offset * rate) / self.geometry.wheel_radius
+        amax = p.base_accel_limit
+        twist = self._twist.tolist()
+        goal = (0.0, 0.0, 0.0) if stopped else (vx, vy, wz)
+        acc = [p.kp * (g - v) for g, v in zip(goal, twist)]
+        k = min(1.0, amax[0] / max(abs(acc[0]), 1e-300), amax[1] / max(abs(acc[1]), 1e-300),
+                amax[2] / max(abs(acc[2]), 1e-300))
+        acc = [ac * k for ac in acc]
+        if stopped and all(abs(v) <= am * dt for v, am in zip(twist, amax)):
+            acc = [-v / dt for v in twist]   # the last step to rest, within the limits
+        init = [v + dt * ac for v, ac in zip(twist, acc)]
+        c0, c1, c2 = icr_next.z.tolist()                 # twist direction ∝ (Y, −X, 1) = (z1, −z0, z2/ℓ)
+        c0, c1, c2 = c1, -c0, c2 / p.icr_scale
+        cn = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        c0, c1, c2 = c0 / cn, c1 / cn, c2 / cn
+        proj = c0 * init[0] + c1 * init[1] + c2 * init[2]
+        feasible = [proj * c0, proj * c1, proj * c2]
+        f_rows = self._rolling_rows(cos_new, sin_new)
+        s = self._velocity_scale(feasible, f_rows, rate)
+        feasible = [s * f for f in feasible]
+        d, r_w = self.geometry.wheel_offset, self.geometry.wheel_radius
+        phi_dot = [(f0 * feasible[0] + f1 * feasible[1] + f2 * feasible[2] + d * r) / r_w
+                   for (f0, f1, f2), r in zip(f_rows, rate)]
 
         executed = self._executed_twist(beta_new, rate, phi_dot, feasible)
-        self._beta, self._beta_dot, self._twist, self._phi_dot = beta_new, rate, feasible, phi_dot
+        self._beta, self._beta_dot = np.array(beta_new), np.array(rate)
+        self._twist, self._phi_dot = np.array(feasible), np.array(phi_dot)
         self._icr = icr_next
         return SwmrOutput(
-            beta_ref=beta_new.copy(), beta_dot_ref=rate.copy(), phi_dot_ref=phi_dot.copy(),
-            twist_feasible=feasible.copy(), twist_executed=executed, icr_next=icr_next, icr_ref=problem.icr_ref,
-            route=problem.route, active_constraints=sorted(int(i) for i in active),
-            solve_time_s=solve_time, status='stopped' if problem.stopped else 'ok',
+            beta_ref=np.array(beta_new), beta_dot_ref=np.array(rate), phi_dot_ref=np.array(phi_dot),
+            twist_feasible=np.array(feasible), twist_executed=executed, icr_next=icr_next, icr_ref=icr_ref,
+            route=route, active_constraints=sorted(active),
+            solve_time_s=solve_time, status='stopped' if stopped else 'ok',
             qp_status=qp_status)
 
-    def _executed_twist(self, beta_new, rate, phi_dot, feasible):
-        """Twist over the coming period: the rolling model at the mid-period steer angles."""
-        if not np.any(rate):
-            return feasible.copy()
-        return self.geometry.twist_from_wheels(beta_new - 0.5 * self.params.dt * rate, rate, phi_dot)
+    def _rolling_rows(self, cos_beta, sin_beta):
+        """Rows ``f(β_i) = (cos β, sin β, d − hy cos β + hx sin β)`` of the rolling constraint, as tuples."""
+        d = self.geometry.wheel_offset
+        return [(c, s, d - hy * c + hx * s) for c, s, (hx, hy, _, _, _) in zip(cos_beta, sin_beta, self._wheels)]
 
-    def _velocity_scale(self, twist, beta, rate):
+    def _executed_twist(self, beta_new, rate, phi_dot, feasible):
+        """Twist over the coming period: the rolling model at the mid-period steer angles.
+
+        Least squares over the N rolling and N no-side-slip rows (as
+        :meth:`SteerableGeometry.twist_from_wheels`), solved by its 3×3 normal equations.
+        Arguments are sequences of floats; returns Shape (3,).
+        """
+        if not any(rate):
+            return np.array(feasible, dtype=float)
+        d, r_w = self.geometry.wheel_offset, self.geometry.wheel_radius
+        half = 0.5 * self.params.dt
+        n00 = n01 = n02 = n11 = n12 = n22 = b0 = b1 = b2 = 0.0
+        for beta, r, phi, (hx, hy, _, _, _) in zip(beta_new, rate, phi_dot, self._wheels):
+            mid = beta - half * r
+            c, s = math.cos(mid), math.sin(mid)
+            f2, g2 = d - hy * c + hx * s, hx * c + hy * s
+            rhs = r_w * phi - d * r
+            n00 += c * c + s * s
+            n01 += c * s - s * c
+            n02 += c * f2 - s * g2
+            n11 += s * s + c * c
+            n12 += s * f2 + c * g2
+            n22 += f2 * f2 + g2 * g2
+            b0 += c * rhs
+            b1 += s * rhs
+            b2 += f2 * rhs
+        # Cramer on the symmetric 3×3 system.
+        m00, m01, m02 = n11 * n22 - n12 * n12, n02 * n12 - n01 * n22, n01 * n12 - n02 * n11
+        det = n00 * m00 + n01 * m01 + n02 * m02
+        m11, m12, m22 = n00 * n22 - n02 * n02, n01 * n02 - n00 * n12, n00 * n11 - n01 * n01
+        return np.array(((m00 * b0 + m01 * b1 + m02 * b2) / det,
+                         (m01 * b0 + m11 * b1 + m12 * b2) / det,
+                         (m02 * b0 + m12 * b1 + m22 * b2) / det))
+
+    def _velocity_scale(self, twist, f_rows, rate):
         """Largest s ∈ [0, 1] with |s ξ̇| within the base limits and |φ̇(s ξ̇)| ≤ drive_rate_limit."""
         p = self.params
+        d, r_w = self.geometry.wheel_offset, self.geometry.wheel_radius
         s = 1.0
-        big = np.abs(twist) > 0
-        if np.any(big):
-            s = min(s, float(np.min(self._vmax[big] / np.abs(twist[big]))))
-        a = self.geometry.rolling_rows(beta) @ twist / self.geometry.wheel_radius
-        b = self.geometry.wheel_offset * rate / self.geometry.wheel_radius
-        nz = np.abs(a) > 1e-300
-        if np.any(nz):
-            s = min(s, float(np.min((p.drive_rate_limit - np.sign(a[nz]) * b[nz]) / np.abs(a[nz]))))
+        for v, vmax in zip(twist, p.base_velocity_limit):
+            if v != 0.0:
+                s = min(s, vmax / abs(v))
+        for (f0, f1, f2), r in zip(f_rows, rate):
+            a = (f0 * twist[0] + f1 * twist[1] + f2 * twist[2]) / r_w
+            if abs(a) > 1e-300:
+                b = d * r / r_w
+                s = min(s, (p.drive_rate_limit - (b if a > 0 else -b)) / abs(a))
         return max(0.0, s)
 
-    def _safe_stop(self, problem, qp_status, solve_time):
+    def _safe_stop(self, rate_lo, rate_hi, icr_ref, qp_status, solve_time):
         """Solver failure: steer rates braked to zero within β̈_max, drive ramped down within φ̈_max."""
         p = self.params
-        rate = np.clip(0.0, problem.rate_lower, problem.rate_upper)
+        rate = np.clip(0.0, rate_lo, rate_hi)
         beta_new = self._beta + p.dt * rate
         peak = float(np.max(np.abs(self._phi_dot)))
         k = max(0.0, 1.0 - p.drive_accel_limit * p.dt / peak) if peak > 0 else 0.0
@@ -633,8 +816,8 @@ class SwmrController:
         self._icr = self._icr_of_beta(beta_new, like=self._icr.z)
         return SwmrOutput(
             beta_ref=beta_new.copy(), beta_dot_ref=rate.copy(), phi_dot_ref=phi_dot.copy(),
-            twist_feasible=twist.copy(), twist_executed=self._executed_twist(beta_new, rate, phi_dot, twist),
-            icr_next=self._icr, icr_ref=problem.icr_ref, route='hold',
+            twist_feasible=twist.copy(),
+            twist_executed=self._executed_twist(beta_new.tolist(), rate.tolist(), phi_dot.tolist(), twist.tolist()),
+            icr_next=self._icr, icr_ref=icr_ref, route='hold',
             active_constraints=[], solve_time_s=solve_time, status='solver_failure',
             qp_status=qp_status)
-
