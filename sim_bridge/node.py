@@ -185,8 +185,8 @@ class SimNode(Node):
     def _advance(self):
         self._waiting_since = None
         self._arrived.clear()
-        self.world.step()
         self._apply_watchdog()
+        self.world.step()
         self._publish_state()
 
     # ------------------------------------------------------------------ output
