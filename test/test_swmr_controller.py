@@ -216,8 +216,8 @@ class _PublicApiOnly:
     def update(self, **kwargs):
         return self._inner.update(**kwargs)
 
-    def solve(self):
-        return self._inner.solve()
+    def solve(self, **kwargs):
+        return self._inner.solve(**kwargs)
 
 
 def test_public_osqp_api_path_gives_the_same_commands(geometry):

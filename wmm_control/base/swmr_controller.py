@@ -289,7 +289,10 @@ class OsqpIcrSolver:
             info, sol = ext.info, ext.solution
         else:
             solver.update(q=q, l=lb, u=ub, Ax=a_x)
-            res = solver.solve()
+            try:
+                res = solver.solve(raise_error=False)    # the status is handled here
+            except TypeError:                            # a release without that keyword
+                res = solver.solve()
             info, sol = res.info, res
         status = _OSQP_STATUS.get(int(info.status_val), str(info.status))
         return np.array(sol.x, dtype=float), status, np.array(sol.y, dtype=float)
