@@ -15,10 +15,13 @@ Publishes, every period:
 Timing: ``realtime`` steps on a wall-clock timer. ``lockstep`` publishes the state at t,
 waits (event-driven) until every group of ``lockstep_groups`` has sent a command, or
 ``lockstep_timeout`` wall seconds pass, then steps one period and publishes the state at
-t + period.
+t + period. Both run their timers on the steady clock, so ``use_sim_time:=true`` works. The
+simulator is the time source in lockstep, and in realtime under ``use_sim_time`` with
+``publish_clock``: its stamps and ``/clock`` are then the simulated time (from 0).
+Otherwise (realtime, wall time) they are the ROS clock.
 
 Safety: a group's command older than ``command_timeout``, judged by this node's clock at
-receipt (sim time in lockstep), is replaced by zero velocity; NaN/inf or wrong-length
+receipt (the simulated time when it is the time source), is replaced by zero velocity; NaN/inf or wrong-length
 commands are rejected with a throttled warning and never applied; values beyond the URDF
 velocity limits are clamped, counted and reported on ``/diagnostics``.
 """
@@ -29,8 +32,10 @@ import time
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.node import Node
-from rosgraph_msgs.msg import Clock
+from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Float64MultiArray
@@ -105,31 +110,39 @@ class SimNode(Node):
         self.pub_ee = self.create_publisher(PoseStamped, '/ee_pose', 10)
         self.pub_odom = self.create_publisher(Odometry, '/odom', 10)
         self.pub_truth = self.create_publisher(Odometry, '/ground_truth/odom', 10)
-        self.pub_clock = self.create_publisher(Clock, '/clock', 10)
+        self.pub_clock = self.create_publisher(ClockMsg, '/clock', 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._arrived = set()
         self._waiting_since = None
         self._steps = 0
         self._next_diag = 0.0
         self._wall_start = time.monotonic()
+        # The simulator is the time source when it steps in lockstep, or when it publishes
+        # /clock to nodes on sim time (itself included): its stamps are then its own time.
+        use_sim_time = bool(self.get_parameter('use_sim_time').value)
+        self.sim_time_source = self.lockstep or (self.p.publish_clock and use_sim_time)
+        # Timers on the steady clock: under use_sim_time the ROS clock only advances when
+        # this node publishes /clock, so timers on it would never fire.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
         if self.lockstep:
             # Wall-clock poll: start once every awaited controller is connected, and step
             # anyway when the commands do not come within lockstep_timeout.
             self._started = False
-            self.poll = self.create_timer(min(0.01, self.p.lockstep_timeout / 4), self._lockstep_poll)
+            self.poll = self.create_timer(min(0.01, self.p.lockstep_timeout / 4), self._lockstep_poll,
+                                          clock=steady)
         else:
-            self.timer = self.create_timer(self.p.period, self._realtime_tick)
+            self.timer = self.create_timer(self.p.period, self._realtime_tick, clock=steady)
         self.get_logger().info(
             f'simulating {self.world.robot.name} ({self.p.base_mode} base, {self.p.timing}, '
             f'period {self.p.period} s); command groups {sorted(groups)}')
 
     # ------------------------------------------------------------------ time
     def now_s(self):
-        """This node's clock [s]: sim time in lockstep, the ROS clock otherwise."""
-        return self.world.time if self.lockstep else self.get_clock().now().nanoseconds * 1e-9
+        """This node's clock [s]: the simulated time when it is the time source, else the ROS clock."""
+        return self.world.time if self.sim_time_source else self.get_clock().now().nanoseconds * 1e-9
 
     def _stamp_now(self):
-        return _stamp(self.world.time) if self.lockstep else self.get_clock().now().to_msg()
+        return _stamp(self.world.time) if self.sim_time_source else self.get_clock().now().to_msg()
 
     # ------------------------------------------------------------------ commands
     def _on_command(self, group, msg):
@@ -193,7 +206,7 @@ class SimNode(Node):
     def _publish_state(self):
         stamp = self._stamp_now()
         if self.lockstep or self.p.publish_clock:
-            self.pub_clock.publish(Clock(clock=stamp))
+            self.pub_clock.publish(ClockMsg(clock=stamp))
         names, pos, vel = self.world.joint_state()
         js = JointState()
         js.header.stamp = stamp

@@ -147,3 +147,16 @@ def test_invalid_parameters_fail_with_a_clear_error(ros):
         SimNode(context=ros.context, parameter_overrides=overrides(base_mode='teleport'))
     with pytest.raises(ConfigError, match='period'):
         SimNode(context=ros.context, parameter_overrides=overrides(period=-1.0))
+
+
+@pytest.mark.parametrize('timing', ['realtime', 'lockstep'])
+def test_runs_under_use_sim_time_as_the_time_source(ros, timing):
+    # Under use_sim_time the ROS clock advances only with the /clock the simulator itself
+    # publishes: timers on it would never fire and the simulator would freeze at t = 0.
+    sim, ctrl = start(ros, lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 2.0)},
+                      timing=timing, use_sim_time=True)
+    assert ros.spin_until(lambda: len(ctrl.joint_states) >= 20 and len(ctrl.truth) >= 20, timeout=10)
+    stamps = np.array([stamp_s(m) for m in ctrl.joint_states[:20]])
+    np.testing.assert_allclose(np.diff(stamps), 0.025, atol=1e-9)      # simulated time, one period a step
+    assert pose2d(ctrl.truth[19])[0] > 0.0                              # and the commands act
+    assert sim.get_clock().now().nanoseconds > 0
