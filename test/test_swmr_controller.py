@@ -151,6 +151,28 @@ def test_input_checks(geometry):
         ctrl.reset(np.zeros(3))
 
 
+@pytest.mark.parametrize('huge, bounded', [
+    ((1e308, 0.0, 0.0), (1.0, 0.0, 0.0)),
+    ((0.0, 1e200, 0.0), (0.0, 1.0, 0.0)),
+    ((-1e308, 1e308, 1e308), (-1.0, 1.0, 1.0)),
+    ((3.0, 1.0, 0.0), (1.0, 1.0 / 3.0, 0.0)),            # scaled, not clipped: the ICR is kept
+], ids=['vx-1e308', 'vy-1e200', 'all-1e308', 'vx-3'])
+def test_references_beyond_the_limits_are_scaled_into_them(geometry, huge, bounded):
+    ctrl, ref = make(geometry), make(geometry)
+    outs = run(ctrl, [huge] * 200)
+    expected = run(ref, [bounded] * 200)
+    assert_limits(outs)
+    for o, e in zip(outs, expected):
+        for name in ('beta_ref', 'beta_dot_ref', 'phi_dot_ref', 'twist_feasible', 'twist_executed'):
+            np.testing.assert_allclose(getattr(o, name), getattr(e, name), rtol=0, atol=1e-12)
+    assert np.all(np.isfinite(ctrl.twist)) and np.all(np.isfinite(ctrl.phi_dot))
+    moving = outs[-1].twist_executed         # along the reference, at a base or drive-rate limit
+    np.testing.assert_allclose(moving / np.linalg.norm(moving), np.divide(bounded, np.linalg.norm(bounded)),
+                               atol=1e-6)
+    assert np.linalg.norm(moving) > 0.99 or np.max(np.abs(outs[-1].phi_dot_ref)) > DRIVE_MAX - 1e-6
+    np.testing.assert_allclose(ctrl.build_qp(huge).x_ref, ref.build_qp(bounded).x_ref, atol=1e-12)
+
+
 # ---------------------------------------------------------------- the QP
 
 def test_build_qp_is_inspectable_and_consistent(geometry):

@@ -2,7 +2,8 @@
 
 Each period ``dt`` the controller takes the reference base twist ξ̇* = (vx, vy, ω) [m/s, m/s,
 rad/s] (base frame) and returns steer angles/rates β_ref, β̇_ref, drive rates φ̇_ref and the
-feasible twist q̇_bf that those commands realise:
+feasible twist q̇_bf that those commands realise. A reference beyond ``base_velocity_limit``
+is first scaled into it as a whole (its direction, hence its ICR, kept):
 
 1. ICR* of ξ̇* and ICR_curr of the commanded steer angles (:class:`~wmm_control.base.icr.Icr`,
    projective, pure translation included); the shorter of the direct and the complementary
@@ -586,6 +587,29 @@ class SwmrController:
         return (np.array((x0, x1)), (e1, e2), a, np.array(lb), rate_lo, rate_hi, (t0, t1, t2), route,
                 stopped)
 
+    def _bounded_reference(self, twist_ref):
+        """ξ̇* checked and scaled down uniformly into ``|ξ̇*_k| ≤ base_velocity_limit_k``.
+
+        A reference beyond the limits is not trusted as given: it is scaled by the largest
+        s ∈ (0, 1] that brings every component within its limit, so its direction (its ICR)
+        is kept, and no later product can overflow (a finite 1e308 would otherwise give NaN).
+
+        Returns:
+            ``(vx, vy, ω)`` as floats [m/s, m/s, rad/s].
+
+        Raises:
+            ShapeError, NonFiniteError: not 3 finite numbers.
+        """
+        ref = as_finite_vector(twist_ref, 3, 'twist_ref').tolist()
+        limits = self.params.base_velocity_limit
+        s = 1.0
+        for v, vmax in zip(ref, limits):
+            if abs(v) > vmax:
+                s = min(s, vmax / abs(v))
+        if s == 1.0:
+            return tuple(ref)
+        return tuple(min(vmax, max(-vmax, v * s)) for v, vmax in zip(ref, limits))
+
     def build_qp(self, twist_ref):
         """Build this period's ICR QP for the reference twist, from the controller state.
 
@@ -595,8 +619,7 @@ class SwmrController:
         Returns:
             :class:`IcrQp`.
         """
-        twist_ref = as_finite_vector(twist_ref, 3, 'twist_ref')
-        return self._as_icr_qp(self._problem(*twist_ref.tolist()))
+        return self._as_icr_qp(self._problem(*self._bounded_reference(twist_ref)))
 
     def _as_icr_qp(self, data):
         """The :class:`IcrQp` of :meth:`_problem`'s ``data``."""
@@ -650,8 +673,14 @@ class SwmrController:
         """One control period.
 
         Args:
-            twist_ref: ξ̇* = (vx, vy, ω) in the base frame [m/s, m/s, rad/s]. Shape (3,).
-            beta_meas: measured steer angles [rad] to resync the state, optional. Shape (N,).
+            twist_ref: ξ̇* = (vx, vy, ω) in the base frame [m/s, m/s, rad/s]; beyond
+                ``base_velocity_limit`` it is scaled down into the limits, direction kept.
+                Shape (3,).
+            beta_meas: measured steer angles [rad], optional. Shape (N,). They replace the
+                commanded angles as the start of this period (the loop closes on them; the
+                commanded rate β̇ stays the reference of the acceleration limit). When the
+                steering followed the last command exactly they equal the commanded angles
+                and change nothing.
             beta_dot_meas: measured steer rates [rad/s] to resync, optional. Shape (N,).
 
         Returns:
@@ -662,14 +691,13 @@ class SwmrController:
         """
         p = self.params
         n = self.geometry.n_wheels
-        twist_ref = as_finite_vector(twist_ref, 3, 'twist_ref')
+        vx, vy, wz = self._bounded_reference(twist_ref)
         if beta_meas is not None:
             self._beta = as_finite_vector(beta_meas, n, 'beta_meas').copy()
             self._icr = self._icr_of_beta(self._beta, like=self._icr.z)
         if beta_dot_meas is not None:
             self._beta_dot = as_finite_vector(beta_dot_meas, n, 'beta_dot_meas').copy()
 
-        vx, vy, wz = twist_ref.tolist()
         data = self._problem(vx, vy, wz)
         x_ref, (e1, e2), a, lb, rate_lo, rate_hi, _, route, stopped = data
         z0, z1, z2 = self._icr.z.tolist()

@@ -2,23 +2,41 @@
 
 Subscribes:
   ``/base/reference`` (``geometry_msgs/TwistStamped``, frame ``base_frame``): ξ̇* = (ẋ, ẏ, ω);
-  ``/joint_states`` (``sensor_msgs/JointState``): steer angles; each message runs one cycle.
+  ``/joint_states`` (``sensor_msgs/JointState``): measured steer angles; each message runs
+  exactly one control cycle.
 Publishes, every cycle:
   ``/steer_controller/commands`` (``std_msgs/Float64MultiArray``): β̇_ref, order ``steer_joints``;
   ``/drive_controller/commands`` (``Float64MultiArray``): φ̇_ref, order ``drive_joints``;
   ``/base/feasible_twist`` (``TwistStamped``): q̇_bf, the twist the base executes over the
-  coming period (compatible with the next ICR, corrected for the steering during the period);
+  coming period (compatible with the next ICR, corrected for the steering during the period),
+  stamped with the joint state the cycle answers;
   ``/diagnostics``: ICR, route, active constraints, solve time, every ``diagnostics_period``.
 
-Safety: a reference older than ``reference_timeout`` (by this node's clock at receipt) is
-replaced by zero: the drive ramps to zero within the limits and the steer angles are held.
-When joint states stop for ``joint_state_timeout``, zero steer and drive rates are
-published, and the controller re-reads the measured steer angles when they come back.
+The exchange, one per period: a joint state stamped S runs the cycle that answers the
+reference stamped S. If the latest reference already carries S (it came first), the cycle
+runs at once; otherwise the node waits for it at most ``reference_wait`` seconds of steady
+(wall) time, then runs with the latest reference. A resolver that answers each joint state
+with a reference of the same stamp therefore gets its feasible twist in the same period,
+and a reference published by hand (stamp 0) still drives the base, one short wait later.
+The cycle closes on the measured steer angles.
+
+Safety: the reference used is zero when the latest one is older than ``reference_timeout``
+(by this node's clock at receipt): the drive ramps to zero within the limits and the steer
+angles are held. References beyond ``base_velocity_limit`` are scaled into it by the core;
+non-finite ones, or ones in another frame, are rejected. When joint states stop for
+``joint_state_timeout`` (steady clock, so a paused sim clock cannot hide it), zero steer and
+drive rates are published, and the controller re-reads the measured steer angles when they
+come back. A joint state without every steer joint, or with positions and names of different
+lengths, is rejected with a throttled log and runs no cycle. The node's timers run on the
+steady clock: they keep working under ``use_sim_time``.
 """
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -50,6 +68,8 @@ PARAMS = (
     Param('drive_joints', 'Drive joint names, command order.', read_only=True),
     Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
     Param('reference_timeout', 'Reference age [s] after which the base stops.', lo=1e-3, hi=60.0),
+    Param('reference_wait', 'Steady time [s] a joint state waits for the reference of its stamp.',
+          lo=0.0, hi=1.0, read_only=True),
     Param('joint_state_timeout', 'Joint-state age [s] after which zero rates are commanded.', lo=1e-3, hi=60.0),
     Param('diagnostics_period', 'Time [s] between /diagnostics messages.', lo=0.0, hi=3600.0),
 )
@@ -74,23 +94,30 @@ class SwmrControllerNode(Node):
                             base_accel_limit=tuple(p.base_accel_limit))
         self.controller = SwmrController(geometry, params)
         self.reference = np.zeros(3)
+        self._ref_stamp = None
         self.ref_fresh = Freshness(p.reference_timeout)
-        self.js_fresh = Freshness(p.joint_state_timeout)
+        self.js_fresh = Freshness(p.joint_state_timeout)     # steady clock
         self.need_resync = True
-        self._index = None
+        self._steer_index = {}          # tuple of joint names -> indices of the steer joints, or None
+        self._pending = None            # (stamp, β_meas) of a joint state waiting for its reference
         self._next_diag = 0.0
         self._last = None
         self._ref_stale_logged = False
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pub_steer = self.create_publisher(Float64MultiArray, '/steer_controller/commands', 10)
         self.pub_drive = self.create_publisher(Float64MultiArray, '/drive_controller/commands', 10)
         self.pub_feasible = self.create_publisher(TwistStamped, '/base/feasible_twist', 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(TwistStamped, '/base/reference', self._on_reference, 10)
         self.create_subscription(JointState, '/joint_states', self._on_joint_states, 10)
-        self.watchdog = self.create_timer(p.period, self._check_joint_states)
+        self.watchdog = self.create_timer(p.period, self._check_joint_states, clock=self._steady)
+        # Started for each joint state that waits for its reference, cancelled by the cycle.
+        self._wait_timer = (self.create_timer(p.reference_wait, self._run_pending, clock=self._steady,
+                                              autostart=False) if p.reference_wait > 0 else None)
         self.get_logger().info(f'steerable base controller: {n} modules, t_s {p.period} s, '
                                f'β̇ ≤ {p.steer_rate_limit} rad/s, β̈ ≤ {p.steer_accel_limit} rad/s²')
 
+    # ------------------------------------------------------------------ inputs
     def _on_reference(self, msg):
         ref = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
         if not np.all(np.isfinite(ref)):
@@ -106,33 +133,62 @@ class SwmrControllerNode(Node):
             self.get_logger().warn('/base/reference: linear.z, angular.x, angular.y are ignored (planar base)',
                                    throttle_duration_sec=10.0)
         self.reference = ref
+        self._ref_stamp = _stamp_key(msg.header.stamp)
         self.ref_fresh.mark(seconds(self.get_clock()))
         self._ref_stale_logged = False
+        if self._pending is not None and self._pending[0] == self._ref_stamp:
+            self._run_pending()
 
     def _steer_state(self, msg):
-        if self._index is None or len(msg.name) != self._index[0]:
-            names = list(msg.name)
-            try:
-                idx = [names.index(j) for j in self.p.steer_joints]
-            except ValueError:
-                missing = [j for j in self.p.steer_joints if j not in names]
-                self.get_logger().error(f'/joint_states lacks steer joints {missing}', throttle_duration_sec=5.0)
-                return None
-            self._index = (len(names), np.array(idx))
-        idx = self._index[1]
-        if len(msg.position) != len(msg.name):
+        """Measured steer angles of a joint state, or None (logged) when it cannot give them."""
+        names = tuple(msg.name)
+        if names not in self._steer_index:
+            if len(self._steer_index) >= 16:      # a bounded cache: senders use one or two layouts
+                self._steer_index.clear()
+            where = {name: i for i, name in enumerate(names)}
+            missing = [j for j in self.p.steer_joints if j not in where]
+            self._steer_index[names] = None if missing else np.array([where[j] for j in self.p.steer_joints])
+        idx = self._steer_index[names]
+        if idx is None:
+            missing = [j for j in self.p.steer_joints if j not in names]
+            self.get_logger().warn(f'rejected /joint_states without steer joints {missing}: cycle skipped',
+                                   throttle_duration_sec=5.0)
+            return None
+        if len(msg.position) != len(names):
+            self.get_logger().warn(f'rejected /joint_states with {len(msg.position)} positions for '
+                                   f'{len(names)} names: cycle skipped', throttle_duration_sec=1.0)
             return None
         beta = np.asarray(msg.position, dtype=float)[idx]
-        return beta if np.all(np.isfinite(beta)) else None
+        if not np.all(np.isfinite(beta)):
+            self.get_logger().warn(f'rejected /joint_states with non-finite steer angles {beta.tolist()}: '
+                                   'cycle skipped', throttle_duration_sec=1.0)
+            return None
+        return beta
 
     def _on_joint_states(self, msg):
         beta = self._steer_state(msg)
         if beta is None:
-            self.get_logger().warn('joint state without finite steer angles: cycle skipped',
-                                   throttle_duration_sec=1.0)
             return
+        self.js_fresh.mark(seconds(self._steady))
+        if self._pending is not None:         # the previous state's reference never came
+            self._run_pending()
+        stamp = _stamp_key(msg.header.stamp)
+        self._pending = (stamp, beta)
+        if self._ref_stamp == stamp or self._wait_timer is None:
+            self._run_pending()
+        else:
+            self._wait_timer.reset()
+
+    # ------------------------------------------------------------------ cycle
+    def _run_pending(self):
+        """Run the cycle of the waiting joint state with the latest reference (zero when stale)."""
+        if self._wait_timer is not None:
+            self._wait_timer.cancel()
+        if self._pending is None:
+            return
+        (sec, nanosec), beta = self._pending
+        self._pending = None
         now = seconds(self.get_clock())
-        self.js_fresh.mark(now)
         if self.need_resync:
             self.controller.reset(beta)
             self.need_resync = False
@@ -143,14 +199,14 @@ class SwmrControllerNode(Node):
             if not self._ref_stale_logged and np.any(self.reference):
                 self.get_logger().warn(f'/base/reference older than {self.p.reference_timeout} s: stopping')
                 self._ref_stale_logged = True
-        out = self.controller.step(reference)
+        out = self.controller.step(reference, beta_meas=beta)
         if out.status == 'solver_failure':
             self.get_logger().error(f'ICR QP failed ({out.qp_status}): steering held, drive ramping down',
                                     throttle_duration_sec=1.0)
         self.pub_steer.publish(float_array(out.beta_dot_ref))
         self.pub_drive.publish(float_array(out.phi_dot_ref))
         twist = TwistStamped()
-        twist.header.stamp = msg.header.stamp
+        twist.header.stamp = Time(sec=sec, nanosec=nanosec)
         twist.header.frame_id = self.p.base_frame
         twist.twist.linear.x, twist.twist.linear.y = float(out.twist_executed[0]), float(out.twist_executed[1])
         twist.twist.angular.z = float(out.twist_executed[2])
@@ -158,18 +214,19 @@ class SwmrControllerNode(Node):
         self._last = out
         if self.p.diagnostics_period > 0 and now >= self._next_diag:
             self._next_diag = now + self.p.diagnostics_period
-            self.pub_diag.publish(self._diagnostics(msg.header.stamp, out))
+            self.pub_diag.publish(self._diagnostics(twist.header.stamp, out))
 
     def _check_joint_states(self):
-        now = seconds(self.get_clock())
-        if self.js_fresh.age(now) > self.p.joint_state_timeout and not self.need_resync:
+        age = self.js_fresh.age(seconds(self._steady))
+        if not self.p.joint_state_timeout < age < float('inf'):
+            return
+        if not self.need_resync:
             self.get_logger().warn(f'no /joint_states for {self.p.joint_state_timeout} s: zero steer and drive '
                                    'rates; will resync from the measured angles')
             self.need_resync = True
-        if self.need_resync and self.js_fresh.age(now) != float('inf'):
-            n = len(self.p.steer_joints)
-            self.pub_steer.publish(float_array(np.zeros(n)))
-            self.pub_drive.publish(float_array(np.zeros(n)))
+        n = len(self.p.steer_joints)
+        self.pub_steer.publish(float_array(np.zeros(n)))
+        self.pub_drive.publish(float_array(np.zeros(n)))
 
     def _diagnostics(self, stamp, out):
         icr = out.icr_next
@@ -181,6 +238,11 @@ class SwmrControllerNode(Node):
                   'beta_ref': out.beta_ref, 'feasible_twist': out.twist_executed, 'reference': self.reference}
         return diagnostic_array(stamp, [diagnostic_status('swmr_controller', 'steerable base', level,
                                                           out.status, values)])
+
+
+def _stamp_key(stamp):
+    """A header stamp as a hashable, comparable ``(sec, nanosec)``."""
+    return (stamp.sec, stamp.nanosec)
 
 
 def main(args=None):
