@@ -39,7 +39,15 @@ Base motion (``base_mode``)
     * Robot A: real wheel–ground contact. The drive wheels are the URDF cylinders on a
       ``GEOM_PLANE`` floor with Coulomb friction (``WHEEL_FRICTION``); the base moves only
       through contact forces, so it scrubs, slips and lags as the steer and drive motors
-      allow.
+      allow. The URDF is loaded with ``URDF_USE_IMPLICIT_CYLINDER``: PyBullet's default turns
+      each cylinder into a convex hull, a polygonal wheel that rolls on its corners and
+      carries its load on one edge at a time. With those wheels a 10 s straight run at
+      0.4 m/s under zero steer rates turned the steer joints by up to 0.036 rad and yawed
+      the base at −0.005 rad/s (0.053 rad, 13.5 cm off the line over 4 m). With true
+      cylinders: 0.001 rad, 0.0015 rad and 1.2 cm. What remains is the velocity motors'
+      residual: under a zero command the steer joints creep at about 2e-4 rad/s (arm
+      joints below 7e-4 rad/s), whatever the solver iterations; a controller closing on the
+      measured angles absorbs it.
     * Robot B: the URDF wheels are plain cylinders (rollers are not modelled), so plain
       contact would behave like a skid-steer car. Chosen instead: the wheel cylinders keep
       the real ground contact for *support* (normal forces from PyBullet) but with zero
@@ -266,8 +274,11 @@ class SimWorld:
                                   rgbaColor=[0.82, 0.84, 0.80, 1.0], physicsClientId=cid)
         self.ground_id = p.createMultiBody(0.0, plane, vis, basePosition=[0.0, 0.0, cfg.ground_z],
                                            physicsClientId=cid)
+        # Implicit cylinders: by default PyBullet turns a URDF cylinder into a convex hull, a
+        # polygonal wheel that rolls on its corners (see the module docstring, physics mode).
         self.body_id = p.loadURDF(str(cfg.urdf_path), basePosition=[0.0, 0.0, 0.0],
-                                  flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid)
+                                  flags=p.URDF_USE_INERTIA_FROM_FILE | p.URDF_USE_IMPLICIT_CYLINDER,
+                                  physicsClientId=cid)
         body = self.body_id
 
         joints, links = {}, {}
