@@ -229,6 +229,25 @@ def _parse_mecanum(raw, where):
     )
 
 
+def read_yaml_section(path, key, what):
+    """The mapping under top-level ``key`` of the YAML file ``path``.
+
+    Raises:
+        ConfigError: the file is missing or not YAML, or has no such mapping (``what`` names
+            the kind of file in the message).
+    """
+    if not path.is_file():
+        raise ConfigError(f'{what} not found: {path}')
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f'{path}: not valid YAML: {exc}') from exc
+    raw = doc.get(key) if isinstance(doc, dict) else None
+    if not isinstance(raw, dict):
+        raise ConfigError(f'{path}: top-level key "{key}" missing')
+    return raw
+
+
 def resolve_robot_yaml(robot):
     """Map a robot name, alias (A/B) or YAML path to the YAML file path."""
     key = str(robot).strip().lower()
@@ -253,15 +272,7 @@ def load_robot(robot='steerable'):
             message names the key).
     """
     path = resolve_robot_yaml(robot)
-    if not path.is_file():
-        raise ConfigError(f'robot description not found: {path}')
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f'{path}: not valid YAML: {exc}') from exc
-    raw = doc.get('robot') if isinstance(doc, dict) else None
-    if not isinstance(raw, dict):
-        raise ConfigError(f'{path}: top-level key "robot" missing')
+    raw = read_yaml_section(path, 'robot', 'robot description')
     where = path.name
     base_type = raw.get('base_type')
     if base_type not in ('steerable', 'mecanum'):

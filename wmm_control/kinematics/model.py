@@ -223,6 +223,16 @@ class KinematicModel:
         m = self._base_ee()
         return m.translation.copy(), m.rotation.copy()
 
+    def arm_points_world(self):
+        """World positions of the arm joint origins and of the end effector [m]. Shape (8, 3).
+
+        With the base origin, they outline the robot's footprint (Sorour Fig 5).
+        """
+        self._require()
+        pts = [self.data.oMi[j].translation for j in self._arm_joint_ids]
+        pts.append(self._oMee.translation)
+        return np.array(pts)
+
     def ee_pose_world(self):
         """World end-effector pose [x, y, z, roll, pitch, yaw]. Shape (6,)."""
         pos, rot = self.ee_placement_world()

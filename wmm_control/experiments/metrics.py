@@ -1,0 +1,226 @@
+"""What a run is judged by: its log, and the per-goal metrics of the experiments.
+
+A :class:`RunLog` holds one row per control period, recorded from the ground truth (the
+end-effector pose and the base pose the simulator reports) and from the commands. Both the
+ROS-free :class:`~sim_bridge.closed_loop.ClosedLoop` and the ROS experiment runner fill it.
+:func:`goal_metrics` turns it into the numbers of Sorour Figs 5–7 (``metrics.json``).
+"""
+
+import numpy as np
+import pinocchio as pin
+
+from wmm_control.kinematics.orientation import rpy_from_matrix, wrap_angle
+
+__all__ = ['RunLog', 'goal_metrics', 'run_limit_report', 'pose_error_norm', 'METRIC_KEYS']
+
+#: Per-goal keys of :func:`goal_metrics` and what they mean (documented in the README).
+METRIC_KEYS = {
+    'area': 'area under the pose-error norm ‖e_p‖ (eq 12, position [m] and wrapped RPY [rad]) '
+            'over the goal window [m·s] (the numbers of Sorour Fig 6)',
+    'final_position_error_m': 'position error at the end of the window, ground truth [m]',
+    'final_orientation_error_rad': 'rotation angle between the final and the goal orientation [rad]',
+    'reached': 'final errors below 1 cm and 0.02 rad',
+    'time_to_rfm_s': 'time from the goal start until the position error first enters r_fm [s] '
+                     '(0 when it starts inside; null when it never does)',
+    'base_path_m': 'length of the base path in the window [m]',
+    'base_path_fine_m': 'length of the base path while ψ = 1 (fine manipulation) [m]',
+    'footprint_m': 'largest horizontal distance of any arm joint or the end effector from the base '
+                   'centre [m]',
+    'max_switch_jump_rad_s': 'largest change of an arm joint velocity command at a mode switch [rad/s] '
+                             '(null when the mode never switches)',
+    'max_switch_jump_base': 'largest change of a base twist reference component at a mode switch '
+                            '[m/s or rad/s]',
+    'psi_min': 'smallest ψ in the window',
+    'psi_max': 'largest ψ in the window',
+    'dex_deviation_psi0_rad': 'while ψ = 0: largest |q_a − q_a,dex| (any joint) once the arm has come '
+                              'within 0.05 rad of q_a,dex [rad] (null: no such phase)',
+    'dex_deviation_psi0_start_rad': 'largest |q_a − q_a,dex| at the start of the ψ = 0 phases [rad]',
+    'compensation_dropped': 'periods whose arm command went out without the eq (14) term '
+                            '(the base controller did not answer in time)',
+}
+
+
+class RunLog:
+    """One row per control period of a run (append, then :meth:`freeze`).
+
+    Columns (after :meth:`freeze`, numpy arrays of K rows): ``t`` [s], ``goal`` (index),
+    ``ee_position`` (K, 3), ``ee_rotation`` (K, 3, 3), ``base_pose`` (K, 3), ``q_arm`` (K, 7),
+    ``arm_command`` (K, 7), ``base_reference`` (K, 3), ``feasible_twist`` (K, 3), ``psi``,
+    ``mode`` (list of str), ``limit_scale``, ``accel_scale``, ``null_scale``,
+    ``compensation_scale``, ``compensated`` (bool), ``cycle_time_s``.
+    """
+
+    COLUMNS = ('t', 'goal', 'ee_position', 'ee_rotation', 'base_pose', 'q_arm', 'arm_command',
+               'base_reference', 'feasible_twist', 'psi', 'mode', 'limit_scale', 'accel_scale',
+               'null_scale', 'compensation_scale', 'compensated', 'cycle_time_s')
+
+    def __init__(self, method='', label=''):
+        self.method = method
+        self.label = label
+        self.rows = {c: [] for c in self.COLUMNS}
+        self.wall_time_s = 0.0
+        self.frozen = False
+
+    def append(self, t, goal, ee_position, ee_rotation, base_pose, q_arm, command, feasible_twist):
+        """Add one period: the state at its start and the command sent (a ``ResolverCommand``)."""
+        d = command.diagnostics
+        r = self.rows
+        r['t'].append(float(t))
+        r['goal'].append(int(goal))
+        r['ee_position'].append(np.asarray(ee_position, dtype=float))
+        r['ee_rotation'].append(np.asarray(ee_rotation, dtype=float))
+        r['base_pose'].append(np.asarray(base_pose, dtype=float))
+        r['q_arm'].append(np.asarray(q_arm, dtype=float))
+        r['arm_command'].append(np.asarray(command.arm_velocity, dtype=float))
+        r['base_reference'].append(np.asarray(command.base_twist, dtype=float))
+        r['feasible_twist'].append(np.asarray(feasible_twist if feasible_twist is not None else np.full(3, np.nan),
+                                              dtype=float))
+        r['psi'].append(d.psi)
+        r['mode'].append(d.mode)
+        r['limit_scale'].append(d.limit_scale)
+        r['accel_scale'].append(d.accel_scale)
+        r['null_scale'].append(d.null_scale)
+        r['compensation_scale'].append(d.compensation_scale)
+        r['compensated'].append(d.compensated)
+        r['cycle_time_s'].append(d.cycle_time_s)
+
+    def freeze(self):
+        """Turn the columns into arrays; returns self."""
+        if not self.frozen:
+            for c in self.COLUMNS:
+                if c != 'mode':
+                    self.rows[c] = np.array(self.rows[c])
+            self.frozen = True
+        return self
+
+    def __getattr__(self, name):
+        rows = self.__dict__.get('rows')
+        if rows is not None and name in rows:
+            return rows[name]
+        raise AttributeError(name)
+
+    def __len__(self):
+        return len(self.rows['t'])
+
+
+def pose_error_norm(goal_pose, ee_position, ee_rotation):
+    """‖e_p‖ of Sorour eq (12): position error and wrapped RPY difference, per row. Shape (K,)."""
+    goal_pose = np.asarray(goal_pose, dtype=float)
+    pos = goal_pose[:3] - ee_position
+    rpy = np.array([rpy_from_matrix(r) for r in ee_rotation])
+    ang = wrap_angle(goal_pose[3:] - rpy)
+    return np.sqrt(np.sum(pos * pos, axis=1) + np.sum(ang * ang, axis=1))
+
+
+def _rotation_angle(r_goal, rot):
+    return float(np.linalg.norm(pin.log3(r_goal @ rot.T)))
+
+
+def goal_metrics(log, scenario, model, r_fm, q_dex, dt):
+    """The per-goal metrics (:data:`METRIC_KEYS`) of a frozen :class:`RunLog`.
+
+    Args:
+        log: the run.
+        scenario: its :class:`~wmm_control.experiments.scenario.Scenario`.
+        model: a :class:`~wmm_control.kinematics.KinematicModel` of the robot (footprint).
+        r_fm: fine manipulation range [m].
+        q_dex: dexterous arm posture [rad]. Shape (7,).
+        dt: control period [s].
+
+    Returns:
+        A list of dicts, one per goal.
+    """
+    log.freeze()
+    out = []
+    q_dex = np.asarray(q_dex, dtype=float)
+    for gi, goal in enumerate(scenario.goals):
+        idx = np.flatnonzero(log.goal == gi)
+        if idx.size == 0:
+            out.append({'goal': gi + 1, 'start_s': goal.t, 'end_s': goal.end, 'cycles': 0})
+            continue
+        target = goal.target
+        pos_err = np.linalg.norm(target.position - log.ee_position[idx], axis=1)
+        err = pose_error_norm(goal.pose, log.ee_position[idx], log.ee_rotation[idx])
+        last = idx[-1]
+        final_pos = float(pos_err[-1])
+        final_ori = _rotation_angle(target.rotation, log.ee_rotation[last])
+        inside = np.flatnonzero(pos_err <= r_fm)
+        base_xy = log.base_pose[idx, :2]
+        steps = np.linalg.norm(np.diff(base_xy, axis=0), axis=1)
+        fine = log.psi[idx][1:] >= 1.0
+        footprint = 0.0
+        for k in idx:
+            model.update(log.base_pose[k], log.q_arm[k])
+            pts = model.arm_points_world()[:, :2] - log.base_pose[k, :2]
+            footprint = max(footprint, float(np.max(np.linalg.norm(pts, axis=1))))
+        modes = [log.mode[k] for k in idx]
+        switches = [j for j in range(1, len(idx)) if modes[j] != modes[j - 1]]
+        arm_jump = [float(np.max(np.abs(log.arm_command[idx[j]] - log.arm_command[idx[j - 1]]))) for j in switches]
+        base_jump = [float(np.max(np.abs(log.base_reference[idx[j]] - log.base_reference[idx[j - 1]])))
+                     for j in switches]
+        dev_after, dev_start = _dex_deviation(log, idx, q_dex)
+        out.append({
+            'goal': gi + 1, 'start_s': goal.t, 'end_s': goal.end, 'cycles': int(idx.size),
+            'area': float(np.sum(err) * dt),
+            'final_position_error_m': final_pos,
+            'final_orientation_error_rad': final_ori,
+            'reached': bool(final_pos < 0.01 and final_ori < 0.02),
+            'time_to_rfm_s': float(log.t[idx[inside[0]]] - goal.t) if inside.size else None,
+            'base_path_m': float(np.sum(steps)),
+            'base_path_fine_m': float(np.sum(steps[fine])),
+            'footprint_m': footprint,
+            'max_switch_jump_rad_s': max(arm_jump) if arm_jump else None,
+            'max_switch_jump_base': max(base_jump) if base_jump else None,
+            'psi_min': float(np.min(log.psi[idx])),
+            'psi_max': float(np.max(log.psi[idx])),
+            'dex_deviation_psi0_rad': dev_after,
+            'dex_deviation_psi0_start_rad': dev_start,
+            'compensation_dropped': int(np.count_nonzero(~log.compensated[idx])),
+        })
+    return out
+
+
+def _dex_deviation(log, idx, q_dex):
+    """(largest deviation from q_dex once within 0.05 rad, largest deviation at a phase start) over ψ = 0."""
+    dev = np.max(np.abs(log.q_arm[idx] - q_dex), axis=1)
+    psi0 = log.psi[idx] == 0.0
+    if not np.any(psi0):
+        return None, None
+    after, starts = [], []
+    phase_started = False
+    settled = False
+    for j in range(idx.size):
+        if not psi0[j]:
+            phase_started = settled = False
+            continue
+        if not phase_started:
+            starts.append(float(dev[j]))
+            phase_started = True
+        if dev[j] <= 0.05:
+            settled = True
+        if settled:
+            after.append(float(dev[j]))
+    return (max(after) if after else None), max(starts)
+
+
+def run_limit_report(log, robot, dt, tol=1e-9):
+    """Largest excess over every limit in a run (all zero when no limit was ever passed).
+
+    The run starts at rest: the first command's change is measured from zero.
+
+    Returns:
+        dict: ``arm_position``, ``arm_velocity``, ``arm_acceleration``, ``base_velocity``,
+        ``base_acceleration`` (largest excess, 0 when within) and ``non_finite`` (count).
+    """
+    log.freeze()
+    arm = robot.arm
+    q = log.q_arm
+    pos = float(max(0.0, np.max(q - arm.position_upper), np.max(arm.position_lower - q)))
+    vel = float(max(0.0, np.max(np.abs(log.arm_command) - arm.velocity)))
+    acc = float(max(0.0, np.max(np.abs(np.diff(log.arm_command, axis=0, prepend=0.0)) - arm.acceleration * dt)))
+    bvel = float(max(0.0, np.max(np.abs(log.base_reference) - robot.base.velocity)))
+    bacc = float(max(0.0, np.max(np.abs(np.diff(log.base_reference, axis=0, prepend=0.0)) - robot.base.acceleration * dt)))
+    bad = int(np.count_nonzero(~np.isfinite(log.arm_command)) + np.count_nonzero(~np.isfinite(log.base_reference)))
+    return {'arm_position': pos if pos > tol else 0.0, 'arm_velocity': vel if vel > tol else 0.0,
+            'arm_acceleration': acc if acc > tol else 0.0, 'base_velocity': bvel if bvel > tol else 0.0,
+            'base_acceleration': bacc if bacc > tol else 0.0, 'non_finite': bad}

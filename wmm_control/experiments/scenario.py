@@ -1,0 +1,127 @@
+"""Scenario files: a timeline of end-effector goals (``config/scenarios/*.yaml``).
+
+Schema::
+
+    scenario:
+      name: sorour_table2
+      description: ...
+      robot: steerable            # robot name, alias or YAML path
+      frame: world                # frame of every goal pose
+      duration: 65.0              # [s]
+      goals:                      # each holds from t until the next goal's t
+        - {t: 0.0, pose: [x, y, z, roll, pitch, yaw]}     # [m, rad], RPY = ZYX Euler
+
+An angle may be written as an expression of ``pi`` (``pi/2``, ``-pi/2``, ``3*pi/4``).
+"""
+
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wmm_control.errors import ConfigError
+from wmm_control.paths import config_path
+from wmm_control.robot_config import read_yaml_section
+from wmm_control.resolvers.interface import PoseTarget
+
+__all__ = ['Goal', 'Scenario', 'load_scenario']
+
+_PI_EXPR = re.compile(r'^\s*([+-]?\d*\.?\d*)\s*\*?\s*pi\s*(?:/\s*(\d+\.?\d*))?\s*$')
+
+
+def _number(value, where):
+    if isinstance(value, bool):
+        raise ConfigError(f'{where}: expected a number, got {value!r}')
+    if isinstance(value, (int, float)):
+        out = float(value)
+    elif isinstance(value, str):
+        m = _PI_EXPR.match(value)
+        if not m:
+            raise ConfigError(f'{where}: expected a number or an expression like "pi/2", got {value!r}')
+        coef = m.group(1)
+        coef = -1.0 if coef == '-' else 1.0 if coef in ('', '+') else float(coef)
+        out = coef * math.pi / (float(m.group(2)) if m.group(2) else 1.0)
+    else:
+        raise ConfigError(f'{where}: expected a number, got {value!r}')
+    if not math.isfinite(out):
+        raise ConfigError(f'{where}: must be finite, got {value!r}')
+    return out
+
+
+@dataclass(frozen=True)
+class Goal:
+    """One goal of a scenario: the pose holds from ``t`` [s] to ``end`` [s].
+
+    Attributes:
+        t: start time [s].
+        end: end time [s] (the next goal's start, or the scenario's duration).
+        pose: [x, y, z, roll, pitch, yaw] in the scenario's frame [m, rad]. Shape (6,).
+    """
+
+    t: float
+    end: float
+    pose: np.ndarray
+
+    @property
+    def target(self):
+        """The goal as a :class:`~wmm_control.resolvers.PoseTarget` set-point."""
+        return PoseTarget.from_rpy(self.pose)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A timeline of goals on one robot."""
+
+    name: str
+    description: str
+    robot: str
+    frame: str
+    duration: float
+    goals: tuple
+    path: Path
+
+    def goal_index(self, t):
+        """Index of the goal in force at time ``t`` [s] (0 before the first start)."""
+        idx = 0
+        for i, goal in enumerate(self.goals):
+            if t + 1e-9 >= goal.t:
+                idx = i
+        return idx
+
+
+def load_scenario(name_or_path):
+    """Load ``config/scenarios/<name>.yaml`` or a scenario file path.
+
+    Raises:
+        ConfigError: missing file or an invalid entry (the message names it).
+    """
+    text = str(name_or_path)
+    path = Path(text) if text.endswith(('.yaml', '.yml')) else config_path('scenarios', f'{text}.yaml')
+    raw = read_yaml_section(path, 'scenario', 'scenario')
+    where = path.name
+    duration = _number(raw.get('duration'), f'{where}.duration')
+    if duration <= 0:
+        raise ConfigError(f'{where}.duration must be > 0, got {duration}')
+    goals_raw = raw.get('goals')
+    if not isinstance(goals_raw, list) or not goals_raw:
+        raise ConfigError(f'{where}.goals: expected a non-empty list')
+    starts, poses = [], []
+    for i, g in enumerate(goals_raw):
+        w = f'{where}.goals[{i}]'
+        if not isinstance(g, dict) or 'pose' not in g or 't' not in g:
+            raise ConfigError(f'{w}: expected {{t: ..., pose: [x, y, z, roll, pitch, yaw]}}')
+        pose = g['pose']
+        if not isinstance(pose, list) or len(pose) != 6:
+            raise ConfigError(f'{w}.pose: expected 6 values [x, y, z, roll, pitch, yaw], got {pose!r}')
+        starts.append(_number(g['t'], f'{w}.t'))
+        poses.append(np.array([_number(v, f'{w}.pose[{k}]') for k, v in enumerate(pose)]))
+    if any(b <= a for a, b in zip(starts, starts[1:])) or starts[0] < 0 or starts[-1] >= duration:
+        raise ConfigError(f'{where}.goals: start times must increase, from >= 0 to below the duration, '
+                          f'got {starts}')
+    ends = starts[1:] + [duration]
+    return Scenario(
+        name=str(raw.get('name', path.stem)), description=str(raw.get('description', '')),
+        robot=str(raw.get('robot', 'steerable')), frame=str(raw.get('frame', 'world')), duration=duration,
+        goals=tuple(Goal(t, e, p) for t, e, p in zip(starts, ends, poses)), path=path)

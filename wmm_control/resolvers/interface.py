@@ -1,0 +1,198 @@
+"""The seam every redundancy resolver shares: ``step(state, target) -> command``.
+
+A resolver turns the robot's state and an end-effector target into one period's command:
+arm joint velocities and a base twist reference. Methods whose arm compensates the base's
+predicted velocity error (Sorour eq 14) finish the arm part in a second call,
+:meth:`Resolver.compensate`, once the base controller has answered this period's base
+reference with the twist it can execute.
+
+Frames: the world frame is fixed, z up; the base frame is ``base_link`` (x forward).
+"""
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from wmm_control.checks import as_finite_vector
+from wmm_control.errors import ShapeError
+from wmm_control.kinematics.orientation import matrix_from_rpy
+
+__all__ = ['RobotState', 'PoseTarget', 'ResolverDiagnostics', 'ResolverCommand', 'Resolver',
+           'N_ARM', 'N_BASE_TWIST']
+
+N_ARM = 7
+N_BASE_TWIST = 3
+
+
+def _rotation(value, name):
+    rot = np.asarray(value, dtype=float)
+    if rot.shape != (3, 3):
+        raise ShapeError(f'{name}: expected a (3, 3) rotation matrix, got shape {rot.shape}')
+    as_finite_vector(rot.ravel(), 9, name)
+    return rot
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """What the robot reports in one period.
+
+    Attributes:
+        base_pose: (x, y, θ) of ``base_link`` in the world [m, m, rad]. Shape (3,).
+        base_twist: measured base twist (vx, vy, ω) in the base frame [m/s, m/s, rad/s].
+            Shape (3,).
+        q_arm: arm joint positions [rad]. Shape (7,).
+        dq_arm: arm joint rates [rad/s]. Shape (7,).
+        ee_position: measured end-effector position in the world [m], or None to use forward
+            kinematics from the base pose and the arm joints. Shape (3,).
+        ee_rotation: measured end-effector orientation in the world, with ``ee_position``.
+            Shape (3, 3).
+
+    Raises:
+        ShapeError, NonFiniteError: a wrong size or a NaN/inf entry.
+    """
+
+    base_pose: np.ndarray
+    base_twist: np.ndarray
+    q_arm: np.ndarray
+    dq_arm: np.ndarray
+    ee_position: np.ndarray = None
+    ee_rotation: np.ndarray = None
+
+    def __post_init__(self):
+        object.__setattr__(self, 'base_pose', as_finite_vector(self.base_pose, 3, 'base_pose'))
+        object.__setattr__(self, 'base_twist', as_finite_vector(self.base_twist, 3, 'base_twist'))
+        object.__setattr__(self, 'q_arm', as_finite_vector(self.q_arm, N_ARM, 'q_arm'))
+        object.__setattr__(self, 'dq_arm', as_finite_vector(self.dq_arm, N_ARM, 'dq_arm'))
+        if (self.ee_position is None) != (self.ee_rotation is None):
+            raise ShapeError('give both ee_position and ee_rotation, or neither')
+        if self.ee_position is not None:
+            object.__setattr__(self, 'ee_position', as_finite_vector(self.ee_position, 3, 'ee_position'))
+            object.__setattr__(self, 'ee_rotation', _rotation(self.ee_rotation, 'ee_rotation'))
+
+
+@dataclass(frozen=True)
+class PoseTarget:
+    """An end-effector target in the world frame: a set-point, or a point of a trajectory.
+
+    Attributes:
+        position: desired position [m]. Shape (3,).
+        rotation: desired orientation. Shape (3, 3).
+        velocity: desired twist (linear, angular) [m/s, rad/s], world axes; zero for a
+            set-point. The velocity-level methods use it as feedforward. Shape (6,).
+        acceleration: desired (linear, angular) acceleration [m/s², rad/s²]. Shape (6,).
+    """
+
+    position: np.ndarray
+    rotation: np.ndarray
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    acceleration: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+    def __post_init__(self):
+        object.__setattr__(self, 'position', as_finite_vector(self.position, 3, 'target position'))
+        object.__setattr__(self, 'rotation', _rotation(self.rotation, 'target rotation'))
+        object.__setattr__(self, 'velocity', as_finite_vector(self.velocity, 6, 'target velocity'))
+        object.__setattr__(self, 'acceleration', as_finite_vector(self.acceleration, 6, 'target acceleration'))
+
+    @classmethod
+    def from_rpy(cls, pose):
+        """A set-point from ``[x, y, z, roll, pitch, yaw]`` [m, rad] (Sorour Table II layout)."""
+        pose = as_finite_vector(pose, 6, 'target pose')
+        return cls(pose[:3], matrix_from_rpy(pose[3:]))
+
+
+@dataclass(frozen=True)
+class ResolverDiagnostics:
+    """What a user wants to see while a resolver runs.
+
+    Attributes:
+        method: the resolver's name.
+        mode: 'gross_motion' (ψ target 0), 'mobile_manipulation' (0.5),
+            'fine_manipulation' (1), or 'whole_body' for methods without task sharing.
+        psi: task-sharing factor ψ used this period (1.0 for whole-body methods).
+        position_error: ‖p* − p‖ [m].
+        orientation_error: rotation angle between the current and the desired orientation [rad].
+        limit_scale: factor s_v in [0, 1] applied to the whole command to keep the velocity
+            and braking limits, keeping its direction (1 = unscaled).
+        accel_scale: fraction s_a in [0, 1] of the way to that command taken this period, to
+            keep the acceleration limits (1 = all of it).
+        null_scale: factor in [0, 1] left to the null-space motion once the limits took their
+            share (it gives way before the task does; 1 for methods without one).
+        compensation_scale: share in [0, 1] of the eq (14) arm command that the arm's limits
+            let through; 1 when none was needed or there is no compensation.
+        limited: indices (0–2 base twist, 3–9 arm joints) whose bound shaped the command.
+        sigma_min: smallest singular value of the arm's analytic Jacobian in the base frame.
+        compensated: True once the eq (14) term is in the arm command.
+        cycle_time_s: wall time of the call [s].
+    """
+
+    method: str
+    mode: str
+    psi: float
+    position_error: float
+    orientation_error: float
+    limit_scale: float
+    accel_scale: float
+    null_scale: float
+    compensation_scale: float
+    limited: tuple
+    sigma_min: float
+    compensated: bool
+    cycle_time_s: float
+
+
+@dataclass(frozen=True)
+class ResolverCommand:
+    """One period's command.
+
+    Attributes:
+        arm_velocity: arm joint velocities [rad/s]. Shape (7,).
+        base_twist: base twist reference (vx, vy, ω) in the base frame [m/s, m/s, rad/s].
+            Shape (3,).
+        diagnostics: :class:`ResolverDiagnostics`.
+    """
+
+    arm_velocity: np.ndarray
+    base_twist: np.ndarray
+    diagnostics: ResolverDiagnostics
+
+    def with_arm(self, arm_velocity, **diagnostics):
+        """A copy with another arm command and some diagnostics fields replaced."""
+        return replace(self, arm_velocity=np.asarray(arm_velocity, dtype=float),
+                       diagnostics=replace(self.diagnostics, **diagnostics))
+
+
+class Resolver(ABC):
+    """A redundancy resolution method: the sibling methods of this package share this API."""
+
+    #: Name of the method, as the ``method`` parameter of the ``redundancy_resolver`` node.
+    name = 'resolver'
+
+    @abstractmethod
+    def step(self, state, target):
+        """One control period.
+
+        Args:
+            state: :class:`RobotState`.
+            target: :class:`PoseTarget`.
+
+        Returns:
+            :class:`ResolverCommand`; every entry finite and within the robot's limits.
+        """
+
+    def compensate(self, command, feasible_twist):
+        """Finish ``command`` with the base controller's answer ``feasible_twist``.
+
+        ``feasible_twist`` is q̇_bf of Sorour eq (15): the twist (vx, vy, ω) [m/s, m/s,
+        rad/s], base frame, that the base will execute in answer to ``command.base_twist``.
+        Methods without compensation return ``command`` unchanged.
+        """
+        return command
+
+    @property
+    def uses_compensation(self):
+        """True when :meth:`compensate` changes the command (it needs the feasible twist)."""
+        return False
+
+    def reset(self):
+        """Forget the previous command (the next one starts from rest)."""

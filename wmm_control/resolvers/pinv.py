@@ -1,0 +1,34 @@
+"""The whole-body damped pseudo-inverse: Sorour eq (8), the baseline.
+
+``u = Jᵀ (J Jᵀ + ρ² I)⁻¹ ṗ_ref`` with ṗ_ref the eq (12) pose controller: the minimum-norm
+joint velocity, base and arm moving together, no null-space task and no compensation. ρ is
+Table I's 0.001 away from singularities (see :func:`~wmm_control.resolvers.pose_servo.singularity_damping`).
+"""
+
+from dataclasses import dataclass
+
+from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver, damped_pinv_solve
+
+__all__ = ['PinvParams', 'PinvResolver']
+
+
+@dataclass(frozen=True)
+class PinvParams(PoseServoParams):
+    """Parameters of :class:`PinvResolver`: those of :class:`PoseServoParams`."""
+
+
+class PinvResolver(PoseServoResolver):
+    """Sorour eq (8), damped by ρ, inside the limits of :class:`PoseServoResolver`.
+
+    Args:
+        robot: robot name, YAML path, RobotConfig or KinematicModel.
+        params: :class:`PinvParams` (Table I defaults).
+    """
+
+    name = 'pinv'
+
+    def __init__(self, robot='steerable', params=None):
+        super().__init__(robot, params if params is not None else PinvParams())
+
+    def _resolve(self, jac, p_ref, e_pos, state):
+        return damped_pinv_solve(jac, p_ref, self.task_damping(jac)), None, 'whole_body', 1.0

@@ -1,0 +1,321 @@
+"""The velocity-level machinery that the damped pseudo-inverse and task sharing share.
+
+Sorour §II–III: the proportional pose controller of eq (12), the augmented Jacobian J_mm of
+eq (7), the limits of the whole command, and the arm compensation of eq (14). A subclass
+supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state) -> (u_task, u_null, mode,
+ψ)``, the task part and the null-space part, which gives way first to the limits.
+
+Joint space. The paper's base coordinates are the 6-vector q̇_b = (ẋ, ẏ, 0, 0, 0, ω) (eq 3)
+with J_b = I₆ (eq 2); three columns of ``M_RPY H J_b`` are then identically zero, and every
+solution of eqs (8), (9) and (14) has zeros there. This module keeps the three that move:
+``u = (vx, vy, ω, q̇_1 … q̇_7)``, base twist in the base frame. The results are the paper's.
+
+Task space (``orientation_error``):
+
+* ``'rpy'`` (the paper): ṗ = (ṙ, θ̇) in the base frame, θ the RPY angles of the end
+  effector. J = J_mm = M_RPY [H J_b, J_a] with Ω⁻¹ damped by ``rpy_damping`` (singular at
+  pitch ±π/2). The angular error is the wrapped difference of world RPY angles; for ZYX
+  angles the base yaw only shifts the yaw, so the base-frame RPY error equals the world one.
+  Eq (12) as printed also rotates that RPY error by ᵇR_w, which only mixes the roll and pitch
+  errors once the base has turned; ``rotate_angular_error=True`` keeps that literal form.
+* ``'log'``: the SO(3) log-map error ``log(R* Rᵀ)`` rotated into the base frame, and the
+  geometric Jacobian [H J_b, J_a]: no singularity short of a half turn.
+"""
+
+import math
+import time
+from abc import abstractmethod
+from dataclasses import dataclass, fields
+
+import numpy as np
+import pinocchio as pin
+
+from wmm_control.errors import ConfigError
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.orientation import rpy_from_matrix, rpy_rate_map, wrap_angle
+from wmm_control.resolvers.interface import N_ARM, N_BASE_TWIST, Resolver, ResolverCommand, ResolverDiagnostics
+from wmm_control.resolvers.limits import CommandLimits
+
+__all__ = ['PoseServoParams', 'PoseServoResolver', 'damped_pinv_solve', 'singularity_damping', 'ORIENTATION_ERRORS']
+
+ORIENTATION_ERRORS = ('rpy', 'log')
+_BASE_COLS = [0, 1, 5]       # columns of H J_b that move: ẋ, ẏ, ω
+_N = N_BASE_TWIST + N_ARM
+
+
+@dataclass(frozen=True)
+class PoseServoParams:
+    """Parameters shared by the velocity-level resolvers (Sorour Table I defaults).
+
+    Attributes:
+        dt: control period t_s [s].
+        lambda_p: gain λ_p of the pose controller, eq (12) [1/s].
+        rho: damping ρ of the pseudo-inverse [-].
+        orientation_error: ``'rpy'`` (the paper) or ``'log'`` (SO(3) log map).
+        rotate_angular_error: apply eq (12)'s ᵇR_w to the RPY error too (literal eq 12).
+        rpy_damping: damping of Ω⁻¹ near pitch ±π/2 [-].
+        max_linear_speed: cap on the task-space linear reference [m/s], applied before the
+            inversion so that an absurdly far goal cannot overflow; far above every limit.
+        max_angular_speed: same for the angular reference [rad/s].
+        singular_region: ε [-]: below this smallest singular value of the Jacobian being
+            inverted, the damping grows (not in the paper; see :func:`singularity_damping`).
+        max_damping: ρ_max [-], the damping reached at an exact singularity.
+    """
+
+    dt: float = 0.025
+    lambda_p: float = 1.7
+    rho: float = 0.001
+    orientation_error: str = 'rpy'
+    rotate_angular_error: bool = False
+    rpy_damping: float = 1e-3
+    max_linear_speed: float = 10.0
+    max_angular_speed: float = 10.0
+    singular_region: float = 0.1
+    max_damping: float = 0.1
+
+    #: numeric fields that may be zero (the others must be > 0)
+    _allow_zero = ()
+
+    def __post_init__(self):
+        _check_fields(self, self._allow_zero)
+        if self.orientation_error not in ORIENTATION_ERRORS:
+            raise ConfigError(f'orientation_error must be one of {ORIENTATION_ERRORS}, '
+                              f'got {self.orientation_error!r}')
+
+
+def _check_fields(params, allow_zero=()):
+    """Every numeric field of a params dataclass is finite and > 0 (>= 0 for ``allow_zero``).
+
+    Fields declared ``bool`` or ``str`` are checked by their owners.
+    """
+    for f in fields(params):
+        if f.type in (bool, str, 'bool', 'str'):
+            continue
+        val = getattr(params, f.name)
+        if isinstance(val, bool) or not isinstance(val, (int, float)):
+            raise ConfigError(f'{type(params).__name__}.{f.name}: expected a number, got {val!r}')
+        if not math.isfinite(val) or val < 0 or (val == 0 and f.name not in allow_zero):
+            raise ConfigError(f'{type(params).__name__}.{f.name} must be finite and '
+                              f'{">= 0" if f.name in allow_zero else "> 0"}, got {val}')
+
+
+def singularity_damping(jac, rho, region, max_damping):
+    """Damping of a singularity-robust inverse (Nakamura–Hanafusa, Chiaverini).
+
+    ``ρ² = ρ₀² + ρ_max² (1 − (σ_min/ε)²)`` when σ_min < ε, else ρ₀: Table I's ρ₀ = 0.001
+    away from singularities, growing smoothly to ρ_max at one. Near a singularity the
+    inverse then slows down instead of asking for huge joint rates, and motion that leaves
+    the singularity stays possible.
+
+    Args:
+        jac: the matrix to be inverted. Shape (m, n).
+        rho: ρ₀.
+        region: ε.
+        max_damping: ρ_max.
+
+    Returns:
+        (ρ, σ_min).
+    """
+    sigma = float(np.linalg.svd(jac, compute_uv=False)[-1])
+    if sigma >= region:
+        return rho, sigma
+    return math.sqrt(rho * rho + max_damping * max_damping * (1.0 - (sigma / region) ** 2)), sigma
+
+
+def damped_pinv_solve(jac, rhs, rho, activation=None):
+    """``A Jᵀ (J A Jᵀ + ρ² I)⁻¹ rhs``: the weighted damped pseudo-inverse of Sorour eq (9).
+
+    Args:
+        jac: J. Shape (m, n).
+        rhs: task-space vector. Shape (m,).
+        rho: damping ρ.
+        activation: the diagonal of A = W⁻¹ (1 = the column takes part fully, 0 = not at
+            all), default all ones (eq 8's damped pseudo-inverse). Shape (n,).
+
+    Returns:
+        Shape (n,); exactly zero where the activation is zero.
+    """
+    ja = jac if activation is None else jac * activation
+    gram = ja @ jac.T
+    gram[np.diag_indices_from(gram)] += rho * rho
+    out = jac.T @ np.linalg.solve(gram, rhs)
+    return out if activation is None else activation * out
+
+
+class PoseServoResolver(Resolver):
+    """Base of the velocity-level resolvers: eq (12) pose controller, limits, eq (14).
+
+    Args:
+        robot: robot name, YAML path, :class:`~wmm_control.robot_config.RobotConfig` or a
+            :class:`~wmm_control.kinematics.KinematicModel` (shared, not copied).
+        params: the method's parameters (a subclass of :class:`PoseServoParams`).
+    """
+
+    name = 'pose_servo'
+
+    def __init__(self, robot, params):
+        self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
+        self.params = params
+        cfg = self.model.config
+        arm = cfg.arm
+        inf3 = np.full(N_BASE_TWIST, np.inf)
+        self.limits = CommandLimits(
+            velocity=np.concatenate((cfg.base.velocity, arm.velocity)),
+            acceleration=np.concatenate((cfg.base.acceleration, arm.acceleration)),
+            position_lower=np.concatenate((-inf3, arm.position_lower)),
+            position_upper=np.concatenate((inf3, arm.position_upper)),
+            dt=params.dt)
+        self._arm_limits = self.limits.subset(slice(N_BASE_TWIST, None))
+        self._position = np.zeros(_N)
+        self.reset()
+
+    def reset(self):
+        self._prev = np.zeros(_N)          # last nominal command (base reference, arm before eq 14)
+        self._prev_null = np.zeros(_N)     # its null-space share
+        self._prev_arm = np.zeros(N_ARM)   # last arm command sent
+        self._prev_arm_null = np.zeros(N_ARM)
+        self._arm_before = (np.zeros(N_ARM), np.zeros(N_ARM))
+        self._arm_task = np.zeros(N_ARM)       # this period's arm command: task part...
+        self._arm_null = np.zeros(N_ARM)       # ...and null-space part
+        self._q_arm = None
+        self._jac = None
+        self.arm_damping = self.params.rho
+
+    # ------------------------------------------------------------------ eq (12)
+    def task_reference(self, state, target):
+        """Pose error and eq (12)'s task-space reference, with the Jacobian it is resolved on.
+
+        Returns:
+            (jac, p_ref, position_error (3,) world, orientation_error_angle [rad]):
+            ``jac`` Shape (6, 10) over u = (vx, vy, ω, q̇_a); ``p_ref`` Shape (6,).
+        """
+        p = self.params
+        model = self.model
+        model.update(state.base_pose, state.q_arm)
+        if state.ee_position is None:
+            pos, rot = model.ee_placement_world()
+        else:
+            pos, rot = state.ee_position, state.ee_rotation
+        theta = state.base_pose[2]
+        c, s = math.cos(theta), math.sin(theta)
+        b_r_w = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        e_pos = target.position - pos
+        rot_err = target.rotation @ rot.T
+        angle = float(np.linalg.norm(pin.log3(rot_err)))
+        ff = target.velocity
+        p_ref = np.empty(6)
+        e_lin = e_pos
+        if _norm(e_pos) > p.max_linear_speed / p.lambda_p:   # an absurdly far goal: keep only its direction
+            e_lin = e_pos / _norm(e_pos) * (p.max_linear_speed / p.lambda_p)
+        p_ref[:3] = b_r_w @ (p.lambda_p * e_lin + ff[:3])
+        if p.orientation_error == 'rpy':
+            jac = model.jmm(p.rpy_damping)[:, _BASE_COLS + list(range(6, 6 + N_ARM))]
+            e_ang = wrap_angle(rpy_from_matrix(target.rotation) - rpy_from_matrix(rot))
+            if p.rotate_angular_error:
+                e_ang = b_r_w @ e_ang
+            ff_ang = rpy_rate_map(model.ee_pose_base()[3:], p.rpy_damping)[3:, 3:] @ (b_r_w @ ff[3:])
+            p_ref[3:] = p.lambda_p * e_ang + ff_ang
+        else:
+            jac = np.empty((6, _N))
+            jac[:, :N_BASE_TWIST] = model.h_matrix()[:, _BASE_COLS]
+            jac[:, N_BASE_TWIST:] = model.arm_jacobian_base()
+            p_ref[3:] = b_r_w @ (p.lambda_p * pin.log3(rot_err) + ff[3:])
+        _cap(p_ref[:3], p.max_linear_speed)
+        _cap(p_ref[3:], p.max_angular_speed)
+        return jac, p_ref, e_pos, angle
+
+    def task_damping(self, jac, activation=None):
+        """ρ for inverting ``jac`` with ``activation`` (:func:`singularity_damping` of the active part)."""
+        p = self.params
+        active = jac if activation is None else jac * np.sqrt(activation)
+        return singularity_damping(active, p.rho, p.singular_region, p.max_damping)[0]
+
+    # ------------------------------------------------------------------ step
+    @abstractmethod
+    def _resolve(self, jac, p_ref, e_pos, state):
+        """The method's inversion: ``(u_task (10,), u_null (10,) or None, mode, ψ)``."""
+
+    def step(self, state, target):
+        """One period: eq (12), the method's inversion, then the limits.
+
+        The whole command (base reference and arm) is brought into the velocity, braking and
+        acceleration bounds by :class:`CommandLimits`, the null-space part giving way first;
+        the arm command is then checked against the arm command actually sent last period,
+        so that it is safe to send as it is when no compensation follows.
+        """
+        t0 = time.perf_counter()
+        jac, p_ref, e_pos, angle = self.task_reference(state, target)
+        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state)
+        self._position[N_BASE_TWIST:] = state.q_arm
+        lim = self.limits.apply(task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null)
+        self._prev, self._prev_null = lim.command.copy(), lim.secondary.copy()
+        self._jac = jac
+        self._q_arm = state.q_arm
+        self._arm_null = lim.secondary[N_BASE_TWIST:].copy()
+        self._arm_task = lim.command[N_BASE_TWIST:] - self._arm_null
+        self._arm_before = (self._prev_arm, self._prev_arm_null)
+        arm = self._finish_arm(self._arm_task)
+        p = self.params
+        self.arm_damping, sigma = singularity_damping(jac[:, N_BASE_TWIST:], p.rho, p.singular_region,
+                                                      p.max_damping)
+        limited = sorted(set(lim.limited) | {i + N_BASE_TWIST for i in arm.limited})
+        diag = ResolverDiagnostics(
+            method=self.name, mode=mode, psi=float(psi), position_error=_norm(e_pos),
+            orientation_error=angle, limit_scale=lim.scale, accel_scale=lim.accel_scale,
+            null_scale=lim.secondary_scale,
+            compensation_scale=1.0, limited=tuple(limited), sigma_min=sigma, compensated=False,
+            cycle_time_s=time.perf_counter() - t0)
+        return ResolverCommand(arm_velocity=arm.command.copy(), base_twist=lim.command[:N_BASE_TWIST].copy(),
+                               diagnostics=diag)
+
+    def _finish_arm(self, arm_task):
+        """The arm command sent: task part ``arm_task`` plus this period's null-space share,
+        within the arm's bounds relative to the arm command sent last period."""
+        before, before_null = self._arm_before
+        arm = self._arm_limits.apply(arm_task, self._q_arm, before, secondary=self._arm_null,
+                                     previous_secondary=before_null)
+        self._prev_arm, self._prev_arm_null = arm.command.copy(), arm.secondary.copy()
+        return arm
+
+    # ------------------------------------------------------------------ eq (14)
+    def compensation_term(self, base_reference, feasible_twist):
+        """Eq (14)'s arm term ``J_a⁺ M_RPY H J_b (q̇_ref(b) − q̇_bf)`` on this period's Jacobian.
+
+        ``J_a`` is the arm's part of the same task Jacobian (analytic in ``'rpy'`` mode), its
+        pseudo-inverse damped by :func:`singularity_damping`. Shape (7,).
+        """
+        jac = self._jac
+        deficit = jac[:, :N_BASE_TWIST] @ (np.asarray(base_reference, dtype=float)
+                                          - np.asarray(feasible_twist, dtype=float))
+        return damped_pinv_solve(jac[:, N_BASE_TWIST:], deficit, self.arm_damping)
+
+    def _add_compensation(self, command, feasible_twist):
+        """``command`` with the eq (14) term added to the nominal arm command, within the arm's bounds.
+
+        The term joins the arm's task part (the null-space part gives way first) and goes
+        through the arm's bounds, its acceleration measured from the arm command sent last
+        period; ``compensation_scale`` is the product of the two uniform factors of that
+        primary part (1: the compensated command went through whole).
+        """
+        t0 = time.perf_counter()
+        term = self.compensation_term(command.base_twist, feasible_twist)
+        arm = self._finish_arm(self._arm_task + term)
+        elapsed = command.diagnostics.cycle_time_s + time.perf_counter() - t0
+        return command.with_arm(arm.command.copy(), compensation_scale=arm.scale * arm.accel_scale,
+                                compensated=True, cycle_time_s=elapsed)
+
+
+def _norm(vec):
+    """Euclidean norm without overflow for entries near the float range (e.g. 1e300)."""
+    big = float(np.max(np.abs(vec)))
+    return 0.0 if big == 0.0 else big * float(np.linalg.norm(vec / big))
+
+
+def _cap(vec, limit):
+    """Scale ``vec`` in place to norm ``limit`` when it is longer, keeping its direction."""
+    big = float(np.max(np.abs(vec)))
+    if big > limit:
+        vec /= big                  # now every entry is in [−1, 1]: no overflow below
+    norm = float(np.linalg.norm(vec))
+    if norm > limit:
+        vec *= limit / norm

@@ -1,0 +1,159 @@
+"""Task-sharing redundancy resolution: Sorour et al. 2019, eqs (9)–(14).
+
+Each period:
+
+1. ψ from the end-effector position error, eq (11): 1 (fine manipulation) within ``r_fm``,
+   0.5 (mobile manipulation) within ``r_mm``, 0 (gross motion) beyond. Optionally ψ moves
+   towards that value at a bounded rate ``psi_rate`` instead of jumping (off in the paper's
+   runs).
+2. The particular solution ``J⁺ᵂ ṗ_ref`` with the weighted damped pseudo-inverse of eq (9),
+   ``J⁺ᵂ = A Jᵀ (J A Jᵀ + ρ² I)⁻¹`` (ρ grows near a singularity of the active part:
+   :func:`~wmm_control.resolvers.pose_servo.singularity_damping`). The diagonal of eq (10), ``diag((1 − ψ) I, ψ I)``, acts
+   as ``A = W⁻¹``, the *activation* of each part: ψ = 1 gives the base exactly no share of
+   the task, ψ = 0 gives the arm none, as the text describes. (Used as W, as printed, it
+   would do the opposite.)
+3. The null-space pull of eqs (9) and (13): ``λ_dex (I − J⁺J) z_dex``,
+   ``z_dex = (0, −(q_a − q_a,dex))``, with the undamped Moore–Penrose J⁺ (SVD, relative
+   tolerance ``pinv_tolerance``). It spans the base too: in fine manipulation the base may
+   still move to restore the dexterous arm pose, keeping the end effector still.
+4. The whole command scaled into the limits (:mod:`wmm_control.resolvers.limits`).
+5. Eq (14) in :meth:`TaskSharingResolver.compensate`, when the base controller has answered
+   with the feasible twist q̇_bf of this period: the arm takes over the base's predicted
+   velocity error, scaled into the arm's limits.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wmm_control.checks import as_finite_vector
+from wmm_control.errors import ConfigError
+from wmm_control.resolvers.interface import N_ARM, N_BASE_TWIST
+from wmm_control.resolvers.pose_servo import (
+    PoseServoParams, PoseServoResolver, _norm, damped_pinv_solve)
+
+__all__ = ['TaskSharingParams', 'TaskSharingResolver', 'MODES', 'psi_of_error']
+
+#: Mode name by the value of ψ that eq (11) gives.
+MODES = {0.0: 'gross_motion', 0.5: 'mobile_manipulation', 1.0: 'fine_manipulation'}
+
+
+def psi_of_error(error_norm, r_fm, r_mm):
+    """Eq (11): the task-sharing factor ψ from the position error norm [m]."""
+    if error_norm <= r_fm:
+        return 1.0
+    if error_norm <= r_mm:
+        return 0.5
+    return 0.0
+
+
+@dataclass(frozen=True)
+class TaskSharingParams(PoseServoParams):
+    """Parameters of :class:`TaskSharingResolver` (Sorour Table I defaults).
+
+    Attributes:
+        r_fm: fine manipulation range [m].
+        r_mm: mobile manipulation range [m].
+        lambda_dex: gain of the null-space pull to the dexterous arm pose [1/s].
+        compensation: apply eq (14) when :meth:`TaskSharingResolver.compensate` is called.
+        psi_rate: largest change of ψ per second [1/s]; 0 lets ψ jump as eq (11) does.
+        pinv_tolerance: relative singular-value cut-off of the null-space projector's J⁺.
+    """
+
+    r_fm: float = 0.25
+    r_mm: float = 0.9
+    lambda_dex: float = 3.5
+    compensation: bool = True
+    psi_rate: float = 0.0
+    pinv_tolerance: float = 1e-6
+
+    _allow_zero = ('psi_rate', 'lambda_dex')
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.r_fm >= self.r_mm:
+            raise ConfigError(f'r_fm ({self.r_fm} m) must be below r_mm ({self.r_mm} m)')
+
+
+class TaskSharingResolver(PoseServoResolver):
+    """Sorour eqs (9)–(14): task sharing, null-space pull to q_a,dex, arm compensation.
+
+    Args:
+        robot: robot name, YAML path, RobotConfig or KinematicModel.
+        params: :class:`TaskSharingParams` (Table I defaults).
+        q_dex: dexterous arm posture [rad], default the robot's ``arm.dexterous``. Shape (7,).
+    """
+
+    name = 'task_sharing'
+
+    def __init__(self, robot='steerable', params=None, q_dex=None):
+        super().__init__(robot, params if params is not None else TaskSharingParams())
+        dex = self.model.config.arm.dexterous if q_dex is None else q_dex
+        self.q_dex = as_finite_vector(dex, N_ARM, 'q_dex').copy()
+        self._psi = None
+
+    @property
+    def uses_compensation(self):
+        return self.params.compensation
+
+    def reset(self):
+        super().reset()
+        self._psi = None
+
+    def _share(self, error_norm):
+        p = self.params
+        target = psi_of_error(error_norm, p.r_fm, p.r_mm)
+        if p.psi_rate == 0.0 or self._psi is None:
+            self._psi = target
+        else:
+            step = p.psi_rate * p.dt
+            self._psi += min(step, max(-step, target - self._psi))
+        return self._psi, MODES[target]
+
+    def _resolve(self, jac, p_ref, e_pos, state):
+        p = self.params
+        psi, mode = self._share(_norm(e_pos))
+        activation = np.empty(N_BASE_TWIST + N_ARM)
+        activation[:N_BASE_TWIST] = 1.0 - psi
+        activation[N_BASE_TWIST:] = psi
+        task = damped_pinv_solve(jac, p_ref, self.task_damping(jac, activation), activation)
+        return task, self._null_motion(jac, task, state.q_arm), mode, psi
+
+    def _null_motion(self, jac, task, q_arm):
+        """Eqs (9) and (13): ``λ_dex (I − J⁺J) z_dex``, kept clear of the braking bounds.
+
+        A joint that the pull would drive past its braking bound (Xing eqs 7–8) is held
+        still by adding its selection row to J and projecting again, so the motion stays in
+        the null space of the task (the end effector does not move) instead of being
+        clipped out of it. Shape (10,).
+        """
+        p = self.params
+        n = N_BASE_TWIST + N_ARM
+        z = np.zeros(n)
+        z[N_BASE_TWIST:] = p.lambda_dex * (self.q_dex - q_arm)
+        self._position[N_BASE_TWIST:] = q_arm
+        down, up = self.limits.braking_rates(self._position)
+        lower, upper = -down - task, up - task
+        held = np.zeros(n, dtype=bool)
+        rows = jac
+        for _ in range(N_ARM):
+            null = z - np.linalg.pinv(rows, rcond=p.pinv_tolerance) @ (rows @ z)
+            over = ~held & ((null < lower - 1e-12) | (null > upper + 1e-12))
+            if not np.any(over):
+                return null
+            held |= over
+            rows = np.vstack((jac, np.eye(n)[held]))
+        return np.zeros(n)
+
+    def compensate(self, command, feasible_twist):
+        """Eq (14): add ``J_a⁺ M_RPY H J_b (q̇_ref(b) − q̇_bf)`` to the arm command.
+
+        Args:
+            command: this period's :meth:`step` result.
+            feasible_twist: q̇_bf, the base controller's answer to ``command.base_twist``
+                (vx, vy, ω), base frame. Shape (3,).
+        """
+        if not self.params.compensation:
+            return command
+        feasible_twist = as_finite_vector(feasible_twist, N_BASE_TWIST, 'feasible_twist')
+        return self._add_compensation(command, feasible_twist)
