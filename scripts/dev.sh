@@ -42,7 +42,7 @@ setup() {
 
 setup
 case "$job" in
-  run)   exec "$VENV/bin/python" -m wmm_control.cli.model_info "$@" ;;
+  run)   exec "$VENV/bin/python" -m wmm_control.cli.experiment "$@" ;;
   test)  exec "$VENV/bin/python" -m pytest test -q "$@" ;;
   bench)
     # pink (a QP-based IK) is a comparison point of bench_swmr.py only, not a dependency.

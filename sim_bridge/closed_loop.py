@@ -162,8 +162,9 @@ def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', p
     for _ in range(n):
         gi = scenario.goal_index(world.time)
         rec = loop.step(targets[gi])
-        log.append(rec.t, gi, rec.ee_position, rec.ee_rotation, rec.base_pose, rec.q_arm, rec.command,
-                   rec.feasible_twist)
+        cmd = rec.command
+        log.append(rec.t, gi, rec.ee_position, rec.ee_rotation, rec.base_pose, rec.q_arm, cmd.arm_velocity,
+                   cmd.base_twist, rec.feasible_twist, cmd.diagnostics)
         if progress is not None:
             progress(1)
     log.wall_time_s = time.perf_counter() - t0

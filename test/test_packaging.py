@@ -63,6 +63,10 @@ def test_every_console_script_is_installed_under_lib_and_starts(install_tree):
     for name in names:
         exe = install_tree / 'lib' / 'wmm_control' / name
         assert exe.is_file() and os.access(exe, os.X_OK), exe
+        if name == 'wmm_experiment':
+            out = subprocess.run([str(exe), '--help'], env=env, capture_output=True, text=True, timeout=120)
+            assert out.returncode == 0 and 'sorour_table2' in out.stdout, out.stderr
+            continue
         if name == 'wmm_model':
             out = subprocess.run([str(exe), '--robot', 'B'], env=env, capture_output=True, text=True, timeout=120)
             assert out.returncode == 0, out.stderr
@@ -89,3 +93,59 @@ def test_wmm_model_reports_a_clear_error_for_an_unknown_robot(install_tree):
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2
     assert "unknown robot 'C'" in out.stderr
+
+
+def _stop(proc):
+    """SIGINT, then the exit code and the output."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        out, _ = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return proc.returncode, out
+
+
+def test_three_installed_executables_take_the_end_effector_to_a_published_goal(install_tree):
+    """wmm_sim, swmr_controller and redundancy_resolver, each its own process with no arguments
+    (what ``ros2 run`` starts), on a private domain: a goal published from this process is reached."""
+    import numpy as np
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+
+    domain = 100 + os.getpid() % 100
+    env = dict(installed_env(install_tree), ROS_DOMAIN_ID=str(domain))
+    procs = {name: subprocess.Popen([str(install_tree / 'lib' / 'wmm_control' / name)], env=env,
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             for name in ('wmm_sim', 'swmr_controller', 'redundancy_resolver')}
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node('goal_test', context=context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    goal = np.array([2.0, 1.0, 1.0])
+    ee = []
+    node.create_subscription(PoseStamped, '/ee_pose', lambda m: ee.append(
+        np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z])), 10)
+    pub = node.create_publisher(PoseStamped, '/goal_pose', 10)
+    msg = PoseStamped()
+    msg.header.frame_id = 'world'
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in goal)
+    msg.pose.orientation.w = 1.0
+    reached = False
+    try:
+        end = time.monotonic() + 90.0
+        while time.monotonic() < end and not reached:
+            executor.spin_once(timeout_sec=0.05)
+            if node.count_subscribers('/goal_pose') and int(time.monotonic() * 2) % 2 == 0:
+                pub.publish(msg)         # published again and again: the resolver may join late
+            reached = bool(ee) and np.linalg.norm(ee[-1] - goal) < 0.01
+    finally:
+        executor.remove_node(node)
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        results = {name: _stop(proc) for name, proc in procs.items()}
+    assert reached, f'end effector at {ee[-1] if ee else None}, goal {goal}'
+    for name, (code, out) in results.items():
+        assert code == 0 and 'Traceback' not in out, f'{name} exit {code}:\n{out}'

@@ -61,9 +61,11 @@ class RunLog:
         self.wall_time_s = 0.0
         self.frozen = False
 
-    def append(self, t, goal, ee_position, ee_rotation, base_pose, q_arm, command, feasible_twist):
-        """Add one period: the state at its start and the command sent (a ``ResolverCommand``)."""
-        d = command.diagnostics
+    def append(self, t, goal, ee_position, ee_rotation, base_pose, q_arm, arm_command, base_reference,
+               feasible_twist, diagnostics):
+        """Add one period: the state at its start, the commands sent, and the resolver's
+        :class:`~wmm_control.resolvers.ResolverDiagnostics`. ``feasible_twist`` may be None."""
+        d = diagnostics
         r = self.rows
         r['t'].append(float(t))
         r['goal'].append(int(goal))
@@ -71,8 +73,8 @@ class RunLog:
         r['ee_rotation'].append(np.asarray(ee_rotation, dtype=float))
         r['base_pose'].append(np.asarray(base_pose, dtype=float))
         r['q_arm'].append(np.asarray(q_arm, dtype=float))
-        r['arm_command'].append(np.asarray(command.arm_velocity, dtype=float))
-        r['base_reference'].append(np.asarray(command.base_twist, dtype=float))
+        r['arm_command'].append(np.asarray(arm_command, dtype=float))
+        r['base_reference'].append(np.asarray(base_reference, dtype=float))
         r['feasible_twist'].append(np.asarray(feasible_twist if feasible_twist is not None else np.full(3, np.nan),
                                               dtype=float))
         r['psi'].append(d.psi)
@@ -165,7 +167,7 @@ def goal_metrics(log, scenario, model, r_fm, q_dex, dt):
             'final_position_error_m': final_pos,
             'final_orientation_error_rad': final_ori,
             'reached': bool(final_pos < 0.01 and final_ori < 0.02),
-            'time_to_rfm_s': float(log.t[idx[inside[0]]] - goal.t) if inside.size else None,
+            'time_to_rfm_s': max(0.0, float(log.t[idx[inside[0]]] - goal.t)) if inside.size else None,
             'base_path_m': float(np.sum(steps)),
             'base_path_fine_m': float(np.sum(steps[fine])),
             'footprint_m': footprint,

@@ -11,6 +11,12 @@ Schema::
       goals:                      # each holds from t until the next goal's t
         - {t: 0.0, pose: [x, y, z, roll, pitch, yaw]}     # [m, rad], RPY = ZYX Euler
 
+      experiment:                 # optional: how wmm_experiment runs it (defaults below)
+        sim: {base_mode: kinematic, slip_gain: 0.05, slip_drift: [...], slip_noise: [...], seed: 0}
+        runs:                     # one run per entry; keys other than name/method/feedback
+          - {name: pinv, method: pinv, feedback: ground_truth}          # are resolver parameters
+          - {name: task_sharing, method: task_sharing, compensation: false}
+
 An angle may be written as an expression of ``pi`` (``pi/2``, ``-pi/2``, ``3*pi/4``).
 """
 
@@ -26,7 +32,21 @@ from wmm_control.paths import config_path
 from wmm_control.robot_config import read_yaml_section
 from wmm_control.resolvers.interface import PoseTarget
 
-__all__ = ['Goal', 'Scenario', 'load_scenario']
+__all__ = ['Goal', 'Scenario', 'load_scenario', 'DEFAULT_RUNS', 'SIM_KEYS', 'RUN_KEYS']
+
+#: Simulator settings a scenario may give (``wmm_sim`` parameters).
+SIM_KEYS = ('base_mode', 'substeps', 'slip_gain', 'slip_drift', 'slip_noise', 'seed')
+#: Keys of a run besides the resolver parameters of ``redundancy_resolver``.
+RUN_KEYS = ('name', 'method', 'feedback')
+#: The runs of Sorour's Table II experiment (and of a scenario that names none).
+DEFAULT_RUNS = (
+    {'name': 'pinv', 'method': 'pinv', 'feedback': 'ground_truth'},
+    {'name': 'task_sharing', 'method': 'task_sharing', 'compensation': False, 'feedback': 'ground_truth'},
+    {'name': 'task_sharing_compensation', 'method': 'task_sharing', 'compensation': True,
+     'feedback': 'ground_truth'},
+    {'name': 'task_sharing_compensation_odometry', 'method': 'task_sharing', 'compensation': True,
+     'feedback': 'odometry'},
+)
 
 _PI_EXPR = re.compile(r'^\s*([+-]?\d*\.?\d*)\s*\*?\s*pi\s*(?:/\s*(\d+\.?\d*))?\s*$')
 
@@ -81,6 +101,8 @@ class Scenario:
     duration: float
     goals: tuple
     path: Path
+    sim: dict = None
+    runs: tuple = DEFAULT_RUNS
 
     def goal_index(self, t):
         """Index of the goal in force at time ``t`` [s] (0 before the first start)."""
@@ -121,7 +143,30 @@ def load_scenario(name_or_path):
         raise ConfigError(f'{where}.goals: start times must increase, from >= 0 to below the duration, '
                           f'got {starts}')
     ends = starts[1:] + [duration]
+    sim, runs = _experiment(raw.get('experiment') or {}, where)
     return Scenario(
         name=str(raw.get('name', path.stem)), description=str(raw.get('description', '')),
         robot=str(raw.get('robot', 'steerable')), frame=str(raw.get('frame', 'world')), duration=duration,
-        goals=tuple(Goal(t, e, p) for t, e, p in zip(starts, ends, poses)), path=path)
+        goals=tuple(Goal(t, e, p) for t, e, p in zip(starts, ends, poses)), path=path, sim=sim, runs=runs)
+
+
+def _experiment(raw, where):
+    """The ``experiment`` section: simulator settings and runs, checked by key."""
+    if not isinstance(raw, dict):
+        raise ConfigError(f'{where}.experiment: expected a mapping')
+    sim = raw.get('sim') or {}
+    if not isinstance(sim, dict) or set(sim) - set(SIM_KEYS):
+        raise ConfigError(f'{where}.experiment.sim: keys must be among {list(SIM_KEYS)}, got {sim!r}')
+    runs = raw.get('runs')
+    if runs is None:
+        return dict(sim), DEFAULT_RUNS
+    if not isinstance(runs, list) or not runs:
+        raise ConfigError(f'{where}.experiment.runs: expected a non-empty list')
+    names = []
+    for i, run in enumerate(runs):
+        if not isinstance(run, dict) or not isinstance(run.get('name'), str) or 'method' not in run:
+            raise ConfigError(f'{where}.experiment.runs[{i}]: expected {{name: ..., method: ..., ...}}')
+        names.append(run['name'])
+    if len(set(names)) != len(names):
+        raise ConfigError(f'{where}.experiment.runs: names must be unique, got {names}')
+    return dict(sim), tuple(dict(r) for r in runs)

@@ -181,7 +181,7 @@ def diagnostic_status(name, hardware_id, level, message, values):
 
 def _kv(value):
     if isinstance(value, float):
-        return f'{value:.6g}'
+        return f'{value:.9g}'
     if isinstance(value, (list, tuple, np.ndarray)):
         return '[' + ', '.join(_kv(float(v)) if isinstance(v, (float, np.floating)) else str(v)
                                for v in value) + ']'

@@ -1,0 +1,194 @@
+"""redundancy_resolver with wmm_sim and swmr_controller, in process: goals on /goal_pose."""
+
+import math
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+
+from ros_helpers import RosHarness, overrides, stamp_s
+from sim_bridge.closed_loop import run_scenario
+from sim_bridge.node import SimNode
+from sim_bridge.world import SimWorld
+from wmm_control.experiments.ros_run import run_with_nodes
+from wmm_control.experiments.scenario import load_scenario
+from wmm_control.nodes.goal_sequencer import GoalSequencerNode
+from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
+from wmm_control.nodes.swmr_controller import SwmrControllerNode
+from wmm_control.resolvers import make_resolver
+
+GOAL_YAML = """scenario:
+  name: one_goal
+  robot: steerable
+  frame: world
+  duration: {duration}
+  goals:
+    - {{t: 0.0, pose: [1.2, 0.4, 1.0, pi/2, 0.0, 0.3]}}
+  experiment:
+    sim: {{base_mode: kinematic, slip_gain: 0.05, slip_drift: [0.005, 0.0, 0.002], slip_noise: [0.01, 0.01, 0.005], seed: 4}}
+    runs:
+      - {{name: ts, method: task_sharing, feedback: ground_truth}}
+"""
+
+
+class Driver(Node):
+    """Publishes goals; records commands, references, feasible twists, diagnostics and the true EE."""
+
+    def __init__(self, context):
+        super().__init__('test_driver', context=context)
+        self.pub_goal = self.create_publisher(PoseStamped, '/goal_pose', 10)
+        self.arm, self.refs, self.feasible, self.diag, self.ee = [], [], [], [], []
+        self.create_subscription(Float64MultiArray, '/arm_controller/commands', lambda m: self.arm.append(list(m.data)), 10)
+        self.create_subscription(TwistStamped, '/base/reference', self.refs.append, 10)
+        self.create_subscription(TwistStamped, '/base/feasible_twist', self.feasible.append, 10)
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
+        self.create_subscription(PoseStamped, '/ee_pose', self.ee.append, 10)
+
+    def _on_diag(self, msg):
+        for s in msg.status:
+            if s.name == 'redundancy_resolver':
+                self.diag.append((s.level, s.message, {kv.key: kv.value for kv in s.values}))
+
+    def goal(self, xyz, quat=(0.0, 0.0, 0.0, 1.0), frame='world'):
+        msg = PoseStamped()
+        msg.header.frame_id = frame
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in xyz)
+        (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+         msg.pose.orientation.w) = (float(v) for v in quat)
+        self.pub_goal.publish(msg)
+
+    def ee_position(self):
+        p = self.ee[-1].pose.position
+        return np.array([p.x, p.y, p.z])
+
+    def sim_time(self):
+        return stamp_s(self.ee[-1]) if self.ee else 0.0
+
+
+@pytest.fixture
+def system():
+    ros = RosHarness()
+    driver = ros.add(Driver(ros.context))
+    ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(diagnostics_period=0.5)))
+    ros.add(SwmrControllerNode(context=ros.context))
+    sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep')))
+    yield ros, driver, sim
+    ros.close()
+
+
+def run_until(ros, driver, sim_seconds):
+    end = driver.sim_time() + sim_seconds
+    assert ros.spin_until(lambda: driver.sim_time() >= end, timeout=60.0), 'the simulation stalled'
+
+
+def test_a_goal_on_the_topic_is_reached_and_held(system):
+    ros, driver, _ = system
+    run_until(ros, driver, 0.2)
+    assert np.allclose(driver.arm[-1], 0.0), 'no goal yet: zero commands'
+    goal = np.array([1.8, 0.6, 1.0])
+    driver.goal(goal, (0.0, 0.0, 0.0, 1.0))
+    run_until(ros, driver, 10.0)
+    assert np.linalg.norm(driver.ee_position() - goal) < 0.01
+    run_until(ros, driver, 20.0)      # the null-space pull settles the posture
+    held = np.array(driver.arm[-40:])
+    assert np.all(np.isfinite(held)) and np.max(np.abs(held)) < 0.01, 'at the goal the robot holds still'
+    level, message, values = driver.diag[-1]
+    assert values['goal_reached'] == 'True' and message == 'goal reached'
+
+
+@pytest.mark.parametrize('frame, xyz, quat, reason', [
+    ('map', (1.0, 0.0, 1.0), (0, 0, 0, 1), 'frame'),
+    ('world', (float('nan'), 0.0, 1.0), (0, 0, 0, 1), 'non-finite'),
+    ('world', (1.0, 0.0, 1.0), (0, 0, 0, 0), 'zero quaternion'),
+    ('world', (1e300, 0.0, 1.0), (0, 0, 0, 1), 'max_goal_distance'),
+])
+def test_a_bad_goal_is_rejected_and_the_robot_holds(system, frame, xyz, quat, reason):
+    ros, driver, _ = system
+    driver.goal((1.5, 0.3, 1.0), (0.0, 0.0, 0.0, 1.0))
+    run_until(ros, driver, 1.0)
+    assert np.max(np.abs(driver.arm[-1])) > 0.0, 'pursuing the first goal'
+    driver.goal(xyz, quat, frame)
+    run_until(ros, driver, 1.0)
+    assert np.allclose(driver.arm[-5:], 0.0) and all(np.all(np.isfinite(a)) for a in driver.arm)
+    ref = driver.refs[-1].twist
+    assert (ref.linear.x, ref.linear.y, ref.angular.z) == (0.0, 0.0, 0.0)
+    node = next(n for n in ros.nodes if isinstance(n, RedundancyResolverNode))
+    assert node.counters['goals_rejected'] == 1 and node.target is None
+
+
+def test_a_non_unit_quaternion_is_normalised(system):
+    ros, driver, _ = system
+    q = np.array([0.0, 0.0, math.sin(0.2), math.cos(0.2)]) * 3.0
+    driver.goal((1.2, 0.2, 1.0), q)
+    run_until(ros, driver, 0.5)
+    node = next(n for n in ros.nodes if isinstance(n, RedundancyResolverNode))
+    assert node.target is not None
+    np.testing.assert_allclose(np.linalg.det(node.target.rotation), 1.0, atol=1e-12)
+
+
+def test_an_unreachable_goal_is_pursued_within_limits_and_reported(system):
+    ros, driver, _ = system
+    driver.goal((1.0, 0.0, 3.0))     # 3 m up: out of the arm's reach
+    run_until(ros, driver, 8.0)
+    arm = np.array(driver.arm)
+    assert np.all(np.isfinite(arm)) and np.all(np.abs(arm) <= 3.6)
+    level, message, values = driver.diag[-1]
+    assert values['goal_stalled'] == 'True' and 'not reached' in message
+
+
+def test_stale_joint_states_give_zero_commands(system):
+    ros, driver, sim = system
+    driver.goal((1.6, 0.4, 1.0))
+    run_until(ros, driver, 1.0)
+    assert np.max(np.abs(driver.arm[-1])) > 0.0
+    ros.executor.remove_node(sim)            # the robot stops reporting
+    n = len(driver.arm)
+    ros.spin_for(0.6)
+    assert len(driver.arm) > n and np.allclose(driver.arm[-1], 0.0)
+
+
+def test_the_node_chain_equals_the_direct_loop(tmp_path):
+    """Over topics in lockstep, each arm command uses the feasible twist of its own cycle: the
+    run equals the ROS-free loop period for period (the goal reaches the resolver one period
+    after the first state, hence the shift of one row). The two differ only by the round-off of
+    the messages (poses travel as quaternions), which the closed loop carries to about 1e-6; a
+    resolver or base controller answering with its previous cycle's output would differ by
+    orders of magnitude more."""
+    path = tmp_path / 'one_goal.yaml'
+    path.write_text(GOAL_YAML.format(duration=3.0))
+    sc = load_scenario(str(path))
+    nodes = run_with_nodes(sc, sc.runs[0])
+    from sim_bridge.slip import SlipParams
+    sim = sc.sim
+    world = SimWorld('steerable', slip=SlipParams(sim['slip_gain'], tuple(sim['slip_drift']), tuple(sim['slip_noise'])),
+                     seed=sim['seed'])
+    direct = run_scenario(world, make_resolver('task_sharing'), sc)
+    world.close()
+    n = len(nodes)
+    assert n > 100 and np.all(nodes.compensated)
+    np.testing.assert_allclose(nodes.t, direct.t[:n] + 0.025)
+    np.testing.assert_allclose(nodes.arm_command, direct.arm_command[:n], atol=1e-5)
+    np.testing.assert_allclose(nodes.base_reference, direct.base_reference[:n], atol=1e-5)
+    np.testing.assert_allclose(nodes.ee_position, direct.ee_position[:n], atol=1e-6)
+    # and the robot did move: compensation was active while the base steered
+    assert np.max(np.abs(direct.base_reference - direct.feasible_twist)) > 0.05
+
+
+def test_goal_sequencer_plays_the_scenario_on_sim_time():
+    ros = RosHarness()
+    try:
+        driver = ros.add(Driver(ros.context))
+        goals = []
+        driver.create_subscription(PoseStamped, '/goal_pose', goals.append, 10)
+        ros.add(GoalSequencerNode(context=ros.context, parameter_overrides=overrides(use_sim_time=True)))
+        sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep',
+                                                                                 lockstep_timeout=0.001)))
+        assert ros.spin_until(lambda: sim.world.time >= 21.0, timeout=60.0)
+        xs = [(stamp_s(g), g.pose.position.y) for g in goals]
+        first_switch = next(t for t, y in xs if abs(y - 1.3) < 1e-9)
+        assert xs[0][1] == pytest.approx(1.5) and first_switch == pytest.approx(20.0, abs=0.03)
+    finally:
+        ros.close()

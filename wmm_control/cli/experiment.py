@@ -1,0 +1,174 @@
+"""``wmm_experiment``: run a paper's experiment end to end and write its numbers and figures.
+
+Usage::
+
+    wmm_experiment [SCENARIO] [--scenario PATH] [--out DIR] [--runs NAME,...] [--engine nodes|direct]
+                   [--no-figures]
+
+``SCENARIO`` names ``config/scenarios/<SCENARIO>.yaml`` (default ``sorour_table2``: Table II of
+Sorour et al. 2019); ``--scenario PATH`` takes any file of that form. Each run of the
+scenario's ``experiment`` section is simulated with every node in this process over real
+topics (``--engine nodes``, the default: ``wmm_sim`` in lockstep, ``swmr_controller``,
+``redundancy_resolver``, ``goal_sequencer``), or with the same objects and no ROS in between
+(``--engine direct``, for quick sweeps). DIR receives ``metrics.json`` and the figures.
+"""
+
+import argparse
+import json
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from wmm_control.errors import WmmError
+from wmm_control.experiments.metrics import METRIC_KEYS, goal_metrics, run_limit_report
+from wmm_control.experiments.scenario import load_scenario
+from wmm_control.kinematics import KinematicModel
+from wmm_control.resolvers import TaskSharingParams
+
+__all__ = ['main', 'run_experiment', 'format_table']
+
+
+def _run_direct(scenario, run, progress):
+    from sim_bridge.closed_loop import run_scenario
+    from sim_bridge.slip import SlipParams
+    from sim_bridge.world import SimWorld
+    from wmm_control.resolvers import make_resolver
+
+    sim = dict(scenario.sim or {})
+    slip = SlipParams(gain=float(sim.get('slip_gain', 0.0)), drift=tuple(sim.get('slip_drift', (0.0,) * 3)),
+                      noise_std=tuple(sim.get('slip_noise', (0.0,) * 3)))
+    params = {k: v for k, v in run.items() if k not in ('name', 'method', 'feedback')}
+    resolver = make_resolver(run['method'], scenario.robot, **params)
+    with SimWorld(scenario.robot, base_mode=sim.get('base_mode', 'kinematic'), substeps=sim.get('substeps', 10),
+                  slip=slip, seed=int(sim.get('seed', 0))) as world:
+        return run_scenario(world, resolver, scenario, feedback=run.get('feedback', 'ground_truth'),
+                            label=run['name'], progress=lambda n: progress(n * world.dt))
+
+
+def _run_nodes(scenario, run, progress):
+    from wmm_control.experiments.ros_run import run_with_nodes
+    return run_with_nodes(scenario, run, progress=progress)
+
+
+def run_experiment(scenario, runs=None, engine='nodes', show_progress=True):
+    """Simulate the runs of ``scenario``.
+
+    Returns:
+        (logs, summary): ``logs`` maps a run name to its RunLog; ``summary`` is the
+        ``metrics.json`` content (see the README for its keys).
+    """
+    from tqdm import tqdm
+
+    model = KinematicModel(scenario.robot)
+    robot = model.config
+    selected = [r for r in scenario.runs if runs is None or r['name'] in runs]
+    if not selected:
+        raise WmmError(f'no run named {sorted(runs)}; the scenario has {[r["name"] for r in scenario.runs]}')
+    runner = _run_nodes if engine == 'nodes' else _run_direct
+    logs, summary_runs = {}, {}
+    dt = 0.025
+    for run in selected:
+        with tqdm(total=scenario.duration, desc=run['name'], unit='sim s', disable=not show_progress,
+                  bar_format='{desc:<36} {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s [{elapsed}]') as bar:
+            log = runner(scenario, run, bar.update)
+        logs[run['name']] = log
+        r_fm = run.get('r_fm', TaskSharingParams().r_fm)
+        goals = goal_metrics(log, scenario, model, r_fm, robot.arm.dexterous, dt)
+        compensating = run['method'] == 'task_sharing' and run.get('compensation', True)
+        for g in goals:
+            if not compensating:
+                g['compensation_dropped'] = None
+        summary_runs[run['name']] = {
+            'method': run['method'], 'feedback': run.get('feedback', 'ground_truth'),
+            'parameters': {k: v for k, v in run.items() if k not in ('name', 'method', 'feedback')},
+            'periods': len(log), 'wall_time_s': log.wall_time_s,
+            'sim_to_wall_ratio': float(log.t[-1] + dt) / log.wall_time_s if log.wall_time_s > 0 else None,
+            'resolver_cycle_median_us': float(np.median(log.cycle_time_s) * 1e6),
+            'limits_exceeded': run_limit_report(log, robot, dt, tol=1e-6),
+            'total_area': float(sum(g.get('area', 0.0) for g in goals)),
+            'all_goals_reached': all(g.get('reached', False) for g in goals),
+            'goals': goals,
+        }
+    summary = {
+        'scenario': scenario.name, 'description': scenario.description, 'robot': robot.name,
+        'engine': engine, 'timing': 'lockstep' if engine == 'nodes' else 'direct (no ROS)',
+        'simulator': dict(scenario.sim or {}, base_mode=(scenario.sim or {}).get('base_mode', 'kinematic')),
+        'goal_windows_s': [[g.t, g.end] for g in scenario.goals],
+        'runs': summary_runs, 'metric_keys': METRIC_KEYS,
+    }
+    return logs, summary
+
+
+def _f(value, fmt):
+    return '—' if value is None else format(value, fmt)
+
+
+def format_table(summary):
+    """A plain-text table of the summary: per run and goal, area, final errors, entry time, footprint."""
+    lines = []
+    head = f'{"run":<36}{"goal":>5}{"area":>8}{"pos err":>10}{"ori err":>9}{"t→r_fm":>8}{"footpr.":>8}{"base":>7}'
+    units = f'{"":<36}{"":>5}{"[m·s]":>8}{"[mm]":>10}{"[rad]":>9}{"[s]":>8}{"[m]":>8}{"[m]":>7}'
+    lines += [head, units, '-' * len(head)]
+    for name, run in summary['runs'].items():
+        for g in run['goals']:
+            lines.append(f'{name if g["goal"] == 1 else "":<36}{g["goal"]:>5}{_f(g.get("area"), "8.3f")}'
+                         f'{_f(g.get("final_position_error_m", 0) * 1e3, "10.2f")}'
+                         f'{_f(g.get("final_orientation_error_rad"), "9.4f")}{_f(g.get("time_to_rfm_s"), "8.2f")}'
+                         f'{_f(g.get("footprint_m"), "8.3f")}{_f(g.get("base_path_m"), "7.2f")}')
+        lim = run['limits_exceeded']
+        within = 'no limit passed' if not any(lim.values()) else f'LIMITS PASSED: {lim}'
+        lines.append(f'{"":<5}total area {run["total_area"]:.3f} m·s; all goals reached (<1 cm, <0.02 rad): '
+                     f'{"yes" if run["all_goals_reached"] else "no"}; {within}; '
+                     f'sim/wall {run["sim_to_wall_ratio"]:.1f}x')
+    return '\n'.join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='wmm_experiment', description=__doc__.split('\n\n')[0])
+    parser.add_argument('name', nargs='?', default='sorour_table2', help='scenario name in config/scenarios (default: %(default)s)')
+    parser.add_argument('--scenario', help='path to a scenario file (instead of a name)')
+    parser.add_argument('--out', default='experiment_output', help='output directory (default: %(default)s)')
+    parser.add_argument('--runs', help='comma-separated run names (default: all of the scenario)')
+    parser.add_argument('--engine', choices=('nodes', 'direct'), default='nodes',
+                        help='nodes: every node in one process over topics; direct: no ROS (default: nodes)')
+    parser.add_argument('--no-figures', action='store_true', help='skip the plots and renders')
+    args = parser.parse_args(argv)
+    try:
+        scenario = load_scenario(args.scenario or args.name)
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        sim = scenario.sim or {}
+        print(f'{scenario.name}: {scenario.description}\n'
+              f'robot {scenario.robot}; {"all nodes in one process over topics, wmm_sim in lockstep" if args.engine == "nodes" else "no ROS (direct)"}; '
+              f'{sim.get("base_mode", "kinematic")} base; slip gain {sim.get("slip_gain", 0.0)}, '
+              f'drift {sim.get("slip_drift", [0, 0, 0])}, noise {sim.get("slip_noise", [0, 0, 0])}, '
+              f'seed {sim.get("seed", 0)}; end-effector error measured on the ground truth', flush=True)
+        start = time.perf_counter()
+        runs = set(args.runs.split(',')) if args.runs else None
+        logs, summary = run_experiment(scenario, runs, engine=args.engine)
+        total_sim = sum(len(log) * 0.025 for log in logs.values())
+        elapsed = time.perf_counter() - start
+        summary['experiment_wall_time_s'] = elapsed
+        summary['experiment_sim_to_wall_ratio'] = total_sim / elapsed
+        summary['peak_memory_mb'] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+        if not args.no_figures:
+            from wmm_control.experiments.figures import write_figures
+            render = next((n for n in logs if 'compensation' in n), next(iter(logs)))
+            summary['figures'] = [str(p) for p in write_figures(logs, {n: r['goals'] for n, r in summary['runs'].items()},
+                                                                scenario, KinematicModel(scenario.robot), out,
+                                                                render_label=render)]
+        (out / 'metrics.json').write_text(json.dumps(summary, indent=2, default=float) + '\n')
+        print(format_table(summary))
+        print(f'{total_sim:.0f} simulated s in {elapsed:.1f} s wall ({total_sim / elapsed:.1f}x), peak memory '
+              f'{summary["peak_memory_mb"]:.0f} MB; wrote {out / "metrics.json"}')
+    except WmmError as exc:
+        print(f'wmm_experiment: {type(exc).__name__}: {exc}', file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

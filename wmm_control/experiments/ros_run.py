@@ -1,0 +1,208 @@
+"""One experiment run with every node in one process, talking over real topics.
+
+The simulator (``wmm_sim``, lockstep), the base controller (``swmr_controller`` for robot A),
+the ``redundancy_resolver`` and the ``goal_sequencer`` run on one executor with a private
+rclpy context, exactly as they run as separate processes. A recorder node listens to the
+topics a user would watch (ground-truth end-effector pose and base pose, joint states,
+commands, feasible twist, the resolver's ``/diagnostics``) and fills a
+:class:`~wmm_control.experiments.metrics.RunLog`, one row per control period.
+"""
+
+import time
+
+import numpy as np
+import pinocchio as pin
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+
+from wmm_control.errors import ConfigError
+from wmm_control.experiments.metrics import RunLog
+from wmm_control.resolvers import ResolverDiagnostics
+
+__all__ = ['run_with_nodes', 'Recorder']
+
+
+def _stamp(msg):
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def _value(text):
+    if text in ('True', 'False'):
+        return text == 'True'
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _key(msg):
+    return (msg.header.stamp.sec, msg.header.stamp.nanosec)
+
+
+def _vector(text):
+    return np.array([float(v) for v in str(text).strip('[]').split(',') if v.strip()])
+
+
+class Recorder(Node):
+    """Collects, per control period (the stamp of its joint state), the ground truth and the
+    resolver's report of the cycle, and turns them into RunLog rows.
+
+    Every message it uses carries the stamp of the period it belongs to, so the rows do not
+    depend on the order in which the topics are delivered: ``/ee_pose`` and
+    ``/ground_truth/odom`` (the true state), ``/joint_states``, ``/base/feasible_twist``, and
+    the resolver's ``/diagnostics`` (the commands it sent, ψ, mode, scales).
+    """
+
+    def __init__(self, context, robot, scenario, log):
+        super().__init__('experiment_recorder', context=context)
+        self.scenario = scenario
+        self.log = log
+        self.arm_joints = robot.arm.joints
+        self._index = None
+        self._rows = {}
+        self.last_t = -1.0
+        self.create_subscription(PoseStamped, '/ee_pose', self._on_ee, 10)
+        self.create_subscription(Odometry, '/ground_truth/odom', self._on_base, 10)
+        self.create_subscription(JointState, '/joint_states', self._on_joints, 10)
+        self.create_subscription(TwistStamped, '/base/feasible_twist', self._on_feasible, 10)
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
+
+    def _row(self, msg):
+        return self._rows.setdefault(_key(msg), {'t': _stamp(msg)})
+
+    def _on_ee(self, msg):
+        p, q = msg.pose.position, msg.pose.orientation
+        self._row(msg)['ee'] = (np.array([p.x, p.y, p.z]),
+                                pin.Quaternion(q.w, q.x, q.y, q.z).normalized().toRotationMatrix())
+
+    def _on_base(self, msg):
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        self._row(msg)['base'] = np.array([p.x, p.y, 2.0 * np.arctan2(q.z, q.w)])
+
+    def _on_joints(self, msg):
+        if self._index is None:
+            names = list(msg.name)
+            self._index = [names.index(j) for j in self.arm_joints]
+        self._row(msg)['q_arm'] = np.asarray(msg.position)[self._index]
+        self.last_t = max(self.last_t, _stamp(msg))
+
+    def _on_feasible(self, msg):
+        self._row(msg)['feasible'] = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
+
+    def _on_diag(self, msg):
+        for status in msg.status:
+            if status.name == 'redundancy_resolver':
+                self._row(msg)['diag'] = {kv.key: kv.value for kv in status.values}
+
+    def flush(self):
+        """Append every complete row (a period in which a goal was pursued), in time order."""
+        for key in sorted(self._rows):
+            row = self._rows[key]
+            d = row.get('diag')
+            if d is None or 'mode' not in d or not all(k in row for k in ('ee', 'base', 'q_arm')):
+                continue
+            f = {k: _value(v) for k, v in d.items() if k not in ('limited', 'arm_command', 'base_reference')}
+            diag = ResolverDiagnostics(
+                method=f['method'], mode=f['mode'], psi=f['psi'], position_error=f['position_error_m'],
+                orientation_error=f['orientation_error_rad'], limit_scale=f['limit_scale'],
+                accel_scale=f['accel_scale'], null_scale=f['null_scale'],
+                compensation_scale=f['compensation_scale'],
+                limited=tuple(int(v) for v in _vector(d.get('limited', '[]'))), sigma_min=f['sigma_min'],
+                compensated=bool(f['compensated']), cycle_time_s=f['cycle_time_us'] * 1e-6)
+            self.log.append(row['t'], self.scenario.goal_index(row['t']), row['ee'][0], row['ee'][1], row['base'],
+                            row['q_arm'], _vector(d['arm_command']), _vector(d['base_reference']),
+                            row.get('feasible'), diag)
+        self._rows.clear()
+
+
+def _executor(context):
+    try:
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor(context=context)
+    except ImportError:
+        return SingleThreadedExecutor(context=context)
+
+
+def run_with_nodes(scenario, run, progress=None, wall_timeout=None):
+    """Run one entry of ``scenario.runs`` with every node in this process.
+
+    Args:
+        scenario: a :class:`~wmm_control.experiments.scenario.Scenario`.
+        run: one of its runs (``name``, ``method``, ``feedback``, resolver parameters).
+        progress: optional callable ``progress(simulated_seconds)`` called as the run advances.
+        wall_timeout: give up after this many wall seconds (default: ten times the duration).
+
+    Returns:
+        The frozen :class:`RunLog` (``wall_time_s`` set).
+
+    Raises:
+        ConfigError: a bad run entry, or the run stalled (no progress for ``wall_timeout``).
+    """
+    from sim_bridge.node import SimNode
+    from wmm_control.nodes.goal_sequencer import GoalSequencerNode
+    from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
+    from wmm_control.nodes.swmr_controller import SwmrControllerNode
+    from wmm_control.robot_config import load_robot
+
+    robot = load_robot(scenario.robot)
+    feedback = run.get('feedback', 'ground_truth')
+    if feedback not in ('ground_truth', 'odometry'):
+        raise ConfigError(f'run {run.get("name")}: feedback must be ground_truth or odometry, got {feedback!r}')
+    resolver_params = {k: v for k, v in run.items() if k not in ('name', 'feedback')}
+    resolver_params.update(robot=robot.name, ee_feedback=feedback, diagnostics_period=1e-9)
+    sim_params = dict(scenario.sim or {})
+    sim_params.update(robot=robot.name, timing='lockstep', diagnostics_period=0.0)
+    for key in ('slip_drift', 'slip_noise'):
+        if key in sim_params:
+            sim_params[key] = [float(v) for v in sim_params[key]]
+    if 'slip_gain' in sim_params:
+        sim_params['slip_gain'] = float(sim_params['slip_gain'])
+
+    def params(values):
+        return [Parameter(k, value=v) for k, v in values.items()]
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    log = RunLog(method=run['method'], label=run['name'])
+    nodes = []
+    executor = _executor(context)
+    try:
+        remap = ['--ros-args', '-r', '/odom:=/ground_truth/odom'] if feedback == 'ground_truth' else []
+        nodes.append(GoalSequencerNode(context=context, parameter_overrides=params(
+            {'scenario': str(scenario.path), 'use_sim_time': True})))
+        nodes.append(RedundancyResolverNode(context=context, cli_args=remap,
+                                            parameter_overrides=params(resolver_params)))
+        if robot.steerable is not None:
+            nodes.append(SwmrControllerNode(context=context))
+        recorder = Recorder(context, robot, scenario, log)
+        nodes.append(recorder)
+        sim = SimNode(context=context, parameter_overrides=params(sim_params))
+        nodes.append(sim)
+        for node in nodes:
+            executor.add_node(node)
+        limit = wall_timeout if wall_timeout is not None else 10.0 * scenario.duration + 30.0
+        start = time.perf_counter()
+        reported = 0.0
+        while recorder.last_t + 1e-9 < scenario.duration:
+            executor.spin_once(timeout_sec=0.1)
+            if progress is not None and recorder.last_t > reported:
+                progress(recorder.last_t - reported)
+                reported = recorder.last_t
+            if time.perf_counter() - start > limit:
+                raise ConfigError(f'run {run["name"]}: no progress after {limit:.0f} s wall time '
+                                  f'(sim time {recorder.last_t:.3f} s)')
+        recorder.flush()
+        log.wall_time_s = time.perf_counter() - start
+    finally:
+        for node in nodes:
+            executor.remove_node(node)
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown(context=context)
+    return log.freeze()

@@ -1,0 +1,390 @@
+"""``redundancy_resolver``: whole-body redundancy resolution as a node (Sorour §II–III).
+
+Publish an end-effector goal on ``/goal_pose`` and the robot goes there.
+
+Subscribes:
+  ``/goal_pose`` (``geometry_msgs/PoseStamped``, frame ``world_frame``): the set-point;
+  ``/joint_states`` (``sensor_msgs/JointState``): arm joints by name; each message runs one
+  control cycle;
+  ``/odom`` (``nav_msgs/Odometry``): base pose and twist (wheel odometry on a real robot);
+  ``/ee_pose`` (``geometry_msgs/PoseStamped``): measured end-effector pose, used only when
+  ``ee_feedback`` is ``ground_truth`` (otherwise forward kinematics from odometry and joints);
+  ``/base/feasible_twist`` (``geometry_msgs/TwistStamped``): the base controller's answer to
+  this cycle's base reference (Sorour eq 15), for the arm compensation of eq (14).
+Publishes, every cycle:
+  ``/base/reference`` (``geometry_msgs/TwistStamped``, frame ``base_frame``): the base twist,
+  stamped with the joint state the cycle answers;
+  ``/arm_controller/commands`` (``std_msgs/Float64MultiArray``): arm joint velocities in the
+  robot YAML's order;
+  ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) every ``diagnostics_period``, stamped
+  with the joint state of the cycle it reports: method, mode, ψ, errors, limit scales, σ_min,
+  compensation, cycle time, the commands sent, goal status.
+
+The exchange, one per period: on the joint state stamped S the resolver publishes the base
+reference stamped S, waits (steady clock, at most ``compensation_timeout``) for the feasible
+twist stamped S, then publishes the arm command with the compensation. When the answer does
+not come in time the arm command goes out without it (counted, logged). Methods without
+compensation publish both at once.
+
+Safety: zero commands when there is no goal, after a rejected goal, and while the joint
+states, the odometry or (with ground-truth feedback) the end-effector pose are older than
+``state_timeout`` (steady clock, at receipt); a watchdog publishes zeros when the joint
+states stop. A goal in another frame, with NaN/inf or a zero quaternion, or beyond
+``max_goal_distance`` from the world origin is rejected with a logged reason; a non-unit
+quaternion is normalised with a warning. Every command stays within the robot's limits
+(:mod:`wmm_control.resolvers.limits`); a goal out of reach is pursued as far as they allow
+and reported on ``/diagnostics``.
+"""
+
+import math
+import time
+
+import numpy as np
+import pinocchio as pin
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from wmm_control.errors import WmmError
+from wmm_control.kinematics import KinematicModel
+from wmm_control.nodes.common import (
+    Freshness, Param, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node)
+from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver
+from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
+
+__all__ = ['RedundancyResolverNode', 'main']
+
+_ROBOTS = ('steerable', 'mecanum', 'A', 'B', 'a', 'b')
+PARAMS = (
+    Param('robot', 'Robot: steerable (A, Sorour) or mecanum (B, Xing), or A/B.', choices=_ROBOTS,
+          read_only=True),
+    Param('method', 'Redundancy resolution method.', choices=tuple(sorted(METHODS)), read_only=True),
+    Param('period', 'Control period [s]: the acceleration limits act per period.', lo=1e-3, hi=1.0,
+          read_only=True),
+    Param('lambda_p', 'Gain λ_p of the pose controller, eq (12) [1/s].', lo=1e-3, hi=100.0, read_only=True),
+    Param('rho', 'Damping ρ of the pseudo-inverse [-].', lo=1e-9, hi=10.0, read_only=True),
+    Param('r_fm', 'Fine manipulation range r_fm [m] (task_sharing).', lo=1e-4, hi=100.0, read_only=True),
+    Param('r_mm', 'Mobile manipulation range r_mm [m] (task_sharing).', lo=1e-4, hi=100.0, read_only=True),
+    Param('lambda_dex', 'Gain λ_dex of the pull to the dexterous posture [1/s] (task_sharing).',
+          lo=0.0, hi=100.0, read_only=True),
+    Param('compensation', 'Arm compensation of the base velocity error, eq (14) (task_sharing).',
+          read_only=True),
+    Param('psi_rate', 'Largest change of ψ per second [1/s]; 0: ψ jumps as in eq (11).', lo=0.0, hi=1000.0,
+          read_only=True),
+    Param('orientation_error', 'rpy (the paper) or log (SO(3) log map).', choices=ORIENTATION_ERRORS,
+          read_only=True),
+    Param('rotate_angular_error', 'Rotate the RPY error by the base yaw, as eq (12) is printed.',
+          read_only=True),
+    Param('singular_region', 'σ_min below which the damping grows [-].', lo=1e-6, hi=10.0, read_only=True),
+    Param('max_damping', 'Damping at an exact singularity [-].', lo=0.0, hi=10.0, read_only=True),
+    Param('ee_feedback', 'End-effector pose from odometry + forward kinematics, or from /ee_pose.',
+          choices=('odometry', 'ground_truth'), read_only=True),
+    Param('world_frame', 'Frame of /goal_pose and /ee_pose.', read_only=True),
+    Param('base_frame', 'Frame of /base/reference and /base/feasible_twist.', read_only=True),
+    Param('state_timeout', 'Age [s] of joint states, odometry or EE pose after which commands are zero.',
+          lo=1e-3, hi=60.0, read_only=True),
+    Param('compensation_timeout', 'Steady time [s] to wait for the feasible twist of this cycle.',
+          lo=0.0, hi=1.0, read_only=True),
+    Param('max_goal_distance', 'Goals farther than this from the world origin are rejected [m].',
+          lo=1.0, hi=1e6, read_only=True),
+    Param('goal_tolerance', 'Position [m] and orientation [rad] errors under which the goal is reached.',
+          read_only=True),
+    Param('stall_time', 'Time [s] without progress after which an unreached goal is reported as stalled.',
+          lo=0.1, hi=600.0, read_only=True),
+    Param('diagnostics_period', 'Time [s] between /diagnostics messages.', lo=0.0, hi=3600.0, read_only=True),
+)
+_RESOLVER_PARAMS = ('lambda_p', 'rho', 'orientation_error', 'rotate_angular_error', 'singular_region',
+                    'max_damping')
+_TASK_SHARING_PARAMS = ('r_fm', 'r_mm', 'lambda_dex', 'compensation', 'psi_rate')
+
+
+def _stamp_key(stamp):
+    return (stamp.sec, stamp.nanosec)
+
+
+class RedundancyResolverNode(Node):
+    """Wraps one :class:`~wmm_control.resolvers.Resolver`; the maths lives there."""
+
+    def __init__(self, **kwargs):
+        super().__init__('redundancy_resolver', **kwargs)
+        p = self.p = declare_parameters(self, 'redundancy_resolver.yaml', PARAMS)
+        if len(p.goal_tolerance) != 2 or min(p.goal_tolerance) <= 0:
+            raise WmmError(f'goal_tolerance: expected [position m, orientation rad] > 0, got {p.goal_tolerance}')
+        self.model = KinematicModel(p.robot)
+        names = _RESOLVER_PARAMS + (_TASK_SHARING_PARAMS if p.method == 'task_sharing' else ())
+        self.resolver = make_resolver(p.method, self.model, dt=p.period, **{n: getattr(p, n) for n in names})
+        self.arm_joints = self.model.config.arm.joints
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.fresh = {k: Freshness(p.state_timeout) for k in ('joint_states', 'odom', 'ee_pose')}
+        self._index = {}
+        self._odom = None
+        self._ee = None
+        self.target = None
+        self._goal_key = None
+        self._pending = None
+        self._wait = None
+        self._last = None
+        self._zero_sent = False
+        self._progress = (math.inf, 0)
+        self._next_diag = 0.0
+        self.counters = {'cycles': 0, 'goals': 0, 'goals_rejected': 0, 'compensation_dropped': 0,
+                         'stale_cycles': 0}
+        self.pub_arm = self.create_publisher(Float64MultiArray, '/arm_controller/commands', 10)
+        self.pub_base = self.create_publisher(TwistStamped, '/base/reference', 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(PoseStamped, '/goal_pose', self._on_goal, 10)
+        self.create_subscription(JointState, '/joint_states', self._on_joint_states, 10)
+        self.create_subscription(Odometry, '/odom', self._on_odom, 10)
+        if p.ee_feedback == 'ground_truth':
+            self.create_subscription(PoseStamped, '/ee_pose', self._on_ee_pose, 10)
+        if self.resolver.uses_compensation:
+            self.create_subscription(TwistStamped, '/base/feasible_twist', self._on_feasible, 10)
+            self._wait = (self.create_timer(p.compensation_timeout, self._compensation_timeout, clock=self._steady,
+                                            autostart=False) if p.compensation_timeout > 0 else None)
+        self.watchdog = self.create_timer(p.period, self._watchdog, clock=self._steady)
+        self.get_logger().info(
+            f'{p.method} on robot {self.model.config.name}: t_s {p.period} s, EE feedback {p.ee_feedback}, '
+            f'compensation {"on" if self.resolver.uses_compensation else "off"}; waiting for /goal_pose '
+            f'(frame {p.world_frame!r})')
+
+    # ------------------------------------------------------------------ time
+    def _now(self):
+        return self._steady.now().nanoseconds * 1e-9
+
+    # ------------------------------------------------------------------ inputs
+    def _reject_goal(self, reason):
+        self.counters['goals_rejected'] += 1
+        self.get_logger().warn(f'rejected /goal_pose: {reason}; holding still', throttle_duration_sec=1.0)
+        self.target = None
+        self._goal_key = None
+
+    def _on_goal(self, msg):
+        pos = msg.pose.position
+        q = msg.pose.orientation
+        values = np.array([pos.x, pos.y, pos.z, q.x, q.y, q.z, q.w])
+        if msg.header.frame_id != self.p.world_frame:
+            return self._reject_goal(f'frame {msg.header.frame_id!r}, expected {self.p.world_frame!r}')
+        if not np.all(np.isfinite(values)):
+            return self._reject_goal(f'non-finite values {values.tolist()}')
+        if float(np.max(np.abs(values[:3]))) > self.p.max_goal_distance:
+            return self._reject_goal(f'position {values[:3].tolist()} is beyond max_goal_distance '
+                                     f'{self.p.max_goal_distance} m')
+        quat = values[3:]
+        norm = float(np.max(np.abs(quat)))
+        norm = norm * float(np.linalg.norm(quat / norm)) if norm > 0 else 0.0
+        if norm < 1e-6:
+            return self._reject_goal('zero quaternion')
+        if abs(norm - 1.0) > 1e-3:
+            self.get_logger().warn(f'/goal_pose quaternion has norm {norm:.6g}: normalised',
+                                   throttle_duration_sec=1.0)
+        quat = quat / norm
+        key = tuple(np.round(np.concatenate((values[:3], quat)), 9))
+        if key == self._goal_key:
+            return None      # the same goal again (a sequencer re-publishing it)
+        rot = pin.Quaternion(quat[3], quat[0], quat[1], quat[2]).toRotationMatrix()
+        self.target = PoseTarget(values[:3], rot)
+        self._goal_key = key
+        self._progress = (math.inf, self.counters['cycles'])
+        self.counters['goals'] += 1
+        self.get_logger().info(f'new goal: position {np.round(values[:3], 4).tolist()}, '
+                               f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}')
+        return None
+
+    def _on_odom(self, msg):
+        p, q, t = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        pose = np.array([p.x, p.y, yaw])
+        twist = np.array([t.linear.x, t.linear.y, t.angular.z])
+        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist))):
+            self.get_logger().warn('rejected /odom with non-finite values', throttle_duration_sec=1.0)
+            return
+        self._odom = (pose, twist)
+        self.fresh['odom'].mark(self._now())
+
+    def _on_ee_pose(self, msg):
+        if msg.header.frame_id != self.p.world_frame:
+            self.get_logger().warn(f'rejected /ee_pose in frame {msg.header.frame_id!r}', throttle_duration_sec=1.0)
+            return
+        p, q = msg.pose.position, msg.pose.orientation
+        values = np.array([p.x, p.y, p.z, q.x, q.y, q.z, q.w])
+        if not np.all(np.isfinite(values)) or np.linalg.norm(values[3:]) < 1e-6:
+            self.get_logger().warn('rejected /ee_pose with non-finite values or a zero quaternion',
+                                   throttle_duration_sec=1.0)
+            return
+        quat = pin.Quaternion(q.w, q.x, q.y, q.z).normalized()
+        self._ee = (values[:3], quat.toRotationMatrix())
+        self.fresh['ee_pose'].mark(self._now())
+
+    def _arm_state(self, msg):
+        names = tuple(msg.name)
+        if names not in self._index:
+            if len(self._index) >= 16:
+                self._index.clear()
+            where = {n: i for i, n in enumerate(names)}
+            missing = [j for j in self.arm_joints if j not in where]
+            self._index[names] = (missing, None if missing else np.array([where[j] for j in self.arm_joints]))
+        missing, idx = self._index[names]
+        if idx is None:
+            self.get_logger().warn(f'rejected /joint_states without arm joints {missing}', throttle_duration_sec=5.0)
+            return None
+        if len(msg.position) != len(names) or len(msg.velocity) not in (0, len(names)):
+            self.get_logger().warn('rejected /joint_states whose position/velocity lengths differ from its names',
+                                   throttle_duration_sec=1.0)
+            return None
+        q = np.asarray(msg.position, dtype=float)[idx]
+        dq = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else np.zeros(len(idx))
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
+            self.get_logger().warn('rejected /joint_states with non-finite arm values', throttle_duration_sec=1.0)
+            return None
+        return q, dq
+
+    # ------------------------------------------------------------------ cycle
+    def _state(self, arm):
+        """The RobotState of this cycle, or (None, reason) when some input is missing or stale."""
+        now = self._now()
+        if self._odom is None or not self.fresh['odom'].fresh(now):
+            return None, 'no fresh /odom'
+        ee = None
+        if self.p.ee_feedback == 'ground_truth':
+            if self._ee is None or not self.fresh['ee_pose'].fresh(now):
+                return None, 'no fresh /ee_pose'
+            ee = self._ee
+        pose, twist = self._odom
+        q, dq = arm
+        return RobotState(pose, twist, q, dq, ee_position=None if ee is None else ee[0],
+                          ee_rotation=None if ee is None else ee[1]), ''
+
+    def _on_joint_states(self, msg):
+        arm = self._arm_state(msg)
+        if arm is None:
+            return
+        self.fresh['joint_states'].mark(self._now())
+        if self._pending is not None:        # the last cycle's feasible twist never came
+            self._finish(None)
+        stamp = msg.header.stamp
+        state, reason = self._state(arm)
+        if state is None or self.target is None:
+            if state is None:
+                self.counters['stale_cycles'] += 1
+                self.get_logger().warn(f'{reason}: zero commands', throttle_duration_sec=2.0)
+            self._publish_zero(stamp)
+            return
+        self._zero_sent = False
+        self.counters['cycles'] += 1
+        command = self.resolver.step(state, self.target)
+        self._publish_base(stamp, command.base_twist)
+        if not self.resolver.uses_compensation:
+            self._publish_arm(command, stamp)
+            return
+        self._pending = (_stamp_key(stamp), command, stamp)
+        if self._wait is None:
+            self._finish(None)
+        else:
+            self._wait.reset()
+
+    def _on_feasible(self, msg):
+        if self._pending is None or _stamp_key(msg.header.stamp) != self._pending[0]:
+            return
+        twist = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
+        if not np.all(np.isfinite(twist)):
+            self.get_logger().warn('rejected /base/feasible_twist with non-finite values', throttle_duration_sec=1.0)
+            return
+        self._finish(twist)
+
+    def _compensation_timeout(self):
+        if self._pending is not None:
+            self._finish(None)
+
+    def _finish(self, feasible):
+        """Publish the pending arm command, compensated when ``feasible`` is given."""
+        if self._wait is not None:
+            self._wait.cancel()
+        _, command, stamp = self._pending
+        self._pending = None
+        if feasible is None:
+            self.counters['compensation_dropped'] += 1
+            self.get_logger().warn('no /base/feasible_twist for this cycle in time: arm command without '
+                                   'compensation', throttle_duration_sec=5.0)
+            self._publish_arm(command, stamp)
+        else:
+            self._publish_arm(self.resolver.compensate(command, feasible), stamp)
+
+    # ------------------------------------------------------------------ outputs
+    def _publish_base(self, stamp, twist):
+        msg = TwistStamped()
+        msg.header.stamp = stamp
+        msg.header.frame_id = self.p.base_frame
+        msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z = (float(v) for v in twist)
+        self.pub_base.publish(msg)
+
+    def _publish_arm(self, command, stamp):
+        """Publish the arm command of the cycle stamped ``stamp`` (and, when due, its diagnostics)."""
+        self.pub_arm.publish(float_array(command.arm_velocity))
+        self._last = command
+        self._track_progress(command.diagnostics)
+        now = self._now()
+        if self.p.diagnostics_period > 0 and now >= self._next_diag:
+            self._next_diag = now + self.p.diagnostics_period
+            self.pub_diag.publish(self._diagnostics(stamp))
+
+    def _publish_zero(self, stamp):
+        self._publish_base(stamp, np.zeros(3))
+        self.pub_arm.publish(float_array(np.zeros(len(self.arm_joints))))
+        self.resolver.reset()
+
+    def _watchdog(self):
+        age = self.fresh['joint_states'].age(self._now())
+        if self.p.state_timeout < age < math.inf:
+            if not self._zero_sent:
+                self.get_logger().warn(f'no /joint_states for {self.p.state_timeout} s: zero commands')
+                self._zero_sent = True
+            self._pending = None
+            self._publish_zero(self.get_clock().now().to_msg())
+
+    # ------------------------------------------------------------------ status
+    def _reached(self, diag):
+        tol_p, tol_o = self.p.goal_tolerance
+        return diag.position_error <= tol_p and diag.orientation_error <= tol_o
+
+    def _track_progress(self, diag):
+        """Remember the control cycle of the last 1 mm of progress (time counted in periods)."""
+        best, _ = self._progress
+        if diag.position_error < best - 1e-3 or self._reached(diag):
+            self._progress = (diag.position_error, self.counters['cycles'])
+
+    def _diagnostics(self, stamp):
+        """Status of the cycle stamped ``stamp`` (the joint state it answers)."""
+        values = dict(self.counters)
+        level, message = 'ok', 'no goal'
+        if self._last is not None and self.target is not None:
+            d = self._last.diagnostics
+            reached = self._reached(d)
+            stalled = not reached and (self.counters['cycles'] - self._progress[1]) * self.p.period > self.p.stall_time
+            values.update({
+                'method': d.method, 'mode': d.mode, 'psi': d.psi, 'position_error_m': d.position_error,
+                'orientation_error_rad': d.orientation_error, 'limit_scale': d.limit_scale,
+                'accel_scale': d.accel_scale, 'null_scale': d.null_scale,
+                'compensation_scale': d.compensation_scale, 'compensated': d.compensated,
+                'limited': list(d.limited), 'sigma_min': d.sigma_min, 'cycle_time_us': d.cycle_time_s * 1e6,
+                'goal_reached': reached, 'goal_stalled': stalled,
+                'arm_command': self._last.arm_velocity, 'base_reference': self._last.base_twist})
+            if stalled:
+                level, message = 'warn', (f'goal not reached: {d.position_error:.3f} m, {d.orientation_error:.3f} '
+                                          f'rad; no progress for {self.p.stall_time} s (out of reach?)')
+            else:
+                message = 'goal reached' if reached else d.mode
+        return diagnostic_array(stamp, [diagnostic_status('redundancy_resolver', self.model.config.name,
+                                                          level, message, values)])
+
+
+def main(args=None):
+    return run_node(RedundancyResolverNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
