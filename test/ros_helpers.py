@@ -14,6 +14,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+from wmm_control.experiments.ros_run import private_domain_id
 from wmm_control.nodes.common import float_array
 
 
@@ -26,7 +27,8 @@ class RosHarness:
 
     def __init__(self):
         self.context = rclpy.Context()
-        rclpy.init(context=self.context)
+        # A domain of this test process alone: no crosstalk with other ROS processes on the machine.
+        rclpy.init(context=self.context, domain_id=private_domain_id())
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes = []
 

@@ -1,6 +1,6 @@
 """One experiment run with every node in one process, talking over real topics.
 
-The simulator (``wmm_sim``, lockstep), the base controller (``swmr_controller`` for robot A),
+The run has a ROS domain of its own (:func:`private_domain_id`). The simulator (``wmm_sim``, lockstep), the base controller (``swmr_controller`` for robot A),
 the ``redundancy_resolver`` and the ``goal_sequencer`` run on one executor with a private
 rclpy context, exactly as they run as separate processes. A recorder node listens to the
 topics a user would watch (ground-truth end-effector pose and base pose, joint states,
@@ -8,6 +8,7 @@ commands, feasible twist, the resolver's ``/diagnostics``) and fills a
 :class:`~wmm_control.experiments.metrics.RunLog`, one row per control period.
 """
 
+import os
 import time
 
 import numpy as np
@@ -25,7 +26,7 @@ from wmm_control.errors import ConfigError
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.resolvers import ResolverDiagnostics
 
-__all__ = ['run_with_nodes', 'Recorder']
+__all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_WAITS']
 
 
 def _stamp(msg):
@@ -129,7 +130,19 @@ def _executor(context):
         return SingleThreadedExecutor(context=context)
 
 
-def run_with_nodes(scenario, run, progress=None, wall_timeout=None):
+#: In lockstep nothing moves until every answer is in, so the nodes may wait as long as a loaded
+#: machine needs (the waits end as soon as the answer comes): the run does not depend on timing.
+LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 0.5},
+                  'swmr_controller': {'reference_wait': 0.5}}
+
+
+def private_domain_id():
+    """A ROS domain for this process alone (101–200, from the process id), so that an experiment
+    never hears, nor drives, a robot system running on the machine's usual domain."""
+    return 101 + os.getpid() % 100
+
+
+def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=None):
     """Run one entry of ``scenario.runs`` with every node in this process.
 
     Args:
@@ -137,6 +150,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None):
         run: one of its runs (``name``, ``method``, ``feedback``, resolver parameters).
         progress: optional callable ``progress(simulated_seconds)`` called as the run advances.
         wall_timeout: give up after this many wall seconds (default: ten times the duration).
+        domain_id: ROS domain of the run; default :func:`private_domain_id`.
 
     Returns:
         The frozen :class:`RunLog` (``wall_time_s`` set).
@@ -155,7 +169,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None):
     if feedback not in ('ground_truth', 'odometry'):
         raise ConfigError(f'run {run.get("name")}: feedback must be ground_truth or odometry, got {feedback!r}')
     resolver_params = {k: v for k, v in run.items() if k not in ('name', 'feedback')}
-    resolver_params.update(robot=robot.name, ee_feedback=feedback, diagnostics_period=1e-9)
+    resolver_params.update(robot=robot.name, ee_feedback=feedback, diagnostics_period=1e-9,
+                           **LOCKSTEP_WAITS['redundancy_resolver'])
     sim_params = dict(scenario.sim or {})
     sim_params.update(robot=robot.name, timing='lockstep', diagnostics_period=0.0)
     for key in ('slip_drift', 'slip_noise'):
@@ -168,7 +183,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None):
         return [Parameter(k, value=v) for k, v in values.items()]
 
     context = rclpy.Context()
-    rclpy.init(context=context)
+    rclpy.init(context=context, domain_id=private_domain_id() if domain_id is None else domain_id)
     log = RunLog(method=run['method'], label=run['name'])
     nodes = []
     executor = _executor(context)
@@ -179,7 +194,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None):
         nodes.append(RedundancyResolverNode(context=context, cli_args=remap,
                                             parameter_overrides=params(resolver_params)))
         if robot.steerable is not None:
-            nodes.append(SwmrControllerNode(context=context))
+            nodes.append(SwmrControllerNode(context=context,
+                                            parameter_overrides=params(LOCKSTEP_WAITS['swmr_controller'])))
         recorder = Recorder(context, robot, scenario, log)
         nodes.append(recorder)
         sim = SimNode(context=context, parameter_overrides=params(sim_params))
