@@ -215,3 +215,35 @@ def test_the_goal_is_reached_with_wheel_contact_physics():
         assert error < 0.01, f'{error * 1e3:.1f} mm from the goal'
     finally:
         ros.close()
+
+
+def test_garbage_on_every_input_never_gives_a_non_finite_or_over_limit_command(system):
+    """NaN, inf and finite but absurd values on every topic the resolver reads."""
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import JointState
+    ros, driver, _ = system
+    pubs = {t: driver.create_publisher(m, t, 10) for t, m in (('/odom', Odometry), ('/joint_states', JointState),
+                                                               ('/base/feasible_twist', TwistStamped))}
+    driver.goal((1.5, 0.3, 1.0))
+    run_until(ros, driver, 0.5)
+    for value in (float('nan'), float('inf'), 1e308, -1e300):
+        odom = Odometry()
+        odom.pose.pose.position.x = value
+        odom.pose.pose.orientation.w = 1.0
+        pubs['/odom'].publish(odom)
+        js = JointState()
+        js.name = ['arm_joint_1', 'arm_joint_2']
+        js.position = [value]
+        pubs['/joint_states'].publish(js)
+        tw = TwistStamped()
+        tw.twist.linear.x = value
+        pubs['/base/feasible_twist'].publish(tw)
+        driver.goal((value, 0.0, 1.0))
+        driver.goal((1.5, 0.3, 1.0))
+        run_until(ros, driver, 0.3)
+    arm = np.array(driver.arm)
+    refs = np.array([(r.twist.linear.x, r.twist.linear.y, r.twist.angular.z) for r in driver.refs])
+    assert np.all(np.isfinite(arm)) and np.all(np.isfinite(refs))
+    assert np.all(np.abs(arm) <= 3.6) and np.all(np.abs(refs) <= 1.0 + 1e-9)
+    run_until(ros, driver, 8.0)
+    assert np.linalg.norm(driver.ee_position() - np.array([1.5, 0.3, 1.0])) < 0.01, 'still reaches its goal'

@@ -3,7 +3,7 @@
 Usage::
 
     wmm_experiment [SCENARIO] [--scenario PATH] [--out DIR] [--runs NAME,...] [--engine nodes|direct]
-                   [--no-figures]
+                   [--seed N] [--no-figures]
 
 ``SCENARIO`` names ``config/scenarios/<SCENARIO>.yaml`` (default ``sorour_table2``: Table II of
 Sorour et al. 2019); ``--scenario PATH`` takes any file of that form. Each run of the
@@ -14,6 +14,7 @@ topics (``--engine nodes``, the default: ``wmm_sim`` in lockstep, ``swmr_control
 """
 
 import argparse
+import dataclasses
 import json
 import resource
 import sys
@@ -24,7 +25,7 @@ import numpy as np
 
 from wmm_control.errors import WmmError
 from wmm_control.experiments.metrics import METRIC_KEYS, goal_metrics, run_limit_report
-from wmm_control.experiments.scenario import load_scenario
+from wmm_control.experiments.scenario import load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers import TaskSharingParams
 
@@ -40,7 +41,7 @@ def _run_direct(scenario, run, progress):
     sim = dict(scenario.sim or {})
     slip = SlipParams(gain=float(sim.get('slip_gain', 0.0)), drift=tuple(sim.get('slip_drift', (0.0,) * 3)),
                       noise_std=tuple(sim.get('slip_noise', (0.0,) * 3)))
-    params = {k: v for k, v in run.items() if k not in ('name', 'method', 'feedback')}
+    params = resolver_parameters(run)
     resolver = make_resolver(run['method'], scenario.robot, **params)
     with SimWorld(scenario.robot, base_mode=sim.get('base_mode', 'kinematic'), substeps=sim.get('substeps', 10),
                   slip=slip, seed=int(sim.get('seed', 0))) as world:
@@ -83,7 +84,7 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True):
                 g['compensation_dropped'] = None
         summary_runs[run['name']] = {
             'method': run['method'], 'feedback': run.get('feedback', 'ground_truth'),
-            'parameters': {k: v for k, v in run.items() if k not in ('name', 'method', 'feedback')},
+            'parameters': resolver_parameters(run),
             'periods': len(log), 'wall_time_s': log.wall_time_s,
             'sim_to_wall_ratio': float(log.t[-1] + dt) / log.wall_time_s if log.wall_time_s > 0 else None,
             'resolver_cycle_median_us': float(np.median(log.cycle_time_s) * 1e6),
@@ -134,10 +135,13 @@ def main(argv=None):
     parser.add_argument('--runs', help='comma-separated run names (default: all of the scenario)')
     parser.add_argument('--engine', choices=('nodes', 'direct'), default='nodes',
                         help='nodes: every node in one process over topics; direct: no ROS (default: nodes)')
+    parser.add_argument('--seed', type=int, help="seed of the simulator's slip noise (default: the scenario's)")
     parser.add_argument('--no-figures', action='store_true', help='skip the plots and renders')
     args = parser.parse_args(argv)
     try:
         scenario = load_scenario(args.scenario or args.name)
+        if args.seed is not None:
+            scenario = dataclasses.replace(scenario, sim=dict(scenario.sim or {}, seed=args.seed))
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         sim = scenario.sim or {}
@@ -156,10 +160,13 @@ def main(argv=None):
         summary['peak_memory_mb'] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
         if not args.no_figures:
             from wmm_control.experiments.figures import write_figures
-            render = next((n for n in logs if 'compensation' in n), next(iter(logs)))
-            summary['figures'] = [str(p) for p in write_figures(logs, {n: r['goals'] for n, r in summary['runs'].items()},
-                                                                scenario, KinematicModel(scenario.robot), out,
-                                                                render_label=render)]
+            plotted = {r['name']: logs[r['name']] for r in scenario.runs if r['name'] in logs and r.get('plot', True)}
+            render = next((n for n in plotted if 'compensation' in n), next(iter(plotted), None))
+            metrics = {n: summary['runs'][n]['goals'] for n in plotted}
+            zoom = [r['name'] for r in scenario.runs if r['name'] in plotted and r['method'] == 'task_sharing'
+                    and r.get('feedback', 'ground_truth') == 'ground_truth'] or None
+            summary['figures'] = [str(p) for p in write_figures(plotted, metrics, scenario, KinematicModel(scenario.robot),
+                                                                out, render_label=render, zoom_labels=zoom)] if plotted else []
         (out / 'metrics.json').write_text(json.dumps(summary, indent=2, default=float) + '\n')
         print(format_table(summary))
         print(f'{total_sim:.0f} simulated s in {elapsed:.1f} s wall ({total_sim / elapsed:.1f}x), peak memory '

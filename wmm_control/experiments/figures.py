@@ -315,7 +315,7 @@ def render_goal_pictures(logs, scenario, out_dir, label, view='iso'):
     return paths + [_save(fig, out_dir / f'goals_{label}.png')]
 
 
-def write_figures(logs, metrics, scenario, model, out_dir, render_label=None):
+def write_figures(logs, metrics, scenario, model, out_dir, render_label=None, zoom_labels=None):
     """Write ``fig6_error_norm.png``, ``fig7_zoom_psi.png``, ``top_view.png`` into ``out_dir``
     (created), plus :func:`render_goal_pictures` of ``render_label`` when given.
 
@@ -326,6 +326,7 @@ def write_figures(logs, metrics, scenario, model, out_dir, render_label=None):
         model: a KinematicModel of the robot.
         out_dir: output folder.
         render_label: run to render at the end of each goal window, or None.
+        zoom_labels: runs of the Fig 7 zoom (default: :func:`plot_zoom_and_psi`'s choice).
 
     Returns:
         The written paths.
@@ -333,7 +334,7 @@ def write_figures(logs, metrics, scenario, model, out_dir, render_label=None):
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [plot_error_norms(logs, metrics, scenario, out_dir / 'fig6_error_norm.png'),
-             plot_zoom_and_psi(logs, metrics, scenario, out_dir / 'fig7_zoom_psi.png'),
+             plot_zoom_and_psi(logs, metrics, scenario, out_dir / 'fig7_zoom_psi.png', labels=zoom_labels),
              plot_top_view(logs, scenario, model, out_dir / 'top_view.png')]
     if render_label is not None:
         paths += render_goal_pictures(logs, scenario, out_dir, render_label)

@@ -24,6 +24,7 @@ from sensor_msgs.msg import JointState
 
 from wmm_control.errors import ConfigError
 from wmm_control.experiments.metrics import RunLog
+from wmm_control.experiments.scenario import resolver_parameters
 from wmm_control.resolvers import ResolverDiagnostics
 
 __all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_WAITS']
@@ -168,7 +169,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     feedback = run.get('feedback', 'ground_truth')
     if feedback not in ('ground_truth', 'odometry'):
         raise ConfigError(f'run {run.get("name")}: feedback must be ground_truth or odometry, got {feedback!r}')
-    resolver_params = {k: v for k, v in run.items() if k not in ('name', 'feedback')}
+    resolver_params = dict(resolver_parameters(run), method=run['method'])
     resolver_params.update(robot=robot.name, ee_feedback=feedback, diagnostics_period=1e-9,
                            **LOCKSTEP_WAITS['redundancy_resolver'])
     sim_params = dict(scenario.sim or {})

@@ -13,8 +13,9 @@ Schema::
 
       experiment:                 # optional: how wmm_experiment runs it (defaults below)
         sim: {base_mode: kinematic, slip_gain: 0.05, slip_drift: [...], slip_noise: [...], seed: 0}
-        runs:                     # one run per entry; keys other than name/method/feedback
-          - {name: pinv, method: pinv, feedback: ground_truth}          # are resolver parameters
+        runs:                     # one run per entry; keys other than name/method/feedback/plot
+          - {name: pinv, method: pinv, feedback: ground_truth}          # are resolver parameters;
+          # plot: false keeps a run out of the figures
           - {name: task_sharing, method: task_sharing, compensation: false}
 
 An angle may be written as an expression of ``pi`` (``pi/2``, ``-pi/2``, ``3*pi/4``).
@@ -32,12 +33,12 @@ from wmm_control.paths import config_path
 from wmm_control.robot_config import read_yaml_section
 from wmm_control.resolvers.interface import PoseTarget
 
-__all__ = ['Goal', 'Scenario', 'load_scenario', 'DEFAULT_RUNS', 'SIM_KEYS', 'RUN_KEYS']
+__all__ = ['Goal', 'Scenario', 'load_scenario', 'resolver_parameters', 'DEFAULT_RUNS', 'SIM_KEYS', 'RUN_KEYS']
 
 #: Simulator settings a scenario may give (``wmm_sim`` parameters).
 SIM_KEYS = ('base_mode', 'substeps', 'slip_gain', 'slip_drift', 'slip_noise', 'seed')
 #: Keys of a run besides the resolver parameters of ``redundancy_resolver``.
-RUN_KEYS = ('name', 'method', 'feedback')
+RUN_KEYS = ('name', 'method', 'feedback', 'plot')
 #: The runs of Sorour's Table II experiment (and of a scenario that names none).
 DEFAULT_RUNS = (
     {'name': 'pinv', 'method': 'pinv', 'feedback': 'ground_truth'},
@@ -148,6 +149,11 @@ def load_scenario(name_or_path):
         name=str(raw.get('name', path.stem)), description=str(raw.get('description', '')),
         robot=str(raw.get('robot', 'steerable')), frame=str(raw.get('frame', 'world')), duration=duration,
         goals=tuple(Goal(t, e, p) for t, e, p in zip(starts, ends, poses)), path=path, sim=sim, runs=runs)
+
+
+def resolver_parameters(run):
+    """The resolver parameters of a run entry (every key but :data:`RUN_KEYS`)."""
+    return {k: v for k, v in run.items() if k not in RUN_KEYS}
 
 
 def _experiment(raw, where):

@@ -200,8 +200,10 @@ class RedundancyResolverNode(Node):
         yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
         pose = np.array([p.x, p.y, yaw])
         twist = np.array([t.linear.x, t.linear.y, t.angular.z])
-        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist))):
-            self.get_logger().warn('rejected /odom with non-finite values', throttle_duration_sec=1.0)
+        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist))) or \
+                max(abs(p.x), abs(p.y)) > self.p.max_goal_distance:
+            self.get_logger().warn(f'rejected /odom at {pose.tolist()}: non-finite or beyond max_goal_distance',
+                                   throttle_duration_sec=1.0)
             return
         self._odom = (pose, twist)
         self.fresh['odom'].mark(self._now())
@@ -291,8 +293,9 @@ class RedundancyResolverNode(Node):
         if self._pending is None or _stamp_key(msg.header.stamp) != self._pending[0]:
             return
         twist = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
-        if not np.all(np.isfinite(twist)):
-            self.get_logger().warn('rejected /base/feasible_twist with non-finite values', throttle_duration_sec=1.0)
+        if not np.all(np.isfinite(twist)) or np.any(np.abs(twist) > 10.0 * self.model.config.base.velocity):
+            self.get_logger().warn(f'rejected /base/feasible_twist {twist.tolist()}: non-finite or beyond ten '
+                                   'times the base velocity limits', throttle_duration_sec=1.0)
             return
         self._finish(twist)
 
