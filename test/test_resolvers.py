@@ -253,3 +253,85 @@ def test_rotating_the_rpy_error_by_the_base_yaw_breaks_orientation_control(liter
         assert max(errors) > 1.0
     else:
         assert errors[-1] < 1e-3 and max(errors) < errors[0] + 1e-3
+
+
+def _reference_apply(lim, primary, position, previous, secondary, previous_secondary):
+    """The steps of the limits module docstring written with whole-array numpy operations.
+
+    :meth:`CommandLimits.apply` takes them entry by entry on Python floats; this is the
+    plain formula it must reproduce. Returns (command, secondary share, s_v, s_a, secondary
+    scale, limited indices, lower, upper).
+    """
+    def largest_step(start, step, lower, upper):
+        with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+            s_each = np.where(step > 0, (upper - start) / step,
+                              np.where(step < 0, (lower - start) / step, np.inf))
+        s = float(np.min(s_each))
+        if s >= 1.0:
+            return 1.0, set()
+        s = min(1.0, max(0.0, s))
+        return s, set(np.flatnonzero(s_each <= s + 1e-12).tolist())
+
+    adt = lim.acceleration * lim.dt
+    half = 0.5 * adt
+    d_up = np.maximum(lim.position_upper - position, 0.0)
+    d_dn = np.maximum(position - lim.position_lower, 0.0)
+    up = np.where(np.isfinite(lim.position_upper), -half + np.sqrt(half * half + 2.0 * lim.acceleration * d_up), np.inf)
+    down = np.where(np.isfinite(lim.position_lower), -half + np.sqrt(half * half + 2.0 * lim.acceleration * d_dn),
+                    np.inf)
+    bad = ~np.isfinite(primary) | ~np.isfinite(secondary)
+    primary, secondary = np.where(bad, 0.0, primary), np.where(bad, 0.0, secondary)
+    limited = set(np.flatnonzero(bad).tolist())
+    clipped = np.clip(primary, -down, up)
+    sec = np.clip(secondary, -down - clipped, up - clipped)
+    limited |= set(np.flatnonzero((clipped != primary) | (sec != secondary)).tolist())
+    s_v, arg = largest_step(np.zeros(lim.n), clipped + sec, -lim.velocity, lim.velocity)
+    limited |= arg
+    prev_p = previous - previous_secondary
+    d_p, d_s = s_v * clipped - prev_p, s_v * sec - previous_secondary
+    lo_a, hi_a = previous - adt, previous + adt
+    s_a, arg = largest_step(previous, d_p, lo_a, hi_a)
+    limited |= arg
+    mid = previous + s_a * d_p
+    s_s, arg = largest_step(mid, d_s, lo_a, hi_a)
+    limited |= arg
+    lo_v, hi_v = np.maximum(-lim.velocity, -down), np.minimum(lim.velocity, up)
+    lo, hi = np.maximum(lo_v, lo_a), np.minimum(hi_v, hi_a)
+    forced = lo > hi
+    lo = np.where(forced, np.clip(previous, lo_v, hi_v), lo)
+    hi = np.where(forced, np.clip(previous, lo_v, hi_v), hi)
+    raw = mid + s_s * d_s
+    command = np.clip(raw, lo, hi)
+    limited |= set(np.flatnonzero(forced | (np.abs(command - raw) > 1e-12)).tolist())
+    out_s = previous_secondary + s_s * d_s
+    share = (min(1.0, np.linalg.norm(out_s) / max(np.linalg.norm(secondary), 1e-300))
+             if np.any(secondary) else 1.0)
+    return command, out_s, s_v, s_a, share, tuple(sorted(limited)), lo, hi
+
+
+_finite_or_not = st.one_of(st.floats(-50, 50), st.sampled_from([np.nan, np.inf, -np.inf]))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(_finite_or_not, min_size=10, max_size=10),
+       st.lists(st.floats(-5, 5), min_size=10, max_size=10),
+       st.lists(st.floats(-1.2, 1.2), min_size=10, max_size=10),
+       st.floats(0.0, 1.0),
+       st.lists(st.floats(-0.1, 1.1), min_size=7, max_size=7))
+def test_limits_equal_the_array_formula(robot, primary, secondary, prev_frac, prev_share, pos_frac):
+    """Every output of :meth:`CommandLimits.apply`, bit for bit, also from a previous command
+    that broke its bounds (forced entries) and from positions beyond the limits."""
+    lim = _limits(robot)
+    arm = robot.arm
+    position = np.concatenate((np.zeros(3), arm.position_lower + np.asarray(pos_frac)
+                               * (arm.position_upper - arm.position_lower)))
+    prev = np.asarray(prev_frac) * lim.velocity
+    prev_s = prev_share * prev
+    out = lim.apply(primary, position, prev, secondary=secondary, previous_secondary=prev_s)
+    ref = _reference_apply(lim, np.asarray(primary), position, prev, np.asarray(secondary), prev_s)
+    for got, want in zip((out.command, out.secondary, out.lower, out.upper), (ref[0], ref[1], ref[6], ref[7])):
+        np.testing.assert_array_equal(got, want)
+    assert (out.scale, out.accel_scale, out.secondary_scale, out.limited) == ref[2:6]
+    lower, upper, _ = lim.box(position, prev)
+    np.testing.assert_array_equal(lower, ref[6])
+    np.testing.assert_array_equal(upper, ref[7])

@@ -36,11 +36,12 @@ and acceleration bounds cannot both hold (a previous command that broke a bound,
 reset) braking wins and the entry is reported as forced.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from wmm_control.checks import as_finite_vector
+from wmm_control.checks import as_finite_vector, as_vector
 from wmm_control.errors import ConfigError
 
 __all__ = ['CommandLimits', 'LimitResult']
@@ -108,6 +109,16 @@ class CommandLimits:
         self.dt = float(dt)
         self.n = n
         self._adt = self.acceleration * self.dt
+        # per-entry constants of the scalar kernels below, as Python floats
+        self._velocity = self.velocity.tolist()
+        self._neg_velocity = (-self.velocity).tolist()
+        self._adt_list = self._adt.tolist()
+        self._half = (0.5 * self._adt).tolist()
+        self._two_a = (2.0 * self.acceleration).tolist()
+        self._lower = self.position_lower.tolist()
+        self._upper = self.position_upper.tolist()
+        self._has_lower = np.isfinite(self.position_lower).tolist()
+        self._has_upper = np.isfinite(self.position_upper).tolist()
 
     def braking_rates(self, position):
         """Largest rates towards the lower and upper position limits from which braking stops in time.
@@ -118,16 +129,8 @@ class CommandLimits:
         Returns:
             (down, up): non-negative rate bounds [unit/s]; inf where there is no limit. Shape (n,) each.
         """
-        position = np.asarray(position, dtype=float)
-        half = 0.5 * self._adt
-        with np.errstate(invalid='ignore'):
-            d_up = np.maximum(self.position_upper - position, 0.0)
-            d_dn = np.maximum(position - self.position_lower, 0.0)
-            up = -half + np.sqrt(half * half + 2.0 * self.acceleration * d_up)
-            down = -half + np.sqrt(half * half + 2.0 * self.acceleration * d_dn)
-        up = np.where(np.isfinite(self.position_upper), up, np.inf)
-        down = np.where(np.isfinite(self.position_lower), down, np.inf)
-        return down, up
+        down, up = self._braking(np.asarray(position, dtype=float).tolist())
+        return np.array(down), np.array(up)
 
     def box(self, position, previous):
         """This period's interval for every entry.
@@ -140,17 +143,9 @@ class CommandLimits:
         Returns:
             (lower, upper, forced): Shape (n,) each; ``forced`` flags the entries above.
         """
-        down, up = self.braking_rates(position)
-        lo_v = np.maximum(-self.velocity, -down)
-        hi_v = np.minimum(self.velocity, up)
-        lo = np.maximum(lo_v, previous - self._adt)
-        hi = np.minimum(hi_v, previous + self._adt)
-        forced = lo > hi
-        if np.any(forced):
-            point = np.clip(previous, lo_v, hi_v)
-            lo = np.where(forced, point, lo)
-            hi = np.where(forced, point, hi)
-        return lo, hi, forced
+        down, up = self._braking(np.asarray(position, dtype=float).tolist())
+        lo, hi, forced = self._box(down, up, np.asarray(previous, dtype=float).tolist())
+        return np.array(lo), np.array(hi), np.array(forced, dtype=bool)
 
     def subset(self, index):
         """The limits of some entries only (``index``: a slice or an index array)."""
@@ -173,55 +168,112 @@ class CommandLimits:
         Returns:
             :class:`LimitResult`.
         """
-        previous = as_finite_vector(previous, self.n, 'previous command')
-        prev_s = (np.zeros(self.n) if previous_secondary is None
-                  else as_finite_vector(previous_secondary, self.n, 'previous secondary'))
-        prev_p = previous - prev_s
-        primary = np.asarray(primary, dtype=float)
-        secondary = np.zeros(self.n) if secondary is None else np.asarray(secondary, dtype=float)
-        bad = ~np.isfinite(primary) | ~np.isfinite(secondary)
-        if np.any(bad):
-            primary = np.where(bad, 0.0, primary)
-            secondary = np.where(bad, 0.0, secondary)
-        limited = set(np.flatnonzero(bad).tolist())
+        n = self.n
+        previous = self._floats(previous, 'previous command', finite=True)
+        prev_s = ([0.0] * n if previous_secondary is None
+                  else self._floats(previous_secondary, 'previous secondary', finite=True))
+        prev_p = [u - s for u, s in zip(previous, prev_s)]
+        primary = self._floats(primary, 'primary')
+        secondary = [0.0] * n if secondary is None else self._floats(secondary, 'secondary')
+        limited = set()
+        for i, (p, s) in enumerate(zip(primary, secondary)):
+            if not (math.isfinite(p) and math.isfinite(s)):
+                primary[i] = secondary[i] = 0.0
+                limited.add(i)
         # 1. braking, joint by joint: the primary part first, the secondary part in the room left
-        down, up = self.braking_rates(position)
-        clipped = np.clip(primary, -down, up)
-        sec = np.clip(secondary, -down - clipped, up - clipped)
-        limited |= set(np.flatnonzero((clipped != primary) | (sec != secondary)).tolist())
+        down, up = self._braking(np.asarray(position, dtype=float).tolist())
+        clipped = [_clip(p, -d, u) for p, d, u in zip(primary, down, up)]
+        sec = [_clip(s, -d - c, u - c) for s, d, u, c in zip(secondary, down, up, clipped)]
+        limited.update(i for i in range(n) if clipped[i] != primary[i] or sec[i] != secondary[i])
         # 2. velocity: the whole command, uniformly (the braking bounds hold all the way to rest)
-        s_v, arg = _largest_step(np.zeros(self.n), clipped + sec, -self.velocity, self.velocity)
-        limited |= set(arg)
-        goal_p, goal_s = s_v * clipped, s_v * sec
+        s_v, arg = _largest_step([0.0] * n, [c + s for c, s in zip(clipped, sec)], self._neg_velocity, self._velocity)
+        limited.update(arg)
+        goal_p, goal_s = [s_v * c for c in clipped], [s_v * s for s in sec]
         # 3. acceleration: the primary part's change first, the secondary part's in the room left
-        lo_a, hi_a = previous - self._adt, previous + self._adt
-        d_p, d_s = goal_p - prev_p, goal_s - prev_s
+        lo_a = [u - a for u, a in zip(previous, self._adt_list)]
+        hi_a = [u + a for u, a in zip(previous, self._adt_list)]
+        d_p = [g - u for g, u in zip(goal_p, prev_p)]
+        d_s = [g - u for g, u in zip(goal_s, prev_s)]
         s_a, arg = _largest_step(previous, d_p, lo_a, hi_a)
-        limited |= set(arg)
-        mid = previous + s_a * d_p
+        limited.update(arg)
+        mid = [u + s_a * d for u, d in zip(previous, d_p)]
         s_s, arg = _largest_step(mid, d_s, lo_a, hi_a)
-        limited |= set(arg)
-        out_s = prev_s + s_s * d_s
-        raw = mid + s_s * d_s
+        limited.update(arg)
+        out_s = [u + s_s * d for u, d in zip(prev_s, d_s)]
+        raw = [u + s_s * d for u, d in zip(mid, d_s)]
         # 4. the period's box, braking first where it conflicts with the acceleration limit
-        lo, hi, forced = self.box(position, previous)
-        command = np.clip(raw, lo, hi)
-        limited |= set(np.flatnonzero(forced | (np.abs(command - raw) > 1e-12)).tolist())
-        share = float(np.linalg.norm(out_s)) / max(float(np.linalg.norm(secondary)), 1e-300)
-        return LimitResult(command=command, secondary=out_s, scale=s_v, accel_scale=s_a,
-                           secondary_scale=min(1.0, share) if np.any(secondary) else 1.0,
-                           limited=tuple(sorted(int(i) for i in limited)), lower=lo, upper=hi)
+        lo, hi, forced = self._box(down, up, previous)
+        command = [_clip(r, a, b) for r, a, b in zip(raw, lo, hi)]
+        limited.update(i for i in range(n) if forced[i] or abs(command[i] - raw[i]) > 1e-12)
+        out_s = np.array(out_s)
+        share = 1.0
+        if any(secondary):
+            # the norms as np.linalg.norm takes them (sqrt of a BLAS dot), at a third of its cost
+            asked = np.array(secondary)
+            share = min(1.0, math.sqrt(out_s.dot(out_s)) / max(math.sqrt(asked.dot(asked)), 1e-300))
+        return LimitResult(command=np.array(command), secondary=out_s, scale=s_v, accel_scale=s_a,
+                           secondary_scale=share, limited=tuple(sorted(limited)), lower=np.array(lo),
+                           upper=np.array(hi))
+
+    # The bounds are computed entry by entry on Python floats: for the n = 7 or 10 entries
+    # of a command, numpy's overhead per call (about 1 µs per operation, some 60 of them per
+    # apply) costs several times the arithmetic itself. Each entry sees the same IEEE
+    # operations in the same order as the array form would, so the results are the same.
+
+    def _floats(self, value, name, finite=False):
+        """``value`` as a list of n floats; :func:`as_finite_vector` / :func:`as_vector` errors otherwise."""
+        arr = np.asarray(value, dtype=float)
+        out = arr.tolist() if arr.shape == (self.n,) else None
+        if out is None or (finite and not all(map(math.isfinite, out))):
+            (as_finite_vector if finite else as_vector)(value, self.n, name)   # raises the detailed error
+        return out
+
+    def _braking(self, position):
+        """:meth:`braking_rates` on a list of floats: (down, up) lists."""
+        down, up = [], []
+        for x, lower, upper, has_lower, has_upper, half, two_a in zip(
+                position, self._lower, self._upper, self._has_lower, self._has_upper, self._half, self._two_a):
+            # distances to the limits, max(·, 0) letting a NaN position through as np.maximum does
+            d_up, d_dn = upper - x, x - lower
+            d_up = 0.0 if d_up < 0.0 else d_up
+            d_dn = 0.0 if d_dn < 0.0 else d_dn
+            up.append(-half + math.sqrt(half * half + two_a * d_up) if has_upper else math.inf)
+            down.append(-half + math.sqrt(half * half + two_a * d_dn) if has_lower else math.inf)
+        return down, up
+
+    def _box(self, down, up, previous):
+        """:meth:`box` from the braking rates (lists): (lower, upper, forced) lists."""
+        lower, upper, forced = [], [], []
+        for d, u, v, prev, adt in zip(down, up, self._velocity, previous, self._adt_list):
+            lo_v = -v if -v >= -d else -d
+            hi_v = v if v <= u else u
+            lo = lo_v if lo_v >= prev - adt else prev - adt
+            hi = hi_v if hi_v <= prev + adt else prev + adt
+            if lo > hi:
+                lo = hi = _clip(prev, lo_v, hi_v)
+                forced.append(True)
+            else:
+                forced.append(False)
+            lower.append(lo)
+            upper.append(hi)
+        return lower, upper, forced
+
+
+def _clip(x, lower, upper):
+    """``np.clip`` of one float: ``min(max(x, lower), upper)``."""
+    x = lower if lower > x else x
+    return upper if upper < x else x
 
 
 def _largest_step(start, step, lower, upper):
     """Largest ``s ∈ [0, 1]`` with ``lower ≤ start + s·step ≤ upper``, and the binding indices.
 
-    ``start`` lies within the bounds.
+    ``start`` lies within the bounds. Sequences of floats, all of one length.
     """
-    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-        s_each = np.where(step > 0, (upper - start) / step, np.where(step < 0, (lower - start) / step, np.inf))
-    s = float(np.min(s_each)) if s_each.size else np.inf
+    s_each = [(hi - x) / d if d > 0.0 else (lo - x) / d if d < 0.0 else math.inf
+              for x, d, lo, hi in zip(start, step, lower, upper)]
+    s = min(s_each, default=math.inf)
     if s >= 1.0:
         return 1.0, ()
     s = min(1.0, max(0.0, s))
-    return s, tuple(np.flatnonzero(s_each <= s + 1e-12).tolist())
+    return s, [i for i, si in enumerate(s_each) if si <= s + 1e-12]
