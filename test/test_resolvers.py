@@ -335,3 +335,24 @@ def test_limits_equal_the_array_formula(robot, primary, secondary, prev_frac, pr
     lower, upper, _ = lim.box(position, prev)
     np.testing.assert_array_equal(lower, ref[6])
     np.testing.assert_array_equal(upper, ref[7])
+
+
+def test_lapack_helpers_equal_numpy_linalg():
+    """The direct LAPACK calls of the resolvers give np.linalg's results, rank-deficient cases included."""
+    from wmm_control.resolvers.pose_servo import lapack_solve, lapack_svd
+    from wmm_control.resolvers.task_sharing import _pinv
+    rng = np.random.default_rng(7)
+    for rows in (6, 7, 9):
+        a = rng.normal(size=(rows, 10))
+        a[:, :3] *= rows == 7            # zero base columns, as with ψ = 1
+        a[rows - 1] = a[0] * (rows == 9)  # a repeated row
+        np.testing.assert_allclose(lapack_svd(a, compute_uv=False), np.linalg.svd(a, compute_uv=False),
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(_pinv(a, 1e-6), np.linalg.pinv(a, rcond=1e-6), rtol=0, atol=1e-10)
+        gram = a @ a.T + 1e-6 * np.eye(rows)
+        rhs = rng.normal(size=rows)
+        np.testing.assert_allclose(gram @ lapack_solve(gram, rhs), rhs, rtol=0, atol=1e-8)
+    with pytest.raises(np.linalg.LinAlgError):
+        lapack_solve(np.zeros((6, 6)), np.ones(6))
+    with pytest.raises(np.linalg.LinAlgError):
+        lapack_svd(np.full((6, 10), np.nan))
