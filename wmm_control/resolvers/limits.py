@@ -144,7 +144,9 @@ class CommandLimits:
             (lower, upper, forced): Shape (n,) each; ``forced`` flags the entries above.
         """
         down, up = self._braking(np.asarray(position, dtype=float).tolist())
-        lo, hi, forced = self._box(down, up, np.asarray(previous, dtype=float).tolist())
+        previous = np.asarray(previous, dtype=float)
+        lo, hi, forced = self._box(down, up, previous.tolist(), (previous - self._adt).tolist(),
+                                   (previous + self._adt).tolist())
         return np.array(lo), np.array(hi), np.array(forced, dtype=bool)
 
     def subset(self, index):
@@ -172,39 +174,43 @@ class CommandLimits:
         previous = self._floats(previous, 'previous command', finite=True)
         prev_s = ([0.0] * n if previous_secondary is None
                   else self._floats(previous_secondary, 'previous secondary', finite=True))
-        prev_p = [u - s for u, s in zip(previous, prev_s)]
         primary = self._floats(primary, 'primary')
         secondary = [0.0] * n if secondary is None else self._floats(secondary, 'secondary')
-        limited = set()
-        for i, (p, s) in enumerate(zip(primary, secondary)):
-            if not (math.isfinite(p) and math.isfinite(s)):
-                primary[i] = secondary[i] = 0.0
-                limited.add(i)
-        # 1. braking, joint by joint: the primary part first, the secondary part in the room left
         down, up = self._braking(np.asarray(position, dtype=float).tolist())
-        clipped = [_clip(p, -d, u) for p, d, u in zip(primary, down, up)]
-        sec = [_clip(s, -d - c, u - c) for s, d, u, c in zip(secondary, down, up, clipped)]
-        limited.update(i for i in range(n) if clipped[i] != primary[i] or sec[i] != secondary[i])
+        limited = set()
+        # 1. braking, joint by joint: the primary part first, the secondary part in the room left
+        clipped, sec = [0.0] * n, [0.0] * n
+        for i, (p, s, d, u) in enumerate(zip(primary, secondary, down, up)):
+            if not (math.isfinite(p) and math.isfinite(s)):       # a request to stop
+                p = s = primary[i] = secondary[i] = 0.0
+                limited.add(i)
+            clipped[i] = c = _clip(p, -d, u)
+            sec[i] = _clip(s, -d - c, u - c)
+            if c != p or sec[i] != s:
+                limited.add(i)
         # 2. velocity: the whole command, uniformly (the braking bounds hold all the way to rest)
         s_v, arg = _largest_step([0.0] * n, [c + s for c, s in zip(clipped, sec)], self._neg_velocity, self._velocity)
         limited.update(arg)
-        goal_p, goal_s = [s_v * c for c in clipped], [s_v * s for s in sec]
-        # 3. acceleration: the primary part's change first, the secondary part's in the room left
+        # 3. acceleration: the primary part's change first, the secondary part's in the room left;
+        #    each part changes from its own share of the previous command (primary: u − u_s)
         lo_a = [u - a for u, a in zip(previous, self._adt_list)]
         hi_a = [u + a for u, a in zip(previous, self._adt_list)]
-        d_p = [g - u for g, u in zip(goal_p, prev_p)]
-        d_s = [g - u for g, u in zip(goal_s, prev_s)]
+        d_p = [s_v * c - (u - us) for c, u, us in zip(clipped, previous, prev_s)]
+        d_s = [s_v * s - us for s, us in zip(sec, prev_s)]
         s_a, arg = _largest_step(previous, d_p, lo_a, hi_a)
         limited.update(arg)
         mid = [u + s_a * d for u, d in zip(previous, d_p)]
         s_s, arg = _largest_step(mid, d_s, lo_a, hi_a)
         limited.update(arg)
-        out_s = [u + s_s * d for u, d in zip(prev_s, d_s)]
-        raw = [u + s_s * d for u, d in zip(mid, d_s)]
         # 4. the period's box, braking first where it conflicts with the acceleration limit
-        lo, hi, forced = self._box(down, up, previous)
-        command = [_clip(r, a, b) for r, a, b in zip(raw, lo, hi)]
-        limited.update(i for i in range(n) if forced[i] or abs(command[i] - raw[i]) > 1e-12)
+        lo, hi, forced = self._box(down, up, previous, lo_a, hi_a)
+        command, out_s = [0.0] * n, [0.0] * n
+        for i, (m, d, us, a, b) in enumerate(zip(mid, d_s, prev_s, lo, hi)):
+            raw = m + s_s * d
+            command[i] = c = _clip(raw, a, b)
+            out_s[i] = us + s_s * d
+            if forced[i] or abs(c - raw) > 1e-12:
+                limited.add(i)
         out_s = np.array(out_s)
         share = 1.0
         if any(secondary):
@@ -241,14 +247,15 @@ class CommandLimits:
             down.append(-half + math.sqrt(half * half + two_a * d_dn) if has_lower else math.inf)
         return down, up
 
-    def _box(self, down, up, previous):
-        """:meth:`box` from the braking rates (lists): (lower, upper, forced) lists."""
+    def _box(self, down, up, previous, lower_accel, upper_accel):
+        """:meth:`box` from the braking rates and the acceleration interval ``previous ∓ a dt``
+        (lists): (lower, upper, forced) lists."""
         lower, upper, forced = [], [], []
-        for d, u, v, prev, adt in zip(down, up, self._velocity, previous, self._adt_list):
+        for d, u, v, prev, lo_a, hi_a in zip(down, up, self._velocity, previous, lower_accel, upper_accel):
             lo_v = -v if -v >= -d else -d
             hi_v = v if v <= u else u
-            lo = lo_v if lo_v >= prev - adt else prev - adt
-            hi = hi_v if hi_v <= prev + adt else prev + adt
+            lo = lo_v if lo_v >= lo_a else lo_a
+            hi = hi_v if hi_v <= hi_a else hi_a
             if lo > hi:
                 lo = hi = _clip(prev, lo_v, hi_v)
                 forced.append(True)
