@@ -76,7 +76,7 @@ class PoseServoParams:
     max_damping: float = 0.1
 
     #: numeric fields that may be zero (the others must be > 0)
-    _allow_zero = ()
+    _allow_zero = ('max_damping',)
 
     def __post_init__(self):
         _check_fields(self, self._allow_zero)

@@ -67,7 +67,7 @@ class TaskSharingParams(PoseServoParams):
     psi_rate: float = 0.0
     pinv_tolerance: float = 1e-6
 
-    _allow_zero = ('psi_rate', 'lambda_dex')
+    _allow_zero = PoseServoParams._allow_zero + ('psi_rate', 'lambda_dex')
 
     def __post_init__(self):
         super().__post_init__()
