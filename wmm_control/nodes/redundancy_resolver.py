@@ -54,7 +54,7 @@ from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.nodes.common import (
     Freshness, Param, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node)
-from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver
+from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 
 __all__ = ['RedundancyResolverNode', 'main']
@@ -82,6 +82,27 @@ PARAMS = (
           read_only=True),
     Param('singular_region', 'σ_min below which the damping grows [-].', lo=1e-6, hi=10.0, read_only=True),
     Param('max_damping', 'Damping at an exact singularity [-].', lo=0.0, hi=10.0, read_only=True),
+    Param('rows', 'Task rows of amp/traditional: position (r = 3) or full (r = 6).', choices=('position', 'full'),
+          read_only=True),
+    Param('kp', 'K_p of the PD law, eq (23), position rows [1/s²] (amp, traditional).', lo=0.0, hi=1e4,
+          read_only=True),
+    Param('kd', 'K_d of eq (23), position rows [1/s] (amp, traditional).', lo=0.0, hi=1e3, read_only=True),
+    Param('kp_rot', 'K_p of eq (23), orientation rows [1/s²] (amp, traditional).', lo=0.0, hi=1e4, read_only=True),
+    Param('kd_rot', 'K_d of eq (23), orientation rows [1/s] (amp, traditional).', lo=0.0, hi=1e3, read_only=True),
+    Param('gamma1', 'γ1 of the manipulability objective, eqs (12)-(13) (amp, traditional).', lo=0.0, hi=1e3,
+          read_only=True),
+    Param('gamma2', 'γ2 of eq (13) (amp, traditional).', lo=0.0, hi=1e3, read_only=True),
+    Param('manipulability', 'Run the manipulability objective (amp, traditional).', read_only=True),
+    Param('sigma_min', 'σ_m,min: the base is activated below it (amp).', lo=0.0, hi=10.0, read_only=True),
+    Param('singularity_avoidance', 'Activate the base near a singularity (amp).', read_only=True),
+    Param('setpoint_speed', 'Peak speed of the trajectory a goal becomes [m/s] (amp, traditional).', lo=1e-3,
+          hi=10.0, read_only=True),
+    Param('setpoint_accel', 'Peak acceleration of that trajectory [m/s²] (amp, traditional).', lo=1e-3, hi=100.0,
+          read_only=True),
+    Param('setpoint_angular_speed', 'Peak angular speed of that trajectory [rad/s].', lo=1e-3, hi=10.0,
+          read_only=True),
+    Param('setpoint_angular_accel', 'Peak angular acceleration of that trajectory [rad/s²].', lo=1e-3, hi=100.0,
+          read_only=True),
     Param('ee_feedback', 'End-effector pose from odometry + forward kinematics, or from /ee_pose.',
           choices=('odometry', 'ground_truth'), read_only=True),
     Param('world_frame', 'Frame of /goal_pose and /ee_pose.', read_only=True),
@@ -98,9 +119,6 @@ PARAMS = (
           lo=0.1, hi=600.0, read_only=True),
     Param('diagnostics_period', 'Time [s] between /diagnostics messages.', lo=0.0, hi=3600.0, read_only=True),
 )
-_RESOLVER_PARAMS = ('lambda_p', 'rho', 'orientation_error', 'rotate_angular_error', 'singular_region',
-                    'max_damping')
-_TASK_SHARING_PARAMS = ('r_fm', 'r_mm', 'lambda_dex', 'compensation', 'psi_rate')
 
 
 def _stamp_key(stamp):
@@ -116,7 +134,7 @@ class RedundancyResolverNode(Node):
         if len(p.goal_tolerance) != 2 or min(p.goal_tolerance) <= 0:
             raise WmmError(f'goal_tolerance: expected [position m, orientation rad] > 0, got {p.goal_tolerance}')
         self.model = KinematicModel(p.robot)
-        names = _RESOLVER_PARAMS + (_TASK_SHARING_PARAMS if p.method == 'task_sharing' else ())
+        names = [n for n in method_parameters(p.method) if n != 'dt' and hasattr(p, n)]
         self.resolver = make_resolver(p.method, self.model, dt=p.period, **{n: getattr(p, n) for n in names})
         self.arm_joints = self.model.config.arm.joints
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)

@@ -1,8 +1,12 @@
 """Redundancy resolution: one seam, ``step(state, target) -> command``, one module per method.
 
 * :mod:`~wmm_control.resolvers.pinv`: the whole-body damped pseudo-inverse (Sorour eq 8);
-* :mod:`~wmm_control.resolvers.task_sharing`: task sharing (Sorour eqs 9–14).
+* :mod:`~wmm_control.resolvers.task_sharing`: task sharing (Sorour eqs 9–14);
+* :mod:`~wmm_control.resolvers.amp`: adaptive motion planning at acceleration level (Xing eqs 6–15, 23);
+* :mod:`~wmm_control.resolvers.traditional`: J⁺ with manipulability in the null space (Xing §4.3).
 """
+from dataclasses import fields
+
 
 from wmm_control.resolvers.interface import (
     PoseTarget, Resolver, ResolverCommand, ResolverDiagnostics, RobotState)
@@ -10,15 +14,25 @@ from wmm_control.resolvers.limits import CommandLimits, LimitResult
 from wmm_control.resolvers.pinv import PinvParams, PinvResolver
 from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver
 from wmm_control.resolvers.task_sharing import TaskSharingParams, TaskSharingResolver, psi_of_error
+from wmm_control.resolvers.amp import AmpParams, AmpResolver
+from wmm_control.resolvers.traditional import TraditionalParams, TraditionalResolver
 
 __all__ = [
     'CommandLimits', 'LimitResult', 'PinvParams', 'PinvResolver', 'PoseServoParams', 'PoseServoResolver',
     'PoseTarget', 'Resolver', 'ResolverCommand', 'ResolverDiagnostics', 'RobotState', 'TaskSharingParams',
-    'TaskSharingResolver', 'psi_of_error', 'METHODS', 'make_resolver',
+    'TaskSharingResolver', 'psi_of_error', 'METHODS', 'make_resolver', 'method_parameters',
+    'AmpParams', 'AmpResolver', 'TraditionalParams', 'TraditionalResolver',
 ]
 
-#: Resolver class by ``method`` name.
-METHODS = {PinvResolver.name: PinvResolver, TaskSharingResolver.name: TaskSharingResolver}
+#: (resolver class, parameters class) by ``method`` name.
+METHODS = {cls.name: (cls, params) for cls, params in (
+    (PinvResolver, PinvParams), (TaskSharingResolver, TaskSharingParams), (AmpResolver, AmpParams),
+    (TraditionalResolver, TraditionalParams))}
+
+
+def method_parameters(method):
+    """Names of the parameters of ``method`` (its parameters class's fields, ``dt`` included)."""
+    return tuple(f.name for f in fields(METHODS[method][1]))
 
 
 def make_resolver(method, robot='steerable', **params):
@@ -29,10 +43,9 @@ def make_resolver(method, robot='steerable', **params):
     """
     from wmm_control.errors import ConfigError
     try:
-        cls = METHODS[method]
+        cls, params_cls = METHODS[method]
     except KeyError as exc:
         raise ConfigError(f'unknown method {method!r}; one of {sorted(METHODS)}') from exc
-    params_cls = TaskSharingParams if cls is TaskSharingResolver else PinvParams
     try:
         return cls(robot, params_cls(**params))
     except TypeError as exc:

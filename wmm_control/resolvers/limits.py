@@ -148,6 +148,19 @@ class CommandLimits:
         lo, hi, forced = self._box(down, up, previous, *self._accel_interval(previous))
         return np.array(lo), np.array(hi), np.array(forced, dtype=bool)
 
+    @classmethod
+    def for_robot(cls, robot, dt):
+        """Limits of the whole-body command (vx, vy, ω, q̇_1 … q̇_7) of a robot description.
+
+        The base twist has the robot YAML's base velocity and acceleration limits and no
+        position limits; the arm has its joint limits.
+        """
+        arm, inf3 = robot.arm, np.full(3, np.inf)
+        return cls(velocity=np.concatenate((robot.base.velocity, arm.velocity)),
+                   acceleration=np.concatenate((robot.base.acceleration, arm.acceleration)),
+                   position_lower=np.concatenate((-inf3, arm.position_lower)),
+                   position_upper=np.concatenate((inf3, arm.position_upper)), dt=dt)
+
     def subset(self, index):
         """The limits of some entries only (``index``: a slice or an index array)."""
         return CommandLimits(self.velocity[index], self.acceleration[index], self.position_lower[index],

@@ -193,15 +193,7 @@ class PoseServoResolver(Resolver):
     def __init__(self, robot, params):
         self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
         self.params = params
-        cfg = self.model.config
-        arm = cfg.arm
-        inf3 = np.full(N_BASE_TWIST, np.inf)
-        self.limits = CommandLimits(
-            velocity=np.concatenate((cfg.base.velocity, arm.velocity)),
-            acceleration=np.concatenate((cfg.base.acceleration, arm.acceleration)),
-            position_lower=np.concatenate((-inf3, arm.position_lower)),
-            position_upper=np.concatenate((inf3, arm.position_upper)),
-            dt=params.dt)
+        self.limits = CommandLimits.for_robot(self.model.config, params.dt)
         self._arm_limits = self.limits.subset(slice(N_BASE_TWIST, None))
         self._position = np.zeros(_N)
         self.reset()

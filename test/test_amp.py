@@ -1,0 +1,148 @@
+"""Xing et al.'s adaptive motion planner (AMP), the traditional planner, and SNS (eq 9)."""
+
+import numpy as np
+import pytest
+
+from sim_bridge.closed_loop import ClosedLoop
+from sim_bridge.world import SimWorld
+from wmm_control.resolvers import (
+    AmpParams, AmpResolver, PoseTarget, TraditionalResolver, make_resolver)
+from wmm_control.resolvers.setpoint_trajectory import SetpointTrajectory
+from wmm_control.resolvers.sns import sns_accelerations
+
+DT = 0.025
+W = np.pi / 20.0
+
+
+def test_sns_saturates_a_joint_and_gives_its_share_to_the_others():
+    jac = np.array([[1.0, 1.0, 1.0]])
+    lo, hi = np.array([-1.0, -1.0, -1.0]), np.array([0.5, 1.0, 1.0])
+    qdd, alpha, active, saturated = sns_accelerations(jac, np.array([2.5]), np.zeros(1), lo, hi,
+                                                      np.ones(3, bool), np.zeros(3))
+    np.testing.assert_allclose(qdd, [0.5, 1.0, 1.0])
+    assert alpha == 1.0 and saturated.tolist() == [True, False, False]
+
+
+def test_sns_scales_an_infeasible_task():
+    jac = np.array([[1.0, 1.0, 1.0]])
+    lo, hi = -np.ones(3), np.ones(3)
+    qdd, alpha, _, _ = sns_accelerations(jac, np.array([5.0]), np.zeros(1), lo, hi, np.ones(3, bool), np.zeros(3))
+    assert alpha == pytest.approx(0.6)
+    np.testing.assert_allclose(jac @ qdd, [3.0])
+    assert np.all(qdd <= hi + 1e-12)
+
+
+def test_sns_keeps_held_joints_at_their_given_acceleration():
+    jac = np.array([[1.0, 1.0, 1.0]])
+    qdd, alpha, _, _ = sns_accelerations(jac, np.array([1.0]), np.zeros(1), -np.ones(3), np.ones(3),
+                                         np.array([False, True, True]), np.array([-0.4, 0.0, 0.0]))
+    assert qdd[0] == -0.4 and alpha == 1.0
+    np.testing.assert_allclose(jac @ qdd, [1.0])
+
+
+def test_setpoint_trajectory_is_smooth_and_within_its_limits():
+    goal = PoseTarget(np.array([0.3, 0.0, 0.0]), np.eye(3))
+    traj = SetpointTrajectory(np.zeros(3), np.eye(3), goal, 0.1, 0.1, 0.3, 0.3)
+    samples = [traj.sample(t) for t in np.arange(0.0, traj.duration + 0.5, 0.01)]
+    speed = max(np.linalg.norm(s.velocity[:3]) for s in samples)
+    accel = max(np.linalg.norm(s.acceleration[:3]) for s in samples)
+    assert speed <= 0.1 + 1e-9 and accel <= 0.1 + 1e-9 and speed > 0.09
+    np.testing.assert_allclose(samples[-1].position, goal.position)
+    assert not np.any(samples[-1].velocity)
+
+
+def circle_run(method, radius, seconds, **params):
+    """Xing §4.2–4.3: x_d(t) = x0 + [−R(cos(πt/20) − 1), −R sin(πt/20), 0] on robot B."""
+    resolver = make_resolver(method, 'mecanum', **params)
+    with SimWorld('mecanum') as world:
+        loop = ClosedLoop(world, resolver)
+        start = loop.state()
+        x0, r0 = start.ee_position.copy(), start.ee_rotation.copy()
+        rows = []
+        for k in range(int(round(seconds / DT))):
+            t = k * DT
+            pos = x0 + radius * np.array([1.0 - np.cos(W * t), -np.sin(W * t), 0.0])
+            vel = radius * W * np.array([np.sin(W * t), -np.cos(W * t), 0.0, 0.0, 0.0, 0.0])
+            acc = radius * W * W * np.array([np.cos(W * t), np.sin(W * t), 0.0, 0.0, 0.0, 0.0])
+            rec = loop.step(PoseTarget(pos, r0, velocity=vel, acceleration=acc))
+            rows.append((np.linalg.norm(pos - rec.ee_position), rec.command, rec.q_arm, rec.base_velocity))
+    return rows
+
+
+def test_within_reach_amp_keeps_the_base_still_where_traditional_moves_it():
+    """R = 0.1 m for 12 s, before σ_min nears σ_m,min: AMP's base commands are exactly zero."""
+    amp = circle_run('amp', 0.1, 12.0)
+    traditional = circle_run('traditional', 0.1, 12.0)
+    assert all(not np.any(c.base_twist) for _, c, _, _ in amp)
+    assert max(e for e, _, _, _ in amp[40:]) < 1e-3
+    moving = sum(np.any(np.abs(c.base_twist) > 1e-6) for _, c, _, _ in traditional)
+    assert moving > 0.9 * len(traditional)
+
+
+def test_a_lower_singularity_threshold_keeps_the_base_still_all_round_the_small_circle():
+    rows = circle_run('amp', 0.1, 40.0, sigma_min=0.09)
+    assert all(not np.any(c.base_twist) for _, c, _, _ in rows)
+    assert max(e for e, _, _, _ in rows[40:]) < 1e-3
+
+
+@pytest.fixture(scope='module')
+def big_circle():
+    return circle_run('amp', 0.25, 40.0)
+
+
+def test_beyond_reach_the_base_helps_only_part_of_the_time_and_the_circle_is_tracked(big_circle):
+    active = [np.any(c.base_twist) for _, c, _, _ in big_circle]
+    assert 0.05 < np.mean(active) < 0.5
+    first = active.index(True) * DT
+    assert 5.0 < first < 8.0            # the paper's base starts at 6.40 s
+    assert max(e for e, _, _, _ in big_circle[40:]) < 2e-3
+
+
+def test_no_limit_of_table_1_is_passed(big_circle):
+    robot = make_resolver('amp', 'mecanum').model.config
+    arm, base = robot.arm, robot.base
+    q = np.array([r[2] for r in big_circle])
+    dq = np.array([r[1].arm_velocity for r in big_circle])
+    assert np.all(q <= arm.position_upper + 1e-9) and np.all(q >= arm.position_lower - 1e-9)
+    assert np.all(np.abs(dq) <= arm.velocity + 1e-9)
+    assert np.all(np.abs(np.diff(dq, axis=0)) <= arm.acceleration * DT + 1e-9)
+    vb = np.array([r[1].base_twist for r in big_circle])
+    assert np.all(np.abs(vb) <= base.velocity * np.sqrt(2.0) + 1e-9)   # world-frame limits, seen in the base frame
+    assert np.all(np.isfinite(dq)) and np.all(np.isfinite(vb))
+
+
+def test_the_base_stops_within_its_braking_time_after_deactivation(big_circle):
+    robot = make_resolver('amp', 'mecanum').model.config
+    modes = [r[1].diagnostics.mode for r in big_circle]
+    vb = [r[1].base_twist for r in big_circle]
+    stops = [k for k in range(1, len(modes)) if modes[k - 1].startswith('base active')
+             and not modes[k].startswith('base active')]
+    assert stops
+    for k in stops:
+        v0 = np.abs(vb[k - 1])
+        allowed = int(np.ceil(np.max(v0 / robot.base.acceleration) / DT)) + 1
+        at_rest = next((j for j in range(k, len(vb)) if not np.any(vb[j]) or modes[j].startswith('base active')), None)
+        assert at_rest is not None and at_rest - k <= allowed
+
+
+def test_without_singularity_avoidance_the_arm_runs_into_the_singularity():
+    rows = circle_run('amp', 0.25, 20.0, singularity_avoidance=False)
+    assert min(c.diagnostics.sigma_min for _, c, _, _ in rows) < 0.05
+    assert max(e for e, _, _, _ in rows[40:]) > 0.01
+
+
+def test_a_goal_within_reach_never_moves_the_base():
+    resolver = AmpResolver('mecanum', AmpParams())
+    with SimWorld('mecanum') as world:
+        loop = ClosedLoop(world, resolver)
+        start = loop.state()
+        goal = PoseTarget(start.ee_position + np.array([0.05, -0.03, 0.02]), start.ee_rotation)
+        rows = [loop.step(goal) for _ in range(int(4.0 / DT))]
+    assert all(not np.any(r.command.base_twist) for r in rows)
+    assert np.linalg.norm(goal.position - rows[-1].ee_position) < 1e-3
+    accel = np.abs(np.diff([r.command.arm_velocity for r in rows], axis=0)) / DT
+    assert np.max(accel) < 1.0, 'a set-point is a smooth trajectory, not a step'
+
+
+def test_traditional_is_a_named_method():
+    assert isinstance(make_resolver('traditional', 'mecanum'), TraditionalResolver)

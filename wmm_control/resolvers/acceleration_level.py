@@ -1,0 +1,204 @@
+"""What the acceleration-level methods share (Xing et al.): the PD tracking law, the joint
+acceleration bounds, the manipulability objective, and the integration to velocity commands.
+
+Joint space: the generalized coordinates ``q = (x_b, y_b, θ_b, q_m)`` of Xing eq (2), the
+base in world coordinates (robot B's base is holonomic, so J and J_v coincide). Each period:
+
+1. ``ẍ = ẍ_d + K_d (ẋ_d − J q̇) + K_p e`` (eq 23) on the position rows (r = 3) or the whole
+   pose (r = 6, orientation error ``log(R_d Rᵀ)``, world frame); ``J̇q̇`` from pinocchio.
+2. Joint acceleration bounds (eqs 6–8) from the position, velocity and acceleration limits of
+   all ten coordinates. The bounds are the velocity interval this period may reach
+   (:meth:`~wmm_control.resolvers.limits.CommandLimits.box`: velocity limits, braking before a
+   position limit, and the acceleration limit around the current rate), divided by the
+   period: eq (8)'s upper bound is the *min* of its terms (it prints max), and near a
+   position limit it becomes full braking. Our braking term keeps the command that is
+   executed (the integrated rate, held for a period) from ever passing the limit.
+3. The method's joint accelerations (a subclass), within the bounds.
+4. ``q̇ ← q̇ + q̈ T``: the arm gets q̇_m; the base gets (ẋ_b, ẏ_b, θ̇_b) turned into its own
+   frame (vx, vy, ω), the reference of its base controller.
+
+A set-point target (zero velocity and acceleration) becomes a smooth trajectory
+(:class:`~wmm_control.resolvers.setpoint_trajectory.SetpointTrajectory`); a trajectory point
+is tracked as given.
+"""
+
+import math
+import time
+from abc import abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from wmm_control.errors import ConfigError
+from wmm_control.kinematics import KinematicModel
+from wmm_control.resolvers.interface import N_ARM, Resolver, ResolverCommand, ResolverDiagnostics
+from wmm_control.resolvers.limits import CommandLimits
+from wmm_control.resolvers.pose_servo import _check_fields
+from wmm_control.resolvers.setpoint_trajectory import SetpointTrajectory
+from wmm_control.resolvers.sns import task_scale
+
+__all__ = ['AccelerationParams', 'AccelerationResolver', 'TASK_ROWS']
+
+TASK_ROWS = ('position', 'full')
+_N = 3 + N_ARM
+
+
+@dataclass(frozen=True)
+class AccelerationParams:
+    """Parameters shared by the acceleration-level methods (Xing §4 defaults).
+
+    Attributes:
+        dt: control period T [s].
+        rows: ``'position'`` (r = 3, §4.2–4.3) or ``'full'`` (r = 6, §4.4).
+        kp, kd: PD gains of eq (23) on the position rows [1/s², 1/s].
+        kp_rot, kd_rot: the same on the orientation rows (r = 6).
+        gamma1, gamma2: gains of the manipulability objective, eqs (12)–(13).
+        manipulability: run the tertiary (manipulability) objective, eqs (10)–(13).
+        setpoint_speed, setpoint_accel: peak linear speed [m/s] and acceleration [m/s²] of the
+            trajectory a set-point becomes.
+        setpoint_angular_speed, setpoint_angular_accel: the same for the rotation [rad/s, rad/s²].
+        rcond: relative singular-value cut-off of the pseudo-inverses.
+    """
+
+    dt: float = 0.025
+    rows: str = 'position'
+    kp: float = 20.0
+    kd: float = 10.0
+    kp_rot: float = 5.0
+    kd_rot: float = 3.0
+    gamma1: float = 5.0
+    gamma2: float = 0.5
+    manipulability: bool = True
+    setpoint_speed: float = 0.1
+    setpoint_accel: float = 0.1
+    setpoint_angular_speed: float = 0.3
+    setpoint_angular_accel: float = 0.3
+    rcond: float = 1e-6
+
+    _allow_zero = ('gamma1', 'gamma2')
+
+    def __post_init__(self):
+        _check_fields(self, self._allow_zero)
+        if self.rows not in TASK_ROWS:
+            raise ConfigError(f'rows must be one of {TASK_ROWS}, got {self.rows!r}')
+
+
+class AccelerationResolver(Resolver):
+    """Base of the acceleration-level methods; a subclass gives ``_accelerations``.
+
+    Args:
+        robot: robot name, YAML path, RobotConfig or KinematicModel.
+        params: an :class:`AccelerationParams` (or subclass).
+    """
+
+    name = 'acceleration_level'
+
+    def __init__(self, robot, params):
+        self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
+        self.params = params
+        self.limits = CommandLimits.for_robot(self.model.config, params.dt)
+        self._rows = slice(0, 3) if params.rows == 'position' else slice(0, 6)
+        self._position = np.zeros(_N)
+        self.reset()
+
+    def reset(self):
+        self._qd = None              # the commanded generalized rates (the integrator)
+        self._setpoint = None        # (goal key, trajectory, time along it)
+
+    # ------------------------------------------------------------------ reference
+    def _reference(self, target, pos, rot):
+        """The trajectory point to track: ``target`` itself, or its set-point trajectory's."""
+        if np.any(target.velocity) or np.any(target.acceleration):
+            self._setpoint = None
+            return target
+        key = (target.position.tobytes(), target.rotation.tobytes())
+        if self._setpoint is None or self._setpoint[0] != key:
+            p = self.params
+            traj = SetpointTrajectory(pos, rot, target, p.setpoint_speed, p.setpoint_accel,
+                                      p.setpoint_angular_speed, p.setpoint_angular_accel)
+            self._setpoint = [key, traj, 0.0]
+        self._setpoint[2] += self.params.dt
+        return self._setpoint[1].sample(self._setpoint[2])
+
+    def task_acceleration(self, state, target):
+        """Eq (23) and what the methods need.
+
+        Returns:
+            dict with ``jac`` (r, 10), ``xdd`` (r,), ``drift`` J̇q̇ (r,), ``lower``/``upper``
+            joint acceleration bounds (10,), ``qd`` (10,), ``position_error`` [m],
+            ``orientation_error`` [rad], ``sigma`` σ_min of the arm's task rows.
+        """
+        p = self.params
+        model = self.model
+        if self._qd is None:
+            c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])
+            v = state.base_twist
+            self._qd = np.concatenate(([c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]], state.dq_arm))
+        qd = self._qd
+        model.update(state.base_pose, state.q_arm, qd[:3], qd[3:])
+        if state.ee_position is None:
+            pos, rot = model.ee_placement_world()
+        else:
+            pos, rot = state.ee_position, state.ee_rotation
+        ref = self._reference(target, pos, rot)
+        jac = model.jacobian_world()
+        err = np.concatenate((ref.position - pos, pin.log3(ref.rotation @ rot.T)))
+        xd = jac @ qd
+        kp = np.array([p.kp] * 3 + [p.kp_rot] * 3)
+        kd = np.array([p.kd] * 3 + [p.kd_rot] * 3)
+        xdd = ref.acceleration + kd * (ref.velocity - xd) + kp * err
+        rows = self._rows
+        self._position[3:] = state.q_arm
+        lo_v, hi_v, _ = self.limits.box(self._position, qd)
+        sigma = float(np.linalg.svd(jac[rows, 3:], compute_uv=False)[-1])
+        target_err = np.concatenate((target.position - pos, pin.log3(target.rotation @ rot.T)))
+        return {'jac': jac[rows], 'xdd': xdd[rows], 'drift': model.jdot_qdot()[rows], 'qd': qd,
+                'lower': (lo_v - qd) / p.dt, 'upper': (hi_v - qd) / p.dt,
+                'position_error': float(np.linalg.norm(target_err[:3])),
+                'orientation_error': float(np.linalg.norm(target_err[3:])), 'sigma': sigma}
+
+    def manipulability_acceleration(self, qd):
+        """Eq (13): ``q̈_A = [0; γ1 ∇²H q̇_m + γ2 (γ1 ∇H − q̇_m)]``, H over the task's rows. Shape (10,)."""
+        p = self.params
+        grad = self.model.manipulability_gradient(self.params.rows)
+        hess = self.model.manipulability_hessian(self.params.rows)
+        out = np.zeros(_N)
+        out[3:] = p.gamma1 * hess @ qd[3:] + p.gamma2 * (p.gamma1 * grad - qd[3:])
+        return out
+
+    # ------------------------------------------------------------------ step
+    @abstractmethod
+    def _accelerations(self, task):
+        """The method: ``(q̈ (10,), diagnostics fields dict)`` within ``task['lower'/'upper']``."""
+
+    def step(self, state, target):
+        t0 = time.perf_counter()
+        task = self.task_acceleration(state, target)
+        qdd, fields = self._accelerations(task)
+        qdd = np.clip(np.nan_to_num(qdd), task['lower'], task['upper'])
+        qd = task['qd'] + qdd * self.params.dt
+        qd[np.abs(qd) < 1e-12] = 0.0      # a stop is exact: braking by −q̇/T leaves round-off
+        self._qd = qd
+        c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])
+        base = np.array([c * qd[0] + s * qd[1], -s * qd[0] + c * qd[1], qd[2]])
+        diag = ResolverDiagnostics(
+            method=self.name, psi=fields.pop('psi', 1.0), position_error=task['position_error'],
+            orientation_error=task['orientation_error'], compensation_scale=1.0, sigma_min=task['sigma'],
+            compensated=False, cycle_time_s=time.perf_counter() - t0, **fields)
+        return ResolverCommand(arm_velocity=qd[3:].copy(), base_twist=base, diagnostics=diag)
+
+    def _tertiary(self, task, qdd, active):
+        """Eqs (10)–(11): ``β P_A q̈_A`` with ``P_A = [I − ((I − S) P_N)⁺] P_N``, β keeping the bounds.
+
+        Returns:
+            (q̈_t (10,), β).
+        """
+        jac = task['jac']
+        rcond = self.params.rcond
+        p_n = np.eye(_N) - np.linalg.pinv(jac, rcond=rcond) @ jac
+        inactive = np.diag((~active).astype(float))
+        p_a = (np.eye(_N) - np.linalg.pinv(inactive @ p_n, rcond=rcond)) @ p_n
+        q_t = p_a @ self.manipulability_acceleration(task['qd'])
+        beta, _ = task_scale(qdd, q_t, task['lower'], task['upper'], np.ones(_N, dtype=bool))
+        return beta * q_t, beta

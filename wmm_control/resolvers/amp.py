@@ -1,0 +1,87 @@
+"""Adaptive motion planning (AMP), Xing et al. §3: the base stays still until the arm cannot.
+
+Each period (on top of :mod:`~wmm_control.resolvers.acceleration_level`):
+
+1. With the base out of the active set, SNS (eq 9, :func:`~wmm_control.resolvers.sns.sns_accelerations`)
+   shares the task among the arm joints, saturating the most violating one at a time. The
+   base's accelerations are then those of its stop, eq (15): full braking at its
+   acceleration limits until it is at rest (within |V_b|/A + one period).
+2. The base is activated when the arm alone cannot do the task (SNS needs α < 1, or
+   rank(J S) < r) or when the arm nears a singularity, σ_min(J_m) < σ_m,min (J_m over the
+   task's rows: the position rows for r = 3, all six for r = 6). With the base active, SNS
+   runs again over all ten coordinates, and the task is scaled by α ≤ 1 when even that is
+   infeasible.
+3. The tertiary objective, eqs (10)–(13): the manipulability gradient projected by P_A,
+   scaled by β ≤ 1 to keep the bounds.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wmm_control.resolvers.acceleration_level import AccelerationParams, AccelerationResolver
+from wmm_control.resolvers.sns import sns_accelerations
+
+__all__ = ['AmpParams', 'AmpResolver']
+
+
+@dataclass(frozen=True)
+class AmpParams(AccelerationParams):
+    """Parameters of :class:`AmpResolver` (Xing §4 defaults).
+
+    Attributes:
+        sigma_min: σ_m,min, the singularity threshold that activates the base [-] (0.15 for
+            r = 3; §4.4 uses 0.19 for r = 6).
+        singularity_avoidance: activate the base near a singularity (§3.2); off reproduces
+            the "AMP without singularity avoidance" run of §4.2.
+    """
+
+    sigma_min: float = 0.15
+    singularity_avoidance: bool = True
+
+
+class AmpResolver(AccelerationResolver):
+    """Xing et al.'s adaptive motion planner at acceleration level (eqs 6–15, 23).
+
+    Args:
+        robot: robot name, YAML path, RobotConfig or KinematicModel.
+        params: :class:`AmpParams`.
+    """
+
+    name = 'amp'
+
+    def __init__(self, robot='mecanum', params=None):
+        super().__init__(robot, params if params is not None else AmpParams())
+
+    def _base_stop(self, task):
+        """Eq (15): the base's accelerations while it is out of the task: full braking to rest."""
+        qd, lo, hi = task['qd'], task['lower'], task['upper']
+        held = np.zeros(len(qd))
+        held[:3] = np.clip(-qd[:3] / self.params.dt, lo[:3], hi[:3])
+        return held
+
+    def _accelerations(self, task):
+        p = self.params
+        n = len(task['qd'])
+        arm_only = np.ones(n, dtype=bool)
+        arm_only[:3] = False
+        singular = p.singularity_avoidance and task['sigma'] < p.sigma_min
+        reason = 'singularity' if singular else ''
+        if not singular:
+            qdd, alpha, active, saturated = sns_accelerations(
+                task['jac'], task['xdd'], task['drift'], task['lower'], task['upper'], arm_only,
+                self._base_stop(task), p.rcond)
+            if alpha < 1.0:
+                reason = 'arm out of reach'
+        if reason:
+            qdd, alpha, active, saturated = sns_accelerations(
+                task['jac'], task['xdd'], task['drift'], task['lower'], task['upper'], np.ones(n, dtype=bool),
+                np.zeros(n), p.rcond)
+        beta = 1.0
+        if p.manipulability:
+            q_t, beta = self._tertiary(task, qdd, active)
+            qdd = qdd + q_t
+        base_on = bool(np.any(active[:3]))
+        mode = f'base active ({reason})' if base_on else ('base stopping' if np.any(task['qd'][:3]) else 'arm only')
+        return qdd, {'mode': mode, 'psi': 0.0 if base_on else 1.0, 'limit_scale': alpha, 'accel_scale': 1.0,
+                     'null_scale': beta, 'limited': tuple(int(i) for i in np.flatnonzero(saturated))}

@@ -1,0 +1,43 @@
+"""The traditional planner of Xing §4.3, for comparison: the whole-body pseudo-inverse at
+acceleration level with the manipulability objective in its null space,
+``q̈ = J⁺(ẍ − J̇q̇) + (I − J⁺J) q̈_A`` (q̈_A of eq 13). The base always takes part. The result
+is scaled uniformly into the joint acceleration bounds (from the nearest point of the bounds
+to rest, keeping its direction), as every method of this package keeps the limits.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wmm_control.resolvers.acceleration_level import AccelerationParams, AccelerationResolver
+from wmm_control.resolvers.sns import task_scale
+
+__all__ = ['TraditionalParams', 'TraditionalResolver']
+
+
+@dataclass(frozen=True)
+class TraditionalParams(AccelerationParams):
+    """Parameters of :class:`TraditionalResolver`: those of :class:`AccelerationParams`."""
+
+
+class TraditionalResolver(AccelerationResolver):
+    """J⁺ at acceleration level with manipulability enhancement in the null space (Xing §4.3)."""
+
+    name = 'traditional'
+
+    def __init__(self, robot='mecanum', params=None):
+        super().__init__(robot, params if params is not None else TraditionalParams())
+
+    def _accelerations(self, task):
+        jac = task['jac']
+        n = jac.shape[1]
+        j_pinv = np.linalg.pinv(jac, rcond=self.params.rcond)
+        qdd = j_pinv @ (task['xdd'] - task['drift'])
+        if self.params.manipulability:
+            qdd = qdd + (np.eye(n) - j_pinv @ jac) @ self.manipulability_acceleration(task['qd'])
+        lo, hi = task['lower'], task['upper']
+        anchor = np.clip(0.0, lo, hi)
+        scale, per = task_scale(anchor, qdd - anchor, lo, hi, np.ones(n, dtype=bool))
+        limited = tuple(int(i) for i in np.flatnonzero(per <= scale + 1e-12)) if scale < 1.0 else ()
+        return anchor + scale * (qdd - anchor), {'mode': 'whole_body', 'psi': 0.0, 'limit_scale': scale,
+                                                 'accel_scale': 1.0, 'null_scale': 1.0, 'limited': limited}
