@@ -26,6 +26,7 @@ Usage::
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import lapack
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError, UnknownFrameError, WmmError
@@ -37,6 +38,12 @@ __all__ = ['KinematicModel', 'build_pinocchio_model', 'N_BASE']
 N_BASE = 3
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _ROWS = {'position': slice(0, 3), 'full': slice(0, 6)}
+_EYE = {3: np.eye(3), 6: np.eye(6)}
+_PIVOT_ID = {3: np.arange(3), 6: np.arange(6)}    # dgesv's pivots when no rows swap
+# (w @ _SKEW).reshape(3, 3) is the cross-product matrix [w]×, row by row: (−ε_abc w_c)_ab.
+_SKEW = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0],
+                  [0, 0, 1, 0, 0, 0, -1, 0, 0],
+                  [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float)
 
 
 def build_pinocchio_model(urdf_path):
@@ -122,6 +129,10 @@ class KinematicModel:
         self._v = None
         self._valid = False
         self._jac = np.zeros((6, self.nv))
+        self._manip_cache = {}
+        self._upper = np.triu(np.ones((self.n_arm, self.n_arm)))          # [k ≤ i]
+        self._strict_upper = np.triu(np.ones((self.n_arm, self.n_arm)), 1)
+        self._sym_weight = 2.0 * self._strict_upper + np.eye(self.n_arm)
 
     # ------------------------------------------------------------------ frames
     @property
@@ -193,6 +204,7 @@ class KinematicModel:
         self._q_flat = flat
         self._bMee = None
         self._rpy_base = None
+        self._manip_cache = {}
         self._valid = True
 
     def _require(self):
@@ -318,86 +330,116 @@ class KinematicModel:
         jm = self.arm_jacobian_world(rows)
         return float(np.linalg.det(jm @ jm.T))
 
-    def _arm_geometry(self):
-        """Joint axes Z (7, 3), lever arms r_i = p_e − p_i (7, 3) in world axes."""
-        z = self._jac[3:, N_BASE:].T
-        pe = self._oMee.translation
-        p = np.array([self.data.oMi[j].translation for j in self._arm_joint_ids])
-        return z, pe - p
-
-    def _jacobian_derivatives(self, second):
-        """∂J_m/∂q_k (7, 6, 7) and optionally ∂²J_m/∂q_l∂q_k (7, 7, 6, 7), world axes.
-
-        Revolute serial chain: ``J_i = [z_i × r_i; z_i]``, ``∂z_i/∂q_k = [k<i] z_k × z_i``,
-        ``∂r_i/∂q_k = z_k × r_max(i,k)``; the second derivatives follow by the same rules.
-        Index order: ``dj[k, :, i] = ∂J_i/∂q_k``, ``ddj[l, k, :, i] = ∂²J_i/∂q_l∂q_k``.
-        """
-        z, r = self._arm_geometry()
-        n = self.n_arm
-        idx = np.arange(n)
-        lower = (idx[:, None] < idx[None, :]).astype(float)        # [k < i]
-        mx = np.maximum.outer(idx, idx)                              # max(i, k)
-        zk = z[:, None, :]
-        dz = np.cross(zk, z[None, :, :]) * lower[:, :, None]        # (k, i, 3)
-        dr = np.cross(zk, r[mx])                                     # (k, i, 3)
-        da = np.cross(dz, r[None, :, :]) + np.cross(z[None, :, :], dr)
-        dj = np.concatenate((da, dz), axis=2).transpose(0, 2, 1)     # (k, 6, i)
-        if not second:
-            return dj, None
-        zl = z[:, None, None, :]
-        zk3 = z[None, :, None, :]
-        zi3 = z[None, None, :, :]
-        lk = lower[:, :, None, None]                                 # [l < k]
-        ki = lower[None, :, :, None]                                 # [k < i]
-        li = lower[:, None, :, None]                                 # [l < i]
-        zlzk = np.cross(zl, zk3)                                     # (l, k, 1, 3)
-        dz2 = ki * (lk * np.cross(zlzk, zi3) + li * np.cross(zk3, np.cross(zl, zi3)))
-        m_ki = mx                                                    # (k, i)
-        r_m = r[m_ki][None, :, :, :]                                 # (1, k, i, 3)
-        m3 = np.maximum(m_ki[None, :, :], idx[:, None, None])        # max(m, l)
-        dr2 = lk * np.cross(zlzk, r_m) + np.cross(zk3, np.cross(zl, r[m3]))
-        ri3 = r[None, None, :, :]
-        da2 = (np.cross(dz2, ri3) + np.cross(dz[None, :, :, :], dr[:, None, :, :])
-               + np.cross(dz[:, None, :, :], dr[None, :, :, :]) + np.cross(zi3, dr2))
-        ddj = np.concatenate((da2, dz2), axis=3).transpose(0, 1, 3, 2)  # (l, k, 6, i)
-        return dj, ddj
-
     def manipulability_gradient(self, rows='position'):
         """∂H/∂q_m of ``H = det(J_m J_mᵀ)`` (Xing appendix A). Shape (7,).
 
-        ``∂H/∂q_k = H tr(M⁻¹ ∂M/∂q_k)`` with ``M = J_m J_mᵀ``.
+        ``∂H/∂q_k = H tr(M⁻¹ ∂M/∂q_k)`` with ``M = J_m J_mᵀ``; exact, in closed form (see
+        :meth:`_manipulability_derivatives`). Computed with the Hessian and kept until the
+        next :meth:`update`, so asking for both costs one evaluation.
+
+        Raises:
+            numpy.linalg.LinAlgError: ``M`` is singular.
         """
-        grad, _ = self._manipulability_derivatives(rows, second=False)
-        return grad
+        return self._manipulability_derivatives(rows)[0].copy()
 
     def manipulability_hessian(self, rows='position'):
-        """∂²H/∂q_m² (Xing appendix B). Shape (7, 7)."""
-        _, hess = self._manipulability_derivatives(rows, second=True)
-        return hess
+        """∂²H/∂q_m² of ``H = det(J_m J_mᵀ)`` (Xing appendix B). Shape (7, 7), symmetric.
 
-    def _manipulability_derivatives(self, rows, second):
-        sl = _rows(rows)
-        jm = self._jac[sl, N_BASE:]
-        dj, ddj = self._jacobian_derivatives(second)
-        dj = dj[:, sl, :]
+        Exact, in closed form; shares one evaluation with :meth:`manipulability_gradient`.
+
+        Raises:
+            numpy.linalg.LinAlgError: ``M`` is singular.
+        """
+        return self._manipulability_derivatives(rows)[1].copy()
+
+    def _manipulability_derivatives(self, rows):
+        """(∇H (7,), ∇²H (7, 7)) over q_m, from J_m alone; cached per ``rows`` until :meth:`update`.
+
+        Revolute serial chain, world axes: column i of J_m is ``J_i = (v_i, w_i)``, with
+        ``w_i`` the joint axis and ``v_i = w_i × (p_e − p_i)``. Moving joint k rotates the
+        chain beyond it about its axis, so
+
+        * ``∂J_i/∂q_k = (w_k × v_i, w_k × w_i)`` for k ≤ i, ``(w_i × v_k, 0)`` for k > i;
+        * for l ≤ k: ``∂²J_i/∂q_l∂q_k = w_l × (w_k × J_i)`` (both halves) for k ≤ i,
+          ``(w_l × (w_i × v_k), 0)`` for l ≤ i < k, ``(w_i × (w_l × v_k), 0)`` for i < l.
+
+        With ``M = J_m J_mᵀ``, ``P = M⁻¹ J_m`` (columns ``(a_i, b_i)``, position rows then
+        angular ones) and ``⟨X, Y⟩ = tr(Xᵀ Y)``:
+
+        * ``g_k = tr(M⁻¹ ∂_k M) = 2⟨P, ∂_k J_m⟩`` and ``∇H = H g`` (appendix A);
+        * ``∇²H = H (g gᵀ + A + B − C)`` (appendix B), where
+          ``B_lk = 2⟨M⁻¹ ∂_l J_m, ∂_k J_m⟩``, ``C_lk = tr(M⁻¹ ∂_l M M⁻¹ ∂_k M)`` and
+          ``A_lk = 2⟨P, ∂²_lk J_m⟩``.
+
+        ``A`` never needs the (7, 7, 6, 7) second derivatives: expanding the triple
+        products, for l ≤ k,
+        ``A_lk / 2 = w_kᵀ S_k w_l − tr(S_k) w_l·w_k + (w_l·v_k)(c_k − c_l) + w_lᵀ R_l v_k
+        − Σ_{i<k} (w_l·w_i)(a_i·v_k)``, with ``S_k = Σ_{i≥k} (a_i v_iᵀ + b_i w_iᵀ)``,
+        ``R_l = Σ_{i<l} a_i w_iᵀ`` and ``c_l = tr R_l``: running sums of 3×3 matrices.
+
+        Raises:
+            numpy.linalg.LinAlgError: ``M`` is singular.
+        """
+        self._require()
+        cached = self._manip_cache.get(rows)
+        if cached is not None:
+            return cached
+        nr = _rows(rows).stop
+        n = self.n_arm
+        jac = self._jac[:, N_BASE:]                       # (6, n): v rows, then w rows
+        jm = jac[:nr]
+        v, w = jac[:3], jac[3:]
+        wt = w.T
         m = jm @ jm.T
-        h = float(np.linalg.det(m))
-        minv = np.linalg.inv(m)
-        djt = dj @ jm.T                                   # (k, r, r): ∂J_k Jᵀ
-        dm = djt + djt.transpose(0, 2, 1)                 # ∂M/∂q_k
-        t = np.einsum('ab,kba->k', minv, dm)              # tr(M⁻¹ ∂M_k)
-        grad = h * t
-        if not second:
-            return grad, None
-        ddj = ddj[:, :, sl, :]
-        a = np.einsum('lab,kbc->lkac', dj, dj.transpose(0, 2, 1))   # ∂J_l ∂J_kᵀ
-        b = ddj @ jm.T                                               # ∂²J_lk Jᵀ
-        ddm = b + b.transpose(0, 1, 3, 2) + a + a.transpose(0, 1, 3, 2)
-        mdm = minv[None] @ dm                                        # M⁻¹ ∂M_k
-        cross = np.einsum('lab,kba->lk', mdm, mdm)                   # tr(M⁻¹∂M_l M⁻¹∂M_k)
-        tr2 = np.einsum('ab,lkba->lk', minv, ddm)
-        hess = np.outer(grad, t) + h * (tr2 - cross)
-        return grad, 0.5 * (hess + hess.T)
+        lu, piv, minv, info = lapack.dgesv(m, _EYE[nr])
+        if info != 0:
+            raise np.linalg.LinAlgError(f'Singular matrix (dgesv info {info})')
+        h = lu.diagonal().prod()
+        if np.count_nonzero(piv != _PIVOT_ID[nr]) % 2:
+            h = -h
+        p = minv @ jm
+        # ∂J_m/∂q_k as dj[k] (nr, n); z[k, :, i] = w_k × v_i (and × w_i for all six rows).
+        skew = (wt @ _SKEW).reshape(n, 3, 3)              # [w_k]×
+        upper = self._upper[:, None, :]                   # [k ≤ i]
+        if nr == 3:
+            z = skew @ v
+            dj = np.where(upper > 0, z, z.transpose(2, 1, 0))
+            outer = p.T[:, :, None] * v.T[:, None, :]     # a_i v_iᵀ
+        else:
+            z = skew[:, None] @ jac.reshape(2, 3, n)
+            dj = np.empty((n, 2, 3, n))
+            np.copyto(dj[:, 0], np.where(upper > 0, z[:, 0], z[:, 0].transpose(2, 1, 0)))
+            np.multiply(z[:, 1], upper, out=dj[:, 1])
+            dj = dj.reshape(n, 6, n)
+            outer = p.reshape(2, 3, n).transpose(2, 1, 0) @ jac.reshape(2, 3, n).transpose(2, 0, 1)
+        djf = dj.reshape(n, -1)
+        g = 2.0 * (djf @ p.ravel())
+        y = minv @ dj                                     # M⁻¹ ∂J_k
+        half_b = y.reshape(n, -1) @ djf.T                # B / 2
+        mdm = y @ jm.T + p @ dj.transpose(0, 2, 1)        # M⁻¹ ∂M_k
+        c = mdm.reshape(n, -1) @ mdm.transpose(0, 2, 1).reshape(n, -1).T
+        # A, upper triangle (l ≤ k) of A / 2, terms in the order of the docstring.
+        s_k = outer[::-1].cumsum(0)[::-1]
+        a_v = p[:3]
+        aw = a_v.T[:, :, None] * wt[:, None, :]           # a_i w_iᵀ
+        r_l = aw.cumsum(0) - aw
+        c_l = r_l.trace(axis1=1, axis2=2)
+        ww = wt @ w
+        half = ((wt[:, None, :] @ s_k)[:, 0, :] @ w).T - ww * s_k.trace(axis1=1, axis2=2)
+        half += (wt @ v) * (c_l - c_l[:, None])
+        half += (wt[:, None, :] @ r_l)[:, 0, :] @ v
+        half -= ww @ ((a_v.T @ v) * self._strict_upper)
+        half *= self._sym_weight                          # 2 above the diagonal, 1 on it
+        # T = that weighted triangle + (B − C) / 2: ∇²H = H (g gᵀ + T + Tᵀ), symmetric to the bit.
+        half += half_b
+        c *= 0.5
+        half -= c
+        hess = half + half.T
+        hess += np.outer(g, g)
+        hess *= h
+        out = (h * g, hess)
+        self._manip_cache[rows] = out
+        return out
 
 
 def _checked(value, size, name):
