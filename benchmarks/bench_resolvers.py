@@ -4,7 +4,8 @@
    compensation (``step`` + ``compensate``, as the node runs them), replayed on the states and
    targets of a closed-loop Table II run; each median also as a ratio to one pink IK step
    (robot A, same run, see ``bench_swmr.py``). Targets: task sharing <= 0.5x pink's median,
-   p99 <= 3x its own median.
+   p99 <= 3x its own median. Then ``amp`` and ``traditional`` on robot B, replayed on the
+   R = 0.25 m circle of Xing §4.3, against one pink step on robot B. Target: AMP <= 1.0x pink's.
 2. Simulated-to-wall time ratio of the whole Table II experiment, all ROS nodes in one process
    (``engine='nodes'``) and with no ROS (``engine='direct'``), with per-run ratios. Target >= 40x.
 3. Peak RSS of the experiment process (run in a subprocess, so pink is not counted). Target <= 400 MB.
@@ -70,15 +71,42 @@ def time_resolver(resolver, cycles, warmup=50):
     return times / 1e3
 
 
+def record_circle(radius=0.25, seconds=40.0):
+    """(state, target, None) of every period of AMP tracking Xing's circle on robot B."""
+    from sim_bridge.closed_loop import ClosedLoop
+    from sim_bridge.world import SimWorld
+    from wmm_control.resolvers import PoseTarget
+    cycles, w = [], np.pi / 20.0
+    with SimWorld('mecanum') as world:
+        loop = ClosedLoop(world, make_resolver('amp', 'mecanum'))
+        x0, r0 = loop.state().ee_position.copy(), loop.state().ee_rotation.copy()
+        for k in range(int(round(seconds / world.dt))):
+            t = k * world.dt
+            target = PoseTarget(x0 + radius * np.array([1 - np.cos(w * t), -np.sin(w * t), 0.0]), r0,
+                                velocity=radius * w * np.array([np.sin(w * t), -np.cos(w * t), 0, 0, 0, 0]),
+                                acceleration=radius * w * w * np.array([np.cos(w * t), np.sin(w * t), 0, 0, 0, 0]))
+            state = loop.state()
+            loop.step(target)
+            cycles.append((state, target, None))
+    return cycles
+
+
 def report_resolvers(scenario):
-    cycles = record_cycles(scenario)
-    print(f'Resolver cycle time, {len(cycles)} recorded cycles of {scenario.name} replayed (robot {scenario.robot}):')
+    report_methods(f'{scenario.name} replayed (robot {scenario.robot})', scenario.robot, record_cycles(scenario),
+                   METHODS, 'task sharing median <= 0.5x pink median; p99 <= 3x own median')
+    report_methods("Xing's R = 0.25 m circle replayed (robot mecanum)", 'mecanum', record_circle(),
+                   (('amp', 'amp', {}), ('traditional', 'traditional', {})),
+                   'AMP median <= 1.0x pink median')
+
+
+def report_methods(title, robot, cycles, methods, targets):
+    print(f'Resolver cycle time, {len(cycles)} recorded cycles of {title}:')
     from bench_swmr import bench_pink
-    pink_us = bench_pink(len(cycles))
+    pink_us = bench_pink(len(cycles), robot)
     pink_med = np.median(pink_us) if pink_us is not None else None
     print(f'  {"method":<28}{"median µs":>10}{"p99 µs":>9}{"p99/med":>9}{"med/pink":>10}')
-    for label, method, params in METHODS:
-        us = time_resolver(make_resolver(method, scenario.robot, **params), cycles)
+    for label, method, params in methods:
+        us = time_resolver(make_resolver(method, robot, **params), cycles)
         med, p99 = np.median(us), np.percentile(us, 99)
         vs_pink = f'{med / pink_med:10.2f}' if pink_med else f'{"—":>10}'
         print(f'  {label:<28}{med:>10.1f}{p99:>9.1f}{p99 / med:>9.2f}{vs_pink}')
@@ -86,7 +114,7 @@ def report_resolvers(scenario):
         print('  pink not installed (pip install pin-pink quadprog): comparison skipped')
     else:
         print(f'  {"pink solve_ik (quadprog)":<28}{pink_med:>10.1f}{np.percentile(pink_us, 99):>9.1f}')
-    print('  targets: task sharing median <= 0.5x pink median; p99 <= 3x own median')
+    print(f'  targets: {targets}')
 
 
 def experiment_only(engine):

@@ -86,16 +86,16 @@ def main():
           f'our p99 / our median = {p99 / med:.2f} (target <= 3)')
 
 
-def bench_pink(cycles):
-    """Wall time [µs] of one pink IK step per cycle, tracking a moving end-effector target."""
+def bench_pink(cycles, robot='steerable'):
+    """Wall time [µs] of one pink IK step per cycle on ``robot``, tracking a moving end-effector target."""
     try:
         import pink
         from pink.tasks import FrameTask, PostureTask
     except ImportError:
         return None
     from wmm_control.kinematics import KinematicModel
-    km = KinematicModel('steerable')
-    q0, _ = km.configuration(np.zeros(3), km.config.arm.dexterous)
+    km = KinematicModel(robot)
+    q0, _ = km.configuration(np.zeros(3), km.config.start.arm)
     conf = pink.Configuration(km.model, km.model.createData(), q0)
     ee = FrameTask(km.ee_frame, position_cost=1.0, orientation_cost=1.0)
     posture = PostureTask(cost=1e-3)
