@@ -39,6 +39,7 @@ setup(
             'wmm_model = wmm_control.cli.model_info:main',
             'wmm_sim = sim_bridge.node:main',
             'swmr_controller = wmm_control.nodes.swmr_controller:main',
+            'mecanum_controller = wmm_control.nodes.mecanum_controller:main',
             'redundancy_resolver = wmm_control.nodes.redundancy_resolver:main',
             'goal_sequencer = wmm_control.nodes.goal_sequencer:main',
             'wmm_experiment = wmm_control.cli.experiment:main',

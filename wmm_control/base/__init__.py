@@ -2,6 +2,7 @@
 
 from wmm_control.base.icr import Icr, choose_route
 from wmm_control.base.mecanum import MecanumKinematics
+from wmm_control.base.mecanum_controller import MecanumController, MecanumOutput, MecanumParams
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.base.swmr_controller import (
     IcrQp,
@@ -15,7 +16,10 @@ from wmm_control.base.swmr_controller import (
 __all__ = [
     'Icr',
     'IcrQp',
+    'MecanumController',
     'MecanumKinematics',
+    'MecanumOutput',
+    'MecanumParams',
     'OsqpIcrSolver',
     'QpResult',
     'SteerableGeometry',

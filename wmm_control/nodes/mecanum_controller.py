@@ -1,0 +1,167 @@
+"""``mecanum_controller``: the Mecanum base controller of robot B (Xing eq 16) as a node.
+
+Subscribes:
+  ``/base/reference`` (``geometry_msgs/TwistStamped``, frame ``base_frame`` or empty):
+  ξ̇* = (ẋ, ẏ, ω);
+  ``/joint_states`` (``sensor_msgs/JointState``): each message with the wheel joints runs
+  exactly one control cycle.
+Publishes, every cycle:
+  ``/wheel_controller/commands`` (``std_msgs/Float64MultiArray``): the four wheel rates
+  [rad/s], order of the robot YAML's ``wheel_joints`` (fl, fr, rl, rr);
+  ``/base/feasible_twist`` (``TwistStamped``, frame ``base_frame``): q̇_bf, the twist the
+  wheel rates realise over the coming period, stamped with the joint state the cycle answers;
+  ``/diagnostics``: status, scales, reference and twist, every ``diagnostics_period``.
+
+The exchange, one per period, is that of ``swmr_controller``: a joint state stamped S runs
+the cycle that answers the reference stamped S, at once if the latest reference carries S,
+else as soon as it comes, or after ``reference_wait`` seconds of steady time with the latest
+reference (:class:`~wmm_control.nodes.common.StampedExchange`).
+
+Geometry (R, d1, d2), the wheel joints and every limit come from the robot YAML
+(``config/robots/<robot>.yaml``); ``config/mecanum_controller.yaml`` holds only the node's
+tuning.
+
+Safety: when the latest reference is older than ``reference_timeout`` (this node's clock at
+receipt) the base brakes to rest at the acceleration limits. Non-finite references and
+references in another frame are rejected; finite references beyond the limits are scaled
+into them by the core. When joint states stop for ``joint_state_timeout`` (steady clock),
+zero wheel rates are published, and the controller restarts from the measured wheel rates
+when they come back. A joint state without the wheel joints, with positions or velocities
+not matching its names, or with non-finite wheel values runs no cycle. Every rejection is
+logged, throttled. Nothing non-finite is ever published. Timers run on the steady clock, so
+the node works under ``use_sim_time``.
+"""
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TwistStamped
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from wmm_control.base import MecanumController
+from wmm_control.nodes.common import (
+    BaseReference, JointSelector, JointStateWatchdog, Param, StampedExchange, declare_parameters, diagnostic_array,
+    diagnostic_status, float_array, run_node, seconds, twist_stamped)
+from wmm_control.robot_config import load_robot
+
+__all__ = ['MecanumControllerNode', 'main']
+
+PARAMS = (
+    Param('robot', 'Robot with a Mecanum base: mecanum (B, Xing). Geometry and limits come from its YAML.',
+          choices=('mecanum', 'B', 'b'), read_only=True),
+    Param('period', 'Control period [s].', lo=1e-3, hi=1.0, read_only=True),
+    Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
+    Param('reference_timeout', 'Reference age [s] after which the base brakes to rest.', lo=1e-3, hi=60.0),
+    Param('reference_wait', 'Steady time [s] a joint state waits for the reference of its stamp.',
+          lo=0.0, hi=1.0, read_only=True),
+    Param('joint_state_timeout', 'Joint-state age [s] after which zero wheel rates are commanded.', lo=1e-3, hi=60.0),
+    Param('diagnostics_period', 'Time [s] between /diagnostics messages.', lo=0.0, hi=3600.0),
+)
+
+
+class MecanumControllerNode(Node):
+    """Wraps one :class:`wmm_control.base.MecanumController`."""
+
+    def __init__(self, **kwargs):
+        super().__init__('mecanum_controller', **kwargs)
+        p = declare_parameters(self, 'mecanum_controller.yaml', PARAMS)
+        self.p = p
+        robot = load_robot(p.robot)
+        self.controller = MecanumController.from_robot_config(robot, p.period)
+        self.wheels = JointSelector(robot.mecanum.wheel_joints)
+        self.reference = BaseReference(self, p.base_frame, p.reference_timeout)
+        self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0}
+        self._next_diag = 0.0
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.pub_wheels = self.create_publisher(Float64MultiArray, '/wheel_controller/commands', 10)
+        self.pub_feasible = self.create_publisher(TwistStamped, '/base/feasible_twist', 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
+        self.watchdog = JointStateWatchdog(
+            self, p.joint_state_timeout, p.period, steady, lambda: self.pub_wheels.publish(float_array(np.zeros(4))),
+            'zero wheel rates; will restart from the measured wheel rates')
+        self.create_subscription(TwistStamped, '/base/reference', self._on_reference, 10)
+        self.create_subscription(JointState, '/joint_states', self._on_joint_states, 10)
+        lim = self.controller.params
+        self.get_logger().info(
+            f'Mecanum base controller, robot {robot.name}: t_s {p.period} s, |v| ≤ {list(lim.velocity_limit)}, '
+            f'|a| ≤ {list(lim.accel_limit)}, wheels ≤ {lim.wheel_rate_limit} rad/s')
+
+    # ------------------------------------------------------------------ inputs
+    def _on_reference(self, msg):
+        if self.reference.accept(msg):
+            self.exchange.reference_received(msg.header.stamp)
+
+    def _wheel_rates_measured(self, msg):
+        """Measured wheel rates (zero when the message has no velocities), or None (logged)."""
+        idx, reason = self.wheels.indices(msg)
+        if idx is None:
+            self._reject_joint_state(reason)
+            return None
+        values = np.asarray(msg.position, dtype=float)[idx]
+        rates = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else np.zeros(len(idx))
+        if not (np.all(np.isfinite(values)) and np.all(np.isfinite(rates))):
+            self._reject_joint_state(f'with non-finite wheel positions {values.tolist()} or rates {rates.tolist()}')
+            return None
+        return rates
+
+    def _reject_joint_state(self, reason):
+        self.counters['joint_states_rejected'] += 1
+        self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped', throttle_duration_sec=1.0)
+
+    def _on_joint_states(self, msg):
+        rates = self._wheel_rates_measured(msg)
+        if rates is None:
+            return
+        self.watchdog.mark()
+        self.exchange.state_received(msg.header.stamp, rates)
+
+    # ------------------------------------------------------------------ cycle
+    def _cycle(self, stamp, wheel_rates):
+        """One period: the latest reference (braking when stale) → wheel rates and q̇_bf."""
+        now = seconds(self.get_clock())
+        if self.watchdog.need_resync:
+            self.controller.reset(self.controller.kinematics.twist_from_wheels(wheel_rates))
+            self.watchdog.need_resync = False
+        reference = self.reference.current(now)
+        if reference is not None:
+            out = self.controller.step(reference)
+        else:
+            self.counters['stale_cycles'] += 1
+            out = self.controller.stop()
+        wheels, twist = out.wheel_rates, out.twist
+        if not (np.all(np.isfinite(wheels)) and np.all(np.isfinite(twist))):   # cannot happen: never publish it
+            self.get_logger().error(f'non-finite command {wheels.tolist()}: zero wheel rates',
+                                    throttle_duration_sec=1.0)
+            self.controller.reset()
+            wheels, twist = np.zeros(4), np.zeros(3)
+        self.counters['cycles'] += 1
+        self.pub_wheels.publish(float_array(wheels))
+        feasible = twist_stamped(stamp, self.p.base_frame, twist)
+        self.pub_feasible.publish(feasible)
+        if self.p.diagnostics_period > 0 and now >= self._next_diag:
+            self._next_diag = now + self.p.diagnostics_period
+            self.pub_diag.publish(self._diagnostics(feasible.header.stamp, out, now))
+
+    def _diagnostics(self, stamp, out, now):
+        ref = self.reference
+        level = 'warn' if out.status == 'braking' and np.any(ref.value) else 'ok'
+        lim = self.controller.params.wheel_rate_limit
+        values = {'status': out.status, 'velocity_scale': out.velocity_scale, 'accel_scale': out.accel_scale,
+                  'reference': ref.value, 'reference_limited': out.reference, 'feasible_twist': out.twist,
+                  'wheel_rates': out.wheel_rates,
+                  'wheel_rate_ratio': float(np.max(np.abs(out.wheel_rates))) / lim,
+                  'reference_age_s': ref.freshness.age(now), 'references_rejected': ref.rejected, **self.counters}
+        return diagnostic_array(stamp, [diagnostic_status('mecanum_controller', 'mecanum base', level,
+                                                          out.status, values)])
+
+
+def main(args=None):
+    return run_node(MecanumControllerNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
