@@ -73,7 +73,7 @@ def system():
     ros = RosHarness()
     driver = ros.add(Driver(ros.context))
     ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-        diagnostics_period=0.5, **LOCKSTEP_WAITS['redundancy_resolver'])))
+        diagnostics_period=1e-9, **LOCKSTEP_WAITS['redundancy_resolver'])))
     ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller'])))
     sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep')))
     yield ros, driver, sim
@@ -247,3 +247,36 @@ def test_garbage_on_every_input_never_gives_a_non_finite_or_over_limit_command(s
     assert np.all(np.abs(arm) <= 3.6) and np.all(np.abs(refs) <= 1.0 + 1e-9)
     run_until(ros, driver, 8.0)
     assert np.linalg.norm(driver.ee_position() - np.array([1.5, 0.3, 1.0])) < 0.01, 'still reaches its goal'
+
+
+def test_amp_tracks_a_trajectory_on_ee_reference_with_the_base_still():
+    """Robot B, Xing's R = 0.1 m circle played by goal_sequencer on /ee_reference (sim time):
+    over topics AMP tracks it with the arm alone (the base reference stays exactly zero)."""
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+    from wmm_control.experiments.trajectories import make_trajectory
+    ros = RosHarness()
+    try:
+        driver = ros.add(Driver(ros.context))
+        refs = []
+        driver.create_subscription(MultiDOFJointTrajectory, '/ee_reference', refs.append, 10)
+        ros.add(GoalSequencerNode(context=ros.context, parameter_overrides=overrides(
+            scenario='xing_circle_0.10', use_sim_time=True)))
+        ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
+            robot='mecanum', method='amp', ee_feedback='ground_truth')))
+        ros.add(SimNode(context=ros.context, parameter_overrides=overrides(
+            robot='mecanum', timing='lockstep', lockstep_groups='arm')))
+        run_until(ros, driver, 8.0)
+        assert len(refs) > 300
+        bases = np.array([(r.twist.linear.x, r.twist.linear.y, r.twist.angular.z) for r in driver.refs])
+        assert len(bases) > 300 and not np.any(bases)
+        start = driver.ee[0]
+        p, q = start.pose.position, start.pose.orientation
+        import pinocchio as pin
+        circle = make_trajectory({'kind': 'circle', 'radius': 0.1}, np.array([p.x, p.y, p.z]),
+                                 pin.Quaternion(q.w, q.x, q.y, q.z).toRotationMatrix())
+        errors = [np.linalg.norm(circle(stamp_s(m) - 0.025).position
+                                 - np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z]))
+                  for m in driver.ee[40:]]
+        assert max(errors) < 2e-3 and np.linalg.norm(driver.ee_position() - np.array([p.x, p.y, p.z])) > 0.05
+    finally:
+        ros.close()

@@ -63,6 +63,9 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True):
     """
     from tqdm import tqdm
 
+    if scenario.trajectory is not None:
+        raise WmmError(f'{scenario.name} is a trajectory scenario: goal_sequencer plays it on /ee_reference; '
+                       'wmm_experiment runs scenarios of goals only')
     model = KinematicModel(scenario.robot)
     robot = model.config
     selected = [r for r in scenario.runs if runs is None or r['name'] in runs]

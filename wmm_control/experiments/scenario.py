@@ -10,6 +10,8 @@ Schema::
       duration: 65.0              # [s]
       goals:                      # each holds from t until the next goal's t
         - {t: 0.0, pose: [x, y, z, roll, pitch, yaw]}     # [m, rad], RPY = ZYX Euler
+      # or, instead of goals, a reference trajectory from the start pose (Xing et al. §4):
+      # trajectory: {kind: circle, radius: 0.1}   or   {kind: pose}
 
       experiment:                 # optional: how wmm_experiment runs it (defaults below)
         sim: {base_mode: kinematic, slip_gain: 0.05, slip_drift: [...], slip_noise: [...], seed: 0}
@@ -31,6 +33,7 @@ import numpy as np
 from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
 from wmm_control.robot_config import read_yaml_section
+from wmm_control.experiments.trajectories import make_trajectory
 from wmm_control.resolvers.interface import PoseTarget
 
 __all__ = ['Goal', 'Scenario', 'load_scenario', 'resolver_parameters', 'DEFAULT_RUNS', 'SIM_KEYS', 'RUN_KEYS']
@@ -104,6 +107,11 @@ class Scenario:
     path: Path
     sim: dict = None
     runs: tuple = DEFAULT_RUNS
+    trajectory: dict = None
+
+    def reference(self, start_position, start_rotation):
+        """The trajectory ``t -> PoseTarget`` of a trajectory scenario, from the start pose."""
+        return make_trajectory(self.trajectory, start_position, start_rotation)
 
     def goal_index(self, t):
         """Index of the goal in force at time ``t`` [s] (0 before the first start)."""
@@ -127,9 +135,22 @@ def load_scenario(name_or_path):
     duration = _number(raw.get('duration'), f'{where}.duration')
     if duration <= 0:
         raise ConfigError(f'{where}.duration must be > 0, got {duration}')
-    goals_raw = raw.get('goals')
+    sim, runs = _experiment(raw.get('experiment') or {}, where)
+    common = dict(name=str(raw.get('name', path.stem)), description=str(raw.get('description', '')),
+                  robot=str(raw.get('robot', 'steerable')), frame=str(raw.get('frame', 'world')),
+                  duration=duration, path=path, sim=sim, runs=runs)
+    if 'trajectory' in raw:
+        if 'goals' in raw:
+            raise ConfigError(f'{where}: give goals or a trajectory, not both')
+        spec = raw['trajectory']
+        make_trajectory(spec, np.zeros(3), np.eye(3))        # checks the entry
+        return Scenario(goals=(), trajectory=dict(spec), **common)
+    return Scenario(goals=_goals(raw.get('goals'), duration, where), **common)
+
+
+def _goals(goals_raw, duration, where):
     if not isinstance(goals_raw, list) or not goals_raw:
-        raise ConfigError(f'{where}.goals: expected a non-empty list')
+        raise ConfigError(f'{where}.goals: expected a non-empty list (or a trajectory)')
     starts, poses = [], []
     for i, g in enumerate(goals_raw):
         w = f'{where}.goals[{i}]'
@@ -144,11 +165,7 @@ def load_scenario(name_or_path):
         raise ConfigError(f'{where}.goals: start times must increase, from >= 0 to below the duration, '
                           f'got {starts}')
     ends = starts[1:] + [duration]
-    sim, runs = _experiment(raw.get('experiment') or {}, where)
-    return Scenario(
-        name=str(raw.get('name', path.stem)), description=str(raw.get('description', '')),
-        robot=str(raw.get('robot', 'steerable')), frame=str(raw.get('frame', 'world')), duration=duration,
-        goals=tuple(Goal(t, e, p) for t, e, p in zip(starts, ends, poses)), path=path, sim=sim, runs=runs)
+    return tuple(Goal(t, e, p) for t, e, p in zip(starts, ends, poses))
 
 
 def resolver_parameters(run):

@@ -1,27 +1,37 @@
-"""``goal_sequencer``: publishes a scenario's timeline of end-effector goals on ``/goal_pose``.
+"""``goal_sequencer``: plays a scenario: goals on ``/goal_pose``, or a trajectory on ``/ee_reference``.
 
-Publishes ``/goal_pose`` (``geometry_msgs/PoseStamped``, the scenario's frame): each goal of
-the scenario file (:mod:`wmm_control.experiments.scenario`, e.g. Table II of Sorour et al.
-2019) when its time comes, and the goal in force again every ``republish_period`` so that a
-resolver started later picks it up.
+For a scenario of goals (:mod:`wmm_control.experiments.scenario`, e.g. Table II of Sorour et
+al. 2019) it publishes ``/goal_pose`` (``geometry_msgs/PoseStamped``, the scenario's frame):
+each goal when its time comes, and the goal in force again every ``republish_period`` so that
+a resolver started later picks it up.
+
+For a trajectory scenario (Xing et al. §4, :mod:`wmm_control.experiments.trajectories`) it
+publishes ``/ee_reference`` (``trajectory_msgs/MultiDOFJointTrajectory``, frame the
+scenario's): at every clock tick one point, ``transforms[0]`` the pose, ``velocities[0]`` the
+twist and ``accelerations[0]`` the acceleration (linear, angular; world axes),
+``time_from_start`` the time along the trajectory. The trajectory starts from the end
+effector's pose at the robot's start state (its YAML), as the paper's x0.
 
 Time: the scenario's clock starts at the first reading of this node's clock. Under
 ``use_sim_time`` (recommended with ``wmm_sim``) that is the first ``/clock`` message, and the
 goals follow simulated time exactly: the node checks its timeline on every ``/clock``
-message, and otherwise on a steady-clock timer. When the scenario ends (its ``duration``), the
+message; on wall time, on a steady-clock timer every 10 ms. When the scenario ends (its ``duration``), the
 last goal stays in force.
 """
 
 import math
 
 import pinocchio as pin
-from geometry_msgs.msg import PoseStamped
+from builtin_interfaces.msg import Duration
+from geometry_msgs.msg import PoseStamped, Transform, Twist
+from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 
 from wmm_control.experiments.scenario import load_scenario
+from wmm_control.kinematics import KinematicModel
 from wmm_control.nodes.common import Param, declare_parameters, run_node
 
 __all__ = ['GoalSequencerNode', 'main']
@@ -34,6 +44,36 @@ PARAMS = (
 )
 
 
+def _quaternion(rot):
+    q = pin.Quaternion(rot)
+    return float(q.x), float(q.y), float(q.z), float(q.w)
+
+
+def _twist(values):
+    msg = Twist()
+    msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.x, msg.angular.y, msg.angular.z = (float(v) for v in values)
+    return msg
+
+
+def reference_message(target, frame, stamp, t):
+    """A one-point ``MultiDOFJointTrajectory`` of a :class:`~wmm_control.resolvers.PoseTarget` at time ``t``."""
+    msg = MultiDOFJointTrajectory()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame
+    msg.joint_names = ['end_effector']
+    point = MultiDOFJointTrajectoryPoint()
+    tf = Transform()
+    tf.translation.x, tf.translation.y, tf.translation.z = (float(v) for v in target.position)
+    tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w = _quaternion(target.rotation)
+    point.transforms = [tf]
+    point.velocities = [_twist(target.velocity)]
+    point.accelerations = [_twist(target.acceleration)]
+    sec = int(math.floor(t))
+    point.time_from_start = Duration(sec=sec, nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
+    msg.points = [point]
+    return msg
+
+
 def goal_message(goal, frame, stamp):
     """A ``PoseStamped`` of a scenario goal ``[x, y, z, roll, pitch, yaw]``."""
     msg = PoseStamped()
@@ -41,9 +81,8 @@ def goal_message(goal, frame, stamp):
     msg.header.frame_id = frame
     x, y, z, roll, pitch, yaw = (float(v) for v in goal.pose)
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
-    q = pin.Quaternion(pin.rpy.rpyToMatrix(roll, pitch, yaw))
-    msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z, msg.pose.orientation.w = (
-        float(q.x), float(q.y), float(q.z), float(q.w))
+    (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+     msg.pose.orientation.w) = _quaternion(pin.rpy.rpyToMatrix(roll, pitch, yaw))
     return msg
 
 
@@ -55,6 +94,12 @@ class GoalSequencerNode(Node):
         self.p = declare_parameters(self, 'goal_sequencer.yaml', PARAMS)
         self.scenario = load_scenario(self.p.scenario)
         self.pub = self.create_publisher(PoseStamped, '/goal_pose', 10)
+        self.pub_ref = self.create_publisher(MultiDOFJointTrajectory, '/ee_reference', 10)
+        self._trajectory = None
+        if self.scenario.trajectory is not None:
+            model = KinematicModel(self.scenario.robot)
+            model.update(model.config.start.base_pose, model.config.start.arm)
+            self._trajectory = self.scenario.reference(*model.ee_placement_world())
         self._sim_time = self.get_parameter('use_sim_time').value
         self._t0 = None
         self._index = -1
@@ -63,16 +108,17 @@ class GoalSequencerNode(Node):
         if self._sim_time:
             self.create_subscription(ClockMsg, '/clock', self._on_clock, 10)
         self.create_timer(0.01, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        g = self.scenario.goals
-        self.get_logger().info(f'scenario {self.scenario.name}: {len(g)} goals over {self.scenario.duration} s '
-                               f'({"sim" if self._sim_time else "wall"} time) on /goal_pose')
+        what = (f'trajectory {self.scenario.trajectory} on /ee_reference' if self._trajectory is not None
+                else f'{len(self.scenario.goals)} goals on /goal_pose')
+        self.get_logger().info(f'scenario {self.scenario.name}: {what} over {self.scenario.duration} s '
+                               f'({"sim" if self._sim_time else "wall"} time)')
 
     def _on_clock(self, msg):
         self._check(msg.clock.sec + msg.clock.nanosec * 1e-9, msg.clock)
 
     def _tick(self):
-        if self._sim_time and self._t0 is None:
-            return             # sim time has not started: wait for the first /clock
+        if self._sim_time:
+            return             # on sim time every /clock message drives the timeline
         now = self.get_clock().now()
         self._check(now.nanoseconds * 1e-9, now.to_msg())
 
@@ -80,6 +126,11 @@ class GoalSequencerNode(Node):
         if self._t0 is None:
             self._t0 = t
         elapsed = t - self._t0
+        if self._trajectory is not None:
+            self.pub_ref.publish(reference_message(self._trajectory(min(elapsed, self.scenario.duration)),
+                                                   self.scenario.frame, stamp, elapsed))
+            self.published += 1
+            return
         index = self.scenario.goal_index(elapsed)
         period = self.p.republish_period
         if index != self._index or (period > 0 and t - self._last_pub >= period):

@@ -4,6 +4,10 @@ Publish an end-effector goal on ``/goal_pose`` and the robot goes there.
 
 Subscribes:
   ``/goal_pose`` (``geometry_msgs/PoseStamped``, frame ``world_frame``): the set-point;
+  ``/ee_reference`` (``trajectory_msgs/MultiDOFJointTrajectory``, frame ``world_frame``): a
+  trajectory point, its first point's ``transforms[0]`` (pose), ``velocities[0]`` and
+  ``accelerations[0]`` (linear, angular, world axes); the latest of a goal and a reference
+  is the target. A reference older than ``state_timeout`` is held as a set-point;
   ``/joint_states`` (``sensor_msgs/JointState``): arm joints by name; each message runs one
   control cycle;
   ``/odom`` (``nav_msgs/Odometry``): base pose and twist (wheel odometry on a real robot);
@@ -49,6 +53,7 @@ from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
@@ -121,6 +126,14 @@ PARAMS = (
 )
 
 
+REFERENCE = '/ee_reference'
+
+
+def _twist_values(twist):
+    return np.array([twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y,
+                     twist.angular.z])
+
+
 def _stamp_key(stamp):
     return (stamp.sec, stamp.nanosec)
 
@@ -138,7 +151,8 @@ class RedundancyResolverNode(Node):
         self.resolver = make_resolver(p.method, self.model, dt=p.period, **{n: getattr(p, n) for n in names})
         self.arm_joints = self.model.config.arm.joints
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.fresh = {k: Freshness(p.state_timeout) for k in ('joint_states', 'odom', 'ee_pose')}
+        self.fresh = {k: Freshness(p.state_timeout) for k in ('joint_states', 'odom', 'ee_pose', 'reference')}
+        self._tracking = False        # the target is a trajectory point of /ee_reference
         self._index = {}
         self._odom = None
         self._ee = None
@@ -156,6 +170,7 @@ class RedundancyResolverNode(Node):
         self.pub_base = self.create_publisher(TwistStamped, '/base/reference', 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(PoseStamped, '/goal_pose', self._on_goal, 10)
+        self.create_subscription(MultiDOFJointTrajectory, '/ee_reference', self._on_reference, 10)
         self.create_subscription(JointState, '/joint_states', self._on_joint_states, 10)
         self.create_subscription(Odometry, '/odom', self._on_odom, 10)
         if p.ee_feedback == 'ground_truth':
@@ -175,11 +190,12 @@ class RedundancyResolverNode(Node):
         return self._steady.now().nanoseconds * 1e-9
 
     # ------------------------------------------------------------------ inputs
-    def _reject_goal(self, reason):
+    def _reject_goal(self, reason, topic='/goal_pose'):
         self.counters['goals_rejected'] += 1
-        self.get_logger().warn(f'rejected /goal_pose: {reason}; holding still', throttle_duration_sec=1.0)
+        self.get_logger().warn(f'rejected {topic}: {reason}; holding still', throttle_duration_sec=1.0)
         self.target = None
         self._goal_key = None
+        self._tracking = False
 
     def _on_goal(self, msg):
         pos = msg.pose.position
@@ -207,10 +223,40 @@ class RedundancyResolverNode(Node):
         rot = pin.Quaternion(quat[3], quat[0], quat[1], quat[2]).toRotationMatrix()
         self.target = PoseTarget(values[:3], rot)
         self._goal_key = key
+        self._tracking = False
         self._progress = (math.inf, self.counters['cycles'])
         self.counters['goals'] += 1
         self.get_logger().info(f'new goal: position {np.round(values[:3], 4).tolist()}, '
                                f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}')
+        return None
+
+    def _on_reference(self, msg):
+        if msg.header.frame_id != self.p.world_frame:
+            return self._reject_goal(f'frame {msg.header.frame_id!r}, expected {self.p.world_frame!r}', REFERENCE)
+        point = msg.points[0] if msg.points else None
+        if point is None or not point.transforms:
+            return self._reject_goal('no point or no transform', REFERENCE)
+        tf = point.transforms[0]
+        vel = _twist_values(point.velocities[0]) if point.velocities else np.zeros(6)
+        acc = _twist_values(point.accelerations[0]) if point.accelerations else np.zeros(6)
+        pose = np.array([tf.translation.x, tf.translation.y, tf.translation.z, tf.rotation.x, tf.rotation.y,
+                         tf.rotation.z, tf.rotation.w])
+        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel)) and np.all(np.isfinite(acc))):
+            return self._reject_goal('non-finite values', REFERENCE)
+        if float(np.max(np.abs(pose[:3]))) > self.p.max_goal_distance or \
+                float(np.max(np.abs(np.concatenate((vel, acc))))) > 1e3:
+            return self._reject_goal('beyond max_goal_distance, or a twist or acceleration beyond 1e3', REFERENCE)
+        norm = float(np.linalg.norm(pose[3:]))
+        if norm < 1e-6:
+            return self._reject_goal('zero quaternion', REFERENCE)
+        x, y, z, w = pose[3:] / norm
+        if not self._tracking:
+            self.get_logger().info('tracking /ee_reference')
+            self._progress = (math.inf, self.counters['cycles'])
+        self.target = PoseTarget(pose[:3], pin.Quaternion(w, x, y, z).toRotationMatrix(), velocity=vel, acceleration=acc)
+        self._goal_key = None
+        self._tracking = True
+        self.fresh['reference'].mark(self._now())
         return None
 
     def _on_odom(self, msg):
@@ -296,6 +342,10 @@ class RedundancyResolverNode(Node):
             return
         self._zero_sent = False
         self.counters['cycles'] += 1
+        if self._tracking and not self.fresh['reference'].fresh(self._now()):
+            self.get_logger().warn('/ee_reference stopped: holding its last pose', throttle_duration_sec=5.0)
+            self.target = PoseTarget(self.target.position, self.target.rotation)
+            self._tracking = False
         command = self.resolver.step(state, self.target)
         self._publish_base(stamp, command.base_twist)
         if not self.resolver.uses_compensation:
