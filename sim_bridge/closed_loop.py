@@ -5,8 +5,8 @@ Each period runs what the nodes run in lockstep, in the same order:
 1. read the state (joint states, odometry or ground-truth base pose, end-effector pose);
 2. ``resolver.step(state, target)``: the arm command and the base twist reference;
 3. the base controller answers that reference at once (robot A: :class:`SwmrController`,
-   closed on the measured steer angles; robot B: the Mecanum inverse kinematics), giving
-   wheel commands and the feasible twist q̇_bf;
+   closed on the measured steer angles; robot B: :class:`MecanumController`), giving wheel
+   commands and the feasible twist q̇_bf;
 4. ``resolver.compensate(command, q̇_bf)`` (Sorour eq 14) finishes the arm command;
 5. the world steps one period.
 
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from wmm_control.base import MecanumKinematics, SteerableGeometry, SwmrController, SwmrParams
+from wmm_control.base import MecanumController, SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.errors import ConfigError
 from wmm_control.resolvers import RobotState
 
@@ -53,11 +53,11 @@ class CycleRecord:
 
 
 def make_base_controller(robot, dt):
-    """The base controller of a robot: a :class:`SwmrController` (A) or Mecanum kinematics (B)."""
+    """The base controller of a robot: a :class:`SwmrController` (A) or a :class:`MecanumController` (B)."""
     if robot.steerable is not None:
         return SwmrController(SteerableGeometry.from_config(robot.steerable),
                               SwmrParams.from_robot_config(robot, dt=dt))
-    return MecanumKinematics.from_config(robot.mecanum)
+    return MecanumController.from_robot_config(robot, dt)
 
 
 class ClosedLoop:
@@ -107,9 +107,9 @@ class ClosedLoop:
             w.set_command('steer', out.beta_dot_ref)
             w.set_command('drive', out.phi_dot_ref)
             return out.twist_executed
-        wheels = self.base.wheel_rates(reference)
-        w.set_command('wheel', wheels)
-        return self.base.twist_from_wheels(wheels)
+        out = self.base.step(reference)
+        w.set_command('wheel', out.wheel_rates)
+        return out.twist
 
     def step(self, target):
         """One period towards ``target`` (:class:`~wmm_control.resolvers.PoseTarget`).

@@ -107,24 +107,32 @@ def _stop(proc):
     return proc.returncode, out
 
 
-def test_three_installed_executables_take_the_end_effector_to_a_published_goal(install_tree):
-    """wmm_sim, swmr_controller and redundancy_resolver, each its own process with no arguments
-    (what ``ros2 run`` starts), on a private domain: a goal published from this process is reached."""
+ROBOT_A = {'wmm_sim': [], 'swmr_controller': [], 'redundancy_resolver': []}
+ROBOT_B = {'wmm_sim': ['--ros-args', '-p', 'robot:=mecanum'], 'mecanum_controller': [],
+           'redundancy_resolver': ['--ros-args', '-p', 'robot:=mecanum', '-p', 'method:=amp']}
+
+
+@pytest.mark.parametrize('system, goal', [(ROBOT_A, (2.0, 1.0, 1.0)), (ROBOT_B, (0.75, 0.1, 0.45))],
+                         ids=['robot A, task sharing', 'robot B, amp'])
+def test_three_installed_executables_take_the_end_effector_to_a_published_goal(install_tree, system, goal):
+    """The simulator, the base controller and redundancy_resolver, each its own process started
+    as ``ros2 run`` does, on a private domain: a goal published from this process is reached
+    (robot A with no arguments at all; robot B with the robot and method parameters)."""
     import numpy as np
     import rclpy
     from geometry_msgs.msg import PoseStamped
 
     domain = 100 + os.getpid() % 100
     env = dict(installed_env(install_tree), ROS_DOMAIN_ID=str(domain))
-    procs = {name: subprocess.Popen([str(install_tree / 'lib' / 'wmm_control' / name)], env=env,
+    procs = {name: subprocess.Popen([str(install_tree / 'lib' / 'wmm_control' / name)] + args, env=env,
                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-             for name in ('wmm_sim', 'swmr_controller', 'redundancy_resolver')}
+             for name, args in system.items()}
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('goal_test', context=context)
     executor = rclpy.executors.SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    goal = np.array([2.0, 1.0, 1.0])
+    goal = np.array(goal)
     ee = []
     node.create_subscription(PoseStamped, '/ee_pose', lambda m: ee.append(
         np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z])), 10)

@@ -1,6 +1,7 @@
 """One experiment run with every node in one process, talking over real topics.
 
-The run has a ROS domain of its own (:func:`private_domain_id`). The simulator (``wmm_sim``, lockstep), the base controller (``swmr_controller`` for robot A),
+The run has a ROS domain of its own (:func:`private_domain_id`). The simulator (``wmm_sim``, lockstep), the base controller (``swmr_controller`` for robot A,
+``mecanum_controller`` for robot B),
 the ``redundancy_resolver`` and the ``goal_sequencer`` run on one executor with a private
 rclpy context, exactly as they run as separate processes. A recorder node listens to the
 topics a user would watch (ground-truth end-effector pose and base pose, joint states,
@@ -134,7 +135,8 @@ def _executor(context):
 #: In lockstep nothing moves until every answer is in, so the nodes may wait as long as a loaded
 #: machine needs (the waits end as soon as the answer comes): the run does not depend on timing.
 LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 0.5},
-                  'swmr_controller': {'reference_wait': 0.5}}
+                  'swmr_controller': {'reference_wait': 0.5},
+                  'mecanum_controller': {'reference_wait': 0.5}}
 
 
 def private_domain_id():
@@ -161,6 +163,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     """
     from sim_bridge.node import SimNode
     from wmm_control.nodes.goal_sequencer import GoalSequencerNode
+    from wmm_control.nodes.mecanum_controller import MecanumControllerNode
     from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
     from wmm_control.nodes.swmr_controller import SwmrControllerNode
     from wmm_control.robot_config import load_robot
@@ -197,6 +200,9 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         if robot.steerable is not None:
             nodes.append(SwmrControllerNode(context=context,
                                             parameter_overrides=params(LOCKSTEP_WAITS['swmr_controller'])))
+        else:
+            nodes.append(MecanumControllerNode(context=context, parameter_overrides=params(
+                dict(LOCKSTEP_WAITS['mecanum_controller'], robot=robot.name))))
         recorder = Recorder(context, robot, scenario, log)
         nodes.append(recorder)
         sim = SimNode(context=context, parameter_overrides=params(sim_params))
