@@ -20,6 +20,7 @@ import pinocchio as pin
 
 from wmm_control.base import MecanumController, SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.errors import ConfigError
+from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers import RobotState
 
 __all__ = ['ClosedLoop', 'CycleRecord', 'FEEDBACKS', 'make_base_controller']
@@ -138,7 +139,7 @@ def _rotation(quat_xyzw):
 
 
 def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', progress=None):
-    """Run a whole scenario on ``world`` with no ROS in between.
+    """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
 
     Args:
         world: a fresh :class:`~sim_bridge.world.SimWorld` of the scenario's robot.
@@ -156,12 +157,12 @@ def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', p
 
     loop = ClosedLoop(world, resolver, feedback=feedback)
     log = RunLog(method=resolver.name, label=label)
-    targets = [g.target for g in scenario.goals]
+    reference = scenario.reference(KinematicModel(world.robot)) if scenario.trajectory is not None else None
     n = int(round(scenario.duration / world.dt))
     t0 = time.perf_counter()
     for _ in range(n):
         gi = scenario.goal_index(world.time)
-        rec = loop.step(targets[gi])
+        rec = loop.step(scenario.target(world.time, reference))
         cmd = rec.command
         log.append(rec.t, gi, rec.ee_position, rec.ee_rotation, rec.base_pose, rec.q_arm, cmd.arm_velocity,
                    cmd.base_twist, rec.feasible_twist, cmd.diagnostics)

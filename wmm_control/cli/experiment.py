@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from wmm_control.errors import WmmError
-from wmm_control.experiments.metrics import METRIC_KEYS, goal_metrics, run_limit_report
+from wmm_control.experiments.metrics import (
+    METRIC_KEYS, TRAJECTORY_METRIC_KEYS, goal_metrics, run_limit_report, trajectory_metrics)
 from wmm_control.experiments.scenario import load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers import TaskSharingParams
@@ -63,9 +64,6 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True):
     """
     from tqdm import tqdm
 
-    if scenario.trajectory is not None:
-        raise WmmError(f'{scenario.name} is a trajectory scenario: goal_sequencer plays it on /ee_reference; '
-                       'wmm_experiment runs scenarios of goals only')
     model = KinematicModel(scenario.robot)
     robot = model.config
     selected = [r for r in scenario.runs if runs is None or r['name'] in runs]
@@ -79,39 +77,68 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True):
                   bar_format='{desc:<36} {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s [{elapsed}]') as bar:
             log = runner(scenario, run, bar.update)
         logs[run['name']] = log
-        r_fm = run.get('r_fm', TaskSharingParams().r_fm)
-        goals = goal_metrics(log, scenario, model, r_fm, robot.arm.dexterous, dt)
-        compensating = run['method'] == 'task_sharing' and run.get('compensation', True)
-        for g in goals:
-            if not compensating:
-                g['compensation_dropped'] = None
-        summary_runs[run['name']] = {
+        entry = {
             'method': run['method'], 'feedback': run.get('feedback', 'ground_truth'),
             'parameters': resolver_parameters(run),
             'periods': len(log), 'wall_time_s': log.wall_time_s,
             'sim_to_wall_ratio': float(log.t[-1] + dt) / log.wall_time_s if log.wall_time_s > 0 else None,
             'resolver_cycle_median_us': float(np.median(log.cycle_time_s) * 1e6),
             'limits_exceeded': run_limit_report(log, robot, dt, tol=1e-6),
-            'total_area': float(sum(g.get('area', 0.0) for g in goals)),
-            'all_goals_reached': all(g.get('reached', False) for g in goals),
-            'goals': goals,
         }
+        if scenario.trajectory is not None:
+            entry['tracking'] = trajectory_metrics(log, scenario, model, dt)
+        else:
+            entry.update(_goal_summary(log, scenario, model, run, dt))
+        summary_runs[run['name']] = entry
     summary = {
         'scenario': scenario.name, 'description': scenario.description, 'robot': robot.name,
         'engine': engine, 'timing': 'lockstep' if engine == 'nodes' else 'direct (no ROS)',
         'simulator': dict(scenario.sim or {}, base_mode=(scenario.sim or {}).get('base_mode', 'kinematic')),
         'goal_windows_s': [[g.t, g.end] for g in scenario.goals],
-        'runs': summary_runs, 'metric_keys': METRIC_KEYS,
+        'trajectory': scenario.trajectory,
+        'runs': summary_runs,
+        'metric_keys': TRAJECTORY_METRIC_KEYS if scenario.trajectory is not None else METRIC_KEYS,
     }
     return logs, summary
+
+
+def _goal_summary(log, scenario, model, run, dt):
+    """Per-goal metrics of a run of a goals scenario, with its totals."""
+    goals = goal_metrics(log, scenario, model, run.get('r_fm', TaskSharingParams().r_fm),
+                         model.config.arm.dexterous, dt)
+    if not (run['method'] == 'task_sharing' and run.get('compensation', True)):
+        for g in goals:
+            g['compensation_dropped'] = None
+    return {'total_area': float(sum(g.get('area', 0.0) for g in goals)),
+            'all_goals_reached': all(g.get('reached', False) for g in goals), 'goals': goals}
 
 
 def _f(value, fmt):
     return '—' if value is None else format(value, fmt)
 
 
+def format_tracking_table(summary):
+    """Xing et al. Tables 2–3 style: commanded base velocity RMS and active time, end-effector errors."""
+    head = (f'{"run":<34}{"base RMS vx, vy [cm/s], ω [°/s]":>32}{"base active [s]":>17}{"max err x, y, xy [mm]":>24}'
+            f'{"rot y [rad]":>12}{"σ_min":>7}')
+    lines = [head, '-' * len(head)]
+    for name, run in summary['runs'].items():
+        m = run['tracking']
+        rms = m['base_rms']
+        lim = run['limits_exceeded']
+        lines.append(f'{name:<34}{rms[0] * 100:>12.2f}{rms[1] * 100:>9.2f}{np.degrees(rms[2]):>11.3f}'
+                     f'{m["base_active_any_s"]:>17.2f}{m["max_error_x_m"] * 1e3:>10.2f}{m["max_error_y_m"] * 1e3:>7.2f}'
+                     f'{m["max_error_xy_m"] * 1e3:>7.2f}{m["max_rotation_error_y_rad"]:>12.4f}{m["sigma_min_min"]:>7.3f}')
+        lines.append(f'{"":<5}{"no limit passed" if not any(lim.values()) else f"LIMITS PASSED: {lim}"}; '
+                     f'first base command at {_f(m["first_base_activation_s"], ".2f")} s; '
+                     f'sim/wall {run["sim_to_wall_ratio"]:.1f}x')
+    return '\n'.join(lines)
+
+
 def format_table(summary):
     """A plain-text table of the summary: per run and goal, area, final errors, entry time, footprint."""
+    if any('tracking' in run for run in summary['runs'].values()):
+        return format_tracking_table(summary)
     lines = []
     head = f'{"run":<36}{"goal":>5}{"area":>8}{"pos err":>10}{"ori err":>9}{"t→r_fm":>8}{"footpr.":>8}{"base":>7}'
     units = f'{"":<36}{"":>5}{"[m·s]":>8}{"[mm]":>10}{"[rad]":>9}{"[s]":>8}{"[m]":>8}{"[m]":>7}'

@@ -11,7 +11,8 @@ import pinocchio as pin
 
 from wmm_control.kinematics.orientation import rpy_from_matrix, wrap_angle
 
-__all__ = ['RunLog', 'goal_metrics', 'run_limit_report', 'pose_error_norm', 'METRIC_KEYS']
+__all__ = ['RunLog', 'goal_metrics', 'trajectory_metrics', 'run_limit_report', 'pose_error_norm', 'METRIC_KEYS',
+           'TRAJECTORY_METRIC_KEYS']
 
 #: Per-goal keys of :func:`goal_metrics` and what they mean (documented in the README).
 METRIC_KEYS = {
@@ -47,12 +48,12 @@ class RunLog:
     ``ee_position`` (K, 3), ``ee_rotation`` (K, 3, 3), ``base_pose`` (K, 3), ``q_arm`` (K, 7),
     ``arm_command`` (K, 7), ``base_reference`` (K, 3), ``feasible_twist`` (K, 3), ``psi``,
     ``mode`` (list of str), ``limit_scale``, ``accel_scale``, ``null_scale``,
-    ``compensation_scale``, ``compensated`` (bool), ``cycle_time_s``.
+    ``compensation_scale``, ``compensated`` (bool), ``cycle_time_s``, ``sigma_min``.
     """
 
     COLUMNS = ('t', 'goal', 'ee_position', 'ee_rotation', 'base_pose', 'q_arm', 'arm_command',
                'base_reference', 'feasible_twist', 'psi', 'mode', 'limit_scale', 'accel_scale',
-               'null_scale', 'compensation_scale', 'compensated', 'cycle_time_s')
+               'null_scale', 'compensation_scale', 'compensated', 'cycle_time_s', 'sigma_min')
 
     def __init__(self, method='', label=''):
         self.method = method
@@ -85,6 +86,7 @@ class RunLog:
         r['compensation_scale'].append(d.compensation_scale)
         r['compensated'].append(d.compensated)
         r['cycle_time_s'].append(d.cycle_time_s)
+        r['sigma_min'].append(d.sigma_min)
 
     def freeze(self):
         """Turn the columns into arrays; returns self."""
@@ -203,6 +205,52 @@ def _dex_deviation(log, idx, q_dex):
         if settled:
             after.append(float(dev[j]))
     return (max(after) if after else None), max(starts)
+
+
+#: Keys of :func:`trajectory_metrics` (Xing et al. Tables 2–3), documented in the README.
+TRAJECTORY_METRIC_KEYS = {
+    'base_rms': 'RMS of the commanded base velocity (vx, vy [m/s], ω [rad/s]) over the run',
+    'base_active_s': 'time during which each commanded base velocity component is not zero [s]',
+    'base_active_any_s': 'time during which any commanded base velocity component is not zero [s]',
+    'max_error_x_m': 'largest |x error| of the end effector against the reference, ground truth [m]',
+    'max_error_y_m': 'largest |y error| [m]',
+    'max_error_xy_m': 'largest distance in the x-y plane [m]',
+    'max_error_m': 'largest 3-D position error [m]',
+    'max_rotation_error_y_rad': 'largest |rotation error about the world y axis| [rad]',
+    'max_orientation_error_rad': 'largest rotation angle between the orientation and the reference [rad]',
+    'sigma_min_min': 'smallest σ_min of the arm Jacobian (the task rows) over the run',
+    'first_base_activation_s': 'time of the first non-zero base command [s] (null: never)',
+}
+
+
+def trajectory_metrics(log, scenario, model, dt, skip_s=1.0):
+    """Xing et al. Tables 2–3 for a run of a trajectory scenario (:data:`TRAJECTORY_METRIC_KEYS`).
+
+    The reference starts from the end effector's pose at the robot's start state, as the
+    goal_sequencer plays it. Errors are taken after ``skip_s`` seconds (the start transient).
+    """
+    log.freeze()
+    reference = scenario.reference(model)
+    targets = [reference(t) for t in log.t]
+    pos_err = np.array([tg.position for tg in targets]) - log.ee_position
+    rot_err = np.array([pin.log3(tg.rotation @ r.T) for tg, r in zip(targets, log.ee_rotation)])
+    late = log.t >= log.t[0] + skip_s
+    base = log.base_reference
+    moving = np.abs(base) > 1e-9
+    any_moving = np.any(moving, axis=1)
+    return {
+        'base_rms': np.sqrt(np.mean(base * base, axis=0)).tolist(),
+        'base_active_s': (np.count_nonzero(moving, axis=0) * dt).tolist(),
+        'base_active_any_s': float(np.count_nonzero(any_moving) * dt),
+        'max_error_x_m': float(np.max(np.abs(pos_err[late, 0]))),
+        'max_error_y_m': float(np.max(np.abs(pos_err[late, 1]))),
+        'max_error_xy_m': float(np.max(np.linalg.norm(pos_err[late, :2], axis=1))),
+        'max_error_m': float(np.max(np.linalg.norm(pos_err[late], axis=1))),
+        'max_rotation_error_y_rad': float(np.max(np.abs(rot_err[late, 1]))),
+        'max_orientation_error_rad': float(np.max(np.linalg.norm(rot_err[late], axis=1))),
+        'sigma_min_min': float(np.min(log.sigma_min)),
+        'first_base_activation_s': float(log.t[np.argmax(any_moving)]) if np.any(any_moving) else None,
+    }
 
 
 def run_limit_report(log, robot, dt, tol=1e-9):

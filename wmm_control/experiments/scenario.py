@@ -109,9 +109,16 @@ class Scenario:
     runs: tuple = DEFAULT_RUNS
     trajectory: dict = None
 
-    def reference(self, start_position, start_rotation):
-        """The trajectory ``t -> PoseTarget`` of a trajectory scenario, from the start pose."""
-        return make_trajectory(self.trajectory, start_position, start_rotation)
+    def reference(self, model):
+        """The trajectory ``t -> PoseTarget`` of a trajectory scenario, from the end effector's pose
+        at the robot's start state (its YAML), through ``model`` (a KinematicModel of the robot)."""
+        cfg = model.config
+        model.update(cfg.start.base_pose, cfg.start.arm)
+        return make_trajectory(self.trajectory, *model.ee_placement_world())
+
+    def target(self, t, reference=None):
+        """The target in force at time ``t`` [s]: the goal, or the reference trajectory's point."""
+        return reference(t) if self.trajectory is not None else self.goals[self.goal_index(t)].target
 
     def goal_index(self, t):
         """Index of the goal in force at time ``t`` [s] (0 before the first start)."""

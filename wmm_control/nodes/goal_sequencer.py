@@ -97,9 +97,7 @@ class GoalSequencerNode(Node):
         self.pub_ref = self.create_publisher(MultiDOFJointTrajectory, '/ee_reference', 10)
         self._trajectory = None
         if self.scenario.trajectory is not None:
-            model = KinematicModel(self.scenario.robot)
-            model.update(model.config.start.base_pose, model.config.start.arm)
-            self._trajectory = self.scenario.reference(*model.ee_placement_world())
+            self._trajectory = self.scenario.reference(KinematicModel(self.scenario.robot))
         self._sim_time = self.get_parameter('use_sim_time').value
         self._t0 = None
         self._index = -1

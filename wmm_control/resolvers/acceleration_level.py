@@ -104,6 +104,7 @@ class AccelerationResolver(Resolver):
 
     def reset(self):
         self._qd = None              # the commanded generalized rates (the integrator)
+        self._last_base = np.zeros(3)  # the last base twist sent (base frame)
         self._setpoint = None        # (goal key, trajectory, time along it)
 
     # ------------------------------------------------------------------ reference
@@ -127,7 +128,8 @@ class AccelerationResolver(Resolver):
         Returns:
             dict with ``jac`` (r, 10), ``xdd`` (r,), ``drift`` J̇q̇ (r,), ``lower``/``upper``
             joint acceleration bounds (10,), ``qd`` (10,), ``position_error`` [m],
-            ``orientation_error`` [rad], ``sigma`` σ_min of the arm's task rows.
+            ``orientation_error`` [rad], ``sigma`` σ_min of the arm's task rows, ``sigma_position``
+            that of its position rows.
         """
         p = self.params
         model = self.model
@@ -135,6 +137,7 @@ class AccelerationResolver(Resolver):
             c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])
             v = state.base_twist
             self._qd = np.concatenate(([c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]], state.dq_arm))
+            self._last_base = np.asarray(state.base_twist, dtype=float).copy()
         qd = self._qd
         model.update(state.base_pose, state.q_arm, qd[:3], qd[3:])
         if state.ee_position is None:
@@ -152,11 +155,13 @@ class AccelerationResolver(Resolver):
         self._position[3:] = state.q_arm
         lo_v, hi_v, _ = self.limits.box(self._position, qd)
         sigma = float(np.linalg.svd(jac[rows, 3:], compute_uv=False)[-1])
+        sigma_position = sigma if rows.stop == 3 else float(np.linalg.svd(jac[:3, 3:], compute_uv=False)[-1])
         target_err = np.concatenate((target.position - pos, pin.log3(target.rotation @ rot.T)))
         return {'jac': jac[rows], 'xdd': xdd[rows], 'drift': model.jdot_qdot()[rows], 'qd': qd,
                 'lower': (lo_v - qd) / p.dt, 'upper': (hi_v - qd) / p.dt,
                 'position_error': float(np.linalg.norm(target_err[:3])),
-                'orientation_error': float(np.linalg.norm(target_err[3:])), 'sigma': sigma}
+                'orientation_error': float(np.linalg.norm(target_err[3:])), 'sigma': sigma,
+                'sigma_position': sigma_position}
 
     def manipulability_acceleration(self, qd):
         """Eq (13): ``q̈_A = [0; γ1 ∇²H q̇_m + γ2 (γ1 ∇H − q̇_m)]``, H over the task's rows. Shape (10,)."""
@@ -179,14 +184,21 @@ class AccelerationResolver(Resolver):
         qdd = np.clip(np.nan_to_num(qdd), task['lower'], task['upper'])
         qd = task['qd'] + qdd * self.params.dt
         qd[np.abs(qd) < 1e-12] = 0.0      # a stop is exact: braking by −q̇/T leaves round-off
-        self._qd = qd
         c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])
         base = np.array([c * qd[0] + s * qd[1], -s * qd[0] + c * qd[1], qd[2]])
+        # The bounds hold the world-frame rates; the base controller limits its own frame, which
+        # turns with the base. Keep the base-frame change within a·T too (a few 1e-5 m/s at most)
+        # and the integrator consistent with what is sent.
+        step = self.limits.acceleration[:3] * self.params.dt
+        base = self._last_base + np.clip(base - self._last_base, -step, step)
+        base[np.abs(base) < 1e-12] = 0.0
+        qd[:3] = (c * base[0] - s * base[1], s * base[0] + c * base[1], base[2])
+        self._qd, self._last_base = qd, base
         diag = ResolverDiagnostics(
             method=self.name, psi=fields.pop('psi', 1.0), position_error=task['position_error'],
             orientation_error=task['orientation_error'], compensation_scale=1.0, sigma_min=task['sigma'],
             compensated=False, cycle_time_s=time.perf_counter() - t0, **fields)
-        return ResolverCommand(arm_velocity=qd[3:].copy(), base_twist=base, diagnostics=diag)
+        return ResolverCommand(arm_velocity=qd[3:].copy(), base_twist=base.copy(), diagnostics=diag)
 
     def _tertiary(self, task, qdd, active):
         """Eqs (10)–(11): ``β P_A q̈_A`` with ``P_A = [I − ((I − S) P_N)⁺] P_N``, β keeping the bounds.

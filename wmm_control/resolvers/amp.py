@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wmm_control.errors import ConfigError
 from wmm_control.resolvers.acceleration_level import AccelerationParams, AccelerationResolver
 from wmm_control.resolvers.sns import sns_accelerations
 
@@ -34,10 +35,20 @@ class AmpParams(AccelerationParams):
             r = 3; §4.4 uses 0.19 for r = 6).
         singularity_avoidance: activate the base near a singularity (§3.2); off reproduces
             the "AMP without singularity avoidance" run of §4.2.
+        sigma_rows: rows of J_m for σ_m: ``'task'`` (the task's rows: all six for r = 6) or
+            ``'position'`` (always the three position rows). On robot B at its start state
+            σ_m over all six rows is 0.162, below §4.4's 0.19, so with ``'task'`` the base is
+            active from t = 0 in the full-pose run; over the position rows it is 0.245.
     """
 
     sigma_min: float = 0.15
     singularity_avoidance: bool = True
+    sigma_rows: str = 'task'
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.sigma_rows not in ('task', 'position'):
+            raise ConfigError(f"sigma_rows must be 'task' or 'position', got {self.sigma_rows!r}")
 
 
 class AmpResolver(AccelerationResolver):
@@ -65,7 +76,8 @@ class AmpResolver(AccelerationResolver):
         n = len(task['qd'])
         arm_only = np.ones(n, dtype=bool)
         arm_only[:3] = False
-        singular = p.singularity_avoidance and task['sigma'] < p.sigma_min
+        sigma = task['sigma_position'] if p.sigma_rows == 'position' else task['sigma']
+        singular = p.singularity_avoidance and sigma < p.sigma_min
         reason = 'singularity' if singular else ''
         if not singular:
             qdd, alpha, active, saturated = sns_accelerations(
