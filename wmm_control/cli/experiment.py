@@ -2,11 +2,12 @@
 
 Usage::
 
-    wmm_experiment [SCENARIO] [--scenario PATH] [--out DIR] [--runs NAME,...] [--engine nodes|direct]
+    wmm_experiment [SCENARIO|all] [--scenario PATH] [--out DIR] [--runs NAME,...] [--engine nodes|direct]
                    [--seed N] [--no-figures]
 
-``SCENARIO`` names ``config/scenarios/<SCENARIO>.yaml`` (default ``sorour_table2``: Table II of
-Sorour et al. 2019); ``--scenario PATH`` takes any file of that form. Each run of the
+``SCENARIO`` names ``config/scenarios/<SCENARIO>.yaml``; ``all`` (the default) runs both papers'
+experiments (:data:`MAIN_JOB`: Table II of Sorour et al. 2019 and Xing et al. §4), each into
+``DIR/<scenario>``; ``--scenario PATH`` takes any file of that form. Each run of the
 scenario's ``experiment`` section is simulated with every node in this process over real
 topics (``--engine nodes``, the default: ``wmm_sim`` in lockstep, ``swmr_controller``,
 ``redundancy_resolver``, ``goal_sequencer``), or with the same objects and no ROS in between
@@ -30,7 +31,10 @@ from wmm_control.experiments.scenario import load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers import TaskSharingParams
 
-__all__ = ['main', 'run_experiment', 'format_table']
+__all__ = ['main', 'run_experiment', 'format_table', 'MAIN_JOB']
+
+#: The scenarios of ``wmm_experiment all``, the README's main job: both papers' experiments.
+MAIN_JOB = ('sorour_table2', 'xing_circle_0.10', 'xing_circle_0.25', 'xing_pose', 'xing_singularity')
 
 
 def _run_direct(scenario, run, progress):
@@ -157,9 +161,55 @@ def format_table(summary):
     return '\n'.join(lines)
 
 
+def _figures(scenario, logs, summary, out):
+    """The figures of a run: Sorour's Figs 5–7 for goals, Xing's for a trajectory."""
+    from wmm_control.experiments.figures import write_figures, write_tracking_figures
+    plotted = {r['name']: logs[r['name']] for r in scenario.runs if r['name'] in logs and r.get('plot', True)}
+    if not plotted:
+        return []
+    model = KinematicModel(scenario.robot)
+    if scenario.trajectory is not None:
+        return write_tracking_figures(plotted, scenario, model, out)
+    render = next((n for n in plotted if 'compensation' in n), next(iter(plotted)))
+    metrics = {n: summary['runs'][n]['goals'] for n in plotted}
+    zoom = [r['name'] for r in scenario.runs if r['name'] in plotted and r['method'] == 'task_sharing'
+            and r.get('feedback', 'ground_truth') == 'ground_truth'] or None
+    return write_figures(plotted, metrics, scenario, model, out, render_label=render, zoom_labels=zoom)
+
+
+def _run_one(scenario, args, out):
+    """Run one scenario's experiment and write ``metrics.json`` and the figures into ``out``."""
+    if args.seed is not None:
+        scenario = dataclasses.replace(scenario, sim=dict(scenario.sim or {}, seed=args.seed))
+    out.mkdir(parents=True, exist_ok=True)
+    sim = scenario.sim or {}
+    engine = ('all nodes in one process over topics, wmm_sim in lockstep' if args.engine == 'nodes'
+              else 'no ROS (direct)')
+    print(f'\n{scenario.name}: {scenario.description}\n'
+          f'robot {scenario.robot}; {engine}; {sim.get("base_mode", "kinematic")} base; slip gain '
+          f'{sim.get("slip_gain", 0.0)}, drift {sim.get("slip_drift", [0, 0, 0])}, noise '
+          f'{sim.get("slip_noise", [0, 0, 0])}, seed {sim.get("seed", 0)}; end-effector error measured on the '
+          'ground truth', flush=True)
+    start = time.perf_counter()
+    runs = set(args.runs.split(',')) if args.runs else None
+    logs, summary = run_experiment(scenario, runs, engine=args.engine)
+    total_sim = sum(len(log) * 0.025 for log in logs.values())
+    elapsed = time.perf_counter() - start
+    summary['experiment_wall_time_s'] = elapsed
+    summary['experiment_sim_to_wall_ratio'] = total_sim / elapsed
+    summary['peak_memory_mb'] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    if not args.no_figures:
+        summary['figures'] = [str(p) for p in _figures(scenario, logs, summary, out)]
+    (out / 'metrics.json').write_text(json.dumps(summary, indent=2, default=float) + '\n')
+    print(format_table(summary))
+    print(f'{total_sim:.0f} simulated s in {elapsed:.1f} s wall ({total_sim / elapsed:.1f}x), peak memory '
+          f'{summary["peak_memory_mb"]:.0f} MB; wrote {out / "metrics.json"}')
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='wmm_experiment', description=__doc__.split('\n\n')[0])
-    parser.add_argument('name', nargs='?', default='sorour_table2', help='scenario name in config/scenarios (default: %(default)s)')
+    parser.add_argument('name', nargs='?', default='all',
+                        help='scenario name in config/scenarios, or "all": ' + ', '.join(MAIN_JOB) + ' (default: %(default)s)')
     parser.add_argument('--scenario', help='path to a scenario file (instead of a name)')
     parser.add_argument('--out', default='experiment_output', help='output directory (default: %(default)s)')
     parser.add_argument('--runs', help='comma-separated run names (default: all of the scenario)')
@@ -169,41 +219,19 @@ def main(argv=None):
     parser.add_argument('--no-figures', action='store_true', help='skip the plots and renders')
     args = parser.parse_args(argv)
     try:
-        scenario = load_scenario(args.scenario or args.name)
-        if args.seed is not None:
-            scenario = dataclasses.replace(scenario, sim=dict(scenario.sim or {}, seed=args.seed))
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        sim = scenario.sim or {}
-        print(f'{scenario.name}: {scenario.description}\n'
-              f'robot {scenario.robot}; {"all nodes in one process over topics, wmm_sim in lockstep" if args.engine == "nodes" else "no ROS (direct)"}; '
-              f'{sim.get("base_mode", "kinematic")} base; slip gain {sim.get("slip_gain", 0.0)}, '
-              f'drift {sim.get("slip_drift", [0, 0, 0])}, noise {sim.get("slip_noise", [0, 0, 0])}, '
-              f'seed {sim.get("seed", 0)}; end-effector error measured on the ground truth', flush=True)
-        start = time.perf_counter()
-        runs = set(args.runs.split(',')) if args.runs else None
-        logs, summary = run_experiment(scenario, runs, engine=args.engine)
-        total_sim = sum(len(log) * 0.025 for log in logs.values())
-        elapsed = time.perf_counter() - start
-        summary['experiment_wall_time_s'] = elapsed
-        summary['experiment_sim_to_wall_ratio'] = total_sim / elapsed
-        summary['peak_memory_mb'] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-        if not args.no_figures:
-            from wmm_control.experiments.figures import write_figures
-            plotted = {r['name']: logs[r['name']] for r in scenario.runs if r['name'] in logs and r.get('plot', True)}
-            render = next((n for n in plotted if 'compensation' in n), next(iter(plotted), None))
-            metrics = {n: summary['runs'][n]['goals'] for n in plotted}
-            zoom = [r['name'] for r in scenario.runs if r['name'] in plotted and r['method'] == 'task_sharing'
-                    and r.get('feedback', 'ground_truth') == 'ground_truth'] or None
-            summary['figures'] = [str(p) for p in write_figures(plotted, metrics, scenario, KinematicModel(scenario.robot),
-                                                                out, render_label=render, zoom_labels=zoom)] if plotted else []
-        (out / 'metrics.json').write_text(json.dumps(summary, indent=2, default=float) + '\n')
-        print(format_table(summary))
-        print(f'{total_sim:.0f} simulated s in {elapsed:.1f} s wall ({total_sim / elapsed:.1f}x), peak memory '
-              f'{summary["peak_memory_mb"]:.0f} MB; wrote {out / "metrics.json"}')
+        names = [args.scenario] if args.scenario else (list(MAIN_JOB) if args.name == 'all' else [args.name])
+        for name in names:
+            scenario = load_scenario(name)
+            if len(names) > 1 and args.runs and not set(args.runs.split(',')) & {r['name'] for r in scenario.runs}:
+                print(f'\n{scenario.name}: no run named {args.runs}; skipped')
+                continue
+            _run_one(scenario, args, Path(args.out) / scenario.name if len(names) > 1 else Path(args.out))
     except WmmError as exc:
         print(f'wmm_experiment: {type(exc).__name__}: {exc}', file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print('wmm_experiment: interrupted', file=sys.stderr)
+        return 130
     return 0
 
 

@@ -24,7 +24,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 from matplotlib.transforms import blended_transform_factory  # noqa: E402
 
-__all__ = ['error_norm', 'arm_reach', 'error_norm_figure', 'zoom_psi_figure', 'top_view_figure',
+__all__ = ['tracking_figure', 'write_tracking_figures', 'error_norm', 'arm_reach', 'error_norm_figure', 'zoom_psi_figure', 'top_view_figure',
            'plot_error_norms', 'plot_zoom_and_psi', 'plot_top_view', 'render_goal_pictures',
            'write_figures', 'BASE_SIZE', 'FOOTPRINT_PERIOD_S', 'PICTURE_SIZE']
 
@@ -339,3 +339,32 @@ def write_figures(logs, metrics, scenario, model, out_dir, render_label=None, zo
     if render_label is not None:
         paths += render_goal_pictures(logs, scenario, out_dir, render_label)
     return paths
+
+
+# ---------------------------------------------------------------------- trajectory scenarios
+def tracking_figure(logs, scenario, model):
+    """Xing et al. Figs 7, 10, 11: per run, the end effector's x-y error against the reference
+    (ground truth), the commanded base velocity, and σ_min of the arm Jacobian, vs time."""
+    fig, axes = _stacked_axes(3, f'{scenario.name}: tracking, base commands, distance to singularity')
+    reference = scenario.reference(model)
+    for label, log in logs.items():
+        ref = np.array([reference(t).position for t in log.t])
+        err = np.linalg.norm(ref[:, :2] - log.ee_position[:, :2], axis=1)
+        axes[0].plot(log.t, err * 1e3, label=label)
+        axes[1].plot(log.t, np.linalg.norm(log.base_reference[:, :2], axis=1) * 1e2, label=f'{label}: |v| [cm/s]')
+        axes[1].plot(log.t, np.degrees(log.base_reference[:, 2]), ls='--', label=f'{label}: ω [°/s]')
+        axes[2].plot(log.t, log.sigma_min, label=label)
+    axes[0].set_ylabel('x-y error [mm]')
+    axes[1].set_ylabel('base command')
+    axes[2].set_ylabel('σ_min(J_m) [-]')
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize='small', loc='upper right')
+    return fig
+
+
+def write_tracking_figures(logs, scenario, model, out_dir):
+    """Write ``tracking.png`` (:func:`tracking_figure`) into ``out_dir``; returns the paths."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return [_save(tracking_figure(logs, scenario, model), out_dir / 'tracking.png')]
