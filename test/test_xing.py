@@ -56,3 +56,13 @@ def test_without_singularity_avoidance_the_arm_becomes_singular():
     assert runs['amp_no_avoidance']['sigma_min_min'] < 0.05
     assert runs['amp_avoidance']['sigma_min_min'] > 0.1
     assert runs['amp_no_avoidance']['max_error_xy_m'] > runs['amp_avoidance']['max_error_xy_m']
+
+
+@pytest.mark.parametrize('name', ['matrix_circle_0.25_a', 'matrix_circle_0.25_b'])
+def test_on_either_robot_amp_moves_the_base_least_and_tracks_best(name):
+    runs = tracking(name)
+    amp = runs['amp']
+    for other in ('pinv', 'task_sharing', 'traditional'):
+        assert amp['base_active_any_s'] < 0.5 * runs[other]['base_active_any_s'], other
+        assert amp['max_error_xy_m'] < runs[other]['max_error_xy_m'], other
+        assert runs[other]['joint_limit_margin_rad'] > 0.0

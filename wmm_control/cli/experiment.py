@@ -31,10 +31,13 @@ from wmm_control.experiments.scenario import load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers import TaskSharingParams
 
-__all__ = ['main', 'run_experiment', 'format_table', 'MAIN_JOB']
+__all__ = ['main', 'run_experiment', 'format_table', 'format_matrix', 'MAIN_JOB', 'MATRIX']
 
 #: The scenarios of ``wmm_experiment all``, the README's main job: both papers' experiments.
-MAIN_JOB = ('sorour_table2', 'xing_circle_0.10', 'xing_circle_0.25', 'xing_pose', 'xing_singularity')
+MAIN_JOB = ('sorour_table2', 'xing_circle_0.10', 'xing_circle_0.25', 'xing_pose', 'xing_singularity',
+            'matrix_circle_0.25_a', 'matrix_circle_0.25_b')
+#: The scenarios of the one table no paper has: one circle, both robots, all four methods.
+MATRIX = ('matrix_circle_0.25_a', 'matrix_circle_0.25_b')
 
 
 def _run_direct(scenario, run, progress):
@@ -139,6 +142,22 @@ def format_tracking_table(summary):
     return '\n'.join(lines)
 
 
+def format_matrix(summaries):
+    """One table over scenarios of trajectories: per robot and method, base active time and RMS,
+    largest end-effector error, joint-limit margin, resolver cycle time."""
+    head = (f'{"robot":<11}{"method":<14}{"base active [s]":>16}{"base RMS vx, vy [cm/s], ω [°/s]":>33}'
+            f'{"max err xy [mm]":>16}{"joint margin [rad]":>19}{"cycle [µs]":>11}')
+    lines = [head, '-' * len(head)]
+    for summary in summaries:
+        for name, run in summary['runs'].items():
+            m = run['tracking']
+            rms = m['base_rms']
+            lines.append(f'{summary["robot"]:<11}{name:<14}{m["base_active_any_s"]:>16.2f}{rms[0] * 100:>13.2f}'
+                         f'{rms[1] * 100:>9.2f}{np.degrees(rms[2]):>11.3f}{m["max_error_xy_m"] * 1e3:>16.1f}'
+                         f'{_f(m["joint_limit_margin_rad"], ".3f"):>19}{run["resolver_cycle_median_us"]:>11.0f}')
+    return '\n'.join(lines)
+
+
 def format_table(summary):
     """A plain-text table of the summary: per run and goal, area, final errors, entry time, footprint."""
     if any('tracking' in run for run in summary['runs'].values()):
@@ -202,6 +221,7 @@ def _run_one(scenario, args, out):
         summary['figures'] = [str(p) for p in _figures(scenario, logs, summary, out)]
     (out / 'metrics.json').write_text(json.dumps(summary, indent=2, default=float) + '\n')
     print(format_table(summary))
+    return summary
     print(f'{total_sim:.0f} simulated s in {elapsed:.1f} s wall ({total_sim / elapsed:.1f}x), peak memory '
           f'{summary["peak_memory_mb"]:.0f} MB; wrote {out / "metrics.json"}')
 
@@ -220,12 +240,17 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         names = [args.scenario] if args.scenario else (list(MAIN_JOB) if args.name == 'all' else [args.name])
+        matrix = {}
         for name in names:
             scenario = load_scenario(name)
             if len(names) > 1 and args.runs and not set(args.runs.split(',')) & {r['name'] for r in scenario.runs}:
                 print(f'\n{scenario.name}: no run named {args.runs}; skipped')
                 continue
-            _run_one(scenario, args, Path(args.out) / scenario.name if len(names) > 1 else Path(args.out))
+            summary = _run_one(scenario, args, Path(args.out) / scenario.name if len(names) > 1 else Path(args.out))
+            if scenario.name in MATRIX:
+                matrix[scenario.name] = summary
+        if len(matrix) == len(MATRIX):
+            print(f'\nThe R = 0.25 m circle on both robots with all four methods:\n{format_matrix(list(matrix.values()))}')
     except WmmError as exc:
         print(f'wmm_experiment: {type(exc).__name__}: {exc}', file=sys.stderr)
         return 2

@@ -220,6 +220,8 @@ TRAJECTORY_METRIC_KEYS = {
     'max_orientation_error_rad': 'largest rotation angle between the orientation and the reference [rad]',
     'sigma_min_min': 'smallest σ_min of the arm Jacobian (the task rows) over the run',
     'first_base_activation_s': 'time of the first non-zero base command [s] (null: never)',
+    'joint_limit_margin_rad': 'smallest distance of an arm joint to a position limit over the run [rad] '
+                              '(joints without limits left out)',
 }
 
 
@@ -250,7 +252,14 @@ def trajectory_metrics(log, scenario, model, dt, skip_s=1.0):
         'max_orientation_error_rad': float(np.max(np.linalg.norm(rot_err[late], axis=1))),
         'sigma_min_min': float(np.min(log.sigma_min)),
         'first_base_activation_s': float(log.t[np.argmax(any_moving)]) if np.any(any_moving) else None,
+        'joint_limit_margin_rad': _joint_limit_margin(log.q_arm, model.config.arm),
     }
+
+
+def _joint_limit_margin(q, arm):
+    margin = np.minimum(q - arm.position_lower, arm.position_upper - q)
+    finite = np.isfinite(margin)
+    return float(np.min(margin[finite])) if np.any(finite) else None
 
 
 def run_limit_report(log, robot, dt, tol=1e-9):
