@@ -16,6 +16,7 @@ topics (``--engine nodes``, the default: ``wmm_sim`` in lockstep, ``swmr_control
 
 import argparse
 import dataclasses
+import gc
 import json
 import resource
 import sys
@@ -221,9 +222,9 @@ def _run_one(scenario, args, out):
         summary['figures'] = [str(p) for p in _figures(scenario, logs, summary, out)]
     (out / 'metrics.json').write_text(json.dumps(summary, indent=2, default=float) + '\n')
     print(format_table(summary))
-    return summary
     print(f'{total_sim:.0f} simulated s in {elapsed:.1f} s wall ({total_sim / elapsed:.1f}x), peak memory '
           f'{summary["peak_memory_mb"]:.0f} MB; wrote {out / "metrics.json"}')
+    return summary
 
 
 def main(argv=None):
@@ -249,6 +250,7 @@ def main(argv=None):
             summary = _run_one(scenario, args, Path(args.out) / scenario.name if len(names) > 1 else Path(args.out))
             if scenario.name in MATRIX:
                 matrix[scenario.name] = summary
+            gc.collect()         # the runs' logs and figures are done with: keep the peak memory down
         if len(matrix) == len(MATRIX):
             print(f'\nThe R = 0.25 m circle on both robots with all four methods:\n{format_matrix(list(matrix.values()))}')
     except WmmError as exc:
