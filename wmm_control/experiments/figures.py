@@ -17,6 +17,7 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
+import pinocchio as pin
 
 from wmm_control.experiments.metrics import pose_error_norm
 
@@ -343,20 +344,28 @@ def write_figures(logs, metrics, scenario, model, out_dir, render_label=None, zo
 
 # ---------------------------------------------------------------------- trajectory scenarios
 def tracking_figure(logs, scenario, model):
-    """Xing et al. Figs 7, 10, 11: per run, the end effector's x-y error against the reference
-    (ground truth), the commanded base velocity, and σ_min of the arm Jacobian, vs time."""
-    fig, axes = _stacked_axes(3, f'{scenario.name}: tracking, base commands, distance to singularity')
+    """Xing et al. Figs 7, 10, 11 (and 13–14 for the pose run): per run, the end effector's x-y error
+    against the reference (ground truth), the commanded base velocity, σ_min of the arm Jacobian,
+    and for the pose run the rotation error about the world y axis, vs time."""
+    pose = scenario.trajectory.get('kind') == 'pose'
+    fig, axes = _stacked_axes(4 if pose else 3, f'{scenario.name}: tracking, base commands, distance to singularity')
     reference = scenario.reference(model)
     for label, log in logs.items():
-        ref = np.array([reference(t).position for t in log.t])
+        targets = [reference(t) for t in log.t]
+        ref = np.array([tg.position for tg in targets])
         err = np.linalg.norm(ref[:, :2] - log.ee_position[:, :2], axis=1)
         axes[0].plot(log.t, err * 1e3, label=label)
+        if pose:
+            rot = [pin.log3(tg.rotation @ r.T)[1] for tg, r in zip(targets, log.ee_rotation)]
+            axes[3].plot(log.t, np.degrees(rot), label=label)
         axes[1].plot(log.t, np.linalg.norm(log.base_reference[:, :2], axis=1) * 1e2, label=f'{label}: |v| [cm/s]')
         axes[1].plot(log.t, np.degrees(log.base_reference[:, 2]), ls='--', label=f'{label}: ω [°/s]')
         axes[2].plot(log.t, log.sigma_min, label=label)
     axes[0].set_ylabel('x-y error [mm]')
     axes[1].set_ylabel('base command')
     axes[2].set_ylabel('σ_min(J_m) [-]')
+    if pose:
+        axes[3].set_ylabel('rotation error about y [°]')
     for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize='small', loc='upper right')

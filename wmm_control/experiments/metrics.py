@@ -222,6 +222,10 @@ TRAJECTORY_METRIC_KEYS = {
     'first_base_activation_s': 'time of the first non-zero base command [s] (null: never)',
     'joint_limit_margin_rad': 'smallest distance of an arm joint to a position limit over the run [rad] '
                               '(joints without limits left out)',
+    'base_integral_error_m': "Xing's integral of the base's kinematic error, |x| and |y| [m]: the mean, "
+                             'over the time the base is commanded (first to last non-zero command), of the '
+                             'distance between the path its commands describe and its true path (null: the '
+                             'base never moved)',
 }
 
 
@@ -253,7 +257,25 @@ def trajectory_metrics(log, scenario, model, dt, skip_s=1.0):
         'sigma_min_min': float(np.min(log.sigma_min)),
         'first_base_activation_s': float(log.t[np.argmax(any_moving)]) if np.any(any_moving) else None,
         'joint_limit_margin_rad': _joint_limit_margin(log.q_arm, model.config.arm),
+        'base_integral_error_m': _base_integral_error(log, any_moving, dt),
     }
+
+
+def _base_integral_error(log, moving, dt):
+    """Mean |commanded path − true path| (x, y) over the commanded window, the commands integrated
+    from the true pose at its start (Xing §4.3's integral base error)."""
+    idx = np.flatnonzero(moving)
+    if idx.size == 0:
+        return None
+    first, last = idx[0], idx[-1] + 1
+    pose = log.base_pose[first].astype(float).copy()
+    errors = []
+    for k in range(first, min(last, len(log.t) - 1)):
+        vx, vy, w = log.base_reference[k]
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        pose = pose + dt * np.array([c * vx - s * vy, s * vx + c * vy, w])
+        errors.append(np.abs(pose[:2] - log.base_pose[k + 1, :2]))
+    return np.mean(errors, axis=0).tolist() if errors else None
 
 
 def _joint_limit_margin(q, arm):
