@@ -169,4 +169,5 @@ def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', p
         if progress is not None:
             progress(1)
     log.wall_time_s = time.perf_counter() - t0
+    log.sim_counters = {g: dict(c) for g, c in world.counters.items()}
     return log.freeze()

@@ -212,6 +212,36 @@ def test_uniform_scaling_keeps_the_direction(robot):
     assert cos > 1 - 1e-9
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.floats(0.0, 3.0), st.floats(0.1, 20.0))
+def test_braking_rate_is_the_largest_that_stops_in_time(distance, accel):
+    """Brute force: braking from v at a·dt per period covers at most the distance, and a rate 1e-9
+    faster would not stop in time."""
+    lim = CommandLimits([10.0], [accel], [-np.inf], [distance], DT)
+    v = float(lim.braking_rates([0.0])[1][0])
+
+    def covered(rate):
+        total = 0.0
+        while rate > 0.0:
+            total += rate * DT
+            rate -= accel * DT
+        return total
+    assert covered(v) <= distance * (1 + 1e-12) + 1e-15
+    assert covered(v + 1e-9 + 1e-9 * v) > distance
+
+
+def test_a_joint_next_to_its_limit_cannot_pass_it_in_one_period(robot):
+    """Within a·dt² of a limit the braking rate would cover more than the distance left in one
+    period; the bound is then that distance over dt."""
+    lim = _limits(robot)
+    position = np.concatenate((np.zeros(3), robot.arm.dexterous))
+    position[3] = robot.arm.position_upper[0] - 1e-4
+    down, up = lim.braking_rates(position)
+    assert up[3] * DT <= 1e-4 + 1e-15 and up[3] > 0.0
+    out = lim.apply(np.full(10, 5.0), position, np.zeros(10))
+    assert position[3] + out.command[3] * DT <= robot.arm.position_upper[0]
+
+
 def test_many_cycles_never_pass_a_limit_even_for_unreachable_goals(steerable_model, robot):
     """Integrate the arm and an ideal base for 600 periods towards goals, two of them unreachable."""
     rng = np.random.default_rng(3)
@@ -273,12 +303,7 @@ def _reference_apply(lim, primary, position, previous, secondary, previous_secon
         return s, set(np.flatnonzero(s_each <= s + 1e-12).tolist())
 
     adt = lim.acceleration * lim.dt
-    half = 0.5 * adt
-    d_up = np.maximum(lim.position_upper - position, 0.0)
-    d_dn = np.maximum(position - lim.position_lower, 0.0)
-    up = np.where(np.isfinite(lim.position_upper), -half + np.sqrt(half * half + 2.0 * lim.acceleration * d_up), np.inf)
-    down = np.where(np.isfinite(lim.position_lower), -half + np.sqrt(half * half + 2.0 * lim.acceleration * d_dn),
-                    np.inf)
+    down, up = lim.braking_rates(position)     # checked on its own against brute force below
     bad = ~np.isfinite(primary) | ~np.isfinite(secondary)
     primary, secondary = np.where(bad, 0.0, primary), np.where(bad, 0.0, secondary)
     limited = set(np.flatnonzero(bad).tolist())

@@ -92,6 +92,7 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True):
             'sim_to_wall_ratio': float(log.t[-1] + dt) / log.wall_time_s if log.wall_time_s > 0 else None,
             'resolver_cycle_median_us': float(np.median(log.cycle_time_s) * 1e6),
             'limits_exceeded': run_limit_report(log, robot, dt, tol=1e-6),
+            'simulator_counters': log.sim_counters,
         }
         if scenario.trajectory is not None:
             entry['tracking'] = trajectory_metrics(log, scenario, model, dt)

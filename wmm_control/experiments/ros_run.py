@@ -222,6 +222,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
                                   f'(sim time {recorder.last_t:.3f} s)')
         recorder.flush()
         log.wall_time_s = time.perf_counter() - start
+        log.sim_counters = {g: dict(c) for g, c in sim.world.counters.items()}   # what /diagnostics reports
     finally:
         for node in nodes:
             executor.remove_node(node)

@@ -7,10 +7,11 @@ from
 * the velocity limit ``|u_i| ≤ v_i``;
 * the acceleration limit ``|u_i − u_i,prev| ≤ a_i dt`` (``u_prev``: the last command);
 * for arm joints, braking in time before a position limit (Xing eqs 7–8): the largest rate
-  from which braking at ``a_i``, one period at a time, stops the joint before the limit.
-  With distance ``D`` to the limit that rate is ``v = −a dt/2 + sqrt((a dt/2)² + 2 a D)``;
-  it satisfies ``v²/(2a) + v dt/2 = D``, so after a period at ``v`` the bound of the next
-  period is exactly ``v − a dt``: braking is always reachable within the acceleration limit.
+  from which braking at ``a_i``, one period at a time (the rates v, v − a dt, …, then rest),
+  stops the joint within the distance ``D`` to the limit (:func:`_braking_rate`; close to
+  ``v = −a dt/2 + sqrt((a dt/2)² + 2 a D)``, exactly ``D/dt`` within ``a dt²`` of the limit).
+  After a period at that rate, ``v − a dt`` is within the next period's bound: braking is
+  always reachable within the acceleration limit, and no period passes the limit.
 
 A command is the sum of a *primary* part (the end-effector task, and the arm compensation of
 Sorour eq 14) and a *secondary* part (the null-space pull to the dexterous posture):
@@ -249,14 +250,15 @@ class CommandLimits:
     def _braking(self, position):
         """:meth:`braking_rates` on a list of floats: (down, up) lists."""
         down, up = [], []
+        inv_dt = 1.0 / self.dt
         for x, lower, upper, has_lower, has_upper, half, two_a in zip(
                 position, self._lower, self._upper, self._has_lower, self._has_upper, self._half, self._two_a):
             # distances to the limits, max(·, 0) letting a NaN position through as np.maximum does
             d_up, d_dn = upper - x, x - lower
             d_up = 0.0 if d_up < 0.0 else d_up
             d_dn = 0.0 if d_dn < 0.0 else d_dn
-            up.append(-half + math.sqrt(half * half + two_a * d_up) if has_upper else math.inf)
-            down.append(-half + math.sqrt(half * half + two_a * d_dn) if has_lower else math.inf)
+            up.append(_braking_rate(d_up, half, two_a, inv_dt) if has_upper else math.inf)
+            down.append(_braking_rate(d_dn, half, two_a, inv_dt) if has_lower else math.inf)
         return down, up
 
     def _accel_interval(self, previous):
@@ -281,6 +283,31 @@ class CommandLimits:
             lower.append(lo)
             upper.append(hi)
         return lower, upper, forced
+
+
+def _braking_rate(distance, half, two_a, inv_dt):
+    """Largest rate v from which braking by a·dt per period, one period at a time, stops within ``distance``.
+
+    Braking from v covers ``dt (n + 1) v − a dt² n (n + 1)/2`` with ``n = ⌊v / (a dt)⌋`` (v, v − a dt,
+    …, the last rate below a dt, then rest): piecewise linear in v. The continuous bound
+    ``v²/(2a) + v dt/2 = D`` meets it at every multiple of a dt and lies above it in between, so
+    its ``n`` is right or one too high. From any v within this bound, ``v − a dt`` is within the
+    next period's bound: braking always stays within the acceleration limit, and ``v dt ≤ D``.
+    (``half`` = a dt/2, ``two_a`` = 2a, ``inv_dt`` = 1/dt.)
+    """
+    if not distance > 0.0:
+        return 0.0 if distance <= 0.0 else distance       # NaN passes through
+    adt = 2.0 * half
+    n = int((-half + math.sqrt(half * half + two_a * distance)) / adt)
+    for _ in range(3):
+        rate = (distance * inv_dt + adt * n * (n + 1) * 0.5) / (n + 1)
+        if rate < n * adt and n > 0:
+            n -= 1
+        elif rate >= (n + 1) * adt:
+            n += 1
+        else:
+            return rate
+    return rate
 
 
 def _clip(x, lower, upper):
