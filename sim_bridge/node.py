@@ -103,13 +103,13 @@ class SimNode(Node):
                 raise ConfigError(f'lockstep_groups: unknown groups {unknown}; this robot has {sorted(groups)}')
         self.fresh = {g: Freshness(self.p.command_timeout) for g in groups}
         self.timed_out = {g: True for g in groups}
-        self.subs = [self.create_subscription(Float64MultiArray, f'/{g}_controller/commands',
+        self.subs = [self.create_subscription(Float64MultiArray, f'{g}_controller/commands',
                                               lambda msg, g=g: self._on_command(g, msg), 10)
                      for g in groups]
-        self.pub_joints = self.create_publisher(JointState, '/joint_states', 10)
-        self.pub_ee = self.create_publisher(PoseStamped, '/ee_pose', 10)
-        self.pub_odom = self.create_publisher(Odometry, '/odom', 10)
-        self.pub_truth = self.create_publisher(Odometry, '/ground_truth/odom', 10)
+        self.pub_joints = self.create_publisher(JointState, 'joint_states', 10)
+        self.pub_ee = self.create_publisher(PoseStamped, 'ee_pose', 10)
+        self.pub_odom = self.create_publisher(Odometry, 'odom', 10)
+        self.pub_truth = self.create_publisher(Odometry, 'ground_truth/odom', 10)
         self.pub_clock = self.create_publisher(ClockMsg, '/clock', 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._arrived = set()
@@ -183,7 +183,7 @@ class SimNode(Node):
 
     def _lockstep_poll(self):
         if not self._started:
-            topics = [f'/{g}_controller/commands' for g in self.wait_groups]
+            topics = [f'{g}_controller/commands' for g in self.wait_groups]
             connected = all(self.count_publishers(t) > 0 for t in topics)
             if connected or time.monotonic() - self._wall_start > self.p.lockstep_timeout:
                 self._started = True

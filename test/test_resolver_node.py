@@ -280,3 +280,49 @@ def test_amp_tracks_a_trajectory_on_ee_reference_with_the_base_still():
         assert max(errors) < 2e-3 and np.linalg.norm(driver.ee_position() - np.array([p.x, p.y, p.z])) > 0.05
     finally:
         ros.close()
+
+
+def test_two_robots_side_by_side_in_their_own_namespaces():
+    """Every node in namespaces /r1 and /r2 in one domain: each robot reaches its own goal, and a
+    goal for one never moves the other (topic names are relative; the node names repeat)."""
+    ros = RosHarness()
+    try:
+        drivers, goals = {}, {'r1': (1.6, 0.4, 1.0), 'r2': (0.7, -0.8, 1.1)}
+        for ns in goals:
+            args = ['--ros-args', '-r', f'__ns:=/{ns}']
+            drivers[ns] = ros.add(NamespacedDriver(ros.context, ns))
+            ros.add(RedundancyResolverNode(context=ros.context, cli_args=args, parameter_overrides=overrides(
+                **LOCKSTEP_WAITS['redundancy_resolver'])))
+            ros.add(SwmrControllerNode(context=ros.context, cli_args=args,
+                                       parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller'])))
+            ros.add(SimNode(context=ros.context, cli_args=args, parameter_overrides=overrides(timing='lockstep')))
+        drivers['r1'].goal(goals['r1'])
+        assert ros.spin_until(lambda: all(d.sim_time() >= 10.0 for d in drivers.values()), timeout=90.0)
+        assert np.linalg.norm(drivers['r1'].ee_position() - goals['r1']) < 0.01
+        start = np.array([0.708, 0.004, 1.08])
+        assert np.linalg.norm(drivers['r2'].ee_position() - start) < 1e-6, 'r2 had no goal: it must not move'
+        drivers['r2'].goal(goals['r2'])
+        t2 = drivers['r2'].sim_time()
+        assert ros.spin_until(lambda: drivers['r2'].sim_time() >= t2 + 10.0, timeout=90.0)
+        assert np.linalg.norm(drivers['r2'].ee_position() - goals['r2']) < 0.01
+    finally:
+        ros.close()
+
+
+class NamespacedDriver(Driver):
+    """The test driver inside a namespace (relative topic names resolve there)."""
+
+    def __init__(self, context, ns):
+        Node.__init__(self, 'test_driver', namespace=ns, context=context)
+        self.pub_goal = self.create_publisher(PoseStamped, 'goal_pose', 10)
+        self.arm, self.refs, self.feasible, self.diag, self.ee = [], [], [], [], []
+        self.create_subscription(PoseStamped, 'ee_pose', self.ee.append, 10)
+
+
+def test_a_renamed_node_keeps_its_defaults():
+    ros = RosHarness()
+    try:
+        node = ros.add(RedundancyResolverNode(context=ros.context, cli_args=['--ros-args', '-r', '__node:=left_arm']))
+        assert node.get_name() == 'left_arm' and node.p.lambda_p == 1.7
+    finally:
+        ros.close()

@@ -6,6 +6,7 @@ that file, so the YAML is the one place a default is written.
 """
 
 import math
+from pathlib import Path
 from dataclasses import dataclass
 from types import SimpleNamespace
 
@@ -89,7 +90,9 @@ def declare_parameters(node, yaml_name, specs):
         ConfigError: a default is missing from the YAML, a value is out of range or not
             an allowed choice (the message names the parameter and the allowed values).
     """
-    defaults = load_defaults(yaml_name, node.get_name())
+    # The section is the node's default name, the file's stem: a node renamed at start-up
+    # (``-r __node:=left_base``) keeps its defaults; ``--params-file`` overrides go by name.
+    defaults = load_defaults(yaml_name, Path(yaml_name).stem)
     values = {}
     for spec in specs:
         if spec.name not in defaults:

@@ -93,8 +93,8 @@ class GoalSequencerNode(Node):
         super().__init__('goal_sequencer', **kwargs)
         self.p = declare_parameters(self, 'goal_sequencer.yaml', PARAMS)
         self.scenario = load_scenario(self.p.scenario)
-        self.pub = self.create_publisher(PoseStamped, '/goal_pose', 10)
-        self.pub_ref = self.create_publisher(MultiDOFJointTrajectory, '/ee_reference', 10)
+        self.pub = self.create_publisher(PoseStamped, 'goal_pose', 10)
+        self.pub_ref = self.create_publisher(MultiDOFJointTrajectory, 'ee_reference', 10)
         self._trajectory = None
         if self.scenario.trajectory is not None:
             self._trajectory = self.scenario.reference(KinematicModel(self.scenario.robot))

@@ -76,15 +76,15 @@ class MecanumControllerNode(Node):
         self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0}
         self._next_diag = 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.pub_wheels = self.create_publisher(Float64MultiArray, '/wheel_controller/commands', 10)
-        self.pub_feasible = self.create_publisher(TwistStamped, '/base/feasible_twist', 10)
+        self.pub_wheels = self.create_publisher(Float64MultiArray, 'wheel_controller/commands', 10)
+        self.pub_feasible = self.create_publisher(TwistStamped, 'base/feasible_twist', 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
         self.watchdog = JointStateWatchdog(
             self, p.joint_state_timeout, p.period, steady, lambda: self.pub_wheels.publish(float_array(np.zeros(4))),
             'zero wheel rates; will restart from the measured wheel rates')
-        self.create_subscription(TwistStamped, '/base/reference', self._on_reference, 10)
-        self.create_subscription(JointState, '/joint_states', self._on_joint_states, 10)
+        self.create_subscription(TwistStamped, 'base/reference', self._on_reference, 10)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, 10)
         lim = self.controller.params
         self.get_logger().info(
             f'Mecanum base controller, robot {robot.name}: t_s {p.period} s, |v| ≤ {list(lim.velocity_limit)}, '

@@ -128,7 +128,7 @@ PARAMS = (
 )
 
 
-REFERENCE = '/ee_reference'
+REFERENCE = 'ee_reference'
 
 
 def _twist_values(twist):
@@ -168,17 +168,17 @@ class RedundancyResolverNode(Node):
         self._next_diag = 0.0
         self.counters = {'cycles': 0, 'goals': 0, 'goals_rejected': 0, 'compensation_dropped': 0,
                          'stale_cycles': 0}
-        self.pub_arm = self.create_publisher(Float64MultiArray, '/arm_controller/commands', 10)
-        self.pub_base = self.create_publisher(TwistStamped, '/base/reference', 10)
+        self.pub_arm = self.create_publisher(Float64MultiArray, 'arm_controller/commands', 10)
+        self.pub_base = self.create_publisher(TwistStamped, 'base/reference', 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(PoseStamped, '/goal_pose', self._on_goal, 10)
-        self.create_subscription(MultiDOFJointTrajectory, '/ee_reference', self._on_reference, 10)
-        self.create_subscription(JointState, '/joint_states', self._on_joint_states, 10)
-        self.create_subscription(Odometry, '/odom', self._on_odom, 10)
+        self.create_subscription(PoseStamped, 'goal_pose', self._on_goal, 10)
+        self.create_subscription(MultiDOFJointTrajectory, 'ee_reference', self._on_reference, 10)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, 10)
+        self.create_subscription(Odometry, 'odom', self._on_odom, 10)
         if p.ee_feedback == 'ground_truth':
-            self.create_subscription(PoseStamped, '/ee_pose', self._on_ee_pose, 10)
+            self.create_subscription(PoseStamped, 'ee_pose', self._on_ee_pose, 10)
         if self.resolver.uses_compensation:
-            self.create_subscription(TwistStamped, '/base/feasible_twist', self._on_feasible, 10)
+            self.create_subscription(TwistStamped, 'base/feasible_twist', self._on_feasible, 10)
             self._wait = (self.create_timer(p.compensation_timeout, self._compensation_timeout, clock=self._steady,
                                             autostart=False) if p.compensation_timeout > 0 else None)
         self.watchdog = self.create_timer(p.period, self._watchdog, clock=self._steady)
@@ -192,7 +192,7 @@ class RedundancyResolverNode(Node):
         return self._steady.now().nanoseconds * 1e-9
 
     # ------------------------------------------------------------------ inputs
-    def _reject_goal(self, reason, topic='/goal_pose'):
+    def _reject_goal(self, reason, topic='goal_pose'):
         self.counters['goals_rejected'] += 1
         self.get_logger().warn(f'rejected {topic}: {reason}; holding still', throttle_duration_sec=1.0)
         self.target = None

@@ -104,12 +104,12 @@ class SwmrControllerNode(Node):
         self._last = None
         self._ref_stale_logged = False
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.pub_steer = self.create_publisher(Float64MultiArray, '/steer_controller/commands', 10)
-        self.pub_drive = self.create_publisher(Float64MultiArray, '/drive_controller/commands', 10)
-        self.pub_feasible = self.create_publisher(TwistStamped, '/base/feasible_twist', 10)
+        self.pub_steer = self.create_publisher(Float64MultiArray, 'steer_controller/commands', 10)
+        self.pub_drive = self.create_publisher(Float64MultiArray, 'drive_controller/commands', 10)
+        self.pub_feasible = self.create_publisher(TwistStamped, 'base/feasible_twist', 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(TwistStamped, '/base/reference', self._on_reference, 10)
-        self.create_subscription(JointState, '/joint_states', self._on_joint_states, 10)
+        self.create_subscription(TwistStamped, 'base/reference', self._on_reference, 10)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, 10)
         self.watchdog = self.create_timer(p.period, self._check_joint_states, clock=self._steady)
         # Started for each joint state that waits for its reference, cancelled by the cycle.
         self._wait_timer = (self.create_timer(p.reference_wait, self._run_pending, clock=self._steady,
