@@ -527,3 +527,30 @@ def test_steer_rate_term_of_the_drive(geometry):
     for o in run(ctrl, [(0.3, 0.3, 0.0)] * 30):
         rolling = geometry.rolling_rows(o.beta_ref) @ o.twist_feasible / R_W
         np.testing.assert_allclose(o.phi_dot_ref - rolling, 0.5 * o.beta_dot_ref, atol=1e-12)
+
+
+def test_a_stale_reference_brakes_at_the_acceleration_limit():
+    """brake=True: rest within max |v_i|/a_i + one period, never decelerating beyond the limits."""
+    from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
+    from wmm_control.robot_config import load_robot
+    robot = load_robot('steerable')
+    ctrl = SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
+    for _ in range(400):
+        out = ctrl.step([0.8, 0.0, 0.0])
+    v0 = out.twist_feasible.copy()
+    assert v0[0] > 0.79
+    amax = np.array(ctrl.params.base_accel_limit)
+    allowed = int(np.ceil(np.max(np.abs(v0) / amax) / ctrl.params.dt)) + 1
+    twists = [v0]
+    for _ in range(allowed):
+        twists.append(ctrl.step([0.0, 0.0, 0.0], brake=True).twist_feasible.copy())
+    steps = np.abs(np.diff(twists, axis=0))
+    assert np.all(steps <= amax * ctrl.params.dt + 1e-12)
+    assert np.allclose(twists[-1], 0.0)
+    # the K_p law alone (no brake) is still moving after the same time
+    ctrl2 = SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
+    for _ in range(400):
+        ctrl2.step([0.8, 0.0, 0.0])
+    for _ in range(allowed):
+        out2 = ctrl2.step([0.0, 0.0, 0.0])
+    assert np.linalg.norm(out2.twist_feasible) > 0.05

@@ -669,7 +669,7 @@ class SwmrController:
         return x, status, elapsed
 
     # ------------------------------------------------------------------ step
-    def step(self, twist_ref, beta_meas=None, beta_dot_meas=None):
+    def step(self, twist_ref, beta_meas=None, beta_dot_meas=None, brake=False):
         """One control period.
 
         Args:
@@ -682,6 +682,9 @@ class SwmrController:
                 steering followed the last command exactly they equal the commanded angles
                 and change nothing.
             beta_dot_meas: measured steer rates [rad/s] to resync, optional. Shape (N,).
+            brake: stop as fast as the limits allow (a stale reference): the twist decelerates
+                uniformly, its binding component at its acceleration limit, instead of
+                following the K_p law; the base is at rest within max |v_i|/a_i + one period.
 
         Returns:
             :class:`SwmrOutput`.
@@ -749,9 +752,13 @@ class SwmrController:
         amax = p.base_accel_limit
         twist = self._twist.tolist()
         goal = (0.0, 0.0, 0.0) if stopped else (vx, vy, wz)
-        acc = [p.kp * (g - v) for g, v in zip(goal, twist)]
-        k = min(1.0, amax[0] / max(abs(acc[0]), 1e-300), amax[1] / max(abs(acc[1]), 1e-300),
-                amax[2] / max(abs(acc[2]), 1e-300))
+        if brake:
+            acc = [-v for v in twist]          # full braking along the twist, scaled to the limits below
+            k = min(1.0 / dt, *(am / max(abs(ac), 1e-300) for ac, am in zip(acc, amax)))
+        else:
+            acc = [p.kp * (g - v) for g, v in zip(goal, twist)]
+            k = min(1.0, amax[0] / max(abs(acc[0]), 1e-300), amax[1] / max(abs(acc[1]), 1e-300),
+                    amax[2] / max(abs(acc[2]), 1e-300))
         acc = [ac * k for ac in acc]
         if stopped and all(abs(v) <= am * dt for v, am in zip(twist, amax)):
             acc = [-v / dt for v in twist]   # the last step to rest, within the limits

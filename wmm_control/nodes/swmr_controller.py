@@ -20,9 +20,9 @@ with a reference of the same stamp therefore gets its feasible twist in the same
 and a reference published by hand (stamp 0) still drives the base, one short wait later.
 The cycle closes on the measured steer angles.
 
-Safety: the reference used is zero when the latest one is older than ``reference_timeout``
-(by this node's clock at receipt): the drive ramps to zero within the limits and the steer
-angles are held. References beyond ``base_velocity_limit`` are scaled into it by the core;
+Safety: when the latest reference is older than ``reference_timeout`` (by this node's clock
+at receipt) the base brakes to rest at its acceleration limits (at rest within |v|/a + one
+period) and the steer angles are held. References beyond ``base_velocity_limit`` are scaled into it by the core;
 non-finite ones, or ones in another frame, are rejected. When joint states stop for
 ``joint_state_timeout`` (steady clock, so a paused sim clock cannot hide it), zero steer and
 drive rates are published, and the controller re-reads the measured steer angles when they
@@ -192,14 +192,15 @@ class SwmrControllerNode(Node):
         if self.need_resync:
             self.controller.reset(beta)
             self.need_resync = False
-        if self.ref_fresh.fresh(now):
+        fresh = self.ref_fresh.fresh(now)
+        if fresh:
             reference = self.reference
         else:
             reference = np.zeros(3)
             if not self._ref_stale_logged and np.any(self.reference):
-                self.get_logger().warn(f'/base/reference older than {self.p.reference_timeout} s: stopping')
+                self.get_logger().warn(f'/base/reference older than {self.p.reference_timeout} s: braking to rest')
                 self._ref_stale_logged = True
-        out = self.controller.step(reference, beta_meas=beta)
+        out = self.controller.step(reference, beta_meas=beta, brake=not fresh)
         if out.status == 'solver_failure':
             self.get_logger().error(f'ICR QP failed ({out.qp_status}): steering held, drive ramping down',
                                     throttle_duration_sec=1.0)
