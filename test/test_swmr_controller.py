@@ -554,3 +554,17 @@ def test_a_stale_reference_brakes_at_the_acceleration_limit():
     for _ in range(allowed):
         out2 = ctrl2.step([0.0, 0.0, 0.0])
     assert np.linalg.norm(out2.twist_feasible) > 0.05
+
+
+def test_measured_steer_rates_beyond_the_limit_never_give_commands_beyond_it():
+    from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
+    from wmm_control.robot_config import load_robot
+    robot = load_robot('steerable')
+    ctrl = SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
+    limit = ctrl.params.steer_rate_limit
+    rates = []
+    for k in range(60):
+        glitch = np.array([3.0, -3.0, 3.0, -3.0]) if k == 0 else None
+        out = ctrl.step([0.2, 0.3, 0.4], beta_meas=ctrl.beta, beta_dot_meas=glitch)
+        rates.append(out.beta_dot_ref)
+    assert np.max(np.abs(rates)) <= limit + 1e-12

@@ -681,7 +681,8 @@ class SwmrController:
                 commanded rate β̇ stays the reference of the acceleration limit). When the
                 steering followed the last command exactly they equal the commanded angles
                 and change nothing.
-            beta_dot_meas: measured steer rates [rad/s] to resync, optional. Shape (N,).
+            beta_dot_meas: measured steer rates [rad/s] to resync, optional; clipped into
+                ±``steer_rate_limit`` (a glitch never yields a command beyond it). Shape (N,).
             brake: stop as fast as the limits allow (a stale reference): the twist decelerates
                 uniformly, its binding component at its acceleration limit, instead of
                 following the K_p law; the base is at rest within max |v_i|/a_i + one period.
@@ -699,7 +700,9 @@ class SwmrController:
             self._beta = as_finite_vector(beta_meas, n, 'beta_meas').copy()
             self._icr = self._icr_of_beta(self._beta, like=self._icr.z)
         if beta_dot_meas is not None:
-            self._beta_dot = as_finite_vector(beta_dot_meas, n, 'beta_dot_meas').copy()
+            # a measured rate beyond the limit (an encoder glitch) is not a state to continue from
+            limit = p.steer_rate_limit
+            self._beta_dot = np.clip(as_finite_vector(beta_dot_meas, n, 'beta_dot_meas'), -limit, limit)
 
         data = self._problem(vx, vy, wz)
         x_ref, (e1, e2), a, lb, rate_lo, rate_hi, _, route, stopped = data
