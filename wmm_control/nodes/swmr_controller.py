@@ -44,8 +44,8 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.errors import ConfigError
 from wmm_control.nodes.common import (
-    Freshness, Param, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node,
-    seconds)
+    Freshness, Param, StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array,
+    run_node, seconds)
 
 __all__ = ['SwmrControllerNode', 'main']
 
@@ -94,12 +94,10 @@ class SwmrControllerNode(Node):
                             base_accel_limit=tuple(p.base_accel_limit))
         self.controller = SwmrController(geometry, params)
         self.reference = np.zeros(3)
-        self._ref_stamp = None
         self.ref_fresh = Freshness(p.reference_timeout)
         self.js_fresh = Freshness(p.joint_state_timeout)     # steady clock
         self.need_resync = True
         self._steer_index = {}          # tuple of joint names -> indices of the steer joints, or None
-        self._pending = None            # (stamp, β_meas) of a joint state waiting for its reference
         self._next_diag = 0.0
         self._last = None
         self._ref_stale_logged = False
@@ -112,8 +110,8 @@ class SwmrControllerNode(Node):
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, 10)
         self.watchdog = self.create_timer(p.period, self._check_joint_states, clock=self._steady)
         # Started for each joint state that waits for its reference, cancelled by the cycle.
-        self._wait_timer = (self.create_timer(p.reference_wait, self._run_pending, clock=self._steady,
-                                              autostart=False) if p.reference_wait > 0 else None)
+        # One cycle per joint state, run with the reference of the same stamp (see the module doc).
+        self.exchange = StampedExchange(self, p.reference_wait, self._cycle, self._steady)
         self.get_logger().info(f'steerable base controller: {n} modules, t_s {p.period} s, '
                                f'β̇ ≤ {p.steer_rate_limit} rad/s, β̈ ≤ {p.steer_accel_limit} rad/s²')
 
@@ -133,11 +131,9 @@ class SwmrControllerNode(Node):
             self.get_logger().warn('/base/reference: linear.z, angular.x, angular.y are ignored (planar base)',
                                    throttle_duration_sec=10.0)
         self.reference = ref
-        self._ref_stamp = _stamp_key(msg.header.stamp)
         self.ref_fresh.mark(seconds(self.get_clock()))
         self._ref_stale_logged = False
-        if self._pending is not None and self._pending[0] == self._ref_stamp:
-            self._run_pending()
+        self.exchange.reference_received(msg.header.stamp)
 
     def _steer_state(self, msg):
         """Measured steer angles of a joint state, or None (logged) when it cannot give them."""
@@ -170,24 +166,13 @@ class SwmrControllerNode(Node):
         if beta is None:
             return
         self.js_fresh.mark(seconds(self._steady))
-        if self._pending is not None:         # the previous state's reference never came
-            self._run_pending()
-        stamp = _stamp_key(msg.header.stamp)
-        self._pending = (stamp, beta)
-        if self._ref_stamp == stamp or self._wait_timer is None:
-            self._run_pending()
-        else:
-            self._wait_timer.reset()
+        self.exchange.state_received(msg.header.stamp, beta)
 
     # ------------------------------------------------------------------ cycle
-    def _run_pending(self):
-        """Run the cycle of the waiting joint state with the latest reference (zero when stale)."""
-        if self._wait_timer is not None:
-            self._wait_timer.cancel()
-        if self._pending is None:
-            return
-        (sec, nanosec), beta = self._pending
-        self._pending = None
+    def _cycle(self, stamp, beta):
+        """The cycle of the joint state stamped ``stamp`` ((sec, nanosec)), measured steer angles ``beta``,
+        with the latest reference (braking when it is stale)."""
+        sec, nanosec = stamp
         now = seconds(self.get_clock())
         if self.need_resync:
             self.controller.reset(beta)
@@ -239,11 +224,6 @@ class SwmrControllerNode(Node):
                   'beta_ref': out.beta_ref, 'feasible_twist': out.twist_executed, 'reference': self.reference}
         return diagnostic_array(stamp, [diagnostic_status('swmr_controller', 'steerable base', level,
                                                           out.status, values)])
-
-
-def _stamp_key(stamp):
-    """A header stamp as a hashable, comparable ``(sec, nanosec)``."""
-    return (stamp.sec, stamp.nanosec)
 
 
 def main(args=None):
