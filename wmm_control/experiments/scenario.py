@@ -26,6 +26,7 @@ An angle may be written as an expression of ``pi`` (``pi/2``, ``-pi/2``, ``3*pi/
 import math
 import re
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -88,9 +89,10 @@ class Goal:
     end: float
     pose: np.ndarray
 
-    @property
+    @cached_property
     def target(self):
-        """The goal as a :class:`~wmm_control.resolvers.PoseTarget` set-point."""
+        """The goal as a :class:`~wmm_control.resolvers.PoseTarget` set-point (built once: a
+        scenario run asks for it every period)."""
         return PoseTarget.from_rpy(self.pose)
 
 

@@ -41,7 +41,6 @@ and reported on ``/diagnostics``.
 """
 
 import math
-import time
 
 import numpy as np
 import pinocchio as pin

@@ -44,8 +44,8 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.errors import ConfigError
 from wmm_control.nodes.common import (
-    Freshness, Param, StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array,
-    run_node, seconds)
+    Freshness, JointStateWatchdog, Param, StampedExchange, declare_parameters, diagnostic_array,
+    diagnostic_status, float_array, run_node, seconds)
 
 __all__ = ['SwmrControllerNode', 'main']
 
@@ -95,8 +95,6 @@ class SwmrControllerNode(Node):
         self.controller = SwmrController(geometry, params)
         self.reference = np.zeros(3)
         self.ref_fresh = Freshness(p.reference_timeout)
-        self.js_fresh = Freshness(p.joint_state_timeout)     # steady clock
-        self.need_resync = True
         self._steer_index = {}          # tuple of joint names -> indices of the steer joints, or None
         self._next_diag = 0.0
         self._last = None
@@ -108,7 +106,9 @@ class SwmrControllerNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(TwistStamped, 'base/reference', self._on_reference, 10)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, 10)
-        self.watchdog = self.create_timer(p.period, self._check_joint_states, clock=self._steady)
+        self.watchdog = JointStateWatchdog(
+            self, p.joint_state_timeout, p.period, self._steady, self._zero_rates,
+            'zero steer and drive rates; will resync from the measured angles')
         # Started for each joint state that waits for its reference, cancelled by the cycle.
         # One cycle per joint state, run with the reference of the same stamp (see the module doc).
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, self._steady)
@@ -165,7 +165,7 @@ class SwmrControllerNode(Node):
         beta = self._steer_state(msg)
         if beta is None:
             return
-        self.js_fresh.mark(seconds(self._steady))
+        self.watchdog.mark()
         self.exchange.state_received(msg.header.stamp, beta)
 
     # ------------------------------------------------------------------ cycle
@@ -174,9 +174,9 @@ class SwmrControllerNode(Node):
         with the latest reference (braking when it is stale)."""
         sec, nanosec = stamp
         now = seconds(self.get_clock())
-        if self.need_resync:
+        if self.watchdog.need_resync:
             self.controller.reset(beta)
-            self.need_resync = False
+            self.watchdog.need_resync = False
         fresh = self.ref_fresh.fresh(now)
         if fresh:
             reference = self.reference
@@ -202,14 +202,7 @@ class SwmrControllerNode(Node):
             self._next_diag = now + self.p.diagnostics_period
             self.pub_diag.publish(self._diagnostics(twist.header.stamp, out))
 
-    def _check_joint_states(self):
-        age = self.js_fresh.age(seconds(self._steady))
-        if not self.p.joint_state_timeout < age < float('inf'):
-            return
-        if not self.need_resync:
-            self.get_logger().warn(f'no /joint_states for {self.p.joint_state_timeout} s: zero steer and drive '
-                                   'rates; will resync from the measured angles')
-            self.need_resync = True
+    def _zero_rates(self):
         n = len(self.p.steer_joints)
         self.pub_steer.publish(float_array(np.zeros(n)))
         self.pub_drive.publish(float_array(np.zeros(n)))

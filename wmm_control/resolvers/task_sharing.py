@@ -111,7 +111,6 @@ class TaskSharingResolver(PoseServoResolver):
         return self._psi, MODES[target]
 
     def _resolve(self, jac, p_ref, e_pos, state):
-        p = self.params
         psi, mode = self._share(_norm(e_pos))
         activation = np.empty(N_BASE_TWIST + N_ARM)
         activation[:N_BASE_TWIST] = 1.0 - psi
