@@ -7,13 +7,16 @@ import pytest
 
 from wmm_control.cli.experiment import run_experiment
 from wmm_control.experiments.scenario import load_scenario
+from wmm_control.kinematics import KinematicModel
 
 
-def tracking(name):
-    _, summary = run_experiment(load_scenario(name), engine='direct', show_progress=False)
+def tracking(name, with_logs=False):
+    scenario = load_scenario(name)
+    logs, summary = run_experiment(scenario, engine='direct', show_progress=False)
     for run_name, run in summary['runs'].items():
         assert not any(run['limits_exceeded'].values()), (name, run_name, run['limits_exceeded'])
-    return {n: r['tracking'] for n, r in summary['runs'].items()}
+    runs = {n: r['tracking'] for n, r in summary['runs'].items()}
+    return (runs, logs, scenario) if with_logs else runs
 
 
 @pytest.fixture(scope='module')
@@ -52,10 +55,22 @@ def test_beyond_reach_the_base_helps_a_fraction_of_the_traditional_time(big_circ
 
 
 def test_without_singularity_avoidance_the_arm_becomes_singular():
-    runs = tracking('xing_singularity')
+    """§4.2: without avoidance σ_m collapses and tracking fails; with it σ_m stays above
+    0.8 σ_m,min. The test as printed (no anticipation) lets σ_m fall further while the slow base
+    (0.025 m/s²) takes over."""
+    runs, logs, scenario = tracking('xing_singularity', with_logs=True)
     assert runs['amp_no_avoidance']['sigma_min_min'] < 0.05
-    assert runs['amp_avoidance']['sigma_min_min'] > 0.1
-    assert runs['amp_no_avoidance']['max_error_xy_m'] > runs['amp_avoidance']['max_error_xy_m']
+    assert runs['amp_avoidance']['sigma_min_min'] >= 0.8 * 0.15
+    assert runs['amp_avoidance_as_printed']['sigma_min_min'] < runs['amp_avoidance']['sigma_min_min']
+    # Around the singularity (the paper: 8.35 s) the error against the ground truth grows
+    # without avoidance; later both runs carry the slip of a moving base (a few cm).
+    reference = scenario.reference(KinematicModel(scenario.robot))
+
+    def error_near_singularity(log):
+        window = (log.t >= 7.0) & (log.t < 11.0)
+        return max(np.linalg.norm(scenario.target(t, reference).position - p)
+                   for t, p in zip(log.t[window], log.ee_position[window]))
+    assert error_near_singularity(logs['amp_no_avoidance']) > 2 * error_near_singularity(logs['amp_avoidance'])
 
 
 @pytest.mark.parametrize('name', ['matrix_circle_0.25_a', 'matrix_circle_0.25_b'])

@@ -101,6 +101,8 @@ PARAMS = (
     Param('singularity_avoidance', 'Activate the base near a singularity (amp).', read_only=True),
     Param('sigma_rows', 'Rows of J_m for σ_m: task (the task rows) or position (amp).', choices=('task', 'position'),
           read_only=True),
+    Param('sigma_lookahead', 'Anticipation of the singularity test: σ_m + τ·min(σ̇_m, 0) [s] (amp).', lo=0.0,
+          hi=10.0, read_only=True),
     Param('setpoint_speed', 'Peak speed of the trajectory a goal becomes [m/s] (amp, traditional).', lo=1e-3,
           hi=10.0, read_only=True),
     Param('setpoint_accel', 'Peak acceleration of that trajectory [m/s²] (amp, traditional).', lo=1e-3, hi=100.0,

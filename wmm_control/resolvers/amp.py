@@ -39,11 +39,20 @@ class AmpParams(AccelerationParams):
             ``'position'`` (always the three position rows). On robot B at its start state
             σ_m over all six rows is 0.162, below §4.4's 0.19, so with ``'task'`` the base is
             active from t = 0 in the full-pose run; over the position rows it is 0.245.
+        sigma_lookahead: anticipation τ [s]: the singularity test uses σ_m + τ·min(σ̇_m, 0), σ̇_m
+            from the last period, so the base is switched on τ before σ_m would reach σ_m,min at
+            its current rate. 0 is the test as printed. The base takes seconds to take over (its
+            acceleration limit is 0.025 m/s², Table 1): with τ = 0 σ_m keeps falling for about
+            2.5 s after the activation, to 0.74 σ_m,min on the R = 0.25 m circle; τ = 0.5 s keeps
+            it above 0.9 σ_m,min.
     """
 
     sigma_min: float = 0.15
     singularity_avoidance: bool = True
     sigma_rows: str = 'task'
+    sigma_lookahead: float = 0.5
+
+    _allow_zero = AccelerationParams._allow_zero + ('sigma_lookahead',)
 
     def __post_init__(self):
         super().__post_init__()
@@ -64,6 +73,17 @@ class AmpResolver(AccelerationResolver):
     def __init__(self, robot='mecanum', params=None):
         super().__init__(robot, params if params is not None else AmpParams())
 
+    def reset(self):
+        super().reset()
+        self._last_sigma = None      # σ_m of the last period, for the anticipation of the test
+
+    def _anticipated_sigma(self, sigma):
+        """σ_m + τ·min(σ̇_m, 0): where σ_m is heading, τ ahead (``sigma_lookahead``)."""
+        last, self._last_sigma = self._last_sigma, sigma
+        if last is None:
+            return sigma
+        return sigma + self.params.sigma_lookahead * min(sigma - last, 0.0) / self.params.dt
+
     def _base_stop(self, task):
         """Eq (15): the base's accelerations while it is out of the task: full braking to rest."""
         qd, lo, hi = task['qd'], task['lower'], task['upper']
@@ -76,7 +96,7 @@ class AmpResolver(AccelerationResolver):
         n = len(task['qd'])
         arm_only = np.ones(n, dtype=bool)
         arm_only[:3] = False
-        sigma = task['sigma_position'] if p.sigma_rows == 'position' else task['sigma']
+        sigma = self._anticipated_sigma(task['sigma_position'] if p.sigma_rows == 'position' else task['sigma'])
         singular = p.singularity_avoidance and sigma < p.sigma_min
         reason = 'singularity' if singular else ''
         if not singular:
