@@ -17,8 +17,8 @@ W = np.pi / 20.0
 def test_sns_saturates_a_joint_and_gives_its_share_to_the_others():
     jac = np.array([[1.0, 1.0, 1.0]])
     lo, hi = np.array([-1.0, -1.0, -1.0]), np.array([0.5, 1.0, 1.0])
-    qdd, alpha, active, saturated = sns_accelerations(jac, np.array([2.5]), np.zeros(1), lo, hi,
-                                                      np.ones(3, bool), np.zeros(3))
+    qdd, alpha, active, saturated, _ = sns_accelerations(jac, np.array([2.5]), np.zeros(1), lo, hi,
+                                                         np.ones(3, bool), np.zeros(3))
     np.testing.assert_allclose(qdd, [0.5, 1.0, 1.0])
     assert alpha == 1.0 and saturated.tolist() == [True, False, False]
 
@@ -26,7 +26,7 @@ def test_sns_saturates_a_joint_and_gives_its_share_to_the_others():
 def test_sns_scales_an_infeasible_task():
     jac = np.array([[1.0, 1.0, 1.0]])
     lo, hi = -np.ones(3), np.ones(3)
-    qdd, alpha, _, _ = sns_accelerations(jac, np.array([5.0]), np.zeros(1), lo, hi, np.ones(3, bool), np.zeros(3))
+    qdd, alpha, *_ = sns_accelerations(jac, np.array([5.0]), np.zeros(1), lo, hi, np.ones(3, bool), np.zeros(3))
     assert alpha == pytest.approx(0.6)
     np.testing.assert_allclose(jac @ qdd, [3.0])
     assert np.all(qdd <= hi + 1e-12)
@@ -34,10 +34,34 @@ def test_sns_scales_an_infeasible_task():
 
 def test_sns_keeps_held_joints_at_their_given_acceleration():
     jac = np.array([[1.0, 1.0, 1.0]])
-    qdd, alpha, _, _ = sns_accelerations(jac, np.array([1.0]), np.zeros(1), -np.ones(3), np.ones(3),
-                                         np.array([False, True, True]), np.array([-0.4, 0.0, 0.0]))
+    qdd, alpha, *_ = sns_accelerations(jac, np.array([1.0]), np.zeros(1), -np.ones(3), np.ones(3),
+                                       np.array([False, True, True]), np.array([-0.4, 0.0, 0.0]))
     assert qdd[0] == -0.4 and alpha == 1.0
     np.testing.assert_allclose(jac @ qdd, [1.0])
+
+
+@pytest.mark.parametrize('rows', [3, 6])
+def test_tertiary_projector_is_the_printed_one(rows):
+    """Eqs (10)–(11): ``P_A = [I − ((I − S) P_N)⁺] P_N`` as printed, against the projector the
+    planner applies (over the active columns, ``I − (J S)⁺ (J S)``), for random Jacobians and
+    active sets: the base out, saturated arm joints out, everything in."""
+    rng = np.random.default_rng(rows)
+    resolver = AmpResolver('mecanum')
+    for active in ([False] * 3 + [True] * 7, [False] * 3 + [True, False, True, True, False, True, True], [True] * 10):
+        active = np.array(active)
+        jac = rng.normal(size=(rows, 10))
+        q_a = rng.normal(size=10)
+        q_a[:3] = 0.0
+        resolver.manipulability_acceleration = lambda qd: q_a
+        p_n = np.eye(10) - np.linalg.pinv(jac) @ jac
+        p_a = (np.eye(10) - np.linalg.pinv(np.diag((~active).astype(float)) @ p_n)) @ p_n
+        task = {'jac': jac, 'qd': np.zeros(10), 'lower': -1e9 * np.ones(10), 'upper': 1e9 * np.ones(10)}
+        q_t, beta = resolver._tertiary(task, np.zeros(10), active, np.linalg.pinv(jac[:, active]))
+        assert beta == 1.0
+        np.testing.assert_allclose(q_t, p_a @ q_a, atol=1e-10)
+        np.testing.assert_allclose(jac @ q_t, 0.0, atol=1e-10)
+        assert np.all(q_t[~active] == 0.0)
+        assert (np.linalg.norm(q_t) > 0.1) == (active.sum() > rows)     # else no null space is left
 
 
 def test_setpoint_trajectory_is_smooth_and_within_its_limits():

@@ -34,7 +34,7 @@ from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers.interface import N_ARM, Resolver, ResolverCommand, ResolverDiagnostics
 from wmm_control.resolvers.limits import CommandLimits
-from wmm_control.resolvers.pose_servo import _check_fields
+from wmm_control.resolvers.pose_servo import _check_fields, lapack_svd
 from wmm_control.resolvers.setpoint_trajectory import SetpointTrajectory
 from wmm_control.resolvers.sns import task_scale
 
@@ -154,8 +154,8 @@ class AccelerationResolver(Resolver):
         rows = self._rows
         self._position[3:] = state.q_arm
         lo_v, hi_v, _ = self.limits.box(self._position, qd)
-        sigma = float(np.linalg.svd(jac[rows, 3:], compute_uv=False)[-1])
-        sigma_position = sigma if rows.stop == 3 else float(np.linalg.svd(jac[:3, 3:], compute_uv=False)[-1])
+        sigma = float(lapack_svd(jac[rows, 3:], compute_uv=False)[-1])
+        sigma_position = sigma if rows.stop == 3 else float(lapack_svd(jac[:3, 3:], compute_uv=False)[-1])
         target_err = np.concatenate((target.position - pos, pin.log3(target.rotation @ rot.T)))
         return {'jac': jac[rows], 'xdd': xdd[rows], 'drift': model.jdot_qdot()[rows], 'qd': qd,
                 'lower': (lo_v - qd) / p.dt, 'upper': (hi_v - qd) / p.dt,
@@ -200,17 +200,27 @@ class AccelerationResolver(Resolver):
             compensated=False, cycle_time_s=time.perf_counter() - t0, **fields)
         return ResolverCommand(arm_velocity=qd[3:].copy(), base_twist=base.copy(), diagnostics=diag)
 
-    def _tertiary(self, task, qdd, active):
+    def _tertiary(self, task, qdd, active, active_pinv):
         """Eqs (10)–(11): ``β P_A q̈_A`` with ``P_A = [I − ((I − S) P_N)⁺] P_N``, β keeping the bounds.
+
+        ``P_A`` is the orthogonal projector onto the motions that leave the task alone
+        (``J x = 0``, the null space of ``P_N``) and move no joint outside the active set S
+        (``(I − S) x = 0``): over the active columns it is ``I − (J S)⁺ (J S)``, zero elsewhere.
+        So it needs only the pseudo-inverse SNS already has, not the printed 10 × 10 ones
+        (the same matrix to round-off; a test compares them).
+
+        Args:
+            task: :meth:`task_acceleration`'s dict.
+            qdd: the primary and secondary accelerations (10,).
+            active: the active set S (bool, (10,)).
+            active_pinv: ``(J S)⁺`` over the active columns, (|S|, r).
 
         Returns:
             (q̈_t (10,), β).
         """
-        jac = task['jac']
-        rcond = self.params.rcond
-        p_n = np.eye(_N) - np.linalg.pinv(jac, rcond=rcond) @ jac
-        inactive = np.diag((~active).astype(float))
-        p_a = (np.eye(_N) - np.linalg.pinv(inactive @ p_n, rcond=rcond)) @ p_n
-        q_t = p_a @ self.manipulability_acceleration(task['qd'])
+        cols = np.flatnonzero(active)
+        q_a = self.manipulability_acceleration(task['qd'])[cols]
+        q_t = np.zeros(_N)
+        q_t[cols] = q_a - active_pinv @ (task['jac'][:, cols] @ q_a)
         beta, _ = task_scale(qdd, q_t, task['lower'], task['upper'], np.ones(_N, dtype=bool))
         return beta * q_t, beta

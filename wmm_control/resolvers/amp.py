@@ -41,7 +41,9 @@ class AmpParams(AccelerationParams):
             active from t = 0 in the full-pose run; over the position rows it is 0.245.
         sigma_lookahead: anticipation τ [s]: the singularity test uses σ_m + τ·min(σ̇_m, 0), σ̇_m
             from the last period, so the base is switched on τ before σ_m would reach σ_m,min at
-            its current rate. 0 is the test as printed. The base takes seconds to take over (its
+            its current rate (§3.2 switches the base on when the trajectory's current segment
+            takes the arm towards a singularity). 0 tests σ_m < σ_m,min alone, as Fig 3 draws
+            it. The base takes seconds to take over (its
             acceleration limit is 0.025 m/s², Table 1): with τ = 0 σ_m keeps falling for about
             2.5 s after the activation, to 0.74 σ_m,min on the R = 0.25 m circle; τ = 0.5 s keeps
             it above 0.9 σ_m,min.
@@ -100,18 +102,17 @@ class AmpResolver(AccelerationResolver):
         singular = p.singularity_avoidance and sigma < p.sigma_min
         reason = 'singularity' if singular else ''
         if not singular:
-            qdd, alpha, active, saturated = sns_accelerations(
-                task['jac'], task['xdd'], task['drift'], task['lower'], task['upper'], arm_only,
-                self._base_stop(task), p.rcond)
-            if alpha < 1.0:
+            sns = sns_accelerations(task['jac'], task['xdd'], task['drift'], task['lower'], task['upper'], arm_only,
+                                    self._base_stop(task), p.rcond)
+            if sns.alpha < 1.0:
                 reason = 'arm out of reach'
         if reason:
-            qdd, alpha, active, saturated = sns_accelerations(
-                task['jac'], task['xdd'], task['drift'], task['lower'], task['upper'], np.ones(n, dtype=bool),
-                np.zeros(n), p.rcond)
+            sns = sns_accelerations(task['jac'], task['xdd'], task['drift'], task['lower'], task['upper'],
+                                    np.ones(n, dtype=bool), np.zeros(n), p.rcond)
+        qdd, alpha, active, saturated = sns.qdd, sns.alpha, sns.active, sns.saturated
         beta = 1.0
-        if p.manipulability:
-            q_t, beta = self._tertiary(task, qdd, active)
+        if p.manipulability and sns.pinv is not None:
+            q_t, beta = self._tertiary(task, qdd, active, sns.pinv)
             qdd = qdd + q_t
         base_on = bool(np.any(active[:3]))
         mode = f'base active ({reason})' if base_on else ('base stopping' if np.any(task['qd'][:3]) else 'arm only')

@@ -6,9 +6,13 @@ by the joints still active. When no active set satisfies every bound, the task i
 the largest ``α ∈ [0, 1]`` found along the way (the task scaling of Xing's Fig 4).
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
-__all__ = ['sns_accelerations', 'task_scale']
+from wmm_control.resolvers.pose_servo import lapack_svd
+
+__all__ = ['SnsResult', 'full_row_rank_pinv', 'sns_accelerations', 'task_scale']
 
 _TOL = 1e-9
 
@@ -29,6 +33,37 @@ def task_scale(start, step, lower, upper, mask):
     return float(min(1.0, np.min(per))), per
 
 
+class SnsResult(NamedTuple):
+    """What :func:`sns_accelerations` found.
+
+    Attributes:
+        qdd: joint accelerations q̈. Shape (n,).
+        alpha: the task scale α ∈ [0, 1].
+        active: the active set S used (bool). Shape (n,).
+        saturated: joints taken out and held at a bound (bool). Shape (n,).
+        pinv: (J S)⁺ over the active columns, shape (|S|, r), for the null-space projector of
+            eqs (10)–(11); None when no active set had full row rank.
+    """
+
+    qdd: np.ndarray
+    alpha: float
+    active: np.ndarray
+    saturated: np.ndarray
+    pinv: object
+
+
+def full_row_rank_pinv(a, rcond):
+    """``a⁺`` from one SVD when ``a`` (r, k) has full row rank, else None.
+
+    Full row rank: r singular values, the smallest above ``rcond`` times the largest. Then no
+    singular value is cut and ``a⁺ = V Σ⁻¹ Uᵀ``, what ``np.linalg.pinv(a, rcond)`` gives.
+    """
+    u, sv, vt = lapack_svd(a)
+    if sv.size < a.shape[0] or sv[-1] <= rcond * sv[0]:
+        return None
+    return (vt.T / sv) @ u.T
+
+
 def sns_accelerations(jac, xdd, drift, lower, upper, active, held, rcond=1e-6):
     """Xing eq (9) by saturation in the null space.
 
@@ -43,9 +78,9 @@ def sns_accelerations(jac, xdd, drift, lower, upper, active, held, rcond=1e-6):
         rcond: relative singular-value cut-off of the pseudo-inverses.
 
     Returns:
-        (q̈ (n,), α, active set used (n,) bool, saturated joints (n,) bool).
+        :class:`SnsResult`.
     """
-    n, r = jac.shape[1], jac.shape[0]
+    n = jac.shape[1]
     act = np.asarray(active, dtype=bool).copy()
     q_n = np.where(act, 0.0, held)
     saturated = np.zeros(n, dtype=bool)
@@ -54,11 +89,9 @@ def sns_accelerations(jac, xdd, drift, lower, upper, active, held, rcond=1e-6):
         cols = np.flatnonzero(act)
         if cols.size == 0:
             break
-        jc = jac[:, cols]
-        sv = np.linalg.svd(jc, compute_uv=False)
-        if sv.size < r or sv[r - 1] <= rcond * sv[0]:
+        jp = full_row_rank_pinv(jac[:, cols], rcond)
+        if jp is None:
             break                          # rank(J S) < r: this set cannot do the task
-        jp = np.linalg.pinv(jc, rcond=rcond)
         a = q_n.copy()
         a[cols] += jp @ (-drift - jac @ q_n)
         b = np.zeros(n)
@@ -66,14 +99,14 @@ def sns_accelerations(jac, xdd, drift, lower, upper, active, held, rcond=1e-6):
         q = a + b
         over = act & ((q > upper + _TOL) | (q < lower - _TOL))
         if not np.any(over):
-            return q, 1.0, act, saturated
+            return SnsResult(q, 1.0, act, saturated, jp)
         s, per = task_scale(a, b, lower, upper, act)
-        if best is None or s > best[1]:
-            best = (np.clip(a + s * b, lower, upper), s, act.copy(), saturated.copy())
+        if best is None or s > best.alpha:
+            best = SnsResult(np.clip(a + s * b, lower, upper), s, act.copy(), saturated.copy(), jp)
         worst = int(np.argmin(np.where(over, per, np.inf)))
         act[worst] = False
         saturated[worst] = True
         q_n[worst] = upper[worst] if q[worst] > upper[worst] else lower[worst]
     if best is None:
-        return np.clip(q_n, lower, upper), 0.0, act, saturated
+        return SnsResult(np.clip(q_n, lower, upper), 0.0, act, saturated, None)
     return best

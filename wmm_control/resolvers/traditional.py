@@ -34,7 +34,8 @@ class TraditionalResolver(AccelerationResolver):
         j_pinv = np.linalg.pinv(jac, rcond=self.params.rcond)
         qdd = j_pinv @ (task['xdd'] - task['drift'])
         if self.params.manipulability:
-            qdd = qdd + (np.eye(n) - j_pinv @ jac) @ self.manipulability_acceleration(task['qd'])
+            q_a = self.manipulability_acceleration(task['qd'])
+            qdd = qdd + q_a - j_pinv @ (jac @ q_a)          # + (I − J⁺J) q̈_A
         lo, hi = task['lower'], task['upper']
         anchor = np.clip(0.0, lo, hi)
         scale, per = task_scale(anchor, qdd - anchor, lo, hi, np.ones(n, dtype=bool))
