@@ -100,6 +100,8 @@ class AccelerationResolver(Resolver):
         self.limits = CommandLimits.for_robot(self.model.config, params.dt)
         self._rows = slice(0, 3) if params.rows == 'position' else slice(0, 6)
         self._position = np.zeros(_N)
+        self._kp = np.array([params.kp] * 3 + [params.kp_rot] * 3)
+        self._kd = np.array([params.kd] * 3 + [params.kd_rot] * 3)
         self.reset()
 
     def reset(self):
@@ -148,9 +150,7 @@ class AccelerationResolver(Resolver):
         jac = model.jacobian_world()
         err = np.concatenate((ref.position - pos, pin.log3(ref.rotation @ rot.T)))
         xd = jac @ qd
-        kp = np.array([p.kp] * 3 + [p.kp_rot] * 3)
-        kd = np.array([p.kd] * 3 + [p.kd_rot] * 3)
-        xdd = ref.acceleration + kd * (ref.velocity - xd) + kp * err
+        xdd = ref.acceleration + self._kd * (ref.velocity - xd) + self._kp * err
         rows = self._rows
         self._position[3:] = state.q_arm
         lo_v, hi_v, _ = self.limits.box(self._position, qd)
@@ -181,7 +181,9 @@ class AccelerationResolver(Resolver):
         t0 = time.perf_counter()
         task = self.task_acceleration(state, target)
         qdd, fields = self._accelerations(task)
-        qdd = np.clip(np.nan_to_num(qdd), task['lower'], task['upper'])
+        if not np.isfinite(qdd).all():
+            qdd = np.nan_to_num(qdd)
+        qdd = np.clip(qdd, task['lower'], task['upper'])
         qd = task['qd'] + qdd * self.params.dt
         qd[np.abs(qd) < 1e-12] = 0.0      # a stop is exact: braking by −q̇/T leaves round-off
         c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])

@@ -24,12 +24,13 @@ def task_scale(start, step, lower, upper, mask):
         (s, per_entry): ``per_entry`` is each masked entry's own largest s (inf where it does
         not bind, 0 where ``start`` is already out of bounds; inf outside the mask).
     """
-    with np.errstate(divide='ignore', invalid='ignore'):
-        s_up = np.where(step > 0, (upper - start) / step, np.inf)
-        s_dn = np.where(step < 0, (lower - start) / step, np.inf)
-    per = np.minimum(s_up, s_dn)
-    per = np.where((start > upper + _TOL) | (start < lower - _TOL), 0.0, np.maximum(per, 0.0))
-    per = np.where(mask, per, np.inf)
+    per = np.full(len(start), np.inf)
+    up = mask & (step > 0)
+    down = mask & (step < 0)
+    per[up] = (upper[up] - start[up]) / step[up]
+    per[down] = (lower[down] - start[down]) / step[down]
+    np.maximum(per, 0.0, out=per)
+    per[mask & ((start > upper + _TOL) | (start < lower - _TOL))] = 0.0
     return float(min(1.0, np.min(per))), per
 
 
