@@ -8,7 +8,9 @@ Publishes, every period:
   ``/joint_states`` (``sensor_msgs/JointState``: every simulated joint, position and velocity),
   ``/ee_pose`` (``geometry_msgs/PoseStamped``, ground-truth end effector, frame ``world``),
   ``/odom`` (``nav_msgs/Odometry``: wheel odometry, dead reckoning through the nominal
-  model, frame ``odom`` = ``world`` at the start, child ``base_link``),
+  model, frame ``odom`` = ``world`` at the start, child ``base_link``; pose and twist
+  covariances are the mean squared errors the slip model gives,
+  :class:`~sim_bridge.slip.OdometryCovariance`),
   ``/ground_truth/odom`` (``nav_msgs/Odometry``: true base pose and twist, frame ``world``),
   ``/clock`` (sim time; always in lockstep), and ``/diagnostics`` every ``diagnostics_period``.
 
@@ -29,6 +31,8 @@ velocity limits are clamped, counted and reported on ``/diagnostics``.
 import math
 import time
 
+import numpy as np
+
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
@@ -40,14 +44,20 @@ from sensor_msgs.msg import JointState
 from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Float64MultiArray
 
-from sim_bridge.slip import SlipParams
+from sim_bridge.slip import VARIANCE_FLOOR, OdometryCovariance, SlipParams
 from sim_bridge.world import BASE_MODES, SimWorld
+from wmm_control.robot_config import load_robot
 from wmm_control.errors import ConfigError
 from wmm_control.nodes.common import (
-    Freshness, Param, declare_parameters, diagnostic_array, diagnostic_status, parse_command,
-    run_node)
+    CLOCK_QOS, COMMAND_QOS, DIAGNOSTICS_QOS, STATE_PUB_QOS, Freshness, Param, declare_parameters,
+    diagnostic_array, diagnostic_status, parse_command, run_node)
 
-__all__ = ['SimNode', 'main']
+__all__ = ['SimNode', 'main', 'wait_groups']
+
+def _robot_start(field):
+    """Default of a start-state parameter: the robot YAML's ``start:`` entry (its one home)."""
+    return lambda values: [float(v) for v in getattr(load_robot(values.robot).start, field)]
+
 
 PARAMS = (
     Param('robot', 'Robot: steerable (A, Sorour) or mecanum (B, Xing), or A/B.',
@@ -61,18 +71,39 @@ PARAMS = (
     Param('command_timeout', 'Command age [s] (receiver clock) after which a group is zeroed.',
           lo=1e-3, hi=10.0),
     Param('lockstep_groups', 'Comma-separated command groups lockstep waits for, or "all".'),
-    Param('lockstep_timeout', 'Wall time [s] lockstep waits for commands before stepping.', lo=1e-3, hi=60.0),
-    Param('publish_clock', 'Publish /clock in realtime mode too.'),
-    Param('diagnostics_period', 'Simulated time [s] between /diagnostics messages.', lo=0.0, hi=3600.0),
+    Param('lockstep_timeout', 'Wall time [s] lockstep waits for commands before stepping anyway.',
+          lo=1e-3, hi=60.0),
+    Param('publish_clock', 'Publish /clock in realtime mode too.', read_only=True),
+    Param('diagnostics_period', 'Simulated time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
     Param('slip_gain', 'Slip fraction per unit rim speed [1/(m/s)], kinematic mode.', lo=0.0, hi=10.0,
           read_only=True),
-    Param('slip_drift', 'Base-frame twist bias (vx, vy, ω) [m/s, m/s, rad/s] while moving.', read_only=True),
-    Param('slip_noise', 'Std of the base twist noise (vx, vy, ω).', read_only=True),
+    Param('slip_drift', 'Base-frame twist bias (vx, vy, ω) [m/s, m/s, rad/s] while moving.', lo=-10.0, hi=10.0,
+          size=(3,), read_only=True),
+    Param('slip_noise', 'Std of the base twist noise (vx, vy, ω) [m/s, m/s, rad/s].', lo=0.0, hi=10.0, size=(3,),
+          read_only=True),
     Param('seed', 'Seed of the slip noise.', lo=0, hi=2**31 - 1, read_only=True),
-    Param('start_base_pose', 'Start base pose (x, y, θ); empty = the paper start.', read_only=True),
-    Param('start_arm', 'Start arm joints [rad] (7); empty = the paper start.', read_only=True),
+    Param('start_base_pose', 'Start base pose (x, y, θ) [m, m, rad]; default: the robot YAML\'s start.',
+          lo=-1e4, hi=1e4, size=(3,), read_only=True, default_from=_robot_start('base_pose')),
+    Param('start_arm', 'Start arm joints [rad] (7); default: the robot YAML\'s start.', lo=-2 * math.pi,
+          hi=2 * math.pi, size=(7,), read_only=True, default_from=_robot_start('arm')),
     Param('gui', 'Open the PyBullet GUI.', read_only=True),
 )
+
+
+def _poll_period(lockstep_timeout):
+    """Wall-clock poll period [s] of lockstep (start-up, and stepping after ``lockstep_timeout``)."""
+    return min(0.01, lockstep_timeout / 4)
+
+
+def wait_groups(text, groups):
+    """The command groups of ``lockstep_groups`` text, and '' or the reason it is invalid."""
+    if text.strip() == 'all':
+        return frozenset(groups), ''
+    chosen = frozenset(g.strip() for g in text.split(',') if g.strip())
+    unknown = sorted(chosen - set(groups))
+    if unknown or not chosen:
+        return chosen, f'lockstep_groups: unknown groups {unknown}; this robot has {sorted(groups)}'
+    return chosen, ''
 
 
 def _stamp(seconds):
@@ -85,33 +116,35 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('wmm_sim', **kwargs)
-        self.p = declare_parameters(self, 'wmm_sim.yaml', PARAMS)
-        slip = SlipParams(gain=self.p.slip_gain, drift=tuple(self.p.slip_drift) or (0.0, 0.0, 0.0),
-                          noise_std=tuple(self.p.slip_noise) or (0.0, 0.0, 0.0))
+        self.world = None
+        self.p = declare_parameters(
+            self, 'wmm_sim.yaml', PARAMS,
+            on_change={'command_timeout': self._set_command_timeout,
+                       'lockstep_timeout': self._set_lockstep_timeout,
+                       'lockstep_groups': self._set_wait_groups},
+            check=lambda v: wait_groups(v.lockstep_groups, self.world.command_groups)[1] if self.world else '')
+        slip = SlipParams(gain=self.p.slip_gain, drift=tuple(self.p.slip_drift), noise_std=tuple(self.p.slip_noise))
         self.world = SimWorld(
             robot=self.p.robot, base_mode=self.p.base_mode, dt=self.p.period, substeps=self.p.substeps,
             slip=slip, seed=self.p.seed, gui=self.p.gui,
-            start_base_pose=self.p.start_base_pose or None, start_arm=self.p.start_arm or None)
+            start_base_pose=self.p.start_base_pose, start_arm=self.p.start_arm)
         self.lockstep = self.p.timing == 'lockstep'
+        self.odom_covariance = OdometryCovariance()
         groups = self.world.command_groups
-        if self.p.lockstep_groups.strip() == 'all':
-            self.wait_groups = frozenset(groups)
-        else:
-            self.wait_groups = frozenset(g.strip() for g in self.p.lockstep_groups.split(',') if g.strip())
-            unknown = sorted(self.wait_groups - set(groups))
-            if unknown:
-                raise ConfigError(f'lockstep_groups: unknown groups {unknown}; this robot has {sorted(groups)}')
+        self.wait_groups, reason = wait_groups(self.p.lockstep_groups, groups)
+        if reason:
+            raise ConfigError(reason)
         self.fresh = {g: Freshness(self.p.command_timeout) for g in groups}
         self.timed_out = {g: True for g in groups}
         self.subs = [self.create_subscription(Float64MultiArray, f'{g}_controller/commands',
-                                              lambda msg, g=g: self._on_command(g, msg), 10)
+                                              lambda msg, g=g: self._on_command(g, msg), COMMAND_QOS)
                      for g in groups]
-        self.pub_joints = self.create_publisher(JointState, 'joint_states', 10)
-        self.pub_ee = self.create_publisher(PoseStamped, 'ee_pose', 10)
-        self.pub_odom = self.create_publisher(Odometry, 'odom', 10)
-        self.pub_truth = self.create_publisher(Odometry, 'ground_truth/odom', 10)
-        self.pub_clock = self.create_publisher(ClockMsg, '/clock', 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.pub_joints = self.create_publisher(JointState, 'joint_states', STATE_PUB_QOS)
+        self.pub_ee = self.create_publisher(PoseStamped, 'ee_pose', STATE_PUB_QOS)
+        self.pub_odom = self.create_publisher(Odometry, 'odom', STATE_PUB_QOS)
+        self.pub_truth = self.create_publisher(Odometry, 'ground_truth/odom', STATE_PUB_QOS)
+        self.pub_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._arrived = set()
         self._waiting_since = None
         self._steps = 0
@@ -128,13 +161,30 @@ class SimNode(Node):
             # Wall-clock poll: start once every awaited controller is connected, and step
             # anyway when the commands do not come within lockstep_timeout.
             self._started = False
-            self.poll = self.create_timer(min(0.01, self.p.lockstep_timeout / 4), self._lockstep_poll,
+            self.poll = self.create_timer(_poll_period(self.p.lockstep_timeout), self._lockstep_poll,
                                           clock=steady)
         else:
             self.timer = self.create_timer(self.p.period, self._realtime_tick, clock=steady)
         self.get_logger().info(
             f'simulating {self.world.robot.name} ({self.p.base_mode} base, {self.p.timing}, '
             f'period {self.p.period} s); command groups {sorted(groups)}')
+
+    def _set_command_timeout(self, timeout):
+        for fresh in self.fresh.values():
+            fresh.timeout = timeout
+
+    def _set_wait_groups(self, text):
+        self.wait_groups = wait_groups(text, self.world.command_groups)[0]
+
+    def _set_lockstep_timeout(self, timeout):
+        if self.lockstep:
+            self.poll.timer_period_ns = int(_poll_period(timeout) * 1e9)
+
+    def destroy_node(self):
+        """Destroy the node and close the PyBullet client (also when the node was never spun)."""
+        if self.world is not None:
+            self.world.close()
+        return super().destroy_node()
 
     # ------------------------------------------------------------------ time
     def now_s(self):
@@ -176,9 +226,17 @@ class SimNode(Node):
                                        f'{fresh.timeout} s): zero velocity', throttle_duration_sec=1.0)
 
     # ------------------------------------------------------------------ stepping
-    def _realtime_tick(self):
+    def _step_world(self):
+        """One period: the command watchdog, the world's step, the odometry covariance."""
         self._apply_watchdog()
+        theta = self.world.odom_pose()[2]
         self.world.step()
+        twist = self.world.odom_twist()
+        self.odom_covariance.update(theta, twist, *self.world.slip.twist_error(twist, self.world.rim_speed),
+                                    self.world.dt)
+
+    def _realtime_tick(self):
+        self._step_world()
         self._publish_state()
 
     def _lockstep_poll(self):
@@ -198,8 +256,7 @@ class SimNode(Node):
     def _advance(self):
         self._waiting_since = None
         self._arrived.clear()
-        self._apply_watchdog()
-        self.world.step()
+        self._step_world()
         self._publish_state()
 
     # ------------------------------------------------------------------ output
@@ -221,7 +278,8 @@ class SimNode(Node):
         (ee.pose.orientation.x, ee.pose.orientation.y, ee.pose.orientation.z,
          ee.pose.orientation.w) = (float(v) for v in ee_quat)
         self.pub_ee.publish(ee)
-        self.pub_odom.publish(_odometry(stamp, 'odom', self.world.odom_pose(), self.world.odom_twist()))
+        self.pub_odom.publish(_odometry(stamp, 'odom', self.world.odom_pose(), self.world.odom_twist(),
+                                        self.odom_covariance.pose, self.odom_covariance.twist))
         self.pub_truth.publish(_odometry(stamp, 'world', self.world.base_pose(), self.world.base_twist()))
         if self.now_s() + 1e-9 >= self._next_diag and self.p.diagnostics_period > 0:
             self._next_diag = self.now_s() + self.p.diagnostics_period
@@ -251,7 +309,9 @@ class SimNode(Node):
         return diagnostic_array(stamp, statuses)
 
 
-def _odometry(stamp, frame, pose, twist):
+def _odometry(stamp, frame, pose, twist, pose_covariance=None, twist_variance=None):
+    """An ``Odometry`` of a planar pose and twist; covariances (x, y, θ) and (vx, vy, ω) when given
+    (z, roll, pitch and their rates: :data:`~sim_bridge.slip.VARIANCE_FLOOR`, the base is planar)."""
     msg = Odometry()
     msg.header.stamp = stamp
     msg.header.frame_id = frame
@@ -261,7 +321,18 @@ def _odometry(stamp, frame, pose, twist):
     msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(th / 2), math.cos(th / 2)
     vx, vy, w = (float(v) for v in twist)
     msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z = vx, vy, w
+    if pose_covariance is not None:
+        msg.pose.covariance = _planar_covariance(pose_covariance)
+        msg.twist.covariance = _planar_covariance(np.diag(twist_variance))
     return msg
+
+
+def _planar_covariance(cov3):
+    """The 6×6 row-major covariance (x, y, z, roll, pitch, yaw) of a planar (x, y, yaw) one."""
+    full = np.diag(np.full(6, VARIANCE_FLOOR))
+    idx = np.array([0, 1, 5])
+    full[np.ix_(idx, idx)] = cov3
+    return full.ravel().tolist()
 
 
 def main(args=None):

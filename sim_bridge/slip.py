@@ -30,7 +30,11 @@ import numpy as np
 
 from wmm_control.errors import ConfigError
 
-__all__ = ['SlipParams', 'SlipModel']
+__all__ = ['SlipParams', 'SlipModel', 'OdometryCovariance', 'VARIANCE_FLOOR']
+
+#: [m², rad²] (and per s²) added to every variance: a covariance stays positive definite when
+#: the model says odometry is exact (slip off, or at rest).
+VARIANCE_FLOOR = 1e-9
 
 
 def _triple(value, name):
@@ -129,3 +133,61 @@ class SlipModel:
             sx, sy, sw = prm.noise_std
             dx, dy, dw = dx + sx * float(n[0]), dy + sy * float(n[1]), dw + sw * float(n[2])
         return keep, (dx, dy, dw)
+
+    def twist_error(self, nominal, rim_speed):
+        """Expected error of the odometry twist and the variance of its random part, one period.
+
+        Odometry reports the nominal twist; the true one differs by
+        ``e = −s · ξ̇_nom + a · (drift + n)`` (module doc): its mean is
+        ``a · drift − s · ξ̇_nom`` and its variance ``a · noise_std²`` (``a = 1`` while the
+        wheels turn).
+
+        Args:
+            nominal: the nominal (odometry) twist (vx, vy, ω) [m/s, m/s, rad/s].
+            rim_speed: mean absolute rim speed of the wheels over the period [m/s].
+
+        Returns:
+            ``(mean, variance)``, each (vx, vy, ω) [m/s, m/s, rad/s] and its square. Shape (3,).
+        """
+        prm = self.params
+        moving = 1.0 if rim_speed > 0.0 else 0.0
+        slip = min(prm.gain * rim_speed, 1.0)
+        mean = moving * np.asarray(prm.drift) - slip * np.asarray(nominal, dtype=float)
+        return mean, moving * np.asarray(prm.noise_std) ** 2
+
+
+class OdometryCovariance:
+    """Mean squared error of dead-reckoned odometry (x, y, θ) and its twist, per the slip model.
+
+    Each period the odometry pose moves by the nominal twist held for ``dt``; the true pose by
+    the nominal twist plus the twist error of :meth:`SlipModel.twist_error`. To first order the
+    pose error follows ``δ⁺ = F δ + G e dt``, with ``F = ∂pose⁺/∂pose`` (the heading's effect on
+    the position) and ``G`` the rotation of the base frame into the odometry frame. Its mean
+    ``m`` and the covariance ``P`` of its random part propagate as
+    ``m ← F m + G ē dt`` and ``P ← F P Fᵀ + G diag(σ²) Gᵀ dt²``; the reported covariance is the
+    mean squared error ``P + m mᵀ`` (a systematic slip counts, as it does for a user). Every
+    variance is at least :data:`VARIANCE_FLOOR`. It starts at zero: the start pose is known.
+    """
+
+    def __init__(self):
+        self._mean = np.zeros(3)
+        self._random = np.zeros((3, 3))
+        self.twist = np.full(3, VARIANCE_FLOOR)
+
+    @property
+    def pose(self):
+        """Mean squared error of (x, y, θ) [m², m², rad² and products]. Shape (3, 3)."""
+        return self._random + np.outer(self._mean, self._mean) + VARIANCE_FLOOR * np.eye(3)
+
+    def update(self, theta, twist, error_mean, error_variance, dt):
+        """One period at odometry heading ``theta`` [rad] (at its start) and ``twist``, with the
+        twist error's mean and variance (:meth:`SlipModel.twist_error`); ``dt`` [s]."""
+        vx, vy, _ = (float(v) for v in twist)
+        c, s = math.cos(theta), math.sin(theta)
+        f = np.array([[1.0, 0.0, -(vx * s + vy * c) * dt],
+                      [0.0, 1.0, (vx * c - vy * s) * dt],
+                      [0.0, 0.0, 1.0]])
+        g = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        self._mean = f @ self._mean + g @ np.asarray(error_mean) * dt
+        self._random = f @ self._random @ f.T + (g * np.asarray(error_variance)) @ g.T * dt * dt
+        self.twist = np.asarray(error_mean) ** 2 + np.asarray(error_variance) + VARIANCE_FLOOR

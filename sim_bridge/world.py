@@ -241,6 +241,7 @@ class SimWorld:
         self._odom = self._pose
         self._twist = (0.0, 0.0, 0.0)
         self._odom_twist = (0.0, 0.0, 0.0)
+        self.rim_speed = 0.0          # [m/s] mean absolute rim speed of the last period (kinematic mode)
         self._twist_cache = None
 
         self._cid = p.connect(p.GUI if gui else p.DIRECT)
@@ -521,6 +522,7 @@ class SimWorld:
         self._q, self._qd = q_new, vel
         self._pose, self._odom = pose, odom
         self._twist, self._odom_twist = true_tw, segments[-1][0]
+        self.rim_speed = rim
         self._place()
 
     def _physics_substep(self, vel, odometry=True):
@@ -603,6 +605,11 @@ class SimWorld:
     def odom_pose(self):
         """Wheel-odometry pose (x, y, θ) [m, m, rad], θ in [−π, π]; starts at the start pose. Shape (3,)."""
         return np.array([self._odom[0], self._odom[1], _wrap(self._odom[2])])
+
+    @property
+    def slip(self):
+        """The :class:`~sim_bridge.slip.SlipModel` of the kinematic base (off in physics mode)."""
+        return self._slip
 
     def odom_twist(self):
         """Wheel-odometry twist (vx, vy, ω) in the base frame [m/s, m/s, rad/s]. Shape (3,)."""

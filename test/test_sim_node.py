@@ -1,5 +1,7 @@
 """wmm_sim node, in-process: lockstep stepping, commands, safety, and what it publishes."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -160,3 +162,53 @@ def test_runs_under_use_sim_time_as_the_time_source(ros, timing):
     np.testing.assert_allclose(np.diff(stamps), 0.025, atol=1e-9)      # simulated time, one period a step
     assert pose2d(ctrl.truth[19])[0] > 0.0                              # and the commands act
     assert sim.get_clock().now().nanoseconds > 0
+
+
+# ---------------------------------------------------------------- odometry covariance, PyBullet client
+
+def _planar(cov):
+    full = np.array(cov).reshape(6, 6)
+    return full[np.ix_([0, 1, 5], [0, 1, 5])]
+
+
+def test_odometry_covariance_is_the_slip_models_error(ros):
+    # Drive straight with slip (gain, drift, noise): the reported covariances must match the
+    # errors odometry actually makes against the ground truth.
+    noise = [0.01, 0.01, 0.02]
+    sim, ctrl = start(ros, lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 5.0)},
+                      slip_gain=0.05, slip_drift=[0.003, 0.0, 0.002], slip_noise=noise, seed=3)
+    assert ros.spin_until(lambda: len(ctrl.odom) >= 161 and len(ctrl.truth) >= 161)
+    odom, truth = ctrl.odom[1:161], ctrl.truth[1:161]
+    twist = lambda m: np.array([m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.angular.z])
+    err = np.array([twist(t) - twist(o) for o, t in zip(odom, truth)])
+    reported = np.array([np.diag(_planar(o.twist.covariance)) for o in odom])
+    # Mean squared twist error per axis vs the mean reported variance: equal within sampling error.
+    np.testing.assert_allclose(np.mean(err ** 2, axis=0), np.mean(reported, axis=0), rtol=0.3)
+    assert np.all(reported[:, :2] > 1e-5)          # not a placeholder: at least noise² + slip²
+    # The pose: the dead-reckoning error after 4 s against its reported mean squared error.
+    o, t = odom[-1], truth[-1]
+    pose_err = np.array([t.pose.pose.position.x - o.pose.pose.position.x,
+                         t.pose.pose.position.y - o.pose.pose.position.y])
+    cov = _planar(o.pose.covariance)
+    assert cov[0, 0] > cov[1, 1] > 0                 # the slip acts along x, the direction of motion
+    assert 0.25 < abs(pose_err[0]) / math.sqrt(cov[0, 0]) < 2.0
+    assert abs(pose_err[1]) < 3 * math.sqrt(cov[1, 1])
+    np.testing.assert_array_equal(truth[-1].pose.covariance, np.zeros(36))     # ground truth is exact
+
+
+def test_odometry_covariance_without_slip_is_the_floor(ros):
+    from sim_bridge.slip import VARIANCE_FLOOR
+    sim, ctrl = start(ros, lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 5.0)})
+    assert ros.spin_until(lambda: len(ctrl.odom) >= 40)
+    np.testing.assert_allclose(np.diag(_planar(ctrl.odom[-1].pose.covariance)), VARIANCE_FLOOR)
+    np.testing.assert_allclose(np.diag(_planar(ctrl.odom[-1].twist.covariance)), VARIANCE_FLOOR)
+
+
+def test_destroying_the_node_closes_its_pybullet_client(ros):
+    import pybullet
+    sim = SimNode(context=ros.context)
+    cid = sim.world.client_id
+    assert pybullet.isConnected(physicsClientId=cid)
+    sim.destroy_node()
+    assert not pybullet.isConnected(physicsClientId=cid)
+    assert sim.world.client_id == -1

@@ -18,9 +18,11 @@ from wmm_control.base import (
     choose_route,
 )
 from wmm_control.errors import ConfigError, NonFiniteError, ShapeError, SolverError
+from wmm_control.robot_config import load_robot
 
 HIPS = np.array([[0.24, 0.19], [0.24, -0.19], [-0.24, 0.19], [-0.24, -0.19]])
 R_W, D = 0.09, 0.045
+ROBOT_A = load_robot('steerable')        # the limits (SwmrParams has no default for them)
 DT, RATE_MAX, ACC_MAX, DRIVE_MAX = 0.025, 1.0, 2.0, 12.0
 TOL = 1e-6
 
@@ -31,7 +33,7 @@ def geometry():
 
 
 def make(geometry, **kw):
-    return SwmrController(geometry, SwmrParams(**kw))
+    return SwmrController(geometry, SwmrParams.from_robot_config(ROBOT_A, **kw))
 
 
 def run(ctrl, refs):
@@ -118,15 +120,15 @@ def test_route_rule_left_arc_to_right_arc(r1, r2, expected):
 
 def test_params_validation():
     with pytest.raises(ConfigError):
-        SwmrParams(dt=-0.01)
+        SwmrParams.from_robot_config(ROBOT_A, dt=-0.01)
     with pytest.raises(ConfigError):
-        SwmrParams(icr_gain=float('nan'))
+        SwmrParams.from_robot_config(ROBOT_A, icr_gain=float('nan'))
     with pytest.raises(ConfigError):
-        SwmrParams(base_velocity_limit=(1.0, 1.0))
+        SwmrParams.from_robot_config(ROBOT_A, base_velocity_limit=(1.0, 1.0))
     with pytest.raises(ConfigError):
-        SwmrParams(icr_gain=100.0)                           # λ dt > 1
+        SwmrParams.from_robot_config(ROBOT_A, icr_gain=100.0)                           # λ dt > 1
     with pytest.raises(ConfigError):
-        SwmrParams(steer_rate_limit=40.0)                    # > π/4 per period
+        SwmrParams.from_robot_config(ROBOT_A, steer_rate_limit=40.0)                    # > π/4 per period
 
 
 def test_params_from_robot_config():
@@ -468,7 +470,7 @@ def test_injected_solver_failure_gives_a_safe_stop(geometry, bad_solver):
 
 
 def test_solver_hook_in_constructor(geometry):
-    ctrl = SwmrController(geometry, SwmrParams(), solver=lambda p: QpResult(np.full(2, np.inf), 'solved'))
+    ctrl = SwmrController(geometry, SwmrParams.from_robot_config(ROBOT_A), solver=lambda p: QpResult(np.full(2, np.inf), 'solved'))
     out = ctrl.step([0.3, 0.0, 0.0])
     assert isinstance(out, SwmrOutput)
     assert out.status == 'solver_failure' and 'non-finite' in out.qp_status
@@ -476,7 +478,7 @@ def test_solver_hook_in_constructor(geometry):
 
 def test_infeasible_qp_falls_back_to_clipping(geometry):
     """A solver reporting infeasibility is not a failure: rates are clipped per wheel."""
-    ctrl = SwmrController(geometry, SwmrParams(),
+    ctrl = SwmrController(geometry, SwmrParams.from_robot_config(ROBOT_A),
                           solver=lambda p: QpResult(np.zeros(2), 'primal_infeasible'))
     outs = run(ctrl, [(0.0, 0.5, 0.0)] * 200)
     assert_limits(outs)

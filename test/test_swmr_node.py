@@ -209,9 +209,10 @@ def test_bad_references_are_rejected(ros):
     assert all(np.all(np.isfinite(d)) for d in rec.drive + rec.steer)
 
 
-def test_inconsistent_geometry_parameters_fail_clearly(ros):
-    with pytest.raises(ConfigError, match='same length'):
-        SwmrControllerNode(context=ros.context, parameter_overrides=overrides(hip_x=[0.24, -0.24]))
+def test_a_robot_without_a_steerable_base_fails_clearly(ros):
+    # Geometry and limits come from the robot YAML: only a steerable robot can be chosen.
+    with pytest.raises(ConfigError, match="'mecanum' is not one of"):
+        SwmrControllerNode(context=ros.context, parameter_overrides=overrides(robot='mecanum'))
 
 
 # ---------------------------------------------------------------- the exchange, one per period

@@ -102,7 +102,11 @@ class StartState:
 
 @dataclass(frozen=True)
 class SteerableConfig:
-    """Steerable base geometry (Sorour Table I): hips (4, 2) [m], r_w, d [m], steer/drive limits."""
+    """Steerable base geometry (Sorour Table I): hips (4, 2) [m], r_w, d [m], steer/drive limits.
+
+    ``drive_accel_limit`` [rad/s²] is the drive deceleration used to ramp the wheels to rest
+    after a controller failure.
+    """
 
     steer_joints: tuple
     drive_joints: tuple
@@ -112,6 +116,7 @@ class SteerableConfig:
     steer_rate_limit: float
     steer_accel_limit: float
     drive_rate_limit: float
+    drive_accel_limit: float
 
 
 @dataclass(frozen=True)
@@ -214,6 +219,7 @@ def _parse_steerable(raw, where):
         steer_rate_limit=_scalar(s, 'steer_rate_limit', w),
         steer_accel_limit=_scalar(s, 'steer_accel_limit', w),
         drive_rate_limit=_scalar(s, 'drive_rate_limit', w),
+        drive_accel_limit=_scalar(s, 'drive_accel_limit', w),
     )
 
 

@@ -64,9 +64,12 @@ _FEAS_TOL = 1e-9       # a normalised row violated by at most this counts as sat
 ELASTIC_WEIGHT = 1e4   # penalty on the common wedge relaxation s of the elastic QP
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SwmrParams:
-    """Parameters of :class:`SwmrController` (SI units, angles in rad).
+    """Parameters of :class:`SwmrController` (SI units, angles in rad), keyword-only.
+
+    The limits have no default: they are the robot's, from its YAML
+    (:meth:`from_robot_config`).
 
     Attributes:
         dt: control period t_s [s] (Sorour Table I: 0.025).
@@ -95,12 +98,12 @@ class SwmrParams:
     dt: float = 0.025
     kp: float = 2.0
     icr_gain: float = 4.0
-    steer_rate_limit: float = 1.0
-    steer_accel_limit: float = 2.0
-    drive_rate_limit: float = 12.0
-    drive_accel_limit: float = 20.0
-    base_velocity_limit: tuple = (1.0, 1.0, 1.0)
-    base_accel_limit: tuple = (1.0, 1.0, 1.5)
+    steer_rate_limit: float
+    steer_accel_limit: float
+    drive_rate_limit: float
+    drive_accel_limit: float
+    base_velocity_limit: tuple
+    base_accel_limit: tuple
     icr_scale: float = DEFAULT_ICR_SCALE
     icr_border: float = DEFAULT_ICR_BORDER
     max_icr_step: float = 0.3
@@ -149,6 +152,7 @@ class SwmrParams:
             steer_rate_limit=s.steer_rate_limit,
             steer_accel_limit=s.steer_accel_limit,
             drive_rate_limit=s.drive_rate_limit,
+            drive_accel_limit=s.drive_accel_limit,
             base_velocity_limit=tuple(np.asarray(robot.base.velocity, dtype=float)),
             base_accel_limit=tuple(np.asarray(robot.base.acceleration, dtype=float)),
         )
@@ -389,9 +393,9 @@ class SwmrController:
             the attribute ``solver`` and may be replaced at run time (tests inject failures).
     """
 
-    def __init__(self, geometry, params=None, solver=None):
+    def __init__(self, geometry, params, solver=None):
         self.geometry = geometry
-        self.params = params if params is not None else SwmrParams()
+        self.params = params
         p = self.params
         n = geometry.n_wheels
         steer_term = geometry.wheel_offset * p.steer_rate_limit / geometry.wheel_radius

@@ -1,10 +1,14 @@
 """Helpers shared by the nodes: parameters, command messages, freshness, diagnostics, main().
 
-Parameter defaults live in ``config/<node>.yaml`` (``<node_name>: ros__parameters:``); the
-code declares each parameter with a description and range and takes its default from
-that file, so the YAML is the one place a default is written.
+Every default is written once. A node's own tuning lives in ``config/<node>.yaml``
+(``<node_name>: ros__parameters:``); a robot's geometry, limits and start state live in its
+robot YAML (``config/robots/<robot>.yaml``). The code declares each parameter with a
+description, a range (numeric ones) and whether it may change at run time, and takes its
+default from that file; a parameter that follows the robot (``Param.default_from``) must not
+appear in the node YAML.
 """
 
+import array
 import math
 from pathlib import Path
 from dataclasses import dataclass
@@ -16,28 +20,59 @@ import yaml
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TwistStamped
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Float64MultiArray
 
 from wmm_control.errors import ConfigError, WmmError
 from wmm_control.paths import config_path
 
 __all__ = [
-    'Param', 'declare_parameters', 'load_defaults', 'float_array', 'parse_command',
+    'Param', 'declare_parameters', 'load_defaults', 'parameter_error', 'float_array', 'parse_command',
     'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
-    'BaseReference', 'JointStateWatchdog',
+    'BaseReference', 'JointStateWatchdog', 'STATE_PUB_QOS', 'STATE_SUB_QOS', 'COMMAND_QOS', 'CLOCK_QOS',
+    'DIAGNOSTICS_QOS',
 ]
+
+
+# ---------------------------------------------------------------- QoS (the README's table)
+
+#: State streams a node *publishes* (``joint_states``, ``odom``, ``ee_pose``): reliable, keep
+#: last 10, volatile (the system default), so that reliable and best-effort subscribers both
+#: match (REP 2003: a sensor source publishes reliable, its consumers choose).
+STATE_PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE)
+#: State streams a node *consumes*: rclpy's sensor-data profile (best effort, keep last 5,
+#: volatile): a late sample is worth less than the next one, and never stalls the sender.
+STATE_SUB_QOS = qos_profile_sensor_data
+#: Commands and set-points (``*/commands``, ``base/reference``, ``base/feasible_twist``,
+#: ``goal_pose``, ``ee_reference``): reliable, keep last 10, volatile: none is lost (the base
+#: exchange matches each reference to its joint state by stamp, so two queued references must
+#: both arrive), and none is replayed to a late joiner.
+COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+#: ``/clock``: reliable, keep last 1 (only the newest time matters; rclpy's time source
+#: subscribes best effort, which matches).
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+#: ``/diagnostics``: reliable, keep last 10, volatile (what diagnostic_aggregator expects).
+DIAGNOSTICS_QOS = STATE_PUB_QOS
 
 
 @dataclass(frozen=True)
 class Param:
-    """One ROS parameter: name, description, optional numeric range or allowed strings.
+    """One ROS parameter: name, description, numeric range or allowed strings, mutability.
 
-    ``lo``/``hi`` give a FloatingPointRange (or IntegerRange for int defaults) that rclpy
-    enforces on overrides; ``choices`` restricts a string parameter.
+    Every numeric parameter (scalar or array) needs ``lo`` and ``hi``: a FloatingPointRange
+    (IntegerRange for int defaults) that rclpy enforces on scalars and this module on every
+    element of an array. ``choices`` restricts a string parameter, ``size`` the allowed lengths
+    of an array. A parameter that is not ``read_only`` takes effect when set at run time (the
+    node's ``on_change`` hook, or its value read where it is used).
+
+    ``default_from(values)`` gives the default of a parameter whose home is not the node YAML
+    (e.g. the robot YAML's start state), from the values declared before it.
     """
 
     name: str
@@ -46,6 +81,8 @@ class Param:
     hi: float = None
     choices: tuple = None
     read_only: bool = False
+    size: tuple = None
+    default_from: object = None
 
 
 def load_defaults(yaml_name, node_name):
@@ -62,62 +99,156 @@ def load_defaults(yaml_name, node_name):
     raise ConfigError(f'{path}: no "{node_name}: ros__parameters:" section')
 
 
+def _is_number(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _numeric(value):
+    """True for a number or a non-empty list of numbers."""
+    if isinstance(value, (list, tuple)):
+        return bool(value) and all(_is_number(v) for v in value)
+    return _is_number(value)
+
+
 def _descriptor(spec, default):
     desc = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
-    if spec.lo is not None or spec.hi is not None:
-        if isinstance(default, bool) or not isinstance(default, (int, float)):
-            raise ConfigError(f'parameter {spec.name}: a range needs a numeric default, got {default!r}')
-        if isinstance(default, int):
-            desc.integer_range = [IntegerRange(
-                from_value=int(spec.lo if spec.lo is not None else -2**62),
-                to_value=int(spec.hi if spec.hi is not None else 2**62), step=0)]
+    if _numeric(default):
+        if spec.lo is None or spec.hi is None:
+            raise ConfigError(f'parameter {spec.name}: a numeric parameter needs a range (lo and hi)')
+        first = default[0] if isinstance(default, (list, tuple)) else default
+        if isinstance(first, int):
+            desc.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi), step=0)]
         else:
-            desc.floating_point_range = [FloatingPointRange(
-                from_value=float(spec.lo if spec.lo is not None else -1e300),
-                to_value=float(spec.hi if spec.hi is not None else 1e300), step=0.0)]
+            desc.floating_point_range = [FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi),
+                                                            step=0.0)]
+    elif spec.lo is not None or spec.hi is not None:
+        raise ConfigError(f'parameter {spec.name}: a range needs a numeric default, got {default!r}')
+    constraints = []
     if spec.choices:
-        desc.additional_constraints = 'one of: ' + ', '.join(spec.choices)
+        constraints.append('one of: ' + ', '.join(spec.choices))
+    if spec.size:
+        constraints.append('length ' + ' or '.join(str(n) for n in spec.size))
+    if isinstance(default, (list, tuple)) and _numeric(default):
+        constraints.append(f'every element in [{spec.lo}, {spec.hi}]')
+    desc.additional_constraints = '; '.join(constraints)
     return desc
 
 
-def declare_parameters(node, yaml_name, specs):
-    """Declare every parameter of ``specs`` with its defaults from ``config/<yaml_name>``.
+def parameter_error(spec, value):
+    """Why ``value`` is not valid for ``spec`` ('' when it is).
+
+    Checks what rclpy's descriptor does not: allowed strings, finiteness, and the length and
+    element range of an array.
+    """
+    if spec.choices and value not in spec.choices:
+        return f'{value!r} is not one of {list(spec.choices)}'
+    if isinstance(value, float) and not math.isfinite(value):
+        return f'must be finite, got {value}'
+    if isinstance(value, (list, tuple, array.array)):
+        values = list(value)
+        if spec.size and len(values) not in spec.size:
+            return f'expected {" or ".join(str(n) for n in spec.size)} values, got {len(values)}'
+        if spec.lo is not None and values and all(_is_number(v) for v in values):
+            bad = [v for v in values if not (math.isfinite(v) and spec.lo <= v <= spec.hi)]
+            if bad:
+                return f'values {bad} are outside [{spec.lo}, {spec.hi}]'
+    return ''
+
+
+def _plain(value):
+    return list(value) if isinstance(value, (list, tuple, array.array)) else value
+
+
+def declare_parameters(node, yaml_name, specs, on_change=None, check=None):
+    """Declare every parameter of ``specs``, defaults from ``config/<yaml_name>``, and keep them live.
+
+    A set at run time (``ros2 param set``, the SetParameters service) is validated by rclpy
+    (type, read-only, scalar range) and by :func:`parameter_error` and ``check``; a refused one
+    keeps the old value and answers with the reason. An accepted one updates the returned
+    namespace and calls ``on_change[name](value)``.
+
+    Args:
+        node: the node.
+        yaml_name: its parameter file, ``config/<yaml_name>``; its stem names the section.
+        specs: the :class:`Param` of every parameter.
+        on_change: ``{name: callable(value)}``, run after a run-time change of ``name``.
+        check: ``check(values) -> reason``: cross-parameter constraints on the namespace the
+            values would have after a change ('' accepts).
 
     Returns:
-        A namespace with one attribute per parameter (its value after overrides).
+        A namespace with one attribute per parameter (its current value).
 
     Raises:
-        ConfigError: a default is missing from the YAML, a value is out of range or not
-            an allowed choice (the message names the parameter and the allowed values).
+        ConfigError: a default is missing from the YAML or written both there and elsewhere
+            (``default_from``), a value is out of range or invalid (the message names the
+            parameter and the allowed values).
     """
     # The section is the node's default name, the file's stem: a node renamed at start-up
     # (``-r __node:=left_base``) keeps its defaults; ``--params-file`` overrides go by name.
     defaults = load_defaults(yaml_name, Path(yaml_name).stem)
     values = {}
     for spec in specs:
-        if spec.name not in defaults:
+        if spec.default_from is not None:
+            if spec.name in defaults:
+                raise ConfigError(f'config/{yaml_name}: {spec.name!r} has its default elsewhere (one home '
+                                  'for every default): remove it from this file')
+            default = spec.default_from(SimpleNamespace(**values))
+        elif spec.name not in defaults:
             raise ConfigError(f'config/{yaml_name}: no default for parameter {spec.name!r}')
-        default = defaults[spec.name]
-        if isinstance(default, int) and not isinstance(default, bool) and spec.lo is not None \
-                and isinstance(spec.lo, float):
+        else:
+            default = defaults[spec.name]
+        if isinstance(default, int) and not isinstance(default, bool) and isinstance(spec.lo, float):
             default = float(default)
+        if isinstance(default, (list, tuple)) and not default:
+            raise ConfigError(f'parameter {spec.name}: an empty list has no type; give a value')
         try:
-            if isinstance(default, list) and not default:
-                # rclpy cannot infer a type from []: an empty default is an optional double array.
-                value = node.declare_parameter(
-                    spec.name, Parameter.Type.DOUBLE_ARRAY, _descriptor(spec, default)).value
-                value = [] if value is None else list(value)
-            else:
-                value = node.declare_parameter(spec.name, default, _descriptor(spec, default)).value
+            value = _plain(node.declare_parameter(spec.name, default, _descriptor(spec, default)).value)
         except (rclpy.exceptions.InvalidParameterValueException,
                 rclpy.exceptions.InvalidParameterTypeException) as exc:
             raise ConfigError(f'parameter {spec.name}: {exc}') from exc
-        if spec.choices and value not in spec.choices:
-            raise ConfigError(f'parameter {spec.name}: {value!r} is not one of {list(spec.choices)}')
-        if isinstance(value, float) and not math.isfinite(value):
-            raise ConfigError(f'parameter {spec.name}: must be finite, got {value}')
+        reason = parameter_error(spec, value)
+        if reason:
+            raise ConfigError(f'parameter {spec.name}: {reason}')
         values[spec.name] = value
-    return SimpleNamespace(**values)
+    namespace = SimpleNamespace(**values)
+    if check is not None:
+        reason = check(namespace)
+        if reason:
+            raise ConfigError(reason)
+    _watch(node, namespace, {s.name: s for s in specs}, on_change or {}, check)
+    return namespace
+
+
+def _watch(node, namespace, specs, on_change, check):
+    """Validate run-time sets of the parameters of ``specs``, then apply them to ``namespace``."""
+
+    def validate(params):
+        changes = {}
+        for prm in params:
+            spec = specs.get(prm.name)
+            if spec is None:
+                continue            # use_sim_time and the like: rclpy's
+            reason = parameter_error(spec, prm.value)
+            if reason:
+                return SetParametersResult(successful=False, reason=f'{prm.name}: {reason}')
+            changes[prm.name] = _plain(prm.value)
+        if changes and check is not None:
+            reason = check(SimpleNamespace(**{**vars(namespace), **changes}))
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def apply(params):
+        for prm in params:
+            if prm.name in specs:
+                value = _plain(prm.value)
+                setattr(namespace, prm.name, value)
+                if prm.name in on_change:
+                    on_change[prm.name](value)
+                node.get_logger().info(f'parameter {prm.name} set to {value}')
+
+    node.add_on_set_parameters_callback(validate)
+    node.add_post_set_parameters_callback(apply)
 
 
 def float_array(values):

@@ -32,7 +32,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 from wmm_control.experiments.scenario import load_scenario
 from wmm_control.kinematics import KinematicModel
-from wmm_control.nodes.common import Param, declare_parameters, run_node
+from wmm_control.nodes.common import (
+    CLOCK_QOS, COMMAND_QOS, Param, declare_parameters, run_node)
 
 __all__ = ['GoalSequencerNode', 'main']
 
@@ -40,7 +41,7 @@ PARAMS = (
     Param('scenario', 'Scenario name (config/scenarios/<name>.yaml) or a path to a scenario file.',
           read_only=True),
     Param('republish_period', 'Time [s] between re-publications of the goal in force; 0 = never.',
-          lo=0.0, hi=3600.0, read_only=True),
+          lo=0.0, hi=3600.0),
 )
 
 
@@ -93,8 +94,8 @@ class GoalSequencerNode(Node):
         super().__init__('goal_sequencer', **kwargs)
         self.p = declare_parameters(self, 'goal_sequencer.yaml', PARAMS)
         self.scenario = load_scenario(self.p.scenario)
-        self.pub = self.create_publisher(PoseStamped, 'goal_pose', 10)
-        self.pub_ref = self.create_publisher(MultiDOFJointTrajectory, 'ee_reference', 10)
+        self.pub = self.create_publisher(PoseStamped, 'goal_pose', COMMAND_QOS)
+        self.pub_ref = self.create_publisher(MultiDOFJointTrajectory, 'ee_reference', COMMAND_QOS)
         self._trajectory = None
         if self.scenario.trajectory is not None:
             self._trajectory = self.scenario.reference(KinematicModel(self.scenario.robot))
@@ -104,7 +105,7 @@ class GoalSequencerNode(Node):
         self._last_pub = -math.inf
         self.published = 0
         if self._sim_time:
-            self.create_subscription(ClockMsg, '/clock', self._on_clock, 10)
+            self.create_subscription(ClockMsg, '/clock', self._on_clock, CLOCK_QOS)
         self.create_timer(0.01, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         what = (f'trajectory {self.scenario.trajectory} on /ee_reference' if self._trajectory is not None
                 else f'{len(self.scenario.goals)} goals on /goal_pose')

@@ -43,8 +43,9 @@ from std_msgs.msg import Float64MultiArray
 
 from wmm_control.base import MecanumController
 from wmm_control.nodes.common import (
-    BaseReference, JointSelector, JointStateWatchdog, Param, StampedExchange, declare_parameters, diagnostic_array,
-    diagnostic_status, float_array, run_node, seconds, twist_stamped)
+    BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
+    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node, seconds,
+    twist_stamped)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['MecanumControllerNode', 'main']
@@ -58,7 +59,7 @@ PARAMS = (
     Param('reference_wait', 'Steady time [s] a joint state waits for the reference of its stamp.',
           lo=0.0, hi=1.0, read_only=True),
     Param('joint_state_timeout', 'Joint-state age [s] after which zero wheel rates are commanded.', lo=1e-3, hi=60.0),
-    Param('diagnostics_period', 'Time [s] between /diagnostics messages.', lo=0.0, hi=3600.0),
+    Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
 )
 
 
@@ -67,7 +68,9 @@ class MecanumControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('mecanum_controller', **kwargs)
-        p = declare_parameters(self, 'mecanum_controller.yaml', PARAMS)
+        p = declare_parameters(self, 'mecanum_controller.yaml', PARAMS, on_change={
+            'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
+            'joint_state_timeout': lambda v: setattr(self.watchdog.freshness, 'timeout', v)})
         self.p = p
         robot = load_robot(p.robot)
         self.controller = MecanumController.from_robot_config(robot, p.period)
@@ -76,15 +79,15 @@ class MecanumControllerNode(Node):
         self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0}
         self._next_diag = 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.pub_wheels = self.create_publisher(Float64MultiArray, 'wheel_controller/commands', 10)
-        self.pub_feasible = self.create_publisher(TwistStamped, 'base/feasible_twist', 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.pub_wheels = self.create_publisher(Float64MultiArray, 'wheel_controller/commands', COMMAND_QOS)
+        self.pub_feasible = self.create_publisher(TwistStamped, 'base/feasible_twist', COMMAND_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
         self.watchdog = JointStateWatchdog(
             self, p.joint_state_timeout, p.period, steady, lambda: self.pub_wheels.publish(float_array(np.zeros(4))),
             'zero wheel rates; will restart from the measured wheel rates')
-        self.create_subscription(TwistStamped, 'base/reference', self._on_reference, 10)
-        self.create_subscription(JointState, 'joint_states', self._on_joint_states, 10)
+        self.create_subscription(TwistStamped, 'base/reference', self._on_reference, COMMAND_QOS)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         lim = self.controller.params
         self.get_logger().info(
             f'Mecanum base controller, robot {robot.name}: t_s {p.period} s, |v| ≤ {list(lim.velocity_limit)}, '

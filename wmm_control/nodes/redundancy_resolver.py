@@ -54,10 +54,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.nodes.common import (
-    Freshness, Param, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node)
+    COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, Param, STATE_SUB_QOS, declare_parameters, diagnostic_array,
+    diagnostic_status, float_array, run_node)
 from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 
@@ -115,17 +115,17 @@ PARAMS = (
           choices=('odometry', 'ground_truth'), read_only=True),
     Param('world_frame', 'Frame of /goal_pose and /ee_pose.', read_only=True),
     Param('base_frame', 'Frame of /base/reference and /base/feasible_twist.', read_only=True),
-    Param('state_timeout', 'Age [s] of joint states, odometry or EE pose after which commands are zero.',
-          lo=1e-3, hi=60.0, read_only=True),
+    Param('state_timeout', 'Age [s] of joint states, odometry, EE pose or trajectory reference (steady clock, '
+          'at receipt) after which commands are zero.', lo=1e-3, hi=60.0),
     Param('compensation_timeout', 'Steady time [s] to wait for the feasible twist of this cycle.',
           lo=0.0, hi=1.0, read_only=True),
     Param('max_goal_distance', 'Goals farther than this from the world origin are rejected [m].',
-          lo=1.0, hi=1e6, read_only=True),
+          lo=1.0, hi=1e6),
     Param('goal_tolerance', 'Position [m] and orientation [rad] errors under which the goal is reached.',
-          read_only=True),
+          lo=1e-6, hi=10.0, size=(2,)),
     Param('stall_time', 'Time [s] without progress after which an unreached goal is reported as stalled.',
-          lo=0.1, hi=600.0, read_only=True),
-    Param('diagnostics_period', 'Time [s] between /diagnostics messages.', lo=0.0, hi=3600.0, read_only=True),
+          lo=0.1, hi=600.0),
+    Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
 )
 
 
@@ -146,9 +146,8 @@ class RedundancyResolverNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('redundancy_resolver', **kwargs)
-        p = self.p = declare_parameters(self, 'redundancy_resolver.yaml', PARAMS)
-        if len(p.goal_tolerance) != 2 or min(p.goal_tolerance) <= 0:
-            raise WmmError(f'goal_tolerance: expected [position m, orientation rad] > 0, got {p.goal_tolerance}')
+        p = self.p = declare_parameters(self, 'redundancy_resolver.yaml', PARAMS, on_change={
+            'state_timeout': self._set_state_timeout})
         self.model = KinematicModel(p.robot)
         names = [n for n in method_parameters(p.method) if n != 'dt' and hasattr(p, n)]
         self.resolver = make_resolver(p.method, self.model, dt=p.period, **{n: getattr(p, n) for n in names})
@@ -169,17 +168,17 @@ class RedundancyResolverNode(Node):
         self._next_diag = 0.0
         self.counters = {'cycles': 0, 'goals': 0, 'goals_rejected': 0, 'compensation_dropped': 0,
                          'stale_cycles': 0}
-        self.pub_arm = self.create_publisher(Float64MultiArray, 'arm_controller/commands', 10)
-        self.pub_base = self.create_publisher(TwistStamped, 'base/reference', 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(PoseStamped, 'goal_pose', self._on_goal, 10)
-        self.create_subscription(MultiDOFJointTrajectory, 'ee_reference', self._on_reference, 10)
-        self.create_subscription(JointState, 'joint_states', self._on_joint_states, 10)
-        self.create_subscription(Odometry, 'odom', self._on_odom, 10)
+        self.pub_arm = self.create_publisher(Float64MultiArray, 'arm_controller/commands', COMMAND_QOS)
+        self.pub_base = self.create_publisher(TwistStamped, 'base/reference', COMMAND_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.create_subscription(PoseStamped, 'goal_pose', self._on_goal, COMMAND_QOS)
+        self.create_subscription(MultiDOFJointTrajectory, 'ee_reference', self._on_reference, COMMAND_QOS)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
+        self.create_subscription(Odometry, 'odom', self._on_odom, STATE_SUB_QOS)
         if p.ee_feedback == 'ground_truth':
-            self.create_subscription(PoseStamped, 'ee_pose', self._on_ee_pose, 10)
+            self.create_subscription(PoseStamped, 'ee_pose', self._on_ee_pose, STATE_SUB_QOS)
         if self.resolver.uses_compensation:
-            self.create_subscription(TwistStamped, 'base/feasible_twist', self._on_feasible, 10)
+            self.create_subscription(TwistStamped, 'base/feasible_twist', self._on_feasible, COMMAND_QOS)
             self._wait = (self.create_timer(p.compensation_timeout, self._compensation_timeout, clock=self._steady,
                                             autostart=False) if p.compensation_timeout > 0 else None)
         self.watchdog = self.create_timer(p.period, self._watchdog, clock=self._steady)
@@ -187,6 +186,10 @@ class RedundancyResolverNode(Node):
             f'{p.method} on robot {self.model.config.name}: t_s {p.period} s, EE feedback {p.ee_feedback}, '
             f'compensation {"on" if self.resolver.uses_compensation else "off"}; waiting for /goal_pose '
             f'(frame {p.world_frame!r})')
+
+    def _set_state_timeout(self, timeout):
+        for fresh in self.fresh.values():
+            fresh.timeout = timeout
 
     # ------------------------------------------------------------------ time
     def _now(self):

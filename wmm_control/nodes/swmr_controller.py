@@ -42,36 +42,27 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
-from wmm_control.errors import ConfigError
 from wmm_control.nodes.common import (
-    Freshness, JointStateWatchdog, Param, StampedExchange, declare_parameters, diagnostic_array,
-    diagnostic_status, float_array, run_node, seconds)
+    COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointStateWatchdog, Param, STATE_SUB_QOS, StampedExchange,
+    declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node, seconds)
+from wmm_control.robot_config import load_robot
 
 __all__ = ['SwmrControllerNode', 'main']
 
 PARAMS = (
+    Param('robot', 'Robot with a steerable base: steerable (A, Sorour). Geometry, joints and limits come from '
+          'its YAML.', choices=('steerable', 'A', 'a'), read_only=True),
     Param('period', 'Control period t_s [s].', lo=1e-3, hi=1.0, read_only=True),
-    Param('wheel_radius', 'Wheel radius r_w [m].', lo=1e-3, hi=2.0, read_only=True),
-    Param('wheel_offset', 'Steer axis to wheel centre d [m].', lo=0.0, hi=1.0, read_only=True),
-    Param('hip_x', 'Steer-axis x positions h_x,i in the base frame [m].', read_only=True),
-    Param('hip_y', 'Steer-axis y positions h_y,i in the base frame [m].', read_only=True),
     Param('kp', 'Gain K_p of the twist controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
     Param('icr_gain', 'Gain λ of the ICR P-controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
-    Param('steer_rate_limit', 'β̇_max [rad/s].', lo=1e-3, hi=30.0, read_only=True),
-    Param('steer_accel_limit', 'β̈_max [rad/s²].', lo=1e-3, hi=1000.0, read_only=True),
-    Param('drive_rate_limit', 'Drive rate limit [rad/s].', lo=1e-3, hi=1000.0, read_only=True),
-    Param('drive_accel_limit', 'Drive deceleration after a solver failure [rad/s²].', lo=1e-3, hi=1e4,
-          read_only=True),
-    Param('base_velocity_limit', '|vx|, |vy|, |ω| limits [m/s, m/s, rad/s].', read_only=True),
-    Param('base_accel_limit', 'Twist controller acceleration limits [m/s², m/s², rad/s²].', read_only=True),
-    Param('steer_joints', 'Steer joint names, command order.', read_only=True),
-    Param('drive_joints', 'Drive joint names, command order.', read_only=True),
     Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
-    Param('reference_timeout', 'Reference age [s] after which the base stops.', lo=1e-3, hi=60.0),
+    Param('reference_timeout', 'Reference age [s] (this node\'s clock at receipt) after which the base brakes '
+          'to rest.', lo=1e-3, hi=60.0),
     Param('reference_wait', 'Steady time [s] a joint state waits for the reference of its stamp.',
           lo=0.0, hi=1.0, read_only=True),
-    Param('joint_state_timeout', 'Joint-state age [s] after which zero rates are commanded.', lo=1e-3, hi=60.0),
-    Param('diagnostics_period', 'Time [s] between /diagnostics messages.', lo=0.0, hi=3600.0),
+    Param('joint_state_timeout', 'Joint-state age [s] (steady clock) after which zero rates are commanded.',
+          lo=1e-3, hi=60.0),
+    Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
 )
 
 
@@ -80,18 +71,14 @@ class SwmrControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('swmr_controller', **kwargs)
-        p = declare_parameters(self, 'swmr_controller.yaml', PARAMS)
+        p = declare_parameters(self, 'swmr_controller.yaml', PARAMS, on_change={
+            'reference_timeout': lambda v: setattr(self.ref_fresh, 'timeout', v),
+            'joint_state_timeout': lambda v: setattr(self.watchdog.freshness, 'timeout', v)})
         self.p = p
-        n = len(p.hip_x)
-        if len(p.hip_y) != n or len(p.steer_joints) != n or len(p.drive_joints) != n:
-            raise ConfigError(f'hip_x, hip_y, steer_joints and drive_joints must have the same length, got '
-                              f'{len(p.hip_x)}, {len(p.hip_y)}, {len(p.steer_joints)}, {len(p.drive_joints)}')
-        geometry = SteerableGeometry(np.column_stack((p.hip_x, p.hip_y)), p.wheel_radius, p.wheel_offset)
-        params = SwmrParams(dt=p.period, kp=p.kp, icr_gain=p.icr_gain, steer_rate_limit=p.steer_rate_limit,
-                            steer_accel_limit=p.steer_accel_limit, drive_rate_limit=p.drive_rate_limit,
-                            drive_accel_limit=p.drive_accel_limit,
-                            base_velocity_limit=tuple(p.base_velocity_limit),
-                            base_accel_limit=tuple(p.base_accel_limit))
+        robot = load_robot(p.robot)
+        self.steer_joints = robot.steerable.steer_joints
+        geometry = SteerableGeometry.from_config(robot.steerable)
+        params = SwmrParams.from_robot_config(robot, dt=p.period, kp=p.kp, icr_gain=p.icr_gain)
         self.controller = SwmrController(geometry, params)
         self.reference = np.zeros(3)
         self.ref_fresh = Freshness(p.reference_timeout)
@@ -100,20 +87,21 @@ class SwmrControllerNode(Node):
         self._last = None
         self._ref_stale_logged = False
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.pub_steer = self.create_publisher(Float64MultiArray, 'steer_controller/commands', 10)
-        self.pub_drive = self.create_publisher(Float64MultiArray, 'drive_controller/commands', 10)
-        self.pub_feasible = self.create_publisher(TwistStamped, 'base/feasible_twist', 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(TwistStamped, 'base/reference', self._on_reference, 10)
-        self.create_subscription(JointState, 'joint_states', self._on_joint_states, 10)
+        self.pub_steer = self.create_publisher(Float64MultiArray, 'steer_controller/commands', COMMAND_QOS)
+        self.pub_drive = self.create_publisher(Float64MultiArray, 'drive_controller/commands', COMMAND_QOS)
+        self.pub_feasible = self.create_publisher(TwistStamped, 'base/feasible_twist', COMMAND_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.create_subscription(TwistStamped, 'base/reference', self._on_reference, COMMAND_QOS)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         self.watchdog = JointStateWatchdog(
             self, p.joint_state_timeout, p.period, self._steady, self._zero_rates,
             'zero steer and drive rates; will resync from the measured angles')
         # Started for each joint state that waits for its reference, cancelled by the cycle.
         # One cycle per joint state, run with the reference of the same stamp (see the module doc).
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, self._steady)
-        self.get_logger().info(f'steerable base controller: {n} modules, t_s {p.period} s, '
-                               f'β̇ ≤ {p.steer_rate_limit} rad/s, β̈ ≤ {p.steer_accel_limit} rad/s²')
+        self.get_logger().info(f'steerable base controller, robot {robot.name}: {geometry.n_wheels} modules, '
+                               f't_s {p.period} s, '
+                               f'β̇ ≤ {params.steer_rate_limit} rad/s, β̈ ≤ {params.steer_accel_limit} rad/s²')
 
     # ------------------------------------------------------------------ inputs
     def _on_reference(self, msg):
@@ -142,11 +130,11 @@ class SwmrControllerNode(Node):
             if len(self._steer_index) >= 16:      # a bounded cache: senders use one or two layouts
                 self._steer_index.clear()
             where = {name: i for i, name in enumerate(names)}
-            missing = [j for j in self.p.steer_joints if j not in where]
-            self._steer_index[names] = None if missing else np.array([where[j] for j in self.p.steer_joints])
+            missing = [j for j in self.steer_joints if j not in where]
+            self._steer_index[names] = None if missing else np.array([where[j] for j in self.steer_joints])
         idx = self._steer_index[names]
         if idx is None:
-            missing = [j for j in self.p.steer_joints if j not in names]
+            missing = [j for j in self.steer_joints if j not in names]
             self.get_logger().warn(f'rejected /joint_states without steer joints {missing}: cycle skipped',
                                    throttle_duration_sec=5.0)
             return None
@@ -203,7 +191,7 @@ class SwmrControllerNode(Node):
             self.pub_diag.publish(self._diagnostics(twist.header.stamp, out))
 
     def _zero_rates(self):
-        n = len(self.p.steer_joints)
+        n = len(self.steer_joints)
         self.pub_steer.publish(float_array(np.zeros(n)))
         self.pub_drive.publish(float_array(np.zeros(n)))
 
