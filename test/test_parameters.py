@@ -27,6 +27,7 @@ from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
 from wmm_control.paths import config_path
+from wmm_control.resolvers import METHODS
 from wmm_control.robot_config import load_robot
 from wmm_control.errors import ConfigError
 import sim_bridge.node as sim_node
@@ -313,6 +314,18 @@ def test_a_node_yaml_holds_its_own_tuning_and_nothing_of_the_robot(yaml_name):
         lists = [v for v in robot_leaves.values() if isinstance(v, list) and len(v) > 2 and any(v)]
         repeated = [k for k, v in node_values.items() if isinstance(v, list) and v in lists]
         assert not repeated, f'{yaml_name}: {repeated} repeat values of {robot}.yaml'
+
+
+def test_method_tuning_has_its_home_in_the_resolver_classes():
+    # The resolver node's YAML holds the node's settings; a method's gains and thresholds are
+    # declared with their parameter class's defaults (one home), and a dump shows them.
+    node_values = yaml.safe_load(config_path('redundancy_resolver.yaml').read_text())
+    keys = set(node_values['redundancy_resolver']['ros__parameters'])
+    method_fields = {f.name for _, cls in METHODS.values() for f in dataclasses.fields(cls)}
+    assert not keys & method_fields
+    declared = {s.name for s in redundancy_resolver.PARAMS if s.default_from is not None}
+    assert declared == method_fields & {s.name for s in redundancy_resolver.PARAMS}
+    assert {'lambda_p', 'kp', 'sigma_min', 'gamma1'} <= declared
 
 
 def test_no_robot_limit_has_a_default_in_code():

@@ -40,6 +40,7 @@ quaternion is normalised with a warning. Every command stays within the robot's 
 and reported on ``/diagnostics``.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -64,7 +65,7 @@ from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 __all__ = ['RedundancyResolverNode', 'main']
 
 _ROBOTS = ('steerable', 'mecanum', 'A', 'B', 'a', 'b')
-PARAMS = (
+_SPECS = (
     Param('robot', 'Robot: steerable (A, Sorour) or mecanum (B, Xing), or A/B.', choices=_ROBOTS,
           read_only=True),
     Param('method', 'Redundancy resolution method.', choices=tuple(sorted(METHODS)), read_only=True),
@@ -127,6 +128,25 @@ PARAMS = (
           lo=0.1, hi=600.0),
     Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
 )
+
+
+def _method_defaults():
+    """The default of every method parameter: its field's default in the resolver parameter
+    classes (:mod:`wmm_control.resolvers`), their one home. A name several classes share has
+    one default in all of them (checked here)."""
+    out = {}
+    for _, params_cls in METHODS.values():
+        for field in dataclasses.fields(params_cls):
+            if out.setdefault(field.name, field.default) != field.default:
+                raise AssertionError(f'method parameter {field.name} has two defaults')
+    return out
+
+
+_METHOD_DEFAULTS = _method_defaults()
+#: The node's parameters. The method's own (gains, thresholds, options) take their defaults
+#: from the resolver parameter classes; config/redundancy_resolver.yaml holds the node's.
+PARAMS = tuple(dataclasses.replace(spec, default_from=lambda _values, d=_METHOD_DEFAULTS[spec.name]: d)
+               if spec.name in _METHOD_DEFAULTS else spec for spec in _SPECS)
 
 
 REFERENCE = 'ee_reference'
