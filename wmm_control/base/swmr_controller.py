@@ -6,7 +6,8 @@ feasible twist ξ̇_ref that those commands realise. A reference beyond ``base_v
 is first scaled into it as a whole (its direction, hence its ICR, kept). :meth:`SwmrController.step`
 is Fig 4 in three parts:
 
-**Steering controller** (:meth:`~SwmrController.build_qp`, :meth:`~SwmrController._steer`)
+**Steering controller** (:meth:`~SwmrController.build_qp`, :meth:`~SwmrController._icr_next`,
+:meth:`~SwmrController._steer`)
 
 1. ICR* of ξ̇* and ICR_curr of the steer angles (:class:`~wmm_control.base.icr.Icr`,
    projective, pure translation included); the shorter of the direct and the complementary
@@ -116,10 +117,14 @@ class SwmrParams:
             it by |ξ̇| sin θ, which ``base_accel_limit`` dt caps (:meth:`SwmrController._icr_step`).
         stop_threshold: ‖ξ̇*‖ below which the base stops and the steer angles are held.
         route_weight: w, extra cost of ICR_next's deviation across the route ICR_curr → ICR*
-            (:class:`IcrQp`). With w = 0 (the plain distance of the paper) the nearest point to
-            ICR_ref slides round the steer-limit wedges: an ICR route through two hips then
-            sweeps those wheels (11.0 rad of steering where 4.45 are needed); 3000 keeps the
-            route (5.2 rad) and halves the elastic fallbacks of a changing reference.
+            (:class:`IcrQp`), applied while that route passes a hip. With the plain distance of
+            the paper the nearest point to ICR_ref slides round the thin steer-limit wedges,
+            off the route: an ICR route through two hips then sweeps those wheels round (11.0
+            rad of steering where 4.45 are needed); with the weight, 5.5 rad.
+        route_hip_distance: [rad] a route passes a hip when the hip's homogeneous point is
+            within this of the route's great circle, between ICR_curr and ICR*. (Everywhere,
+            the weight would make the ICR jitter with references near zero, whose route
+            direction is arbitrary.)
         measurement_deadband: [rad] measured steer angles start the period at the headings of
             their best-fit ICR, moved towards the measurement by the part of each wheel's
             disagreement beyond this band: sensor noise (σ of a few mrad) is not mistaken for
@@ -142,6 +147,7 @@ class SwmrParams:
     max_icr_step: float = 0.3
     stop_threshold: float = 1e-3
     route_weight: float = 3000.0
+    route_hip_distance: float = 0.15
     measurement_deadband: float = 0.01
     eps: float = 1e-6
     max_iter: int = 4000
@@ -583,39 +589,54 @@ class SwmrController:
             upper.append(hi)
         return lower, upper
 
-    def _resync(self, beta_meas, beta_dot_meas):
+    def _resync(self, beta_meas, beta_dot_meas, stopped):
         """Start the period from measured steer angles and rates (either may be None).
 
-        Angles: each wheel restarts at its heading for the best-fit ICR of the measurement
-        (:func:`icr_of_headings`, the twin nearest the measurement), moved towards the measured
-        angle by the part of the disagreement beyond ``measurement_deadband``. Noise that no
-        single ICR explains thus does not start the QP from wedges without a common point,
-        while a real lag beyond the band is kept. Rates beyond ±``steer_rate_limit`` (an
-        encoder glitch) are clipped: they are not a state to continue from.
+        Angles: a wheel set that no single ICR explains exactly has, per wheel, a
+        disagreement with the headings of its best-fit ICR (:func:`icr_of_headings`). The
+        measurement starts the period with its best-fit ICR and with the commanded set's own
+        disagreement, plus only the part of the extra disagreement that lies beyond
+        ``measurement_deadband``: sensor noise does not start the QP from wedges without a
+        common point, a real lag of a wheel beyond the band is kept. Measured angles equal to
+        the commanded ones change nothing. While the steering is held at rest (``stopped`` and no
+        steer rate) a wheel keeps its held angle unless the measurement is beyond the band
+        from it, and then takes the measurement as it is. Rates beyond
+        ±``steer_rate_limit`` (an encoder glitch) are clipped: they are not a state to continue
+        from.
         """
         p = self.params
         n = self.geometry.n_wheels
-        if beta_meas is not None:
-            meas = as_finite_vector(beta_meas, n, 'beta_meas').tolist()
-            fit = self._icr_of(meas, like=self._icr.z.tolist())
-            z = fit.z.tolist()
-            band = p.measurement_deadband
-            start, exact = [], True
-            for beta, (hx, hy) in zip(meas, self.geometry.hip_list):
-                vx, vy = hip_velocity(z, hx, hy, p.icr_scale)
-                if math.hypot(vx, vy) < _HIP_TOL:      # ICR on this hip: any angle fits
-                    start.append(beta)
-                    continue
-                error = -wrap_half_turn(math.atan2(vy, vx) - beta)   # measured − fitted
-                kept = math.copysign(max(abs(error) - band, 0.0), error)
-                exact = exact and kept == 0.0
-                start.append(beta - error + kept)
-            self._beta = start
-            self._icr = fit if exact else self._icr_of(start, like=z)
         if beta_dot_meas is not None:
             limit = p.steer_rate_limit
             rates = as_finite_vector(beta_dot_meas, n, 'beta_dot_meas').tolist()
             self._beta_dot = [min(limit, max(-limit, r)) for r in rates]
+        if beta_meas is not None:
+            meas = as_finite_vector(beta_meas, n, 'beta_meas').tolist()
+            if stopped and not any(self._beta_dot):
+                # held at rest: within the band of the held angle a measurement is noise, beyond
+                # it the wheel was moved and the measurement is taken as it is
+                band = p.measurement_deadband
+                held = [c if abs(m - c) <= band else m for m, c in zip(meas, self._beta)]
+                if held != self._beta:
+                    self._beta = held
+                    self._icr = self._icr_of(held, like=self._icr.z.tolist())
+            elif meas != self._beta:
+                z_cmd = self._icr.z.tolist()
+                z_meas = icr_of_headings([math.cos(b) for b in meas], [math.sin(b) for b in meas],
+                                         self.geometry.hip_list, p.icr_scale, z_cmd)
+                band = p.measurement_deadband
+                start = []
+                for m, c, (hx, hy) in zip(meas, self._beta, self.geometry.hip_list):
+                    v_meas = hip_velocity(z_meas, hx, hy, p.icr_scale)
+                    v_cmd = hip_velocity(z_cmd, hx, hy, p.icr_scale)
+                    if min(math.hypot(*v_meas), math.hypot(*v_cmd)) < _HIP_TOL:   # on the hip: any angle fits
+                        start.append(m)
+                        continue
+                    own = wrap_half_turn(c - math.atan2(v_cmd[1], v_cmd[0]))        # the command's
+                    extra = wrap_half_turn(m - math.atan2(v_meas[1], v_meas[0]) - own)
+                    start.append(m - extra + math.copysign(max(abs(extra) - band, 0.0), extra))
+                self._beta = start
+                self._icr = self._icr_of(start, like=z_cmd)
 
     # ------------------------------------------------------------------ the steering controller
     def build_qp(self, twist_ref):
@@ -641,7 +662,7 @@ class SwmrController:
         vx, vy, wz = ref
         zc = self._icr.z.tolist()
         e1, e2 = tangent_pair(*zc)
-        stopped = math.sqrt(vx * vx + vy * vy + wz * wz) < p.stop_threshold
+        stopped = self._stopped(ref)
         step = self._icr_step()
         x0 = x1 = 0.0
         if stopped:
@@ -671,7 +692,35 @@ class SwmrController:
             sides.append(side)
         return IcrQp(x_ref=np.array((x0, x1)), wedges=wedges, mirrored=mirror, box=math.tan(step), chart=(e1, e2),
                      icr_curr=self._icr, target_z=zt, rate_lower=rate_lo, rate_upper=rate_hi,
-                     sides=sides, route=route, stopped=stopped, route_weight=p.route_weight)
+                     sides=sides, route=route, stopped=stopped,
+                     route_weight=p.route_weight if self._route_passes_a_hip(zc, zt) else 0.0)
+
+    def _route_passes_a_hip(self, zc, zt):
+        """True when the great-circle route ICR_curr → ICR* passes within ``route_hip_distance`` of a hip.
+
+        Only then does the route weight apply: off the route near a hip, a wheel sweeps round.
+        """
+        p = self.params
+        nrm = (zc[1] * zt[2] - zc[2] * zt[1], zc[2] * zt[0] - zc[0] * zt[2], zc[0] * zt[1] - zc[1] * zt[0])
+        sin_theta = math.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2])
+        if sin_theta < 1e-12:
+            return False
+        cos_theta = zc[0] * zt[0] + zc[1] * zt[1] + zc[2] * zt[2]
+        for hx, hy in self.geometry.hip_list:
+            hn = math.sqrt(hx * hx + hy * hy + p.icr_scale * p.icr_scale)
+            h = (hx / hn, hy / hn, p.icr_scale / hn)
+            off = abs(h[0] * nrm[0] + h[1] * nrm[1] + h[2] * nrm[2]) / sin_theta
+            # the hip's foot on the route's great circle is a zc + b zt with a, b ≥ 0
+            hc = h[0] * zc[0] + h[1] * zc[1] + h[2] * zc[2]
+            ht = h[0] * zt[0] + h[1] * zt[1] + h[2] * zt[2]
+            between = hc - ht * cos_theta >= 0.0 and ht - hc * cos_theta >= 0.0
+            if off < p.route_hip_distance and between:
+                return True
+        return False
+
+    def _stopped(self, ref):
+        """True when the reference (vx, vy, ω) is below ``stop_threshold``: stop, hold the angles."""
+        return math.sqrt(ref[0] * ref[0] + ref[1] * ref[1] + ref[2] * ref[2]) < self.params.stop_threshold
 
     def _icr_step(self):
         """Largest ICR move of this period on the ICR sphere [rad]: ``max_icr_step``, or less at speed.
@@ -731,18 +780,16 @@ class SwmrController:
             return None, f'{qp_status} (non-finite x)', solve_time
         return tuple(x.tolist()), qp_status, solve_time
 
-    def _steer(self, ref):
-        """Steps 1–4: ICR_next from the QP, β_ref its nearest twin, β̇_ref clipped into the limits.
+    def _icr_next(self, ref):
+        """Steps 1–3: this period's QP and ICR_next in its chart coordinates.
 
         The wedges are first chosen per wheel (:meth:`_wedge_side`); when some wheel took its
         mirror wedge and the wedges then have no common point, the QP is solved again with every
         wheel on the wedge of ICR_curr.
 
         Returns:
-            ``(problem, steering, failure, solve_time)``: ``steering`` (:class:`_Steering`) is
-            None when the solver failed, ``failure`` then says why.
+            ``(problem, x, qp_status, solve_time)``; ``x`` is None when the solver failed.
         """
-        p = self.params
         problem = self._icr_qp(ref)
         x, qp_status, solve_time = self._solve(problem)
         if x is not None and qp_status not in _SOLVED:
@@ -752,11 +799,17 @@ class SwmrController:
                 solve_time += time2
                 if x2 is not None and status2 in _SOLVED:
                     problem, x, qp_status = plain, x2, status2
-        if x is None:
-            return problem, None, qp_status, solve_time
+        return problem, x, qp_status, solve_time
+
+    def _steer(self, problem, x, qp_status, solve_time):
+        """Step 4: β_ref of ICR_next (the nearest twin), β̇_ref clipped into the period's limits.
+
+        Returns:
+            :class:`_Steering`.
+        """
+        p = self.params
         x0, x1 = x
         hold = qp_status == 'not_solved'
-
         z_next = problem.z_at(x0, x1)
         dt, scale = p.dt, p.icr_scale
         beta_new, rate, active = [], [], set()
@@ -765,7 +818,7 @@ class SwmrController:
             vx, vy = hip_velocity(z_next, hx, hy, scale)
             wanted = 0.0
             if not hold and math.hypot(vx, vy) >= _HIP_TOL:      # on a hip any angle fits: keep it
-                delta = (wrap_half_turn(math.atan2(vy, vx) - beta))
+                delta = wrap_half_turn(math.atan2(vy, vx) - beta)
                 # A change at the round-off of the ICR ↔ β round trip is none: at rest the wheels stay put.
                 if abs(delta) > _ANGLE_TOL:
                     wanted = delta / dt
@@ -779,7 +832,7 @@ class SwmrController:
                 if r0 * x0 + r1 * x1 - lb <= _ROW_TOL:
                     active.add(k // 2)
         icr_next = self._icr_of(beta_new, like=z_next)
-        return problem, _Steering(beta_new, rate, icr_next, active, qp_status, solve_time), None, None
+        return _Steering(beta_new, rate, icr_next, active, qp_status, solve_time)
 
     # ------------------------------------------------------------------ the drive controller
     def _drive(self, ref, stopped, brake):
@@ -835,11 +888,14 @@ class SwmrController:
         for c, vmax in zip(direction, p.base_velocity_limit):
             if c != 0.0:
                 lo, hi = max(lo, -vmax / abs(c)), min(hi, vmax / abs(c))
+        # φ̇_i is recomputed from s·c afterwards: a bound 1e-12 inside keeps its round-off
+        # below the limit (a simulator comparing exactly would clamp a command at the limit).
+        drive_limit = p.drive_rate_limit * (1.0 - 1e-12)
         for (f0, f1, f2), r in zip(rows, rate):
             a = (f0 * direction[0] + f1 * direction[1] + f2 * direction[2]) / r_w
             if abs(a) > 1e-300:
                 b = d * r / r_w
-                s1, s2 = (-p.drive_rate_limit - b) / a, (p.drive_rate_limit - b) / a
+                s1, s2 = (-drive_limit - b) / a, (drive_limit - b) / a
                 lo, hi = max(lo, min(s1, s2)), min(hi, max(s1, s2))
         lo, hi = min(lo, 0.0), max(hi, 0.0)
         # acceleration: |s c_k − v_k| ≤ r_k
@@ -893,10 +949,13 @@ class SwmrController:
             ShapeError, NonFiniteError: malformed inputs.
         """
         ref = self._bounded_reference(twist_ref)
-        self._resync(beta_meas, beta_dot_meas)
-        problem, steer, failure, solve_time = self._steer(ref)
-        if steer is None:
-            return self._safe_stop(problem, failure, solve_time)
+        self._resync(beta_meas, beta_dot_meas, self._stopped(ref))
+        # steering controller: ICR*, route, ICR_ref, QP → ICR_next → β_ref, β̇_ref
+        problem, x, qp_status, solve_time = self._icr_next(ref)
+        if x is None:
+            return self._safe_stop(problem, qp_status, solve_time)
+        steer = self._steer(problem, x, qp_status, solve_time)
+        # drive controller: ξ̇_ref(init), then the feasible twist compatible with ICR_next
         init = self._drive(ref, problem.stopped, brake)
         twist, phi_dot = self._feasible_twist(init, steer)
         return self._commit(problem, steer, twist, phi_dot)
