@@ -17,9 +17,13 @@ is Fig 4 in three parts:
 3. QP ``min ‖ICR_next − ICR_ref‖²`` subject to, for each wheel, the wedge of two lines through
    its hip that bounds the steer change in one period by β̇_max and β̈_max
    (:func:`~wmm_control.base.icr.wedge_row`). A wheel's headings modulo π fill a *double*
-   wedge (β and its twin β + π); each wheel uses the half on the side of ICR_ref, so an ICR
-   path through a hip flips that wheel to its twin instead of sweeping it round. When ICR_ref
-   already lies in every wedge it is the optimum and OSQP is not called.
+   wedge (β and its twin β + π); a wheel whose hip lies within the period's ICR step uses the
+   half that holds ICR_ref, so an ICR path through a hip flips that wheel to its twin instead
+   of sweeping it round (if the wedges then have no common point, the QP is solved again on
+   the halves of ICR_curr). While the
+   route passes a hip, steps across it cost ``route_weight`` more than along it (the thin
+   wedges would otherwise lead ICR_next round the hip). When ICR_ref already lies in every
+   wedge it is the optimum and OSQP is not called.
 4. β_ref of ICR_next, the twin (β or β + π, drive reversed) nearest the current angle; the
    steer rate is then clipped into the per-period interval (hard limits).
 
