@@ -243,11 +243,15 @@ class IcrQp:
     route: str
     stopped: bool
     mirrored: bool = False
+    route_weight: float = 0.0
 
     @property
     def A(self):
         """Constraint matrix. Shape (2N + 2, 2)."""
-        return np.array([w[:2] for w in self.wedges] + [(1.0, 0.0), (0.0, 1.0)])
+        a = np.empty((len(self.wedges) + 2, 2))
+        a[:-2] = [w[:2] for w in self.wedges]
+        a[-2:] = ((1.0, 0.0), (0.0, 1.0))
+        return a
 
     @property
     def l(self):  # noqa: E743 — OSQP's name for the lower bounds
@@ -257,9 +261,9 @@ class IcrQp:
     @property
     def u(self):
         """Upper bounds (only the box has finite ones). Shape (2N + 2,)."""
-        return np.array([_INF] * len(self.wedges) + [self.box, self.box])
-
-    route_weight: float = 0.0
+        u = np.full(len(self.wedges) + 2, _INF)
+        u[-2:] = self.box
+        return u
 
     @property
     def P(self):
@@ -273,12 +277,21 @@ class IcrQp:
 
         ``S = I + (√(1 + w) − 1) n nᵀ``. Shape (2, 2).
         """
+        return self._metric(math.sqrt(1.0 + self.route_weight))
+
+    @property
+    def metric_inverse(self):
+        """S⁻¹ = I + (1/√(1 + w) − 1) n nᵀ. Shape (2, 2)."""
+        return self._metric(1.0 / math.sqrt(1.0 + self.route_weight))
+
+    def _metric(self, stretch):
         x0, x1 = self.x_ref.tolist()
         nn = math.hypot(x0, x1)
-        if nn == 0.0:
+        if nn == 0.0 or self.route_weight == 0.0:
             return np.eye(2)
-        n = np.array((-x1 / nn, x0 / nn))
-        return np.eye(2) + (math.sqrt(1.0 + self.route_weight) - 1.0) * np.outer(n, n)
+        n0, n1 = -x1 / nn, x0 / nn
+        k = stretch - 1.0
+        return np.array(((1.0 + k * n0 * n0, k * n0 * n1), (k * n0 * n1, 1.0 + k * n1 * n1)))
 
     @property
     def basis(self):
@@ -302,7 +315,7 @@ class IcrQp:
 
     def icr_of(self, x):
         """The ICR at chart coordinates ``x`` (Shape (2,))."""
-        return self.icr_curr.with_z(self.z_at(*np.asarray(x, dtype=float).tolist()))
+        return self.icr_curr._with_z_unchecked(self.z_at(*np.asarray(x, dtype=float).tolist()))
 
     @property
     def icr_ref(self):
@@ -334,6 +347,9 @@ _CLIPPED = ('primal_infeasible', 'max_iter_reached')
 _OSQP_ACCEPTED = (SolverStatus.OSQP_SOLVED, SolverStatus.OSQP_SOLVED_INACCURATE)
 _OSQP_ELASTIC = (SolverStatus.OSQP_PRIMAL_INFEASIBLE, SolverStatus.OSQP_PRIMAL_INFEASIBLE_INACCURATE,
                  SolverStatus.OSQP_MAX_ITER_REACHED)
+
+
+_STATUS = {status.value: status for status in SolverStatus}
 
 
 def _status_name(status):
@@ -401,7 +417,7 @@ class OsqpIcrSolver:
             res = solver.solve(raise_error=False)    # the status is handled here
             info, sol = res.info, res
         self.last_iterations = int(info.iter)
-        return np.array(sol.x, dtype=float), SolverStatus(info.status_val)
+        return np.array(sol.x, dtype=float), _STATUS[info.status_val]
 
     def __call__(self, problem):
         """Solve ``problem`` (an :class:`IcrQp`); returns a :class:`QpResult`.
@@ -417,16 +433,18 @@ class OsqpIcrSolver:
         a, lb, ub = problem.A, problem.l, problem.u
         if a.shape != (self.n_rows, 2):
             raise ShapeError(f'ICR QP: A has shape {a.shape}, solver set up for ({self.n_rows}, 2)')
-        metric = problem.metric
-        s_inv = np.linalg.inv(metric)
-        a = a @ s_inv
-        norms = np.sqrt(np.einsum('ij,ij->i', a, a))
-        a /= norms[:, None]
-        lb, ub = np.maximum(lb / norms, -_INF), np.minimum(ub / norms, _INF)
-        y_ref = metric @ np.asarray(problem.x_ref, dtype=float)
+        y_ref = np.asarray(problem.x_ref, dtype=float)
+        s_inv = None
+        if problem.route_weight > 0.0 and y_ref.any():
+            s_inv = problem.metric_inverse
+            a = a @ s_inv
+            norms = np.sqrt(np.einsum('ij,ij->i', a, a))
+            a /= norms[:, None]
+            lb, ub = np.maximum(lb / norms, -_INF), np.minimum(ub / norms, _INF)
+            y_ref = problem.metric @ y_ref
         y, status = self._run(self._osqp, -y_ref, a, lb, ub)
         if status in _OSQP_ACCEPTED or status not in _OSQP_ELASTIC:
-            return QpResult(s_inv @ y, _status_name(status))
+            return QpResult(y if s_inv is None else s_inv @ y, _status_name(status))
         m = a.shape[0]
         ae = np.zeros((m + 1, 3))
         ae[:m, :2] = a
@@ -435,7 +453,7 @@ class OsqpIcrSolver:
         ye, estatus = self._run(self._elastic, np.concatenate((-y_ref, [0.0])), ae,
                                 np.concatenate((lb, [0.0])), np.concatenate((ub, [_INF])))
         if estatus in _OSQP_ACCEPTED:
-            return QpResult(s_inv @ ye[:2], 'elastic')
+            return QpResult(ye[:2] if s_inv is None else s_inv @ ye[:2], 'elastic')
         return QpResult(np.asarray(problem.x_ref, dtype=float).copy(), _status_name(status))
 
 
@@ -651,9 +669,17 @@ class SwmrController:
                 ``base_velocity_limit`` it is scaled into it. Shape (3,).
 
         Returns:
-            :class:`IcrQp`.
+            :class:`IcrQp`, its route weight set.
         """
-        return self._icr_qp(self._bounded_reference(twist_ref))
+        problem = self._icr_qp(self._bounded_reference(twist_ref))
+        self._weigh_route(problem)
+        return problem
+
+    def _weigh_route(self, problem):
+        """Set the problem's route weight: ``route_weight`` while its route passes a hip, else 0."""
+        z = problem.icr_curr.z.tolist()
+        passes = self._route_passes_a_hip(z, problem.target_z)
+        problem.route_weight = self.params.route_weight if passes else 0.0
 
     def _icr_qp(self, ref, mirror=True):
         """Steps 1–3 up to the QP: ICR* and its route, ICR_ref, and the wedges (:class:`IcrQp`).
@@ -696,8 +722,7 @@ class SwmrController:
             sides.append(side)
         return IcrQp(x_ref=np.array((x0, x1)), wedges=wedges, mirrored=mirror, box=math.tan(step), chart=(e1, e2),
                      icr_curr=self._icr, target_z=zt, rate_lower=rate_lo, rate_upper=rate_hi,
-                     sides=sides, route=route, stopped=stopped,
-                     route_weight=p.route_weight if self._route_passes_a_hip(zc, zt) else 0.0)
+                     sides=sides, route=route, stopped=stopped)
 
     def _route_passes_a_hip(self, zc, zt):
         """True when the great-circle route ICR_curr → ICR* passes within ``route_hip_distance`` of a hip.
@@ -752,11 +777,12 @@ class SwmrController:
         c, s = math.cos(beta), math.sin(beta)
         vc, vr = hip_velocity(zc, hx, hy, scale), hip_velocity(zr, hx, hy, scale)
         near = mirror and math.hypot(*vc) <= math.hypot(vr[0] - vc[0], vr[1] - vc[1])
-        for v in ((vr, vc) if near else (vc, vr)) + (hip_velocity(zt, hx, hy, scale),):
+        for v in (vr, vc) if near else (vc, vr):
             along = c * v[0] + s * v[1]
             if abs(along) > _HIP_TOL * max(1.0, math.hypot(*v)):
                 return 1.0 if along > 0 else -1.0
-        return 1.0
+        v = hip_velocity(zt, hx, hy, scale)
+        return -1.0 if c * v[0] + s * v[1] < 0 else 1.0
 
     def _solve(self, problem):
         """Step 3: ICR_next in chart coordinates, ``(x, qp_status, solve_time)``.
@@ -769,6 +795,7 @@ class SwmrController:
             return (0.0, 0.0), 'not_solved', 0.0
         if problem.x_ref_feasible():
             return tuple(problem.x_ref.tolist()), 'unconstrained', 0.0
+        self._weigh_route(problem)
         t0 = time.perf_counter()
         try:
             res = self.solver(problem)
@@ -816,7 +843,7 @@ class SwmrController:
         hold = qp_status == 'not_solved'
         z_next = problem.z_at(x0, x1)
         dt, scale = p.dt, p.icr_scale
-        beta_new, rate, active = [], [], set()
+        beta_new, rate, active, clipped = [], [], set(), False
         for i, (beta, lo, hi, (hx, hy)) in enumerate(zip(self._beta, problem.rate_lower, problem.rate_upper,
                                                          self.geometry.hip_list)):
             vx, vy = hip_velocity(z_next, hx, hy, scale)
@@ -827,15 +854,20 @@ class SwmrController:
                 if abs(delta) > _ANGLE_TOL:
                     wanted = delta / dt
             r = min(max(wanted, lo), hi)
-            if abs(wanted - r) > _RATE_TOL:
-                active.add(i)
+            if r != wanted:
+                clipped = True
+                if abs(wanted - r) > _RATE_TOL:
+                    active.add(i)
             rate.append(r)
             beta_new.append(beta + dt * r)
         if qp_status in _USED:
             for k, (r0, r1, lb) in enumerate(problem.wedges):
                 if r0 * x0 + r1 * x1 - lb <= _ROW_TOL:
                     active.add(k // 2)
-        icr_next = self._icr_of(beta_new, like=z_next)
+        if clipped or hold:            # the wheels' own ICR (they may disagree)
+            icr_next = self._icr_of(beta_new, like=z_next)
+        else:                          # every wheel on its heading for ICR_next
+            icr_next = self._icr_proto._with_z_unchecked(z_next)
         return _Steering(beta_new, rate, icr_next, active, qp_status, solve_time)
 
     # ------------------------------------------------------------------ the drive controller
@@ -904,11 +936,9 @@ class SwmrController:
         lo, hi = min(lo, 0.0), max(hi, 0.0)
         # acceleration: |s c_k − v_k| ≤ r_k
         dt = p.dt
-        lines = []                          # (slope, offset) of the ratios ±(s c_k − v_k)/r_k
         alo, ahi = -math.inf, math.inf
         for c, v, am in zip(direction, self._twist, p.base_accel_limit):
             r = am * dt
-            lines += ((c / r, -v / r), (-c / r, v / r))
             if c != 0.0:
                 s1, s2 = (v - r) / c, (v + r) / c
                 alo, ahi = max(alo, min(s1, s2)), min(ahi, max(s1, s2))
@@ -916,7 +946,12 @@ class SwmrController:
                 alo, ahi = math.inf, -math.inf
         if max(lo, alo) <= min(hi, ahi):
             return min(max(wanted, max(lo, alo)), min(hi, ahi))
-        # minimax: the convex max of the lines is least where a rising and a falling one cross
+        # minimax: the convex max of the lines ±(s c_k − v_k)/r_k is least where a rising and a
+        # falling one cross
+        lines = []
+        for c, v, am in zip(direction, self._twist, p.base_accel_limit):
+            r = am * dt
+            lines += ((c / r, -v / r), (-c / r, v / r))
         best, best_ratio = 0.0, math.inf
         candidates = [lo, hi] + [(o2 - o1) / (k1 - k2) for k1, o1 in lines for k2, o2 in lines
                                  if k1 > 0.0 > k2]
