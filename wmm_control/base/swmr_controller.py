@@ -775,14 +775,22 @@ class SwmrController:
         """
         scale = self.params.icr_scale
         c, s = math.cos(beta), math.sin(beta)
-        vc, vr = hip_velocity(zc, hx, hy, scale), hip_velocity(zr, hx, hy, scale)
-        near = mirror and math.hypot(*vc) <= math.hypot(vr[0] - vc[0], vr[1] - vc[1])
-        for v in (vr, vc) if near else (vc, vr):
-            along = c * v[0] + s * v[1]
-            if abs(along) > _HIP_TOL * max(1.0, math.hypot(*v)):
+        vc0, vc1 = hip_velocity(zc, hx, hy, scale)
+        along_c = c * vc0 + s * vc1
+        if mirror:
+            vr0, vr1 = hip_velocity(zr, hx, hy, scale)
+            along_r = c * vr0 + s * vr1
+            d0, d1 = vr0 - vc0, vr1 - vc1
+            if vc0 * vc0 + vc1 * vc1 <= d0 * d0 + d1 * d1 and abs(along_r) > _HIP_TOL:   # near
+                return 1.0 if along_r > 0 else -1.0
+        if abs(along_c) > _HIP_TOL:
+            return 1.0 if along_c > 0 else -1.0
+        for z in (zr, zt):                         # ICR_curr on the hip: ICR_ref, then ICR*
+            v0, v1 = hip_velocity(z, hx, hy, scale)
+            along = c * v0 + s * v1
+            if abs(along) > _HIP_TOL:
                 return 1.0 if along > 0 else -1.0
-        v = hip_velocity(zt, hx, hy, scale)
-        return -1.0 if c * v[0] + s * v[1] < 0 else 1.0
+        return 1.0
 
     def _solve(self, problem):
         """Step 3: ICR_next in chart coordinates, ``(x, qp_status, solve_time)``.
@@ -920,32 +928,46 @@ class SwmrController:
         """
         p = self.params
         d, r_w = self.geometry.wheel_offset, self.geometry.wheel_radius
+        # hard: |s c_k| ≤ V_k, then |s a_i + b_i| ≤ L (a_i = f_i·c / r_w, b_i = d β̇_i / r_w)
         lo, hi = -math.inf, math.inf
         for c, vmax in zip(direction, p.base_velocity_limit):
             if c != 0.0:
-                lo, hi = max(lo, -vmax / abs(c)), min(hi, vmax / abs(c))
+                bound = vmax / abs(c)
+                if bound < hi:
+                    lo, hi = -bound, bound
         # φ̇_i is recomputed from s·c afterwards: a bound 1e-12 inside keeps its round-off
         # below the limit (a simulator comparing exactly would clamp a command at the limit).
         drive_limit = p.drive_rate_limit * (1.0 - 1e-12)
+        c0, c1, c2 = direction
         for (f0, f1, f2), r in zip(rows, rate):
-            a = (f0 * direction[0] + f1 * direction[1] + f2 * direction[2]) / r_w
-            if abs(a) > 1e-300:
+            a = (f0 * c0 + f1 * c1 + f2 * c2) / r_w
+            if a > 1e-300 or a < -1e-300:
                 b = d * r / r_w
                 s1, s2 = (-drive_limit - b) / a, (drive_limit - b) / a
-                lo, hi = max(lo, min(s1, s2)), min(hi, max(s1, s2))
+                if a < 0.0:
+                    s1, s2 = s2, s1
+                if s1 > lo:
+                    lo = s1
+                if s2 < hi:
+                    hi = s2
         lo, hi = min(lo, 0.0), max(hi, 0.0)
         # acceleration: |s c_k − v_k| ≤ r_k
         dt = p.dt
-        alo, ahi = -math.inf, math.inf
+        alo, ahi = lo, hi
         for c, v, am in zip(direction, self._twist, p.base_accel_limit):
             r = am * dt
             if c != 0.0:
                 s1, s2 = (v - r) / c, (v + r) / c
-                alo, ahi = max(alo, min(s1, s2)), min(ahi, max(s1, s2))
+                if c < 0.0:
+                    s1, s2 = s2, s1
+                if s1 > alo:
+                    alo = s1
+                if s2 < ahi:
+                    ahi = s2
             elif abs(v) > r:
                 alo, ahi = math.inf, -math.inf
-        if max(lo, alo) <= min(hi, ahi):
-            return min(max(wanted, max(lo, alo)), min(hi, ahi))
+        if alo <= ahi:
+            return alo if wanted < alo else (ahi if wanted > ahi else wanted)
         # minimax: the convex max of the lines ±(s c_k − v_k)/r_k is least where a rising and a
         # falling one cross
         lines = []
