@@ -371,8 +371,8 @@ class OsqpIcrSolver:
         eps: absolute and relative tolerance.
         max_iter: iteration limit.
         use_extension: update and solve through osqp's extension object (``OSQP._solver``, not
-            public API) instead of ``update()``/``solve()``. It skips ~12 µs of argument
-            checking and copying per call, ~half of a solve on this 2-variable problem
+            public API) instead of ``update()``/``solve()``. It skips ~15 µs of argument
+            checking and copying per call, a third of the call on this 2-variable problem
             (``benchmarks/bench_swmr.py`` prints both); a release without that attribute
             takes the public path, with equal results.
 
