@@ -1,8 +1,15 @@
 """Per-cycle cost of SwmrController.step (robot A geometry, Table I period).
 
 Runs ~5000 cycles of a varying reference (arcs, translations in all directions, spins, arc
-switches through infinity, reversals, stops) and prints the median and p99 wall time of
-``step`` and of the OSQP solve inside it, in µs, plus how often the elastic QP was needed.
+switches through infinity, reversals, stops) and prints:
+
+- the median and p99 wall time of ``step``, in µs;
+- the OSQP solve, counted only over the cycles that call OSQP, and how many do;
+- the status counts (``unconstrained``: ICR_ref lies in every wedge, OSQP not called;
+  ``elastic``: the wedges had no common point; ``not_solved``: steering held at rest);
+- where a cycle's time goes: the median of each part of ``step`` per cycle;
+- the same controller solving through osqp's public ``update()``/``solve()`` instead of its
+  extension object, to show what that non-public shortcut is worth.
 
 Side by side, in the same run: one differential-IK step of pink (``pin-pink`` with the
 quadprog solver, a frame task on the end effector and a posture task) on robot A's
@@ -22,8 +29,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run from a source checkout
 
-from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams  # noqa: E402
+from wmm_control.base import OsqpIcrSolver, SteerableGeometry, SwmrController, SwmrParams  # noqa: E402
 from wmm_control.robot_config import load_robot  # noqa: E402
+
+PARTS = ('_resync', '_icr_qp', 'solver', '_steer', '_drive', '_feasible_twist', '_commit')
+"""The parts of ``step`` timed separately (``solver``: the OSQP call, inside the steering)."""
 
 
 def reference(k, dt):
@@ -48,38 +58,82 @@ def reference(k, dt):
     return np.array([0.6, 0.1, 0.0])
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--cycles', type=int, default=5000)
-    args = parser.parse_args()
+def controller(use_extension=True):
     robot = load_robot('steerable')
     geometry = SteerableGeometry.from_config(robot.steerable)
     params = SwmrParams.from_robot_config(robot)
     ctrl = SwmrController(geometry, params)
+    ctrl.solver = OsqpIcrSolver(ctrl.n_rows, params.eps, params.max_iter, use_extension=use_extension)
+    return ctrl
+
+
+def time_steps(ctrl, cycles):
+    """Step times [µs], OSQP solve times [µs] of the cycles that call it, status counts."""
+    dt = ctrl.params.dt
     for k in range(50):                                  # warm-up (imports, caches)
-        ctrl.step(reference(k, params.dt))
-    ctrl.reset(np.zeros(geometry.n_wheels))
+        ctrl.step(reference(k, dt))
+    ctrl.reset(np.zeros(ctrl.geometry.n_wheels))
     step_us, solve_us, statuses = [], [], {}
-    for k in range(args.cycles):
-        ref = reference(k, params.dt)
+    for k in range(cycles):
+        ref = reference(k, dt)
         t0 = time.perf_counter()
         out = ctrl.step(ref)
         step_us.append((time.perf_counter() - t0) * 1e6)
         if out.solve_time_s > 0:
             solve_us.append(out.solve_time_s * 1e6)
         statuses[out.qp_status] = statuses.get(out.qp_status, 0) + 1
-    step_us, solve_us = np.array(step_us), np.array(solve_us)
-    print(f'SwmrController.step over {args.cycles} cycles (dt = {params.dt} s):')
-    print(f'  step   median {np.median(step_us):7.1f} us   p99 {np.percentile(step_us, 99):7.1f} us   '
-          f'max {step_us.max():7.1f} us')
-    print(f'  solve  median {np.median(solve_us):7.1f} us   p99 {np.percentile(solve_us, 99):7.1f} us   '
-          f'({len(solve_us)} QP solves)')
+    return np.array(step_us), np.array(solve_us), statuses
+
+
+def time_parts(ctrl, cycles):
+    """Median time [µs] per cycle of each part of ``step`` (wrapped with timers)."""
+    spent = {name: 0.0 for name in PARTS}
+    per_cycle = {name: [] for name in PARTS}
+
+    def timed(name, fn):
+        def wrapper(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[name] += time.perf_counter() - t0
+        return wrapper
+
+    for name in PARTS:
+        setattr(ctrl, name, timed(name, getattr(ctrl, name)))
+    dt = ctrl.params.dt
+    ctrl.reset(np.zeros(ctrl.geometry.n_wheels))
+    for k in range(cycles):
+        for name in PARTS:
+            spent[name] = 0.0
+        ctrl.step(reference(k, dt))
+        for name in PARTS:
+            per_cycle[name].append(spent[name] * 1e6)
+    return {name: (np.median(v), np.mean(v)) for name, v in per_cycle.items()}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--cycles', type=int, default=5000)
+    args = parser.parse_args()
+    ctrl = controller()
+    step_us, solve_us, statuses = time_steps(ctrl, args.cycles)
+    med, p99 = np.median(step_us), np.percentile(step_us, 99)
+    print(f'SwmrController.step over {args.cycles} cycles (dt = {ctrl.params.dt} s):')
+    print(f'  step   median {med:7.1f} us   p99 {p99:7.1f} us   max {step_us.max():7.1f} us')
+    print(f'  OSQP   median {np.median(solve_us):7.1f} us   p99 {np.percentile(solve_us, 99):7.1f} us   '
+          f'over the {len(solve_us)} cycles that call it ({len(solve_us) / args.cycles:.0%})')
     print('  qp status counts:', ', '.join(f'{k}: {v}' for k, v in sorted(statuses.items())))
+    public_us, public_solve_us, _ = time_steps(controller(use_extension=False), args.cycles)
+    print(f'  through osqp\'s public update()/solve(): step median {np.median(public_us):7.1f} us, '
+          f'OSQP median {np.median(public_solve_us):7.1f} us')
+    parts = time_parts(controller(), args.cycles)
+    print('  per cycle, median / mean [us]: ' + ', '.join(
+        f'{name.strip("_")} {m:.1f} / {a:.1f}' for name, (m, a) in parts.items()))
     pink_us = bench_pink(args.cycles)
     if pink_us is None:
         print('pink not installed (pip install pin-pink quadprog): comparison skipped')
         return
-    med, p99 = np.median(step_us), np.percentile(step_us, 99)
     pmed = np.median(pink_us)
     print(f'pink solve_ik (quadprog), robot A: median {pmed:7.1f} us   p99 {np.percentile(pink_us, 99):7.1f} us')
     print(f'  ratio: our median / pink median = {med / pmed:.2f} (target <= 0.5); '

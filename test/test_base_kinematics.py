@@ -74,3 +74,35 @@ def test_steerable_geometry_rejects_bad_values():
         SteerableGeometry(HIPS, -0.09, 0.045)
     with pytest.raises(ConfigError, match='wheel_offset'):
         SteerableGeometry(HIPS, 0.09, -0.01)
+
+
+def _rows_by_hand(beta):
+    """f(β_i) and g(β_i) of Sorour §IV written out, for wheel sets that need not agree."""
+    c, s = np.cos(beta), np.sin(beta)
+    hx, hy, d = HIPS[:, 0], HIPS[:, 1], 0.045
+    return np.column_stack((c, s, d - hy * c + hx * s)), np.column_stack((-s, c, hx * c + hy * s))
+
+
+def test_rolling_model_fit_of_disagreeing_wheels_is_the_least_squares_twist():
+    geom = SteerableGeometry(HIPS, 0.09, 0.045)
+    rng = np.random.default_rng(8)
+    for _ in range(50):
+        beta, beta_dot, phi_dot = rng.uniform(-3, 3, 4), rng.uniform(-1, 1, 4), rng.uniform(-10, 10, 4)
+        f, g = _rows_by_hand(beta)
+        rhs = np.concatenate((0.09 * phi_dot - 0.045 * beta_dot, np.zeros(4)))
+        expected = np.linalg.lstsq(np.vstack((f, g)), rhs, rcond=None)[0]
+        np.testing.assert_allclose(geom.twist_from_wheels(beta, beta_dot, phi_dot), expected, atol=1e-10)
+
+
+def test_icr_of_disagreeing_wheels_minimises_the_side_slip():
+    """Icr.from_steer_angles is the smallest right singular vector of the no-side-slip rows."""
+    from wmm_control.base import Icr
+    geom = SteerableGeometry(HIPS, 0.09, 0.045)
+    rng = np.random.default_rng(9)
+    for _ in range(200):
+        beta = geom.steer_angles_for_icr(rng.uniform(-2, 2, 2)) + rng.normal(0.0, 0.3, 4)
+        _, g = _rows_by_hand(beta)
+        t = np.linalg.svd(g)[2][-1]                       # (vx, vy, ω), ℓ = 1
+        icr = Icr.from_steer_angles(geom, beta)
+        twist = icr.twist_direction
+        assert abs(abs(twist @ t) - 1.0) < 1e-9

@@ -36,9 +36,15 @@ def test_urdf_limits_equal_yaml_limits(name):
 
 
 def test_steerable_geometry_is_sorour_table_i():
-    s = load_robot('steerable').steerable
-    np.testing.assert_allclose(np.abs(s.hips), [[0.24, 0.19]] * 4)
+    cfg = load_robot('steerable')
+    s = cfg.steerable
+    # front-left, front-right, rear-left, rear-right, with their signs: swapped wheels fail
+    np.testing.assert_allclose(s.hips, [[0.24, 0.19], [0.24, -0.19], [-0.24, 0.19], [-0.24, -0.19]])
     assert s.wheel_radius == 0.09 and s.wheel_offset == 0.045
+    # each steer joint of the URDF sits on its hip (the same order as the YAML's hips)
+    joints = {j.get('name'): j for j in ET.parse(cfg.urdf_path).getroot().iter('joint')}
+    origins = [[float(v) for v in joints[name].find('origin').get('xyz').split()[:2]] for name in s.steer_joints]
+    np.testing.assert_allclose(origins, s.hips)
 
 
 def test_mecanum_limits_are_xing_table_1():

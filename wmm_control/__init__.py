@@ -5,10 +5,10 @@ The core (kinematics, base controllers, resolvers) is ROS-free; the rclpy nodes 
 """
 
 from wmm_control.errors import (
-    ConfigError, NonFiniteError, ShapeError, SolverError, UnknownFrameError, WmmError)
+    ConfigError, NonFiniteError, ShapeError, UnknownFrameError, WmmError)
 from wmm_control.robot_config import RobotConfig, load_robot
 
 __all__ = [
-    'ConfigError', 'NonFiniteError', 'ShapeError', 'SolverError', 'UnknownFrameError', 'WmmError',
+    'ConfigError', 'NonFiniteError', 'ShapeError', 'UnknownFrameError', 'WmmError',
     'RobotConfig', 'load_robot',
 ]

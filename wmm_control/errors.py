@@ -10,7 +10,6 @@ __all__ = [
     'ShapeError',
     'NonFiniteError',
     'UnknownFrameError',
-    'SolverError',
 ]
 
 
@@ -35,7 +34,3 @@ class UnknownFrameError(WmmError, KeyError):
 
     def __str__(self):  # KeyError quotes its message; keep it readable.
         return str(self.args[0]) if self.args else ''
-
-
-class SolverError(WmmError):
-    """A numerical solver failed or returned a non-finite result."""

@@ -34,9 +34,11 @@ from wmm_control.errors import ConfigError, NonFiniteError
 __all__ = [
     'Icr',
     'choose_route',
-    'hip_velocity_matrices',
-    'tangent_basis',
+    'hip_velocity',
+    'icr_of_headings',
+    'route_between',
     'tangent_pair',
+    'wedge_row',
     'wrap_half_turn',
     'DEFAULT_ICR_BORDER',
     'DEFAULT_ICR_SCALE',
@@ -52,25 +54,21 @@ _TINY = 1e-12
 
 
 def wrap_half_turn(angle):
-    """Wrap angles to [−π/2, π/2) [rad]: the difference to the nearest twin (β or β + π)."""
-    return (np.asarray(angle, dtype=float) + np.pi / 2) % np.pi - np.pi / 2
+    """Wrap angles to [−π/2, π/2) [rad]: the difference to the nearest twin (β or β + π).
 
-
-def tangent_basis(z):
-    """Orthonormal basis of the plane tangent to the unit sphere at ``z``.
-
-    Args:
-        z: unit vector. Shape (3,).
-
-    Returns:
-        E with ``Eᵀ E = I``, ``Eᵀ z = 0``. Shape (3, 2).
+    A float gives a float, anything else an array.
     """
-    e1, e2 = tangent_pair(float(z[0]), float(z[1]), float(z[2]))
-    return np.array((e1, e2)).T
+    if not isinstance(angle, float):
+        angle = np.asarray(angle, dtype=float)
+    return (angle + math.pi / 2) % math.pi - math.pi / 2
 
 
 def tangent_pair(z0, z1, z2):
-    """:func:`tangent_basis` of the unit vector (z0, z1, z2) as two 3-tuples of floats (e1, e2)."""
+    """Orthonormal basis (e1, e2) of the plane tangent to the unit sphere at (z0, z1, z2).
+
+    The chart ``z = z_c + e1 x₁ + e2 x₂`` of the ICR QP. Returns two 3-tuples of floats,
+    ``e2 = z × e1``.
+    """
     a = (abs(z0), abs(z1), abs(z2))
     k = 0 if a[0] <= a[1] and a[0] <= a[2] else (1 if a[1] <= a[2] else 2)
     zk = (z0, z1, z2)[k]
@@ -125,22 +123,20 @@ class Icr:
         return cls(np.array([-t[1], t[0], scale * t[2]]), scale, border)
 
     @classmethod
-    def from_steer_angles(cls, geometry, beta, scale=DEFAULT_ICR_SCALE, border=DEFAULT_ICR_BORDER):
+    def from_steer_angles(cls, geometry, beta, scale=DEFAULT_ICR_SCALE, border=DEFAULT_ICR_BORDER, like=None):
         """The ICR that best fits steer angles β (least squares over the no-side-slip rows).
 
         Exact when the wheels agree on one ICR; for disagreeing wheels it is the twist
-        direction minimising the side slip in the metric (vx, vy, ℓω).
+        direction minimising the side slip in the metric (vx, vy, ℓω) (:func:`icr_of_headings`).
 
         Args:
             geometry: a :class:`SteerableGeometry`.
             beta: steer angles [rad]. Shape (N,).
+            like: optional homogeneous vector; the sign of ``z`` is chosen on its hemisphere.
         """
         beta = as_finite_vector(beta, geometry.n_wheels, 'beta')
-        c, s = np.cos(beta), np.sin(beta)
-        hx, hy = geometry.hips[:, 0], geometry.hips[:, 1]
-        g = np.column_stack((-s, c, (hx * c + hy * s) / scale))
-        t = np.linalg.svd(g)[2][-1]          # (vx, vy, ℓω) up to scale
-        return cls(np.array([-t[1], t[0], t[2]]), scale, border)
+        z = icr_of_headings(np.cos(beta).tolist(), np.sin(beta).tolist(), geometry.hip_list, scale, like)
+        return cls(np.array(z), scale, border)
 
     def with_z(self, z):
         """A new ICR with the same scale and border."""
@@ -189,9 +185,8 @@ class Icr:
     def hip_velocities(self, hips):
         """Velocity direction of each hip (the wheel heading, up to its twin) for this ICR.
 
-        Linear in ``z``: ``v_i = M_i z``, ``M_i = [[0, 1, −hy_i/ℓ], [−1, 0, hx_i/ℓ]]``; it is the
-        hip velocity under :attr:`twist_direction` (times a positive factor). Zero when the ICR
-        sits on hip i.
+        Linear in ``z`` (:func:`hip_velocity`); it is the hip velocity under
+        :attr:`twist_direction` (times a positive factor). Zero when the ICR sits on hip i.
 
         Args:
             hips: hip positions [m]. Shape (N, 2).
@@ -199,7 +194,8 @@ class Icr:
         Returns:
             Shape (N, 2).
         """
-        return hip_velocity_matrices(hips, self.scale) @ self.z
+        hips = np.asarray(hips, dtype=float)
+        return np.column_stack(hip_velocity(self.z, hips[:, 0], hips[:, 1], self.scale))
 
     def angle_to(self, other):
         """Distance to another ICR on the projective plane [rad], in [0, π/2].
@@ -213,16 +209,106 @@ class Icr:
         return math.atan2(c, abs(a0 * b0 + a1 * b1 + a2 * b2))
 
 
-def hip_velocity_matrices(hips, scale):
-    """Stack of the matrices M_i with ``v_i = M_i z``. Shape (N, 2, 3)."""
-    hips = np.asarray(hips, dtype=float)
-    n = hips.shape[0]
-    m = np.zeros((n, 2, 3))
-    m[:, 0, 1] = 1.0
-    m[:, 0, 2] = -hips[:, 1] / scale
-    m[:, 1, 0] = -1.0
-    m[:, 1, 2] = hips[:, 0] / scale
-    return m
+def hip_velocity(z, hx, hy, scale):
+    """Velocity direction of the hip (hx, hy) [m] under rotation about the ICR ``z``.
+
+    ``v = (z₁ − hy z₂/ℓ, −z₀ + hx z₂/ℓ)`` ∝ ẑ × (hip − ICR): perpendicular to the line from
+    the ICR to the hip, the heading of a wheel there (up to its twin). Works on floats and on
+    arrays of hips alike.
+
+    Returns:
+        ``(vx, vy)``.
+    """
+    return z[1] - hy * z[2] / scale, hx * z[2] / scale - z[0]
+
+
+def icr_of_headings(cos_beta, sin_beta, hips, scale, like=None):
+    """Least-squares ICR of wheel headings: the kernel of :meth:`Icr.from_steer_angles`.
+
+    The twist direction t = (vx, vy, ℓω) minimising ``Σ (g_i · t)²`` over the no-side-slip
+    rows ``g_i = (−sin β_i, cos β_i, (hx_i cos β_i + hy_i sin β_i)/ℓ)`` is the eigenvector of the
+    smallest eigenvalue of S = GᵀG: closed-form eigenvalue (trigonometric method), eigenvector
+    the largest cross product of two rows of S − λI. Near-repeated eigenvalues fall back to an
+    SVD of G. Plain floats, since it runs every control period.
+
+    Args:
+        cos_beta, sin_beta: cosines and sines of the steer angles (sequences of floats).
+        hips: hip positions as (hx, hy) pairs [m].
+        scale: ℓ [m].
+        like: optional homogeneous vector; the result is on its hemisphere.
+
+    Returns:
+        The homogeneous ICR ``z ∝ (−vy, vx, ℓω)`` as a 3-tuple (unnormalised).
+    """
+    g = [(-s, c, (hx * c + hy * s) / scale) for c, s, (hx, hy) in zip(cos_beta, sin_beta, hips)]
+    s00 = s01 = s02 = s11 = s12 = s22 = 0.0
+    for g0, g1, g2 in g:
+        s00 += g0 * g0
+        s01 += g0 * g1
+        s02 += g0 * g2
+        s11 += g1 * g1
+        s12 += g1 * g2
+        s22 += g2 * g2
+    q = (s00 + s11 + s22) / 3.0
+    off = s01 * s01 + s02 * s02 + s12 * s12
+    pp = math.sqrt(((s00 - q) ** 2 + (s11 - q) ** 2 + (s22 - q) ** 2 + 2.0 * off) / 6.0)
+    t = None
+    if pp > 1e-9 * q:
+        b00, b11, b22 = (s00 - q) / pp, (s11 - q) / pp, (s22 - q) / pp
+        b01, b02, b12 = s01 / pp, s02 / pp, s12 / pp
+        det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
+        phi = math.acos(min(1.0, max(-1.0, 0.5 * det))) / 3.0
+        lam = q + 2.0 * pp * math.cos(phi + 2.0 * math.pi / 3.0)
+        rows = ((s00 - lam, s01, s02), (s01, s11 - lam, s12), (s02, s12, s22 - lam))
+        best, bn = None, 0.0
+        for u, v in ((rows[0], rows[1]), (rows[0], rows[2]), (rows[1], rows[2])):
+            c = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+            cn = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+            if cn > bn:
+                best, bn = c, cn
+        # The cross product scales with the two other eigenvalue gaps; too small: degenerate.
+        if bn > 1e-12 * (pp * pp) ** 2:
+            t = best
+    if t is None:
+        t = np.linalg.svd(np.array(g))[2][-1].tolist()
+    z = (-t[1], t[0], t[2])
+    if like is not None and z[0] * like[0] + z[1] * like[1] + z[2] * like[2] < 0:
+        z = (-z[0], -z[1], -z[2])
+    return z
+
+
+def wedge_row(heading, side, hx, hy, scale, z, e1, e2):
+    """One steer-limit line of the ICR QP in the chart ``z_c + e1 x₁ + e2 x₂``.
+
+    The ICRs whose hip velocity (:func:`hip_velocity`) lies on the ``side`` (±1) of the wheel
+    heading ``heading`` = (cos a, sin a) form a half-plane through the hip; in chart
+    coordinates it is ``r · x ≥ lb``. A wedge is two such half-planes, for the extreme headings
+    a_lo, a_hi of the period (``side`` +1 for a_lo, −1 for a_hi, times the wheel's orientation σ
+    along its hip velocity): ``cross(e_lo, v) ≥ 0`` and ``cross(v, e_hi) ≥ 0``.
+
+    Returns:
+        ``(r0, r1, lb)`` normalised (‖r‖ = 1), or ``(0, 0, −inf)`` for a degenerate row.
+    """
+    c0, c1 = -side * heading[1], side * heading[0]
+    # row c·M z of the hip velocity v = M z, M = [[0, 1, −hy/ℓ], [−1, 0, hx/ℓ]]
+    r2 = (hx * c1 - hy * c0) / scale
+    w0 = -c1 * e1[0] + c0 * e1[1] + r2 * e1[2]
+    w1 = -c1 * e2[0] + c0 * e2[1] + r2 * e2[2]
+    nr = math.sqrt(w0 * w0 + w1 * w1)
+    if nr <= 1e-12:
+        return 0.0, 0.0, -math.inf
+    return w0 / nr, w1 / nr, (c1 * z[0] - c0 * z[1] - r2 * z[2]) / nr
+
+
+def route_between(zc, zt):
+    """The kernel of :func:`choose_route` on homogeneous 3-tuples (``zc`` unit, ``zt`` any norm).
+
+    Returns:
+        ``(target, route)``: ``±zt`` on the hemisphere of ``zc``, and 'direct' or 'complementary'.
+    """
+    if zc[0] * zt[0] + zc[1] * zt[1] + zc[2] * zt[2] < 0.0:
+        zt = (-zt[0], -zt[1], -zt[2])
+    return zt, ('complementary' if zc[2] * zt[2] < 0.0 else 'direct')
 
 
 def choose_route(current, target):
@@ -239,7 +325,5 @@ def choose_route(current, target):
         infinity (pure translation) — the route out through the border and back in from the
         opposite side — else ``'direct'``.
     """
-    tz = target.z if float(current.z @ target.z) >= 0.0 else -target.z
-    wc, wt = current.z[2], tz[2]
-    route = 'complementary' if wc * wt < 0.0 else 'direct'
-    return tz, route
+    tz, route = route_between(current.z.tolist(), target.z.tolist())
+    return np.array(tz), route

@@ -1,24 +1,43 @@
-"""Steerable wheeled mobile robot (SWMR) base controller (Sorour 2019 §IV).
+"""Steerable wheeled mobile robot (SWMR) base controller (Sorour 2019 §IV, Fig 4).
 
 Each period ``dt`` the controller takes the reference base twist ξ̇* = (vx, vy, ω) [m/s, m/s,
 rad/s] (base frame) and returns steer angles/rates β_ref, β̇_ref, drive rates φ̇_ref and the
-feasible twist q̇_bf that those commands realise. A reference beyond ``base_velocity_limit``
-is first scaled into it as a whole (its direction, hence its ICR, kept):
+feasible twist ξ̇_ref that those commands realise. A reference beyond ``base_velocity_limit``
+is first scaled into it as a whole (its direction, hence its ICR, kept). :meth:`SwmrController.step`
+is Fig 4 in three parts:
 
-1. ICR* of ξ̇* and ICR_curr of the commanded steer angles (:class:`~wmm_control.base.icr.Icr`,
+**Steering controller** (:meth:`~SwmrController.build_qp`, :meth:`~SwmrController._icr_next`,
+:meth:`~SwmrController._steer`)
+
+1. ICR* of ξ̇* and ICR_curr of the steer angles (:class:`~wmm_control.base.icr.Icr`,
    projective, pure translation included); the shorter of the direct and the complementary
-   route (through the border = pure translation) is chosen (:func:`choose_route`).
+   route (through the border = pure translation) is chosen (:func:`~wmm_control.base.icr.route_between`).
 2. ICR P-controller ``ICṘ_ref = λ (ICR* − ICR_curr)``, integrated over one period:
    ``ICR_ref`` is ICR_curr moved a fraction ``λ dt`` of the way along the route.
-3. QP (OSQP, 2 variables, fixed dense pattern, warm-started, values updated each cycle):
-   ``min ‖ICR_next − ICR_ref‖²`` subject to, for each wheel, the wedge of two lines through its
-   hip that bounds the steer change in one period by β̇_max and β̈_max. When ICR_ref already
-   lies in every wedge it is the optimum and OSQP is not called.
+3. QP ``min ‖ICR_next − ICR_ref‖²`` subject to, for each wheel, the wedge of two lines through
+   its hip that bounds the steer change in one period by β̇_max and β̈_max
+   (:func:`~wmm_control.base.icr.wedge_row`). A wheel's headings modulo π fill a *double*
+   wedge (β and its twin β + π); a wheel whose hip lies within the period's ICR step uses the
+   half that holds ICR_ref, so an ICR path through a hip flips that wheel to its twin instead
+   of sweeping it round (if the wedges then have no common point, the QP is solved again on
+   the halves of ICR_curr). While the
+   route passes a hip, steps across it cost ``route_weight`` more than along it (the thin
+   wedges would otherwise lead ICR_next round the hip). When ICR_ref already lies in every
+   wedge it is the optimum and OSQP is not called.
 4. β_ref of ICR_next, the twin (β or β + π, drive reversed) nearest the current angle; the
-   steer rate is then clipped into the per-period interval (hard limits), β̇_ref by differencing.
-5. ξ̈ = K_p (ξ̇* − ξ̇), integrated, projected onto the motion compatible with the new steer
-   configuration (rotation about its ICR, or translation at infinity), scaled into the base and
-   drive rate limits → q̇_bf; φ̇_ref from the inverse actuation model with wheel offset d.
+   steer rate is then clipped into the per-period interval (hard limits).
+
+**Drive controller** (:meth:`~SwmrController._drive`)
+
+5. ξ̈ = K_p (ξ̇* − ξ̇) within ``base_accel_limit``, integrated.
+
+**Feasible twist**
+
+6. Projected onto the motion compatible with the new steer configuration (rotation about its
+   ICR, or translation at infinity); its size along that direction is the one nearest the
+   projection that keeps the base velocity, drive rate and base acceleration limits
+   (:meth:`~SwmrController._feasible_speed`) → ξ̇_ref; φ̇_ref from the inverse actuation model
+   with wheel offset d (:func:`~wmm_control.base.steerable_kinematics.rolling_row`).
 
 The QP lives in a gnomonic chart of the ICR sphere centred on ICR_curr (coordinates ``x ∈ R²``,
 ``z = z_curr + E x``). That chart is the paper's Cartesian ICR plane seen from the current ICR:
@@ -28,29 +47,39 @@ rest the wedges are β̈_max dt² = 1.25e-3 rad wide and meet only ~0.19/1.25e-3
 the box QP has no solution whenever the wheels are parallel at rest.) The bounded box
 representation is kept for reporting (:attr:`Icr.point`, border ``L``).
 
-When the wedges have no common point (steer rates that no single ICR motion continues, e.g.
-near a hip where β varies fast), an elastic copy of the QP (one common relaxation ``s ≥ 0`` of
-all wedges, heavily penalised) gives the ICR that breaks them least; the per-wheel clip of
-step 4 then keeps every limit. A solver error or a non-finite answer instead brakes the steering
-to rest within β̈_max and ramps the drive to zero within ``drive_accel_limit``
-(status ``'solver_failure'``).
+When the wedges have no common point (steer rates that no single ICR motion continues), an
+elastic copy of the QP (one common relaxation ``s ≥ 0`` of all wedges, heavily penalised) gives
+the ICR that breaks them least; the per-wheel clip of step 4 then keeps every limit. A solver
+error or a non-finite answer instead brakes the steering to rest within β̈_max and ramps the
+drive to zero within ``drive_accel_limit`` (status ``'solver_failure'``).
+
+Measured steer angles (:meth:`~SwmrController.step` ``beta_meas``) restart each period: at the
+headings of their best-fit ICR, plus the part of each wheel's disagreement with it beyond
+``measurement_deadband`` (:meth:`~SwmrController._resync`).
 """
 
 import math
 import time
 from dataclasses import dataclass, field, fields
+from typing import NamedTuple
 
 import numpy as np
 import osqp
-import scipy.sparse as sp
+from osqp import SolverStatus
+from scipy import sparse
 
 from wmm_control.base.icr import (
     DEFAULT_ICR_BORDER,
     DEFAULT_ICR_SCALE,
     Icr,
-    hip_velocity_matrices,
+    hip_velocity,
+    icr_of_headings,
+    route_between,
     tangent_pair,
+    wedge_row,
+    wrap_half_turn,
 )
+from wmm_control.base.steerable_kinematics import rolling_row
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError, ShapeError
 
@@ -61,7 +90,8 @@ _ROW_TOL = 1e-6        # a normalised wedge row within this of its bound counts 
 _RATE_TOL = 1e-9       # [rad/s] a steer rate clipped by more than this counts as active
 _ANGLE_TOL = 1e-12     # [rad] a steer change below this is round-off
 _FEAS_TOL = 1e-9       # a normalised row violated by at most this counts as satisfied
-ELASTIC_WEIGHT = 1e4   # penalty on the common wedge relaxation s of the elastic QP
+_HIP_TOL = 1e-9        # a hip velocity below this: the ICR sits on the hip
+ELASTIC_WEIGHT = 1e4
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,7 +120,22 @@ class SwmrParams:
         icr_border: L [m], half side of the bounded ICR square used for reporting; ICRs at or
             beyond it count as at infinity.
         max_icr_step: largest ICR move per period on the ICR sphere [rad] (chart box bound).
+            At speed the bound is smaller: turning a twist of size |ξ̇| by an angle θ changes
+            it by |ξ̇| sin θ, which ``base_accel_limit`` dt caps (:meth:`SwmrController._icr_step`).
         stop_threshold: ‖ξ̇*‖ below which the base stops and the steer angles are held.
+        route_weight: w, extra cost of ICR_next's deviation across the route ICR_curr → ICR*
+            (:class:`IcrQp`), applied while that route passes a hip. With the plain distance of
+            the paper the nearest point to ICR_ref slides round the thin steer-limit wedges,
+            off the route: an ICR route through two hips then sweeps those wheels round (11.0
+            rad of steering where 4.45 are needed); with the weight, 5.5 rad.
+        route_hip_distance: [rad] a route passes a hip when the hip's homogeneous point is
+            within this of the route's great circle, between ICR_curr and ICR*. (Everywhere,
+            the weight would make the ICR jitter with references near zero, whose route
+            direction is arbitrary.)
+        measurement_deadband: [rad] measured steer angles start the period at the headings of
+            their best-fit ICR, moved towards the measurement by the part of each wheel's
+            disagreement beyond this band: sensor noise (σ of a few mrad) is not mistaken for
+            steering that no single ICR explains, a real lag beyond the band still is.
         eps: OSQP absolute and relative tolerance.
         max_iter: OSQP iteration limit.
     """
@@ -108,6 +153,9 @@ class SwmrParams:
     icr_border: float = DEFAULT_ICR_BORDER
     max_icr_step: float = 0.3
     stop_threshold: float = 1e-3
+    route_weight: float = 3000.0
+    route_hip_distance: float = 0.15
+    measurement_deadband: float = 0.01
     eps: float = 1e-6
     max_iter: int = 4000
 
@@ -160,109 +208,186 @@ class SwmrParams:
         return cls(**values)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class IcrQp:
-    """One cycle's ICR QP, ``min ½ xᵀPx + qᵀx  s.t.  l ≤ A x ≤ u``, plus its context.
+    """One cycle's ICR QP, ``min ½ (x − x_ref)ᵀ P (x − x_ref)  s.t.  l ≤ A x ≤ u``, plus its context.
 
-    ``x`` are gnomonic chart coordinates around ICR_curr: the ICR is ``z_curr + basis @ x``.
+    ``P = I + w n nᵀ`` (n ⟂ x_ref): the paper's distance to ICR_ref, with steps across the route
+    ICR_curr → ICR* costing 1 + w (``route_weight``) times more than along it, so that
+    ICR_next follows the route instead of sliding round the wedges' corners.
+
+    ``x`` are gnomonic chart coordinates around ICR_curr: the ICR is ``z_curr + e1 x₁ + e2 x₂``.
     Rows of ``A``: ``2i`` and ``2i + 1`` are the two wedge lines of wheel i (normalised, lower
-    bound only), the last two the chart box ``|x_k| ≤ tan(max_icr_step)``.
+    bound only), the last two the chart box ``|x_k| ≤ box``.
 
     Attributes:
-        P: Shape (2, 2).  q: Shape (2,).  A: Shape (2N + 2, 2).  l, u: Shape (2N + 2,).
-        basis: tangent basis E at ICR_curr. Shape (3, 2).
-        x_ref: chart coordinates of ICR_ref. Shape (2,).
+        x_ref: chart coordinates of ICR_ref (the unconstrained optimum). Shape (2,).
+        wedges: the 2N wedge rows as ``(r0, r1, lb)`` tuples (:func:`wedge_row`).
+        box: half side of the chart box.
+        chart: the tangent basis (e1, e2) at ICR_curr, two 3-tuples.
         icr_curr: ICR of the current steer angles.
-        icr_target: ICR* (the representative on the chosen route).
-        icr_ref: ICR_ref, this period's P-controller reference.
-        rate_lower, rate_upper: per-wheel steer-rate interval for this period [rad/s]. Shape (N,).
+        target_z: ICR* on the chosen route (representative on the current hemisphere), 3-tuple.
+        rate_lower, rate_upper: per-wheel steer-rate interval for this period [rad/s].
+        sides: per wheel, +1 or −1: which half of its double wedge (heading or twin) is used.
+        mirrored: a wheel whose hip lies within the ICR step may use its mirror wedge.
+        route_weight: w of the cost (:attr:`P`).
         route: 'direct', 'complementary' or 'hold'.
         stopped: the reference is below the stop threshold.
     """
 
-    P: np.ndarray
-    q: np.ndarray
-    A: np.ndarray
-    l: np.ndarray
-    u: np.ndarray
-    basis: np.ndarray
     x_ref: np.ndarray
+    wedges: list
+    box: float
+    chart: tuple
     icr_curr: Icr
-    icr_target: Icr
-    icr_ref: Icr
-    rate_lower: np.ndarray
-    rate_upper: np.ndarray
+    target_z: tuple
+    rate_lower: list
+    rate_upper: list
+    sides: list
     route: str
     stopped: bool
+    mirrored: bool = False
+    route_weight: float = 0.0
 
-    def elastic(self):
-        """The elastic problem used when this one is infeasible, as ``(P, q, A, l, u)``.
+    @property
+    def A(self):
+        """Constraint matrix. Shape (2N + 2, 2)."""
+        a = np.empty((len(self.wedges) + 2, 2))
+        a[:-2] = [w[:2] for w in self.wedges]
+        a[-2:] = ((1.0, 0.0), (0.0, 1.0))
+        return a
 
-        Variables ``(x₁, x₂, s)``: every wedge row is relaxed by the same ``s ≥ 0`` (a
-        distance in chart units, rows being normalised) and ``s`` is penalised by
-        ``½ ELASTIC_WEIGHT s²``, so the solution violates the steer-limit wedges as little as possible
-        (the steer rates are then clipped into their limits per wheel). Shapes (3, 3), (3,),
-        (2N + 3, 3), (2N + 3,), (2N + 3,).
+    @property
+    def l(self):  # noqa: E743 — OSQP's name for the lower bounds
+        """Lower bounds. Shape (2N + 2,)."""
+        return np.array([max(w[2], -_INF) for w in self.wedges] + [-self.box, -self.box])
+
+    @property
+    def u(self):
+        """Upper bounds (only the box has finite ones). Shape (2N + 2,)."""
+        u = np.full(len(self.wedges) + 2, _INF)
+        u[-2:] = self.box
+        return u
+
+    @property
+    def P(self):
+        """Cost Hessian ``I + w n nᵀ``, n the unit normal of x_ref: a step across the route costs 1 + w."""
+        m = self.metric
+        return m @ m
+
+    @property
+    def metric(self):
+        """Symmetric S with ``S S = P``: in ``y = S x`` the cost is ``½‖y − S x_ref‖²``.
+
+        ``S = I + (√(1 + w) − 1) n nᵀ``. Shape (2, 2).
         """
-        p = np.diag([1.0, 1.0, ELASTIC_WEIGHT])
-        q = np.concatenate((self.q, [0.0]))
-        return (p, q) + _elastic_rows(self.A, self.l, self.u)
+        return self._metric(math.sqrt(1.0 + self.route_weight))
+
+    @property
+    def metric_inverse(self):
+        """S⁻¹ = I + (1/√(1 + w) − 1) n nᵀ. Shape (2, 2)."""
+        return self._metric(1.0 / math.sqrt(1.0 + self.route_weight))
+
+    def _metric(self, stretch):
+        x0, x1 = self.x_ref.tolist()
+        nn = math.hypot(x0, x1)
+        if nn == 0.0 or self.route_weight == 0.0:
+            return np.eye(2)
+        n0, n1 = -x1 / nn, x0 / nn
+        k = stretch - 1.0
+        return np.array(((1.0 + k * n0 * n0, k * n0 * n1), (k * n0 * n1, 1.0 + k * n1 * n1)))
+
+    @property
+    def basis(self):
+        """Tangent basis E = [e1 e2] at ICR_curr. Shape (3, 2)."""
+        return np.array(self.chart).T
+
+    def x_ref_feasible(self):
+        """True when ICR_ref lies in every wedge and in the box: it is then the optimum."""
+        x0, x1 = self.x_ref.tolist()
+        if abs(x0) > self.box + _FEAS_TOL or abs(x1) > self.box + _FEAS_TOL:
+            return False
+        return all(r0 * x0 + r1 * x1 - lb >= -_FEAS_TOL for r0, r1, lb in self.wedges)
+
+    def z_at(self, x0, x1):
+        """Unit homogeneous ICR at chart coordinates (x0, x1), a 3-tuple."""
+        (a0, a1, a2), (b0, b1, b2) = self.chart
+        c0, c1, c2 = self.icr_curr.z.tolist()
+        z0, z1, z2 = c0 + a0 * x0 + b0 * x1, c1 + a1 * x0 + b1 * x1, c2 + a2 * x0 + b2 * x1
+        n = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
+        return z0 / n, z1 / n, z2 / n
 
     def icr_of(self, x):
         """The ICR at chart coordinates ``x`` (Shape (2,))."""
-        return self.icr_curr.with_z(self.icr_curr.z + self.basis @ np.asarray(x, dtype=float))
+        return self.icr_curr._with_z_unchecked(self.z_at(*np.asarray(x, dtype=float).tolist()))
+
+    @property
+    def icr_ref(self):
+        """ICR_ref, this period's P-controller reference."""
+        return self.icr_of(self.x_ref)
+
+    @property
+    def icr_target(self):
+        """ICR* (the representative on the chosen route)."""
+        return self.icr_curr.with_z(self.target_z)
 
 
-def _elastic_rows(a, lb, ub):
-    """Rows ``(A, l, u)`` of the elastic problem (:meth:`IcrQp.elastic`) from the QP's ``a, lb, ub``."""
-    m = a.shape[0]
-    ae = np.zeros((m + 1, 3))
-    ae[:m, :2] = a
-    ae[:m - 2, 2] = 1.0
-    ae[m, 2] = 1.0
-    return ae, np.concatenate((lb, [0.0])), np.concatenate((ub, [_INF]))
+class QpResult(NamedTuple):
+    """What a solver returns: ``x`` (Shape (2,)) and a status string.
 
-
-@dataclass(frozen=True)
-class QpResult:
-    """What a solver returns: ``x`` (Shape (2,)), a status string and the duals (or None).
-
-    Status ``'solved'``, ``'solved_inaccurate'``, ``'max_iter_reached'``, ``'elastic'`` or
-    ``'unconstrained'`` (``x_ref`` satisfies every row) with a finite ``x`` is used; ``'primal_infeasible'`` makes the controller fall back to per-wheel clipping; anything
-    else, or a non-finite ``x``, is a solver failure (safe stop).
+    The controller uses ``x`` for status ``'solved'``, ``'solved_inaccurate'`` or ``'elastic'``
+    (finite ``x`` only); ``'primal_infeasible…'`` and ``'max_iter_reached'`` make it fall back to
+    per-wheel clipping towards ICR_ref; anything else, or a non-finite ``x``, is a solver failure
+    (safe stop).
     """
 
     x: np.ndarray
     status: str
-    y: np.ndarray = None
 
 
-_USABLE = ('solved', 'solved_inaccurate', 'max_iter_reached')
-_USED = _USABLE + ('elastic', 'unconstrained')
-_OSQP_STATUS = {1: 'solved', 2: 'solved_inaccurate', 3: 'primal_infeasible',
-                4: 'primal_infeasible_inaccurate', 5: 'dual_infeasible', 6: 'dual_infeasible_inaccurate',
-                7: 'max_iter_reached', 8: 'time_limit_reached', 9: 'non_convex', 10: 'interrupted',
-                11: 'unsolved'}
-_INFEASIBLE = ('primal_infeasible', 'primal_infeasible_inaccurate')
+_USED = ('solved', 'solved_inaccurate', 'elastic')
+_SOLVED = ('solved', 'solved_inaccurate', 'unconstrained', 'not_solved')
+_CLIPPED = ('primal_infeasible', 'max_iter_reached')
+_OSQP_ACCEPTED = (SolverStatus.OSQP_SOLVED, SolverStatus.OSQP_SOLVED_INACCURATE)
+_OSQP_ELASTIC = (SolverStatus.OSQP_PRIMAL_INFEASIBLE, SolverStatus.OSQP_PRIMAL_INFEASIBLE_INACCURATE,
+                 SolverStatus.OSQP_MAX_ITER_REACHED)
+
+
+_STATUS = {status.value: status for status in SolverStatus}
+
+
+def _status_name(status):
+    """'solved', 'primal_infeasible', … from an osqp :class:`osqp.SolverStatus`."""
+    return status.name.removeprefix('OSQP_').lower()
 
 
 class OsqpIcrSolver:
     """OSQP set up once for the ICR QP: fixed dense pattern, warm start, polish off.
 
-    Holds a second OSQP instance, also set up once, for the elastic problem
-    (:meth:`IcrQp.elastic`), solved only when the first reports primal infeasibility; its
-    result is returned with status ``'elastic'``. An ``x_ref`` (the unconstrained optimum,
-    ``q = −x_ref``) that satisfies every row is the optimum itself: it is returned with status
-    ``'unconstrained'`` and OSQP is not called.
+    Holds a second OSQP instance, also set up once, for the elastic problem (every wedge row
+    relaxed by one common ``s ≥ 0``, penalised by ``½ ELASTIC_WEIGHT s²``), solved only when
+    the first reports primal infeasibility or stops at its iteration limit; its result is
+    returned with status ``'elastic'``. A ``max_iter_reached`` answer is never returned as a
+    solution.
 
     Args:
         n_rows: number of constraint rows (2N + 2).
         eps: absolute and relative tolerance.
         max_iter: iteration limit.
+        use_extension: update and solve through osqp's extension object (``OSQP._solver``, not
+            public API) instead of ``update()``/``solve()``. It skips ~15 µs of argument
+            checking and copying per call, a third of the call on this 2-variable problem
+            (``benchmarks/bench_swmr.py`` prints both); a release without that attribute
+            takes the public path, with equal results.
+
+    Attributes:
+        last_iterations: OSQP iterations of the last solve (the elastic one if it ran).
     """
 
-    def __init__(self, n_rows, eps=1e-6, max_iter=4000):
+    def __init__(self, n_rows, eps=1e-6, max_iter=4000, use_extension=True):
         self.n_rows = m = int(n_rows)
+        self.last_iterations = 0
+        self.use_extension = bool(use_extension)
         settings = dict(verbose=False, polishing=False, warm_starting=True, eps_abs=eps, eps_rel=eps,
                         max_iter=int(max_iter))
         self._osqp = self._setup(np.eye(2), m, settings)
@@ -275,18 +400,17 @@ class OsqpIcrSolver:
         # P is constant (set here, never updated). A: dense pattern, every entry stored
         # (placeholder values are non-zero so none is dropped); its values change each cycle.
         n = p_dense.shape[0]
-        p = sp.triu(sp.csc_matrix(p_dense), format='csc')
-        a = sp.csc_matrix((np.ones(n * m), np.tile(np.arange(m), n), np.arange(0, n * m + 1, m)), shape=(m, n))
+        p = sparse.triu(sparse.csc_matrix(p_dense), format='csc')
+        a = sparse.csc_matrix((np.ones(n * m), np.tile(np.arange(m), n), np.arange(0, n * m + 1, m)),
+                              shape=(m, n))
         solver = osqp.OSQP()
         solver.setup(p, np.zeros(n), a, -np.full(m, _INF), np.full(m, _INF), **settings)
         return solver
 
-    @staticmethod
-    def _run(solver, q, a_x, lb, ub):
-        # osqp 1.x keeps its C-extension solver as ``_solver``; updating and solving through
-        # it skips ~30 µs of wrapper overhead per call. That attribute is not public API, so
-        # any other osqp release takes the public update()/solve() path, with equal results.
-        ext = getattr(solver, '_solver', None)
+    def _run(self, solver, q, a, lb, ub):
+        """Update ``solver``'s q, A (dense, column-major values), l, u and solve: ``(x, SolverStatus)``."""
+        a_x = a.ravel(order='F')
+        ext = getattr(solver, '_solver', None) if self.use_extension else None
         if ext is not None and hasattr(ext, 'update_data_vec') and hasattr(ext, 'update_data_mat'):
             ext.update_data_vec(q, lb, ub)
             ext.update_data_mat(None, None, a_x, None)
@@ -294,46 +418,47 @@ class OsqpIcrSolver:
             info, sol = ext.info, ext.solution
         else:
             solver.update(q=q, l=lb, u=ub, Ax=a_x)
-            try:
-                res = solver.solve(raise_error=False)    # the status is handled here
-            except TypeError:                            # a release without that keyword
-                res = solver.solve()
+            res = solver.solve(raise_error=False)    # the status is handled here
             info, sol = res.info, res
-        status = _OSQP_STATUS.get(int(info.status_val), str(info.status))
-        return np.array(sol.x, dtype=float), status, np.array(sol.y, dtype=float)
-
-    def solve(self, x_ref, a, lb, ub):
-        """Solve ``min ‖x − x_ref‖²  s.t.  lb ≤ a x ≤ ub`` (rows laid out as :class:`IcrQp`).
-
-        Args:
-            x_ref: the unconstrained optimum. Shape (2,).
-            a: Shape (n_rows, 2).  lb, ub: Shape (n_rows,).
-
-        Returns:
-            ``(x, status, y)``; ``y`` (the duals) is None when OSQP was not called.
-        """
-        ax = a @ x_ref
-        if (lb - ax <= _FEAS_TOL).all() and (ax - ub <= _FEAS_TOL).all():
-            return x_ref.copy(), 'unconstrained', None
-        a_x = a.ravel(order='F')
-        x, status, y = self._run(self._osqp, -x_ref, a_x, lb, ub)
-        if status not in _INFEASIBLE:
-            return x, status, y
-        ae, le, ue = _elastic_rows(a, lb, ub)
-        xe, estatus, ye = self._run(self._elastic, np.concatenate((-x_ref, [0.0])), ae.ravel(order='F'), le, ue)
-        if estatus in _USABLE:
-            return xe[:2], 'elastic', ye
-        return x, f'{status} (elastic: {estatus})', y
+        self.last_iterations = int(info.iter)
+        return np.array(sol.x, dtype=float), _STATUS[info.status_val]
 
     def __call__(self, problem):
-        """Solve ``problem`` (an :class:`IcrQp`) with updated values; returns a :class:`QpResult`.
+        """Solve ``problem`` (an :class:`IcrQp`); returns a :class:`QpResult`.
+
+        OSQP sees the problem in the coordinates ``y = S x`` of :attr:`IcrQp.metric`, where
+        its cost is the identity (constant, set up once) and the rows are normalised again: the
+        route weight then costs OSQP no conditioning. (With P = I + w n nᵀ itself, condition
+        number 1 + w, answers reported 'solved' broke the thin wedges by up to 1e-4.)
 
         Raises:
-            ShapeError: the problem's A does not have the set-up shape.
+            ShapeError: the problem does not have the set-up number of rows.
         """
-        if problem.A.shape != (self.n_rows, 2):
-            raise ShapeError(f'ICR QP: A has shape {problem.A.shape}, solver set up for ({self.n_rows}, 2)')
-        return QpResult(*self.solve(-np.asarray(problem.q, dtype=float), problem.A, problem.l, problem.u))
+        a, lb, ub = problem.A, problem.l, problem.u
+        if a.shape != (self.n_rows, 2):
+            raise ShapeError(f'ICR QP: A has shape {a.shape}, solver set up for ({self.n_rows}, 2)')
+        y_ref = np.asarray(problem.x_ref, dtype=float)
+        s_inv = None
+        if problem.route_weight > 0.0 and y_ref.any():
+            s_inv = problem.metric_inverse
+            a = a @ s_inv
+            norms = np.sqrt(np.einsum('ij,ij->i', a, a))
+            a /= norms[:, None]
+            lb, ub = np.maximum(lb / norms, -_INF), np.minimum(ub / norms, _INF)
+            y_ref = problem.metric @ y_ref
+        y, status = self._run(self._osqp, -y_ref, a, lb, ub)
+        if status in _OSQP_ACCEPTED or status not in _OSQP_ELASTIC:
+            return QpResult(y if s_inv is None else s_inv @ y, _status_name(status))
+        m = a.shape[0]
+        ae = np.zeros((m + 1, 3))
+        ae[:m, :2] = a
+        ae[:m - 2, 2] = 1.0          # every wedge row relaxed by s (the box rows are not)
+        ae[m, 2] = 1.0               # s ≥ 0
+        ye, estatus = self._run(self._elastic, np.concatenate((-y_ref, [0.0])), ae,
+                                np.concatenate((lb, [0.0])), np.concatenate((ub, [_INF])))
+        if estatus in _OSQP_ACCEPTED:
+            return QpResult(ye[:2] if s_inv is None else s_inv @ ye[:2], 'elastic')
+        return QpResult(np.asarray(problem.x_ref, dtype=float).copy(), _status_name(status))
 
 
 @dataclass(frozen=True)
@@ -358,9 +483,10 @@ class SwmrOutput:
         active_constraints: wheels whose steer rate/acceleration limit binds this period.
         solve_time_s: wall time of the QP solve [s] (0 when no QP was solved).
         status: 'ok', 'stopped' or 'solver_failure'.
-        qp_status: the solver's status: 'solved', 'solved_inaccurate', 'max_iter_reached',
-            'unconstrained' (ICR_ref satisfies every wedge, it is the optimum; OSQP not called),
-            'elastic' (wedges infeasible, elastic QP used), 'primal_infeasible' (fallback:
+        qp_status: 'solved' or 'solved_inaccurate' (OSQP's answer used), 'unconstrained'
+            (ICR_ref lies in every wedge: it is the optimum, OSQP not called), 'elastic' (the
+            wedges have no common point, or OSQP stopped at its iteration limit: the elastic
+            QP's answer used), 'primal_infeasible' or 'max_iter_reached' (no usable answer:
             per-wheel clipping towards ICR_ref), 'not_solved' (steering held at rest), or the
             failure reason.
     """
@@ -379,18 +505,30 @@ class SwmrOutput:
     qp_status: str = field(default='not_solved')
 
 
+class _Steering(NamedTuple):
+    """The steering controller's result for one period."""
+
+    beta: list            # β_ref [rad]
+    rate: list            # β̇_ref [rad/s]
+    icr_next: Icr         # ICR of β_ref
+    active: set           # wheels whose rate limit or wedge binds
+    qp_status: str
+    solve_time: float     # [s]
+
+
 class SwmrController:
     """The §IV steering + drive controller for an N-module steerable base.
 
     Internal state: the commanded β, β̇ (position-controlled steering: the actuators integrate
     β̇_ref), the last feasible twist (the integrator of the ξ̇ controller) and the drive rates.
-    Pass measured angles to :meth:`step` to resync.
+    Pass measured angles to :meth:`step` to close the loop on them.
 
     Args:
         geometry: :class:`SteerableGeometry` (hips, r_w, d).
         params: :class:`SwmrParams`.
         solver: callable ``solver(IcrQp) -> QpResult``; default :class:`OsqpIcrSolver`. It is
             the attribute ``solver`` and may be replaced at run time (tests inject failures).
+            It is called only in periods where ICR_ref leaves some wedge.
     """
 
     def __init__(self, geometry, params, solver=None):
@@ -405,13 +543,10 @@ class SwmrController:
                 f'drive_rate_limit = {p.drive_rate_limit}')
         self.n_rows = 2 * n + 2
         self.solver = solver if solver is not None else OsqpIcrSolver(self.n_rows, p.eps, p.max_iter)
-        m = hip_velocity_matrices(geometry.hips, p.icr_scale)
-        # Hip i: M_i z = (z1 + my_i z2, −z0 + mx_i z2); tol_i flags an ICR on the hip.
-        self._wheels = [(float(hx), float(hy), float(mi[0, 2]), float(mi[1, 2]),
-                         1e-9 * max(1.0, float(np.linalg.norm(mi)))) for (hx, hy), mi in zip(geometry.hips, m)]
         self._icr_proto = Icr(np.array([0.0, 0.0, 1.0]), p.icr_scale, p.icr_border)
-        self._box = math.tan(p.max_icr_step)
-        self._ub = np.concatenate((np.full(2 * n, _INF), [self._box, self._box]))
+        # the twist direction ∝ (z₁, −z₀, z₂/ℓ): its angle changes up to max(ℓ, 1/ℓ) × the ICR's
+        self._turn_factor = max(p.icr_scale, 1.0 / p.icr_scale) * math.sqrt(2.0)
+        self._turn_budget = min(p.base_accel_limit) * p.dt
         self.reset(np.zeros(n))
 
     # ------------------------------------------------------------------ state
@@ -425,87 +560,41 @@ class SwmrController:
                 ξ̇-controller's integrator state. Shape (3,).
         """
         n = self.geometry.n_wheels
-        self._beta = as_finite_vector(beta, n, 'beta').copy()
-        self._beta_dot = np.zeros(n) if beta_dot is None else as_finite_vector(beta_dot, n, 'beta_dot').copy()
-        self._twist = np.zeros(3) if twist is None else as_finite_vector(twist, 3, 'twist').copy()
-        self._phi_dot = self.geometry.wheel_rates(self._beta, self._beta_dot, self._twist)
-        self._icr = self._icr_of_beta(self._beta)
+        self._beta = as_finite_vector(beta, n, 'beta').tolist()
+        self._beta_dot = [0.0] * n if beta_dot is None else as_finite_vector(beta_dot, n, 'beta_dot').tolist()
+        self._twist = [0.0] * 3 if twist is None else as_finite_vector(twist, 3, 'twist').tolist()
+        self._phi_dot = self.geometry.wheel_rates(self._beta, self._beta_dot, self._twist).tolist()
+        self._icr = self._icr_of(self._beta)
 
     @property
     def beta(self):
         """Commanded steer angles [rad]. Shape (N,)."""
-        return self._beta.copy()
+        return np.array(self._beta)
 
     @property
     def beta_dot(self):
         """Commanded steer rates [rad/s]. Shape (N,)."""
-        return self._beta_dot.copy()
+        return np.array(self._beta_dot)
 
     @property
     def twist(self):
         """Last feasible twist (vx, vy, ω) [m/s, m/s, rad/s]. Shape (3,)."""
-        return self._twist.copy()
+        return np.array(self._twist)
 
     @property
     def phi_dot(self):
         """Last drive rates [rad/s]. Shape (N,)."""
-        return self._phi_dot.copy()
+        return np.array(self._phi_dot)
 
     @property
     def icr(self):
         """ICR of the commanded steer angles."""
         return self._icr
 
-    def _icr_of_beta(self, beta, like=None):
-        """ICR of steer angles β (least squares, as :meth:`Icr.from_steer_angles`), sign of ``like``."""
-        beta = np.asarray(beta, dtype=float)
-        return self._icr_of_cs(np.cos(beta).tolist(), np.sin(beta).tolist(), like)
-
-    def _icr_of_cs(self, cos_beta, sin_beta, like):
-        """:meth:`_icr_of_beta` from the cosines and sines of β (sequences of floats).
-
-        The least-squares twist direction t (rows g_i = (−sin, cos, (hx cos + hy sin)/ℓ)) is the
-        eigenvector of the smallest eigenvalue λ of S = GᵀG: closed-form λ (trigonometric
-        method), t the largest cross product of two rows of S − λI. An ill-conditioned case
-        (repeated eigenvalues) falls back to the SVD of G.
-        """
-        ell = self.params.icr_scale
-        g = [(-s, c, (hx * c + hy * s) / ell) for c, s, (hx, hy, _, _, _) in zip(cos_beta, sin_beta, self._wheels)]
-        s00 = s01 = s02 = s11 = s12 = s22 = 0.0
-        for g0, g1, g2 in g:
-            s00 += g0 * g0
-            s01 += g0 * g1
-            s02 += g0 * g2
-            s11 += g1 * g1
-            s12 += g1 * g2
-            s22 += g2 * g2
-        q = (s00 + s11 + s22) / 3.0
-        off = s01 * s01 + s02 * s02 + s12 * s12
-        pp = math.sqrt(((s00 - q) ** 2 + (s11 - q) ** 2 + (s22 - q) ** 2 + 2.0 * off) / 6.0)
-        t = None
-        if pp > 1e-9 * q:
-            b00, b11, b22 = (s00 - q) / pp, (s11 - q) / pp, (s22 - q) / pp
-            b01, b02, b12 = s01 / pp, s02 / pp, s12 / pp
-            det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
-            phi = math.acos(min(1.0, max(-1.0, 0.5 * det))) / 3.0
-            lam = q + 2.0 * pp * math.cos(phi + 2.0 * math.pi / 3.0)
-            r0 = (s00 - lam, s01, s02)
-            r1 = (s01, s11 - lam, s12)
-            r2 = (s02, s12, s22 - lam)
-            best, bn = None, 0.0
-            for u, v in ((r0, r1), (r0, r2), (r1, r2)):
-                c = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
-                cn = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
-                if cn > bn:
-                    best, bn = c, cn
-            # The cross product scales with the two other eigenvalue gaps; too small: degenerate.
-            if bn > 1e-12 * (pp * pp) ** 2:
-                t = best
-        if t is None:
-            t = np.linalg.svd(np.array(g))[2][-1].tolist()
-        z = (-t[1], t[0], t[2])
-        if like is not None and z[0] * like[0] + z[1] * like[1] + z[2] * like[2] < 0:
-            z = (-z[0], -z[1], -z[2])
+    def _icr_of(self, beta, like=None):
+        """ICR of steer angles β (a sequence of floats): :func:`icr_of_headings`, sign of ``like``."""
+        z = icr_of_headings([math.cos(b) for b in beta], [math.sin(b) for b in beta],
+                            self.geometry.hip_list, self.params.icr_scale, like)
         return self._icr_proto._with_z_unchecked(z)
 
     def _rate_interval(self):
@@ -518,7 +607,7 @@ class SwmrController:
         dv = p.steer_accel_limit * p.dt
         vmax = p.steer_rate_limit
         lower, upper = [], []
-        for rate in self._beta_dot.tolist():
+        for rate in self._beta_dot:
             lo, hi = max(-vmax, rate - dv), min(vmax, rate + dv)
             if lo > hi:   # a resynced (measured) rate beyond β̇_max + β̈_max dt: brake as hard as β̈_max allows
                 lo = hi = rate - math.copysign(dv, rate)
@@ -526,70 +615,446 @@ class SwmrController:
             upper.append(hi)
         return lower, upper
 
-    # ------------------------------------------------------------------ QP
-    def _problem(self, vx, vy, wz):
-        """This period's QP data for the reference twist (vx, vy, ω), from the controller state.
+    def _resync(self, beta_meas, beta_dot_meas, stopped):
+        """Start the period from measured steer angles and rates (either may be None).
 
-        Returns:
-            ``(x_ref, (e1, e2), a, lb, rate_lower, rate_upper, target_z, route, stopped)``:
-            x_ref (Shape (2,)), the tangent basis as two 3-tuples, the rows ``a`` (Shape (2N + 2, 2))
-            and lower bounds ``lb`` (Shape (2N + 2,)) laid out as in :class:`IcrQp` (upper bounds
-            are the constant ``self._ub``), the rate interval as lists, ICR* as a 3-tuple (the
-            representative on the chosen route), the route and the stop flag.
+        Angles: a wheel set that no single ICR explains exactly has, per wheel, a
+        disagreement with the headings of its best-fit ICR (:func:`icr_of_headings`). The
+        measurement starts the period with its best-fit ICR and with the commanded set's own
+        disagreement, plus only the part of the extra disagreement that lies beyond
+        ``measurement_deadband``: sensor noise does not start the QP from wedges without a
+        common point, a real lag of a wheel beyond the band is kept. Measured angles equal to
+        the commanded ones change nothing. While the steering is held at rest (``stopped`` and no
+        steer rate) a wheel keeps its held angle unless the measurement is beyond the band
+        from it, and then takes the measurement as it is. Rates beyond
+        ±``steer_rate_limit`` (an encoder glitch) are clipped: they are not a state to continue
+        from.
         """
         p = self.params
-        z0, z1, z2 = self._icr.z.tolist()
-        e1, e2 = tangent_pair(z0, z1, z2)
-        stopped = math.sqrt(vx * vx + vy * vy + wz * wz) < p.stop_threshold
+        n = self.geometry.n_wheels
+        if beta_dot_meas is not None:
+            limit = p.steer_rate_limit
+            rates = as_finite_vector(beta_dot_meas, n, 'beta_dot_meas').tolist()
+            self._beta_dot = [min(limit, max(-limit, r)) for r in rates]
+        if beta_meas is not None:
+            meas = as_finite_vector(beta_meas, n, 'beta_meas').tolist()
+            if stopped and not any(self._beta_dot):
+                # held at rest: within the band of the held angle a measurement is noise, beyond
+                # it the wheel was moved and the measurement is taken as it is
+                band = p.measurement_deadband
+                held = [c if abs(m - c) <= band else m for m, c in zip(meas, self._beta)]
+                if held != self._beta:
+                    self._beta = held
+                    self._icr = self._icr_of(held, like=self._icr.z.tolist())
+            elif meas != self._beta:
+                z_cmd = self._icr.z.tolist()
+                z_meas = icr_of_headings([math.cos(b) for b in meas], [math.sin(b) for b in meas],
+                                         self.geometry.hip_list, p.icr_scale, z_cmd)
+                band = p.measurement_deadband
+                start = []
+                for m, c, (hx, hy) in zip(meas, self._beta, self.geometry.hip_list):
+                    v_meas = hip_velocity(z_meas, hx, hy, p.icr_scale)
+                    v_cmd = hip_velocity(z_cmd, hx, hy, p.icr_scale)
+                    if min(math.hypot(*v_meas), math.hypot(*v_cmd)) < _HIP_TOL:   # on the hip: any angle fits
+                        start.append(m)
+                        continue
+                    own = wrap_half_turn(c - math.atan2(v_cmd[1], v_cmd[0]))        # the command's
+                    extra = wrap_half_turn(m - math.atan2(v_meas[1], v_meas[0]) - own)
+                    start.append(m - extra + math.copysign(max(abs(extra) - band, 0.0), extra))
+                self._beta = start
+                self._icr = self._icr_of(start, like=z_cmd)
+
+    # ------------------------------------------------------------------ the steering controller
+    def build_qp(self, twist_ref):
+        """This period's ICR QP for the reference twist, from the controller state.
+
+        Args:
+            twist_ref: ξ̇* = (vx, vy, ω) in the base frame [m/s, m/s, rad/s]; beyond
+                ``base_velocity_limit`` it is scaled into it. Shape (3,).
+
+        Returns:
+            :class:`IcrQp`, its route weight set.
+        """
+        problem = self._icr_qp(self._bounded_reference(twist_ref))
+        self._weigh_route(problem)
+        return problem
+
+    def _weigh_route(self, problem):
+        """Set the problem's route weight: ``route_weight`` while its route passes a hip, else 0."""
+        z = problem.icr_curr.z.tolist()
+        passes = self._route_passes_a_hip(z, problem.target_z)
+        problem.route_weight = self.params.route_weight if passes else 0.0
+
+    def _icr_qp(self, ref, mirror=True):
+        """Steps 1–3 up to the QP: ICR* and its route, ICR_ref, and the wedges (:class:`IcrQp`).
+
+        ``mirror``: a wheel whose hip lies within the ICR step may use its mirror wedge
+        (:meth:`_wedge_side`); False keeps every wheel on the wedge of ICR_curr.
+        """
+        p = self.params
+        scale = p.icr_scale
+        vx, vy, wz = ref
+        zc = self._icr.z.tolist()
+        e1, e2 = tangent_pair(*zc)
+        stopped = self._stopped(ref)
+        step = self._icr_step()
         x0 = x1 = 0.0
         if stopped:
-            t0, t1, t2, route = z0, z1, z2, 'hold'
+            zt, route = tuple(zc), 'hold'
         else:
-            t0, t1, t2 = -vy, vx, p.icr_scale * wz
-            tn = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-            t0, t1, t2 = t0 / tn, t1 / tn, t2 / tn
-            cos = z0 * t0 + z1 * t1 + z2 * t2
-            if cos < 0.0:            # choose_route: the representative on the current hemisphere
-                t0, t1, t2, cos = -t0, -t1, -t2, -cos
-            route = 'complementary' if z2 * t2 < 0.0 else 'direct'
-            theta = math.acos(min(1.0, cos))
-            d0 = e1[0] * t0 + e1[1] * t1 + e1[2] * t2
-            d1 = e2[0] * t0 + e2[1] * t1 + e2[2] * t2
+            zt, route = route_between(zc, (-vy, vx, scale * wz))
+            tn = math.sqrt(zt[0] * zt[0] + zt[1] * zt[1] + zt[2] * zt[2])
+            zt = (zt[0] / tn, zt[1] / tn, zt[2] / tn)
+            # ICR_ref: a fraction λ dt of the arc ICR_curr → ICR*, along the great circle.
+            theta = math.acos(min(1.0, zc[0] * zt[0] + zc[1] * zt[1] + zc[2] * zt[2]))
+            d0 = e1[0] * zt[0] + e1[1] * zt[1] + e1[2] * zt[2]
+            d1 = e2[0] * zt[0] + e2[1] * zt[1] + e2[2] * zt[2]
             dn = math.sqrt(d0 * d0 + d1 * d1)
             if dn > 1e-12:
-                k = math.tan(min(p.icr_gain * p.dt * theta, p.max_icr_step)) / dn
+                k = math.tan(min(p.icr_gain * p.dt * theta, step)) / dn
                 x0, x1 = k * d0, k * d1
+        zr = (zc[0] + e1[0] * x0 + e2[0] * x1, zc[1] + e1[1] * x0 + e2[1] * x1,
+              zc[2] + e1[2] * x0 + e2[2] * x1)
         rate_lo, rate_hi = self._rate_interval()
-
-        # cross(e_lo, v) >= 0 and cross(v, e_hi) >= 0 with e = σ (cos, sin), v = M_i (z_c + E x):
-        # rows r = c M_i with c_lo = σ (−sin a_lo, cos a_lo), c_hi = σ (sin a_hi, −cos a_hi),
-        # i.e. r = (−c1, c0, my c0 + mx c1); σ orients the wheel along the hip velocity.
         dt = p.dt
-        rows, lb = [], []
-        for beta, lo, hi, (_, _, my, mx, tol) in zip(self._beta.tolist(), rate_lo, rate_hi, self._wheels):
-            cb, sb = math.cos(beta), math.sin(beta)
-            side = cb * (z1 + my * z2) + sb * (mx * z2 - z0)
-            if abs(side) < tol:      # ICR on the hip: open the wedge towards the goal
-                side = cb * (t1 + my * t2) + sb * (mx * t2 - t0)
-            sig = -1.0 if side < 0 else 1.0
+        wedges, sides = [], []
+        for beta, lo, hi, (hx, hy) in zip(self._beta, rate_lo, rate_hi, self.geometry.hip_list):
+            side = self._wedge_side(beta, hx, hy, zc, zr, zt, mirror)
             a_lo, a_hi = beta + dt * lo, beta + dt * hi
-            for c0, c1 in ((-sig * math.sin(a_lo), sig * math.cos(a_lo)),
-                           (sig * math.sin(a_hi), -sig * math.cos(a_hi))):
-                r2 = my * c0 + mx * c1
-                w0 = -c1 * e1[0] + c0 * e1[1] + r2 * e1[2]
-                w1 = -c1 * e2[0] + c0 * e2[1] + r2 * e2[2]
-                nr = math.sqrt(w0 * w0 + w1 * w1)
-                if nr > 1e-12:
-                    rows += (w0 / nr, w1 / nr)
-                    lb.append((c1 * z0 - c0 * z1 - r2 * z2) / nr)
-                else:
-                    rows += (0.0, 0.0)
-                    lb.append(-_INF)
-        rows += (1.0, 0.0, 0.0, 1.0)
-        lb += (-self._box, -self._box)
-        a = np.array(rows).reshape(-1, 2)
-        return (np.array((x0, x1)), (e1, e2), a, np.array(lb), rate_lo, rate_hi, (t0, t1, t2), route,
-                stopped)
+            wedges.append(wedge_row((math.cos(a_lo), math.sin(a_lo)), side, hx, hy, scale, zc, e1, e2))
+            wedges.append(wedge_row((math.cos(a_hi), math.sin(a_hi)), -side, hx, hy, scale, zc, e1, e2))
+            sides.append(side)
+        return IcrQp(x_ref=np.array((x0, x1)), wedges=wedges, mirrored=mirror, box=math.tan(step), chart=(e1, e2),
+                     icr_curr=self._icr, target_z=zt, rate_lower=rate_lo, rate_upper=rate_hi,
+                     sides=sides, route=route, stopped=stopped)
+
+    def _route_passes_a_hip(self, zc, zt):
+        """True when the great-circle route ICR_curr → ICR* passes within ``route_hip_distance`` of a hip.
+
+        Only then does the route weight apply: off the route near a hip, a wheel sweeps round.
+        """
+        p = self.params
+        nrm = (zc[1] * zt[2] - zc[2] * zt[1], zc[2] * zt[0] - zc[0] * zt[2], zc[0] * zt[1] - zc[1] * zt[0])
+        sin_theta = math.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2])
+        if sin_theta < 1e-12:
+            return False
+        cos_theta = zc[0] * zt[0] + zc[1] * zt[1] + zc[2] * zt[2]
+        for hx, hy in self.geometry.hip_list:
+            hn = math.sqrt(hx * hx + hy * hy + p.icr_scale * p.icr_scale)
+            h = (hx / hn, hy / hn, p.icr_scale / hn)
+            off = abs(h[0] * nrm[0] + h[1] * nrm[1] + h[2] * nrm[2]) / sin_theta
+            # the hip's foot on the route's great circle is a zc + b zt with a, b ≥ 0
+            hc = h[0] * zc[0] + h[1] * zc[1] + h[2] * zc[2]
+            ht = h[0] * zt[0] + h[1] * zt[1] + h[2] * zt[2]
+            between = hc - ht * cos_theta >= 0.0 and ht - hc * cos_theta >= 0.0
+            if off < p.route_hip_distance and between:
+                return True
+        return False
+
+    def _stopped(self, ref):
+        """True when the reference (vx, vy, ω) is below ``stop_threshold``: stop, hold the angles."""
+        return math.sqrt(ref[0] * ref[0] + ref[1] * ref[1] + ref[2] * ref[2]) < self.params.stop_threshold
+
+    def _icr_step(self):
+        """Largest ICR move of this period on the ICR sphere [rad]: ``max_icr_step``, or less at speed.
+
+        Rotating the twist ξ̇ by θ changes it by |ξ̇| sin θ; with θ at most √2 × the chart box
+        (its corner) times the distortion max(ℓ, 1/ℓ) of the map ICR → twist direction, the
+        bound ``|ξ̇| sin θ ≤ min(base_accel_limit) dt`` leaves the feasible twist a size within
+        the acceleration limit (:meth:`_feasible_speed`).
+        """
+        speed = math.sqrt(sum(v * v for v in self._twist))
+        if speed <= self._turn_budget:
+            return self.params.max_icr_step
+        return min(self.params.max_icr_step, math.asin(self._turn_budget / speed) / self._turn_factor)
+
+    def _wedge_side(self, beta, hx, hy, zc, zr, zt, mirror=True):
+        """+1 if the wheel heading β points along its hip velocity, −1 if against it (twin).
+
+        The hip velocity is taken at ICR_curr; but when the hip lies within this period's ICR
+        step (|v(ICR_curr)| ≤ |v(ICR_ref) − v(ICR_curr)|, v linear in z), at ICR_ref: the ICR
+        path passes by the hip, and if it crosses it the half of the wheel's double wedge that
+        holds ICR_ref is the mirror one, so the wheel flips to its twin (drive reversed) instead
+        of steering half a turn. ICR* decides when both sit on the hip.
+        """
+        scale = self.params.icr_scale
+        c, s = math.cos(beta), math.sin(beta)
+        vc0, vc1 = hip_velocity(zc, hx, hy, scale)
+        along_c = c * vc0 + s * vc1
+        if mirror:
+            vr0, vr1 = hip_velocity(zr, hx, hy, scale)
+            along_r = c * vr0 + s * vr1
+            d0, d1 = vr0 - vc0, vr1 - vc1
+            if vc0 * vc0 + vc1 * vc1 <= d0 * d0 + d1 * d1 and abs(along_r) > _HIP_TOL:   # near
+                return 1.0 if along_r > 0 else -1.0
+        if abs(along_c) > _HIP_TOL:
+            return 1.0 if along_c > 0 else -1.0
+        for z in (zr, zt):                         # ICR_curr on the hip: ICR_ref, then ICR*
+            v0, v1 = hip_velocity(z, hx, hy, scale)
+            along = c * v0 + s * v1
+            if abs(along) > _HIP_TOL:
+                return 1.0 if along > 0 else -1.0
+        return 1.0
+
+    def _solve(self, problem):
+        """Step 3: ICR_next in chart coordinates, ``(x, qp_status, solve_time)``.
+
+        ``x`` is None when the solver failed (``qp_status`` says why); ICR_ref when no usable
+        answer exists (per-wheel clipping follows). OSQP is called only when ICR_ref leaves a
+        wedge, and ``'not_solved'`` means the steering is held at rest.
+        """
+        if problem.stopped and not any(self._beta_dot):
+            return (0.0, 0.0), 'not_solved', 0.0
+        if problem.x_ref_feasible():
+            return tuple(problem.x_ref.tolist()), 'unconstrained', 0.0
+        self._weigh_route(problem)
+        t0 = time.perf_counter()
+        try:
+            res = self.solver(problem)
+            x, qp_status = np.asarray(res.x, dtype=float), str(res.status)
+        except Exception as exc:  # noqa: BLE001 — any solver exception means a safe stop
+            return None, f'error: {type(exc).__name__}: {exc}', time.perf_counter() - t0
+        solve_time = time.perf_counter() - t0
+        if qp_status.startswith(_CLIPPED):
+            return tuple(problem.x_ref.tolist()), qp_status, solve_time
+        if qp_status not in _USED:
+            return None, qp_status, solve_time
+        if x.shape != (2,) or not np.isfinite(x).all():
+            return None, f'{qp_status} (non-finite x)', solve_time
+        return tuple(x.tolist()), qp_status, solve_time
+
+    def _icr_next(self, ref):
+        """Steps 1–3: this period's QP and ICR_next in its chart coordinates.
+
+        The wedges are first chosen per wheel (:meth:`_wedge_side`); when some wheel took its
+        mirror wedge and the wedges then have no common point, the QP is solved again with every
+        wheel on the wedge of ICR_curr.
+
+        Returns:
+            ``(problem, x, qp_status, solve_time)``; ``x`` is None when the solver failed.
+        """
+        problem = self._icr_qp(ref)
+        x, qp_status, solve_time = self._solve(problem)
+        if x is not None and qp_status not in _SOLVED:
+            plain = self._icr_qp(ref, mirror=False)
+            if plain.sides != problem.sides:
+                x2, status2, time2 = self._solve(plain)
+                solve_time += time2
+                if x2 is not None and status2 in _SOLVED:
+                    problem, x, qp_status = plain, x2, status2
+        return problem, x, qp_status, solve_time
+
+    def _steer(self, problem, x, qp_status, solve_time):
+        """Step 4: β_ref of ICR_next (the nearest twin), β̇_ref clipped into the period's limits.
+
+        Returns:
+            :class:`_Steering`.
+        """
+        p = self.params
+        x0, x1 = x
+        hold = qp_status == 'not_solved'
+        z_next = problem.z_at(x0, x1)
+        dt, scale = p.dt, p.icr_scale
+        beta_new, rate, active, clipped = [], [], set(), False
+        for i, (beta, lo, hi, (hx, hy)) in enumerate(zip(self._beta, problem.rate_lower, problem.rate_upper,
+                                                         self.geometry.hip_list)):
+            vx, vy = hip_velocity(z_next, hx, hy, scale)
+            wanted = 0.0
+            if not hold and math.hypot(vx, vy) >= _HIP_TOL:      # on a hip any angle fits: keep it
+                delta = wrap_half_turn(math.atan2(vy, vx) - beta)
+                # A change at the round-off of the ICR ↔ β round trip is none: at rest the wheels stay put.
+                if abs(delta) > _ANGLE_TOL:
+                    wanted = delta / dt
+            r = min(max(wanted, lo), hi)
+            if r != wanted:
+                clipped = True
+                if abs(wanted - r) > _RATE_TOL:
+                    active.add(i)
+            rate.append(r)
+            beta_new.append(beta + dt * r)
+        if qp_status in _USED:
+            for k, (r0, r1, lb) in enumerate(problem.wedges):
+                if r0 * x0 + r1 * x1 - lb <= _ROW_TOL:
+                    active.add(k // 2)
+        if clipped or hold:            # the wheels' own ICR (they may disagree)
+            icr_next = self._icr_of(beta_new, like=z_next)
+        else:                          # every wheel on its heading for ICR_next
+            icr_next = self._icr_proto._with_z_unchecked(z_next)
+        return _Steering(beta_new, rate, icr_next, active, qp_status, solve_time)
+
+    # ------------------------------------------------------------------ the drive controller
+    def _drive(self, ref, stopped, brake):
+        """Step 5: the twist controller's next twist ξ̇_ref(init), acceleration-limited."""
+        p = self.params
+        amax, dt, twist = p.base_accel_limit, p.dt, self._twist
+        if brake:                          # full braking along the twist, scaled to the limits
+            acc = [-v for v in twist]
+            k = min(1.0 / dt, *(am / max(abs(ac), 1e-300) for ac, am in zip(acc, amax)))
+        else:
+            goal = (0.0, 0.0, 0.0) if stopped else ref
+            acc = [p.kp * (g - v) for g, v in zip(goal, twist)]
+            k = min(1.0, *(am / max(abs(ac), 1e-300) for ac, am in zip(acc, amax)))
+        if stopped and all(abs(v) <= am * dt for v, am in zip(twist, amax)):
+            return [0.0, 0.0, 0.0]         # the last step to rest, within the limits
+        return [v + dt * k * ac for v, ac in zip(twist, acc)]
+
+    # ------------------------------------------------------------------ the feasible twist
+    def _feasible_twist(self, init, steer):
+        """Step 6: ξ̇_ref(init) projected onto the motion of ICR_next, within every limit.
+
+        Returns:
+            ``(twist, phi_dot)``, lists of floats.
+        """
+        p, g = self.params, self.geometry
+        z = steer.icr_next.z.tolist()
+        c0, c1, c2 = z[1], -z[0], z[2] / p.icr_scale          # twist direction ∝ (Y, −X, 1)
+        cn = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        direction = (c0 / cn, c1 / cn, c2 / cn)
+        rows = [rolling_row(math.cos(b), math.sin(b), hx, hy, g.wheel_offset)
+                for b, (hx, hy) in zip(steer.beta, g.hip_list)]
+        proj = sum(c * v for c, v in zip(direction, init))
+        speed = self._feasible_speed(direction, proj, rows, steer.rate)
+        twist = [speed * c for c in direction]
+        d, r_w = g.wheel_offset, g.wheel_radius
+        phi_dot = [(f0 * twist[0] + f1 * twist[1] + f2 * twist[2] + d * r) / r_w
+                   for (f0, f1, f2), r in zip(rows, steer.rate)]
+        return twist, phi_dot
+
+    def _feasible_speed(self, direction, wanted, rows, rate):
+        """The size s of the twist ``s · direction`` nearest ``wanted`` within the limits.
+
+        Hard: |s c_k| ≤ base_velocity_limit_k and |φ̇_i(s c)| ≤ drive_rate_limit (an interval
+        of s around 0, since |d β̇_i / r_w| < drive_rate_limit). Then, within it, the change
+        from the last twist: |s c_k − ξ̇_k| ≤ base_accel_limit_k dt, another interval. When the
+        two do not meet (the ICR turned the direction faster than the acceleration limit
+        allows at this speed), s is the one of the first interval that exceeds the
+        acceleration limit least (minimax of the ratios).
+        """
+        p = self.params
+        d, r_w = self.geometry.wheel_offset, self.geometry.wheel_radius
+        # hard: |s c_k| ≤ V_k, then |s a_i + b_i| ≤ L (a_i = f_i·c / r_w, b_i = d β̇_i / r_w)
+        lo, hi = -math.inf, math.inf
+        for c, vmax in zip(direction, p.base_velocity_limit):
+            if c != 0.0:
+                bound = vmax / abs(c)
+                if bound < hi:
+                    lo, hi = -bound, bound
+        # φ̇_i is recomputed from s·c afterwards: a bound 1e-12 inside keeps its round-off
+        # below the limit (a simulator comparing exactly would clamp a command at the limit).
+        drive_limit = p.drive_rate_limit * (1.0 - 1e-12)
+        c0, c1, c2 = direction
+        for (f0, f1, f2), r in zip(rows, rate):
+            a = (f0 * c0 + f1 * c1 + f2 * c2) / r_w
+            if a > 1e-300 or a < -1e-300:
+                b = d * r / r_w
+                s1, s2 = (-drive_limit - b) / a, (drive_limit - b) / a
+                if a < 0.0:
+                    s1, s2 = s2, s1
+                if s1 > lo:
+                    lo = s1
+                if s2 < hi:
+                    hi = s2
+        lo, hi = min(lo, 0.0), max(hi, 0.0)
+        # acceleration: |s c_k − v_k| ≤ r_k
+        dt = p.dt
+        alo, ahi = lo, hi
+        for c, v, am in zip(direction, self._twist, p.base_accel_limit):
+            r = am * dt
+            if c != 0.0:
+                s1, s2 = (v - r) / c, (v + r) / c
+                if c < 0.0:
+                    s1, s2 = s2, s1
+                if s1 > alo:
+                    alo = s1
+                if s2 < ahi:
+                    ahi = s2
+            elif abs(v) > r:
+                alo, ahi = math.inf, -math.inf
+        if alo <= ahi:
+            return alo if wanted < alo else (ahi if wanted > ahi else wanted)
+        # minimax: the convex max of the lines ±(s c_k − v_k)/r_k is least where a rising and a
+        # falling one cross
+        lines = []
+        for c, v, am in zip(direction, self._twist, p.base_accel_limit):
+            r = am * dt
+            lines += ((c / r, -v / r), (-c / r, v / r))
+        best, best_ratio = 0.0, math.inf
+        candidates = [lo, hi] + [(o2 - o1) / (k1 - k2) for k1, o1 in lines for k2, o2 in lines
+                                 if k1 > 0.0 > k2]
+        for s in candidates:
+            s = min(max(s, lo), hi)
+            ratio = max(k * s + o for k, o in lines)
+            if ratio < best_ratio:
+                best, best_ratio = s, ratio
+        return best
+
+    # ------------------------------------------------------------------ one period
+    def step(self, twist_ref, beta_meas=None, beta_dot_meas=None, brake=False):
+        """One control period: steering controller, drive controller, feasible twist (Fig 4).
+
+        Args:
+            twist_ref: ξ̇* = (vx, vy, ω) in the base frame [m/s, m/s, rad/s]; beyond
+                ``base_velocity_limit`` it is scaled down into the limits, direction kept.
+                Shape (3,).
+            beta_meas: measured steer angles [rad], optional. Shape (N,). They replace the
+                commanded angles as the start of this period (:meth:`_resync`; the commanded
+                rate β̇ stays the reference of the acceleration limit). When the steering
+                followed the last command exactly they equal the commanded angles and change
+                nothing.
+            beta_dot_meas: measured steer rates [rad/s] to resync, optional; clipped into
+                ±``steer_rate_limit`` (a glitch never yields a command beyond it). Shape (N,).
+            brake: stop as fast as the limits allow (a stale reference): the twist decelerates
+                uniformly, its binding component at its acceleration limit, instead of
+                following the K_p law; the base is at rest within max |v_i|/a_i + one period.
+
+        Returns:
+            :class:`SwmrOutput`.
+
+        Raises:
+            ShapeError, NonFiniteError: malformed inputs.
+        """
+        ref = self._bounded_reference(twist_ref)
+        self._resync(beta_meas, beta_dot_meas, self._stopped(ref))
+        # steering controller: ICR*, route, ICR_ref, QP → ICR_next → β_ref, β̇_ref
+        problem, x, qp_status, solve_time = self._icr_next(ref)
+        if x is None:
+            return self._safe_stop(problem, qp_status, solve_time)
+        steer = self._steer(problem, x, qp_status, solve_time)
+        # drive controller: ξ̇_ref(init), then the feasible twist compatible with ICR_next
+        init = self._drive(ref, problem.stopped, brake)
+        twist, phi_dot = self._feasible_twist(init, steer)
+        return self._commit(problem, steer, twist, phi_dot)
+
+    def _commit(self, problem, steer, twist, phi_dot, status=None):
+        """Store the new state and return it as a :class:`SwmrOutput`."""
+        self._beta, self._beta_dot, self._twist, self._phi_dot = steer.beta, steer.rate, twist, phi_dot
+        self._icr = steer.icr_next
+        executed = twist
+        if any(steer.rate):     # the rolling model at the mid-period steer angles
+            half = 0.5 * self.params.dt
+            executed = self.geometry.fit_twist([b - half * r for b, r in zip(steer.beta, steer.rate)],
+                                               steer.rate, phi_dot)
+        if status is None:
+            status = 'stopped' if problem.stopped else 'ok'
+        return SwmrOutput(
+            beta_ref=np.array(steer.beta), beta_dot_ref=np.array(steer.rate), phi_dot_ref=np.array(phi_dot),
+            twist_feasible=np.array(twist), twist_executed=np.array(executed), icr_next=steer.icr_next,
+            icr_ref=problem.icr_ref, route=problem.route if status != 'solver_failure' else 'hold',
+            active_constraints=sorted(steer.active), solve_time_s=steer.solve_time, status=status,
+            qp_status=steer.qp_status)
+
+    def _safe_stop(self, problem, qp_status, solve_time):
+        """Solver failure: steer rates braked to zero within β̈_max, drive ramped down within φ̈_max."""
+        p = self.params
+        rate = [min(max(0.0, lo), hi) for lo, hi in zip(problem.rate_lower, problem.rate_upper)]
+        beta_new = [b + p.dt * r for b, r in zip(self._beta, rate)]
+        peak = max(abs(v) for v in self._phi_dot)
+        k = max(0.0, 1.0 - p.drive_accel_limit * p.dt / peak) if peak > 0 else 0.0
+        steer = _Steering(beta_new, rate, self._icr_of(beta_new, like=self._icr.z.tolist()), set(), qp_status,
+                          solve_time or 0.0)
+        return self._commit(problem, steer, [k * v for v in self._twist], [k * v for v in self._phi_dot],
+                            status='solver_failure')
+
 
     def _bounded_reference(self, twist_ref):
         """ξ̇* checked and scaled down uniformly into ``|ξ̇*_k| ≤ base_velocity_limit_k``.
@@ -614,255 +1079,3 @@ class SwmrController:
             return tuple(ref)
         return tuple(min(vmax, max(-vmax, v * s)) for v, vmax in zip(ref, limits))
 
-    def build_qp(self, twist_ref):
-        """Build this period's ICR QP for the reference twist, from the controller state.
-
-        Args:
-            twist_ref: ξ̇* = (vx, vy, ω) in the base frame [m/s, m/s, rad/s]. Shape (3,).
-
-        Returns:
-            :class:`IcrQp`.
-        """
-        return self._as_icr_qp(self._problem(*self._bounded_reference(twist_ref)))
-
-    def _as_icr_qp(self, data):
-        """The :class:`IcrQp` of :meth:`_problem`'s ``data``."""
-        x_ref, (e1, e2), a, lb, rate_lo, rate_hi, target_z, route, stopped = data
-        curr = self._icr
-        basis = np.array((e1, e2)).T
-        return IcrQp(
-            P=np.eye(2), q=-x_ref, A=a, l=lb, u=self._ub.copy(), basis=basis, x_ref=x_ref,
-            icr_curr=curr, icr_target=curr._with_z_unchecked(target_z),
-            icr_ref=self._icr_at(e1, e2, *x_ref.tolist()),
-            rate_lower=np.array(rate_lo), rate_upper=np.array(rate_hi), route=route, stopped=stopped)
-
-    def _icr_at(self, e1, e2, x0, x1):
-        """The ICR at chart coordinates (x0, x1) around the current ICR (tangent basis e1, e2)."""
-        z0, z1, z2 = self._icr.z.tolist()
-        return self._icr_proto._with_z_unchecked(
-            (z0 + e1[0] * x0 + e2[0] * x1, z1 + e1[1] * x0 + e2[1] * x1, z2 + e1[2] * x0 + e2[2] * x1))
-
-    def solve_qp(self, problem):
-        """Solve ``problem`` with :attr:`solver`.
-
-        Returns:
-            ``(x, qp_status, solve_time_s)``; ``x`` is None on failure (``qp_status`` says why).
-            On primal infeasibility ``x`` is the unconstrained optimum ``x_ref`` (the steer
-            rates are clipped per wheel afterwards).
-        """
-        return self._timed_solve(self.solver, (problem,), problem.x_ref)
-
-    @staticmethod
-    def _timed_solve(call, args, x_ref):
-        """``call(*args)`` (a :class:`QpResult` or an ``(x, status, y)`` tuple), timed and checked."""
-        t0 = time.perf_counter()
-        try:
-            res = call(*args)
-        except Exception as exc:  # noqa: BLE001 — any solver exception means a safe stop
-            return None, f'error: {type(exc).__name__}: {exc}', time.perf_counter() - t0
-        elapsed = time.perf_counter() - t0
-        if isinstance(res, tuple):
-            x, status = res[0], res[1]
-        else:
-            x, status = getattr(res, 'x', None), str(getattr(res, 'status', 'unknown'))
-        x = np.asarray(x, dtype=float) if x is not None else None
-        if status.startswith(_INFEASIBLE):
-            return x_ref.copy(), status, elapsed
-        if status not in _USED or x is None or x.shape != (2,) or not np.isfinite(x).all():
-            return None, status if status not in _USED else f'{status} (non-finite x)', elapsed
-        return x, status, elapsed
-
-    # ------------------------------------------------------------------ step
-    def step(self, twist_ref, beta_meas=None, beta_dot_meas=None, brake=False):
-        """One control period.
-
-        Args:
-            twist_ref: ξ̇* = (vx, vy, ω) in the base frame [m/s, m/s, rad/s]; beyond
-                ``base_velocity_limit`` it is scaled down into the limits, direction kept.
-                Shape (3,).
-            beta_meas: measured steer angles [rad], optional. Shape (N,). They replace the
-                commanded angles as the start of this period (the loop closes on them; the
-                commanded rate β̇ stays the reference of the acceleration limit). When the
-                steering followed the last command exactly they equal the commanded angles
-                and change nothing.
-            beta_dot_meas: measured steer rates [rad/s] to resync, optional; clipped into
-                ±``steer_rate_limit`` (a glitch never yields a command beyond it). Shape (N,).
-            brake: stop as fast as the limits allow (a stale reference): the twist decelerates
-                uniformly, its binding component at its acceleration limit, instead of
-                following the K_p law; the base is at rest within max |v_i|/a_i + one period.
-
-        Returns:
-            :class:`SwmrOutput`.
-
-        Raises:
-            ShapeError, NonFiniteError: malformed inputs.
-        """
-        p = self.params
-        n = self.geometry.n_wheels
-        vx, vy, wz = self._bounded_reference(twist_ref)
-        if beta_meas is not None:
-            self._beta = as_finite_vector(beta_meas, n, 'beta_meas').copy()
-            self._icr = self._icr_of_beta(self._beta, like=self._icr.z)
-        if beta_dot_meas is not None:
-            # a measured rate beyond the limit (an encoder glitch) is not a state to continue from
-            limit = p.steer_rate_limit
-            self._beta_dot = np.clip(as_finite_vector(beta_dot_meas, n, 'beta_dot_meas'), -limit, limit)
-
-        data = self._problem(vx, vy, wz)
-        x_ref, (e1, e2), a, lb, rate_lo, rate_hi, _, route, stopped = data
-        z0, z1, z2 = self._icr.z.tolist()
-        icr_ref = self._icr_at(e1, e2, *x_ref.tolist())
-        beta_dot = self._beta_dot.tolist()
-        hold = stopped and not any(beta_dot)
-        if hold:
-            x0 = x1 = 0.0
-            qp_status, solve_time = 'not_solved', 0.0
-        else:
-            if isinstance(self.solver, OsqpIcrSolver):
-                x, qp_status, solve_time = self._timed_solve(self.solver.solve, (x_ref, a, lb, self._ub), x_ref)
-            else:
-                x, qp_status, solve_time = self.solve_qp(self._as_icr_qp(data))
-            if x is None:
-                return self._safe_stop(rate_lo, rate_hi, icr_ref, qp_status, solve_time)
-            x0, x1 = x.tolist()
-
-        # Steer: ICR_next -> nearest twin -> hard clip into the period's rate interval.
-        n0, n1, n2 = z0 + e1[0] * x0 + e2[0] * x1, z1 + e1[1] * x0 + e2[1] * x1, z2 + e1[2] * x0 + e2[2] * x1
-        nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-        n0, n1, n2 = n0 / nn, n1 / nn, n2 / nn
-        dt = p.dt
-        half_pi = 0.5 * math.pi
-        beta_new, rate, active = [], [], set()
-        for i, (beta, lo, hi, (_, _, my, mx, _)) in enumerate(zip(self._beta.tolist(), rate_lo, rate_hi,
-                                                                   self._wheels)):
-            v0, v1 = n1 + my * n2, mx * n2 - n0
-            if hold or math.sqrt(v0 * v0 + v1 * v1) < 1e-9:   # ICR on a hip: any angle fits, keep it
-                wanted = 0.0
-            else:
-                delta = (math.atan2(v1, v0) - beta + half_pi) % math.pi - half_pi
-                # A change at the round-off of the ICR ↔ β round trip is none: at rest the wheels stay put.
-                wanted = delta / dt if abs(delta) > _ANGLE_TOL else 0.0
-            r = min(max(wanted, lo), hi)
-            if abs(wanted - r) > _RATE_TOL:
-                active.add(i)
-            rate.append(r)
-            beta_new.append(beta + dt * r)
-        if qp_status in _USED:
-            for k, ((a0, a1), low) in enumerate(zip(a[:-2].tolist(), lb[:-2].tolist())):
-                if a0 * x0 + a1 * x1 - low <= _ROW_TOL:
-                    active.add(k // 2)
-        cos_new = [math.cos(b) for b in beta_new]
-        sin_new = [math.sin(b) for b in beta_new]
-        icr_next = self._icr_of_cs(cos_new, sin_new, (n0, n1, n2))
-
-        # Drive: K_p twist controller, projection on the motion compatible with icr_next, limits.
-        amax = p.base_accel_limit
-        twist = self._twist.tolist()
-        goal = (0.0, 0.0, 0.0) if stopped else (vx, vy, wz)
-        if brake:
-            acc = [-v for v in twist]          # full braking along the twist, scaled to the limits below
-            k = min(1.0 / dt, *(am / max(abs(ac), 1e-300) for ac, am in zip(acc, amax)))
-        else:
-            acc = [p.kp * (g - v) for g, v in zip(goal, twist)]
-            k = min(1.0, amax[0] / max(abs(acc[0]), 1e-300), amax[1] / max(abs(acc[1]), 1e-300),
-                    amax[2] / max(abs(acc[2]), 1e-300))
-        acc = [ac * k for ac in acc]
-        if stopped and all(abs(v) <= am * dt for v, am in zip(twist, amax)):
-            acc = [-v / dt for v in twist]   # the last step to rest, within the limits
-        init = [v + dt * ac for v, ac in zip(twist, acc)]
-        c0, c1, c2 = icr_next.z.tolist()                 # twist direction ∝ (Y, −X, 1) = (z1, −z0, z2/ℓ)
-        c0, c1, c2 = c1, -c0, c2 / p.icr_scale
-        cn = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-        c0, c1, c2 = c0 / cn, c1 / cn, c2 / cn
-        proj = c0 * init[0] + c1 * init[1] + c2 * init[2]
-        feasible = [proj * c0, proj * c1, proj * c2]
-        f_rows = self._rolling_rows(cos_new, sin_new)
-        s = self._velocity_scale(feasible, f_rows, rate)
-        feasible = [s * f for f in feasible]
-        d, r_w = self.geometry.wheel_offset, self.geometry.wheel_radius
-        phi_dot = [(f0 * feasible[0] + f1 * feasible[1] + f2 * feasible[2] + d * r) / r_w
-                   for (f0, f1, f2), r in zip(f_rows, rate)]
-
-        executed = self._executed_twist(beta_new, rate, phi_dot, feasible)
-        self._beta, self._beta_dot = np.array(beta_new), np.array(rate)
-        self._twist, self._phi_dot = np.array(feasible), np.array(phi_dot)
-        self._icr = icr_next
-        return SwmrOutput(
-            beta_ref=np.array(beta_new), beta_dot_ref=np.array(rate), phi_dot_ref=np.array(phi_dot),
-            twist_feasible=np.array(feasible), twist_executed=executed, icr_next=icr_next, icr_ref=icr_ref,
-            route=route, active_constraints=sorted(active),
-            solve_time_s=solve_time, status='stopped' if stopped else 'ok',
-            qp_status=qp_status)
-
-    def _rolling_rows(self, cos_beta, sin_beta):
-        """Rows ``f(β_i) = (cos β, sin β, d − hy cos β + hx sin β)`` of the rolling constraint, as tuples."""
-        d = self.geometry.wheel_offset
-        return [(c, s, d - hy * c + hx * s) for c, s, (hx, hy, _, _, _) in zip(cos_beta, sin_beta, self._wheels)]
-
-    def _executed_twist(self, beta_new, rate, phi_dot, feasible):
-        """Twist over the coming period: the rolling model at the mid-period steer angles.
-
-        Least squares over the N rolling and N no-side-slip rows (as
-        :meth:`SteerableGeometry.twist_from_wheels`), solved by its 3×3 normal equations.
-        Arguments are sequences of floats; returns Shape (3,).
-        """
-        if not any(rate):
-            return np.array(feasible, dtype=float)
-        d, r_w = self.geometry.wheel_offset, self.geometry.wheel_radius
-        half = 0.5 * self.params.dt
-        n00 = n01 = n02 = n11 = n12 = n22 = b0 = b1 = b2 = 0.0
-        for beta, r, phi, (hx, hy, _, _, _) in zip(beta_new, rate, phi_dot, self._wheels):
-            mid = beta - half * r
-            c, s = math.cos(mid), math.sin(mid)
-            f2, g2 = d - hy * c + hx * s, hx * c + hy * s
-            rhs = r_w * phi - d * r
-            n00 += c * c + s * s
-            n01 += c * s - s * c
-            n02 += c * f2 - s * g2
-            n11 += s * s + c * c
-            n12 += s * f2 + c * g2
-            n22 += f2 * f2 + g2 * g2
-            b0 += c * rhs
-            b1 += s * rhs
-            b2 += f2 * rhs
-        # Cramer on the symmetric 3×3 system.
-        m00, m01, m02 = n11 * n22 - n12 * n12, n02 * n12 - n01 * n22, n01 * n12 - n02 * n11
-        det = n00 * m00 + n01 * m01 + n02 * m02
-        m11, m12, m22 = n00 * n22 - n02 * n02, n01 * n02 - n00 * n12, n00 * n11 - n01 * n01
-        return np.array(((m00 * b0 + m01 * b1 + m02 * b2) / det,
-                         (m01 * b0 + m11 * b1 + m12 * b2) / det,
-                         (m02 * b0 + m12 * b1 + m22 * b2) / det))
-
-    def _velocity_scale(self, twist, f_rows, rate):
-        """Largest s ∈ [0, 1] with |s ξ̇| within the base limits and |φ̇(s ξ̇)| ≤ drive_rate_limit."""
-        p = self.params
-        d, r_w = self.geometry.wheel_offset, self.geometry.wheel_radius
-        s = 1.0
-        for v, vmax in zip(twist, p.base_velocity_limit):
-            if v != 0.0:
-                s = min(s, vmax / abs(v))
-        for (f0, f1, f2), r in zip(f_rows, rate):
-            a = (f0 * twist[0] + f1 * twist[1] + f2 * twist[2]) / r_w
-            if abs(a) > 1e-300:
-                b = d * r / r_w
-                s = min(s, (p.drive_rate_limit - (b if a > 0 else -b)) / abs(a))
-        return max(0.0, s)
-
-    def _safe_stop(self, rate_lo, rate_hi, icr_ref, qp_status, solve_time):
-        """Solver failure: steer rates braked to zero within β̈_max, drive ramped down within φ̈_max."""
-        p = self.params
-        rate = np.clip(0.0, rate_lo, rate_hi)
-        beta_new = self._beta + p.dt * rate
-        peak = float(np.max(np.abs(self._phi_dot)))
-        k = max(0.0, 1.0 - p.drive_accel_limit * p.dt / peak) if peak > 0 else 0.0
-        phi_dot = self._phi_dot * k
-        twist = self._twist * k
-        self._beta, self._beta_dot, self._twist, self._phi_dot = beta_new, rate, twist, phi_dot
-        self._icr = self._icr_of_beta(beta_new, like=self._icr.z)
-        return SwmrOutput(
-            beta_ref=beta_new.copy(), beta_dot_ref=rate.copy(), phi_dot_ref=phi_dot.copy(),
-            twist_feasible=twist.copy(),
-            twist_executed=self._executed_twist(beta_new.tolist(), rate.tolist(), phi_dot.tolist(), twist.tolist()),
-            icr_next=self._icr, icr_ref=icr_ref, route='hold',
-            active_constraints=[], solve_time_s=solve_time, status='solver_failure',
-            qp_status=qp_status)

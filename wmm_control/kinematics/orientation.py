@@ -25,16 +25,12 @@ def wrap_angle(angle):
 
 
 def rpy_from_matrix(rot):
-    """RPY angles [roll, pitch, yaw] of a rotation matrix (ZYX Euler). Shape (3,).
+    """RPY angles [roll, pitch, yaw] of a rotation matrix (ZYX Euler), by pinocchio. Shape (3,).
 
-    Pitch is in [−π/2, π/2]; at the singularity (|pitch| = π/2) roll is set to 0.
+    ``pin.rpy.matrixToRpy``, the inverse of :func:`matrix_from_rpy`: pitch in [−π/2, π/2]; at
+    the singularity (|pitch| = π/2) only roll ∓ yaw is defined, pinocchio picks the split.
     """
-    r20 = float(rot[2, 0])
-    pitch = math.asin(min(1.0, max(-1.0, -r20)))
-    if abs(r20) > 1.0 - 1e-12:
-        return np.array([0.0, pitch, math.atan2(-float(rot[0, 1]), float(rot[1, 1]))])
-    return np.array([math.atan2(float(rot[2, 1]), float(rot[2, 2])), pitch,
-                     math.atan2(float(rot[1, 0]), float(rot[0, 0]))])
+    return pin.rpy.matrixToRpy(np.asarray(rot, dtype=float))
 
 
 def matrix_from_rpy(rpy):
