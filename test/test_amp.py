@@ -170,3 +170,19 @@ def test_a_goal_within_reach_never_moves_the_base():
 
 def test_traditional_is_a_named_method():
     assert isinstance(make_resolver('traditional', 'mecanum'), TraditionalResolver)
+
+
+@pytest.mark.parametrize('method', ['amp', 'traditional'])
+def test_the_base_twist_keeps_its_own_frame_limits_when_the_base_is_turned(method):
+    """The velocity bounds hold the world-frame rates ẋ_b, ẏ_b; with the base turned by π/4 a
+    goal along the world diagonal takes both to their bound, √2 times the limit on the base's
+    own x axis, unless the twist is held within the base-frame limits too."""
+    resolver = make_resolver(method, 'mecanum', setpoint_speed=1.0, setpoint_accel=1.0)
+    with SimWorld('mecanum', start_base_pose=(0.0, 0.0, np.pi / 4)) as world:
+        loop = ClosedLoop(world, resolver)
+        start = loop.state()
+        goal = PoseTarget(start.ee_position + np.array([3.0, 3.0, 0.0]), start.ee_rotation)
+        twists = np.array([loop.step(goal).command.base_twist for _ in range(int(30.0 / DT))])
+    limit = resolver.limits.velocity[:3]
+    assert np.max(np.abs(twists[:, 0])) > 0.9 * limit[0], 'the run must drive the base near its limit'
+    assert np.all(np.abs(twists) <= limit + 1e-12)

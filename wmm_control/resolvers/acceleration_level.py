@@ -193,6 +193,10 @@ class AccelerationResolver(Resolver):
         # and the integrator consistent with what is sent.
         step = self.limits.acceleration[:3] * self.params.dt
         base = self._last_base + np.clip(base - self._last_base, -step, step)
+        # The same for the velocity limits: two world-frame rates at their bound make up to √2
+        # times the limit on one base axis. Clipping each axis towards the box keeps the change
+        # within a·T (the last twist is inside the box).
+        np.clip(base, -self.limits.velocity[:3], self.limits.velocity[:3], out=base)
         base[np.abs(base) < 1e-12] = 0.0
         qd[:3] = (c * base[0] - s * base[1], s * base[0] + c * base[1], base[2])
         self._qd, self._last_base = qd, base
