@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import yaml
 
 from wmm_control.experiments.metrics import run_limit_report
@@ -43,7 +44,7 @@ from wmm_control.resolvers.progress import GoalProgress
 from wmm_control.robot_config import load_robot
 
 __all__ = ['RandomGoal', 'sample_goals', 'run_goal', 'summarize', 'ROBOTS', 'METHOD_RUNS', 'DURATION_S',
-           'ARM_MARGIN', 'COLLISION_MARGIN', 'SETTLE_S', 'TOLERANCE', 'STALL_TIME_S']
+           'ARM_MARGIN', 'COLLISION_MARGIN', 'SETTLE_S', 'goal_settings']
 
 #: The robots, by name.
 ROBOTS = ('steerable', 'mecanum')
@@ -65,9 +66,6 @@ ARM_MARGIN = 0.1
 COLLISION_MARGIN = 0.02
 #: A direct run ends once the goal has been held this long [s].
 SETTLE_S = 2.0
-#: The node's goal_tolerance and stall_time (config/redundancy_resolver.yaml).
-TOLERANCE = (0.01, 0.02)
-STALL_TIME_S = 3.0
 #: Tolerance of the limit checks on the nodes engine, whose commands come back through the
 #: 9 significant digits of /diagnostics [rad/s, m/s].
 NODES_TOLERANCE = 1e-7
@@ -90,6 +88,15 @@ class RandomGoal:
     q_arm: np.ndarray
     pose: np.ndarray
     draws: int
+
+
+def goal_settings():
+    """``(goal_tolerance, stall_time)`` of the ``redundancy_resolver`` node, from its defaults
+    (``config/redundancy_resolver.yaml``): (position [m], orientation [rad]) and [s]."""
+    from wmm_control.nodes.common import load_defaults
+
+    defaults = load_defaults('redundancy_resolver.yaml', 'redundancy_resolver')
+    return tuple(float(v) for v in defaults['goal_tolerance']), float(defaults['stall_time'])
 
 
 def _arm_box(arm):
@@ -142,7 +149,7 @@ def _run_direct(robot, run, goal, duration):
     from wmm_control.resolvers import make_resolver
 
     resolver = make_resolver(run['method'], robot, **resolver_parameters(run))
-    progress = GoalProgress(TOLERANCE, STALL_TIME_S, resolver.params.dt)
+    progress = GoalProgress(*goal_settings(), period=resolver.params.dt)
     settle = int(round(SETTLE_S / resolver.params.dt))
     held = [0]
 
@@ -165,8 +172,7 @@ def _run_nodes(robot, run, goal, duration):
             'name': f'random_{robot.name}_{goal.index}', 'robot': robot.name, 'frame': 'world', 'duration': duration,
             'goals': [{'t': 0.0, 'pose': [float(v) for v in goal.pose]}]}}))
         scenario = load_scenario(path)
-        entry = dict(run, name=run['method'], feedback='ground_truth', goal_tolerance=list(TOLERANCE),
-                     stall_time=STALL_TIME_S)
+        entry = dict(run, name=run['method'], feedback='ground_truth')
         log = run_with_nodes(scenario, entry)
     status = log.final_status or {}
     return log, {'goal_reached': status.get('goal_reached') == 'True',
@@ -213,7 +219,8 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
     target = Goal(0.0, duration, goal.pose).target
     pos_err = np.linalg.norm(log.ee_position - target.position, axis=1)
     ori_err = np.array([_angle(target.rotation @ r.T) for r in log.ee_rotation])
-    inside = np.flatnonzero((pos_err <= TOLERANCE[0]) & (ori_err <= TOLERANCE[1]))
+    tolerance, _ = goal_settings()
+    inside = np.flatnonzero((pos_err <= tolerance[0]) & (ori_err <= tolerance[1]))
     # the nodes engine reads the commands back from /diagnostics, written with 9 significant digits
     exceeded = run_limit_report(log, cfg, dt, tol=1e-9 if engine == 'direct' else NODES_TOLERANCE)
     clamped = sum(c['clamped'] + c['rejected'] for c in (log.sim_counters or {}).values())
@@ -240,7 +247,6 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
 
 
 def _angle(rot):
-    import pinocchio as pin
     return float(np.linalg.norm(pin.log3(rot)))
 
 

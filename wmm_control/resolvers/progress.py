@@ -23,7 +23,7 @@ class GoalProgress:
         min_progress: (position [m], orientation [rad]) improvement that counts as progress.
     """
 
-    def __init__(self, tolerance=(0.01, 0.02), stall_time=3.0, period=0.025, min_progress=(1e-3, 1e-3)):
+    def __init__(self, tolerance, stall_time, period, min_progress=(1e-3, 1e-3)):
         self.tolerance = tuple(float(v) for v in tolerance)
         self.stall_time = float(stall_time)
         self.period = float(period)
