@@ -90,6 +90,13 @@ def test_progress_in_orientation_alone_is_not_a_stall():
     assert progress.reached and not progress.stalled
 
 
+def test_drifting_away_while_turning_is_a_stall():
+    progress = GoalProgress((0.01, 0.02), stall_time=1.0, period=0.1)
+    for k in range(12):                         # the orientation improves, the position gets worse
+        progress.update(_diag(0.2 + 0.05 * k, 1.0 - 0.05 * k))
+    assert progress.stalled
+
+
 def test_a_goal_out_of_reach_is_reported_not_converged():
     pose = np.array([0.7, 0.0, 3.0, np.pi / 2, 0.0, 0.0])        # 3 m high: no configuration reaches it
     r = run_goal('steerable', 'pinv', RandomGoal(0, np.zeros(3), np.zeros(7), pose, 1), duration=15.0)

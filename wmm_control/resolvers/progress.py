@@ -2,8 +2,11 @@
 
 :class:`GoalProgress` follows a resolver's :class:`~wmm_control.resolvers.ResolverDiagnostics`
 cycle by cycle. A goal is *reached* while both errors are within the tolerance. It is
-*stalled* when it is not reached and neither error has improved on its best value by
-``min_progress`` for ``stall_time``: the method cannot take the end effector further (a goal
+*stalled* when it is not reached and has made no progress for ``stall_time``: progress is the
+position error improving on its best value by ``min_progress``, or the orientation error
+doing so while the position error stays within ``min_progress`` of its best (an end effector
+that drifts away while it turns makes none). Then the method cannot take the end effector
+further (a goal
 out of reach, a joint held at its limit, a task-sharing split that leaves the arm alone with
 a goal it cannot reach). The node and the randomized closed-loop runs share it.
 """
@@ -44,10 +47,10 @@ class GoalProgress:
         self.reached = pos <= self.tolerance[0] and ori <= self.tolerance[1]
         best_pos, best_ori = self._best
         better_pos = pos < best_pos - self.min_progress[0]
-        better_ori = ori < best_ori - self.min_progress[1]
+        better_ori = ori < best_ori - self.min_progress[1] and pos <= best_pos + self.min_progress[0]
         if better_pos or better_ori or self.reached:
             self._last_progress = self.cycles
-        self._best = (min(best_pos, pos) if better_pos else best_pos, min(best_ori, ori) if better_ori else best_ori)
+        self._best = (pos if better_pos else best_pos, ori if better_ori else best_ori)
 
     @property
     def stalled(self):
