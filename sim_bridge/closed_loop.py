@@ -138,7 +138,7 @@ def _rotation(quat_xyzw):
     return pin.Quaternion(qw, x, y, z).normalized().toRotationMatrix()
 
 
-def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', progress=None):
+def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', progress=None, until=None):
     """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
 
     Args:
@@ -148,6 +148,9 @@ def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', p
         feedback: see :class:`ClosedLoop`.
         label: name of the run in the log.
         progress: optional callable ``progress(n_periods)`` called after each period.
+        until: optional callable ``until(diagnostics)``, given each period's
+            :class:`~wmm_control.resolvers.ResolverDiagnostics`: the run ends early when it
+            returns True.
 
     Returns:
         The frozen :class:`~wmm_control.experiments.metrics.RunLog`.
@@ -168,6 +171,8 @@ def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', p
                    cmd.base_twist, rec.feasible_twist, cmd.diagnostics)
         if progress is not None:
             progress(1)
+        if until is not None and until(cmd.diagnostics):
+            break
     log.wall_time_s = time.perf_counter() - t0
     log.sim_counters = {g: dict(c) for g, c in world.counters.items()}
     return log.freeze()

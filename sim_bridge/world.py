@@ -87,6 +87,7 @@ from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.errors import ConfigError
 from wmm_control.robot_config import RobotConfig, load_robot
 
+from sim_bridge.client import OwnedClient
 from sim_bridge.slip import SlipModel
 
 __all__ = ['SimWorld', 'CommandResult', 'se2_step', 'BASE_MODES']
@@ -156,7 +157,7 @@ def _quat_mul(q1, q2):
             w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2)
 
 
-class SimWorld:
+class SimWorld(OwnedClient):
     """A wheeled mobile manipulator in its own PyBullet world.
 
     Args:
@@ -630,20 +631,3 @@ class SimWorld:
         """The PyBullet physics client id of this world (-1 once closed)."""
         return self._cid
 
-    def close(self):
-        """Disconnect from PyBullet; safe to call twice."""
-        if self._cid >= 0:
-            p.disconnect(physicsClientId=self._cid)
-            self._cid = -1
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:  # interpreter shutdown: pybullet may already be gone
-            return

@@ -70,6 +70,7 @@ class Recorder(Node):
         self._index = None
         self._rows = {}
         self.last_t = -1.0
+        self.final_status = None
         self.create_subscription(PoseStamped, '/ee_pose', self._on_ee, 10)
         self.create_subscription(Odometry, '/ground_truth/odom', self._on_base, 10)
         self.create_subscription(JointState, '/joint_states', self._on_joints, 10)
@@ -102,6 +103,7 @@ class Recorder(Node):
         for status in msg.status:
             if status.name == 'redundancy_resolver':
                 self._row(msg)['diag'] = {kv.key: kv.value for kv in status.values}
+                self.final_status = self._row(msg)['diag']
 
     def flush(self):
         """Append every complete row (a period in which a goal was pursued), in time order."""
@@ -222,6 +224,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
                                   f'(sim time {recorder.last_t:.3f} s)')
         recorder.flush()
         log.wall_time_s = time.perf_counter() - start
+        log.final_status = recorder.final_status
         log.sim_counters = {g: dict(c) for g, c in sim.world.counters.items()}   # what /diagnostics reports
     finally:
         for node in nodes:

@@ -61,6 +61,7 @@ from wmm_control.nodes.common import (
     diagnostic_status, float_array, run_node)
 from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
+from wmm_control.resolvers.progress import GoalProgress
 
 __all__ = ['RedundancyResolverNode', 'main']
 
@@ -184,7 +185,7 @@ class RedundancyResolverNode(Node):
         self._wait = None
         self._last = None
         self._zero_sent = False
-        self._progress = (math.inf, 0)
+        self.progress = GoalProgress(p.goal_tolerance, p.stall_time, p.period)
         self._next_diag = 0.0
         self.counters = {'cycles': 0, 'goals': 0, 'goals_rejected': 0, 'compensation_dropped': 0,
                          'stale_cycles': 0}
@@ -250,7 +251,7 @@ class RedundancyResolverNode(Node):
         self.target = PoseTarget(values[:3], rot)
         self._goal_key = key
         self._tracking = False
-        self._progress = (math.inf, self.counters['cycles'])
+        self.progress.start()
         self.counters['goals'] += 1
         self.get_logger().info(f'new goal: position {np.round(values[:3], 4).tolist()}, '
                                f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}')
@@ -278,7 +279,7 @@ class RedundancyResolverNode(Node):
         x, y, z, w = pose[3:] / norm
         if not self._tracking:
             self.get_logger().info('tracking /ee_reference')
-            self._progress = (math.inf, self.counters['cycles'])
+            self.progress.start()
         self.target = PoseTarget(pose[:3], pin.Quaternion(w, x, y, z).toRotationMatrix(), velocity=vel, acceleration=acc)
         self._goal_key = None
         self._tracking = True
@@ -423,7 +424,7 @@ class RedundancyResolverNode(Node):
         """Publish the arm command of the cycle stamped ``stamp`` (and, when due, its diagnostics)."""
         self.pub_arm.publish(float_array(command.arm_velocity))
         self._last = command
-        self._track_progress(command.diagnostics)
+        self.progress.update(command.diagnostics)
         now = self._now()
         if self.p.diagnostics_period > 0 and now >= self._next_diag:
             self._next_diag = now + self.p.diagnostics_period
@@ -444,24 +445,13 @@ class RedundancyResolverNode(Node):
             self._publish_zero(self.get_clock().now().to_msg())
 
     # ------------------------------------------------------------------ status
-    def _reached(self, diag):
-        tol_p, tol_o = self.p.goal_tolerance
-        return diag.position_error <= tol_p and diag.orientation_error <= tol_o
-
-    def _track_progress(self, diag):
-        """Remember the control cycle of the last 1 mm of progress (time counted in periods)."""
-        best, _ = self._progress
-        if diag.position_error < best - 1e-3 or self._reached(diag):
-            self._progress = (diag.position_error, self.counters['cycles'])
-
     def _diagnostics(self, stamp):
         """Status of the cycle stamped ``stamp`` (the joint state it answers)."""
         values = dict(self.counters)
         level, message = 'ok', 'no goal'
         if self._last is not None and self.target is not None:
             d = self._last.diagnostics
-            reached = self._reached(d)
-            stalled = not reached and (self.counters['cycles'] - self._progress[1]) * self.p.period > self.p.stall_time
+            reached, stalled = self.progress.reached, self.progress.stalled
             values.update({
                 'method': d.method, 'mode': d.mode, 'psi': d.psi, 'position_error_m': d.position_error,
                 'orientation_error_rad': d.orientation_error, 'limit_scale': d.limit_scale,

@@ -1,0 +1,115 @@
+"""Randomized closed-loop runs (``wmm_randomized``): the goal draw, and a seeded subset of the runs.
+
+The full set (100 goals per robot and method) is ``python -m wmm_control.cli.randomized``; here
+two goals per robot and method, and the two ways a run may end well: converged, or stalled
+and reported.
+"""
+
+import numpy as np
+import pytest
+
+from sim_bridge.collision import SelfCollisionChecker
+from wmm_control.experiments.randomized import (
+    ARM_MARGIN, METHOD_RUNS, ROBOTS, RandomGoal, run_goal, sample_goals, summarize)
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.orientation import matrix_from_rpy
+from wmm_control.resolvers import ResolverDiagnostics
+from wmm_control.resolvers.progress import GoalProgress
+
+SUBSET_SEED = 1
+SUBSET_GOALS = 2
+
+
+@pytest.fixture(scope='module', params=ROBOTS)
+def subset(request):
+    return request.param, sample_goals(request.param, SUBSET_GOALS, seed=SUBSET_SEED)
+
+
+@pytest.mark.parametrize('robot', ROBOTS)
+def test_goals_are_poses_of_clear_configurations_within_the_limits(robot):
+    goals = sample_goals(robot, 15, seed=3)
+    model = KinematicModel(robot)
+    arm = model.config.arm
+    with SelfCollisionChecker(robot) as checker:
+        for g in goals:
+            assert np.all(g.q_arm >= np.where(np.isfinite(arm.position_lower), arm.position_lower + ARM_MARGIN, -np.pi))
+            assert np.all(g.q_arm <= np.where(np.isfinite(arm.position_upper), arm.position_upper - ARM_MARGIN, np.pi))
+            assert checker.collisions(g.q_arm) == []
+            model.update(g.base_pose, g.q_arm)
+            pos, rot = model.ee_placement_world()
+            np.testing.assert_allclose(g.pose[:3], pos, atol=1e-12)
+            np.testing.assert_allclose(matrix_from_rpy(g.pose[3:]), rot, atol=1e-9)
+            assert np.hypot(*g.base_pose[:2]) <= 1.0
+    again = sample_goals(robot, 15, seed=3)
+    assert all(np.array_equal(a.pose, b.pose) for a, b in zip(goals, again))
+    other = sample_goals(robot, 15, seed=4)
+    assert not any(np.array_equal(a.pose, b.pose) for a, b in zip(goals, other))
+
+
+def test_the_draw_rejects_an_arm_folded_into_the_body_or_the_floor():
+    with SelfCollisionChecker('mecanum') as checker:
+        assert checker.collisions(checker.robot.start.arm) == []
+        folded = {(a, b) for a, b, _ in checker.collisions([0.0, 1.6, 0.0, 2.4, 0.0, 0.0, 0.0])}
+        assert ('arm_link_7', 'chassis_link') in folded
+        floor = {(a, b) for a, b, _ in checker.collisions([0.0, 2.1, 0.0, 1.2, 0.0, 0.0, 0.0])}
+        assert ('arm_link_7', 'floor') in floor
+        assert checker.collisions([0.0, 2.1, 0.0, 0.0, 0.0, 0.0, 0.0]) == []     # over the floor, clear
+    # the draw does meet such configurations, and draws again
+    assert max(g.draws for g in sample_goals('mecanum', 30, seed=0)) > 1
+
+
+@pytest.mark.parametrize('method', list(METHOD_RUNS))
+def test_every_method_converges_within_every_limit(subset, method):
+    robot, goals = subset
+    for goal in goals:
+        r = run_goal(robot, method, goal)
+        assert r['outcome'] == 'converged', r
+        assert r['final_position_error_m'] <= 0.01 and r['final_orientation_error_rad'] <= 0.02
+        assert all(v == 0 for v in r['limits_exceeded'].values()), r['limits_exceeded']
+        use = r['limit_use']
+        assert max(v for k, v in use.items() if k != 'arm_position_margin_rad') <= 1.0 + 1e-9
+        assert use['arm_position_margin_rad'] >= 0.0
+        assert r['sim_clamped'] == 0
+
+
+def _diag(position, orientation):
+    return ResolverDiagnostics(method='m', mode='x', psi=1.0, position_error=position, orientation_error=orientation,
+                               limit_scale=1.0, accel_scale=1.0, null_scale=1.0, compensation_scale=1.0, limited=(),
+                               sigma_min=1.0, compensated=False, cycle_time_s=0.0)
+
+
+def test_progress_in_orientation_alone_is_not_a_stall():
+    progress = GoalProgress((0.01, 0.02), stall_time=1.0, period=0.1)
+    for k in range(30):                         # position held at 5 mm, orientation still converging
+        progress.update(_diag(0.005, 0.5 - 0.01 * k))
+    assert not progress.stalled and not progress.reached
+    for _ in range(11):                         # then nothing improves for 1.1 s
+        progress.update(_diag(0.005, 0.21))
+    assert progress.stalled
+    progress.update(_diag(0.005, 0.01))
+    assert progress.reached and not progress.stalled
+
+
+def test_drifting_away_while_turning_is_a_stall():
+    progress = GoalProgress((0.01, 0.02), stall_time=1.0, period=0.1)
+    for k in range(12):                         # the orientation improves, the position gets worse
+        progress.update(_diag(0.2 + 0.05 * k, 1.0 - 0.05 * k))
+    assert progress.stalled
+
+
+def test_a_goal_out_of_reach_is_reported_not_converged():
+    pose = np.array([0.7, 0.0, 3.0, np.pi / 2, 0.0, 0.0])        # 3 m high: no configuration reaches it
+    r = run_goal('steerable', 'pinv', RandomGoal(0, np.zeros(3), np.zeros(7), pose, 1), duration=15.0)
+    assert r['outcome'] == 'reported', r
+    assert r['final_position_error_m'] > 1.0
+    assert all(v == 0 for v in r['limits_exceeded'].values())
+
+
+def test_the_nodes_report_the_outcome_on_diagnostics():
+    goal = sample_goals('steerable', 1, seed=SUBSET_SEED)[0]
+    r = run_goal('steerable', 'pinv', goal, engine='nodes', duration=14.0)
+    assert r['outcome'] == 'converged', r
+    direct = run_goal('steerable', 'pinv', goal, duration=14.0)
+    assert abs(r['time_to_reach_s'] - direct['time_to_reach_s']) < 0.1
+    table = summarize([r, direct])
+    assert table[('steerable', 'pinv')]['converged'] == 2

@@ -1,0 +1,104 @@
+"""``wmm_randomized``: randomized closed-loop runs, every method on both robots.
+
+Usage::
+
+    wmm_randomized [--goals N] [--seed S] [--robots steerable,mecanum] [--methods pinv,...]
+                   [--engine direct|nodes] [--out FILE]
+
+Draws ``N`` reachable goals per robot (:mod:`wmm_control.experiments.randomized` says what
+reachable means), runs each method to each goal from the robot's start state in lockstep, in
+this process, and prints per robot and method: runs, converged, reported (stalled, on
+``/diagnostics``), failed, the worst final error of the converged runs, the time to converge,
+and the worst use of any velocity or acceleration limit. ``--out`` writes every run as JSON.
+The exit status is 1 when a run failed (a limit passed, a non-finite command, or neither
+converged nor reported).
+"""
+
+import argparse
+import json
+import sys
+
+from wmm_control.errors import WmmError
+from wmm_control.experiments.randomized import METHOD_RUNS, ROBOTS, run_goal, sample_goals, summarize
+
+__all__ = ['main', 'format_summary']
+
+
+def _f(value, fmt):
+    return '—' if value is None else format(value, fmt)
+
+
+def format_summary(table):
+    """The summary of :func:`~wmm_control.experiments.randomized.summarize` as a Markdown table."""
+    lines = ['| robot | method | runs | converged | reported | failed | worst error [mm / rad] '
+             '| time to converge, median / max [s] | largest use of a limit | closest joint to a limit [rad] |',
+             '|---|---|---|---|---|---|---|---|---|---|']
+    for (robot, method), s in table.items():
+        err = (f'{_f(s["worst_position_error_m"] and s["worst_position_error_m"] * 1e3, ".1f")} / '
+               f'{_f(s["worst_orientation_error_rad"], ".3f")}')
+        lines.append(f'| {robot} | {method} | {s["runs"]} | {s["converged"]} | {s["reported"]} | {s["failed"]} '
+                     f'| {err} | {_f(s["median_time_s"], ".1f")} / {_f(s["max_time_s"], ".1f")} '
+                     f'| {s["limit_use_max"]:.3f} | {s["position_margin_min_rad"]:.3f} |')
+    return '\n'.join(lines)
+
+
+def _param(text):
+    """``NAME=VALUE`` -> (name, value), the value read as YAML (numbers, booleans, strings)."""
+    import yaml
+
+    name, sep, value = text.partition('=')
+    if not sep or not name:
+        raise WmmError(f'--param: expected NAME=VALUE, got {text!r}')
+    return name, yaml.safe_load(value)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='wmm_randomized', description=__doc__.split('\n\n')[0])
+    parser.add_argument('--goals', type=int, default=100, help='goals per robot (default: %(default)s)')
+    parser.add_argument('--seed', type=int, default=0, help='seed of the draw (default: %(default)s)')
+    parser.add_argument('--robots', default=','.join(ROBOTS), help='comma-separated (default: %(default)s)')
+    parser.add_argument('--methods', default=','.join(METHOD_RUNS), help='comma-separated (default: %(default)s)')
+    parser.add_argument('--engine', choices=('direct', 'nodes'), default='direct',
+                        help='direct: the core objects without ROS; nodes: every node in this process over '
+                             'topics (default: %(default)s)')
+    parser.add_argument('--param', action='append', default=[], metavar='NAME=VALUE',
+                        help='a resolver parameter for every run, e.g. orientation_error=log (repeatable)')
+    parser.add_argument('--out', help='write every run as JSON to this file')
+    args = parser.parse_args(argv)
+    from tqdm import tqdm
+
+    robots = [r for r in args.robots.split(',') if r]
+    methods = [m for m in args.methods.split(',') if m]
+    try:
+        unknown = sorted(set(methods) - set(METHOD_RUNS))
+        if unknown or args.goals < 1:
+            raise WmmError(f'--methods: unknown {unknown}, expected some of {list(METHOD_RUNS)}' if unknown
+                           else f'--goals must be >= 1, got {args.goals}')
+        params = dict(_param(text) for text in args.param)
+        draws = {r: sample_goals(r, args.goals, seed=args.seed) for r in robots}
+        results = []
+        with tqdm(total=len(robots) * len(methods) * args.goals, unit='run', file=sys.stderr) as bar:
+            for robot in robots:
+                for method in methods:
+                    bar.set_description(f'{robot} {method}')
+                    for goal in draws[robot]:
+                        results.append(run_goal(robot, method, goal, engine=args.engine, params=params))
+                        bar.update(1)
+    except WmmError as exc:
+        print(f'wmm_randomized: {exc}', file=sys.stderr)
+        return 2
+    table = summarize(results)
+    print(f'{args.goals} random reachable goals per robot (seed {args.seed}), engine {args.engine}:')
+    print(format_summary(table))
+    failed = [r for r in results if r['outcome'] == 'failed']
+    for r in failed:
+        print(f'FAILED: {r["robot"]} {r["method"]} goal {r["goal"]}: {r["why"]}')
+    if args.out:
+        with open(args.out, 'w') as fh:
+            json.dump({'seed': args.seed, 'goals': args.goals, 'engine': args.engine, 'runs': results,
+                       'summary': [dict(robot=r, method=m, **s) for (r, m), s in table.items()]}, fh, indent=1)
+    return 1 if failed else 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

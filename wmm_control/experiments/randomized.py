@@ -1,0 +1,282 @@
+"""Randomized closed-loop runs: random reachable goals, every method, both robots.
+
+**A reachable goal** is the end-effector pose of a configuration the robot can take:
+
+1. an arm configuration drawn uniformly within the position limits, ``ARM_MARGIN`` inside
+   them (joints without limits: within (−π, π]);
+2. a base pose drawn uniformly: (x, y) in a disc of radius ``base_radius`` around the start
+   pose, heading uniform in (−π, π];
+3. the goal is that configuration's end-effector pose (forward kinematics);
+4. the draw is rejected, and drawn again, when the arm comes within ``COLLISION_MARGIN`` of
+   the robot's own body or the floor (:class:`~sim_bridge.collision.SelfCollisionChecker`).
+
+So every goal is reached by at least one configuration within the limits and clear of the
+robot's body. The path to it is not checked: no method here avoids collisions.
+
+**A run** starts from the robot's start state (its YAML), with the goal given at t = 0 as a
+set-point, in lockstep: the direct engine (:func:`sim_bridge.closed_loop.run_scenario`, the
+same core objects the nodes run) or every node in this process over topics
+(:func:`~wmm_control.experiments.ros_run.run_with_nodes`). Kinematic base, no slip,
+ground-truth feedback: the runs test the controllers, not the odometry. Its outcome is
+
+* *converged*: the goal is reached (the node's ``goal_tolerance``) and held until the end (a
+  direct run ends once it has held for ``SETTLE_S``);
+* *reported*: not converged, and ``goal_stalled`` is set on ``/diagnostics`` at the end (for
+  the direct engine: :class:`~wmm_control.resolvers.progress.GoalProgress` over the resolver's
+  diagnostics, what the node publishes);
+* *failed*: neither, a limit passed, or a non-finite command.
+"""
+
+import math
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from wmm_control.experiments.metrics import run_limit_report
+from wmm_control.experiments.scenario import Goal, Scenario, load_scenario
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.orientation import rpy_from_matrix
+from wmm_control.resolvers.progress import GoalProgress
+from wmm_control.robot_config import load_robot
+
+__all__ = ['RandomGoal', 'sample_goals', 'run_goal', 'summarize', 'ROBOTS', 'METHOD_RUNS', 'DURATION_S',
+           'ARM_MARGIN', 'COLLISION_MARGIN', 'SETTLE_S', 'goal_settings']
+
+#: The robots, by name.
+ROBOTS = ('steerable', 'mecanum')
+#: The run entry of each method (resolver parameters; the others are the node's defaults).
+#: The goals are arbitrary poses: the acceleration-level methods track all six rows
+#: (``rows: full``), and the velocity-level methods take the orientation error as a log map:
+#: the RPY difference of Sorour eq (12) is singular at pitch ±π/2, where robot B starts.
+METHOD_RUNS = {
+    'pinv': {'method': 'pinv', 'orientation_error': 'log'},
+    'task_sharing': {'method': 'task_sharing', 'orientation_error': 'log'},
+    'amp': {'method': 'amp', 'rows': 'full'},
+    'traditional': {'method': 'traditional', 'rows': 'full'},
+}
+#: Longest run per robot [s]: robot B's base accelerates at 0.025 m/s² (Xing Table 1).
+DURATION_S = {'steerable': 60.0, 'mecanum': 120.0}
+#: Drawn arm configurations stay this far inside the position limits [rad].
+ARM_MARGIN = 0.1
+#: Clearance of a drawn configuration from the robot's body and the floor [m].
+COLLISION_MARGIN = 0.02
+#: A direct run ends once the goal has been held this long [s].
+SETTLE_S = 2.0
+#: Tolerance of the limit checks on the nodes engine, whose commands come back through the
+#: 9 significant digits of /diagnostics [rad/s, m/s].
+NODES_TOLERANCE = 1e-7
+
+
+@dataclass(frozen=True)
+class RandomGoal:
+    """One drawn goal.
+
+    Attributes:
+        index: its number in the draw.
+        base_pose: base pose (x, y, θ) of the configuration it comes from [m, m, rad]. Shape (3,).
+        q_arm: arm configuration it comes from [rad]. Shape (7,).
+        pose: the goal [x, y, z, roll, pitch, yaw], world frame [m, rad]. Shape (6,).
+        draws: configurations drawn for it (the rejected ones included).
+    """
+
+    index: int
+    base_pose: np.ndarray
+    q_arm: np.ndarray
+    pose: np.ndarray
+    draws: int
+
+
+def goal_settings():
+    """``(goal_tolerance, stall_time)`` of the ``redundancy_resolver`` node, from its defaults
+    (``config/redundancy_resolver.yaml``): (position [m], orientation [rad]) and [s]."""
+    from wmm_control.nodes.common import load_defaults
+
+    defaults = load_defaults('redundancy_resolver.yaml', 'redundancy_resolver')
+    return tuple(float(v) for v in defaults['goal_tolerance']), float(defaults['stall_time'])
+
+
+def _arm_box(arm):
+    lo = np.where(np.isfinite(arm.position_lower), arm.position_lower + ARM_MARGIN, -math.pi)
+    hi = np.where(np.isfinite(arm.position_upper), arm.position_upper - ARM_MARGIN, math.pi)
+    return lo, hi
+
+
+def sample_goals(robot, count, seed=0, base_radius=1.0):
+    """``count`` reachable goals for ``robot`` (see the module docstring), reproducible by ``seed``.
+
+    Returns:
+        list of :class:`RandomGoal`.
+    """
+    from sim_bridge.collision import SelfCollisionChecker
+
+    cfg = load_robot(robot)
+    model = KinematicModel(cfg)
+    rng = np.random.default_rng(seed)
+    lo, hi = _arm_box(cfg.arm)
+    start = np.asarray(cfg.start.base_pose, dtype=float)
+    goals = []
+    with SelfCollisionChecker(cfg, margin=COLLISION_MARGIN) as checker:
+        while len(goals) < count:
+            draws = 0
+            while True:
+                draws += 1
+                q = rng.uniform(lo, hi)
+                radius, bearing = base_radius * math.sqrt(rng.uniform()), rng.uniform(-math.pi, math.pi)
+                base = start + np.array([radius * math.cos(bearing), radius * math.sin(bearing), 0.0])
+                base[2] = rng.uniform(-math.pi, math.pi)
+                if not checker.collisions(q):
+                    break
+            model.update(base, q)
+            pos, rot = model.ee_placement_world()
+            goals.append(RandomGoal(len(goals), base, q, np.concatenate((pos, rpy_from_matrix(rot))), draws))
+    return goals
+
+
+def _scenario(robot, goal, duration, path=None):
+    return Scenario(name=f'random_{robot.name}_{goal.index}', description='random reachable goal', robot=robot.name,
+                    frame='world', duration=duration, goals=(Goal(0.0, duration, goal.pose),), path=path,
+                    sim={'base_mode': 'kinematic'}, runs=())
+
+
+def _run_direct(robot, run, goal, duration):
+    from sim_bridge.closed_loop import run_scenario
+    from sim_bridge.world import SimWorld
+    from wmm_control.experiments.scenario import resolver_parameters
+    from wmm_control.resolvers import make_resolver
+
+    resolver = make_resolver(run['method'], robot, **resolver_parameters(run))
+    progress = GoalProgress(*goal_settings(), period=resolver.params.dt)
+    settle = int(round(SETTLE_S / resolver.params.dt))
+    held = [0]
+
+    def done(diagnostics):
+        progress.update(diagnostics)
+        held[0] = held[0] + 1 if progress.reached else 0
+        return held[0] >= settle
+
+    with SimWorld(robot, base_mode='kinematic') as world:
+        log = run_scenario(world, resolver, _scenario(robot, goal, duration), until=done)
+    return log, {'goal_reached': progress.reached, 'goal_stalled': progress.stalled}
+
+
+def _run_nodes(robot, run, goal, duration):
+    from wmm_control.experiments.ros_run import run_with_nodes
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / 'goal.yaml'
+        path.write_text(yaml.safe_dump({'scenario': {
+            'name': f'random_{robot.name}_{goal.index}', 'robot': robot.name, 'frame': 'world', 'duration': duration,
+            'goals': [{'t': 0.0, 'pose': [float(v) for v in goal.pose]}]}}))
+        scenario = load_scenario(path)
+        entry = dict(run, name=run['method'], feedback='ground_truth')
+        log = run_with_nodes(scenario, entry)
+    status = log.final_status or {}
+    return log, {'goal_reached': status.get('goal_reached') == 'True',
+                 'goal_stalled': status.get('goal_stalled') == 'True'}
+
+
+def _limit_use(log, robot, dt):
+    """How much of each limit the run used: the largest |value| / limit (<= 1 within) and the
+    smallest distance of an arm joint to a position limit [rad]."""
+    arm, base = robot.arm, robot.base
+    arm_cmd, base_ref = log.arm_command, log.base_reference
+    use = {
+        'arm_velocity': float(np.max(np.abs(arm_cmd) / arm.velocity)),
+        'arm_acceleration': float(np.max(np.abs(np.diff(arm_cmd, axis=0, prepend=0.0)) / (arm.acceleration * dt))),
+        'base_velocity': float(np.max(np.abs(base_ref) / base.velocity)),
+        'base_acceleration': float(np.max(np.abs(np.diff(base_ref, axis=0, prepend=0.0))
+                                          / (base.acceleration * dt))),
+    }
+    margin = np.minimum(log.q_arm - arm.position_lower, arm.position_upper - log.q_arm)
+    finite = np.isfinite(margin)
+    use['arm_position_margin_rad'] = float(np.min(margin[finite])) if np.any(finite) else math.inf
+    return use
+
+
+def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
+    """One closed-loop run of ``method`` to ``goal`` from the robot's start state.
+
+    ``params`` (resolver parameters) override those of :data:`METHOD_RUNS`.
+
+    Returns:
+        dict: ``robot``, ``method``, ``goal`` (index), ``outcome`` (``converged`` | ``reported`` |
+        ``failed``), ``time_s`` (simulated), ``time_to_reach_s`` (first entry into the
+        tolerance, null: never), ``final_position_error_m``, ``final_orientation_error_rad``,
+        ``limits_exceeded`` (:func:`~wmm_control.experiments.metrics.run_limit_report`),
+        ``limit_use`` (largest fraction of each velocity and acceleration limit, smallest
+        distance to an arm position limit), ``sim_clamped`` (command entries the simulator had
+        to clamp) and ``why`` (the reason of a failure, else empty).
+    """
+    cfg = load_robot(robot)
+    duration = DURATION_S.get(cfg.name, max(DURATION_S.values())) if duration is None else duration
+    run = dict(METHOD_RUNS[method], **(params or {}))
+    log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration)
+    dt = float(np.median(np.diff(log.t))) if len(log) > 1 else 0.025
+    target = Goal(0.0, duration, goal.pose).target
+    pos_err = np.linalg.norm(log.ee_position - target.position, axis=1)
+    ori_err = np.array([_angle(target.rotation @ r.T) for r in log.ee_rotation])
+    tolerance, _ = goal_settings()
+    inside = np.flatnonzero((pos_err <= tolerance[0]) & (ori_err <= tolerance[1]))
+    # the nodes engine reads the commands back from /diagnostics, written with 9 significant digits
+    exceeded = run_limit_report(log, cfg, dt, tol=1e-9 if engine == 'direct' else NODES_TOLERANCE)
+    clamped = sum(c['clamped'] + c['rejected'] for c in (log.sim_counters or {}).values())
+    why = []
+    if exceeded['non_finite']:
+        why.append(f'{exceeded["non_finite"]} non-finite commands')
+    why += [f'{k} limit passed by {v:.3g}' for k, v in exceeded.items() if k != 'non_finite' and v > 0]
+    if clamped:
+        why.append(f'{clamped} command entries clamped by the simulator')
+    if status['goal_reached']:
+        outcome = 'converged'
+    elif status['goal_stalled']:
+        outcome = 'reported'
+    else:
+        outcome = 'failed'
+        why.append(f'neither reached nor reported stalled after {duration:g} s')
+    if why:
+        outcome = 'failed'
+    return {'robot': cfg.name, 'method': method, 'goal': goal.index, 'outcome': outcome,
+            'time_s': float(log.t[-1] + dt), 'time_to_reach_s': float(log.t[inside[0]]) if inside.size else None,
+            'final_position_error_m': float(pos_err[-1]), 'final_orientation_error_rad': float(ori_err[-1]),
+            'limits_exceeded': exceeded, 'limit_use': _limit_use(log, cfg, dt), 'sim_clamped': int(clamped),
+            'why': '; '.join(why)}
+
+
+def _angle(rot):
+    return float(np.linalg.norm(pin.log3(rot)))
+
+
+def summarize(results):
+    """Per robot and method: ``runs``, ``converged``, ``reported``, ``failed``, the worst final
+    errors of the converged runs, the median and largest time to converge, and the worst use of
+    every limit over all runs (``limit_use_max``: largest fraction of a velocity or acceleration
+    limit; ``position_margin_min_rad``).
+
+    Returns:
+        dict keyed by ``(robot, method)``.
+    """
+    out = {}
+    for r in results:
+        out.setdefault((r['robot'], r['method']), []).append(r)
+    table = {}
+    for key, rows in out.items():
+        conv = [r for r in rows if r['outcome'] == 'converged']
+        times = [r['time_to_reach_s'] for r in conv]
+        use = [max(v for k, v in r['limit_use'].items() if k != 'arm_position_margin_rad') for r in rows]
+        table[key] = {
+            'runs': len(rows), 'converged': len(conv),
+            'reported': sum(r['outcome'] == 'reported' for r in rows),
+            'failed': sum(r['outcome'] == 'failed' for r in rows),
+            'worst_position_error_m': max((r['final_position_error_m'] for r in conv), default=None),
+            'worst_orientation_error_rad': max((r['final_orientation_error_rad'] for r in conv), default=None),
+            'median_time_s': float(np.median(times)) if times else None,
+            'max_time_s': max(times, default=None),
+            'limit_use_max': max(use),
+            'position_margin_min_rad': min(r['limit_use']['arm_position_margin_rad'] for r in rows),
+            'non_finite': sum(r['limits_exceeded']['non_finite'] for r in rows),
+        }
+    return table
