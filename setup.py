@@ -43,6 +43,7 @@ setup(
             'redundancy_resolver = wmm_control.nodes.redundancy_resolver:main',
             'goal_sequencer = wmm_control.nodes.goal_sequencer:main',
             'wmm_experiment = wmm_control.cli.experiment:main',
+            'wmm_bad_input = wmm_control.cli.bad_input:main',
         ],
     },
 )
