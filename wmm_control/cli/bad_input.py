@@ -26,6 +26,7 @@ Exit code 0 when every cell passes, 1 otherwise.
 """
 
 import argparse
+import gc
 import math
 import sys
 import time
@@ -177,6 +178,9 @@ class Rig:
         if self.node is not None:
             self.executor.remove_node(self.node)
             self.node.destroy_node()
+            world = getattr(self.node, 'world', None)
+            if world is not None:
+                world.close()       # now, not whenever the garbage collector gets to it
         self.executor.remove_node(self.probe)
         self.probe.destroy_node()
         self.executor.shutdown()
@@ -949,6 +953,9 @@ def run_matrix(kinds=None, columns=None, progress=None):
             results[(kind.name, column)] = cell = run_cell(RIGS[column], kind)
             if progress is not None:
                 progress(kind.name, column, cell)
+        # Dozens of nodes were made and destroyed: collect them here rather than in a long
+        # pause later, in the middle of whatever runs next in this process.
+        gc.collect()
     return results
 
 

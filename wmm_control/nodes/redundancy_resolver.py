@@ -466,7 +466,8 @@ class RedundancyResolverNode(Node):
 
     def _diagnostics(self, stamp):
         """Status of the cycle stamped ``stamp`` (the joint state it answers)."""
-        values = dict(self.counters)
+        values = dict(self.counters, joint_states_skipped=self.watchdog.skipped,
+                      measured_period_s=self.watchdog.stamps.measured_period)
         level, message = 'ok', 'no goal'
         if self._last is not None and self.target is not None:
             d = self._last.diagnostics
