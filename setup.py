@@ -44,6 +44,7 @@ setup(
             'goal_sequencer = wmm_control.nodes.goal_sequencer:main',
             'wmm_experiment = wmm_control.cli.experiment:main',
             'wmm_randomized = wmm_control.cli.randomized:main',
+            'wmm_bad_input = wmm_control.cli.bad_input:main',
         ],
     },
 )

@@ -21,12 +21,15 @@ SIM_GROUP = {'clamped', 'rejected', 'position_limited', 'command_age_s'}
 DIAGNOSTIC_KEYS = {
     'wmm_sim: simulation': {'sim_time_s', 'steps', 'real_time_factor'},
     'swmr_controller': {'status', 'route', 'qp_status', 'icr_next_xy', 'icr_at_infinity', 'active_constraints',
-                        'solve_time_us', 'beta_ref', 'feasible_twist', 'reference'},
+                        'solve_time_us', 'beta_ref', 'feasible_twist', 'reference', 'references_rejected',
+                        'joint_states_skipped', 'measured_period_s'},
     'mecanum_controller': {'status', 'velocity_scale', 'accel_scale', 'reference', 'reference_limited',
                            'feasible_twist', 'wheel_rates', 'wheel_rate_ratio', 'reference_age_s',
-                           'references_rejected', 'cycles', 'joint_states_rejected', 'stale_cycles'},
+                           'references_rejected', 'cycles', 'joint_states_rejected', 'stale_cycles',
+                           'joint_states_skipped', 'measured_period_s'},
 }
-RESOLVER_ALWAYS = {'cycles', 'goals', 'goals_rejected', 'compensation_dropped', 'stale_cycles'}
+RESOLVER_ALWAYS = {'cycles', 'goals', 'goals_rejected', 'compensation_dropped', 'stale_cycles',
+                   'joint_states_skipped', 'measured_period_s'}
 RESOLVER_GOAL = {'method', 'mode', 'psi', 'position_error_m', 'orientation_error_rad', 'limit_scale', 'accel_scale',
                  'null_scale', 'compensation_scale', 'compensated', 'limited', 'sigma_min', 'cycle_time_us',
                  'goal_reached', 'goal_stalled', 'arm_command', 'base_reference'}

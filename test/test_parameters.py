@@ -195,6 +195,10 @@ class BaseDriver(Node):
         self.pub_js = self.create_publisher(JointState, '/joint_states', 10)
         self.pub_ref = self.create_publisher(TwistStamped, '/base/reference', 10)
         self.create_subscription(TwistStamped, '/base/feasible_twist', self.feasible.append, 10)
+        # Stands in for the simulator: a controller whose wheel commands nobody receives holds
+        # its state at the measured one.
+        for topic in ('/steer_controller/commands', '/drive_controller/commands', '/wheel_controller/commands'):
+            self.create_subscription(Float64MultiArray, topic, lambda msg: None, 10)
 
     def reference(self, twist):
         msg = TwistStamped()

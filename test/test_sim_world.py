@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 from sim_bridge import SimWorld, SlipParams, render_png, se2_step
-from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
 

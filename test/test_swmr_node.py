@@ -205,7 +205,7 @@ def test_bad_references_are_rejected(ros):
     rec.send(np.zeros(4), (np.nan, 0.0, 0.0))
     rec.send(np.zeros(4), (0.0, 0.9, 0.0), frame='odom')
     ros.spin_for(0.1)
-    np.testing.assert_array_equal(node.reference, [0.2, 0.0, 0.0])
+    np.testing.assert_array_equal(node.reference.value, [0.2, 0.0, 0.0])
     assert all(np.all(np.isfinite(d)) for d in rec.drive + rec.steer)
 
 

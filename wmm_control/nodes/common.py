@@ -10,6 +10,7 @@ appear in the node YAML.
 
 import array
 import math
+from collections import deque
 from pathlib import Path
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -32,8 +33,8 @@ __all__ = [
     'Param', 'declare_parameters', 'load_defaults', 'parameter_error', 'float_array', 'parse_command',
     'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
-    'BaseReference', 'JointStateWatchdog', 'STATE_PUB_QOS', 'STATE_SUB_QOS', 'COMMAND_QOS', 'CLOCK_QOS',
-    'DIAGNOSTICS_QOS',
+    'BaseReference', 'JointStateWatchdog', 'StampGate', 'STATE_PUB_QOS', 'STATE_SUB_QOS', 'COMMAND_QOS',
+    'CLOCK_QOS', 'DIAGNOSTICS_QOS',
 ]
 
 
@@ -383,18 +384,21 @@ def parse_base_reference(msg, base_frame):
 
     Returns:
         ``(array (vx, vy, ω), warning)`` when it is finite and in ``base_frame`` (or has an
-        empty frame); ``warning`` is '' unless it moves out of the plane (ignored). Else
-        ``(None, reason)``.
+        empty frame, taken as ``base_frame``); ``warning`` is '' unless the frame is empty or
+        it moves out of the plane (ignored). Else ``(None, reason)``.
     """
     ref = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
     if not np.all(np.isfinite(ref)):
         return None, f'non-finite values {ref.tolist()}'
     if msg.header.frame_id not in ('', base_frame):
         return None, f'frame {msg.header.frame_id!r}: expected {base_frame!r}'
+    warnings = []
+    if not msg.header.frame_id:
+        warnings.append(f'empty frame_id, taken as {base_frame!r}')
     other = (msg.twist.linear.z, msg.twist.angular.x, msg.twist.angular.y)
     if any(abs(v) > 1e-9 for v in other):
-        return ref, 'linear.z, angular.x, angular.y are ignored (planar base)'
-    return ref, ''
+        warnings.append('linear.z, angular.x, angular.y are ignored (planar base)')
+    return ref, '; '.join(warnings)
 
 
 def twist_stamped(stamp, frame, twist):
@@ -408,37 +412,146 @@ def twist_stamped(stamp, frame, twist):
 
 
 class JointSelector:
-    """Finds named joints in ``sensor_msgs/JointState`` messages, whatever their order.
+    """Reads named joints from ``sensor_msgs/JointState`` messages, whatever their order.
 
     The index of each name layout is cached (senders use one or two layouts).
+
+    Args:
+        joints: the joint names to read, in the order they are returned.
+        velocity_limits: optional |q̇| limit per joint [rad/s]; a measured rate beyond
+            ``PLAUSIBLE_FACTOR`` times it is taken for a glitch and the message is rejected.
+        position_limits: optional ``(lower, upper)`` per joint [rad]; a position beyond them by
+            more than ``POSITION_MARGIN`` is rejected.
     """
 
-    def __init__(self, joints, cache_size=16):
+    PLAUSIBLE_FACTOR = 10.0
+    POSITION_MARGIN = 0.5       # [rad]
+    MAX_POSITION = 1e9          # [rad] no joint angle is larger (a wheel at 12 rad/s needs 2.6 years)
+
+    def __init__(self, joints, cache_size=16, velocity_limits=None, position_limits=None):
         self.joints = tuple(joints)
         self._cache = {}
         self._cache_size = cache_size
+        self._max_rate = None if velocity_limits is None else \
+            self.PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), len(self.joints))
+        self._bounds = None if position_limits is None else (
+            np.asarray(position_limits[0], dtype=float) - self.POSITION_MARGIN,
+            np.asarray(position_limits[1], dtype=float) + self.POSITION_MARGIN)
+
+    def _layout(self, names):
+        where = {}
+        for i, name in enumerate(names):
+            where.setdefault(name, []).append(i)
+        missing = [j for j in self.joints if j not in where]
+        if missing:
+            return f'without joints {missing}'
+        twice = [j for j in self.joints if len(where[j]) > 1]
+        if twice:
+            return f'listing joints {twice} more than once (ambiguous)'
+        return np.array([where[j][0] for j in self.joints])
 
     def indices(self, msg):
         """Indices of the joints in ``msg`` and '' or ``(None, reason)``.
 
-        A message lacking a joint, or whose positions (or non-empty velocities) differ in
-        length from its names, gives None.
+        A message lacking a joint, naming one of them twice, or whose positions (or
+        non-empty velocities) differ in length from its names, gives None.
         """
         names = tuple(msg.name)
         if names not in self._cache:
             if len(self._cache) >= self._cache_size:
                 self._cache.clear()
-            where = {name: i for i, name in enumerate(names)}
-            missing = [j for j in self.joints if j not in where]
-            self._cache[names] = missing if missing else np.array([where[j] for j in self.joints])
+            self._cache[names] = self._layout(names)
         idx = self._cache[names]
-        if isinstance(idx, list):
-            return None, f'without joints {idx}'
+        if isinstance(idx, str):
+            return None, idx
         if len(msg.position) != len(names):
             return None, f'with {len(msg.position)} positions for {len(names)} names'
         if len(msg.velocity) not in (0, len(names)):
             return None, f'with {len(msg.velocity)} velocities for {len(names)} names'
         return idx, ''
+
+    def read(self, msg):
+        """``(positions, velocities, '')`` of the joints, or ``(None, None, reason)``.
+
+        Velocities are zero when the message has none. Non-finite values, and values beyond
+        the plausibility bounds given at construction, give a reason.
+        """
+        idx, reason = self.indices(msg)
+        if idx is None:
+            return None, None, reason
+        q = np.asarray(msg.position, dtype=float)[idx]
+        dq = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else np.zeros(len(idx))
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
+            return None, None, f'with non-finite values: positions {q.tolist()}, velocities {dq.tolist()}'
+        if self._max_rate is not None and np.any(np.abs(dq) > self._max_rate):
+            bad = [self.joints[i] for i in np.flatnonzero(np.abs(dq) > self._max_rate)]
+            return None, None, (f'with rates of {bad} beyond {self.PLAUSIBLE_FACTOR:g} times their limits '
+                                f'(a measurement glitch?)')
+        if np.any(np.abs(q) > self.MAX_POSITION):
+            return None, None, f'with positions beyond {self.MAX_POSITION:g} rad: not joint angles'
+        if self._bounds is not None and (np.any(q < self._bounds[0]) or np.any(q > self._bounds[1])):
+            bad = [self.joints[i] for i in np.flatnonzero((q < self._bounds[0]) | (q > self._bounds[1]))]
+            return None, None, (f'with positions of {bad} more than {self.POSITION_MARGIN} rad beyond '
+                                'their limits')
+        return q, dq, ''
+
+
+class StampGate:
+    """Which joint states run a control cycle, judged by their header stamps.
+
+    The controllers integrate one ``period`` per cycle, so a cycle must answer a new instant
+    of the sender's time: a message stamped at or before the last cycle's (a second
+    publisher, a replayed or re-ordered message, a zero stamp amid stamped ones) runs no
+    cycle, nor does one stamped more than ``max_jump`` after it (a far-future stamp: a
+    sender that really paused that long trips the joint-state timeout first, which calls
+    :meth:`restart`). A burst of queued messages runs one cycle each, one period each, as
+    their stamps say. Messages that all carry a zero stamp (published by hand) each run one.
+
+    The median of the last ``window`` stamp steps is the sender's period;
+    :meth:`period_mismatch` reports it when it differs from ``period`` by more than 10 %.
+    """
+
+    def __init__(self, period, max_jump, window=40):
+        self.period = float(period)
+        self.max_jump = float(max_jump)
+        self._steps = deque(maxlen=window)
+        self._last = None
+
+    def restart(self):
+        """Any next stamp starts a new time base (the sender restarted, or was silent)."""
+        self._last = None
+
+    def admit(self, stamp):
+        """'' when the message stamped ``stamp`` runs a cycle, else why not."""
+        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        last = self._last
+        if last is None or (ns == 0 and last == 0):
+            self._last = ns
+            return ''
+        step = (ns - last) * 1e-9
+        if step <= 0.0:
+            return (f'stamped {ns * 1e-9:.9g} s, not after the last cycle\'s {last * 1e-9:.9g} s (a second '
+                    'publisher, or an old or re-ordered message)')
+        if step > self.max_jump:
+            return f'stamped {step:.6g} s after the last cycle\'s, beyond {self.max_jump:g} s (a far-future stamp)'
+        self._last = ns
+        self._steps.append(step)
+        return ''
+
+    @property
+    def measured_period(self):
+        """Median stamp step of the last cycles [s]; 0 before half a window."""
+        if len(self._steps) < self._steps.maxlen // 2:
+            return 0.0
+        return float(np.median(self._steps))
+
+    def period_mismatch(self):
+        """'' or a sentence saying that the sender's period differs from ``period``."""
+        measured = self.measured_period
+        if measured == 0.0 or abs(measured - self.period) <= 0.1 * self.period:
+            return ''
+        return (f'joint states come every {measured:.6g} s by their stamps, but this node\'s period is '
+                f'{self.period:g} s: its rate and acceleration limits act per {self.period:g} s')
 
 
 class StampedExchange:
@@ -500,14 +613,17 @@ class BaseReference:
         node: the node whose clock and logger are used.
         base_frame: the one frame accepted besides an empty one.
         timeout: age [s] beyond which :meth:`current` gives None.
+        velocity_limit: |vx|, |vy|, |ω| limits; a reference beyond them is kept (the
+            controller scales it into them) with a logged warning.
     """
 
-    def __init__(self, node, base_frame, timeout):
+    def __init__(self, node, base_frame, timeout, velocity_limit=None):
         self._node = node
         self.base_frame = base_frame
         self.value = np.zeros(3)
         self.freshness = Freshness(timeout)
         self.rejected = 0
+        self._limit = None if velocity_limit is None else np.asarray(velocity_limit, dtype=float)
         self._stale_logged = False
 
     def accept(self, msg):
@@ -520,6 +636,9 @@ class BaseReference:
             return False
         if reason:
             logger.warn(f'/base/reference: {reason}', throttle_duration_sec=10.0)
+        if self._limit is not None and np.any(np.abs(ref) > self._limit):
+            logger.warn(f'/base/reference {ref.tolist()} is beyond the velocity limits {self._limit.tolist()}: '
+                        'scaled into them', throttle_duration_sec=1.0)
         self.value = ref
         self.freshness.mark(seconds(self._node.get_clock()))
         self._stale_logged = False
@@ -530,24 +649,31 @@ class BaseReference:
         if self.freshness.fresh(now):
             return self.value
         if not self._stale_logged and np.any(self.value):
-            self._node.get_logger().warn(f'/base/reference older than {self.freshness.timeout} s: stopping')
+            self._node.get_logger().warn(f'/base/reference older than {self.freshness.timeout} s: braking to rest')
             self._stale_logged = True
         return None
 
 
 class JointStateWatchdog:
-    """Calls ``on_timeout()`` every ``period`` while joint states are older than ``timeout``.
+    """The timing of a controller's ``/joint_states`` input: stamps, age and period.
 
-    It runs on ``clock`` (give it the steady clock: a paused sim clock must not hide a stop)
-    and sets :attr:`need_resync`, which the node clears once it has resynchronised.
+    :meth:`admit` decides, by the stamps (:class:`StampGate`), whether a message runs a cycle,
+    and logs why not (throttled). While admitted joint states are older than ``timeout``,
+    ``on_timeout()`` is called every ``period``; the timer runs on ``clock`` (give it the
+    steady clock: a paused sim clock must not hide a stop). A timeout sets
+    :attr:`need_resync`, which the node clears once it has resynchronised, and lets the next
+    stamp start a new time base.
     """
 
-    def __init__(self, node, timeout, period, clock, on_timeout, action):
+    def __init__(self, node, timeout, period, clock, on_timeout, action, topic='joint_states'):
         self._node = node
         self._clock = clock
         self._on_timeout = on_timeout
         self._action = action
+        self._topic = topic
         self.freshness = Freshness(timeout)
+        self.stamps = StampGate(period, max_jump=max(float(timeout), 4.0 * float(period)))
+        self.skipped = 0
         self.need_resync = True
         self.timer = node.create_timer(period, self._check, clock=clock)
 
@@ -555,11 +681,41 @@ class JointStateWatchdog:
         """A joint state arrived now."""
         self.freshness.mark(seconds(self._clock))
 
+    def admit(self, stamp):
+        """True when the joint state stamped ``stamp`` runs a cycle (it is then marked fresh)."""
+        reason = self.stamps.admit(stamp)
+        logger = self._node.get_logger()
+        if reason:
+            self.skipped += 1
+            publishers = self._node.count_publishers(self._topic)
+            logger.warn(f'/{self._topic} {reason}; {publishers} publisher(s) on it: cycle skipped',
+                        throttle_duration_sec=1.0)
+            return False
+        self.mark()
+        mismatch = self.stamps.period_mismatch()
+        if mismatch:
+            logger.warn(mismatch, throttle_duration_sec=10.0)
+        return True
+
+    def resync(self, *outputs):
+        """True when the node restarts from the measured state this cycle.
+
+        That is after a timeout (and at start-up), and also while any of ``outputs`` (the
+        command publishers) has no matched subscription yet: commands that nobody receives
+        must not advance the controller's state, or the first one that arrives would jump.
+        """
+        if not all(pub.get_subscription_count() > 0 for pub in outputs):
+            return True
+        due = self.need_resync
+        self.need_resync = False
+        return due
+
     def _check(self):
         age = self.freshness.age(seconds(self._clock))
         if not self.freshness.timeout < age < math.inf:
             return
         if not self.need_resync:
-            self._node.get_logger().warn(f'no /joint_states for {self.freshness.timeout} s: {self._action}')
+            self._node.get_logger().warn(f'no /{self._topic} for {self.freshness.timeout} s: {self._action}')
             self.need_resync = True
+        self.stamps.restart()
         self._on_timeout()

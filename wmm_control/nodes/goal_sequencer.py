@@ -16,7 +16,8 @@ Time: the scenario's clock starts at the first reading of this node's clock. Und
 ``use_sim_time`` (recommended with ``wmm_sim``) that is the first ``/clock`` message, and the
 goals follow simulated time exactly: the node checks its timeline on every ``/clock``
 message; on wall time, on a steady-clock timer every 10 ms. When the scenario ends (its ``duration``), the
-last goal stays in force.
+last goal stays in force. A clock that goes back (a restarted simulator) starts the scenario
+again, and one that jumps more than 10 s ahead skips to that time; both are logged.
 """
 
 import math
@@ -36,6 +37,8 @@ from wmm_control.nodes.common import (
     CLOCK_QOS, COMMAND_QOS, Param, declare_parameters, run_node)
 
 __all__ = ['GoalSequencerNode', 'main']
+
+MAX_CLOCK_STEP = 10.0     # [s] a larger step of the clock between two checks is reported
 
 PARAMS = (
     Param('scenario', 'Scenario name (config/scenarios/<name>.yaml) or a path to a scenario file.',
@@ -101,6 +104,7 @@ class GoalSequencerNode(Node):
             self._trajectory = self.scenario.reference(KinematicModel(self.scenario.robot))
         self._sim_time = self.get_parameter('use_sim_time').value
         self._t0 = None
+        self._last_t = None
         self._index = -1
         self._last_pub = -math.inf
         self.published = 0
@@ -122,6 +126,14 @@ class GoalSequencerNode(Node):
         self._check(now.nanoseconds * 1e-9, now.to_msg())
 
     def _check(self, t, stamp):
+        if self._last_t is not None and t < self._last_t:
+            self.get_logger().warn(f'clock went back from {self._last_t:.6g} s to {t:.6g} s (simulator restarted?): '
+                                   'the scenario starts again', throttle_duration_sec=1.0)
+            self._t0, self._index, self._last_pub = None, -1, -math.inf
+        elif self._last_t is not None and t - self._last_t > MAX_CLOCK_STEP:
+            self.get_logger().warn(f'clock jumped {t - self._last_t:.6g} s ahead in one step: the scenario '
+                                   'skips to that time', throttle_duration_sec=1.0)
+        self._last_t = t
         if self._t0 is None:
             self._t0 = t
         elapsed = t - self._t0

@@ -23,12 +23,16 @@ tuning.
 
 Safety: when the latest reference is older than ``reference_timeout`` (this node's clock at
 receipt) the base brakes to rest at the acceleration limits. Non-finite references and
-references in another frame are rejected; finite references beyond the limits are scaled
-into them by the core. When joint states stop for ``joint_state_timeout`` (steady clock),
-zero wheel rates are published, and the controller restarts from the measured wheel rates
-when they come back. A joint state without the wheel joints, with positions or velocities
-not matching its names, or with non-finite wheel values runs no cycle. Every rejection is
-logged, throttled. Nothing non-finite is ever published. Timers run on the steady clock, so
+references in another frame are rejected (an empty frame is taken as ``base_frame``, with a
+warning); finite references beyond the limits are scaled into them by the core, with a
+warning. When joint states stop for ``joint_state_timeout`` (steady clock), zero wheel rates
+are published, and the controller restarts from the measured wheel rates when they come
+back. A joint state without the wheel joints or naming one twice, with positions or
+velocities not matching its names, with non-finite wheel values or rates beyond ten times
+the wheel rate limit runs no cycle. Nor does one whose stamp is not after the last cycle's
+or jumps more than the timeout ahead (:class:`~wmm_control.nodes.common.StampGate`: a second
+publisher, a replayed message); a joint-state period that differs from ``period`` is
+reported. Every rejection is logged, throttled. Nothing non-finite is ever published. Timers run on the steady clock, so
 the node works under ``use_sim_time``.
 """
 
@@ -74,8 +78,8 @@ class MecanumControllerNode(Node):
         self.p = p
         robot = load_robot(p.robot)
         self.controller = MecanumController.from_robot_config(robot, p.period)
-        self.wheels = JointSelector(robot.mecanum.wheel_joints)
-        self.reference = BaseReference(self, p.base_frame, p.reference_timeout)
+        self.wheels = JointSelector(robot.mecanum.wheel_joints, velocity_limits=robot.mecanum.wheel_rate_limit)
+        self.reference = BaseReference(self, p.base_frame, p.reference_timeout, robot.base.velocity)
         self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0}
         self._next_diag = 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -100,15 +104,9 @@ class MecanumControllerNode(Node):
 
     def _wheel_rates_measured(self, msg):
         """Measured wheel rates (zero when the message has no velocities), or None (logged)."""
-        idx, reason = self.wheels.indices(msg)
-        if idx is None:
+        _, rates, reason = self.wheels.read(msg)
+        if rates is None:
             self._reject_joint_state(reason)
-            return None
-        values = np.asarray(msg.position, dtype=float)[idx]
-        rates = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else np.zeros(len(idx))
-        if not (np.all(np.isfinite(values)) and np.all(np.isfinite(rates))):
-            self._reject_joint_state(f'with non-finite wheel positions {values.tolist()} or rates {rates.tolist()}')
-            return None
         return rates
 
     def _reject_joint_state(self, reason):
@@ -117,18 +115,16 @@ class MecanumControllerNode(Node):
 
     def _on_joint_states(self, msg):
         rates = self._wheel_rates_measured(msg)
-        if rates is None:
+        if rates is None or not self.watchdog.admit(msg.header.stamp):
             return
-        self.watchdog.mark()
         self.exchange.state_received(msg.header.stamp, rates)
 
     # ------------------------------------------------------------------ cycle
     def _cycle(self, stamp, wheel_rates):
         """One period: the latest reference (braking when stale) → wheel rates and q̇_bf."""
         now = seconds(self.get_clock())
-        if self.watchdog.need_resync:
+        if self.watchdog.resync(self.pub_wheels):
             self.controller.reset(self.controller.kinematics.twist_from_wheels(wheel_rates))
-            self.watchdog.need_resync = False
         reference = self.reference.current(now)
         if reference is not None:
             out = self.controller.step(reference)
@@ -157,7 +153,9 @@ class MecanumControllerNode(Node):
                   'reference': ref.value, 'reference_limited': out.reference, 'feasible_twist': out.twist,
                   'wheel_rates': out.wheel_rates,
                   'wheel_rate_ratio': float(np.max(np.abs(out.wheel_rates))) / lim,
-                  'reference_age_s': ref.freshness.age(now), 'references_rejected': ref.rejected, **self.counters}
+                  'reference_age_s': ref.freshness.age(now), 'references_rejected': ref.rejected,
+                  'joint_states_skipped': self.watchdog.skipped,
+                  'measured_period_s': self.watchdog.stamps.measured_period, **self.counters}
         return diagnostic_array(stamp, [diagnostic_status('mecanum_controller', 'mecanum base', level,
                                                           out.status, values)])
 

@@ -33,9 +33,16 @@ compensation publish both at once.
 Safety: zero commands when there is no goal, after a rejected goal, and while the joint
 states, the odometry or (with ground-truth feedback) the end-effector pose are older than
 ``state_timeout`` (steady clock, at receipt); a watchdog publishes zeros when the joint
-states stop. A goal in another frame, with NaN/inf or a zero quaternion, or beyond
-``max_goal_distance`` from the world origin is rejected with a logged reason; a non-unit
-quaternion is normalised with a warning. Every command stays within the robot's limits
+states stop. A goal (or ``/ee_reference`` point) in another frame, with NaN/inf or a zero
+quaternion, beyond ``max_goal_distance`` from the world origin, below the floor, above the
+highest the end effector can reach, or inside the base's body at its current pose
+(:class:`~wmm_control.kinematics.workspace.Workspace`) is rejected with a logged reason; a
+non-unit quaternion is normalised with a warning. Odometry with NaN/inf, a zero quaternion
+or a twist beyond ten times the base limits, and joint states lacking an arm joint or naming
+one twice, with non-finite values, rates beyond ten times the limits or positions beyond
+the limits, are rejected. A joint state whose stamp is not after the last cycle's, or jumps
+more than ``state_timeout`` ahead, runs no cycle (a second publisher, a replayed message).
+A goal that stops making progress is logged once. Every command stays within the robot's limits
 (:mod:`wmm_control.resolvers.limits`); a goal out of reach is pursued as far as they allow
 and reported on ``/diagnostics``.
 """
@@ -56,9 +63,10 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.common import (
-    COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, Param, STATE_SUB_QOS, declare_parameters, diagnostic_array,
-    diagnostic_status, float_array, run_node)
+    COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
+    declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node)
 from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 from wmm_control.resolvers.progress import GoalProgress
@@ -158,6 +166,12 @@ def _twist_values(twist):
                      twist.angular.z])
 
 
+def _norm(values):
+    """Euclidean norm that does not overflow for entries near the largest double."""
+    scale = float(np.max(np.abs(values)))
+    return scale * float(np.linalg.norm(values / scale)) if scale > 0 else 0.0
+
+
 def _stamp_key(stamp):
     return (stamp.sec, stamp.nanosec)
 
@@ -172,11 +186,14 @@ class RedundancyResolverNode(Node):
         self.model = KinematicModel(p.robot)
         names = [n for n in method_parameters(p.method) if n != 'dt' and hasattr(p, n)]
         self.resolver = make_resolver(p.method, self.model, dt=p.period, **{n: getattr(p, n) for n in names})
-        self.arm_joints = self.model.config.arm.joints
+        arm = self.model.config.arm
+        self.arm_joints = arm.joints
+        self.arm = JointSelector(arm.joints, velocity_limits=arm.velocity,
+                                 position_limits=(arm.position_lower, arm.position_upper))
+        self.workspace = Workspace(self.model)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.fresh = {k: Freshness(p.state_timeout) for k in ('joint_states', 'odom', 'ee_pose', 'reference')}
+        self.fresh = {k: Freshness(p.state_timeout) for k in ('odom', 'ee_pose', 'reference')}
         self._tracking = False        # the target is a trajectory point of /ee_reference
-        self._index = {}
         self._odom = None
         self._ee = None
         self.target = None
@@ -184,8 +201,8 @@ class RedundancyResolverNode(Node):
         self._pending = None
         self._wait = None
         self._last = None
-        self._zero_sent = False
         self.progress = GoalProgress(p.goal_tolerance, p.stall_time, p.period)
+        self._stall_logged = False
         self._next_diag = 0.0
         self.counters = {'cycles': 0, 'goals': 0, 'goals_rejected': 0, 'compensation_dropped': 0,
                          'stale_cycles': 0}
@@ -202,7 +219,7 @@ class RedundancyResolverNode(Node):
             self.create_subscription(TwistStamped, 'base/feasible_twist', self._on_feasible, COMMAND_QOS)
             self._wait = (self.create_timer(p.compensation_timeout, self._compensation_timeout, clock=self._steady,
                                             autostart=False) if p.compensation_timeout > 0 else None)
-        self.watchdog = self.create_timer(p.period, self._watchdog, clock=self._steady)
+        self.watchdog = JointStateWatchdog(self, p.state_timeout, p.period, self._steady, self._stop, 'zero commands')
         self.get_logger().info(
             f'{p.method} on robot {self.model.config.name}: t_s {p.period} s, EE feedback {p.ee_feedback}, '
             f'compensation {"on" if self.resolver.uses_compensation else "off"}; waiting for /goal_pose '
@@ -235,9 +252,11 @@ class RedundancyResolverNode(Node):
         if float(np.max(np.abs(values[:3]))) > self.p.max_goal_distance:
             return self._reject_goal(f'position {values[:3].tolist()} is beyond max_goal_distance '
                                      f'{self.p.max_goal_distance} m')
+        impossible = self._impossible(values[:3])
+        if impossible:
+            return self._reject_goal(f'position {values[:3].tolist()}: {impossible}')
         quat = values[3:]
-        norm = float(np.max(np.abs(quat)))
-        norm = norm * float(np.linalg.norm(quat / norm)) if norm > 0 else 0.0
+        norm = _norm(quat)
         if norm < 1e-6:
             return self._reject_goal('zero quaternion')
         if abs(norm - 1.0) > 1e-3:
@@ -252,6 +271,7 @@ class RedundancyResolverNode(Node):
         self._goal_key = key
         self._tracking = False
         self.progress.start()
+        self._stall_logged = False
         self.counters['goals'] += 1
         self.get_logger().info(f'new goal: position {np.round(values[:3], 4).tolist()}, '
                                f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}')
@@ -273,6 +293,9 @@ class RedundancyResolverNode(Node):
         if float(np.max(np.abs(pose[:3]))) > self.p.max_goal_distance or \
                 float(np.max(np.abs(np.concatenate((vel, acc))))) > 1e3:
             return self._reject_goal('beyond max_goal_distance, or a twist or acceleration beyond 1e3', REFERENCE)
+        impossible = self._impossible(pose[:3])
+        if impossible:
+            return self._reject_goal(f'position {pose[:3].tolist()}: {impossible}', REFERENCE)
         norm = float(np.linalg.norm(pose[3:]))
         if norm < 1e-6:
             return self._reject_goal('zero quaternion', REFERENCE)
@@ -286,17 +309,38 @@ class RedundancyResolverNode(Node):
         self.fresh['reference'].mark(self._now())
         return None
 
+    def _impossible(self, position):
+        """'' or why no motion reaches an end-effector goal at the world ``position``."""
+        fresh = self._odom is not None and self.fresh['odom'].fresh(self._now())
+        return self.workspace.impossible(position, self._odom[0] if fresh else None)
+
     def _on_odom(self, msg):
         p, q, t = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
-        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-        pose = np.array([p.x, p.y, yaw])
+        quat = np.array([q.x, q.y, q.z, q.w])
         twist = np.array([t.linear.x, t.linear.y, t.angular.z])
-        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist))) or \
-                max(abs(p.x), abs(p.y)) > self.p.max_goal_distance:
-            self.get_logger().warn(f'rejected /odom at {pose.tolist()}: non-finite or beyond max_goal_distance',
-                                   throttle_duration_sec=1.0)
+        values = np.concatenate(([p.x, p.y], quat, twist))
+        logger = self.get_logger()
+        if not np.all(np.isfinite(values)):
+            logger.warn(f'rejected /odom with non-finite values {values.tolist()}', throttle_duration_sec=1.0)
             return
-        self._odom = (pose, twist)
+        if max(abs(p.x), abs(p.y)) > self.p.max_goal_distance:
+            logger.warn(f'rejected /odom at ({p.x:.6g}, {p.y:.6g}): beyond max_goal_distance '
+                        f'{self.p.max_goal_distance} m from the origin', throttle_duration_sec=1.0)
+            return
+        limit = 10.0 * self.model.config.base.velocity
+        if np.any(np.abs(twist) > limit):
+            logger.warn(f'rejected /odom with twist {twist.tolist()} beyond ten times the base velocity limits',
+                        throttle_duration_sec=1.0)
+            return
+        norm = _norm(quat)
+        if norm < 1e-6:
+            logger.warn('rejected /odom with a zero quaternion', throttle_duration_sec=1.0)
+            return
+        if abs(norm - 1.0) > 1e-3:
+            logger.warn(f'/odom quaternion has norm {norm:.6g}: normalised', throttle_duration_sec=1.0)
+        x, y, z, w = quat / norm
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        self._odom = (np.array([p.x, p.y, yaw]), twist)
         self.fresh['odom'].mark(self._now())
 
     def _on_ee_pose(self, msg):
@@ -314,25 +358,9 @@ class RedundancyResolverNode(Node):
         self.fresh['ee_pose'].mark(self._now())
 
     def _arm_state(self, msg):
-        names = tuple(msg.name)
-        if names not in self._index:
-            if len(self._index) >= 16:
-                self._index.clear()
-            where = {n: i for i, n in enumerate(names)}
-            missing = [j for j in self.arm_joints if j not in where]
-            self._index[names] = (missing, None if missing else np.array([where[j] for j in self.arm_joints]))
-        missing, idx = self._index[names]
-        if idx is None:
-            self.get_logger().warn(f'rejected /joint_states without arm joints {missing}', throttle_duration_sec=5.0)
-            return None
-        if len(msg.position) != len(names) or len(msg.velocity) not in (0, len(names)):
-            self.get_logger().warn('rejected /joint_states whose position/velocity lengths differ from its names',
-                                   throttle_duration_sec=1.0)
-            return None
-        q = np.asarray(msg.position, dtype=float)[idx]
-        dq = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else np.zeros(len(idx))
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
-            self.get_logger().warn('rejected /joint_states with non-finite arm values', throttle_duration_sec=1.0)
+        q, dq, reason = self.arm.read(msg)
+        if q is None:
+            self.get_logger().warn(f'rejected /joint_states {reason}: zero commands', throttle_duration_sec=1.0)
             return None
         return q, dq
 
@@ -354,9 +382,8 @@ class RedundancyResolverNode(Node):
 
     def _on_joint_states(self, msg):
         arm = self._arm_state(msg)
-        if arm is None:
+        if arm is None or not self.watchdog.admit(msg.header.stamp):
             return
-        self.fresh['joint_states'].mark(self._now())
         if self._pending is not None:        # the last cycle's feasible twist never came
             self._finish(None)
         stamp = msg.header.stamp
@@ -367,7 +394,8 @@ class RedundancyResolverNode(Node):
                 self.get_logger().warn(f'{reason}: zero commands', throttle_duration_sec=2.0)
             self._publish_zero(stamp)
             return
-        self._zero_sent = False
+        if self.watchdog.resync(self.pub_arm):
+            self.resolver.reset()
         self.counters['cycles'] += 1
         if self._tracking and not self.fresh['reference'].fresh(self._now()):
             self.get_logger().warn('/ee_reference stopped: holding its last pose', throttle_duration_sec=5.0)
@@ -407,7 +435,7 @@ class RedundancyResolverNode(Node):
         if feasible is None:
             self.counters['compensation_dropped'] += 1
             self.get_logger().warn('no /base/feasible_twist for this cycle in time: arm command without '
-                                   'compensation', throttle_duration_sec=5.0)
+                                   'compensation', throttle_duration_sec=1.0)
             self._publish_arm(command, stamp)
         else:
             self._publish_arm(self.resolver.compensate(command, feasible), stamp)
@@ -425,6 +453,7 @@ class RedundancyResolverNode(Node):
         self.pub_arm.publish(float_array(command.arm_velocity))
         self._last = command
         self.progress.update(command.diagnostics)
+        self._log_stall_once(command.diagnostics)
         now = self._now()
         if self.p.diagnostics_period > 0 and now >= self._next_diag:
             self._next_diag = now + self.p.diagnostics_period
@@ -435,19 +464,25 @@ class RedundancyResolverNode(Node):
         self.pub_arm.publish(float_array(np.zeros(len(self.arm_joints))))
         self.resolver.reset()
 
-    def _watchdog(self):
-        age = self.fresh['joint_states'].age(self._now())
-        if self.p.state_timeout < age < math.inf:
-            if not self._zero_sent:
-                self.get_logger().warn(f'no /joint_states for {self.p.state_timeout} s: zero commands')
-                self._zero_sent = True
-            self._pending = None
-            self._publish_zero(self.get_clock().now().to_msg())
+    def _stop(self):
+        """Joint states stopped: zero commands every period (the watchdog's timeout action)."""
+        self._pending = None
+        self._publish_zero(self.get_clock().now().to_msg())
 
     # ------------------------------------------------------------------ status
+    def _log_stall_once(self, diag):
+        """Warn once when the goal stalls (again after it made progress)."""
+        if not self.progress.stalled:
+            self._stall_logged = False
+        elif not self._stall_logged:
+            self.get_logger().warn(f'goal not reached: {diag.position_error:.3f} m away, no progress for '
+                                   f'{self.p.stall_time} s (out of reach, or held by a limit?)')
+            self._stall_logged = True
+
     def _diagnostics(self, stamp):
         """Status of the cycle stamped ``stamp`` (the joint state it answers)."""
-        values = dict(self.counters)
+        values = dict(self.counters, joint_states_skipped=self.watchdog.skipped,
+                      measured_period_s=self.watchdog.stamps.measured_period)
         level, message = 'ok', 'no goal'
         if self._last is not None and self.target is not None:
             d = self._last.diagnostics

@@ -26,8 +26,13 @@ period) and the steer angles are held. References beyond ``base_velocity_limit``
 non-finite ones, or ones in another frame, are rejected. When joint states stop for
 ``joint_state_timeout`` (steady clock, so a paused sim clock cannot hide it), zero steer and
 drive rates are published, and the controller re-reads the measured steer angles when they
-come back. A joint state without every steer joint, or with positions and names of different
-lengths, is rejected with a throttled log and runs no cycle. The node's timers run on the
+come back. A joint state without every steer joint or naming one twice, with positions and
+names of different lengths, non-finite values or steer rates beyond ten times the limit, is
+rejected with a throttled log and runs no cycle. Nor does one whose stamp is not after the
+last cycle's or jumps more than the timeout ahead (:class:`~wmm_control.nodes.common.StampGate`:
+a second publisher, a replayed message); a joint-state period that differs from ``period`` is
+reported. An empty reference frame is taken as ``base_frame`` and a reference beyond the
+limits is scaled into them, both with a warning. The node's timers run on the
 steady clock: they keep working under ``use_sim_time``.
 """
 
@@ -43,8 +48,8 @@ from std_msgs.msg import Float64MultiArray
 
 from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.nodes.common import (
-    COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointStateWatchdog, Param, STATE_SUB_QOS, StampedExchange,
-    declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node, seconds)
+    BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
+    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node, seconds)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['SwmrControllerNode', 'main']
@@ -72,7 +77,7 @@ class SwmrControllerNode(Node):
     def __init__(self, **kwargs):
         super().__init__('swmr_controller', **kwargs)
         p = declare_parameters(self, 'swmr_controller.yaml', PARAMS, on_change={
-            'reference_timeout': lambda v: setattr(self.ref_fresh, 'timeout', v),
+            'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
             'joint_state_timeout': lambda v: setattr(self.watchdog.freshness, 'timeout', v)})
         self.p = p
         robot = load_robot(p.robot)
@@ -80,12 +85,10 @@ class SwmrControllerNode(Node):
         geometry = SteerableGeometry.from_config(robot.steerable)
         params = SwmrParams.from_robot_config(robot, dt=p.period, kp=p.kp, icr_gain=p.icr_gain)
         self.controller = SwmrController(geometry, params)
-        self.reference = np.zeros(3)
-        self.ref_fresh = Freshness(p.reference_timeout)
-        self._steer_index = {}          # tuple of joint names -> indices of the steer joints, or None
+        self.reference = BaseReference(self, p.base_frame, p.reference_timeout, params.base_velocity_limit)
+        self.steer = JointSelector(self.steer_joints, velocity_limits=params.steer_rate_limit)
         self._next_diag = 0.0
         self._last = None
-        self._ref_stale_logged = False
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pub_steer = self.create_publisher(Float64MultiArray, 'steer_controller/commands', COMMAND_QOS)
         self.pub_drive = self.create_publisher(Float64MultiArray, 'drive_controller/commands', COMMAND_QOS)
@@ -105,56 +108,16 @@ class SwmrControllerNode(Node):
 
     # ------------------------------------------------------------------ inputs
     def _on_reference(self, msg):
-        ref = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
-        if not np.all(np.isfinite(ref)):
-            self.get_logger().warn(f'rejected /base/reference with non-finite values {ref.tolist()}',
-                                   throttle_duration_sec=1.0)
-            return
-        if msg.header.frame_id not in ('', self.p.base_frame):
-            self.get_logger().warn(f'rejected /base/reference in frame {msg.header.frame_id!r}: expected '
-                                   f'{self.p.base_frame!r}', throttle_duration_sec=1.0)
-            return
-        other = (msg.twist.linear.z, msg.twist.angular.x, msg.twist.angular.y)
-        if any(abs(v) > 1e-9 for v in other):
-            self.get_logger().warn('/base/reference: linear.z, angular.x, angular.y are ignored (planar base)',
-                                   throttle_duration_sec=10.0)
-        self.reference = ref
-        self.ref_fresh.mark(seconds(self.get_clock()))
-        self._ref_stale_logged = False
-        self.exchange.reference_received(msg.header.stamp)
-
-    def _steer_state(self, msg):
-        """Measured steer angles of a joint state, or None (logged) when it cannot give them."""
-        names = tuple(msg.name)
-        if names not in self._steer_index:
-            if len(self._steer_index) >= 16:      # a bounded cache: senders use one or two layouts
-                self._steer_index.clear()
-            where = {name: i for i, name in enumerate(names)}
-            missing = [j for j in self.steer_joints if j not in where]
-            self._steer_index[names] = None if missing else np.array([where[j] for j in self.steer_joints])
-        idx = self._steer_index[names]
-        if idx is None:
-            missing = [j for j in self.steer_joints if j not in names]
-            self.get_logger().warn(f'rejected /joint_states without steer joints {missing}: cycle skipped',
-                                   throttle_duration_sec=5.0)
-            return None
-        if len(msg.position) != len(names):
-            self.get_logger().warn(f'rejected /joint_states with {len(msg.position)} positions for '
-                                   f'{len(names)} names: cycle skipped', throttle_duration_sec=1.0)
-            return None
-        beta = np.asarray(msg.position, dtype=float)[idx]
-        if not np.all(np.isfinite(beta)):
-            self.get_logger().warn(f'rejected /joint_states with non-finite steer angles {beta.tolist()}: '
-                                   'cycle skipped', throttle_duration_sec=1.0)
-            return None
-        return beta
+        if self.reference.accept(msg):
+            self.exchange.reference_received(msg.header.stamp)
 
     def _on_joint_states(self, msg):
-        beta = self._steer_state(msg)
+        beta, _, reason = self.steer.read(msg)
         if beta is None:
+            self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped', throttle_duration_sec=1.0)
             return
-        self.watchdog.mark()
-        self.exchange.state_received(msg.header.stamp, beta)
+        if self.watchdog.admit(msg.header.stamp):
+            self.exchange.state_received(msg.header.stamp, beta)
 
     # ------------------------------------------------------------------ cycle
     def _cycle(self, stamp, beta):
@@ -162,17 +125,12 @@ class SwmrControllerNode(Node):
         with the latest reference (braking when it is stale)."""
         sec, nanosec = stamp
         now = seconds(self.get_clock())
-        if self.watchdog.need_resync:
+        if self.watchdog.resync(self.pub_steer, self.pub_drive):
             self.controller.reset(beta)
-            self.watchdog.need_resync = False
-        fresh = self.ref_fresh.fresh(now)
-        if fresh:
-            reference = self.reference
-        else:
+        reference = self.reference.current(now)
+        fresh = reference is not None
+        if not fresh:
             reference = np.zeros(3)
-            if not self._ref_stale_logged and np.any(self.reference):
-                self.get_logger().warn(f'/base/reference older than {self.p.reference_timeout} s: braking to rest')
-                self._ref_stale_logged = True
         out = self.controller.step(reference, beta_meas=beta, brake=not fresh)
         if out.status == 'solver_failure':
             self.get_logger().error(f'ICR QP failed ({out.qp_status}): steering held, drive ramping down',
@@ -202,7 +160,10 @@ class SwmrControllerNode(Node):
                   'icr_next_xy': icr.point, 'icr_at_infinity': icr.at_infinity,
                   'active_constraints': list(out.active_constraints),
                   'solve_time_us': out.solve_time_s * 1e6,
-                  'beta_ref': out.beta_ref, 'feasible_twist': out.twist_executed, 'reference': self.reference}
+                  'beta_ref': out.beta_ref, 'feasible_twist': out.twist_executed,
+                  'reference': self.reference.value, 'references_rejected': self.reference.rejected,
+                  'joint_states_skipped': self.watchdog.skipped,
+                  'measured_period_s': self.watchdog.stamps.measured_period}
         return diagnostic_array(stamp, [diagnostic_status('swmr_controller', 'steerable base', level,
                                                           out.status, values)])
 

@@ -1,0 +1,184 @@
+"""Joint-state timing: one cycle per instant of the sender's time, whatever the delivery.
+
+Two publishers on ``/joint_states``, a replayed message, a burst of queued messages, a gap:
+no controller runs two cycles for one stamp nor integrates several periods in one cycle,
+each cycle's period is the one its stamps say, and a sender whose period disagrees with the
+node's is reported (log and ``/diagnostics``).
+"""
+
+import math
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TwistStamped
+from rcl_interfaces.msg import Log
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from ros_helpers import RosHarness, overrides, stamp_s
+from sim_bridge.node import SimNode
+from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
+from wmm_control.nodes.common import STATE_SUB_QOS, StampGate, twist_stamped
+from wmm_control.nodes.mecanum_controller import MecanumControllerNode
+from wmm_control.robot_config import load_robot
+
+DT = 0.025
+ROBOT = load_robot('mecanum')
+WHEELS = ROBOT.mecanum.wheel_joints
+
+
+def _time(t):
+    ns = round(t * 1e9)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+# ---------------------------------------------------------------- the gate alone
+
+def test_the_gate_admits_each_new_instant_once():
+    gate = StampGate(DT, max_jump=0.2)
+    assert gate.admit(_time(10.0)) == ''
+    assert 'not after' in gate.admit(_time(10.0))          # the same instant again
+    assert 'not after' in gate.admit(_time(9.0))           # backwards
+    assert 'not after' in gate.admit(_time(0.0))           # a zero stamp amid stamped ones
+    assert 'far-future' in gate.admit(_time(1e6))
+    assert gate.admit(_time(10.025)) == ''                 # the stream goes on from the last cycle
+    assert gate.admit(_time(10.1)) == ''                   # a gap of three periods: one cycle
+    gate.restart()                                         # the sender was silent: a new time base
+    assert gate.admit(_time(0.5)) == ''
+
+
+def test_messages_that_all_carry_a_zero_stamp_each_run_a_cycle():
+    gate = StampGate(DT, max_jump=0.2)
+    assert [gate.admit(_time(0.0)) for _ in range(3)] == ['', '', '']
+
+
+def test_the_gate_measures_the_senders_period_and_reports_a_mismatch():
+    gate = StampGate(DT, max_jump=0.2)
+    for k in range(30):
+        gate.admit(_time(1.0 + 0.05 * k))
+    assert gate.measured_period == pytest.approx(0.05)
+    assert 'every 0.05 s' in gate.period_mismatch() and 'period is 0.025 s' in gate.period_mismatch()
+    same = StampGate(DT, max_jump=0.2)
+    for k in range(30):
+        same.admit(_time(1.0 + DT * k + (0.001 if k % 2 else 0.0)))   # jitter of 1 ms
+    assert same.period_mismatch() == ''
+
+
+# ---------------------------------------------------------------- in a system
+
+class Probe(Node):
+    """Records the controller's feasible twists, diagnostics and warnings; publishes joint states."""
+
+    def __init__(self, context):
+        super().__init__('timing_probe', context=context)
+        self.feasible, self.diag, self.warnings = [], [], []
+        self.create_subscription(TwistStamped, '/base/feasible_twist', self.feasible.append, 50)
+        self.wheels = []           # listened to, as the simulator does: a controller unheard stays at rest
+        self.create_subscription(Float64MultiArray, '/wheel_controller/commands', self.wheels.append, 50)
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
+        self.create_subscription(Log, '/rosout', self._on_log, QoSProfile(
+            depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE))
+        self.pub_js = self.create_publisher(JointState, '/joint_states', 50)
+        self.pub_ref = self.create_publisher(TwistStamped, '/base/reference', 50)
+
+    def _on_diag(self, msg):
+        for s in msg.status:
+            if s.name == 'mecanum_controller':
+                self.diag.append({kv.key: kv.value for kv in s.values})
+
+    def _on_log(self, msg):
+        if msg.name == 'mecanum_controller' and msg.level >= Log.WARN:
+            self.warnings.append(msg.msg)
+
+    def state(self, t):
+        js = JointState()
+        js.header.stamp = _time(t)
+        js.name = list(WHEELS)
+        js.position = [0.0] * 4
+        js.velocity = [0.0] * 4
+        self.pub_js.publish(js)
+
+    def per_stamp(self):
+        counts = {}
+        for m in self.feasible:
+            counts[stamp_s(m)] = counts.get(stamp_s(m), 0) + 1
+        return counts
+
+
+def twist_of(msg):
+    return np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
+
+
+@pytest.fixture
+def ros():
+    harness = RosHarness()
+    yield harness
+    harness.close()
+
+
+def test_a_second_publisher_replaying_the_simulators_states_runs_no_second_cycle(ros):
+    """A lockstep simulator and the Mecanum controller; a second publisher echoes every joint
+    state the simulator sends (same stamp): one feasible twist per stamp, and the duplicates
+    are logged with the number of publishers."""
+    probe = ros.add(Probe(ros.context))
+    echo = ros.add(Node('echo', context=ros.context))
+    pub = echo.create_publisher(JointState, '/joint_states', 10)
+    echo.create_subscription(JointState, '/joint_states', lambda m: pub.publish(m) if m.name != ['echoed'] else None, 10)
+    node = ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
+        diagnostics_period=1e-9, **LOCKSTEP_WAITS['mecanum_controller'])))
+    ros.add(SimNode(context=ros.context, parameter_overrides=overrides(
+        robot='mecanum', timing='lockstep', lockstep_groups='wheel')))
+    reference = echo.create_publisher(TwistStamped, '/base/reference', 10)
+    echo.create_subscription(JointState, '/joint_states',
+                             lambda m: reference.publish(twist_stamped(m.header.stamp, 'base_link', (0.2, 0.1, 0.5))), 10)
+    # Until 70 copies were seen (the echo's discovery may take a moment on a loaded machine).
+    assert ros.spin_until(lambda: len(probe.feasible) >= 80 and node.watchdog.skipped >= 70, timeout=60.0)
+    # The simulator's first state is stamped 0, which reads as unstamped (published by hand):
+    # its copy runs a cycle too. Every later stamp runs exactly one.
+    counts = probe.per_stamp()
+    counts.pop(0.0)
+    assert set(counts.values()) == {1}, {t: n for t, n in counts.items() if n != 1}
+    # Logged with the number of publishers (the simulator, the echo and this probe's).
+    assert any('not after the last cycle' in w and '3 publisher(s)' in w for w in probe.warnings), probe.warnings
+    # Its limits act per simulated period: the twist never changes faster than the limit.
+    twists = np.array([twist_of(m) for m in sorted(probe.feasible, key=stamp_s)])
+    step = np.asarray(ROBOT.base.acceleration) * DT
+    assert np.all(np.abs(np.diff(twists, axis=0)) <= step * (1 + 1e-9) + 1e-12)
+    assert np.any(twists)
+
+
+def test_a_burst_runs_one_period_per_message_and_a_gap_still_only_one(ros):
+    probe = ros.add(Probe(ros.context))
+    ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
+        reference_wait=0.0, reference_timeout=10.0, joint_state_timeout=10.0)))
+    ros.spin_for(0.2)
+    probe.pub_ref.publish(twist_stamped(_time(0.0), 'base_link', (0.2, 0.0, 0.0)))
+    ros.spin_for(0.05)
+    burst = STATE_SUB_QOS.depth          # as many queued states as the subscription keeps
+    for k in range(burst):               # delivered at once
+        probe.state(5.0 + k * DT)
+    assert ros.spin_until(lambda: len(probe.feasible) >= burst, timeout=5.0)
+    probe.state(5.0 + (burst + 5) * DT)  # five periods missing
+    assert ros.spin_until(lambda: len(probe.feasible) >= burst + 1, timeout=5.0)
+    ros.spin_for(0.1)
+    vx = [twist_of(m)[0] for m in probe.feasible]
+    step = ROBOT.base.acceleration[0] * DT
+    # Every cycle, the gap's included, moves the twist by exactly one period of acceleration.
+    np.testing.assert_allclose(np.diff([0.0] + vx), step, rtol=1e-9)
+    assert len(vx) == burst + 1
+
+
+def test_a_simulator_period_that_disagrees_with_the_controllers_is_reported(ros):
+    probe = ros.add(Probe(ros.context))
+    ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
+        diagnostics_period=1e-9, **LOCKSTEP_WAITS['mecanum_controller'])))
+    ros.add(SimNode(context=ros.context, parameter_overrides=overrides(
+        robot='mecanum', timing='lockstep', lockstep_groups='wheel', period=0.05)))
+    assert ros.spin_until(lambda: any('every 0.05 s' in w for w in probe.warnings), timeout=60.0)
+    assert any("this node's period is 0.025 s" in w for w in probe.warnings)
+    measured = float(probe.diag[-1]['measured_period_s'])
+    assert math.isclose(measured, 0.05, rel_tol=1e-6)

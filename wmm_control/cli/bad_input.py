@@ -1,0 +1,1004 @@
+"""``wmm_bad_input``: every node against every kind of bad input; prints kinds × nodes → outcome.
+
+Usage::
+
+    wmm_bad_input                    # the table (Markdown), then the failures if any
+    wmm_bad_input --reasons          # and, per cell, the warning the node logged
+    wmm_bad_input --kinds nan,inf --nodes swmr_controller
+    python -m wmm_control.cli.bad_input
+
+Each cell runs one node, in this process on a private ROS domain, fed by a probe that plays
+the rest of the system over real topics (a tiny kinematic plant closes the loop): a few
+nominal cycles, the bad input in ``REPEATS`` consecutive cycles, then nominal cycles again.
+The probe records every output topic of the node and its ``/rosout``. A cell passes when:
+
+* no callback raised (``CRASH``);
+* no output holds NaN/inf (``NaN``; on ``/diagnostics``, NaN);
+* every command is within the robot's limits (``LIMIT``);
+* the node answers nominal input again afterwards (``DEAD``);
+* bad input was rejected or corrected with a logged warning (else ``SILENT``), throttled: no
+  message more than twice in the injection (else ``FLOOD``); a parameter set was refused
+  with a reason (else ``ACCEPTED``);
+* valid input in another layout (joints in another order) gives the very same commands as
+  the nominal layout (else ``WRONG``).
+
+Exit code 0 when every cell passes, 1 otherwise.
+"""
+
+import argparse
+import gc
+import math
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import Log
+from rcl_interfaces.srv import SetParameters
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+from wmm_control.experiments.ros_run import private_domain_id
+from wmm_control.kinematics import KinematicModel
+from wmm_control.nodes.common import float_array, twist_stamped
+from wmm_control.robot_config import load_robot
+
+__all__ = ['KINDS', 'RIGS', 'run_matrix', 'format_table', 'main']
+
+PERIOD = 0.025
+T0 = 100.0                # [s] stamp of the first nominal cycle
+WARMUP = 5
+REPEATS = 4
+RECOVERY = 4
+CYCLE_WAIT = 0.05         # [s] wall time a cycle's answer is awaited (rejected input gives none)
+ALIVE_WAIT = 3.0          # [s] wall time the answer to nominal input is awaited after the injection
+FAILURES = ('CRASH', 'NaN', 'LIMIT', 'DEAD', 'SILENT', 'FLOOD', 'ACCEPTED', 'WRONG')
+_LOG_QOS = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _time(t):
+    ns = int(round(t * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def _stamp_s(msg):
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def _pose(xyz, rot, frame='world', stamp=None):
+    msg = PoseStamped()
+    msg.header.frame_id = frame
+    if stamp is not None:
+        msg.header.stamp = stamp
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in xyz)
+    q = pin.Quaternion(np.asarray(rot))
+    msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z, msg.pose.orientation.w = \
+        float(q.x), float(q.y), float(q.z), float(q.w)
+    return msg
+
+
+class Crash(Exception):
+    """A callback of the node under test raised."""
+
+
+# ------------------------------------------------------------------------------------ rigs
+
+class Rig:
+    """One node under test, fed and watched by a probe node, in a private rclpy context.
+
+    Subclasses give ``family``, ``column``, :meth:`make_node`, :meth:`nominal` (the messages
+    of cycle ``k`` as ``[(topic, msg)]``), :meth:`_watch_outputs` and :meth:`_cycle_count`.
+    """
+
+    family = ''
+    column = ''
+
+    def __init__(self):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=private_domain_id(), args=['--ros-args', '--disable-stdout-logs'])
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.probe = Node('bad_input_probe', context=self.context)
+        self.executor.add_node(self.probe)
+        self.node = None
+        self.k = 0
+        self.mutate = None
+        self.logs = []
+        self.bad = []            # (failure, text)
+        self.records = []        # (topic, values) of every output, in order
+        self._pubs = {}
+        self.probe.create_subscription(Log, '/rosout', self._on_log, _LOG_QOS)
+        self._watch_outputs()
+
+    # ---------------------------------------------------------------- plumbing
+    def publish(self, topic, msg):
+        if topic not in self._pubs:
+            self._pubs[topic] = self.probe.create_publisher(type(msg), topic, 10)
+        self._pubs[topic].publish(msg)
+
+    def _on_log(self, msg):
+        if self.node is not None and msg.name == self.node.get_logger().name:
+            self.logs.append(msg)
+
+    def watch(self, topic, msg_type, values, limit=None, what=''):
+        """Record ``values(msg)`` of every message on ``topic``; flag NaN/inf and |v| > ``limit``."""
+        def callback(msg):
+            v = np.asarray(values(msg), dtype=float)
+            self.records.append((topic, v))
+            if not np.all(np.isfinite(v)):
+                self.bad.append(('NaN', f'{topic}: {v.tolist()}'))
+            elif limit is not None:
+                lim = limit(msg) if callable(limit) else limit
+                over = np.abs(v) > np.asarray(lim) * (1 + 1e-9) + 1e-12
+                if np.any(over):
+                    self.bad.append(('LIMIT', f'{topic}{what}: {v[over].tolist()} beyond {np.broadcast_to(lim, v.shape)[over].tolist()}'))
+        self.probe.create_subscription(msg_type, topic, callback, 10)
+
+    def watch_diagnostics(self):
+        def callback(msg):
+            for status in msg.status:
+                for kv in status.values:
+                    if kv.value.strip('[]').strip().lower() in ('nan', '-nan') or 'nan,' in kv.value.lower() \
+                            or ', nan' in kv.value.lower():
+                        self.bad.append(('NaN', f'/diagnostics {status.name}: {kv.key} = {kv.value}'))
+        self.probe.create_subscription(DiagnosticArray, '/diagnostics', callback, 10)
+
+    def spin_until(self, predicate, timeout):
+        end = time.monotonic() + timeout
+        while True:
+            if predicate():
+                return True
+            if time.monotonic() > end:
+                return False
+            try:
+                self.executor.spin_once(timeout_sec=0.002)
+            except Exception as exc:  # noqa: BLE001 - any exception out of a callback is the finding
+                raise Crash(f'{type(exc).__name__}: {exc}') from exc
+
+    # ---------------------------------------------------------------- life cycle
+    def start(self, overrides=()):
+        self.node = self.make_node([Parameter(k, value=v) for k, v in dict(overrides).items()])
+        self.executor.add_node(self.node)
+        self.spin_until(lambda: False, 0.05)      # discovery within the context
+        for _ in range(WARMUP):
+            self.step()
+
+    def close(self):
+        if self.node is not None:
+            self.executor.remove_node(self.node)
+            self.node.destroy_node()
+            world = getattr(self.node, 'world', None)
+            if world is not None:
+                world.close()       # now, not whenever the garbage collector gets to it
+        self.executor.remove_node(self.probe)
+        self.probe.destroy_node()
+        self.executor.shutdown()
+        rclpy.try_shutdown(context=self.context)
+
+    def step(self, mutate=None, wait=CYCLE_WAIT):
+        """One cycle of nominal messages (``mutate(rig, msgs) -> msgs`` first); True when it was answered."""
+        before = self._cycle_count()
+        msgs = self.nominal(self.k)
+        if mutate is not None:
+            msgs = mutate(self, msgs)
+        for topic, msg in msgs:
+            self.publish(topic, msg)
+        self.k += 1
+        return self.spin_until(lambda: self._cycle_count() > before, wait)
+
+    def set_parameter(self, name, value):
+        """Set one parameter through the node's ``set_parameters`` service: ``(successful, reason)``."""
+        client = self.probe.create_client(SetParameters, f'{self.node.get_fully_qualified_name()}/set_parameters')
+        try:
+            if not self.spin_until(client.service_is_ready, 2.0):
+                return True, 'parameter service not available'
+            request = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
+            future = client.call_async(request)
+            if not self.spin_until(future.done, 2.0):
+                return True, 'no answer from the parameter service'
+            result = future.result().results[0]
+            return result.successful, result.reason
+        finally:
+            self.probe.destroy_client(client)
+
+
+class SimRig(Rig):
+    """``wmm_sim`` in lockstep; the probe answers each state with commands for every group."""
+
+    family = 'sim'
+
+    def __init__(self, robot='steerable'):
+        from sim_bridge.world import SimWorld
+        self.robot = robot
+        world = SimWorld(robot=robot)
+        self.groups = dict(world.command_groups)
+        self.limits = dict(zip(world.joint_names, world.velocity_limits))
+        cfg = world.robot
+        self.arm_bounds = dict(zip(cfg.arm.joints, np.maximum(np.abs(cfg.arm.position_lower),
+                                                             np.abs(cfg.arm.position_upper))))
+        world.close()
+        self.column = f'wmm_sim ({"A" if load_robot(robot).steerable else "B"})'
+        self._states = 0
+        super().__init__()
+        self.probe.create_subscription(JointState, '/joint_states', self._on_state, 10)
+
+    def make_node(self, overrides):
+        from sim_bridge.node import SimNode
+        return SimNode(context=self.context, parameter_overrides=[
+            Parameter('robot', value=self.robot), Parameter('timing', value='lockstep'),
+            Parameter('lockstep_timeout', value=CYCLE_WAIT), Parameter('diagnostics_period', value=PERIOD),
+            *overrides])
+
+    def _watch_outputs(self):
+        def joint_values(msg):
+            return list(msg.velocity) + [p for n, p in zip(msg.name, msg.position) if n in self.arm_bounds]
+
+        def joint_limits(msg):
+            return [self.limits.get(n, np.inf) for n in msg.name] + \
+                [self.arm_bounds[n] for n in msg.name if n in self.arm_bounds]
+        self.watch('/joint_states', JointState, joint_values, joint_limits, ' (velocities, arm positions)')
+        for topic in ('/odom', '/ground_truth/odom'):
+            self.watch(topic, Odometry, lambda m: [m.pose.pose.position.x, m.pose.pose.position.y,
+                                                   m.pose.pose.orientation.z, m.pose.pose.orientation.w,
+                                                   m.twist.twist.linear.x, m.twist.twist.linear.y,
+                                                   m.twist.twist.angular.z])
+        self.watch('/ee_pose', PoseStamped, lambda m: [m.pose.position.x, m.pose.position.y, m.pose.position.z])
+        self.watch_diagnostics()
+
+    def _cycle_count(self):
+        return self._states
+
+    def nominal(self, k):
+        return []         # the commands answer the states (see _on_state)
+
+    def step(self, mutate=None, wait=CYCLE_WAIT):
+        self.mutate = mutate
+        before = self._states
+        ok = self.spin_until(lambda: self._states > before, wait + CYCLE_WAIT)
+        self.k += 1
+        return ok
+
+    def commands(self, t):
+        """Nominal velocity commands at sim time ``t``: gentle, within every limit."""
+        out = []
+        for group, joints in self.groups.items():
+            scale = {'arm': 0.2, 'steer': 0.3, 'drive': 3.0, 'wheel': 3.0}[group]
+            out.append((f'{group}_controller/commands', float_array(scale * np.sin(t + np.arange(len(joints))))))
+        return out
+
+    def _on_state(self, msg):
+        self._states += 1
+        msgs = self.commands(_stamp_s(msg))
+        if self.mutate is not None:
+            msgs = self.mutate(self, msgs)
+        for topic, m in msgs:
+            self.publish(topic, m)
+
+
+class PlantRig(Rig):
+    """A controller fed by a kinematic plant: joint positions integrate the commanded rates."""
+
+    def __init__(self, robot):
+        self.config = load_robot(robot)
+        cfg = self.config
+        self.joint_names = list(cfg.arm.joints) + list(cfg.wheel_joints)
+        self.q = {n: 0.0 for n in self.joint_names}
+        self.q.update(zip(cfg.arm.joints, cfg.start.arm))
+        self.dq = {n: 0.0 for n in self.joint_names}
+        self.base_pose = np.array(cfg.start.base_pose, dtype=float)
+        self.base_twist = np.zeros(3)
+        super().__init__()
+
+    def stamp(self, k):
+        return _time(T0 + k * PERIOD)
+
+    def set_rates(self, joints, rates):
+        self.dq.update(zip(joints, (float(v) for v in rates)))
+
+    def integrate(self):
+        for n in self.joint_names:
+            self.q[n] += self.dq[n] * PERIOD
+        lo, hi = self.config.arm.position_lower, self.config.arm.position_upper
+        for i, n in enumerate(self.config.arm.joints):
+            self.q[n] = float(np.clip(self.q[n], lo[i], hi[i]))
+        vx, vy, w = self.base_twist
+        th = self.base_pose[2]
+        self.base_pose += PERIOD * np.array([vx * math.cos(th) - vy * math.sin(th),
+                                             vx * math.sin(th) + vy * math.cos(th), w])
+
+    def joint_state(self, k):
+        js = JointState()
+        js.header.stamp = self.stamp(k)
+        js.name = list(self.joint_names)
+        js.position = [self.q[n] for n in self.joint_names]
+        js.velocity = [self.dq[n] for n in self.joint_names]
+        return js
+
+
+class BaseControllerRig(PlantRig):
+    """``swmr_controller`` (robot A) or ``mecanum_controller`` (robot B)."""
+
+    family = 'base'
+
+    def __init__(self, robot):
+        super().__init__(robot)
+        self.column = 'swmr_controller' if self.config.steerable else 'mecanum_controller'
+        self.own_joints = list(self.config.steerable.steer_joints if self.config.steerable
+                               else self.config.mecanum.wheel_joints)
+        self.reference = np.array([0.4, 0.15, 0.3]) * np.asarray(self.config.base.velocity)
+        self._feasible = 0
+
+    def make_node(self, overrides):
+        if self.config.steerable:
+            from wmm_control.nodes.swmr_controller import SwmrControllerNode as cls
+        else:
+            from wmm_control.nodes.mecanum_controller import MecanumControllerNode as cls
+        return cls(context=self.context, parameter_overrides=[
+            Parameter('diagnostics_period', value=PERIOD), *overrides])
+
+    def _watch_outputs(self):
+        cfg = self.config
+        vmax = np.asarray(cfg.base.velocity)
+        if cfg.steerable:
+            s = cfg.steerable
+            self.watch('/steer_controller/commands', Float64MultiArray, lambda m: m.data, s.steer_rate_limit)
+            self.watch('/drive_controller/commands', Float64MultiArray, lambda m: m.data, s.drive_rate_limit)
+            self.probe.create_subscription(Float64MultiArray, '/steer_controller/commands',
+                                           lambda m: self.set_rates(s.steer_joints, m.data), 10)
+            self.probe.create_subscription(Float64MultiArray, '/drive_controller/commands',
+                                           lambda m: self.set_rates(s.drive_joints, m.data), 10)
+        else:
+            wheels = cfg.mecanum.wheel_joints
+            self.watch('/wheel_controller/commands', Float64MultiArray, lambda m: m.data, cfg.mecanum.wheel_rate_limit)
+            self.probe.create_subscription(Float64MultiArray, '/wheel_controller/commands',
+                                           lambda m: self.set_rates(wheels, m.data), 10)
+        self.watch('/base/feasible_twist', TwistStamped,
+                   lambda m: [m.twist.linear.x, m.twist.linear.y, m.twist.angular.z], vmax)
+        self.probe.create_subscription(TwistStamped, '/base/feasible_twist', self._on_feasible, 10)
+        self.watch_diagnostics()
+
+    def _on_feasible(self, msg):
+        self._feasible += 1
+
+    def _cycle_count(self):
+        return self._feasible
+
+    def nominal(self, k):
+        self.integrate()
+        return [('/base/reference', twist_stamped(self.stamp(k), 'base_link', self.reference)),
+                ('/joint_states', self.joint_state(k))]
+
+
+class ResolverRig(PlantRig):
+    """``redundancy_resolver``; the probe is an ideal base that answers each reference with itself."""
+
+    family = 'resolver'
+
+    def __init__(self, robot, method):
+        super().__init__(robot)
+        self.method = method
+        self.compensated = method == 'task_sharing'
+        self.column = f'redundancy_resolver ({"A" if self.config.steerable else "B"}, {method})'
+        model = KinematicModel(self.config)
+        model.update(self.base_pose, np.array([self.q[n] for n in self.config.arm.joints]))
+        pos, self.goal_rotation = model.ee_placement_world()
+        self.goal = pos + np.array([0.3, 0.1, -0.05])
+        self.feasible_twist = None      # set by a kind: the probe's answer instead of the reference itself
+        self._arm = 0
+
+    def make_node(self, overrides):
+        from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
+        return RedundancyResolverNode(context=self.context, parameter_overrides=[
+            Parameter('robot', value=self.config.name), Parameter('method', value=self.method),
+            Parameter('diagnostics_period', value=PERIOD), Parameter('stall_time', value=0.5),
+            # The probe answers every reference at once: on a loaded machine the compensation must
+            # not be dropped for a late answer, nor the odometry go stale, or the twin runs differ.
+            Parameter('compensation_timeout', value=0.5), Parameter('state_timeout', value=1.0), *overrides])
+
+    def _watch_outputs(self):
+        cfg = self.config
+        self.watch('/arm_controller/commands', Float64MultiArray, lambda m: m.data, cfg.arm.velocity)
+        self.watch('/base/reference', TwistStamped, lambda m: [m.twist.linear.x, m.twist.linear.y, m.twist.angular.z],
+                   np.asarray(cfg.base.velocity))
+        self.probe.create_subscription(Float64MultiArray, '/arm_controller/commands', self._on_arm, 10)
+        self.probe.create_subscription(TwistStamped, '/base/reference', self._on_reference, 10)
+        self.watch_diagnostics()
+
+    def _on_arm(self, msg):
+        self._arm += 1
+        self.set_rates(self.config.arm.joints, msg.data)
+
+    def _on_reference(self, msg):
+        twist = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
+        self.base_twist = twist
+        answer = twist if self.feasible_twist is None else self.feasible_twist
+        self.publish('/base/feasible_twist', twist_stamped(msg.header.stamp, 'base_link', answer))
+
+    def _cycle_count(self):
+        return self._arm
+
+    def odometry(self, k):
+        msg = Odometry()
+        msg.header.stamp = self.stamp(k)
+        msg.header.frame_id = 'odom'
+        msg.child_frame_id = 'base_link'
+        x, y, th = self.base_pose
+        msg.pose.pose.position.x, msg.pose.pose.position.y = float(x), float(y)
+        msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(th / 2), math.cos(th / 2)
+        msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z = \
+            (float(v) for v in self.base_twist)
+        return msg
+
+    def nominal(self, k):
+        self.integrate()
+        msgs = [('/odom', self.odometry(k))]
+        if k == 0:
+            msgs.append(('/goal_pose', _pose(self.goal, self.goal_rotation)))
+        msgs.append(('/joint_states', self.joint_state(k)))
+        return msgs
+
+
+class SequencerRig(Rig):
+    """``goal_sequencer`` on sim time: the probe publishes ``/clock``, one period per cycle, and the
+    goal in force comes back on every tick (``republish_period`` half a period)."""
+
+    family = 'sequencer'
+    column = 'goal_sequencer'
+
+    def __init__(self):
+        self._goals = 0
+        super().__init__()
+
+    def make_node(self, overrides):
+        from wmm_control.nodes.goal_sequencer import GoalSequencerNode
+        return GoalSequencerNode(context=self.context, parameter_overrides=[
+            Parameter('use_sim_time', value=True), Parameter('republish_period', value=PERIOD / 2), *overrides])
+
+    def _watch_outputs(self):
+        def values(m):
+            q = m.pose.orientation
+            return [m.pose.position.x, m.pose.position.y, m.pose.position.z, math.sqrt(q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2)]
+        self.watch('/goal_pose', PoseStamped, values)
+        self.probe.create_subscription(PoseStamped, '/goal_pose', self._on_goal, 10)
+
+    def _on_goal(self, msg):
+        self._goals += 1
+        q = msg.pose.orientation
+        if abs(math.sqrt(q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2) - 1.0) > 1e-6:
+            self.bad.append(('LIMIT', f'/goal_pose quaternion not unit: {[q.x, q.y, q.z, q.w]}'))
+
+    def _cycle_count(self):
+        return self._goals
+
+    def nominal(self, k):
+        return [('/clock', ClockMsg(clock=_time(T0 + k * PERIOD)))]
+
+
+#: The columns of the table, each a factory of its rig.
+RIGS = {
+    'wmm_sim (A)': lambda: SimRig('steerable'),
+    'wmm_sim (B)': lambda: SimRig('mecanum'),
+    'swmr_controller': lambda: BaseControllerRig('steerable'),
+    'mecanum_controller': lambda: BaseControllerRig('mecanum'),
+    'redundancy_resolver (A, task_sharing)': lambda: ResolverRig('steerable', 'task_sharing'),
+    'redundancy_resolver (B, amp)': lambda: ResolverRig('mecanum', 'amp'),
+    'goal_sequencer': SequencerRig,
+}
+
+
+# ----------------------------------------------------------------------------------- kinds
+
+def _on(topic, change):
+    """A mutator applying ``change(msg)`` to every message of ``topic`` in the cycle."""
+    def mutate(rig, msgs):
+        for t, m in msgs:
+            if t.lstrip('/') == topic.lstrip('/'):
+                change(m)
+        return msgs
+    return mutate
+
+
+def _add(make):
+    """A mutator adding ``make(rig)`` = ``(topic, msg)`` to the cycle (before its joint state)."""
+    def mutate(rig, msgs):
+        return [make(rig)] + msgs
+    return mutate
+
+
+def _command(group_of, values):
+    """Sim: the command of one group replaced by ``values`` (a list, or ``f(n)`` of the group size)."""
+    def mutate(rig, msgs):
+        group = group_of(rig)
+        out = []
+        for t, m in msgs:
+            if t == f'{group}_controller/commands':
+                n = len(rig.groups[group])
+                m = float_array(values(n) if callable(values) else values)
+            out.append((t, m))
+        return out
+    return mutate
+
+
+def _base_group(rig):
+    return 'steer' if 'steer' in rig.groups else 'wheel'
+
+
+def _last_group(rig):
+    return 'drive' if 'drive' in rig.groups else 'wheel'
+
+
+def _set_joint(field, value, which=0):
+    """Joint state: ``field`` ('position'/'velocity') of the node's ``which``-th own joint set to ``value``."""
+    def change(js):
+        rig_joint = change.joints[which]
+        values = list(getattr(js, field))
+        values[js.name.index(rig_joint)] = value
+        setattr(js, field, values)
+
+    def mutate(rig, msgs):
+        change.joints = rig.own_joints if rig.family == 'base' else list(rig.config.arm.joints)
+        return _on('joint_states', change)(rig, msgs)
+    return mutate
+
+
+def _js(edit):
+    """Joint state rebuilt by ``edit(rig, names, positions, velocities) -> (names, positions, velocities)``."""
+    def mutate(rig, msgs):
+        own = rig.own_joints if rig.family == 'base' else list(rig.config.arm.joints)
+        for t, m in msgs:
+            if t.lstrip('/') == 'joint_states':
+                names, pos, vel = edit(own, list(m.name), list(m.position), list(m.velocity))
+                m.name, m.position, m.velocity = names, [float(v) for v in pos], [float(v) for v in vel]
+        return msgs
+    return mutate
+
+
+def _reversed(own, names, pos, vel):
+    return names[::-1], pos[::-1], vel[::-1]
+
+
+def _own_shuffled(own, names, pos, vel):
+    order = [names.index(n) for n in own][::-1]
+    order = order[1:] + order[:1]
+    return [names[i] for i in order], [pos[i] for i in order], [vel[i] for i in order]
+
+
+def _duplicated(own, names, pos, vel):
+    i = names.index(own[0])
+    return names + [names[i]], pos + [pos[i] + 0.5], vel + [vel[i]]
+
+
+def _missing(own, names, pos, vel):
+    i = names.index(own[-1])
+    return names[:i] + names[i + 1:], pos[:i] + pos[i + 1:], vel[:i] + vel[i + 1:]
+
+
+def _stamp(shift=None, value=None):
+    """Joint state (or /clock) stamp set to ``value`` or moved by ``shift`` seconds."""
+    def change(msg):
+        if hasattr(msg, 'clock'):
+            t = msg.clock.sec + msg.clock.nanosec * 1e-9
+            msg.clock = _time(value if value is not None else t + shift)
+        else:
+            msg.header.stamp = _time(value if value is not None else _stamp_s(msg) + shift)
+    return change
+
+
+def _twice(rig, msgs):
+    """The joint state delivered twice (a second publisher replaying it)."""
+    out = []
+    for t, m in msgs:
+        out.append((t, m))
+        if t.lstrip('/') == 'joint_states':
+            out.append((t, m))
+    return out
+
+
+def _goal(position, quat=None, frame='world'):
+    def make(rig):
+        msg = _pose(position(rig) if callable(position) else position, rig.goal_rotation, frame)
+        if quat is not None:
+            o = msg.pose.orientation
+            o.x, o.y, o.z, o.w = quat
+        return ('/goal_pose', msg)
+    return _add(make)
+
+
+def _goal_near(offset, quat=None, frame='world'):
+    return _goal(lambda rig: rig.goal + np.asarray(offset, dtype=float), quat, frame)
+
+
+def _odom(change):
+    return _on('odom', change)
+
+
+def _set_odom_quaternion(x, y, z, w):
+    def change(m):
+        o = m.pose.pose.orientation
+        o.x, o.y, o.z, o.w = x, y, z, w
+    return change
+
+
+def _inside_body(rig):
+    x, y, _ = rig.base_pose
+    return 'goal_pose', _pose([x, y, 0.35 if rig.config.steerable else -0.15], rig.goal_rotation)
+
+
+def _empty_reference(rig):
+    msg = MultiDOFJointTrajectory()
+    msg.header.frame_id = 'world'
+    return ('/ee_reference', msg)
+
+
+def _feasible(value):
+    def mutate(rig, msgs):
+        rig.feasible_twist = np.asarray(value, dtype=float)
+        return msgs
+    return mutate
+
+
+def _set_reference(**fields):
+    def change(m):
+        for name, value in fields.items():
+            if name == 'frame_id':
+                m.header.frame_id = value
+            else:
+                part, axis = name.split('_')
+                setattr(getattr(m.twist, part), axis, value)
+    return _on('base/reference', change)
+
+
+@dataclass(frozen=True)
+class Kind:
+    """One kind of bad input: what it is, and per node family the mutator and the expected outcome.
+
+    ``cases[family] = (expected, what is sent, mutator)``, or a function of the rig giving
+    that or None (not applicable to that configuration); ``expected`` is 'rejected',
+    'corrected', 'skipped' (a joint state that runs no cycle), 'restarts', 'accepted' (valid
+    input, results checked) or 'by name' (valid layout, results equal the nominal ones).
+    Parameter kinds have ``param`` set instead: a function giving the values to try for one
+    parameter.
+    """
+
+    name: str
+    cases: dict
+    param: object = None
+
+
+def _param_values_out_of_range(descriptor, value):
+    rng = list(descriptor.floating_point_range) + list(descriptor.integer_range)
+    if not rng or isinstance(value, (list, str, bool)):
+        return []
+    lo, hi = rng[0].from_value, rng[0].to_value
+    bad = [hi + abs(hi - lo) + 1, lo - abs(hi - lo) - 1]
+    return [type(value)(v) if isinstance(value, int) else float(v) for v in bad]
+
+
+def _param_values_non_finite(descriptor, value):
+    if isinstance(value, float):
+        return [math.nan, math.inf, -math.inf]
+    if isinstance(value, list) and value and isinstance(value[0], float):
+        return [[math.nan] * len(value), [math.inf] * len(value)]
+    return []
+
+
+def _param_values_wrong_type(descriptor, value):
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return ['not a number']
+    if isinstance(value, str):
+        return [1.5]
+    return []
+
+
+KINDS = [
+    Kind('NaN field', {
+        'sim': ('rejected', 'arm command [NaN, ...]', _command(lambda r: 'arm', lambda n: [math.nan] * n)),
+        'base': ('rejected', '/base/reference linear.x = NaN', _set_reference(linear_x=math.nan)),
+        'resolver': ('rejected', '/goal_pose position.x = NaN', _goal([math.nan, 0.0, 1.0])),
+    }),
+    Kind('+inf field', {
+        'sim': ('rejected', 'steer/wheel command [inf, ...]', _command(_base_group, lambda n: [math.inf] * n)),
+        'base': ('rejected', '/base/reference angular.z = inf', _set_reference(angular_z=math.inf)),
+        'resolver': ('rejected', '/odom position.x = inf', _odom(lambda m: setattr(m.pose.pose.position, 'x', math.inf))),
+    }),
+    Kind('-inf measured value', {
+        'sim': ('rejected', 'drive/wheel command [-inf, ...]', _command(_last_group, lambda n: [-math.inf] * n)),
+        'base': ('rejected', '/joint_states position of a steer/wheel joint = -inf', _set_joint('position', -math.inf)),
+        'resolver': ('rejected', '/joint_states velocity of arm joint 1 = -inf', _set_joint('velocity', -math.inf)),
+    }),
+    Kind('finite absurd value (1e308)', {
+        'sim': ('corrected', 'arm command [1e308, ...] (clamped)', _command(lambda r: 'arm', lambda n: [1e308] * n)),
+        'base': ('corrected', '/base/reference linear.x = 1e308 (scaled)', _set_reference(linear_x=1e308)),
+        'resolver': ('rejected', '/goal_pose position.x = 1e308', _goal([1e308, 0.0, 1.0])),
+    }),
+    Kind('measured rate 1e308', {
+        'base': ('rejected', '/joint_states velocity of a steer/wheel joint = 1e308', _set_joint('velocity', 1e308)),
+        'resolver': ('rejected', '/joint_states velocity of arm joint 1 = 1e308', _set_joint('velocity', 1e308)),
+    }),
+    Kind('joint position 1e308', {
+        'base': ('rejected', '/joint_states position of a steer/wheel joint = 1e308', _set_joint('position', 1e308)),
+        'resolver': ('rejected', '/joint_states position of arm joint 1 = 1e308', _set_joint('position', 1e308)),
+    }),
+    Kind('odometry twist 1e308', {
+        'resolver': ('rejected', '/odom twist linear.x = 1e308',
+                     _odom(lambda m: setattr(m.twist.twist.linear, 'x', 1e308))),
+    }),
+    Kind('zero quaternion (goal)', {
+        'resolver': ('rejected', '/goal_pose orientation (0, 0, 0, 0)', _goal_near((0, 0, 0), quat=(0.0, 0.0, 0.0, 0.0))),
+    }),
+    Kind('zero quaternion (odometry)', {
+        'resolver': ('rejected', '/odom orientation (0, 0, 0, 0)', _odom(_set_odom_quaternion(0.0, 0.0, 0.0, 0.0))),
+    }),
+    Kind('non-unit quaternion (goal)', {
+        'resolver': ('corrected', '/goal_pose orientation of norm 2 (normalised)',
+                     _goal_near((0, 0, 0), quat=(0.0, 0.0, 0.0, 2.0))),
+    }),
+    Kind('non-unit quaternion (odometry)', {
+        'resolver': ('corrected', '/odom orientation of norm 3 (normalised)',
+                     _odom(_set_odom_quaternion(0.0, 0.0, 0.0, 3.0))),
+    }),
+    Kind('unknown frame_id', {
+        'base': ('rejected', "/base/reference frame 'map'", _set_reference(frame_id='map')),
+        'resolver': ('rejected', "/goal_pose frame 'map'", _goal_near((0, 0, 0), frame='map')),
+    }),
+    Kind('empty frame_id', {
+        'base': ('corrected', "/base/reference frame '' (taken as base_link)", _set_reference(frame_id='')),
+        'resolver': ('rejected', "/goal_pose frame ''", _goal_near((0, 0, 0), frame='')),
+    }),
+    Kind('JointState empty', {
+        f: ('rejected', '/joint_states without names or values', _js(lambda own, n, p, v: ([], [], [])))
+        for f in ('base', 'resolver')}),
+    Kind('JointState short', {
+        f: ('rejected', '/joint_states with one position fewer than names', _js(lambda own, n, p, v: (n, p[:-1], v)))
+        for f in ('base', 'resolver')}),
+    Kind('JointState mismatched velocities', {
+        f: ('rejected', '/joint_states with 2 velocities for all its names', _js(lambda own, n, p, v: (n, p, v[:2])))
+        for f in ('base', 'resolver')}),
+    Kind('JointState missing a joint', {
+        f: ('rejected', "/joint_states without one of the node's joints", _js(_missing)) for f in ('base', 'resolver')}),
+    Kind('JointState reordered', {
+        f: ('by name', '/joint_states with every name in reverse order', _js(_reversed)) for f in ('base', 'resolver')}),
+    Kind('JointState duplicated name', {
+        f: ('rejected', "/joint_states naming one of the node's joints twice (other value)", _js(_duplicated))
+        for f in ('base', 'resolver')}),
+    Kind('JointState unrelated names', {
+        f: ('rejected', "/joint_states of joints 'foo', 'bar' only",
+            _js(lambda own, n, p, v: (['foo', 'bar'], [0.0, 1.0], [0.0, 0.0]))) for f in ('base', 'resolver')}),
+    Kind('JointState same length, other order', {
+        f: ('by name', "/joint_states of the node's own joints only, in another order", _js(_own_shuffled))
+        for f in ('base', 'resolver')}),
+    Kind('command too short', {
+        'sim': ('rejected', 'arm command of 6 values', _command(lambda r: 'arm', [0.1] * 6))}),
+    Kind('command too long', {
+        'sim': ('rejected', 'arm command of 8 values', _command(lambda r: 'arm', [0.1] * 8))}),
+    Kind('command empty', {
+        'sim': ('rejected', 'steer/wheel command []', _command(_base_group, []))}),
+    Kind('goal out of reach', {
+        'resolver': ('rejected', '/goal_pose 5 m above the floor', _goal(lambda rig: [rig.goal[0], rig.goal[1], 5.0]))}),
+    Kind('goal below the floor', {
+        'resolver': ('rejected', '/goal_pose 0.5 m below the floor',
+                     _goal(lambda rig: [rig.goal[0], rig.goal[1], rig.config.ground_z - 0.5]))}),
+    Kind('goal 100 m away', {
+        'resolver': ('accepted', '/goal_pose 100 m ahead (pursued within the limits)', _goal_near((100.0, 0, 0)))}),
+    Kind("goal inside the robot's body", {
+        'resolver': ('rejected', '/goal_pose inside the chassis', _add(_inside_body))}),
+    Kind('trajectory without points', {
+        'resolver': ('rejected', '/ee_reference with no point', _add(_empty_reference))}),
+    Kind('feasible twist 1e308', {
+        'resolver': lambda rig: ('rejected', '/base/feasible_twist (1e308, 0, 0) for the cycle',
+                                 _feasible([1e308, 0.0, 0.0])) if rig.compensated else None}),
+    Kind('zero stamp', {
+        'base': ('skipped', '/joint_states stamped 0 amid stamped ones', _on('joint_states', _stamp(value=0.0))),
+        'resolver': ('skipped', '/joint_states stamped 0 amid stamped ones', _on('joint_states', _stamp(value=0.0))),
+        'sequencer': ('restarts', '/clock back to 0', _on('clock', _stamp(value=0.0))),
+    }),
+    Kind('backwards stamp', {
+        'base': ('skipped', '/joint_states stamped 1 s before the last', _on('joint_states', _stamp(shift=-1.0))),
+        'resolver': ('skipped', '/joint_states stamped 1 s before the last', _on('joint_states', _stamp(shift=-1.0))),
+        'sequencer': ('restarts', '/clock 1 s back', _on('clock', _stamp(shift=-1.0))),
+    }),
+    Kind('far-future stamp', {
+        'base': ('skipped', '/joint_states stamped 1e6 s ahead', _on('joint_states', _stamp(shift=1e6))),
+        'resolver': ('skipped', '/joint_states stamped 1e6 s ahead', _on('joint_states', _stamp(shift=1e6))),
+        'sequencer': ('restarts', '/clock 1e6 s ahead, then back', _on('clock', _stamp(shift=1e6))),
+    }),
+    Kind('duplicated message', {
+        'base': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
+        'resolver': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
+    }),
+    Kind('out-of-range parameter', {}, param=_param_values_out_of_range),
+    Kind('non-finite parameter', {}, param=_param_values_non_finite),
+    Kind('parameter of the wrong type', {}, param=_param_values_wrong_type),
+]
+
+
+# ----------------------------------------------------------------------------------- cells
+
+@dataclass
+class Cell:
+    outcome: str
+    detail: str = ''
+
+    @property
+    def ok(self):
+        return self.outcome not in FAILURES
+
+
+def _run_steps(rig, kind_case):
+    """Warm-up, injection, recovery; returns (outputs of the injection, alive)."""
+    rig.start()
+    rig.logs.clear()
+    rig.bad.clear()
+    start = len(rig.records)
+    for _ in range(REPEATS):
+        rig.step(kind_case)
+    injected = len(rig.records)
+    if isinstance(rig, ResolverRig):
+        rig.feasible_twist = None
+    for _ in range(RECOVERY):
+        rig.step()
+    alive = rig.step(wait=ALIVE_WAIT)
+    return rig.records[start:injected], alive
+
+
+def _param_cell(rig, values_of):
+    rig.start()
+    rig.logs.clear()
+    rig.bad.clear()
+    accepted, reasons, tried = [], [], 0
+    params = rig.node.get_parameters_by_prefix('')
+    described = dict(zip(params, rig.node.describe_parameters(list(params))))
+    for name, param in sorted(params.items()):
+        if name == 'use_sim_time':
+            continue
+        for value in values_of(described[name], param.value):
+            tried += 1
+            before = param.value
+            ok, reason = rig.set_parameter(name, value)
+            if ok or not reason:
+                accepted.append(f'{name} = {value!r}' + ('' if ok else ' (refused without a reason)'))
+                if ok:
+                    rig.set_parameter(name, before)
+            else:
+                reasons.append(f'{name} = {value!r}: {reason}')
+            rig.step()
+    alive = rig.step(wait=ALIVE_WAIT)
+    return tried, accepted, reasons, alive
+
+
+def _harm(rig, run, after):
+    """``(run's result, None)``, or ``(None, failed Cell)`` when it crashed, gave NaN or passed a limit,
+    or left the node dead (``run`` returns ``(..., alive)``)."""
+    try:
+        result = run()
+    except Crash as exc:
+        return None, Cell('CRASH', str(exc))
+    if rig.bad:
+        return None, Cell(*rig.bad[0])
+    if not result[-1]:
+        return None, Cell('DEAD', f'no answer to nominal input after {after}')
+    return result, None
+
+
+def run_cell(rig_factory, kind):
+    """Run one kind on one node; a :class:`Cell`."""
+    rig = rig_factory()
+    try:
+        if kind.param is not None:
+            result, failed = _harm(rig, lambda: _param_cell(rig, kind.param), 'the parameter sets')
+            if failed:
+                return failed
+            tried, accepted, reasons, _ = result
+            if accepted:
+                return Cell('ACCEPTED', '; '.join(accepted))
+            if not tried:
+                return Cell('n/a', 'no parameter of that type')
+            return Cell('refused', f'{tried} sets refused, e.g. {reasons[0]}')
+        case = kind.cases.get(rig.family)
+        if callable(case):
+            case = case(rig)
+        if case is None:
+            return Cell('n/a')
+        expected, what, mutate = case
+        result, failed = _harm(rig, lambda: _run_steps(rig, mutate), 'the bad input')
+        if failed:
+            return failed
+        outputs, _ = result
+        warnings = [m.msg for m in rig.logs if m.level >= Log.WARN]
+        if expected == 'by name':
+            twin = rig_factory()
+            try:
+                reference, _ = _run_steps(twin, None)
+            finally:
+                twin.close()
+            same = len(reference) == len(outputs) and all(
+                t1 == t2 and v1.shape == v2.shape and np.allclose(v1, v2, rtol=0, atol=1e-12)
+                for (t1, v1), (t2, v2) in zip(reference, outputs))
+            if not same:
+                return Cell('WRONG', f'{what}: the commands differ from those of the nominal layout')
+            return Cell('by name', what + (f' (warned: {warnings[0]})' if warnings else ''))
+        if expected == 'accepted':
+            return Cell('accepted', what)
+        if not warnings:
+            return Cell('SILENT', f'{what}: nothing logged')
+        counts = {}
+        for w in warnings:
+            counts[w[:40]] = counts.get(w[:40], 0) + 1
+        flood = [w for w, n in counts.items() if n > 2]
+        if flood:
+            return Cell('FLOOD', f'{what}: logged {counts[flood[0]]} times in {REPEATS} cycles: {flood[0]}...')
+        return Cell(expected, f'{what} → {warnings[0]}')
+    finally:
+        rig.close()
+
+
+def run_matrix(kinds=None, columns=None, progress=None):
+    """``{(kind name, column): Cell}`` for the chosen kinds and columns (all by default)."""
+    kinds = [k for k in KINDS if kinds is None or k.name in kinds]
+    columns = [c for c in RIGS if columns is None or c in columns]
+    results = {}
+    for column in columns:
+        for kind in kinds:
+            results[(kind.name, column)] = cell = run_cell(RIGS[column], kind)
+            if progress is not None:
+                progress(kind.name, column, cell)
+        # Dozens of nodes were made and destroyed: collect them here rather than in a long
+        # pause later, in the middle of whatever runs next in this process.
+        gc.collect()
+    return results
+
+
+def format_table(results):
+    """Markdown table of the outcomes: one row per kind, one column per node."""
+    kinds = list(dict.fromkeys(k for k, _ in results))
+    columns = list(dict.fromkeys(c for _, c in results))
+    lines = ['| kind | ' + ' | '.join(columns) + ' |', '|---' * (len(columns) + 1) + '|']
+    for kind in kinds:
+        lines.append(f'| {kind} | ' + ' | '.join(results[(kind, c)].outcome for c in columns) + ' |')
+    return '\n'.join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='wmm_bad_input', description=__doc__.split('\n\n')[0])
+    parser.add_argument('--kinds', help='comma-separated kind names (default: all)')
+    parser.add_argument('--nodes', help='comma-separated column names (default: all): ' + ', '.join(RIGS))
+    parser.add_argument('--reasons', action='store_true', help='print what each cell sent and logged')
+    parser.add_argument('--list', action='store_true', help='list the kinds and exit')
+    args = parser.parse_args(argv)
+    if args.list:
+        for kind in KINDS:
+            print(kind.name)
+        return 0
+    kinds = args.kinds.split(',') if args.kinds else None
+    columns = args.nodes.split(',') if args.nodes else None
+    if columns:
+        columns = [c for c in RIGS if any(c.startswith(n.strip()) for n in columns)]
+    t0 = time.monotonic()
+    results = run_matrix(kinds, columns, progress=lambda k, c, cell: print(
+        f'  {c:<40} {k:<36} {cell.outcome}', file=sys.stderr, flush=True))
+    print(format_table(results))
+    bad = {key: cell for key, cell in results.items() if not cell.ok}
+    if args.reasons or bad:
+        print()
+        for (kind, column), cell in results.items():
+            if cell.detail and (args.reasons or not cell.ok):
+                print(f'- {kind} / {column}: {cell.outcome}: {cell.detail}')
+    cells = [c for c in results.values() if c.outcome != 'n/a']
+    print(f'\n{len(cells)} cells run ({len(KINDS)} kinds), {len(bad)} failed, '
+          f'{time.monotonic() - t0:.0f} s')
+    return 1 if bad else 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,91 @@
+"""Where an end-effector goal can lie: above the floor, within the arm's height, outside the base.
+
+:class:`Workspace` answers, for a world position and the base pose, whether a goal there is
+impossible for a reason a user can act on:
+
+* below the floor (the robot YAML's ``ground_z``);
+* higher than the end effector can ever be: the arm's first joint, plus the lengths of every
+  link after it and of the tool, stacked straight up (an upper bound, so a goal it rejects is
+  surely out of reach, while some goals it lets pass may still be: the resolvers pursue
+  those as far as the limits allow);
+* inside the base's own body: the collision shapes of the URDF fixed to the base (chassis,
+  wheel modules), each taken as its box in its own frame.
+"""
+
+import numpy as np
+import pinocchio as pin
+
+__all__ = ['Workspace']
+
+_ROOT_JOINT = 1           # the planar base joint of the kinematic model
+
+
+def _half_extents(geometry):
+    """Half extents of a collision shape's box in its own frame (None for other shapes)."""
+    if hasattr(geometry, 'halfSide'):
+        return np.asarray(geometry.halfSide, dtype=float)
+    if hasattr(geometry, 'halfLength') and hasattr(geometry, 'radius'):
+        return np.array([geometry.radius, geometry.radius, geometry.halfLength], dtype=float)
+    if hasattr(geometry, 'radius'):
+        return np.full(3, geometry.radius, dtype=float)
+    return None
+
+
+class Workspace:
+    """The floor, the arm's height bound and the base's body of one :class:`KinematicModel`.
+
+    Attributes:
+        floor_z: world height of the floor [m].
+        max_height: no end-effector position is higher [m] (world z; the base is planar).
+        boxes: ``(name, rotation (3, 3), centre (3,), half extents (3,))`` in the base frame.
+    """
+
+    def __init__(self, model):
+        self.floor_z = float(model.config.ground_z)
+        pm = model.model
+        arm = list(range(2, pm.njoints))
+        ee = pm.frames[model.frame_id(model.ee_frame)]
+        height = pm.jointPlacements[arm[0]].translation[2]
+        height += sum(float(np.linalg.norm(pm.jointPlacements[j].translation)) for j in arm[1:])
+        height += float(np.linalg.norm(ee.placement.translation))
+        self.max_height = float(height)
+        geometry = pin.buildGeomFromUrdf(pm, str(model.config.urdf_path), pin.GeometryType.COLLISION)
+        self.boxes = []
+        for obj in geometry.geometryObjects:
+            half = _half_extents(obj.geometry)
+            if obj.parentJoint == _ROOT_JOINT and half is not None:
+                self.boxes.append((obj.name, obj.placement.rotation.copy(), obj.placement.translation.copy(), half))
+
+    def body_part_at(self, position, base_pose):
+        """Name of the base part whose box holds the world ``position``, or None.
+
+        Args:
+            position: world (x, y, z) [m].
+            base_pose: base (x, y, θ) in the world [m, m, rad].
+        """
+        x, y, th = base_pose
+        c, s = np.cos(th), np.sin(th)
+        dx, dy = position[0] - x, position[1] - y
+        local = np.array([c * dx + s * dy, -s * dx + c * dy, position[2]])
+        for name, rot, centre, half in self.boxes:
+            if np.all(np.abs(rot.T @ (local - centre)) <= half):
+                return name
+        return None
+
+    def impossible(self, position, base_pose=None):
+        """'' when a goal at world ``position`` may be reached, else why it cannot.
+
+        Args:
+            position: world (x, y, z) [m].
+            base_pose: the base's current pose (x, y, θ); without it the body is not checked.
+        """
+        z = float(position[2])
+        if z < self.floor_z:
+            return f'z = {z:.4g} m is below the floor (z = {self.floor_z:g} m)'
+        if z > self.max_height:
+            return f'z = {z:.4g} m is above the highest the end effector can reach ({self.max_height:.3f} m)'
+        if base_pose is not None:
+            part = self.body_part_at(position, base_pose)
+            if part is not None:
+                return f'it lies inside the robot\'s own body ({part}, at the current base pose)'
+        return ''
