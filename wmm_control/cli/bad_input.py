@@ -790,7 +790,7 @@ KINDS = [
         'resolver': ('rejected', '/goal_pose 0.5 m below the floor',
                      _goal(lambda rig: [rig.goal[0], rig.goal[1], rig.config.ground_z - 0.5]))}),
     Kind('goal 100 m away', {
-        'resolver': ('accepted', '/goal_pose 100 m ahead (pursued within the limits)', _goal_near((100.0, 0, 0)))}),
+        'resolver': ('rejected', '/goal_pose 100 m ahead (beyond max_goal_distance, 50 m)', _goal_near((100.0, 0, 0)))}),
     Kind("goal inside the robot's body", {
         'resolver': ('rejected', '/goal_pose inside the chassis', _add(_inside_body))}),
     Kind('trajectory without points', {
