@@ -353,3 +353,27 @@ def test_a_default_written_twice_is_refused(ros, monkeypatch):
     with pytest.raises(ConfigError, match='one home'):
         SimNode(context=ros.context)
     assert rclpy.ok(context=ros.context)
+
+
+def test_goal_tolerance_and_stall_time_set_at_run_time_judge_the_goal(ros):
+    """The reached/stalled judgement follows live changes; a position-only method (amp, r = 3)
+    judges the position alone: its orientation is free, never a reason to report a stall."""
+    from types import SimpleNamespace
+    node = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
+        robot='mecanum', method='amp')))
+    caller = ros.add(Node('param_cli', context=ros.context))
+    near = SimpleNamespace(position_error=0.004, orientation_error=0.5)   # 4 mm, orientation far off
+    node.progress.update(near)
+    assert node.progress.reached                                           # orientation free at r = 3
+    assert set_parameter(ros, caller, node.get_fully_qualified_name(), 'goal_tolerance', [0.002, 0.02]).successful
+    node.progress.start()
+    node.progress.update(near)
+    assert not node.progress.reached                                      # 4 mm > the new 2 mm
+    assert set_parameter(ros, caller, node.get_fully_qualified_name(), 'stall_time', 0.1).successful
+    for _ in range(6):                                                    # 6 periods, 0.15 s, no progress
+        node.progress.update(near)
+    assert node.progress.stalled
+    full = ros.add(RedundancyResolverNode(context=ros.context, cli_args=['--ros-args', '-r', '__node:=full'],
+                                          parameter_overrides=overrides(robot='mecanum', method='amp', rows='full')))
+    full.progress.update(near)
+    assert not full.progress.reached                                      # r = 6: 0.5 rad is not reached

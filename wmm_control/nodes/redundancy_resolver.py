@@ -182,7 +182,9 @@ class RedundancyResolverNode(Node):
     def __init__(self, **kwargs):
         super().__init__('redundancy_resolver', **kwargs)
         p = self.p = declare_parameters(self, 'redundancy_resolver.yaml', PARAMS, on_change={
-            'state_timeout': self._set_state_timeout})
+            'state_timeout': self._set_state_timeout,
+            'goal_tolerance': lambda v: setattr(self.progress, 'tolerance', self._tolerance(v)),
+            'stall_time': lambda v: setattr(self.progress, 'stall_time', float(v))})
         self.model = KinematicModel(p.robot)
         names = [n for n in method_parameters(p.method) if n != 'dt' and hasattr(p, n)]
         self.resolver = make_resolver(p.method, self.model, dt=p.period, **{n: getattr(p, n) for n in names})
@@ -201,7 +203,7 @@ class RedundancyResolverNode(Node):
         self._pending = None
         self._wait = None
         self._last = None
-        self.progress = GoalProgress(p.goal_tolerance, p.stall_time, p.period)
+        self.progress = GoalProgress(self._tolerance(p.goal_tolerance), p.stall_time, p.period)
         self._stall_logged = False
         self._next_diag = 0.0
         self.counters = {'cycles': 0, 'goals': 0, 'goals_rejected': 0, 'compensation_dropped': 0,
@@ -224,6 +226,12 @@ class RedundancyResolverNode(Node):
             f'{p.method} on robot {self.model.config.name}: t_s {p.period} s, EE feedback {p.ee_feedback}, '
             f'compensation {"on" if self.resolver.uses_compensation else "off"}; waiting for /goal_pose '
             f'(frame {p.world_frame!r})')
+
+    def _tolerance(self, goal_tolerance):
+        """(position, orientation) tolerance of a goal; a method that tracks the position alone
+        (``rows: position``) leaves the orientation free, so only the position counts."""
+        position_only = getattr(self.resolver.params, 'rows', 'full') == 'position'
+        return (float(goal_tolerance[0]), math.inf if position_only else float(goal_tolerance[1]))
 
     def _set_state_timeout(self, timeout):
         for fresh in self.fresh.values():
