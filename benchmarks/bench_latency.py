@@ -22,6 +22,7 @@ Usage: ``python benchmarks/bench_latency.py [--robot A|B] [--seconds 20]``;
 """
 
 import argparse
+import contextlib
 import os
 import signal
 import subprocess
@@ -61,10 +62,9 @@ def answer(groups):
     executor = default_executor()
     executor.add_node(node)
     try:
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    except KeyboardInterrupt:
-        pass
+        with contextlib.suppress(KeyboardInterrupt):       # SIGINT is how the benchmark stops it
+            while rclpy.ok():
+                executor.spin_once(timeout_sec=0.1)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

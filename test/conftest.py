@@ -1,4 +1,4 @@
-"""Shared fixtures: one kinematic model per robot, built once per session."""
+"""Shared fixtures: one kinematic model per robot, built once per session; a ROS harness per test."""
 
 import pytest
 
@@ -19,3 +19,12 @@ def steerable_model():
 @pytest.fixture(scope='session')
 def mecanum_model():
     return KinematicModel('mecanum')
+
+
+@pytest.fixture
+def ros():
+    """An isolated rclpy context with an executor (:class:`ros_helpers.RosHarness`), closed after the test."""
+    from ros_helpers import RosHarness
+    harness = RosHarness()
+    yield harness
+    harness.close()

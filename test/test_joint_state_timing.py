@@ -19,7 +19,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ros_helpers import RosHarness, overrides, stamp_s
+from ros_helpers import overrides, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
 from wmm_control.nodes.common import STATE_SUB_QOS, StampGate, twist_stamped
@@ -111,13 +111,6 @@ class Probe(Node):
 
 def twist_of(msg):
     return np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
-
-
-@pytest.fixture
-def ros():
-    harness = RosHarness()
-    yield harness
-    harness.close()
 
 
 def test_a_second_publisher_replaying_the_simulators_states_runs_no_second_cycle(ros):

@@ -14,7 +14,7 @@ from rclpy.time import Time as RosTime
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ros_helpers import RosHarness, ScriptedController, overrides, stamp_s
+from ros_helpers import ScriptedController, overrides, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.base import MecanumController, MecanumParams
 from wmm_control.errors import ConfigError, NonFiniteError
@@ -163,13 +163,6 @@ def test_braking_is_at_the_acceleration_limit_not_faster():
 
 
 # ---------------------------------------------------------------- the node, by hand
-
-@pytest.fixture
-def ros():
-    harness = RosHarness()
-    yield harness
-    harness.close()
-
 
 def twist_of(msg):
     return np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])

@@ -8,7 +8,7 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import ReliabilityPolicy
 
-from ros_helpers import RosHarness, overrides
+from ros_helpers import overrides
 from sim_bridge.node import SimNode
 from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
@@ -33,13 +33,6 @@ RESOLVER_ALWAYS = {'cycles', 'goals', 'goals_rejected', 'compensation_dropped', 
 RESOLVER_GOAL = {'method', 'mode', 'psi', 'position_error_m', 'orientation_error_rad', 'limit_scale', 'accel_scale',
                  'null_scale', 'compensation_scale', 'compensated', 'limited', 'sigma_min', 'cycle_time_us',
                  'goal_reached', 'goal_stalled', 'arm_command', 'base_reference'}
-
-
-@pytest.fixture
-def ros():
-    harness = RosHarness()
-    yield harness
-    harness.close()
 
 
 class Listener(Node):

@@ -45,13 +45,6 @@ NODES = {
 }
 
 
-@pytest.fixture
-def ros():
-    harness = RosHarness()
-    yield harness
-    harness.close()
-
-
 # ---------------------------------------------------------------- the parameter services, as ros2cli calls them
 
 def call(ros, client, request, timeout=10.0):

@@ -14,13 +14,6 @@ from wmm_control.robot_config import load_robot
 ARM = [f'arm_joint_{i}' for i in range(1, 8)]
 
 
-@pytest.fixture
-def ros():
-    harness = RosHarness()
-    yield harness
-    harness.close()
-
-
 def start(ros, script, groups=('arm', 'steer', 'drive'), **params):
     params.setdefault('timing', 'lockstep')
     sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(**params)))

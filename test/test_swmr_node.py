@@ -12,7 +12,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ros_helpers import RosHarness, ScriptedController, overrides, pose2d, stamp_s
+from ros_helpers import ScriptedController, overrides, pose2d, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.base import SwmrController
 from wmm_control.errors import ConfigError
@@ -20,13 +20,6 @@ from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
 
 DT = 0.025
-
-
-@pytest.fixture
-def ros():
-    harness = RosHarness()
-    yield harness
-    harness.close()
 
 
 class ReferencePublisher(ScriptedController):

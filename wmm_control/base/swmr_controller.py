@@ -516,6 +516,14 @@ class _Steering(NamedTuple):
     solve_time: float     # [s]
 
 
+def _narrow(lo, hi, slope, low, high):
+    """``[lo, hi] ∩ {s : low ≤ slope·s ≤ high}`` for ``slope ≠ 0`` (plain floats)."""
+    s1, s2 = low / slope, high / slope
+    if slope < 0.0:
+        s1, s2 = s2, s1
+    return (s1 if s1 > lo else lo), (s2 if s2 < hi else hi)
+
+
 class SwmrController:
     """The §IV steering + drive controller for an N-module steerable base.
 
@@ -947,13 +955,7 @@ class SwmrController:
             a = (f0 * c0 + f1 * c1 + f2 * c2) / r_w
             if a > 1e-300 or a < -1e-300:
                 b = d * r / r_w
-                s1, s2 = (-drive_limit - b) / a, (drive_limit - b) / a
-                if a < 0.0:
-                    s1, s2 = s2, s1
-                if s1 > lo:
-                    lo = s1
-                if s2 < hi:
-                    hi = s2
+                lo, hi = _narrow(lo, hi, a, -drive_limit - b, drive_limit - b)
         lo, hi = min(lo, 0.0), max(hi, 0.0)
         # acceleration: |s c_k − v_k| ≤ r_k
         dt = p.dt
@@ -961,13 +963,7 @@ class SwmrController:
         for c, v, am in zip(direction, self._twist, p.base_accel_limit):
             r = am * dt
             if c != 0.0:
-                s1, s2 = (v - r) / c, (v + r) / c
-                if c < 0.0:
-                    s1, s2 = s2, s1
-                if s1 > alo:
-                    alo = s1
-                if s2 < ahi:
-                    ahi = s2
+                alo, ahi = _narrow(alo, ahi, c, v - r, v + r)
             elif abs(v) > r:
                 alo, ahi = math.inf, -math.inf
         if alo <= ahi:
