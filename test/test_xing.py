@@ -73,6 +73,20 @@ def test_without_singularity_avoidance_the_arm_becomes_singular():
     assert error_near_singularity(logs['amp_no_avoidance']) > 2 * error_near_singularity(logs['amp_avoidance'])
 
 
+def test_full_pose_the_base_helps_for_at_most_60_percent_of_the_run():
+    """§4.4: x and rotation about y, 40 s. The paper's base is active 46 % of the run. With the
+    paper's γ1 = 5, H over six rows is too weak a pull here and the arm stretches into the
+    elbow singularity while the base is on (most of the run)."""
+    runs = tracking('xing_pose')
+    amp, trad = runs['amp'], runs['traditional']
+    assert amp['base_active_any_s'] <= 0.6 * 40.0
+    assert 3.0 < amp['first_base_activation_s']
+    assert amp['max_error_x_m'] < trad['max_error_x_m']
+    assert amp['max_rotation_error_y_rad'] < trad['max_rotation_error_y_rad']
+    assert runs['amp_gamma1_5']['base_active_any_s'] > 0.6 * 40.0
+    assert runs['amp_sigma_six_rows']['first_base_activation_s'] == 0.0
+
+
 @pytest.mark.parametrize('name', ['matrix_circle_0.25_a', 'matrix_circle_0.25_b'])
 def test_on_either_robot_amp_moves_the_base_least_and_tracks_best(name):
     runs = tracking(name)

@@ -38,7 +38,8 @@ class AmpParams(AccelerationParams):
         sigma_rows: rows of J_m for σ_m: ``'task'`` (the task's rows: all six for r = 6) or
             ``'position'`` (always the three position rows). On robot B at its start state
             σ_m over all six rows is 0.162, below §4.4's 0.19, so with ``'task'`` the base is
-            active from t = 0 in the full-pose run; over the position rows it is 0.245.
+            active from t = 0 in the full-pose run; over the position rows it is 0.245, and the
+            ``xing_pose`` scenario uses those (README, "Full pose").
         sigma_lookahead: anticipation τ [s]: the singularity test uses σ_m + τ·min(σ̇_m, 0), σ̇_m
             from the last period, so the base is switched on τ before σ_m would reach σ_m,min at
             its current rate (§3.2 switches the base on when the trajectory's current segment
