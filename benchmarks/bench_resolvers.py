@@ -94,9 +94,36 @@ def record_circle(radius=0.25, seconds=40.0):
 def report_resolvers(scenario):
     report_methods(f'{scenario.name} replayed (robot {scenario.robot})', scenario.robot, record_cycles(scenario),
                    METHODS, 'task sharing median <= 0.5x pink median; p99 <= 3x own median')
-    report_methods("Xing's R = 0.25 m circle replayed (robot mecanum)", 'mecanum', record_circle(),
+    circle = record_circle()
+    report_methods("Xing's R = 0.25 m circle replayed (robot mecanum)", 'mecanum', circle,
                    (('amp', 'amp', {}), ('traditional', 'traditional', {})),
                    'AMP median <= 1.0x pink median')
+    report_amp_floor(circle)
+
+
+def report_amp_floor(cycles):
+    """AMP's cycle with its two heaviest parts made free: ∇H and ∇²H returned as zeros, and SNS
+    answered by a stand-in that returns zero accelerations at once. What is left (kinematics,
+    the PD law, the bounds of eqs 6–8, σ_m, the projection of the tertiary task, the
+    integration and the limits) bounds from below what speeding up those two parts can give."""
+    from unittest import mock
+
+    from wmm_control.kinematics import KinematicModel
+    from wmm_control.resolvers import amp, sns
+
+    def free_sns(jac, xdd, drift, lower, upper, active, held, rcond=1e-6):
+        act = np.asarray(active, dtype=bool)
+        return sns.SnsResult(np.zeros(jac.shape[1]), 1.0, act, np.zeros_like(act),
+                             np.zeros((int(act.sum()), jac.shape[0])))
+
+    zeros = (np.zeros(7), np.zeros((7, 7)))
+    full = np.median(time_resolver(make_resolver('amp', 'mecanum'), cycles))
+    with mock.patch.object(KinematicModel, '_manipulability_derivatives', lambda self, rows: zeros):
+        no_h = np.median(time_resolver(make_resolver('amp', 'mecanum'), cycles))
+        with mock.patch.object(amp, 'sns_accelerations', free_sns):
+            floor = np.median(time_resolver(make_resolver('amp', 'mecanum'), cycles))
+    print(f'  amp median {full:.1f} µs; with ∇H, ∇²H free {no_h:.1f} µs; with SNS free too {floor:.1f} µs '
+          '(the rest of the cycle)')
 
 
 def report_methods(title, robot, cycles, methods, targets):
