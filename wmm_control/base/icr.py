@@ -144,9 +144,10 @@ class Icr:
 
     def _with_z_unchecked(self, z):
         """:meth:`with_z` for a finite, non-zero ``z`` computed internally (no input checks)."""
-        z = np.array(z, dtype=float)
+        z0, z1, z2 = z
+        n = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
         icr = object.__new__(Icr)
-        object.__setattr__(icr, 'z', z / math.sqrt(float(z @ z)))
+        object.__setattr__(icr, 'z', np.array((z0 / n, z1 / n, z2 / n), dtype=float))
         object.__setattr__(icr, 'scale', self.scale)
         object.__setattr__(icr, 'border', self.border)
         return icr
