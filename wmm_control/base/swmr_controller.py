@@ -257,9 +257,10 @@ class IcrQp:
         """
         r0, r1, lb = zip(*self.wedges)
         b = self.box
-        return (np.array(r0 + (1.0, 0.0) + r1 + (0.0, 1.0)),
-                np.maximum(np.array(lb + (-b, -b)), -_INF),
-                np.array((_INF,) * len(lb) + (b, b)))
+        lower = np.array(lb + (-b, -b))
+        if min(lb) < -_INF:             # a degenerate row's −inf, as OSQP's infinity
+            np.maximum(lower, -_INF, out=lower)
+        return np.array(r0 + (1.0, 0.0) + r1 + (0.0, 1.0)), lower, np.array((_INF,) * len(lb) + (b, b))
 
     @property
     def A(self):
@@ -398,6 +399,7 @@ class OsqpIcrSolver:
         # The elastic rows are normalised already; OSQP's Ruiz scaling, fighting the heavy weight
         # on s, would multiply its iteration count by ~15 (median ~2000, often max_iter).
         self._elastic = self._setup(np.diag([1.0, 1.0, ELASTIC_WEIGHT]), m + 1, dict(settings, scaling=0))
+        self._extensions = {solver: self._extension(solver) for solver in (self._osqp, self._elastic)}
 
     @staticmethod
     def _setup(p_dense, m, settings):
@@ -411,10 +413,18 @@ class OsqpIcrSolver:
         solver.setup(p, np.zeros(n), a, -np.full(m, _INF), np.full(m, _INF), **settings)
         return solver
 
+    @staticmethod
+    def _extension(solver):
+        """osqp's extension object of ``solver`` if it has the calls used here, else None."""
+        ext = getattr(solver, '_solver', None)
+        if ext is not None and hasattr(ext, 'update_data_vec') and hasattr(ext, 'update_data_mat'):
+            return ext
+        return None
+
     def _run(self, solver, q, a_x, lb, ub):
         """Update ``solver``'s q, A (its values column-major), l, u and solve: ``(x, SolverStatus)``."""
-        ext = getattr(solver, '_solver', None) if self.use_extension else None
-        if ext is not None and hasattr(ext, 'update_data_vec') and hasattr(ext, 'update_data_mat'):
+        ext = self._extensions[solver] if self.use_extension else None
+        if ext is not None:
             ext.update_data_vec(q, lb, ub)
             ext.update_data_mat(None, None, a_x, None)
             ext.solve()
@@ -736,21 +746,28 @@ class SwmrController:
         zr = (zc[0] + e1[0] * x0 + e2[0] * x1, zc[1] + e1[1] * x0 + e2[1] * x1,
               zc[2] + e1[2] * x0 + e2[2] * x1)
         rate_lo, rate_hi = self._rate_interval()
-        dt = p.dt
         # |v(ICR_ref) − v(ICR_curr)|² ≤ ‖M‖² |x|² (|zr − zc| = |x|: e1, e2 orthonormal), with a
         # margin for round-off; -1 when no mirror wedge may be taken
         reach = (x0 * x0 + x1 * x1) * (1.0 + 1e-6) + 1e-20 if mirror else -1.0
-        wedges, sides = [], []
-        for beta, lo, hi, (hx, hy), gain in zip(self._beta, rate_lo, rate_hi, self.geometry.hip_list,
-                                                self._hip_gain):
-            side = self._wedge_side(beta, hx, hy, zc, zr, zt, reach * gain)
+        sides = [self._wedge_side(beta, hx, hy, zc, zr, zt, reach * gain)
+                 for beta, (hx, hy), gain in zip(self._beta, self.geometry.hip_list, self._hip_gain)]
+        return IcrQp(x_ref=np.array((x0, x1)), wedges=self._wedge_rows(sides, rate_lo, rate_hi, zc, e1, e2),
+                     mirrored=mirror, box=math.tan(step), chart=(e1, e2), icr_curr=self._icr, target_z=zt,
+                     rate_lower=rate_lo, rate_upper=rate_hi, sides=sides, route=route, stopped=stopped)
+
+    def _wedge_rows(self, sides, rate_lower, rate_upper, zc, e1, e2):
+        """The QP's wedges: per wheel, the lines of its extreme headings this period (:func:`wedge_row`).
+
+        Returns:
+            2N ``(r0, r1, lb)`` tuples in the chart ``zc + e1 x₁ + e2 x₂``, wheel i's at 2i, 2i + 1.
+        """
+        dt, scale = self.params.dt, self.params.icr_scale
+        wedges = []
+        for beta, side, lo, hi, (hx, hy) in zip(self._beta, sides, rate_lower, rate_upper, self.geometry.hip_list):
             a_lo, a_hi = beta + dt * lo, beta + dt * hi
             wedges.append(wedge_row((math.cos(a_lo), math.sin(a_lo)), side, hx, hy, scale, zc, e1, e2))
             wedges.append(wedge_row((math.cos(a_hi), math.sin(a_hi)), -side, hx, hy, scale, zc, e1, e2))
-            sides.append(side)
-        return IcrQp(x_ref=np.array((x0, x1)), wedges=wedges, mirrored=mirror, box=math.tan(step), chart=(e1, e2),
-                     icr_curr=self._icr, target_z=zt, rate_lower=rate_lo, rate_upper=rate_hi,
-                     sides=sides, route=route, stopped=stopped)
+        return wedges
 
     def _route_passes_a_hip(self, zc, zt):
         """True when the great-circle route ICR_curr → ICR* passes within ``route_hip_distance`` of a hip.
