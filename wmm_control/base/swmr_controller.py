@@ -519,6 +519,14 @@ class SwmrOutput:
     qp_status: str = field(default='not_solved')
 
 
+class _QpAnswer(NamedTuple):
+    """The steering controller's QP answer for one period."""
+
+    x: tuple              # ICR_next in chart coordinates; None when the solver failed
+    status: str           # the qp_status of :class:`SwmrOutput`
+    solve_time: float     # [s]
+
+
 class _Steering(NamedTuple):
     """The steering controller's result for one period."""
 
@@ -842,32 +850,32 @@ class SwmrController:
         return 1.0
 
     def _solve(self, problem):
-        """Step 3: ICR_next in chart coordinates, ``(x, qp_status, solve_time)``.
+        """Step 3: ICR_next in chart coordinates, as a :class:`_QpAnswer`.
 
-        ``x`` is None when the solver failed (``qp_status`` says why); ICR_ref when no usable
+        Its ``x`` is None when the solver failed (``status`` says why); ICR_ref when no usable
         answer exists (per-wheel clipping follows). OSQP is called only when ICR_ref leaves a
         wedge, and ``'not_solved'`` means the steering is held at rest.
         """
         if problem.stopped and not any(self._beta_dot):
-            return (0.0, 0.0), 'not_solved', 0.0
+            return _QpAnswer((0.0, 0.0), 'not_solved', 0.0)
         if problem.x_ref_feasible():
-            return tuple(problem.x_ref.tolist()), 'unconstrained', 0.0
+            return _QpAnswer(tuple(problem.x_ref.tolist()), 'unconstrained', 0.0)
         self._weigh_route(problem)
         t0 = time.perf_counter()
         try:
             res = self.solver(problem)
             x, qp_status = np.asarray(res.x, dtype=float), str(res.status)
         except Exception as exc:  # noqa: BLE001 — any solver exception means a safe stop
-            return None, f'error: {type(exc).__name__}: {exc}', time.perf_counter() - t0
+            return _QpAnswer(None, f'error: {type(exc).__name__}: {exc}', time.perf_counter() - t0)
         solve_time = time.perf_counter() - t0
         if qp_status.startswith(_CLIPPED):
-            return tuple(problem.x_ref.tolist()), qp_status, solve_time
+            return _QpAnswer(tuple(problem.x_ref.tolist()), qp_status, solve_time)
         if qp_status not in _USED:
-            return None, qp_status, solve_time
+            return _QpAnswer(None, qp_status, solve_time)
         x = x.tolist() if x.shape == (2,) else ()
         if len(x) != 2 or not all(map(math.isfinite, x)):
-            return None, f'{qp_status} (non-finite x)', solve_time
-        return tuple(x), qp_status, solve_time
+            return _QpAnswer(None, f'{qp_status} (non-finite x)', solve_time)
+        return _QpAnswer(tuple(x), qp_status, solve_time)
 
     def _icr_next(self, ref):
         """Steps 1–3: this period's QP and ICR_next in its chart coordinates.
@@ -877,27 +885,30 @@ class SwmrController:
         wheel on the wedge of ICR_curr.
 
         Returns:
-            ``(problem, x, qp_status, solve_time)``; ``x`` is None when the solver failed.
+            ``(problem, answer)``: the :class:`IcrQp` used and its :class:`_QpAnswer` (the
+            solve time of both QPs when there were two).
         """
         problem = self._icr_qp(ref)
-        x, qp_status, solve_time = self._solve(problem)
-        if x is not None and qp_status not in _SOLVED:
+        answer = self._solve(problem)
+        if answer.x is not None and answer.status not in _SOLVED:
             plain = self._icr_qp(ref, mirror=False)
             if plain.sides != problem.sides:
-                x2, status2, time2 = self._solve(plain)
-                solve_time += time2
-                if x2 is not None and status2 in _SOLVED:
-                    problem, x, qp_status = plain, x2, status2
-        return problem, x, qp_status, solve_time
+                again = self._solve(plain)
+                solve_time = answer.solve_time + again.solve_time
+                if again.x is not None and again.status in _SOLVED:
+                    return plain, again._replace(solve_time=solve_time)
+                answer = answer._replace(solve_time=solve_time)
+        return problem, answer
 
-    def _steer(self, problem, x, qp_status, solve_time):
+    def _steer(self, problem, answer):
         """Step 4: β_ref of ICR_next (the nearest twin), β̇_ref clipped into the period's limits.
 
         Returns:
             :class:`_Steering`.
         """
         p = self.params
-        x0, x1 = x
+        x0, x1 = answer.x
+        qp_status = answer.status
         hold = qp_status == 'not_solved'
         z_next = problem.z_at(x0, x1)
         dt, scale = p.dt, p.icr_scale
@@ -926,7 +937,7 @@ class SwmrController:
             icr_next = self._icr_of(beta_new, like=z_next)
         else:                          # every wheel on its heading for ICR_next
             icr_next = self._icr_proto._with_z_unchecked(z_next)
-        return _Steering(beta_new, rate, icr_next, active, qp_status, solve_time)
+        return _Steering(beta_new, rate, icr_next, active, qp_status, answer.solve_time)
 
     # ------------------------------------------------------------------ the drive controller
     def _drive(self, ref, stopped, brake):
@@ -1050,10 +1061,10 @@ class SwmrController:
         ref = self._bounded_reference(twist_ref)
         self._resync(beta_meas, beta_dot_meas, self._stopped(ref))
         # steering controller: ICR*, route, ICR_ref, QP → ICR_next → β_ref, β̇_ref
-        problem, x, qp_status, solve_time = self._icr_next(ref)
-        if x is None:
-            return self._safe_stop(problem, qp_status, solve_time)
-        steer = self._steer(problem, x, qp_status, solve_time)
+        problem, answer = self._icr_next(ref)
+        if answer.x is None:
+            return self._safe_stop(problem, answer)
+        steer = self._steer(problem, answer)
         # drive controller: ξ̇_ref(init), then the feasible twist compatible with ICR_next
         init = self._drive(ref, problem.stopped, brake)
         twist, phi_dot = self._feasible_twist(init, steer)
@@ -1077,15 +1088,15 @@ class SwmrController:
             active_constraints=sorted(steer.active), solve_time_s=steer.solve_time, status=status,
             qp_status=steer.qp_status)
 
-    def _safe_stop(self, problem, qp_status, solve_time):
+    def _safe_stop(self, problem, answer):
         """Solver failure: steer rates braked to zero within β̈_max, drive ramped down within φ̈_max."""
         p = self.params
         rate = [min(max(0.0, lo), hi) for lo, hi in zip(problem.rate_lower, problem.rate_upper)]
         beta_new = [b + p.dt * r for b, r in zip(self._beta, rate)]
         peak = max(abs(v) for v in self._phi_dot)
         k = max(0.0, 1.0 - p.drive_accel_limit * p.dt / peak) if peak > 0 else 0.0
-        steer = _Steering(beta_new, rate, self._icr_of(beta_new, like=self._icr.z.tolist()), set(), qp_status,
-                          solve_time or 0.0)
+        steer = _Steering(beta_new, rate, self._icr_of(beta_new, like=self._icr.z.tolist()), set(), answer.status,
+                          answer.solve_time or 0.0)
         return self._commit(problem, steer, [k * v for v in self._twist], [k * v for v in self._phi_dot],
                             status='solver_failure')
 
