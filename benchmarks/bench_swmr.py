@@ -9,7 +9,10 @@ switches through infinity, reversals, stops) and prints:
   ``elastic``: the wedges had no common point; ``not_solved``: steering held at rest);
 - where a cycle's time goes: the median of each part of ``step`` per cycle;
 - the same controller solving through osqp's public ``update()``/``solve()`` instead of its
-  extension object, to show what that non-public shortcut is worth.
+  extension object, to show what that non-public shortcut is worth;
+- the floor: a stripped cycle that does only the work a cycle calling OSQP cannot skip (the
+  QP data, one OSQP update and solve through its extension object, and the wheel outputs),
+  replayed over the cycles that call OSQP, with the median of each part.
 
 Side by side, in the same run: one differential-IK step of pink (``pin-pink`` with the
 quadprog solver, a frame task on the end effector and a posture task) on robot A's
@@ -21,6 +24,7 @@ is skipped with a message.
 """
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -30,6 +34,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run from a source checkout
 
 from wmm_control.base import OsqpIcrSolver, SteerableGeometry, SwmrController, SwmrParams  # noqa: E402
+from wmm_control.base.icr import hip_velocity, wrap_half_turn  # noqa: E402
+from wmm_control.base.steerable_kinematics import rolling_row  # noqa: E402
 from wmm_control.robot_config import load_robot  # noqa: E402
 
 PARTS = ('_resync', '_icr_qp', 'solver', '_steer', '_drive', '_feasible_twist', '_commit')
@@ -112,6 +118,64 @@ def time_parts(ctrl, cycles):
     return {name: (np.median(v), np.mean(v)) for name, v in per_cycle.items()}
 
 
+def record_qps(ctrl, cycles):
+    """The QPs that ``ctrl`` hands OSQP over the reference, each with the steer angles it started from."""
+    qps = []
+    solve = ctrl.solver
+
+    def recording(problem):
+        qps.append((problem, list(ctrl._beta), list(ctrl._twist)))
+        return solve(problem)
+
+    ctrl.solver = recording
+    ctrl.reset(np.zeros(ctrl.geometry.n_wheels))
+    for k in range(cycles):
+        ctrl.step(reference(k, ctrl.params.dt))
+    ctrl.solver = solve
+    return qps
+
+
+def time_floor(cycles):
+    """Median time [µs] of each part of a stripped cycle, over the cycles that call OSQP.
+
+    Parts: ``qp data`` (the 2N wedge rows of the period's steer-angle intervals and OSQP's
+    arrays of them), ``osqp`` (one update of q, l, u and A's values and one solve through the
+    extension object, at the controller's settings, warm-started as in the controller), and
+    ``wheel outputs`` (per wheel the steer angle of ICR_next and its drive rate for the
+    twist). The rest of a cycle (ICR*, route, ICR_ref, the wedge sides, the rate clip,
+    the acceleration and drive limits, the executed twist) is left out.
+    """
+    ctrl = controller()
+    qps = record_qps(ctrl, cycles)
+    solver = OsqpIcrSolver(ctrl.n_rows, ctrl.params.eps, ctrl.params.max_iter)
+    g, scale = ctrl.geometry, ctrl.params.icr_scale
+    d, r_w, dt = g.wheel_offset, g.wheel_radius, ctrl.params.dt
+    parts = {'qp data': [], 'osqp': [], 'wheel outputs': [], 'total': []}
+    for problem, beta, twist in qps:
+        ctrl._beta = beta
+        zc = problem.icr_curr.z.tolist()
+        e1, e2 = problem.chart
+        t0 = time.perf_counter()
+        problem.wedges = ctrl._wedge_rows(problem.sides, problem.rate_lower, problem.rate_upper, zc, e1, e2)
+        a_x, lb, ub = problem.data()
+        t1 = time.perf_counter()
+        y, _ = solver._run(solver._osqp, -problem.x_ref, a_x, lb, ub)
+        t2 = time.perf_counter()
+        x0, x1 = y.tolist()
+        z = problem.z_at(x0, x1)
+        t0_, t1_, t2_ = twist
+        phi_dot = []
+        for b, (hx, hy) in zip(beta, g.hip_list):
+            vx, vy = hip_velocity(z, hx, hy, scale)
+            b_new = b + wrap_half_turn(math.atan2(vy, vx) - b)
+            f0, f1, f2 = rolling_row(math.cos(b_new), math.sin(b_new), hx, hy, d)
+            phi_dot.append((f0 * t0_ + f1 * t1_ + f2 * t2_ + d * (b_new - b) / dt) / r_w)
+        t3 = time.perf_counter()
+        for name, t in (('qp data', t1 - t0), ('osqp', t2 - t1), ('wheel outputs', t3 - t2), ('total', t3 - t0)):
+            parts[name].append(t * 1e6)
+    return {name: float(np.median(v)) for name, v in parts.items()}, len(qps)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--cycles', type=int, default=5000)
@@ -130,6 +194,9 @@ def main():
     parts = time_parts(controller(), args.cycles)
     print('  per cycle, median / mean [us]: ' + ', '.join(
         f'{name.strip("_")} {m:.1f} / {a:.1f}' for name, (m, a) in parts.items()))
+    floor, n_qp = time_floor(args.cycles)
+    print(f'  floor, a stripped cycle over the {n_qp} OSQP calls, median [us]: ' + ', '.join(
+        f'{name} {m:.1f}' for name, m in floor.items()))
     pink_us = bench_pink(args.cycles)
     if pink_us is None:
         print('pink not installed (pip install pin-pink quadprog): comparison skipped')

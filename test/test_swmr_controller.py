@@ -21,6 +21,7 @@ from wmm_control.base import (
     SwmrParams,
     choose_route,
 )
+from wmm_control.base.icr import tangent_pair
 from wmm_control.errors import ConfigError, NonFiniteError, ShapeError
 from wmm_control.robot_config import load_robot
 
@@ -537,6 +538,34 @@ def test_icr_crossing_a_steer_hip(geometry):
     assert np.all(travel[:2] < 0.75), travel                                # fl, fr: no sweep (was π)
     assert travel.sum() <= 1.25 * needed.sum(), (travel, needed)
     np.testing.assert_allclose((betas[-1] - beta0)[:2], 0.0, atol=1e-3)     # the same heading, not a turn of π
+
+
+@settings(max_examples=2000, deadline=None, derandomize=True)
+@given(
+    wheel=st.integers(0, 3),
+    offset=st.tuples(st.floats(-0.05, 0.05), st.floats(-0.05, 0.05)),
+    step=st.tuples(st.floats(-0.05, 0.05), st.floats(-0.05, 0.05)),
+    beta=st.floats(-math.pi, math.pi),
+    scale=st.sampled_from([0.3, 1.0, 3.0]),
+)
+def test_a_hip_out_of_reach_of_the_icr_step_keeps_the_wedge_side_it_would_get(geometry, wheel, offset, step,
+                                                                             beta, scale):
+    """The wedge side skips the hip velocity at ICR_ref only where it cannot change the choice.
+
+    ICR_curr near a hip, an ICR step of either size: the side chosen with the step's bound
+    (:meth:`SwmrController._icr_qp`) is the side chosen when ICR_ref is always looked at.
+    """
+    ctrl = make(geometry, icr_scale=scale)
+    hx, hy = geometry.hip_list[wheel]
+    zc = np.array([hx + offset[0], hy + offset[1], scale])
+    zc = (zc / np.linalg.norm(zc)).tolist()
+    e1, e2 = tangent_pair(*zc)
+    x0, x1 = step
+    zr = tuple(c + a * x0 + b * x1 for c, a, b in zip(zc, e1, e2))
+    zt = tuple(2.0 * r - c for r, c in zip(zr, zc))
+    reach = (x0 * x0 + x1 * x1) * (1.0 + 1e-6) + 1e-20
+    bounded = ctrl._wedge_side(beta, hx, hy, zc, zr, zt, reach * ctrl._hip_gain[wheel])
+    assert bounded == ctrl._wedge_side(beta, hx, hy, zc, zr, zt, math.inf)
 
 
 def test_reference_icr_exactly_on_a_hip(geometry):

@@ -144,9 +144,10 @@ class Icr:
 
     def _with_z_unchecked(self, z):
         """:meth:`with_z` for a finite, non-zero ``z`` computed internally (no input checks)."""
-        z = np.array(z, dtype=float)
+        z0, z1, z2 = z
+        n = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
         icr = object.__new__(Icr)
-        object.__setattr__(icr, 'z', z / math.sqrt(float(z @ z)))
+        object.__setattr__(icr, 'z', np.array((z0 / n, z1 / n, z2 / n), dtype=float))
         object.__setattr__(icr, 'scale', self.scale)
         object.__setattr__(icr, 'border', self.border)
         return icr
@@ -289,15 +290,19 @@ def wedge_row(heading, side, hx, hy, scale, z, e1, e2):
     Returns:
         ``(r0, r1, lb)`` normalised (‖r‖ = 1), or ``(0, 0, −inf)`` for a degenerate row.
     """
-    c0, c1 = -side * heading[1], side * heading[0]
+    cos_a, sin_a = heading
+    c0, c1 = -side * sin_a, side * cos_a
     # row c·M z of the hip velocity v = M z, M = [[0, 1, −hy/ℓ], [−1, 0, hx/ℓ]]
     r2 = (hx * c1 - hy * c0) / scale
-    w0 = -c1 * e1[0] + c0 * e1[1] + r2 * e1[2]
-    w1 = -c1 * e2[0] + c0 * e2[1] + r2 * e2[2]
+    a0, a1, a2 = e1
+    b0, b1, b2 = e2
+    w0 = -c1 * a0 + c0 * a1 + r2 * a2
+    w1 = -c1 * b0 + c0 * b1 + r2 * b2
     nr = math.sqrt(w0 * w0 + w1 * w1)
     if nr <= 1e-12:
         return 0.0, 0.0, -math.inf
-    return w0 / nr, w1 / nr, (c1 * z[0] - c0 * z[1] - r2 * z[2]) / nr
+    z0, z1, z2 = z
+    return w0 / nr, w1 / nr, (c1 * z0 - c0 * z1 - r2 * z2) / nr
 
 
 def route_between(zc, zt):

@@ -80,7 +80,7 @@ from wmm_control.base.icr import (
     wrap_half_turn,
 )
 from wmm_control.base.steerable_kinematics import rolling_row
-from wmm_control.checks import as_finite_vector
+from wmm_control.checks import finite_floats
 from wmm_control.errors import ConfigError, ShapeError
 
 __all__ = ['SwmrParams', 'SwmrOutput', 'IcrQp', 'QpResult', 'OsqpIcrSolver', 'SwmrController']
@@ -249,25 +249,33 @@ class IcrQp:
     mirrored: bool = False
     route_weight: float = 0.0
 
+    def data(self):
+        """OSQP's data: ``(A's values column-major, l, u)``, float arrays.
+
+        The rows of :attr:`A` as OSQP stores its dense pattern (first column, then second).
+        Shapes (2(2N + 2),), (2N + 2,), (2N + 2,).
+        """
+        r0, r1, lb = zip(*self.wedges)
+        b = self.box
+        lower = np.array(lb + (-b, -b))
+        if min(lb) < -_INF:             # a degenerate row's −inf, as OSQP's infinity
+            np.maximum(lower, -_INF, out=lower)
+        return np.array(r0 + (1.0, 0.0) + r1 + (0.0, 1.0)), lower, np.array((_INF,) * len(lb) + (b, b))
+
     @property
     def A(self):
         """Constraint matrix. Shape (2N + 2, 2)."""
-        a = np.empty((len(self.wedges) + 2, 2))
-        a[:-2] = [w[:2] for w in self.wedges]
-        a[-2:] = ((1.0, 0.0), (0.0, 1.0))
-        return a
+        return self.data()[0].reshape(2, -1).T.copy()
 
     @property
     def l(self):  # noqa: E743 — OSQP's name for the lower bounds
         """Lower bounds. Shape (2N + 2,)."""
-        return np.array([max(w[2], -_INF) for w in self.wedges] + [-self.box, -self.box])
+        return self.data()[1]
 
     @property
     def u(self):
         """Upper bounds (only the box has finite ones). Shape (2N + 2,)."""
-        u = np.full(len(self.wedges) + 2, _INF)
-        u[-2:] = self.box
-        return u
+        return self.data()[2]
 
     @property
     def P(self):
@@ -354,11 +362,8 @@ _OSQP_ELASTIC = (SolverStatus.OSQP_PRIMAL_INFEASIBLE, SolverStatus.OSQP_PRIMAL_I
 
 
 _STATUS = {status.value: status for status in SolverStatus}
-
-
-def _status_name(status):
-    """'solved', 'primal_infeasible', … from an osqp :class:`osqp.SolverStatus`."""
-    return status.name.removeprefix('OSQP_').lower()
+_STATUS_NAME = {status: status.name.removeprefix('OSQP_').lower() for status in SolverStatus}
+"""'solved', 'primal_infeasible', … for each osqp :class:`osqp.SolverStatus`."""
 
 
 class OsqpIcrSolver:
@@ -394,6 +399,7 @@ class OsqpIcrSolver:
         # The elastic rows are normalised already; OSQP's Ruiz scaling, fighting the heavy weight
         # on s, would multiply its iteration count by ~15 (median ~2000, often max_iter).
         self._elastic = self._setup(np.diag([1.0, 1.0, ELASTIC_WEIGHT]), m + 1, dict(settings, scaling=0))
+        self._extensions = {solver: self._extension(solver) for solver in (self._osqp, self._elastic)}
 
     @staticmethod
     def _setup(p_dense, m, settings):
@@ -407,11 +413,18 @@ class OsqpIcrSolver:
         solver.setup(p, np.zeros(n), a, -np.full(m, _INF), np.full(m, _INF), **settings)
         return solver
 
-    def _run(self, solver, q, a, lb, ub):
-        """Update ``solver``'s q, A (dense, column-major values), l, u and solve: ``(x, SolverStatus)``."""
-        a_x = a.ravel(order='F')
-        ext = getattr(solver, '_solver', None) if self.use_extension else None
+    @staticmethod
+    def _extension(solver):
+        """osqp's extension object of ``solver`` if it has the calls used here, else None."""
+        ext = getattr(solver, '_solver', None)
         if ext is not None and hasattr(ext, 'update_data_vec') and hasattr(ext, 'update_data_mat'):
+            return ext
+        return None
+
+    def _run(self, solver, q, a_x, lb, ub):
+        """Update ``solver``'s q, A (its values column-major), l, u and solve: ``(x, SolverStatus)``."""
+        ext = self._extensions[solver] if self.use_extension else None
+        if ext is not None:
             ext.update_data_vec(q, lb, ub)
             ext.update_data_mat(None, None, a_x, None)
             ext.solve()
@@ -434,31 +447,32 @@ class OsqpIcrSolver:
         Raises:
             ShapeError: the problem does not have the set-up number of rows.
         """
-        a, lb, ub = problem.A, problem.l, problem.u
-        if a.shape != (self.n_rows, 2):
-            raise ShapeError(f'ICR QP: A has shape {a.shape}, solver set up for ({self.n_rows}, 2)')
+        a_x, lb, ub = problem.data()
+        if lb.shape != (self.n_rows,):
+            raise ShapeError(f'ICR QP: A has shape {(lb.shape[0], 2)}, solver set up for ({self.n_rows}, 2)')
         y_ref = np.asarray(problem.x_ref, dtype=float)
         s_inv = None
         if problem.route_weight > 0.0 and y_ref.any():
             s_inv = problem.metric_inverse
-            a = a @ s_inv
+            a = a_x.reshape(2, -1).T.copy() @ s_inv
             norms = np.sqrt(np.einsum('ij,ij->i', a, a))
             a /= norms[:, None]
+            a_x = a.ravel(order='F')
             lb, ub = np.maximum(lb / norms, -_INF), np.minimum(ub / norms, _INF)
             y_ref = problem.metric @ y_ref
-        y, status = self._run(self._osqp, -y_ref, a, lb, ub)
+        y, status = self._run(self._osqp, -y_ref, a_x, lb, ub)
         if status in _OSQP_ACCEPTED or status not in _OSQP_ELASTIC:
-            return QpResult(y if s_inv is None else s_inv @ y, _status_name(status))
-        m = a.shape[0]
+            return QpResult(y if s_inv is None else s_inv @ y, _STATUS_NAME[status])
+        m = lb.shape[0]
         ae = np.zeros((m + 1, 3))
-        ae[:m, :2] = a
+        ae[:m, :2] = a_x.reshape(2, -1).T
         ae[:m - 2, 2] = 1.0          # every wedge row relaxed by s (the box rows are not)
         ae[m, 2] = 1.0               # s ≥ 0
-        ye, estatus = self._run(self._elastic, np.concatenate((-y_ref, [0.0])), ae,
+        ye, estatus = self._run(self._elastic, np.concatenate((-y_ref, [0.0])), ae.ravel(order='F'),
                                 np.concatenate((lb, [0.0])), np.concatenate((ub, [_INF])))
         if estatus in _OSQP_ACCEPTED:
             return QpResult(ye[:2] if s_inv is None else s_inv @ ye[:2], 'elastic')
-        return QpResult(np.asarray(problem.x_ref, dtype=float).copy(), _status_name(status))
+        return QpResult(np.asarray(problem.x_ref, dtype=float).copy(), _STATUS_NAME[status])
 
 
 @dataclass(frozen=True)
@@ -503,6 +517,14 @@ class SwmrOutput:
     solve_time_s: float
     status: str
     qp_status: str = field(default='not_solved')
+
+
+class _QpAnswer(NamedTuple):
+    """The steering controller's QP answer for one period."""
+
+    x: tuple              # ICR_next in chart coordinates; None when the solver failed
+    status: str           # the qp_status of :class:`SwmrOutput`
+    solve_time: float     # [s]
 
 
 class _Steering(NamedTuple):
@@ -555,6 +577,14 @@ class SwmrController:
         # the twist direction ∝ (z₁, −z₀, z₂/ℓ): its angle changes up to max(ℓ, 1/ℓ) × the ICR's
         self._turn_factor = max(p.icr_scale, 1.0 / p.icr_scale) * math.sqrt(2.0)
         self._turn_budget = min(p.base_accel_limit) * p.dt
+        ell = p.icr_scale
+        # per hip: its unit homogeneous point (route test), and ‖M‖² = 1 + |h|²/ℓ² of the linear
+        # map z ↦ v (:func:`hip_velocity`), which bounds how far an ICR step moves its velocity
+        self._hip_points, self._hip_gain = [], []
+        for hx, hy in geometry.hip_list:
+            hn = math.sqrt(hx * hx + hy * hy + ell * ell)
+            self._hip_points.append((hx / hn, hy / hn, ell / hn))
+            self._hip_gain.append(1.0 + (hx * hx + hy * hy) / (ell * ell))
         self.reset(np.zeros(n))
 
     # ------------------------------------------------------------------ state
@@ -568,9 +598,9 @@ class SwmrController:
                 ξ̇-controller's integrator state. Shape (3,).
         """
         n = self.geometry.n_wheels
-        self._beta = as_finite_vector(beta, n, 'beta').tolist()
-        self._beta_dot = [0.0] * n if beta_dot is None else as_finite_vector(beta_dot, n, 'beta_dot').tolist()
-        self._twist = [0.0] * 3 if twist is None else as_finite_vector(twist, 3, 'twist').tolist()
+        self._beta = finite_floats(beta, n, 'beta')
+        self._beta_dot = [0.0] * n if beta_dot is None else finite_floats(beta_dot, n, 'beta_dot')
+        self._twist = [0.0] * 3 if twist is None else finite_floats(twist, 3, 'twist')
         self._phi_dot = self.geometry.wheel_rates(self._beta, self._beta_dot, self._twist).tolist()
         self._icr = self._icr_of(self._beta)
 
@@ -642,10 +672,10 @@ class SwmrController:
         n = self.geometry.n_wheels
         if beta_dot_meas is not None:
             limit = p.steer_rate_limit
-            rates = as_finite_vector(beta_dot_meas, n, 'beta_dot_meas').tolist()
+            rates = finite_floats(beta_dot_meas, n, 'beta_dot_meas')
             self._beta_dot = [min(limit, max(-limit, r)) for r in rates]
         if beta_meas is not None:
-            meas = as_finite_vector(beta_meas, n, 'beta_meas').tolist()
+            meas = finite_floats(beta_meas, n, 'beta_meas')
             if stopped and not any(self._beta_dot):
                 # held at rest: within the band of the held angle a measurement is noise, beyond
                 # it the wheel was moved and the measurement is taken as it is
@@ -724,17 +754,28 @@ class SwmrController:
         zr = (zc[0] + e1[0] * x0 + e2[0] * x1, zc[1] + e1[1] * x0 + e2[1] * x1,
               zc[2] + e1[2] * x0 + e2[2] * x1)
         rate_lo, rate_hi = self._rate_interval()
-        dt = p.dt
-        wedges, sides = [], []
-        for beta, lo, hi, (hx, hy) in zip(self._beta, rate_lo, rate_hi, self.geometry.hip_list):
-            side = self._wedge_side(beta, hx, hy, zc, zr, zt, mirror)
+        # |v(ICR_ref) − v(ICR_curr)|² ≤ ‖M‖² |x|² (|zr − zc| = |x|: e1, e2 orthonormal), with a
+        # margin for round-off; -1 when no mirror wedge may be taken
+        reach = (x0 * x0 + x1 * x1) * (1.0 + 1e-6) + 1e-20 if mirror else -1.0
+        sides = [self._wedge_side(beta, hx, hy, zc, zr, zt, reach * gain)
+                 for beta, (hx, hy), gain in zip(self._beta, self.geometry.hip_list, self._hip_gain)]
+        return IcrQp(x_ref=np.array((x0, x1)), wedges=self._wedge_rows(sides, rate_lo, rate_hi, zc, e1, e2),
+                     mirrored=mirror, box=math.tan(step), chart=(e1, e2), icr_curr=self._icr, target_z=zt,
+                     rate_lower=rate_lo, rate_upper=rate_hi, sides=sides, route=route, stopped=stopped)
+
+    def _wedge_rows(self, sides, rate_lower, rate_upper, zc, e1, e2):
+        """The QP's wedges: per wheel, the lines of its extreme headings this period (:func:`wedge_row`).
+
+        Returns:
+            2N ``(r0, r1, lb)`` tuples in the chart ``zc + e1 x₁ + e2 x₂``, wheel i's at 2i, 2i + 1.
+        """
+        dt, scale = self.params.dt, self.params.icr_scale
+        wedges = []
+        for beta, side, lo, hi, (hx, hy) in zip(self._beta, sides, rate_lower, rate_upper, self.geometry.hip_list):
             a_lo, a_hi = beta + dt * lo, beta + dt * hi
             wedges.append(wedge_row((math.cos(a_lo), math.sin(a_lo)), side, hx, hy, scale, zc, e1, e2))
             wedges.append(wedge_row((math.cos(a_hi), math.sin(a_hi)), -side, hx, hy, scale, zc, e1, e2))
-            sides.append(side)
-        return IcrQp(x_ref=np.array((x0, x1)), wedges=wedges, mirrored=mirror, box=math.tan(step), chart=(e1, e2),
-                     icr_curr=self._icr, target_z=zt, rate_lower=rate_lo, rate_upper=rate_hi,
-                     sides=sides, route=route, stopped=stopped)
+        return wedges
 
     def _route_passes_a_hip(self, zc, zt):
         """True when the great-circle route ICR_curr → ICR* passes within ``route_hip_distance`` of a hip.
@@ -747,9 +788,7 @@ class SwmrController:
         if sin_theta < 1e-12:
             return False
         cos_theta = zc[0] * zt[0] + zc[1] * zt[1] + zc[2] * zt[2]
-        for hx, hy in self.geometry.hip_list:
-            hn = math.sqrt(hx * hx + hy * hy + p.icr_scale * p.icr_scale)
-            h = (hx / hn, hy / hn, p.icr_scale / hn)
+        for h in self._hip_points:
             off = abs(h[0] * nrm[0] + h[1] * nrm[1] + h[2] * nrm[2]) / sin_theta
             # the hip's foot on the route's great circle is a zc + b zt with a, b ≥ 0
             hc = h[0] * zc[0] + h[1] * zc[1] + h[2] * zc[2]
@@ -771,12 +810,13 @@ class SwmrController:
         bound ``|ξ̇| sin θ ≤ min(base_accel_limit) dt`` leaves the feasible twist a size within
         the acceleration limit (:meth:`_feasible_speed`).
         """
-        speed = math.sqrt(sum(v * v for v in self._twist))
+        v0, v1, v2 = self._twist
+        speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
         if speed <= self._turn_budget:
             return self.params.max_icr_step
         return min(self.params.max_icr_step, math.asin(self._turn_budget / speed) / self._turn_factor)
 
-    def _wedge_side(self, beta, hx, hy, zc, zr, zt, mirror=True):
+    def _wedge_side(self, beta, hx, hy, zc, zr, zt, reach):
         """+1 if the wheel heading β points along its hip velocity, −1 if against it (twin).
 
         The hip velocity is taken at ICR_curr; but when the hip lies within this period's ICR
@@ -784,16 +824,21 @@ class SwmrController:
         path passes by the hip, and if it crosses it the half of the wheel's double wedge that
         holds ICR_ref is the mirror one, so the wheel flips to its twin (drive reversed) instead
         of steering half a turn. ICR* decides when both sit on the hip.
+
+        ``reach`` bounds |v(ICR_ref) − v(ICR_curr)|² from above (negative: the wedge of
+        ICR_curr is kept); a hip farther than that from the step is not near, without
+        evaluating v(ICR_ref).
         """
         scale = self.params.icr_scale
         c, s = math.cos(beta), math.sin(beta)
         vc0, vc1 = hip_velocity(zc, hx, hy, scale)
         along_c = c * vc0 + s * vc1
-        if mirror:
+        vc2 = vc0 * vc0 + vc1 * vc1
+        if vc2 <= reach:
             vr0, vr1 = hip_velocity(zr, hx, hy, scale)
             along_r = c * vr0 + s * vr1
             d0, d1 = vr0 - vc0, vr1 - vc1
-            if vc0 * vc0 + vc1 * vc1 <= d0 * d0 + d1 * d1 and abs(along_r) > _HIP_TOL:   # near
+            if vc2 <= d0 * d0 + d1 * d1 and abs(along_r) > _HIP_TOL:   # near
                 return 1.0 if along_r > 0 else -1.0
         if abs(along_c) > _HIP_TOL:
             return 1.0 if along_c > 0 else -1.0
@@ -805,31 +850,32 @@ class SwmrController:
         return 1.0
 
     def _solve(self, problem):
-        """Step 3: ICR_next in chart coordinates, ``(x, qp_status, solve_time)``.
+        """Step 3: ICR_next in chart coordinates, as a :class:`_QpAnswer`.
 
-        ``x`` is None when the solver failed (``qp_status`` says why); ICR_ref when no usable
+        Its ``x`` is None when the solver failed (``status`` says why); ICR_ref when no usable
         answer exists (per-wheel clipping follows). OSQP is called only when ICR_ref leaves a
         wedge, and ``'not_solved'`` means the steering is held at rest.
         """
         if problem.stopped and not any(self._beta_dot):
-            return (0.0, 0.0), 'not_solved', 0.0
+            return _QpAnswer((0.0, 0.0), 'not_solved', 0.0)
         if problem.x_ref_feasible():
-            return tuple(problem.x_ref.tolist()), 'unconstrained', 0.0
+            return _QpAnswer(tuple(problem.x_ref.tolist()), 'unconstrained', 0.0)
         self._weigh_route(problem)
         t0 = time.perf_counter()
         try:
             res = self.solver(problem)
             x, qp_status = np.asarray(res.x, dtype=float), str(res.status)
         except Exception as exc:  # noqa: BLE001 — any solver exception means a safe stop
-            return None, f'error: {type(exc).__name__}: {exc}', time.perf_counter() - t0
+            return _QpAnswer(None, f'error: {type(exc).__name__}: {exc}', time.perf_counter() - t0)
         solve_time = time.perf_counter() - t0
         if qp_status.startswith(_CLIPPED):
-            return tuple(problem.x_ref.tolist()), qp_status, solve_time
+            return _QpAnswer(tuple(problem.x_ref.tolist()), qp_status, solve_time)
         if qp_status not in _USED:
-            return None, qp_status, solve_time
-        if x.shape != (2,) or not np.isfinite(x).all():
-            return None, f'{qp_status} (non-finite x)', solve_time
-        return tuple(x.tolist()), qp_status, solve_time
+            return _QpAnswer(None, qp_status, solve_time)
+        x = x.tolist() if x.shape == (2,) else ()
+        if len(x) != 2 or not all(map(math.isfinite, x)):
+            return _QpAnswer(None, f'{qp_status} (non-finite x)', solve_time)
+        return _QpAnswer(tuple(x), qp_status, solve_time)
 
     def _icr_next(self, ref):
         """Steps 1–3: this period's QP and ICR_next in its chart coordinates.
@@ -839,27 +885,30 @@ class SwmrController:
         wheel on the wedge of ICR_curr.
 
         Returns:
-            ``(problem, x, qp_status, solve_time)``; ``x`` is None when the solver failed.
+            ``(problem, answer)``: the :class:`IcrQp` used and its :class:`_QpAnswer` (the
+            solve time of both QPs when there were two).
         """
         problem = self._icr_qp(ref)
-        x, qp_status, solve_time = self._solve(problem)
-        if x is not None and qp_status not in _SOLVED:
+        answer = self._solve(problem)
+        if answer.x is not None and answer.status not in _SOLVED:
             plain = self._icr_qp(ref, mirror=False)
             if plain.sides != problem.sides:
-                x2, status2, time2 = self._solve(plain)
-                solve_time += time2
-                if x2 is not None and status2 in _SOLVED:
-                    problem, x, qp_status = plain, x2, status2
-        return problem, x, qp_status, solve_time
+                again = self._solve(plain)
+                solve_time = answer.solve_time + again.solve_time
+                if again.x is not None and again.status in _SOLVED:
+                    return plain, again._replace(solve_time=solve_time)
+                answer = answer._replace(solve_time=solve_time)
+        return problem, answer
 
-    def _steer(self, problem, x, qp_status, solve_time):
+    def _steer(self, problem, answer):
         """Step 4: β_ref of ICR_next (the nearest twin), β̇_ref clipped into the period's limits.
 
         Returns:
             :class:`_Steering`.
         """
         p = self.params
-        x0, x1 = x
+        x0, x1 = answer.x
+        qp_status = answer.status
         hold = qp_status == 'not_solved'
         z_next = problem.z_at(x0, x1)
         dt, scale = p.dt, p.icr_scale
@@ -888,7 +937,7 @@ class SwmrController:
             icr_next = self._icr_of(beta_new, like=z_next)
         else:                          # every wheel on its heading for ICR_next
             icr_next = self._icr_proto._with_z_unchecked(z_next)
-        return _Steering(beta_new, rate, icr_next, active, qp_status, solve_time)
+        return _Steering(beta_new, rate, icr_next, active, qp_status, answer.solve_time)
 
     # ------------------------------------------------------------------ the drive controller
     def _drive(self, ref, stopped, brake):
@@ -1012,10 +1061,10 @@ class SwmrController:
         ref = self._bounded_reference(twist_ref)
         self._resync(beta_meas, beta_dot_meas, self._stopped(ref))
         # steering controller: ICR*, route, ICR_ref, QP → ICR_next → β_ref, β̇_ref
-        problem, x, qp_status, solve_time = self._icr_next(ref)
-        if x is None:
-            return self._safe_stop(problem, qp_status, solve_time)
-        steer = self._steer(problem, x, qp_status, solve_time)
+        problem, answer = self._icr_next(ref)
+        if answer.x is None:
+            return self._safe_stop(problem, answer)
+        steer = self._steer(problem, answer)
         # drive controller: ξ̇_ref(init), then the feasible twist compatible with ICR_next
         init = self._drive(ref, problem.stopped, brake)
         twist, phi_dot = self._feasible_twist(init, steer)
@@ -1039,15 +1088,15 @@ class SwmrController:
             active_constraints=sorted(steer.active), solve_time_s=steer.solve_time, status=status,
             qp_status=steer.qp_status)
 
-    def _safe_stop(self, problem, qp_status, solve_time):
+    def _safe_stop(self, problem, answer):
         """Solver failure: steer rates braked to zero within β̈_max, drive ramped down within φ̈_max."""
         p = self.params
         rate = [min(max(0.0, lo), hi) for lo, hi in zip(problem.rate_lower, problem.rate_upper)]
         beta_new = [b + p.dt * r for b, r in zip(self._beta, rate)]
         peak = max(abs(v) for v in self._phi_dot)
         k = max(0.0, 1.0 - p.drive_accel_limit * p.dt / peak) if peak > 0 else 0.0
-        steer = _Steering(beta_new, rate, self._icr_of(beta_new, like=self._icr.z.tolist()), set(), qp_status,
-                          solve_time or 0.0)
+        steer = _Steering(beta_new, rate, self._icr_of(beta_new, like=self._icr.z.tolist()), set(), answer.status,
+                          answer.solve_time or 0.0)
         return self._commit(problem, steer, [k * v for v in self._twist], [k * v for v in self._phi_dot],
                             status='solver_failure')
 
@@ -1065,7 +1114,7 @@ class SwmrController:
         Raises:
             ShapeError, NonFiniteError: not 3 finite numbers.
         """
-        ref = as_finite_vector(twist_ref, 3, 'twist_ref').tolist()
+        ref = finite_floats(twist_ref, 3, 'twist_ref')
         limits = self.params.base_velocity_limit
         s = 1.0
         for v, vmax in zip(ref, limits):
