@@ -290,7 +290,7 @@ class PoseServoResolver(Resolver):
 
         A held entry keeps its bound (its activation set to zero) and what is left of the
         task, ``ṗ_ref − J_i u_i``, is solved again on the other columns, one round per newly
-        held joint (saturation in the null space, Flacco et al. 2012, at velocity level). With
+        held entry (saturation in the null space, Flacco et al. 2012, at velocity level). With
         nothing held the result is the plain solution, to the bit.
 
         Args:
@@ -307,7 +307,6 @@ class PoseServoResolver(Resolver):
         if not (p.hold_joint_limits or p.arm_takeover):
             return task
         lower, upper = [-math.inf] * _N, [math.inf] * _N
-        last = [self._prev[i] - self._prev_null[i] for i in range(N_BASE_TWIST)]   # the base's task share
         if p.hold_joint_limits:
             self._position[N_BASE_TWIST:] = q_arm
             down, up = self.limits.braking_rates(self._position)
@@ -315,6 +314,7 @@ class PoseServoResolver(Resolver):
             upper[N_BASE_TWIST:] = up[N_BASE_TWIST:].tolist()
         if p.arm_takeover:
             # last period's base share of the task (the command less its null-space share) ± a·t_s
+            last = [self._prev[i] - self._prev_null[i] for i in range(N_BASE_TWIST)]
             step = (self.limits.acceleration[:N_BASE_TWIST] * self.limits.dt).tolist()
             speed = self.limits.velocity[:N_BASE_TWIST].tolist()
             for i in range(N_BASE_TWIST):
