@@ -6,7 +6,7 @@ import pytest
 from sim_bridge.closed_loop import ClosedLoop
 from sim_bridge.world import SimWorld
 from wmm_control.resolvers import (
-    AmpParams, AmpResolver, PoseTarget, TraditionalResolver, make_resolver)
+    AmpParams, AmpResolver, PoseTarget, RobotState, TraditionalResolver, make_resolver)
 from wmm_control.resolvers.setpoint_trajectory import SetpointTrajectory
 from wmm_control.resolvers.sns import sns_accelerations
 
@@ -186,3 +186,25 @@ def test_the_base_twist_keeps_its_own_frame_limits_when_the_base_is_turned(metho
     limit = resolver.limits.velocity[:3]
     assert np.max(np.abs(twists[:, 0])) > 0.9 * limit[0], 'the run must drive the base near its limit'
     assert np.all(np.abs(twists) <= limit + 1e-12)
+
+
+def test_traditional_with_a_joint_on_its_limit_does_not_coast():
+    """A joint resting on its position limit with the task pulling it further: scaled as a whole
+    into the bounds, the accelerations would all be zero and the robot would go on at its rates
+    of the moment (a turning base would keep turning). Kept joint by joint, that joint stays
+    at rest and the others follow the task."""
+    resolver = make_resolver('traditional', 'steerable', rows='full')
+    arm = resolver.model.config.arm
+    q = np.array(arm.dexterous, dtype=float)
+    q[1] = arm.position_upper[1]
+    state = RobotState((0.0, 0.0, 0.0), np.array([0.0, 0.0, 0.1]), q, np.zeros(7))
+    resolver.model.update(state.base_pose, q)
+    pos, rot = (np.array(x) for x in resolver.model.ee_placement_world())
+    push = resolver.model.jacobian_world()[:, 3 + 1].copy()
+    target = PoseTarget(pos, rot, velocity=0.2 * push, acceleration=1.0 * push)
+    cmd = resolver.step(state, target)
+    assert cmd.diagnostics.position_error < 1e-9 and cmd.diagnostics.orientation_error < 1e-9
+    assert cmd.arm_velocity[1] <= 0.0                                       # the joint stays on its limit
+    assert cmd.diagnostics.limit_scale > 0.5
+    assert not np.allclose(cmd.base_twist, state.base_twist, atol=1e-6)    # the base follows the task
+    assert np.linalg.norm(cmd.arm_velocity) > 1e-3

@@ -348,7 +348,7 @@ def test_a_default_written_twice_is_refused(ros, monkeypatch):
     assert rclpy.ok(context=ros.context)
 
 
-def test_goal_tolerance_and_stall_time_set_at_run_time_judge_the_goal(ros):
+def test_goal_tolerance_stall_time_and_min_progress_ratio_set_at_run_time_judge_the_goal(ros):
     """The reached/stalled judgement follows live changes; a position-only method (amp, r = 3)
     judges the position alone: its orientation is free, never a reason to report a stall."""
     from types import SimpleNamespace
@@ -366,6 +366,13 @@ def test_goal_tolerance_and_stall_time_set_at_run_time_judge_the_goal(ros):
     for _ in range(6):                                                    # 6 periods, 0.15 s, no progress
         node.progress.update(near)
     assert node.progress.stalled
+    node.progress.start()                                                 # 1.25 % closer each period:
+    for k in range(12):                                                   # 5 % per stall_time, under 10 %
+        node.progress.update(SimpleNamespace(position_error=0.5 * 0.9875 ** k, orientation_error=0.001))
+    assert node.progress.stalled
+    assert set_parameter(ros, caller, node.get_fully_qualified_name(), 'min_progress_ratio', 0.02).successful
+    node.progress.update(SimpleNamespace(position_error=0.5 * 0.9875 ** 12, orientation_error=0.001))
+    assert not node.progress.stalled                                      # 5 % is progress now
     full = ros.add(RedundancyResolverNode(context=ros.context, cli_args=['--ros-args', '-r', '__node:=full'],
                                           parameter_overrides=overrides(robot='mecanum', method='amp', rows='full')))
     full.progress.update(near)

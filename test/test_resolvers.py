@@ -381,3 +381,62 @@ def test_lapack_helpers_equal_numpy_linalg():
         lapack_solve(np.zeros((6, 6)), np.ones(6))
     with pytest.raises(np.linalg.LinAlgError):
         lapack_svd(np.full((6, 10), np.nan))
+
+
+# ---------------------------------------------------------------- entries held at their bounds
+def _at_upper_limit(robot, joint):
+    """An arm configuration with ``joint`` resting on its upper position limit."""
+    q = np.array(robot.arm.dexterous, dtype=float)
+    q[joint] = robot.arm.position_upper[joint]
+    return q
+
+
+def _pushing_target(res, state, joint):
+    """A target whose pseudo-inverse solution drives ``joint`` further up."""
+    jac, _, _, _ = res.task_reference(state, offset_target(res, state, (0.0, 0.0, 0.0)))
+    push = jac[:, 3 + joint] / np.linalg.norm(jac[:3, 3 + joint])
+    return offset_target(res, state, 0.05 * push[:3], 0.05 * push[3:])
+
+
+@pytest.mark.parametrize('method', ['pinv', 'task_sharing'])
+def test_a_joint_held_at_its_limit_gives_its_share_of_the_task_to_the_others(steerable_model, robot, method):
+    """Clipped out of the solution, a joint resting on its limit takes its share of the end
+    effector's motion with it; held there (``hold_joint_limits``), the others take it over."""
+    state = start_state(robot, _at_upper_limit(robot, 1))
+    extra = {} if method == 'pinv' else {'lambda_dex': 0.0}
+    plain = make_resolver(method, steerable_model, **extra)
+    held = make_resolver(method, steerable_model, hold_joint_limits=True, **extra)
+    target = _pushing_target(plain, state, 1)
+    jac, p_ref, _, _ = plain.task_reference(state, target)
+    u_plain = plain.solve_task(jac, p_ref, state.q_arm)
+    u_held = held.solve_task(jac, p_ref, state.q_arm)
+    assert u_plain[3 + 1] > 0.0 and u_held[3 + 1] == 0.0       # the joint would pass its limit; held, it rests
+    clipped = u_plain.copy()
+    clipped[3 + 1] = 0.0                                       # what the limits make of the plain solution
+    assert np.linalg.norm(jac @ u_held - p_ref) < 0.2 * np.linalg.norm(jac @ clipped - p_ref)
+    # nothing at a limit: the plain solution, to the bit
+    free = start_state(robot)
+    target = offset_target(plain, free, (0.05, -0.03, 0.02), (0.05, 0.0, 0.0))
+    jac, p_ref, _, _ = plain.task_reference(free, target)
+    assert np.array_equal(plain.solve_task(jac, p_ref, free.q_arm), held.solve_task(jac, p_ref, free.q_arm))
+
+
+def test_arm_takeover_keeps_the_end_effector_on_its_way_while_a_slow_base_accelerates(mecanum_model):
+    """Robot B's base accelerates at 0.025 m/s²: one factor for the whole body holds the arm to
+    that pace; with ``arm_takeover`` the base changes by a·t_s and the arm does the rest."""
+    robot = mecanum_model.config
+    state = start_state(robot)
+    plain = make_resolver('pinv', mecanum_model, orientation_error='log')
+    takeover = make_resolver('pinv', mecanum_model, orientation_error='log', arm_takeover=True)
+    target = offset_target(plain, state, (0.15, 0.1, -0.05))
+    jac, p_ref, _, _ = plain.task_reference(state, target)
+    for _ in range(20):                     # 0.5 s from rest, the state held (the commands ramp up)
+        u_plain = np.concatenate(_command(plain.step(state, target)))
+        u_take = np.concatenate(_command(takeover.step(state, target)))
+    assert np.all(np.abs(u_take[:3]) <= 20 * robot.base.acceleration * DT + 1e-12)
+    assert np.linalg.norm(jac @ u_plain - p_ref) > 0.9 * np.linalg.norm(p_ref)   # the whole body at the base's pace
+    assert np.linalg.norm(jac @ u_take - p_ref) < 0.05 * np.linalg.norm(p_ref)   # the arm does the rest
+
+
+def _command(cmd):
+    return cmd.base_twist, cmd.arm_velocity

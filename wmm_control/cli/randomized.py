@@ -3,13 +3,14 @@
 Usage::
 
     wmm_randomized [--goals N] [--seed S] [--robots steerable,mecanum] [--methods pinv,...]
-                   [--engine direct|nodes] [--out FILE]
+                   [--indices I,...] [--engine direct|nodes] [--out FILE]
 
 Draws ``N`` reachable goals per robot (:mod:`wmm_control.experiments.randomized` says what
 reachable means), runs each method to each goal from the robot's start state in lockstep, in
 this process, and prints per robot and method: runs, converged, reported (stalled, on
 ``/diagnostics``), failed, the worst final error of the converged runs, the time to converge,
-and the worst use of any velocity or acceleration limit. ``--out`` writes every run as JSON.
+and the worst use of any velocity or acceleration limit. ``--indices`` runs only those goals
+of the draw (one run again, say). ``--out`` writes every run as JSON.
 The exit status is 1 when a run failed (a limit passed, a non-finite command, or neither
 converged nor reported).
 """
@@ -52,12 +53,27 @@ def _param(text):
     return name, yaml.safe_load(value)
 
 
+def _indices(text, goals):
+    """``--indices``: a set of goal indices, or None for all of them."""
+    if not text:
+        return None
+    try:
+        out = {int(v) for v in text.split(',') if v.strip()}
+    except ValueError as exc:
+        raise WmmError(f'--indices: expected comma-separated integers, got {text!r}') from exc
+    if not out or min(out) < 0 or max(out) >= goals:
+        raise WmmError(f'--indices: each index must be within 0..{goals - 1}, got {text!r}')
+    return out
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='wmm_randomized', description=__doc__.split('\n\n')[0])
     parser.add_argument('--goals', type=int, default=100, help='goals per robot (default: %(default)s)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the draw (default: %(default)s)')
     parser.add_argument('--robots', default=','.join(ROBOTS), help='comma-separated (default: %(default)s)')
     parser.add_argument('--methods', default=','.join(METHOD_RUNS), help='comma-separated (default: %(default)s)')
+    parser.add_argument('--indices', default='',
+                        help='comma-separated goal indices of the draw to run, e.g. 24,29 (default: all)')
     parser.add_argument('--engine', choices=('direct', 'nodes'), default='direct',
                         help='direct: the core objects without ROS; nodes: every node in this process over '
                              'topics (default: %(default)s)')
@@ -75,9 +91,11 @@ def main(argv=None):
             raise WmmError(f'--methods: unknown {unknown}, expected some of {list(METHOD_RUNS)}' if unknown
                            else f'--goals must be >= 1, got {args.goals}')
         params = dict(_param(text) for text in args.param)
-        draws = {r: sample_goals(r, args.goals, seed=args.seed) for r in robots}
+        indices = _indices(args.indices, args.goals)
+        draws = {r: [g for g in sample_goals(r, args.goals, seed=args.seed) if indices is None or g.index in indices]
+                 for r in robots}
         results = []
-        with tqdm(total=len(robots) * len(methods) * args.goals, unit='run', file=sys.stderr) as bar:
+        with tqdm(total=sum(len(draws[r]) for r in robots) * len(methods), unit='run', file=sys.stderr) as bar:
             for robot in robots:
                 for method in methods:
                     bar.set_description(f'{robot} {method}')
@@ -88,7 +106,8 @@ def main(argv=None):
         print(f'wmm_randomized: {exc}', file=sys.stderr)
         return 2
     table = summarize(results)
-    print(f'{args.goals} random reachable goals per robot (seed {args.seed}), engine {args.engine}:')
+    only = f', goals {sorted(indices)} of them' if indices is not None else ''
+    print(f'{args.goals} random reachable goals per robot (seed {args.seed}{only}), engine {args.engine}:')
     print(format_summary(table))
     failed = [r for r in results if r['outcome'] == 'failed']
     for r in failed:

@@ -43,21 +43,29 @@ from wmm_control.kinematics.orientation import rpy_from_matrix
 from wmm_control.resolvers.progress import GoalProgress
 from wmm_control.robot_config import load_robot
 
-__all__ = ['RandomGoal', 'sample_goals', 'run_goal', 'summarize', 'ROBOTS', 'METHOD_RUNS', 'DURATION_S',
+__all__ = ['RandomGoal', 'sample_goals', 'run_goal', 'summarize', 'ROBOTS', 'METHOD_RUNS', 'ROBOT_RUNS', 'DURATION_S',
            'ARM_MARGIN', 'COLLISION_MARGIN', 'SETTLE_S', 'goal_settings']
 
 #: The robots, by name.
 ROBOTS = ('steerable', 'mecanum')
 #: The run entry of each method (resolver parameters; the others are the node's defaults).
 #: The goals are arbitrary poses: the acceleration-level methods track all six rows
-#: (``rows: full``), and the velocity-level methods take the orientation error as a log map:
-#: the RPY difference of Sorour eq (12) is singular at pitch ±π/2, where robot B starts.
+#: (``rows: full``), and the velocity-level methods take the orientation error as a log map
+#: (the RPY difference of Sorour eq (12) is singular at pitch ±π/2, where robot B starts) and
+#: hold a joint at its braking bound while the others take its share of the task
+#: (``hold_joint_limits``; clipped out instead, the end effector can stay put for tens of
+#: seconds).
 METHOD_RUNS = {
-    'pinv': {'method': 'pinv', 'orientation_error': 'log'},
-    'task_sharing': {'method': 'task_sharing', 'orientation_error': 'log'},
+    'pinv': {'method': 'pinv', 'orientation_error': 'log', 'hold_joint_limits': True},
+    'task_sharing': {'method': 'task_sharing', 'orientation_error': 'log', 'hold_joint_limits': True},
     'amp': {'method': 'amp', 'rows': 'full'},
     'traditional': {'method': 'traditional', 'rows': 'full'},
 }
+#: Per robot, parameters added to a method's run entry. Robot B's base accelerates at
+#: 0.025 m/s² (Xing Table 1): with the velocity-level methods the arm takes over the share of
+#: the task the base cannot follow (``arm_takeover``) instead of the whole body slowing to the
+#: base's pace.
+ROBOT_RUNS = {'mecanum': {'pinv': {'arm_takeover': True}, 'task_sharing': {'arm_takeover': True}}}
 #: Longest run per robot [s]: robot B's base accelerates at 0.025 m/s² (Xing Table 1).
 DURATION_S = {'steerable': 60.0, 'mecanum': 120.0}
 #: Drawn arm configurations stay this far inside the position limits [rad].
@@ -91,12 +99,14 @@ class RandomGoal:
 
 
 def goal_settings():
-    """``(goal_tolerance, stall_time)`` of the ``redundancy_resolver`` node, from its defaults
-    (``config/redundancy_resolver.yaml``): (position [m], orientation [rad]) and [s]."""
+    """``(goal_tolerance, stall_time, min_progress_ratio)`` of the ``redundancy_resolver``
+    node, from its defaults (``config/redundancy_resolver.yaml``): (position [m], orientation
+    [rad]), [s] and [-]."""
     from wmm_control.nodes.common import load_defaults
 
     defaults = load_defaults('redundancy_resolver.yaml', 'redundancy_resolver')
-    return tuple(float(v) for v in defaults['goal_tolerance']), float(defaults['stall_time'])
+    return (tuple(float(v) for v in defaults['goal_tolerance']), float(defaults['stall_time']),
+            float(defaults['min_progress_ratio']))
 
 
 def _arm_box(arm):
@@ -149,7 +159,8 @@ def _run_direct(robot, run, goal, duration):
     from wmm_control.resolvers import make_resolver
 
     resolver = make_resolver(run['method'], robot, **resolver_parameters(run))
-    progress = GoalProgress(*goal_settings(), period=resolver.params.dt)
+    tolerance, stall_time, ratio = goal_settings()
+    progress = GoalProgress(tolerance, stall_time, resolver.params.dt, min_progress_ratio=ratio)
     settle = int(round(SETTLE_S / resolver.params.dt))
     held = [0]
 
@@ -200,7 +211,7 @@ def _limit_use(log, robot, dt):
 def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
     """One closed-loop run of ``method`` to ``goal`` from the robot's start state.
 
-    ``params`` (resolver parameters) override those of :data:`METHOD_RUNS`.
+    ``params`` (resolver parameters) override those of :data:`METHOD_RUNS` and :data:`ROBOT_RUNS`.
 
     Returns:
         dict: ``robot``, ``method``, ``goal`` (index), ``outcome`` (``converged`` | ``reported`` |
@@ -213,13 +224,13 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
     """
     cfg = load_robot(robot)
     duration = DURATION_S.get(cfg.name, max(DURATION_S.values())) if duration is None else duration
-    run = dict(METHOD_RUNS[method], **(params or {}))
+    run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(cfg.name, {}).get(method, {}), **(params or {})}
     log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration)
     dt = float(np.median(np.diff(log.t))) if len(log) > 1 else 0.025
     target = Goal(0.0, duration, goal.pose).target
     pos_err = np.linalg.norm(log.ee_position - target.position, axis=1)
     ori_err = np.array([_angle(target.rotation @ r.T) for r in log.ee_rotation])
-    tolerance, _ = goal_settings()
+    tolerance = goal_settings()[0]
     inside = np.flatnonzero((pos_err <= tolerance[0]) & (ori_err <= tolerance[1]))
     # the nodes engine reads the commands back from /diagnostics, written with 9 significant digits
     exceeded = run_limit_report(log, cfg, dt, tol=1e-9 if engine == 'direct' else NODES_TOLERANCE)

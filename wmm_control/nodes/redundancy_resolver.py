@@ -96,6 +96,10 @@ _SPECS = (
           read_only=True),
     Param('singular_region', 'σ_min below which the damping grows [-].', lo=1e-6, hi=10.0, read_only=True),
     Param('max_damping', 'Damping at an exact singularity [-].', lo=0.0, hi=10.0, read_only=True),
+    Param('hold_joint_limits', 'Hold an arm joint the task would drive past its braking bound there and share '
+          'its part of the task among the others (pinv, task_sharing; not in the paper).', read_only=True),
+    Param('arm_takeover', 'Where the base acceleration limit holds back the base share of the task, the arm '
+          'takes it over instead of slowing the whole body (pinv, task_sharing; not in the paper).', read_only=True),
     Param('rows', 'Task rows of amp/traditional: position (r = 3) or full (r = 6).', choices=('position', 'full'),
           read_only=True),
     Param('kp', 'K_p of the PD law, eq (23), position rows [1/s²] (amp, traditional).', lo=0.0, hi=1e4,
@@ -135,6 +139,8 @@ _SPECS = (
           lo=1e-6, hi=10.0, size=(2,)),
     Param('stall_time', 'Time [s] without progress after which an unreached goal is reported as stalled.',
           lo=0.1, hi=600.0),
+    Param('min_progress_ratio', 'Fraction [-] of its best value by which an error must fall within stall_time '
+          'to count as progress (at least 1 mm / 1 mrad).', lo=0.0, hi=0.9),
     Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
 )
 
@@ -184,7 +190,8 @@ class RedundancyResolverNode(Node):
         p = self.p = declare_parameters(self, 'redundancy_resolver.yaml', PARAMS, on_change={
             'state_timeout': self._set_state_timeout,
             'goal_tolerance': lambda v: setattr(self.progress, 'tolerance', self._tolerance(v)),
-            'stall_time': lambda v: setattr(self.progress, 'stall_time', float(v))})
+            'stall_time': lambda v: setattr(self.progress, 'stall_time', float(v)),
+            'min_progress_ratio': lambda v: setattr(self.progress, 'min_progress_ratio', float(v))})
         self.model = KinematicModel(p.robot)
         names = [n for n in method_parameters(p.method) if n != 'dt' and hasattr(p, n)]
         self.resolver = make_resolver(p.method, self.model, dt=p.period, **{n: getattr(p, n) for n in names})
@@ -203,7 +210,8 @@ class RedundancyResolverNode(Node):
         self._pending = None
         self._wait = None
         self._last = None
-        self.progress = GoalProgress(self._tolerance(p.goal_tolerance), p.stall_time, p.period)
+        self.progress = GoalProgress(self._tolerance(p.goal_tolerance), p.stall_time, p.period,
+                                     min_progress_ratio=p.min_progress_ratio)
         self._stall_logged = False
         self._next_diag = 0.0
         self.counters = {'cycles': 0, 'goals': 0, 'goals_rejected': 0, 'compensation_dropped': 0,
@@ -483,9 +491,13 @@ class RedundancyResolverNode(Node):
         if not self.progress.stalled:
             self._stall_logged = False
         elif not self._stall_logged:
-            self.get_logger().warn(f'goal not reached: {diag.position_error:.3f} m away, no progress for '
-                                   f'{self.p.stall_time} s (out of reach, or held by a limit?)')
+            self.get_logger().warn(f'goal not reached: {diag.position_error:.3f} m, {diag.orientation_error:.3f} rad '
+                                   f'away, {self._no_progress()} (out of reach, or held by a limit?)')
             self._stall_logged = True
+
+    def _no_progress(self):
+        return (f'no progress in {self.p.stall_time} s (best error down by less than '
+                f'{100 * self.p.min_progress_ratio:g} %, 1 mm, 1 mrad)')
 
     def _diagnostics(self, stamp):
         """Status of the cycle stamped ``stamp`` (the joint state it answers)."""
@@ -505,7 +517,7 @@ class RedundancyResolverNode(Node):
                 'arm_command': self._last.arm_velocity, 'base_reference': self._last.base_twist})
             if stalled:
                 level, message = 'warn', (f'goal not reached: {d.position_error:.3f} m, {d.orientation_error:.3f} '
-                                          f'rad; no progress for {self.p.stall_time} s (out of reach?)')
+                                          f'rad; {self._no_progress()} (out of reach?)')
             else:
                 message = 'goal reached' if reached else d.mode
         return diagnostic_array(stamp, [diagnostic_status('redundancy_resolver', self.model.config.name,

@@ -129,7 +129,8 @@ class AccelerationResolver(Resolver):
 
         Returns:
             dict with ``jac`` (r, 10), ``xdd`` (r,), ``drift`` J̇q̇ (r,), ``lower``/``upper``
-            joint acceleration bounds (10,), ``qd`` (10,), ``position_error`` [m],
+            joint acceleration bounds (10,), ``brake_lower``/``brake_upper`` those of the
+            braking before a position limit alone (10,), ``qd`` (10,), ``position_error`` [m],
             ``orientation_error`` [rad], ``sigma`` σ_min of the arm's task rows, ``sigma_position``
             that of its position rows.
         """
@@ -154,11 +155,13 @@ class AccelerationResolver(Resolver):
         rows = self._rows
         self._position[3:] = state.q_arm
         lo_v, hi_v, _ = self.limits.box(self._position, qd)
+        down, up = self.limits.braking_rates(self._position)
         sigma = float(lapack_svd(jac[rows, 3:], compute_uv=False)[-1])
         sigma_position = sigma if rows.stop == 3 else float(lapack_svd(jac[:3, 3:], compute_uv=False)[-1])
         target_err = np.concatenate((target.position - pos, pin.log3(target.rotation @ rot.T)))
         return {'jac': jac[rows], 'xdd': xdd[rows], 'drift': model.jdot_qdot()[rows], 'qd': qd,
                 'lower': (lo_v - qd) / p.dt, 'upper': (hi_v - qd) / p.dt,
+                'brake_lower': (-down - qd) / p.dt, 'brake_upper': (up - qd) / p.dt,
                 'position_error': float(np.linalg.norm(target_err[:3])),
                 'orientation_error': float(np.linalg.norm(target_err[3:])), 'sigma': sigma,
                 'sigma_position': sigma_position}

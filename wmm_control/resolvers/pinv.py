@@ -7,7 +7,7 @@ Table I's 0.001 away from singularities (see :func:`~wmm_control.resolvers.pose_
 
 from dataclasses import dataclass
 
-from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver, damped_pinv_solve
+from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver
 
 __all__ = ['PinvParams', 'PinvResolver']
 
@@ -31,4 +31,4 @@ class PinvResolver(PoseServoResolver):
         super().__init__(robot, params if params is not None else PinvParams())
 
     def _resolve(self, jac, p_ref, e_pos, state):
-        return damped_pinv_solve(jac, p_ref, self.task_damping(jac)), None, 'whole_body', 1.0
+        return self.solve_task(jac, p_ref, state.q_arm), None, 'whole_body', 1.0

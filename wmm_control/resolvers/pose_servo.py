@@ -62,6 +62,12 @@ class PoseServoParams:
         singular_region: ε [-]: below this smallest singular value of the Jacobian being
             inverted, the damping grows (not in the paper; see :func:`singularity_damping`).
         max_damping: ρ_max [-], the damping reached at an exact singularity.
+        hold_joint_limits: hold an arm joint that the task would drive past its braking
+            bound there and share its part among the others (not in the paper; see
+            :meth:`PoseServoResolver.solve_task`).
+        arm_takeover: where the base's acceleration limit holds back its share of the task,
+            the other joints take it over (not in the paper; see
+            :meth:`PoseServoResolver.solve_task`).
     """
 
     dt: float = 0.025
@@ -74,6 +80,8 @@ class PoseServoParams:
     max_angular_speed: float = 10.0
     singular_region: float = 0.1
     max_damping: float = 0.1
+    hold_joint_limits: bool = False
+    arm_takeover: bool = False
 
     #: numeric fields that may be zero (the others must be > 0)
     _allow_zero = ('max_damping',)
@@ -260,6 +268,81 @@ class PoseServoResolver(Resolver):
         p = self.params
         active = jac if activation is None else jac * np.sqrt(activation)
         return singularity_damping(active, p.rho, p.singular_region, p.max_damping)[0]
+
+    def solve_task(self, jac, p_ref, q_arm, activation=None):
+        """The task part: ``A Jᵀ (J A Jᵀ + ρ² I)⁻¹ ṗ_ref`` (:func:`damped_pinv_solve`), with the
+        entries that cannot follow it held at their bounds and the task re-shared (not in the
+        paper; both options are off by default).
+
+        * ``hold_joint_limits``: an arm joint that the solution drives past its braking bound.
+          The limits (:class:`CommandLimits`) clip it there anyway, but clipped out of a
+          pseudo-inverse solution its share of the end-effector motion is simply lost, and the
+          next period's solution asks for it again: the end effector can stay put for tens of
+          seconds while the other joints could move it.
+        * ``arm_takeover``: a base whose command would change by more than its acceleration
+          allows this period (a·t_s). Otherwise the limits slow the whole command by one
+          factor, and a slowly accelerating base (robot B: 0.025 m/s²) sets the pace of the
+          arm too; its P law then asks the base for speeds it needs metres to brake from.
+          The base then moves towards its share of the solution by the largest fraction of
+          the way that a·t_s allows on every axis (its direction of change kept), within its
+          velocity limits, and the arm takes over the rest of the task, as eq (14) has it take
+          over the base controller's deficit.
+
+        A held entry keeps its bound (its activation set to zero) and what is left of the
+        task, ``ṗ_ref − J_i u_i``, is solved again on the other columns, one round per newly
+        held entry (saturation in the null space, Flacco et al. 2012, at velocity level). With
+        nothing held the result is the plain solution, to the bit.
+
+        Args:
+            jac: J over u = (vx, vy, ω, q̇_a). Shape (6, 10).
+            p_ref: ṗ_ref. Shape (6,).
+            q_arm: arm positions [rad]. Shape (7,).
+            activation: the diagonal of A (default all ones). Shape (10,).
+
+        Returns:
+            Shape (10,).
+        """
+        task = damped_pinv_solve(jac, p_ref, self.task_damping(jac, activation), activation)
+        p = self.params
+        if not (p.hold_joint_limits or p.arm_takeover):
+            return task
+        lower, upper = [-math.inf] * _N, [math.inf] * _N
+        if p.hold_joint_limits:
+            self._position[N_BASE_TWIST:] = q_arm
+            down, up = self.limits.braking_rates(self._position)
+            lower[N_BASE_TWIST:] = (-down[N_BASE_TWIST:]).tolist()
+            upper[N_BASE_TWIST:] = up[N_BASE_TWIST:].tolist()
+        if p.arm_takeover:
+            # last period's base share of the task (the command less its null-space share) ± a·t_s
+            last = [self._prev[i] - self._prev_null[i] for i in range(N_BASE_TWIST)]
+            step = (self.limits.acceleration[:N_BASE_TWIST] * self.limits.dt).tolist()
+            speed = self.limits.velocity[:N_BASE_TWIST].tolist()
+            for i in range(N_BASE_TWIST):
+                lower[i] = max(last[i] - step[i], -speed[i])
+                upper[i] = min(last[i] + step[i], speed[i])
+        active = np.ones(_N) if activation is None else np.array(activation, dtype=float)
+        fixed = np.zeros(_N)
+        values = task.tolist()
+        if p.arm_takeover and any(not lower[i] - 1e-12 <= values[i] <= upper[i] + 1e-12
+                                  for i in range(N_BASE_TWIST)):
+            # the base turns towards its share by the largest fraction of the way that every axis
+            # can go this period (its direction kept), within its velocity limits; the arm does the rest
+            frac = min([1.0] + [step[i] / abs(values[i] - last[i]) for i in range(N_BASE_TWIST)
+                                if abs(values[i] - last[i]) > step[i]])
+            for i in range(N_BASE_TWIST):
+                fixed[i] = min(max(last[i] + frac * (values[i] - last[i]), lower[i]), upper[i])
+                active[i] = 0.0
+            task = fixed + damped_pinv_solve(jac, p_ref - jac @ fixed, self.task_damping(jac, active), active)
+        for _ in range(N_ARM):
+            over = [i for i, x in enumerate(task.tolist())
+                    if active[i] > 0.0 and (x < lower[i] - 1e-12 or x > upper[i] + 1e-12)]
+            if not over:
+                break
+            for i in over:
+                fixed[i] = min(max(task[i], lower[i]), upper[i])
+                active[i] = 0.0
+            task = fixed + damped_pinv_solve(jac, p_ref - jac @ fixed, self.task_damping(jac, active), active)
+        return task
 
     # ------------------------------------------------------------------ step
     @abstractmethod

@@ -2,18 +2,44 @@
 
 :class:`GoalProgress` follows a resolver's :class:`~wmm_control.resolvers.ResolverDiagnostics`
 cycle by cycle. A goal is *reached* while both errors are within the tolerance. It is
-*stalled* when it is not reached and has made no progress for ``stall_time``: progress is the
-position error improving on its best value by ``min_progress``, or the orientation error
-doing so while the position error stays within ``min_progress`` of its best (an end effector
-that drifts away while it turns makes none). Then the method cannot take the end effector
-further (a goal
-out of reach, a joint held at its limit, a task-sharing split that leaves the arm alone with
-a goal it cannot reach). The node and the randomized closed-loop runs share it.
+*stalled* when it is not reached, was not reached within the last ``stall_time`` either, and
+made no progress over the last ``stall_time``. Progress, over that window, is
+
+1. the **best** position error of the goal so far falling by at least ``min_progress``
+   (1 mm) and at least ``min_progress_ratio`` (10 %) of its value at the window's start; or
+   the best orientation error doing so (1 mrad, 10 %), counted only over cycles whose
+   position error stays within that much of its best (an end effector that drifts away
+   while it turns makes none);
+2. and, once the goal is two windows old, the **held** error doing so as well: the largest
+   error within a ``stall_time`` window is what the end effector stayed within, and the held
+   error is the smallest such value of the goal so far. An end effector that swings through
+   a closer point and away again improves its best error, not its held one: an oscillation
+   whose swings bring it no closer makes no progress.
+
+**While a motion gathers pace** (from the goal's start until the first window whose gain is
+not larger than the one before), a best error falling by ``min_progress`` and by more than
+in the window before also counts: a trajectory that starts with zero velocity and
+acceleration (the acceleration-level methods' set-point trajectory, a quintic) or a base
+that accelerates slowly covers only a small part of a long way in its first seconds.
+
+Judged relative to the error, the rule reports a goal that the end effector approaches so
+slowly that it will not get there: with the defaults, one whose error shrinks by less than
+10 % in 3 s, a time constant above 28 s where the pose controller's is 1/λ_p = 0.6 s. Such a
+goal is held back by a limit (a joint resting on it, a base that accelerates too slowly), a
+singularity's damping, a task-sharing split that leaves the arm alone with a goal it cannot
+reach, or the method oscillates around it. A goal out of reach stalls the same way. The node
+and the randomized closed-loop runs share this rule.
 """
 
+import bisect
 import math
+from collections import deque
 
 __all__ = ['GoalProgress']
+
+#: At most this many samples of the errors are kept per ``stall_time`` (a coarser stride for
+#: a long stall time at a short period; a window is then judged to within 1/256 of it).
+_SAMPLES_PER_WINDOW = 256
 
 
 class GoalProgress:
@@ -21,38 +47,114 @@ class GoalProgress:
 
     Args:
         tolerance: (position [m], orientation [rad]) under which the goal is reached.
-        stall_time: time without progress after which an unreached goal is stalled [s].
+        stall_time: the window over which progress is judged [s].
         period: control period [s].
-        min_progress: (position [m], orientation [rad]) improvement that counts as progress.
+        min_progress: (position [m], orientation [rad]) improvement that counts as progress
+            at the least.
+        min_progress_ratio: fraction of an error at a window's start by which it must fall
+            within ``stall_time`` to count as progress [-].
     """
 
-    def __init__(self, tolerance, stall_time, period, min_progress=(1e-3, 1e-3)):
+    def __init__(self, tolerance, stall_time, period, min_progress=(1e-3, 1e-3), min_progress_ratio=0.1):
         self.tolerance = tuple(float(v) for v in tolerance)
-        self.stall_time = float(stall_time)
         self.period = float(period)
         self.min_progress = tuple(float(v) for v in min_progress)
+        self.min_progress_ratio = float(min_progress_ratio)
+        self.stall_time = stall_time
         self.start()
+
+    @property
+    def stall_time(self):
+        """The window over which progress is judged [s]."""
+        return self._stall_time
+
+    @stall_time.setter
+    def stall_time(self, value):
+        self._stall_time = float(value)
+        self._window = max(1, int(round(self._stall_time / self.period)))
+        self._stride = max(1, math.ceil(self._window / _SAMPLES_PER_WINDOW))
 
     def start(self):
         """A new goal: no cycle seen, no progress yet."""
         self.cycles = 0
-        self._best = (math.inf, math.inf)
-        self._last_progress = 0
         self.reached = False
+        self.stalled = False
+        self._best = [math.inf, math.inf]      # best (position, orientation) error of the goal
+        self._held = [math.inf, math.inf]      # held (position, orientation) error of the goal
+        self._block = [0.0, 0.0]               # largest errors of the stride under way
+        self._blocks = deque()                 # ...and of the strides before it, a window's worth
+        self._last_reached = None
+        self._gathering_pace = True
+        self._cycles = deque()                 # the cycles sampled, every stride...
+        self._samples = deque()                # ...and (best, held) errors then
+
+    def _needed(self, value, index):
+        return max(self.min_progress[index], self.min_progress_ratio * value)
 
     def update(self, diagnostics):
         """Account for one cycle's diagnostics (``position_error``, ``orientation_error``)."""
         self.cycles += 1
         pos, ori = diagnostics.position_error, diagnostics.orientation_error
         self.reached = pos <= self.tolerance[0] and ori <= self.tolerance[1]
-        best_pos, best_ori = self._best
-        better_pos = pos < best_pos - self.min_progress[0]
-        better_ori = ori < best_ori - self.min_progress[1] and pos <= best_pos + self.min_progress[0]
-        if better_pos or better_ori or self.reached:
-            self._last_progress = self.cycles
-        self._best = (pos if better_pos else best_pos, ori if better_ori else best_ori)
+        if self.reached:
+            self._last_reached = self.cycles
+        best = self._best
+        if pos < best[0]:
+            best[0] = pos
+        if ori < best[1] and pos <= best[0] + self._needed(best[0], 0):
+            best[1] = ori
+        self._block = [max(self._block[0], pos), max(self._block[1], ori)]
+        window_max = self._window_max()
+        if self.cycles >= self._window:
+            self._held = [min(h, m) for h, m in zip(self._held, window_max)]
+        if not self._cycles or self.cycles - self._cycles[-1] >= self._stride:
+            self._cycles.append(self.cycles)
+            self._samples.append((tuple(best), tuple(self._held)))
+            self._blocks.append(self._block)
+            self._block = [0.0, 0.0]
+        while len(self._cycles) > 1 and self._cycles[1] <= self.cycles - 2 * self._window:
+            self._cycles.popleft()
+            self._samples.popleft()
+        while len(self._blocks) * self._stride > self._window:
+            self._blocks.popleft()
+        self.stalled = not self.reached and not self._progress(window_max)
 
-    @property
-    def stalled(self):
-        """True when the goal is not reached and has made no progress for ``stall_time``."""
-        return not self.reached and (self.cycles - self._last_progress) * self.period > self.stall_time
+    def _window_max(self):
+        """The largest (position, orientation) errors of about the last ``stall_time``."""
+        pos, ori = self._block
+        for p, o in self._blocks:
+            pos, ori = max(pos, p), max(ori, o)
+        return pos, ori
+
+    def _at(self, cycle):
+        """(best, held) errors at the latest sample not after ``cycle`` (the oldest sample kept
+        when none is that old: before the goal's first cycle nothing was gained)."""
+        return self._samples[max(0, bisect.bisect_right(self._cycles, cycle) - 1)]
+
+    def _gained(self, before, now, held_position=None):
+        """Whether (position, orientation) errors fell from ``before`` to ``now`` by the margin;
+        the orientation counts only while ``held_position`` (when given) keeps near its best."""
+        if before[0] - now[0] >= self._needed(before[0], 0):
+            return True
+        if held_position is not None and held_position > now[0] + self._needed(now[0], 0):
+            return False
+        return math.isfinite(before[1]) and before[1] - now[1] >= self._needed(before[1], 1)
+
+    def _progress(self, window_max):
+        """Whether the goal made progress over the last ``stall_time`` (module docstring)."""
+        window = self._window
+        if self.cycles <= window:
+            return True                 # not a whole window yet
+        if self._last_reached is not None and self.cycles - self._last_reached <= window:
+            return True
+        best0, held0 = self._at(self.cycles - window)
+        if self._gained(best0, self._best) and (
+                self.cycles < 2 * window or self._gained(held0, self._held, window_max[0])):
+            return True
+        if self._gathering_pace:
+            best1, _ = self._at(self.cycles - 2 * window)
+            if any(best0[i] - self._best[i] >= self.min_progress[i]
+                   and best0[i] - self._best[i] > best1[i] - best0[i] for i in (0, 1) if math.isfinite(best1[i])):
+                return True
+            self._gathering_pace = False
+        return False

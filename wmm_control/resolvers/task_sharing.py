@@ -30,7 +30,7 @@ from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
 from wmm_control.resolvers.interface import N_ARM, N_BASE_TWIST
 from wmm_control.resolvers.pose_servo import (
-    PoseServoParams, PoseServoResolver, _norm, damped_pinv_solve, lapack_svd)
+    PoseServoParams, PoseServoResolver, _norm, lapack_svd)
 
 __all__ = ['TaskSharingParams', 'TaskSharingResolver', 'MODES', 'psi_of_error']
 
@@ -115,7 +115,7 @@ class TaskSharingResolver(PoseServoResolver):
         activation = np.empty(N_BASE_TWIST + N_ARM)
         activation[:N_BASE_TWIST] = 1.0 - psi
         activation[N_BASE_TWIST:] = psi
-        task = damped_pinv_solve(jac, p_ref, self.task_damping(jac, activation), activation)
+        task = self.solve_task(jac, p_ref, state.q_arm, activation)
         return task, self._null_motion(jac, task, state.q_arm), mode, psi
 
     def _null_motion(self, jac, task, q_arm):

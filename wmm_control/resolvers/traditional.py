@@ -1,8 +1,12 @@
 """The traditional planner of Xing §4.3, for comparison: the whole-body pseudo-inverse at
 acceleration level with the manipulability objective in its null space,
 ``q̈ = J⁺(ẍ − J̇q̇) + (I − J⁺J) q̈_A`` (q̈_A of eq 13). The base always takes part. The result
-is scaled uniformly into the joint acceleration bounds (from the nearest point of the bounds
-to rest, keeping its direction), as every method of this package keeps the limits.
+is clipped joint by joint into the braking bounds of the position limits, then scaled
+uniformly into the joint acceleration bounds (from the nearest point of the bounds to rest,
+keeping its direction), as every method of this package keeps the limits. (Scaled as a whole
+for a joint that rests on its position limit with the task pulling it further, the
+accelerations would all be zero, and the whole robot would coast on at its rates of the
+moment.)
 """
 
 from dataclasses import dataclass
@@ -37,6 +41,9 @@ class TraditionalResolver(AccelerationResolver):
             q_a = self.manipulability_acceleration(task['qd'])
             qdd = qdd + q_a - j_pinv @ (jac @ q_a)          # + (I − J⁺J) q̈_A
         lo, hi = task['lower'], task['upper']
+        # position limits joint by joint: a joint resting on its limit would otherwise take the
+        # whole body's scale to zero, and with zero accelerations the robot coasts on
+        qdd = np.clip(qdd, task['brake_lower'], task['brake_upper'])
         anchor = np.clip(0.0, lo, hi)
         scale, per = task_scale(anchor, qdd - anchor, lo, hi, np.ones(n, dtype=bool))
         limited = tuple(int(i) for i in np.flatnonzero(per <= scale + 1e-12)) if scale < 1.0 else ()
