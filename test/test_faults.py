@@ -2,11 +2,13 @@
 process (the installed console scripts, started as ``ros2 run`` starts them) on a private
 domain, robot A in real time with its default parameters.
 
-One run, four faults in turn while the robot drives to a far goal:
+One run, the faults in turn while the robot drives to a far goal:
 
 1. the base controller is killed (SIGKILL) and later started again;
-2. the simulator stops (SIGSTOP) and, a second later, continues (SIGCONT);
-3. the resolver is killed.
+2. the base controller stalls (SIGSTOP) longer than the simulator's command timeout but
+   shorter than its own joint-state timeout, then continues (SIGCONT);
+3. the simulator stops (SIGSTOP) and, a second later, continues (SIGCONT);
+4. the resolver is killed.
 
 The run records, by this process's clock at receipt, every command, the ground-truth twist
 and the nodes' ``/rosout``; the tests below check each fault against it.
@@ -28,6 +30,8 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Log
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -140,6 +144,14 @@ class System:
                 return True
         return until is None
 
+    def set_parameter(self, node, name, value):
+        """Set a live parameter of ``node`` through its parameter service, as ``ros2 param set`` does."""
+        client = AsyncParameterClient(self.rec, node)
+        assert self.spin(30.0, client.services_are_ready), f'no parameter service of {node}'
+        future = client.set_parameters([Parameter(name, value=value)])
+        assert self.spin(30.0, future.done), f'{node} did not answer'
+        assert all(r.successful for r in future.result().results), future.result()
+
     def base_speed(self):
         _, twist = self.rec.series('ground_truth/odom', time.monotonic() - 0.2)
         return float(np.max(np.linalg.norm(twist[:, :2], axis=1))) if len(twist) else 0.0
@@ -187,6 +199,19 @@ def run():
         assert system.spin(60.0, lambda: system.base_speed() > 0.2 and len(system.rec.series(
             'steer_controller/commands', restarted)[0]) > 10), 'the base did not resume'
         system.spin(1.0)
+        # The controller stalls: the simulator zeroes the base after its command timeout, and the
+        # controller, whose joint-state timeout has not passed (made long here, so that a loaded
+        # machine cannot stretch the stall past it), answers the joint states queued meanwhile back
+        # to back, from its own last command.
+        system.set_parameter('swmr_controller', 'joint_state_timeout', 10.0)
+        system.signal('swmr_controller', signal.SIGSTOP)
+        system.spin(1.0)
+        system.signal('swmr_controller', signal.SIGCONT)
+        assert system.spin(30.0, lambda: system.base_speed() > 0.2), 'the base did not resume after the stall'
+        system.spin(1.0)
+        system.events['stall over'] = time.monotonic()
+        system.set_parameter('swmr_controller', 'joint_state_timeout', SWMR['joint_state_timeout'])
+        system.spin(1.0)
         system.signal('wmm_sim', signal.SIGSTOP)
         system.spin(1.0)
         system.signal('wmm_sim', signal.SIGCONT)
@@ -221,21 +246,21 @@ def _is_zero(v):
     return not np.any(v)
 
 
-def _starts_from_rest(run, after, end, topics, sent_after=-np.inf):
+def _starts_from_rest(run, after, end, topics, sent_after=-np.inf, factor=2.0):
     """The base, after ``after``, resumes from rest without a jump: on each of ``topics``, the
-    first twist off rest and every change per period after it are within
-    twice the twist controller's per-period acceleration limit (the projection onto the next
-    ICR may pass the limit itself). Only messages stamped (system clock) after ``sent_after``
-    count: a stopped simulator delivers what it sent before, late."""
+    first twist off rest and every change per period after it are within ``factor`` times the
+    twist controller's per-period acceleration limit (the projection onto the next ICR may pass
+    the limit itself). Only messages stamped (system clock) after ``sent_after`` count: a
+    stopped simulator delivers what it sent before, late."""
     step = BASE_ACCEL_LIMIT * SWMR['period']
     for topic in topics:
         twist = np.array([v for (t, v), s in zip(run.rec.topics[topic], run.rec.stamps[topic])
                           if after <= t < end and s > sent_after])
         moving = np.flatnonzero(np.any(np.abs(twist) > 1e-9, axis=1))
         assert len(moving) > 10, f'{topic}: the base moves again'
-        assert np.all(np.abs(twist[moving[0]]) <= 2 * step + 1e-9), (topic, twist[moving[0]])
+        assert np.all(np.abs(twist[moving[0]]) <= factor * step + 1e-9), (topic, np.abs(twist[moving[0]]) / step)
         jumps = np.abs(np.diff(twist[moving[0]:], axis=0))
-        assert np.all(jumps <= 2 * step + 1e-9), (topic, jumps.max(axis=0))
+        assert np.all(jumps <= factor * step + 1e-9), (topic, jumps.max(axis=0) / step)
 
 
 # In simulation periods: a process killed with SIGKILL can stall the simulator's publishing for
@@ -243,6 +268,10 @@ def _starts_from_rest(run, after, end, topics, sent_after=-np.inf):
 # robot does not move while the simulator does not step, so the stop is judged by the periods
 # the simulator runs, not by wall time.
 COMMAND_PERIODS = int(np.ceil(COMMAND_TIMEOUT / PERIOD)) + 2
+#: A base controller that starts again, or goes on after a stall, changes the twist by at most one
+#: period of acceleration (measured, on robot A: 1.0), up to a quarter more where the feasible twist
+#: is projected onto the next ICR.
+RESUME_FACTOR = 1.25
 
 
 def test_a_killed_base_controller_stops_the_base_within_the_command_timeout(run):
@@ -264,6 +293,26 @@ def test_a_restarted_base_controller_drives_the_base_again(run):
     restarted, end = run.events['base restarted'], run.events[('wmm_sim', signal.SIGSTOP)]
     _, twist = run.rec.series('ground_truth/odom', restarted, end)
     assert not np.any(twist[0]) and np.max(np.linalg.norm(twist[:, :2], axis=1)) > 0.2
+
+
+def test_a_restarted_base_controller_resumes_within_the_acceleration_limits(run):
+    """Judged on the true twist: this recorder may discover the new process's publishers only
+    after its first commands."""
+    _starts_from_rest(run, run.events['base restarted'], run.events[('swmr_controller', signal.SIGSTOP)],
+                      ['ground_truth/odom'], factor=RESUME_FACTOR)
+
+
+@pytest.mark.parametrize('topic', ['ground_truth/odom', 'base/feasible_twist'])
+def test_a_stalled_base_controller_resumes_from_rest_within_the_acceleration_limits(run, topic):
+    """The simulator zeroed the base during the stall; the controller finds that its last command
+    was not applied (the joint states' rates are zero) and restarts from rest."""
+    stalled, resumed = run.events[('swmr_controller', signal.SIGSTOP)], run.events[('swmr_controller', signal.SIGCONT)]
+    periods, _ = _moving_periods(run.rec, 'ground_truth/odom', stalled + 0.05)
+    assert periods <= COMMAND_PERIODS + 2, 'the simulator stopped the base during the stall'
+    _starts_from_rest(run, resumed, run.events['stall over'], [topic], factor=RESUME_FACTOR,
+                      sent_after=run.wall[('swmr_controller', signal.SIGCONT)] - 1.0)
+    logs = [m for t, name, m in run.rec.logs if name == 'swmr_controller' and t > resumed and 'not applied' in m]
+    assert logs
 
 
 def test_a_stopped_simulator_gives_a_zero_base_reference_within_two_periods_of_the_state_timeout(run):

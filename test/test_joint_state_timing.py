@@ -98,8 +98,7 @@ class Probe(Node):
         js = JointState()
         js.header.stamp = _time(t)
         js.name = list(WHEELS)
-        js.position = [0.0] * 4
-        js.velocity = [0.0] * 4
+        js.position = [0.0] * 4      # no velocities: the stamps alone decide (no check of the rates applied)
         self.pub_js.publish(js)
 
     def per_stamp(self):

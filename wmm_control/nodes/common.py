@@ -33,8 +33,8 @@ __all__ = [
     'Param', 'declare_parameters', 'load_defaults', 'parameter_error', 'float_array', 'parse_command',
     'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
-    'BaseReference', 'JointStateWatchdog', 'StampGate', 'STATE_PUB_QOS', 'STATE_SUB_QOS', 'COMMAND_QOS',
-    'CLOCK_QOS', 'DIAGNOSTICS_QOS',
+    'BaseReference', 'JointStateWatchdog', 'StampGate', 'unapplied_command', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
+    'COMMAND_QOS', 'CLOCK_QOS', 'DIAGNOSTICS_QOS',
 ]
 
 
@@ -654,6 +654,31 @@ class BaseReference:
         return None
 
 
+def unapplied_command(measured, commanded, tolerance):
+    """'' when a joint state's rates are the last command's, else why not.
+
+    A joint state reports the rates the actuator applied over the period it closes: those of
+    the last command, unless that command was not applied as sent. It may have been lost or
+    late, superseded (a controller that answers queued joint states back to back sends several
+    commands within one period, and the actuator applies only the last), or zeroed by the
+    actuator's command timeout. A controller that went on from its own last command would
+    then change the applied rates by as many periods of acceleration as it answered meanwhile.
+
+    Args:
+        measured: the rates of the joint state [rad/s], or None (the message has none).
+        commanded: the rates last commanded [rad/s], or None (none yet), same order.
+        tolerance: largest difference [rad/s] still taken as applied; 0 turns the check off.
+    """
+    if tolerance <= 0.0 or measured is None or commanded is None:
+        return ''
+    worst = float(np.max(np.abs(np.asarray(measured, dtype=float) - np.asarray(commanded, dtype=float))))
+    if worst <= tolerance:
+        return ''
+    return (f'the rates measured differ from the last command by up to {worst:.3g} rad/s (more than '
+            f'{tolerance:g}): it was not applied as sent (lost, late, superseded, or zeroed by the '
+            'actuator\'s command timeout)')
+
+
 class JointStateWatchdog:
     """The timing of a controller's ``/joint_states`` input: stamps, age and period.
 
@@ -672,10 +697,19 @@ class JointStateWatchdog:
         self._action = action
         self._topic = topic
         self.freshness = Freshness(timeout)
-        self.stamps = StampGate(period, max_jump=max(float(timeout), 4.0 * float(period)))
+        self._period = float(period)
+        self.stamps = StampGate(period, max_jump=self._max_jump(timeout))
         self.skipped = 0
         self.need_resync = True
         self.timer = node.create_timer(period, self._check, clock=clock)
+
+    def _max_jump(self, timeout):
+        return max(float(timeout), 4.0 * self._period)
+
+    def set_timeout(self, timeout):
+        """A new timeout [s] (a parameter set at run time): for the age and for the stamp jump."""
+        self.freshness.timeout = float(timeout)
+        self.stamps.max_jump = self._max_jump(timeout)
 
     def mark(self):
         """A joint state arrived now."""

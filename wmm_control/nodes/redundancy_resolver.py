@@ -236,6 +236,7 @@ class RedundancyResolverNode(Node):
     def _set_state_timeout(self, timeout):
         for fresh in self.fresh.values():
             fresh.timeout = timeout
+        self.watchdog.set_timeout(timeout)
 
     # ------------------------------------------------------------------ time
     def _now(self):
