@@ -40,12 +40,12 @@ from wmm_control.nodes.common import load_defaults
 from wmm_control.robot_config import load_robot
 
 BIN = Path(sys.executable).parent
-PERIOD = load_defaults('wmm_sim.yaml', 'wmm_sim')['period']
 COMMAND_TIMEOUT = load_defaults('wmm_sim.yaml', 'wmm_sim')['command_timeout']
 STATE_TIMEOUT = load_defaults('redundancy_resolver.yaml', 'redundancy_resolver')['state_timeout']
 SWMR = load_defaults('swmr_controller.yaml', 'swmr_controller')
 BASE_ACCEL_LIMIT = np.asarray(load_robot('steerable').base.acceleration)   # the robot YAML's
 ROBOT = load_robot('steerable')
+PERIOD = ROBOT.period         # every node's default
 #: A node's own scheduling on a loaded 2-core machine, on top of the figures the design gives
 #: (a timeout plus the periods in which it is noticed and acted upon), when judged by the
 #: stamps the nodes give their messages; and with the delivery to this process, when judged
@@ -252,7 +252,7 @@ def _starts_from_rest(run, after, end, topics, sent_after=-np.inf, factor=2.0):
     twist controller's per-period acceleration limit (the projection onto the next ICR may pass
     the limit itself). Only messages stamped (system clock) after ``sent_after`` count: a
     stopped simulator delivers what it sent before, late."""
-    step = BASE_ACCEL_LIMIT * SWMR['period']
+    step = BASE_ACCEL_LIMIT * PERIOD
     for topic in topics:
         twist = np.array([v for (t, v), s in zip(run.rec.topics[topic], run.rec.stamps[topic])
                           if after <= t < end and s > sent_after])

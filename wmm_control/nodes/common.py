@@ -24,14 +24,16 @@ from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.time_source import TimeSource
 from std_msgs.msg import Float64MultiArray
 
 from wmm_control.errors import ConfigError, WmmError
 from wmm_control.paths import config_path
+from wmm_control.robot_config import load_robot
 
 __all__ = [
-    'Param', 'declare_parameters', 'load_defaults', 'parameter_error', 'float_array', 'parse_command',
-    'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node',
+    'Param', 'declare_parameters', 'load_defaults', 'robot_period', 'parameter_error', 'float_array', 'parse_command',
+    'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node', 'guard_clock',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
     'BaseReference', 'JointStateWatchdog', 'StampGate', 'unapplied_command', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
     'COMMAND_QOS', 'CLOCK_QOS', 'DIAGNOSTICS_QOS',
@@ -84,6 +86,12 @@ class Param:
     read_only: bool = False
     size: tuple = None
     default_from: object = None
+
+
+def robot_period(values):
+    """The default of a node's ``period``: the control period of its ``robot`` (the robot YAML's
+    ``period``), so that the simulator and every controller agree unless one is told otherwise."""
+    return load_robot(values.robot).period
 
 
 def load_defaults(yaml_name, node_name):
@@ -342,6 +350,36 @@ def default_executor():
     except ImportError:
         return SingleThreadedExecutor()
     return EventsExecutor()
+
+
+def guard_clock(node):
+    """Make ``node`` drop the ``/clock`` messages rclpy's time source cannot take, with a warning.
+
+    With ``use_sim_time``, rclpy's own time source turns each ``/clock`` message into a time
+    point, and raises inside its callback for a negative time (``ValueError: Seconds value must
+    not be negative``), which would end the node. A ``/clock`` stamp is at most 2³¹ − 1 s, a
+    time rclpy takes, so a negative one is the only such message. It is dropped before rclpy
+    sees it, logged through ``node``'s logger (throttled): the ROS clock keeps its last time.
+    ``use_sim_time`` set at run time makes a new subscription, guarded in turn.
+    """
+    def guard(callback):
+        def guarded(msg):
+            if msg.clock.sec < 0:
+                node.get_logger().warn(
+                    f'ignored a /clock message at {msg.clock.sec} s {msg.clock.nanosec} ns: a negative time, '
+                    f'which rclpy cannot take; the ROS clock keeps its last time '
+                    f'({node.count_publishers("/clock")} publisher(s) on /clock)', throttle_duration_sec=1.0)
+                return
+            callback(msg)
+        return guarded
+
+    def guard_all(_params=()):
+        for sub in node.subscriptions:
+            if isinstance(getattr(sub.callback, '__self__', None), TimeSource):
+                sub.callback = guard(sub.callback)
+
+    guard_all()
+    node.add_post_set_parameters_callback(guard_all)
 
 
 def run_node(node_factory, args=None, executor_factory=default_executor):

@@ -51,8 +51,8 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import MecanumController
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node, seconds,
-    twist_stamped, unapplied_command)
+    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, run_node,
+    robot_period, seconds, twist_stamped, unapplied_command)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['MecanumControllerNode', 'main']
@@ -60,7 +60,8 @@ __all__ = ['MecanumControllerNode', 'main']
 PARAMS = (
     Param('robot', 'Robot with a Mecanum base: mecanum (B, Xing). Geometry and limits come from its YAML.',
           choices=('mecanum', 'B', 'b'), read_only=True),
-    Param('period', 'Control period [s].', lo=1e-3, hi=1.0, read_only=True),
+    Param('period', 'Control period [s]; default: the robot YAML\'s period.', lo=1e-3, hi=1.0, read_only=True,
+          default_from=robot_period),
     Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
     Param('reference_timeout', 'Reference age [s] after which the base brakes to rest.', lo=1e-3, hi=60.0),
     Param('reference_wait', 'Steady time [s] a joint state waits for the reference of its stamp.',
@@ -78,6 +79,7 @@ class MecanumControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('mecanum_controller', **kwargs)
+        guard_clock(self)
         p = declare_parameters(self, 'mecanum_controller.yaml', PARAMS, on_change={
             'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
             'joint_state_timeout': lambda v: self.watchdog.set_timeout(v)})

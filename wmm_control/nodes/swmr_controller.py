@@ -54,8 +54,8 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node, seconds,
-    unapplied_command)
+    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, run_node,
+    robot_period, seconds, unapplied_command)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['SwmrControllerNode', 'main']
@@ -63,7 +63,8 @@ __all__ = ['SwmrControllerNode', 'main']
 PARAMS = (
     Param('robot', 'Robot with a steerable base: steerable (A, Sorour). Geometry, joints and limits come from '
           'its YAML.', choices=('steerable', 'A', 'a'), read_only=True),
-    Param('period', 'Control period t_s [s].', lo=1e-3, hi=1.0, read_only=True),
+    Param('period', 'Control period t_s [s]; default: the robot YAML\'s period.', lo=1e-3, hi=1.0, read_only=True,
+          default_from=robot_period),
     Param('kp', 'Gain K_p of the twist controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
     Param('icr_gain', 'Gain λ of the ICR P-controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
     Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
@@ -85,6 +86,7 @@ class SwmrControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('swmr_controller', **kwargs)
+        guard_clock(self)
         p = declare_parameters(self, 'swmr_controller.yaml', PARAMS, on_change={
             'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
             'joint_state_timeout': lambda v: self.watchdog.set_timeout(v)})
