@@ -10,6 +10,9 @@ One run, the faults in turn while the robot drives to a far goal:
 3. the simulator stops (SIGSTOP) and, a second later, continues (SIGCONT);
 4. the resolver is killed.
 
+Then robot B (Mecanum base, AMP) in a second run: its base controller killed and started
+again, then stalled as robot A's.
+
 The run records, by this process's clock at receipt, every command, the ground-truth twist
 and the nodes' ``/rosout``; the tests below check each fault against it.
 """
@@ -62,7 +65,8 @@ class Record(Node):
         super().__init__('fault_recorder', context=context)
         self.topics = {}
         self.stamps = {}
-        for topic in ('arm_controller/commands', 'steer_controller/commands', 'drive_controller/commands'):
+        for topic in ('arm_controller/commands', 'steer_controller/commands', 'drive_controller/commands',
+                      'wheel_controller/commands'):
             self._record(Float64MultiArray, topic, lambda m: np.array(m.data))
         for topic in ('base/reference', 'base/feasible_twist'):
             self._record(TwistStamped, topic, lambda m: np.array([m.twist.linear.x, m.twist.linear.y,
@@ -102,11 +106,14 @@ class Record(Node):
         keep = [i for i, (t, _) in enumerate(rows) if start <= t < end and (not stamps or stamps[i] > newest)]
         return np.array([rows[i][0] for i in keep]), np.array([rows[i][1] for i in keep])
 
-    def publish_goal(self):
+    def publish_goal(self, goal=GOAL, quaternion=(0.5 ** 0.5, 0.0, 0.0, 0.5 ** 0.5)):
+        """The goal: position ``goal``, orientation ``quaternion`` (x, y, z, w); by default robot A's
+        far goal, RPY (π/2, 0, 0) as at the start."""
         msg = PoseStamped()
         msg.header.frame_id = 'world'
-        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = GOAL
-        msg.pose.orientation.x = msg.pose.orientation.w = 0.5 ** 0.5     # RPY (π/2, 0, 0), as at the start
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = goal
+        q = msg.pose.orientation
+        q.x, q.y, q.z, q.w = quaternion
         self.goal.publish(msg)
 
 
@@ -125,8 +132,10 @@ class System:
         self.events = {}
         self.wall = {}            # the system clock at each event: the nodes' stamps in real time
 
-    def start(self, name):
-        self.procs[name] = subprocess.Popen([str(BIN / name)], env=self.env, stdout=subprocess.PIPE,
+    def start(self, name, *params):
+        """Start the executable ``name`` with ``params`` (``'robot:=mecanum'``, ...)."""
+        args = ['--ros-args', *(a for p in params for a in ('-p', p))] if params else []
+        self.procs[name] = subprocess.Popen([str(BIN / name), *args], env=self.env, stdout=subprocess.PIPE,
                                             stderr=subprocess.STDOUT, text=True)
 
     def signal(self, name, sig):
@@ -152,6 +161,41 @@ class System:
         assert self.spin(30.0, future.done), f'{node} did not answer'
         assert all(r.successful for r in future.result().results), future.result()
 
+    def drive_to_goal(self, speed, command_topic, *goal):
+        """Send the goal (``goal``: :meth:`Record.publish_goal`'s arguments) until the base is under
+        way faster than ``speed`` and this recorder hears every process (discovery may take a while)."""
+        def moving():
+            if self.rec.count_subscribers('goal_pose'):
+                self.rec.publish_goal(*goal)
+            heard = all(len(self.rec.topics[t]) > 20 for t in (
+                command_topic, 'arm_controller/commands', 'base/feasible_twist', 'base/reference'))
+            return self.base_speed() > speed and heard
+        assert self.spin(120.0, moving), 'the robot never started for the goal'
+
+    def kill_restart_and_stall(self, controller, speed, command_topic):
+        """The base controller killed, started again, then stalled; events 'base restarted' and
+        'stall over' mark the ends of the windows the tests judge.
+
+        The stall: the simulator zeroes the base after its command timeout, and the controller,
+        whose joint-state timeout has not passed (made long here, so that a loaded machine cannot
+        stretch the stall past it), answers the joint states queued meanwhile back to back."""
+        self.spin(1.0)
+        self.signal(controller, signal.SIGKILL)
+        assert self.spin(5.0, lambda: self.base_speed() == 0.0), 'the base did not stop'
+        self.spin(1.0)
+        self.events['base restarted'] = restarted = time.monotonic()
+        self.start(controller)
+        assert self.spin(60.0, lambda: self.base_speed() > speed and len(self.rec.series(
+            command_topic, restarted)[0]) > 10), 'the base did not resume'
+        self.spin(1.0)
+        self.set_parameter(controller, 'joint_state_timeout', 10.0)
+        self.signal(controller, signal.SIGSTOP)
+        self.spin(1.0)
+        self.signal(controller, signal.SIGCONT)
+        assert self.spin(30.0, lambda: self.base_speed() > speed), 'the base did not resume after the stall'
+        self.spin(1.0)
+        self.events['stall over'] = time.monotonic()
+
     def base_speed(self):
         _, twist = self.rec.series('ground_truth/odom', time.monotonic() - 0.2)
         return float(np.max(np.linalg.norm(twist[:, :2], axis=1))) if len(twist) else 0.0
@@ -173,43 +217,28 @@ class System:
         return outputs
 
 
-@pytest.fixture(scope='module')
-def run():
-    """The four faults in turn; returns the system (records and event times) after it ends."""
+def _run(scenario):
+    """A new system through ``scenario(system)``; the system (records, event times and the
+    processes' output) after it ends. The output is printed when the scenario fails."""
     system = System()
     try:
+        scenario(system)
+    except BaseException:
+        outputs = system.close()
+        print('\n'.join(f'--- {name}\n{out}' for name, out in outputs.items()))
+        raise
+    system.outputs = system.close()
+    return system
+
+
+@pytest.fixture(scope='module')
+def run():
+    """The faults of robot A in turn."""
+    def scenario(system):
         for name in ('wmm_sim', 'swmr_controller', 'redundancy_resolver'):
             system.start(name)
-
-        def moving():
-            if system.rec.count_subscribers('goal_pose'):
-                system.rec.publish_goal()
-            # Under way, and this recorder hears every process (discovery may take a while).
-            heard = all(len(system.rec.topics[t]) > 20 for t in (
-                'drive_controller/commands', 'arm_controller/commands', 'base/feasible_twist', 'base/reference'))
-            return system.base_speed() > 0.2 and heard
-        assert system.spin(90.0, moving), 'the robot never started for the goal'
-        system.spin(1.0)
-        system.signal('swmr_controller', signal.SIGKILL)
-        assert system.spin(5.0, lambda: system.base_speed() == 0.0), 'the base did not stop'
-        system.spin(1.0)
-        system.events['base restarted'] = time.monotonic()
-        system.start('swmr_controller')
-        restarted = system.events['base restarted']
-        assert system.spin(60.0, lambda: system.base_speed() > 0.2 and len(system.rec.series(
-            'steer_controller/commands', restarted)[0]) > 10), 'the base did not resume'
-        system.spin(1.0)
-        # The controller stalls: the simulator zeroes the base after its command timeout, and the
-        # controller, whose joint-state timeout has not passed (made long here, so that a loaded
-        # machine cannot stretch the stall past it), answers the joint states queued meanwhile back
-        # to back, from its own last command.
-        system.set_parameter('swmr_controller', 'joint_state_timeout', 10.0)
-        system.signal('swmr_controller', signal.SIGSTOP)
-        system.spin(1.0)
-        system.signal('swmr_controller', signal.SIGCONT)
-        assert system.spin(30.0, lambda: system.base_speed() > 0.2), 'the base did not resume after the stall'
-        system.spin(1.0)
-        system.events['stall over'] = time.monotonic()
+        system.drive_to_goal(0.2, 'steer_controller/commands')
+        system.kill_restart_and_stall('swmr_controller', 0.2, 'steer_controller/commands')
         system.set_parameter('swmr_controller', 'joint_state_timeout', SWMR['joint_state_timeout'])
         system.spin(1.0)
         system.signal('wmm_sim', signal.SIGSTOP)
@@ -219,12 +248,7 @@ def run():
         system.spin(1.0)
         system.signal('redundancy_resolver', signal.SIGKILL)
         system.spin(2.0)
-    except BaseException:
-        outputs = system.close()
-        print('\n'.join(f'--- {name}\n{out}' for name, out in outputs.items()))
-        raise
-    system.outputs = system.close()
-    return system
+    return _run(scenario)
 
 
 def _first(times, values, predicate, after):
@@ -246,21 +270,21 @@ def _is_zero(v):
     return not np.any(v)
 
 
-def _starts_from_rest(run, after, end, topics, sent_after=-np.inf, factor=2.0):
+def _starts_from_rest(run, after, end, topics, sent_after=-np.inf, factor=2.0, limit=BASE_ACCEL_LIMIT):
     """The base, after ``after``, resumes from rest without a jump: on each of ``topics``, the
     first twist off rest and every change per period after it are within ``factor`` times the
-    twist controller's per-period acceleration limit (the projection onto the next ICR may pass
-    the limit itself). Only messages stamped (system clock) after ``sent_after`` count: a
+    per-period acceleration limit (``limit``, the robot's; on robot A the projection onto the
+    next ICR may pass it). Only messages stamped (system clock) after ``sent_after`` count: a
     stopped simulator delivers what it sent before, late."""
-    step = BASE_ACCEL_LIMIT * PERIOD
+    step = np.asarray(limit) * PERIOD
     for topic in topics:
         twist = np.array([v for (t, v), s in zip(run.rec.topics[topic], run.rec.stamps[topic])
                           if after <= t < end and s > sent_after])
         moving = np.flatnonzero(np.any(np.abs(twist) > 1e-9, axis=1))
         assert len(moving) > 10, f'{topic}: the base moves again'
-        assert np.all(np.abs(twist[moving[0]]) <= factor * step + 1e-9), (topic, np.abs(twist[moving[0]]) / step)
+        assert np.all(np.abs(twist[moving[0]]) <= factor * step + 1e-12), (topic, np.abs(twist[moving[0]]) / step)
         jumps = np.abs(np.diff(twist[moving[0]:], axis=0))
-        assert np.all(jumps <= factor * step + 1e-9), (topic, jumps.max(axis=0) / step)
+        assert np.all(jumps <= factor * step + 1e-12), (topic, jumps.max(axis=0) / step)
 
 
 # In simulation periods: a process killed with SIGKILL can stall the simulator's publishing for
@@ -368,4 +392,47 @@ def test_a_killed_resolver_stops_arm_and_base_by_their_timeouts(run):
 
 def test_no_process_failed(run):
     for name, out in run.outputs.items():
+        assert 'Traceback' not in out, f'{name}:\n{out}'
+
+
+# ---------------------------------------------------------------- robot B
+
+ROBOT_B = load_robot('mecanum')
+GOAL_B = (6.0, 1.0, 0.49)                       # far ahead, at the start's height
+QUAT_B = (0.0, 0.5 ** 0.5, 0.0, 0.5 ** 0.5)     # Ry(π/2), as at the start
+SPEED_B = 0.05                                  # [m/s] under way (the base accelerates at 0.025 m/s²)
+
+
+@pytest.fixture(scope='module')
+def run_b():
+    """Robot B (Mecanum base, AMP): its base controller killed and started again, then stalled
+    (SIGSTOP) longer than the simulator's command timeout, as robot A's above."""
+    def scenario(system):
+        system.start('wmm_sim', 'robot:=mecanum')
+        system.start('mecanum_controller')
+        system.start('redundancy_resolver', 'robot:=mecanum', 'method:=amp')
+        system.drive_to_goal(SPEED_B, 'wheel_controller/commands', GOAL_B, QUAT_B)
+        system.kill_restart_and_stall('mecanum_controller', SPEED_B, 'wheel_controller/commands')
+    return _run(scenario)
+
+
+def test_robot_b_restarted_base_controller_resumes_within_the_acceleration_limits(run_b):
+    _starts_from_rest(run_b, run_b.events['base restarted'], run_b.events[('mecanum_controller', signal.SIGSTOP)],
+                      ['ground_truth/odom'], factor=RESUME_FACTOR, limit=ROBOT_B.base.acceleration)
+
+
+@pytest.mark.parametrize('topic', ['ground_truth/odom', 'base/feasible_twist'])
+def test_robot_b_stalled_base_controller_resumes_from_rest_within_the_acceleration_limits(run_b, topic):
+    stalled, resumed = run_b.events[('mecanum_controller', signal.SIGSTOP)], \
+        run_b.events[('mecanum_controller', signal.SIGCONT)]
+    periods, _ = _moving_periods(run_b.rec, 'ground_truth/odom', stalled + 0.05)
+    assert periods <= COMMAND_PERIODS + 2, 'the simulator stopped the base during the stall'
+    _starts_from_rest(run_b, resumed, run_b.events['stall over'], [topic], factor=RESUME_FACTOR,
+                      limit=ROBOT_B.base.acceleration,
+                      sent_after=run_b.wall[('mecanum_controller', signal.SIGCONT)] - 1.0)
+    assert [m for t, name, m in run_b.rec.logs if name == 'mecanum_controller' and t > resumed and 'not applied' in m]
+
+
+def test_robot_b_no_process_failed(run_b):
+    for name, out in run_b.outputs.items():
         assert 'Traceback' not in out, f'{name}:\n{out}'
