@@ -287,10 +287,9 @@ def _starts_from_rest(run, after, end, topics, sent_after=-np.inf, factor=2.0, l
         assert np.all(jumps <= factor * step + 1e-12), (topic, jumps.max(axis=0) / step)
 
 
-# In simulation periods: a process killed with SIGKILL can stall the simulator's publishing for
-# about a second (Fast DDS's shared-memory transport waits for the dead peer's port), and the
-# robot does not move while the simulator does not step, so the stop is judged by the periods
-# the simulator runs, not by wall time.
+# In simulation periods: the robot does not move while the simulator does not step, so the stop
+# is judged by the periods the simulator runs, not by wall time (a loaded machine, or Fast DDS's
+# shared-memory transport after a peer is killed, which the executables do not use, can hold it).
 COMMAND_PERIODS = int(np.ceil(COMMAND_TIMEOUT / PERIOD)) + 2
 #: A base controller that starts again, or goes on after a stall, changes the twist by at most one
 #: period of acceleration (measured, on robot A: 1.0), up to a quarter more where the feasible twist

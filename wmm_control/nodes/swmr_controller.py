@@ -31,8 +31,9 @@ they differ from the last command by more than ``applied_rate_tolerance``, that 
 applied as sent (lost or late, superseded by the next one when queued joint states are answered
 back to back, or zeroed by the simulator's command timeout), and the controller restarts from
 the measured angles, rates and twist (logged, counted): the rates the base receives then change
-by at most one period of acceleration, not by as many as were answered meanwhile. A joint state without every steer joint or naming one twice, with positions and
-names of different lengths, non-finite values or steer rates beyond ten times the limit, is
+by at most one period of acceleration, not by as many as were answered meanwhile. A joint
+state without every steer joint or naming one twice, with positions and names of different
+lengths, non-finite values or steer rates beyond ten times the limit, is
 rejected with a throttled log and runs no cycle. Nor does one whose stamp is not after the
 last cycle's or jumps more than the timeout ahead (:class:`~wmm_control.nodes.common.StampGate`:
 a second publisher, a replayed message); a joint-state period that differs from ``period`` is
