@@ -50,7 +50,7 @@ from wmm_control.robot_config import load_robot
 from wmm_control.errors import ConfigError
 from wmm_control.nodes.common import (
     CLOCK_QOS, COMMAND_QOS, DIAGNOSTICS_QOS, STATE_PUB_QOS, Freshness, Param, declare_parameters,
-    diagnostic_array, diagnostic_status, parse_command, run_node)
+    diagnostic_array, diagnostic_status, guard_clock, parse_command, robot_period, run_node)
 
 __all__ = ['SimNode', 'main', 'wait_groups']
 
@@ -66,7 +66,8 @@ PARAMS = (
           choices=BASE_MODES, read_only=True),
     Param('timing', 'realtime: wall-clock steps; lockstep: step when the commands answer the state.',
           choices=('realtime', 'lockstep'), read_only=True),
-    Param('period', 'Control period [s].', lo=1e-4, hi=1.0, read_only=True),
+    Param('period', 'Control period [s]; default: the robot YAML\'s period.', lo=1e-4, hi=1.0, read_only=True,
+          default_from=robot_period),
     Param('substeps', 'Physics steps per period [-].', lo=1, hi=1000, read_only=True),
     Param('command_timeout', 'Command age [s] (receiver clock) after which a group is zeroed.',
           lo=1e-3, hi=10.0),
@@ -116,6 +117,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('wmm_sim', **kwargs)
+        guard_clock(self)
         self.world = None
         self.p = declare_parameters(
             self, 'wmm_sim.yaml', PARAMS,

@@ -30,8 +30,11 @@ def test_no_kind_of_bad_input_hurts_the_node(column):
 
 
 def test_the_matrix_sees_a_node_that_runs_a_cycle_per_duplicate(monkeypatch):
-    """Without the stamp gate, a second publisher's copy runs a second cycle, silently."""
+    """Without the stamp gate, a second publisher's copy runs a second cycle, silently (once the
+    check that the last command was applied, which notices the second cycle's effect, is off too)."""
+    import wmm_control.nodes.mecanum_controller as node_module
     monkeypatch.setattr(StampGate, 'admit', lambda self, stamp: '')
+    monkeypatch.setattr(node_module, 'unapplied_command', lambda measured, commanded, tolerance: '')
     kind = next(k for k in bad_input.KINDS if k.name == 'duplicated message')
     cell = bad_input.run_cell(bad_input.RIGS['mecanum_controller'], kind)
     assert cell.outcome == 'SILENT'
@@ -43,3 +46,38 @@ def test_the_table_prints_one_row_per_kind_and_one_column_per_node():
     assert table[0] == '| kind | wmm_sim (A) | goal_sequencer |'
     assert table[2] == '| NaN field | rejected | n/a |'
     assert table[3] == '| command empty | rejected | n/a |'
+
+
+def test_without_the_clock_guard_a_negative_clock_crashes_the_node(monkeypatch):
+    """rclpy's own time source raises on a negative /clock; the guard is what the matrix sees."""
+    import wmm_control.nodes.swmr_controller as node_module
+    monkeypatch.setattr(node_module, 'guard_clock', lambda node: None)
+    kind = next(k for k in bad_input.KINDS if k.name == 'negative /clock')
+    cell = bad_input.run_cell(bad_input.RIGS['swmr_controller'], kind)
+    assert cell.outcome == 'CRASH', cell
+
+
+def test_use_sim_time_set_at_run_time_is_guarded_too(ros):
+    """The time source subscribes to /clock when use_sim_time is set; that subscription drops a
+    negative time with a warning too, and the clock takes the next valid one."""
+    from builtin_interfaces.msg import Time
+    from rcl_interfaces.msg import Log
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    from wmm_control.nodes.mecanum_controller import MecanumControllerNode
+    node = ros.add(MecanumControllerNode(context=ros.context))
+    probe = ros.add(Node('clock_probe', context=ros.context))
+    warnings = []
+    probe.create_subscription(Log, '/rosout', lambda m: warnings.append(m.msg) if m.level >= Log.WARN else None,
+                              QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                                         reliability=ReliabilityPolicy.RELIABLE))
+    pub = probe.create_publisher(Clock, '/clock', 10)
+    assert node.set_parameters([Parameter('use_sim_time', value=True)])[0].successful
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0)
+    pub.publish(Clock(clock=Time(sec=-5)))
+    assert ros.spin_until(lambda: any('negative time' in w for w in warnings))
+    pub.publish(Clock(clock=Time(sec=7)))
+    assert ros.spin_until(lambda: node.get_clock().now().nanoseconds == 7_000_000_000)

@@ -21,6 +21,7 @@ from std_msgs.msg import Float64MultiArray
 
 from ros_helpers import overrides, stamp_s
 from sim_bridge.node import SimNode
+from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
 from wmm_control.nodes.common import STATE_SUB_QOS, StampGate, twist_stamped
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
@@ -94,12 +95,14 @@ class Probe(Node):
         if msg.name == 'mecanum_controller' and msg.level >= Log.WARN:
             self.warnings.append(msg.msg)
 
-    def state(self, t):
+    def state(self, t, velocity=()):
+        """A joint state stamped ``t``; without ``velocity`` the stamps alone decide (the node
+        cannot check that its last command was applied)."""
         js = JointState()
         js.header.stamp = _time(t)
         js.name = list(WHEELS)
         js.position = [0.0] * 4
-        js.velocity = [0.0] * 4
+        js.velocity = [float(v) for v in velocity]
         self.pub_js.publish(js)
 
     def per_stamp(self):
@@ -163,6 +166,39 @@ def test_a_burst_runs_one_period_per_message_and_a_gap_still_only_one(ros):
     # Every cycle, the gap's included, moves the twist by exactly one period of acceleration.
     np.testing.assert_allclose(np.diff([0.0] + vx), step, rtol=1e-9)
     assert len(vx) == burst + 1
+
+
+@pytest.mark.parametrize('tolerance', [0.002, 0.0], ids=['checked', 'unchecked'])
+def test_a_burst_of_states_reporting_the_rates_applied_moves_the_base_one_period(ros, tolerance):
+    """As the simulator does, each joint state reports the wheel rates applied over its period. A
+    controller that stalled finds a burst of them, all reporting the rates applied before the
+    stall; the simulator applies only its last answer. Checked, every answer starts from the rates
+    applied, so that last answer is one period of acceleration from them; unchecked, from the
+    controller's own last command, one period further per state of the burst."""
+    probe = ros.add(Probe(ros.context))
+    ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
+        reference_wait=0.0, reference_timeout=10.0, joint_state_timeout=10.0, applied_rate_tolerance=tolerance)))
+    ros.spin_for(0.2)
+    probe.pub_ref.publish(twist_stamped(_time(0.0), 'base_link', (0.2, 0.0, 0.0)))
+    ros.spin_for(0.05)
+    for k in range(10):                  # nominal periods: each state reports the command it followed
+        applied = list(probe.wheels[-1].data) if probe.wheels else [0.0] * 4
+        probe.state(5.0 + k * DT, applied)
+        assert ros.spin_until(lambda: len(probe.feasible) > k, timeout=5.0)
+    ros.spin_for(0.1)
+    applied = list(probe.wheels[-1].data)
+    before = len(probe.feasible)
+    burst = STATE_SUB_QOS.depth
+    for k in range(burst):
+        probe.state(5.0 + (10 + k) * DT, applied)
+    assert ros.spin_until(lambda: len(probe.feasible) >= before + burst, timeout=5.0)
+    vx_applied = MecanumKinematics.from_config(ROBOT.mecanum).twist_from_wheels(np.array(applied))[0]
+    step = ROBOT.base.acceleration[0] * DT
+    last = twist_of(probe.feasible[-1])[0] - vx_applied
+    if tolerance:
+        assert last == pytest.approx(step, rel=1e-6)
+    else:
+        assert last == pytest.approx(burst * step, rel=1e-6)
 
 
 def test_a_simulator_period_that_disagrees_with_the_controllers_is_reported(ros):

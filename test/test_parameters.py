@@ -22,6 +22,7 @@ from ros_helpers import RosHarness, overrides
 from sim_bridge.node import SimNode
 from wmm_control.base import MecanumParams, SwmrParams
 from wmm_control.nodes import goal_sequencer, mecanum_controller, redundancy_resolver, swmr_controller
+from wmm_control.nodes.common import robot_period
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
@@ -313,6 +314,23 @@ def test_a_node_yaml_holds_its_own_tuning_and_nothing_of_the_robot(yaml_name):
         assert not repeated, f'{yaml_name}: {repeated} repeat values of {robot}.yaml'
 
 
+def test_the_control_period_has_one_home_the_robot_yaml(ros):
+    # The simulator and the controllers must agree on it: each node's `period` defaults to its
+    # robot's (a node YAML that wrote it too would repeat a robot-YAML key, above), and a node
+    # still takes its own when given one.
+    with_period = [yaml_name for yaml_name, specs in NODE_YAMLS.items() if any(s.name == 'period' for s in specs)]
+    assert sorted(with_period) == ['mecanum_controller.yaml', 'redundancy_resolver.yaml', 'swmr_controller.yaml',
+                                   'wmm_sim.yaml']
+    for yaml_name in with_period:
+        assert next(s for s in NODE_YAMLS[yaml_name] if s.name == 'period').default_from is robot_period
+    for robot in ('steerable', 'mecanum'):
+        assert 'period' in yaml.safe_load(config_path('robots', f'{robot}.yaml').read_text())['robot']
+    node = ros.add(MecanumControllerNode(context=ros.context))
+    assert node.p.period == load_robot('mecanum').period
+    node = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(period=0.05)))
+    assert node.p.period == 0.05 and node.resolver.params.dt == 0.05
+
+
 def test_method_tuning_has_its_home_in_the_resolver_classes():
     # The resolver node's YAML holds the node's settings; a method's gains and thresholds are
     # declared with their parameter class's defaults (one home), and a dump shows them.
@@ -320,7 +338,7 @@ def test_method_tuning_has_its_home_in_the_resolver_classes():
     keys = set(node_values['redundancy_resolver']['ros__parameters'])
     method_fields = {f.name for _, cls in METHODS.values() for f in dataclasses.fields(cls)}
     assert not keys & method_fields
-    declared = {s.name for s in redundancy_resolver.PARAMS if s.default_from is not None}
+    declared = {s.name for s in redundancy_resolver.PARAMS if s.default_from not in (None, robot_period)}
     assert declared == method_fields & {s.name for s in redundancy_resolver.PARAMS}
     assert {'lambda_p', 'kp', 'sigma_min', 'gamma1'} <= declared
 

@@ -132,7 +132,7 @@ class MecanumConfig:
 
 @dataclass(frozen=True)
 class RobotConfig:
-    """One robot: its URDF, frames, arm, base limits, start state and base geometry."""
+    """One robot: its URDF, frames, control period, arm, base limits, start state and base geometry."""
 
     name: str
     description: str
@@ -142,6 +142,7 @@ class RobotConfig:
     base_link: str
     ee_frame: str
     ground_z: float
+    period: float
     arm: ArmConfig
     base: BaseLimits
     start: StartState
@@ -299,6 +300,7 @@ def load_robot(robot='steerable'):
         base_link=str(raw.get('base_link', 'base_link')),
         ee_frame=str(raw.get('ee_frame', 'ee_link')),
         ground_z=float(raw.get('ground_z', 0.0)),
+        period=_scalar(raw, 'period', where),
         arm=_parse_arm(raw, where),
         base=BaseLimits(
             velocity=_positive(_vec(base, 'velocity', 3, f'{where}.base'), 'velocity', f'{where}.base'),

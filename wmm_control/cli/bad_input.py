@@ -595,6 +595,11 @@ def _stamp(shift=None, value=None):
     return change
 
 
+def _clock(sec):
+    """A ``/clock`` message at ``sec`` seconds, added to the cycle."""
+    return lambda rig: ('/clock', ClockMsg(clock=Time(sec=sec)))
+
+
 def _twice(rig, msgs):
     """The joint state delivered twice (a second publisher replaying it)."""
     out = []
@@ -668,12 +673,13 @@ class Kind:
     'corrected', 'skipped' (a joint state that runs no cycle), 'restarts', 'accepted' (valid
     input, results checked) or 'by name' (valid layout, results equal the nominal ones).
     Parameter kinds have ``param`` set instead: a function giving the values to try for one
-    parameter.
+    parameter. ``start`` holds ``(name, value)`` parameters the node starts with.
     """
 
     name: str
     cases: dict
     param: object = None
+    start: tuple = ()
 
 
 def _param_values_out_of_range(descriptor, value):
@@ -813,6 +819,16 @@ KINDS = [
         'resolver': ('skipped', '/joint_states stamped 1e6 s ahead', _on('joint_states', _stamp(shift=1e6))),
         'sequencer': ('restarts', '/clock 1e6 s ahead, then back', _on('clock', _stamp(shift=1e6))),
     }),
+    Kind('negative /clock', {
+        **{f: ('rejected', '/clock at -5 s (use_sim_time)', _add(_clock(-5))) for f in ('sim', 'base', 'resolver')},
+        'sequencer': ('rejected', '/clock at -5 s instead of the next time', _on('clock', _stamp(value=-5.0)))},
+        start=(('use_sim_time', True),)),
+    Kind('/clock at its largest time', {
+        **{f: ('accepted', '/clock at 2^31 - 1 s (use_sim_time)', _add(_clock(2 ** 31 - 1)))
+           for f in ('sim', 'base', 'resolver')},
+        'sequencer': ('restarts', '/clock at 2^31 - 1 s instead of the next time, then back',
+                      _on('clock', _stamp(value=2 ** 31 - 1)))},
+        start=(('use_sim_time', True),)),
     Kind('duplicated message', {
         'base': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
         'resolver': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
@@ -835,9 +851,9 @@ class Cell:
         return self.outcome not in FAILURES
 
 
-def _run_steps(rig, kind_case):
+def _run_steps(rig, kind_case, overrides=()):
     """Warm-up, injection, recovery; returns (outputs of the injection, alive)."""
-    rig.start()
+    rig.start(overrides)
     rig.logs.clear()
     rig.bad.clear()
     start = len(rig.records)
@@ -911,7 +927,7 @@ def run_cell(rig_factory, kind):
         if case is None:
             return Cell('n/a')
         expected, what, mutate = case
-        result, failed = _harm(rig, lambda: _run_steps(rig, mutate), 'the bad input')
+        result, failed = _harm(rig, lambda: _run_steps(rig, mutate, kind.start), 'the bad input')
         if failed:
             return failed
         outputs, _ = result
@@ -919,7 +935,7 @@ def run_cell(rig_factory, kind):
         if expected == 'by name':
             twin = rig_factory()
             try:
-                reference, _ = _run_steps(twin, None)
+                reference, _ = _run_steps(twin, None, kind.start)
             finally:
                 twin.close()
             same = len(reference) == len(outputs) and all(

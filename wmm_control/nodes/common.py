@@ -10,6 +10,7 @@ appear in the node YAML.
 
 import array
 import math
+import os
 import statistics
 from collections import deque
 from pathlib import Path
@@ -25,17 +26,19 @@ from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.time_source import TimeSource
 from std_msgs.msg import Float64MultiArray
 
 from wmm_control.errors import ConfigError, WmmError
 from wmm_control.paths import config_path
+from wmm_control.robot_config import load_robot
 
 __all__ = [
-    'Param', 'declare_parameters', 'load_defaults', 'parameter_error', 'float_array', 'parse_command',
-    'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node',
+    'Param', 'declare_parameters', 'load_defaults', 'robot_period', 'parameter_error', 'float_array', 'parse_command',
+    'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node', 'guard_clock',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
-    'BaseReference', 'JointStateWatchdog', 'StampGate', 'STATE_PUB_QOS', 'STATE_SUB_QOS', 'COMMAND_QOS',
-    'CLOCK_QOS', 'DIAGNOSTICS_QOS',
+    'BaseReference', 'JointStateWatchdog', 'StampGate', 'unapplied_command', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
+    'COMMAND_QOS', 'CLOCK_QOS', 'DIAGNOSTICS_QOS',
 ]
 
 
@@ -85,6 +88,12 @@ class Param:
     read_only: bool = False
     size: tuple = None
     default_from: object = None
+
+
+def robot_period(values):
+    """The default of a node's ``period``: the control period of its ``robot`` (the robot YAML's
+    ``period``), so that the simulator and every controller agree unless one is told otherwise."""
+    return load_robot(values.robot).period
 
 
 def load_defaults(yaml_name, node_name):
@@ -345,11 +354,51 @@ def default_executor():
     return EventsExecutor()
 
 
+def guard_clock(node):
+    """Make ``node`` drop the ``/clock`` messages rclpy's time source cannot take, with a warning.
+
+    With ``use_sim_time``, rclpy's own time source turns each ``/clock`` message into a time
+    point, and raises inside its callback for a negative time (``ValueError: Seconds value must
+    not be negative``), which would end the node. A ``/clock`` stamp is at most 2³¹ − 1 s, a
+    time rclpy takes, so a negative one is the only such message. It is dropped before rclpy
+    sees it, logged through ``node``'s logger (throttled): the ROS clock keeps its last time.
+    ``use_sim_time`` set at run time makes a new subscription, guarded in turn.
+    """
+    def guard(callback):
+        def guarded(msg):
+            if msg.clock.sec < 0:
+                node.get_logger().warn(
+                    f'ignored a /clock message at {msg.clock.sec} s {msg.clock.nanosec} ns: a negative time, '
+                    f'which rclpy cannot take; the ROS clock keeps its last time '
+                    f'({node.count_publishers("/clock")} publisher(s) on /clock)', throttle_duration_sec=1.0)
+                return
+            callback(msg)
+        return guarded
+
+    def guard_all(_params=()):
+        for sub in node.subscriptions:
+            if isinstance(getattr(sub.callback, '__self__', None), TimeSource):
+                sub.callback = guard(sub.callback)
+
+    guard_all()
+    node.add_post_set_parameters_callback(guard_all)
+
+
+#: Fast DDS transports of the executables, unless the environment names others: UDP alone.
+#: With its shared-memory transport too (Fast DDS's default), a peer killed (SIGKILL) or
+#: stopped (SIGSTOP) at the wrong moment stalled the surviving processes' traffic for 0.2 to 2 s
+#: (measured, see the README), which fired their watchdogs; over UDP it never did.
+FASTDDS_TRANSPORTS = 'UDPv4'
+
+
 def run_node(node_factory, args=None, executor_factory=default_executor):
     """Standard main(): init, build the node, spin until Ctrl-C or shutdown, clean up.
 
-    A configuration error at start-up is logged and gives exit code 2.
+    A configuration error at start-up is logged and gives exit code 2. The process uses Fast
+    DDS's UDP transport alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS``
+    is set.
     """
+    os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', FASTDDS_TRANSPORTS)
     rclpy.init(args=args)
     node = None
     try:
@@ -655,6 +704,31 @@ class BaseReference:
         return None
 
 
+def unapplied_command(measured, commanded, tolerance):
+    """'' when a joint state's rates are the last command's, else why not.
+
+    A joint state reports the rates the actuator applied over the period it closes: those of
+    the last command, unless that command was not applied as sent. It may have been lost or
+    late, superseded (a controller that answers queued joint states back to back sends several
+    commands within one period, and the actuator applies only the last), or zeroed by the
+    actuator's command timeout. A controller that went on from its own last command would
+    then change the applied rates by as many periods of acceleration as it answered meanwhile.
+
+    Args:
+        measured: the rates of the joint state [rad/s], or None (the message has none).
+        commanded: the rates last commanded [rad/s], or None (none yet), same order.
+        tolerance: largest difference [rad/s] still taken as applied; 0 turns the check off.
+    """
+    if tolerance <= 0.0 or measured is None or commanded is None:
+        return ''
+    worst = float(np.max(np.abs(np.asarray(measured, dtype=float) - np.asarray(commanded, dtype=float))))
+    if worst <= tolerance:
+        return ''
+    return (f'the rates measured differ from the last command by up to {worst:.3g} rad/s (more than '
+            f'{tolerance:g}): it was not applied as sent (lost, late, superseded, or zeroed by the '
+            'actuator\'s command timeout)')
+
+
 class JointStateWatchdog:
     """The timing of a controller's ``/joint_states`` input: stamps, age and period.
 
@@ -673,10 +747,19 @@ class JointStateWatchdog:
         self._action = action
         self._topic = topic
         self.freshness = Freshness(timeout)
-        self.stamps = StampGate(period, max_jump=max(float(timeout), 4.0 * float(period)))
+        self._period = float(period)
+        self.stamps = StampGate(period, max_jump=self._max_jump(timeout))
         self.skipped = 0
         self.need_resync = True
         self.timer = node.create_timer(period, self._check, clock=clock)
+
+    def _max_jump(self, timeout):
+        return max(float(timeout), 4.0 * self._period)
+
+    def set_timeout(self, timeout):
+        """A new timeout [s] (a parameter set at run time): for the age and for the stamp jump."""
+        self.freshness.timeout = float(timeout)
+        self.stamps.max_jump = self._max_jump(timeout)
 
     def mark(self):
         """A joint state arrived now."""

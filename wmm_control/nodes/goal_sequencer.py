@@ -34,7 +34,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from wmm_control.experiments.scenario import load_scenario
 from wmm_control.kinematics import KinematicModel
 from wmm_control.nodes.common import (
-    CLOCK_QOS, COMMAND_QOS, Param, declare_parameters, run_node)
+    CLOCK_QOS, COMMAND_QOS, Param, declare_parameters, guard_clock, run_node)
 
 __all__ = ['GoalSequencerNode', 'main']
 
@@ -95,6 +95,7 @@ class GoalSequencerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('goal_sequencer', **kwargs)
+        guard_clock(self)
         self.p = declare_parameters(self, 'goal_sequencer.yaml', PARAMS)
         self.scenario = load_scenario(self.p.scenario)
         self.pub = self.create_publisher(PoseStamped, 'goal_pose', COMMAND_QOS)
@@ -117,6 +118,8 @@ class GoalSequencerNode(Node):
                                f'({"sim" if self._sim_time else "wall"} time)')
 
     def _on_clock(self, msg):
+        if msg.clock.sec < 0:
+            return              # not a time: dropped and logged (guard_clock)
         self._check(msg.clock.sec + msg.clock.nanosec * 1e-9, msg.clock)
 
     def _tick(self):

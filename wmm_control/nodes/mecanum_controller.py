@@ -27,7 +27,10 @@ references in another frame are rejected (an empty frame is taken as ``base_fram
 warning); finite references beyond the limits are scaled into them by the core, with a
 warning. When joint states stop for ``joint_state_timeout`` (steady clock), zero wheel rates
 are published, and the controller restarts from the measured wheel rates when they come
-back. A joint state without the wheel joints or naming one twice, with positions or
+back. It does so too when the wheel rates of a joint state, those applied over its period,
+differ from the last command by more than ``applied_rate_tolerance``: that command was not
+applied as sent (lost or late, superseded when queued joint states are answered back to back,
+or zeroed by the simulator's command timeout; logged, counted). A joint state without the wheel joints or naming one twice, with positions or
 velocities not matching its names, with non-finite wheel values or rates beyond ten times
 the wheel rate limit runs no cycle. Nor does one whose stamp is not after the last cycle's
 or jumps more than the timeout ahead (:class:`~wmm_control.nodes.common.StampGate`: a second
@@ -48,8 +51,8 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import MecanumController
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node, seconds,
-    twist_stamped)
+    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, run_node,
+    robot_period, seconds, twist_stamped, unapplied_command)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['MecanumControllerNode', 'main']
@@ -57,12 +60,16 @@ __all__ = ['MecanumControllerNode', 'main']
 PARAMS = (
     Param('robot', 'Robot with a Mecanum base: mecanum (B, Xing). Geometry and limits come from its YAML.',
           choices=('mecanum', 'B', 'b'), read_only=True),
-    Param('period', 'Control period [s].', lo=1e-3, hi=1.0, read_only=True),
+    Param('period', 'Control period [s]; default: the robot YAML\'s period.', lo=1e-3, hi=1.0, read_only=True,
+          default_from=robot_period),
     Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
     Param('reference_timeout', 'Reference age [s] after which the base brakes to rest.', lo=1e-3, hi=60.0),
     Param('reference_wait', 'Steady time [s] a joint state waits for the reference of its stamp.',
           lo=0.0, hi=1.0, read_only=True),
     Param('joint_state_timeout', 'Joint-state age [s] after which zero wheel rates are commanded.', lo=1e-3, hi=60.0),
+    Param('applied_rate_tolerance', 'Largest difference [rad/s] between the wheel rates of a joint state and the '
+          'last command under which that command counts as applied; beyond it the controller restarts from the '
+          'measured wheel rates. 0: never.', lo=0.0, hi=100.0, read_only=True),
     Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
 )
 
@@ -72,15 +79,17 @@ class MecanumControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('mecanum_controller', **kwargs)
+        guard_clock(self)
         p = declare_parameters(self, 'mecanum_controller.yaml', PARAMS, on_change={
             'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
-            'joint_state_timeout': lambda v: setattr(self.watchdog.freshness, 'timeout', v)})
+            'joint_state_timeout': lambda v: self.watchdog.set_timeout(v)})
         self.p = p
         robot = load_robot(p.robot)
         self.controller = MecanumController.from_robot_config(robot, p.period)
         self.wheels = JointSelector(robot.mecanum.wheel_joints, velocity_limits=robot.mecanum.wheel_rate_limit)
         self.reference = BaseReference(self, p.base_frame, p.reference_timeout, robot.base.velocity)
-        self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0}
+        self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0, 'commands_not_applied': 0}
+        self._last_wheels = None
         self._next_diag = 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pub_wheels = self.create_publisher(Float64MultiArray, 'wheel_controller/commands', COMMAND_QOS)
@@ -117,14 +126,23 @@ class MecanumControllerNode(Node):
         rates = self._wheel_rates_measured(msg)
         if rates is None or not self.watchdog.admit(msg.header.stamp):
             return
-        self.exchange.state_received(msg.header.stamp, rates)
+        self.exchange.state_received(msg.header.stamp, (rates, bool(len(msg.velocity))))
 
     # ------------------------------------------------------------------ cycle
-    def _cycle(self, stamp, wheel_rates):
-        """One period: the latest reference (braking when stale) → wheel rates and q̇_bf."""
+    def _cycle(self, stamp, measured):
+        """One period: the latest reference (braking when stale) → wheel rates and q̇_bf; ``measured``
+        is (the wheel rates of the joint state, whether it has velocities)."""
+        wheel_rates, has_rates = measured
         now = seconds(self.get_clock())
         if self.watchdog.resync(self.pub_wheels):
             self.controller.reset(self.controller.kinematics.twist_from_wheels(wheel_rates))
+        elif has_rates:
+            why = unapplied_command(wheel_rates, self._last_wheels, self.p.applied_rate_tolerance)
+            if why:
+                self.counters['commands_not_applied'] += 1
+                self.get_logger().warn(f'last wheel command: {why}; restarting from the measured wheel rates',
+                                       throttle_duration_sec=1.0)
+                self.controller.reset(self.controller.kinematics.twist_from_wheels(wheel_rates))
         reference = self.reference.current(now)
         if reference is not None:
             out = self.controller.step(reference)
@@ -139,6 +157,7 @@ class MecanumControllerNode(Node):
             wheels, twist = np.zeros(4), np.zeros(3)
         self.counters['cycles'] += 1
         self.pub_wheels.publish(float_array(wheels))
+        self._last_wheels = wheels
         feasible = twist_stamped(stamp, self.p.base_frame, twist)
         self.pub_feasible.publish(feasible)
         if self.p.diagnostics_period > 0 and now >= self._next_diag:

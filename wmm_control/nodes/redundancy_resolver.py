@@ -66,7 +66,7 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node)
+    declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, robot_period, run_node)
 from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 from wmm_control.resolvers.progress import GoalProgress
@@ -78,8 +78,8 @@ _SPECS = (
     Param('robot', 'Robot: steerable (A, Sorour) or mecanum (B, Xing), or A/B.', choices=_ROBOTS,
           read_only=True),
     Param('method', 'Redundancy resolution method.', choices=tuple(sorted(METHODS)), read_only=True),
-    Param('period', 'Control period [s]: the acceleration limits act per period.', lo=1e-3, hi=1.0,
-          read_only=True),
+    Param('period', 'Control period [s]: the acceleration limits act per period; default: the robot YAML\'s '
+          'period.', lo=1e-3, hi=1.0, read_only=True, default_from=robot_period),
     Param('lambda_p', 'Gain λ_p of the pose controller, eq (12) [1/s].', lo=1e-3, hi=100.0, read_only=True),
     Param('rho', 'Damping ρ of the pseudo-inverse [-].', lo=1e-9, hi=10.0, read_only=True),
     Param('r_fm', 'Fine manipulation range r_fm [m] (task_sharing).', lo=1e-4, hi=100.0, read_only=True),
@@ -187,6 +187,7 @@ class RedundancyResolverNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('redundancy_resolver', **kwargs)
+        guard_clock(self)
         p = self.p = declare_parameters(self, 'redundancy_resolver.yaml', PARAMS, on_change={
             'state_timeout': self._set_state_timeout,
             'goal_tolerance': lambda v: setattr(self.progress, 'tolerance', self._tolerance(v)),
@@ -244,6 +245,7 @@ class RedundancyResolverNode(Node):
     def _set_state_timeout(self, timeout):
         for fresh in self.fresh.values():
             fresh.timeout = timeout
+        self.watchdog.set_timeout(timeout)
 
     # ------------------------------------------------------------------ time
     def _now(self):

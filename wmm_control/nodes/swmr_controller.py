@@ -26,8 +26,14 @@ period) and the steer angles are held. References beyond ``base_velocity_limit``
 non-finite ones, or ones in another frame, are rejected. When joint states stop for
 ``joint_state_timeout`` (steady clock, so a paused sim clock cannot hide it), zero steer and
 drive rates are published, and the controller re-reads the measured steer angles when they
-come back. A joint state without every steer joint or naming one twice, with positions and
-names of different lengths, non-finite values or steer rates beyond ten times the limit, is
+come back. A joint state also reports the steer and drive rates applied over its period: when
+they differ from the last command by more than ``applied_rate_tolerance``, that command was not
+applied as sent (lost or late, superseded by the next one when queued joint states are answered
+back to back, or zeroed by the simulator's command timeout), and the controller restarts from
+the measured angles, rates and twist (logged, counted): the rates the base receives then change
+by at most one period of acceleration, not by as many as were answered meanwhile. A joint
+state without every steer joint or naming one twice, with positions and names of different
+lengths, non-finite values or steer rates beyond ten times the limit, is
 rejected with a throttled log and runs no cycle. Nor does one whose stamp is not after the
 last cycle's or jumps more than the timeout ahead (:class:`~wmm_control.nodes.common.StampGate`:
 a second publisher, a replayed message); a joint-state period that differs from ``period`` is
@@ -49,7 +55,8 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, run_node, seconds)
+    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, run_node,
+    robot_period, seconds, unapplied_command)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['SwmrControllerNode', 'main']
@@ -57,7 +64,8 @@ __all__ = ['SwmrControllerNode', 'main']
 PARAMS = (
     Param('robot', 'Robot with a steerable base: steerable (A, Sorour). Geometry, joints and limits come from '
           'its YAML.', choices=('steerable', 'A', 'a'), read_only=True),
-    Param('period', 'Control period t_s [s].', lo=1e-3, hi=1.0, read_only=True),
+    Param('period', 'Control period t_s [s]; default: the robot YAML\'s period.', lo=1e-3, hi=1.0, read_only=True,
+          default_from=robot_period),
     Param('kp', 'Gain K_p of the twist controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
     Param('icr_gain', 'Gain λ of the ICR P-controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
     Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
@@ -67,6 +75,9 @@ PARAMS = (
           lo=0.0, hi=1.0, read_only=True),
     Param('joint_state_timeout', 'Joint-state age [s] (steady clock) after which zero rates are commanded.',
           lo=1e-3, hi=60.0),
+    Param('applied_rate_tolerance', 'Largest difference [rad/s] between the steer and drive rates of a joint state '
+          'and the last command under which that command counts as applied; beyond it the controller restarts '
+          'from the measured state. 0: never.', lo=0.0, hi=100.0, read_only=True),
     Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
 )
 
@@ -76,9 +87,10 @@ class SwmrControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('swmr_controller', **kwargs)
+        guard_clock(self)
         p = declare_parameters(self, 'swmr_controller.yaml', PARAMS, on_change={
             'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
-            'joint_state_timeout': lambda v: setattr(self.watchdog.freshness, 'timeout', v)})
+            'joint_state_timeout': lambda v: self.watchdog.set_timeout(v)})
         self.p = p
         robot = load_robot(p.robot)
         self.steer_joints = robot.steerable.steer_joints
@@ -87,6 +99,9 @@ class SwmrControllerNode(Node):
         self.controller = SwmrController(geometry, params)
         self.reference = BaseReference(self, p.base_frame, p.reference_timeout, params.base_velocity_limit)
         self.steer = JointSelector(self.steer_joints, velocity_limits=params.steer_rate_limit)
+        self.drive = JointSelector(robot.steerable.drive_joints, velocity_limits=params.drive_rate_limit)
+        self.geometry = geometry
+        self.not_applied = 0
         self._next_diag = 0.0
         self._last = None
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -112,21 +127,28 @@ class SwmrControllerNode(Node):
             self.exchange.reference_received(msg.header.stamp)
 
     def _on_joint_states(self, msg):
-        beta, _, reason = self.steer.read(msg)
+        beta, beta_dot, reason = self.steer.read(msg)
         if beta is None:
             self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped', throttle_duration_sec=1.0)
             return
+        # The rates applied over the period the message closes (none when it has no velocities or
+        # no drive joints): the check that the last command was applied.
+        phi_dot = self.drive.read(msg)[1] if len(msg.velocity) else None
+        rates = None if phi_dot is None else (beta_dot, phi_dot)
         if self.watchdog.admit(msg.header.stamp):
-            self.exchange.state_received(msg.header.stamp, beta)
+            self.exchange.state_received(msg.header.stamp, (beta, rates))
 
     # ------------------------------------------------------------------ cycle
-    def _cycle(self, stamp, beta):
-        """The cycle of the joint state stamped ``stamp`` ((sec, nanosec)), measured steer angles ``beta``,
-        with the latest reference (braking when it is stale)."""
+    def _cycle(self, stamp, measured):
+        """The cycle of the joint state stamped ``stamp`` ((sec, nanosec)), measured steer angles and
+        ``(steer rates, drive rates)`` or None, with the latest reference (braking when it is stale)."""
         sec, nanosec = stamp
+        beta, rates = measured
         now = seconds(self.get_clock())
         if self.watchdog.resync(self.pub_steer, self.pub_drive):
             self.controller.reset(beta)
+        elif rates is not None and self._last is not None:
+            self._restart_unless_applied(beta, *rates)
         reference = self.reference.current(now)
         fresh = reference is not None
         if not fresh:
@@ -148,6 +170,21 @@ class SwmrControllerNode(Node):
             self._next_diag = now + self.p.diagnostics_period
             self.pub_diag.publish(self._diagnostics(twist.header.stamp, out))
 
+    def _restart_unless_applied(self, beta, beta_dot, phi_dot):
+        """Restart from the measured state when the rates applied are not the last command's."""
+        last = self._last
+        why = unapplied_command(np.concatenate((beta_dot, phi_dot)),
+                                np.concatenate((last.beta_dot_ref, last.phi_dot_ref)), self.p.applied_rate_tolerance)
+        if not why:
+            return
+        self.not_applied += 1
+        self.get_logger().warn(f'last steer/drive command: {why}; restarting from the measured state',
+                               throttle_duration_sec=1.0)
+        limit = self.controller.params.steer_rate_limit
+        beta_dot = np.clip(beta_dot, -limit, limit)
+        twist = self.geometry.fit_twist(beta.tolist(), beta_dot.tolist(), phi_dot.tolist())
+        self.controller.reset(beta, beta_dot, twist)
+
     def _zero_rates(self):
         n = len(self.steer_joints)
         self.pub_steer.publish(float_array(np.zeros(n)))
@@ -162,7 +199,7 @@ class SwmrControllerNode(Node):
                   'solve_time_us': out.solve_time_s * 1e6,
                   'beta_ref': out.beta_ref, 'feasible_twist': out.twist_executed,
                   'reference': self.reference.value, 'references_rejected': self.reference.rejected,
-                  'joint_states_skipped': self.watchdog.skipped,
+                  'joint_states_skipped': self.watchdog.skipped, 'commands_not_applied': self.not_applied,
                   'measured_period_s': self.watchdog.stamps.measured_period}
         return diagnostic_array(stamp, [diagnostic_status('swmr_controller', 'steerable base', level,
                                                           out.status, values)])
