@@ -54,7 +54,8 @@ def test_tertiary_projector_is_the_printed_one(rows):
         q_a[:3] = 0.0
         resolver.manipulability_acceleration = lambda qd: q_a
         p_n = np.eye(10) - np.linalg.pinv(jac) @ jac
-        p_a = (np.eye(10) - np.linalg.pinv(np.diag((~active).astype(float)) @ p_n)) @ p_n
+        # rcond: the exact zeros of (I − S) P_N come out at round-off, which pinv must not invert.
+        p_a = (np.eye(10) - np.linalg.pinv(np.diag((~active).astype(float)) @ p_n, rcond=1e-10)) @ p_n
         task = {'jac': jac, 'qd': np.zeros(10), 'lower': -1e9 * np.ones(10), 'upper': 1e9 * np.ones(10)}
         q_t, beta = resolver._tertiary(task, np.zeros(10), active, np.linalg.pinv(jac[:, active]))
         assert beta == 1.0
