@@ -77,8 +77,9 @@ def test_setpoint_trajectory_is_smooth_and_within_its_limits():
 
 
 def circle_run(method, radius, seconds, **params):
-    """Xing §4.2–4.3: x_d(t) = x0 + [−R(cos(πt/20) − 1), −R sin(πt/20), 0] on robot B."""
-    resolver = make_resolver(method, 'mecanum', **params)
+    """Xing §4.2–4.3: x_d(t) = x0 + [−R(cos(πt/20) − 1), −R sin(πt/20), 0] on robot B, the
+    position tracked (r = 3)."""
+    resolver = make_resolver(method, 'mecanum', **{'rows': 'position', **params})
     with SimWorld('mecanum') as world:
         loop = ClosedLoop(world, resolver)
         start = loop.state()

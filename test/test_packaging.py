@@ -6,6 +6,7 @@ script under ``lib/wmm_control/``.
 """
 
 import configparser
+import math
 import os
 import signal
 import subprocess
@@ -117,15 +118,17 @@ def _stop(proc):
 
 ROBOT_A = {'wmm_sim': [], 'swmr_controller': [], 'redundancy_resolver': []}
 ROBOT_B = {'wmm_sim': ['--ros-args', '-p', 'robot:=mecanum'], 'mecanum_controller': [],
-           'redundancy_resolver': ['--ros-args', '-p', 'robot:=mecanum', '-p', 'method:=amp']}
+           'redundancy_resolver': ['--ros-args', '-p', 'robot:=mecanum']}      # amp: robot B's default
 
 
-@pytest.mark.parametrize('system, goal', [(ROBOT_A, (2.0, 1.0, 1.0)), (ROBOT_B, (0.75, 0.1, 0.45))],
+# Goals: position, orientation quaternion (x, y, z, w); robot B's tool keeps pointing along world x.
+@pytest.mark.parametrize('system, goal, quat', [(ROBOT_A, (2.0, 1.0, 1.0), (0.0, 0.0, 0.0, 1.0)),
+                                                (ROBOT_B, (0.75, 0.1, 0.45), (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5)))],
                          ids=['robot A, task sharing', 'robot B, amp'])
-def test_three_installed_executables_take_the_end_effector_to_a_published_goal(install_tree, system, goal):
+def test_three_installed_executables_take_the_end_effector_to_a_published_goal(install_tree, system, goal, quat):
     """The simulator, the base controller and redundancy_resolver, each its own process started
     as ``ros2 run`` does, on a private domain: a goal published from this process is reached
-    (robot A with no arguments at all; robot B with the robot and method parameters)."""
+    (robot A with no arguments at all; robot B with the robot parameter: its default method, amp)."""
     import numpy as np
     import rclpy
     from geometry_msgs.msg import PoseStamped
@@ -142,13 +145,15 @@ def test_three_installed_executables_take_the_end_effector_to_a_published_goal(i
     executor.add_node(node)
     goal = np.array(goal)
     ee = []
-    node.create_subscription(PoseStamped, '/ee_pose', lambda m: ee.append(
-        np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z])), 10)
+    node.create_subscription(PoseStamped, '/ee_pose', lambda m: ee.append(np.array([
+        m.pose.position.x, m.pose.position.y, m.pose.position.z,
+        m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w])), 10)
     pub = node.create_publisher(PoseStamped, '/goal_pose', 10)
     msg = PoseStamped()
     msg.header.frame_id = 'world'
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in goal)
-    msg.pose.orientation.w = 1.0
+    o = msg.pose.orientation
+    o.x, o.y, o.z, o.w = quat
     reached = False
     try:
         end = time.monotonic() + 90.0
@@ -156,7 +161,8 @@ def test_three_installed_executables_take_the_end_effector_to_a_published_goal(i
             executor.spin_once(timeout_sec=0.05)
             if node.count_subscribers('/goal_pose') and int(time.monotonic() * 2) % 2 == 0:
                 pub.publish(msg)         # published again and again: the resolver may join late
-            reached = bool(ee) and np.linalg.norm(ee[-1] - goal) < 0.01
+            # within 1 cm, and 0.05 rad of the orientation (|<q, q_goal>| = cos(angle / 2))
+            reached = bool(ee) and np.linalg.norm(ee[-1][:3] - goal) < 0.01 and abs(ee[-1][3:] @ quat) > math.cos(0.025)
     finally:
         executor.remove_node(node)
         node.destroy_node()

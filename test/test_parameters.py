@@ -22,7 +22,7 @@ from ros_helpers import RosHarness, overrides
 from sim_bridge.node import SimNode
 from wmm_control.base import MecanumParams, SwmrParams
 from wmm_control.nodes import goal_sequencer, mecanum_controller, redundancy_resolver, swmr_controller
-from wmm_control.nodes.common import robot_period
+from wmm_control.nodes.common import robot_method, robot_period
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
@@ -338,7 +338,7 @@ def test_method_tuning_has_its_home_in_the_resolver_classes():
     keys = set(node_values['redundancy_resolver']['ros__parameters'])
     method_fields = {f.name for _, cls in METHODS.values() for f in dataclasses.fields(cls)}
     assert not keys & method_fields
-    declared = {s.name for s in redundancy_resolver.PARAMS if s.default_from not in (None, robot_period)}
+    declared = {s.name for s in redundancy_resolver.PARAMS if s.default_from not in (None, robot_period, robot_method)}
     assert declared == method_fields & {s.name for s in redundancy_resolver.PARAMS}
     assert {'lambda_p', 'kp', 'sigma_min', 'gamma1'} <= declared
 
@@ -367,11 +367,12 @@ def test_a_default_written_twice_is_refused(ros, monkeypatch):
 
 
 def test_goal_tolerance_stall_time_and_min_progress_ratio_set_at_run_time_judge_the_goal(ros):
-    """The reached/stalled judgement follows live changes; a position-only method (amp, r = 3)
-    judges the position alone: its orientation is free, never a reason to report a stall."""
+    """The reached/stalled judgement follows live changes; a position-only method (amp with
+    ``rows: position``, r = 3) judges the position alone: its orientation is free, never a reason
+    to report a stall."""
     from types import SimpleNamespace
     node = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-        robot='mecanum', method='amp')))
+        robot='mecanum', method='amp', rows='position')))
     caller = ros.add(Node('param_cli', context=ros.context))
     near = SimpleNamespace(position_error=0.004, orientation_error=0.5)   # 4 mm, orientation far off
     node.progress.update(near)
@@ -392,6 +393,7 @@ def test_goal_tolerance_stall_time_and_min_progress_ratio_set_at_run_time_judge_
     node.progress.update(SimpleNamespace(position_error=0.5 * 0.9875 ** 12, orientation_error=0.001))
     assert not node.progress.stalled                                      # 5 % is progress now
     full = ros.add(RedundancyResolverNode(context=ros.context, cli_args=['--ros-args', '-r', '__node:=full'],
-                                          parameter_overrides=overrides(robot='mecanum', method='amp', rows='full')))
+                                          parameter_overrides=overrides(robot='mecanum')))    # amp, rows full: the defaults
     full.progress.update(near)
     assert not full.progress.reached                                      # r = 6: 0.5 rad is not reached
+

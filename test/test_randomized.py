@@ -5,6 +5,8 @@ two goals per robot and method, and the two ways a run may end well: converged, 
 and reported.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -199,3 +201,20 @@ def test_the_cli_runs_the_goals_it_is_given(tmp_path, capsys):
     assert [(r['robot'], r['method'], r['goal']) for r in runs] == [('steerable', 'pinv', 1)]
     assert main(['--goals', '3', '--indices', '3']) == 2
     assert '--indices' in capsys.readouterr().err
+
+
+def test_no_stall_while_the_set_point_trajectory_still_runs():
+    """An acceleration-level method's goal becomes a trajectory: while it runs the end effector
+    may lag and draw away from the goal (robot A's amp did so for 2.5 s on a far goal); that is
+    no stall, until a whole stall_time after the trajectory ends."""
+    def run(time_left):
+        progress = GoalProgress((0.01, 0.02), stall_time=1.0, period=0.1)
+        stalled = []
+        for k in range(40):                     # 4 s drawing away from the goal, no progress
+            diag = dataclasses.replace(_diag(1.0 + 0.001 * k, 0.0), reference_time_left=max(time_left - 0.1 * k, 0.0))
+            progress.update(diag)
+            stalled.append(progress.stalled)
+        return stalled
+    assert run(0.0).index(True) == 10           # no trajectory: stalled after one stall_time
+    moving = run(2.0)                           # the trajectory's last cycle is the 20th (1.9 s)
+    assert not any(moving[:30]) and all(moving[30:])

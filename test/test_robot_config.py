@@ -75,6 +75,7 @@ def _write_variant(tmp_path, mutate):
     (lambda r: r['steerable'].__setitem__('hips', [[0.2, 0.1]] * 3), 'hips'),
     (lambda r: r.__setitem__('urdf', 'nowhere.urdf'), 'file not found'),
     (lambda r: r['arm'].__setitem__('dexterous', [9.0] * 7), 'dexterous: outside the position limits'),
+    (lambda r: r.pop('method'), "key 'method' must be a name"),
 ])
 def test_invalid_descriptions_raise_config_error_naming_the_key(tmp_path, mutate, message):
     with pytest.raises(ConfigError, match=message):

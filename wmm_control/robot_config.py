@@ -56,6 +56,13 @@ def _scalar(raw, key, where, positive=True):
     return val
 
 
+def _word(raw, key, where):
+    val = raw.get(key)
+    if not isinstance(val, str) or not val:
+        raise ConfigError(f'{where}: key {key!r} must be a name, got {val!r}')
+    return val
+
+
 def _section(raw, key, where):
     sec = raw.get(key) if isinstance(raw, dict) else None
     if not isinstance(sec, dict):
@@ -132,7 +139,8 @@ class MecanumConfig:
 
 @dataclass(frozen=True)
 class RobotConfig:
-    """One robot: its URDF, frames, control period, arm, base limits, start state and base geometry."""
+    """One robot: its URDF, frames, control period, default redundancy resolution method, arm,
+    base limits, start state and base geometry."""
 
     name: str
     description: str
@@ -143,6 +151,7 @@ class RobotConfig:
     ee_frame: str
     ground_z: float
     period: float
+    method: str
     arm: ArmConfig
     base: BaseLimits
     start: StartState
@@ -301,6 +310,7 @@ def load_robot(robot='steerable'):
         ee_frame=str(raw.get('ee_frame', 'ee_link')),
         ground_z=float(raw.get('ground_z', 0.0)),
         period=_scalar(raw, 'period', where),
+        method=_word(raw, 'method', where),
         arm=_parse_arm(raw, where),
         base=BaseLimits(
             velocity=_positive(_vec(base, 'velocity', 3, f'{where}.base'), 'velocity', f'{where}.base'),

@@ -119,7 +119,8 @@ class Recorder(Node):
                 accel_scale=f['accel_scale'], null_scale=f['null_scale'],
                 compensation_scale=f['compensation_scale'],
                 limited=tuple(int(v) for v in _vector(d.get('limited', '[]'))), sigma_min=f['sigma_min'],
-                compensated=bool(f['compensated']), cycle_time_s=f['cycle_time_us'] * 1e-6)
+                compensated=bool(f['compensated']), cycle_time_s=f['cycle_time_us'] * 1e-6,
+                reference_time_left=f['reference_time_left_s'])
             self.log.append(row['t'], self.scenario.goal_index(row['t']), row['ee'][0], row['ee'][1], row['base'],
                             row['q_arm'], _vector(d['arm_command']), _vector(d['base_reference']),
                             row.get('feasible'), diag)

@@ -11,7 +11,9 @@ appear in the node YAML.
 import array
 import math
 import os
+import signal
 import statistics
+import threading
 from collections import deque
 from pathlib import Path
 from dataclasses import dataclass
@@ -25,7 +27,9 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
 from rclpy.time_source import TimeSource
 from std_msgs.msg import Float64MultiArray
 
@@ -33,8 +37,10 @@ from wmm_control.errors import ConfigError, WmmError
 from wmm_control.paths import config_path
 from wmm_control.robot_config import load_robot
 
+RCLError = _rclpy.RCLError
+
 __all__ = [
-    'Param', 'declare_parameters', 'load_defaults', 'robot_period', 'parameter_error', 'float_array', 'parse_command',
+    'Param', 'declare_parameters', 'load_defaults', 'robot_method', 'robot_period', 'parameter_error', 'float_array', 'parse_command',
     'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node', 'guard_clock',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
     'BaseReference', 'JointStateWatchdog', 'StampGate', 'unapplied_command', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
@@ -94,6 +100,12 @@ def robot_period(values):
     """The default of a node's ``period``: the control period of its ``robot`` (the robot YAML's
     ``period``), so that the simulator and every controller agree unless one is told otherwise."""
     return load_robot(values.robot).period
+
+
+def robot_method(values):
+    """The default of ``redundancy_resolver``'s ``method``: its ``robot``'s (the robot YAML's
+    ``method``)."""
+    return load_robot(values.robot).method
 
 
 def load_defaults(yaml_name, node_name):
@@ -392,30 +404,43 @@ FASTDDS_TRANSPORTS = 'UDPv4'
 
 
 def run_node(node_factory, args=None, executor_factory=default_executor):
-    """Standard main(): init, build the node, spin until Ctrl-C or shutdown, clean up.
+    """Standard main(): init, build the node, spin until Ctrl-C, SIGTERM or shutdown, clean up.
 
-    A configuration error at start-up is logged and gives exit code 2. The process uses Fast
+    A configuration error at start-up (the command line's included) is logged and gives exit
+    code 2. Ctrl-C and SIGTERM end the spin loop between callbacks: rclpy's own handlers shut
+    the context down at once, in the middle of a callback, whose next publish then fails
+    ("publisher's context is invalid", a traceback on the way out). The process uses Fast
     DDS's UDP transport alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS``
     is set.
     """
     os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', FASTDDS_TRANSPORTS)
-    rclpy.init(args=args)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as exc:        # the command line: a --params-file that cannot be read, a bad rule
+        rclpy.logging.get_logger('wmm_control').fatal(f'cannot start: {exc}')
+        return 2
+    stop = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():     # where Python delivers signals
+        previous = {sig: signal.signal(sig, lambda signum, _frame: stop.append(signum))
+                    for sig in (signal.SIGINT, signal.SIGTERM)}
     node = None
     try:
         node = node_factory()
         executor = executor_factory()
         executor.add_node(node)
-        # spin_once in a loop rather than spin(): the events executor's spin() does not
-        # return on SIGINT, while this loop sees the shutdown that rclpy's handler triggers.
-        while rclpy.ok():
+        # spin_once in a loop rather than spin(): it returns to check the stop request.
+        while rclpy.ok() and not stop:
             executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except ExternalShutdownException:
         pass
     except WmmError as exc:
         logger = node.get_logger() if node is not None else rclpy.logging.get_logger('wmm_control')
         logger.fatal(f'{type(exc).__name__}: {exc}')
         return 2
     finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

@@ -66,7 +66,8 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, robot_period, run_node)
+    declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, robot_method, robot_period,
+    run_node)
 from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 from wmm_control.resolvers.progress import GoalProgress
@@ -77,7 +78,8 @@ _ROBOTS = ('steerable', 'mecanum', 'A', 'B', 'a', 'b')
 _SPECS = (
     Param('robot', 'Robot: steerable (A, Sorour) or mecanum (B, Xing), or A/B.', choices=_ROBOTS,
           read_only=True),
-    Param('method', 'Redundancy resolution method.', choices=tuple(sorted(METHODS)), read_only=True),
+    Param('method', 'Redundancy resolution method; default: the robot YAML\'s method.', choices=tuple(sorted(METHODS)),
+          read_only=True, default_from=robot_method),
     Param('period', 'Control period [s]: the acceleration limits act per period; default: the robot YAML\'s '
           'period.', lo=1e-3, hi=1.0, read_only=True, default_from=robot_period),
     Param('lambda_p', 'Gain λ_p of the pose controller, eq (12) [1/s].', lo=1e-3, hi=100.0, read_only=True),
@@ -515,6 +517,7 @@ class RedundancyResolverNode(Node):
                 'accel_scale': d.accel_scale, 'null_scale': d.null_scale,
                 'compensation_scale': d.compensation_scale, 'compensated': d.compensated,
                 'limited': list(d.limited), 'sigma_min': d.sigma_min, 'cycle_time_us': d.cycle_time_s * 1e6,
+                'reference_time_left_s': d.reference_time_left,
                 'goal_reached': reached, 'goal_stalled': stalled,
                 'arm_command': self._last.arm_velocity, 'base_reference': self._last.base_twist})
             if stalled:

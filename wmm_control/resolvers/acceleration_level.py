@@ -50,7 +50,7 @@ class AccelerationParams:
 
     Attributes:
         dt: control period T [s].
-        rows: ``'position'`` (r = 3, §4.2–4.3) or ``'full'`` (r = 6, §4.4).
+        rows: ``'full'`` (r = 6, §4.4: a goal is a pose) or ``'position'`` (r = 3, §4.2–4.3).
         kp, kd: PD gains of eq (23) on the position rows [1/s², 1/s].
         kp_rot, kd_rot: the same on the orientation rows (r = 6).
         gamma1, gamma2: gains of the manipulability objective, eqs (12)–(13).
@@ -62,7 +62,7 @@ class AccelerationParams:
     """
 
     dt: float = 0.025
-    rows: str = 'position'
+    rows: str = 'full'
     kp: float = 20.0
     kd: float = 10.0
     kp_rot: float = 5.0
@@ -203,10 +203,11 @@ class AccelerationResolver(Resolver):
         base[np.abs(base) < 1e-12] = 0.0
         qd[:3] = (c * base[0] - s * base[1], s * base[0] + c * base[1], base[2])
         self._qd, self._last_base = qd, base
+        time_left = max(self._setpoint[1].duration - self._setpoint[2], 0.0) if self._setpoint else 0.0
         diag = ResolverDiagnostics(
             method=self.name, psi=fields.pop('psi', 1.0), position_error=task['position_error'],
             orientation_error=task['orientation_error'], compensation_scale=1.0, sigma_min=task['sigma'],
-            compensated=False, cycle_time_s=time.perf_counter() - t0, **fields)
+            compensated=False, cycle_time_s=time.perf_counter() - t0, reference_time_left=time_left, **fields)
         return ResolverCommand(arm_velocity=qd[3:].copy(), base_twist=base.copy(), diagnostics=diag)
 
     def _tertiary(self, task, qdd, active, active_pinv):

@@ -35,11 +35,12 @@ class AmpParams(AccelerationParams):
             r = 3; §4.4 uses 0.19 for r = 6).
         singularity_avoidance: activate the base near a singularity (§3.2); off reproduces
             the "AMP without singularity avoidance" run of §4.2.
-        sigma_rows: rows of J_m for σ_m: ``'task'`` (the task's rows: all six for r = 6) or
-            ``'position'`` (always the three position rows). On robot B at its start state
-            σ_m over all six rows is 0.162, below §4.4's 0.19, so with ``'task'`` the base is
-            active from t = 0 in the full-pose run; over the position rows it is 0.245, and the
-            ``xing_pose`` scenario uses those (README, "Full pose").
+        sigma_rows: rows of J_m for σ_m: ``'position'`` (always the three position rows, the
+            default) or ``'task'`` (the task's rows: all six for r = 6). On robot B at its start
+            state σ_m over all six rows is 0.162, below §4.4's 0.19 and near 0.15, so with
+            ``'task'`` the base is active from t = 0 in the full-pose run and moves for a goal
+            the arm alone reaches; over the position rows it is 0.245 (README, "Full pose").
+            For r = 3 both are the position rows.
         sigma_lookahead: anticipation τ [s]: the singularity test uses σ_m + τ·min(σ̇_m, 0), σ̇_m
             from the last period, so the base is switched on τ before σ_m would reach σ_m,min at
             its current rate (§3.2 switches the base on when the trajectory's current segment
@@ -52,7 +53,7 @@ class AmpParams(AccelerationParams):
 
     sigma_min: float = 0.15
     singularity_avoidance: bool = True
-    sigma_rows: str = 'task'
+    sigma_rows: str = 'position'
     sigma_lookahead: float = 0.5
 
     _allow_zero = AccelerationParams._allow_zero + ('sigma_lookahead',)

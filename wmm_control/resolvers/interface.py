@@ -124,6 +124,9 @@ class ResolverDiagnostics:
         sigma_min: smallest singular value of the arm's analytic Jacobian in the base frame.
         compensated: True once the eq (14) term is in the arm command.
         cycle_time_s: wall time of the call [s].
+        reference_time_left: time [s] the set-point trajectory a goal became still has to run
+            (the acceleration-level methods); 0 otherwise. Until it ends the goal is not yet
+            the target, so it cannot stall (:mod:`~wmm_control.resolvers.progress`).
     """
 
     method: str
@@ -139,6 +142,7 @@ class ResolverDiagnostics:
     sigma_min: float
     compensated: bool
     cycle_time_s: float
+    reference_time_left: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,11 @@ made no progress over the last ``stall_time``. Progress, over that window, is
    a closer point and away again improves its best error, not its held one: an oscillation
    whose swings bring it no closer makes no progress.
 
+**While the target still moves** (an acceleration-level method's set-point trajectory, which
+the goal becomes, has not ended: ``reference_time_left`` of the diagnostics) and for a
+``stall_time`` after, there is no stall: until then the end effector follows the trajectory,
+not the goal, and a slow start or a tracking lag may take it away from the goal for a while.
+
 **While a motion gathers pace** (from the goal's start until the first window whose gain is
 not larger than the one before), a best error falling by ``min_progress`` and by more than
 in the window before also counts: a trajectory that starts with zero velocity and
@@ -84,6 +89,7 @@ class GoalProgress:
         self._block = [0.0, 0.0]               # largest errors of the stride under way
         self._blocks = deque()                 # ...and of the strides before it, a window's worth
         self._last_reached = None
+        self._last_moving = None               # the last cycle whose target still moved
         self._gathering_pace = True
         self._cycles = deque()                 # the cycles sampled, every stride...
         self._samples = deque()                # ...and (best, held) errors then
@@ -98,6 +104,8 @@ class GoalProgress:
         self.reached = pos <= self.tolerance[0] and ori <= self.tolerance[1]
         if self.reached:
             self._last_reached = self.cycles
+        if getattr(diagnostics, 'reference_time_left', 0.0) > 0.0:
+            self._last_moving = self.cycles
         best = self._best
         if pos < best[0]:
             best[0] = pos
@@ -145,7 +153,7 @@ class GoalProgress:
         window = self._window
         if self.cycles <= window:
             return True                 # not a whole window yet
-        if self._last_reached is not None and self.cycles - self._last_reached <= window:
+        if any(last is not None and self.cycles - last <= window for last in (self._last_reached, self._last_moving)):
             return True
         best0, held0 = self._at(self.cycles - window)
         if self._gained(best0, self._best) and (
