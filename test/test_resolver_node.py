@@ -212,7 +212,10 @@ def test_the_goal_is_reached_with_wheel_contact_physics():
         ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep', base_mode='physics')))
         goal = np.array([1.8, 0.6, 1.0])
         driver.goal(goal)
-        run_until(ros, driver, 16.0)
+        # Contact physics makes the run sensitive to round-off (the base controller restarts when
+        # the measured rates stray from the command): two ways of normalising the measured
+        # quaternion, 1e-16 apart, reach the goal before 16 s and between 16 and 30 s.
+        run_until(ros, driver, 30.0)
         error = np.linalg.norm(driver.ee_position() - goal)
         assert error < 0.01, f'{error * 1e3:.1f} mm from the goal'
     finally:

@@ -57,7 +57,7 @@ from wmm_control.robot_config import load_robot
 
 __all__ = ['KINDS', 'RIGS', 'run_matrix', 'format_table', 'main']
 
-PERIOD = 0.025
+PERIOD = load_robot('steerable').period   # [s] the robots' control period (robot YAML; both 0.025 s)
 T0 = 100.0                # [s] stamp of the first nominal cycle
 WARMUP = 5
 REPEATS = 4

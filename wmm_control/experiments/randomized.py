@@ -67,9 +67,9 @@ METHOD_RUNS = {
 #: base's pace.
 ROBOT_RUNS = {'mecanum': {'pinv': {'arm_takeover': True}, 'task_sharing': {'arm_takeover': True}}}
 #: Longest run per robot [s]: robot B's base accelerates at 0.025 m/s² (Xing Table 1). Long
-#: enough for the slowest approach that still makes progress (amp, σ_m over the position rows:
-#: 61 s on robot A, 128 s on robot B).
-DURATION_S = {'steerable': 90.0, 'mecanum': 180.0}
+#: enough for the slowest approach that still makes progress (robot A: amp, 64 s; robot B:
+#: task_sharing, 202 s).
+DURATION_S = {'steerable': 90.0, 'mecanum': 240.0}
 #: Drawn arm configurations stay this far inside the position limits [rad].
 ARM_MARGIN = 0.1
 #: Clearance of a drawn configuration from the robot's body and the floor [m].
@@ -228,7 +228,7 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
     duration = DURATION_S.get(cfg.name, max(DURATION_S.values())) if duration is None else duration
     run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(cfg.name, {}).get(method, {}), **(params or {})}
     log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration)
-    dt = float(np.median(np.diff(log.t))) if len(log) > 1 else 0.025
+    dt = float(np.median(np.diff(log.t))) if len(log) > 1 else cfg.period
     target = Goal(0.0, duration, goal.pose).target
     pos_err = np.linalg.norm(log.ee_position - target.position, axis=1)
     ori_err = np.array([_angle(target.rotation @ r.T) for r in log.ee_rotation])

@@ -67,7 +67,7 @@ from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
     declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, robot_method, robot_period,
-    run_node)
+    run_node, stamp_key, twist_stamped)
 from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 from wmm_control.resolvers.progress import GoalProgress
@@ -174,14 +174,15 @@ def _twist_values(twist):
                      twist.angular.z])
 
 
-def _norm(values):
-    """Euclidean norm that does not overflow for entries near the largest double."""
-    scale = float(np.max(np.abs(values)))
-    return scale * float(np.linalg.norm(values / scale)) if scale > 0 else 0.0
-
-
-def _stamp_key(stamp):
-    return (stamp.sec, stamp.nanosec)
+def _unit_quaternion(quat, topic, logger):
+    """``quat`` (x, y, z, w, finite) normalised, or None when it is zero; a norm off 1 is logged.
+    The norm does not overflow for entries near the largest double (``np.hypot``)."""
+    norm = float(np.hypot.reduce(quat))
+    if norm < 1e-6:
+        return None
+    if abs(norm - 1.0) > 1e-3:
+        logger.warn(f'{topic} quaternion has norm {norm:.6g}: normalised', throttle_duration_sec=1.0)
+    return quat / norm
 
 
 class RedundancyResolverNode(Node):
@@ -203,6 +204,8 @@ class RedundancyResolverNode(Node):
         self.arm = JointSelector(arm.joints, velocity_limits=arm.velocity,
                                  position_limits=(arm.position_lower, arm.position_upper))
         self.workspace = Workspace(self.model)
+        # /odom and /base/feasible_twist beyond this are glitches
+        self._plausible_twist = JointSelector.PLAUSIBLE_FACTOR * self.model.config.base.velocity
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.fresh = {k: Freshness(p.state_timeout) for k in ('odom', 'ee_pose', 'reference')}
         self._tracking = False        # the target is a trajectory point of /ee_reference
@@ -275,14 +278,9 @@ class RedundancyResolverNode(Node):
         impossible = self._impossible(values[:3])
         if impossible:
             return self._reject_goal(f'position {values[:3].tolist()}: {impossible}')
-        quat = values[3:]
-        norm = _norm(quat)
-        if norm < 1e-6:
+        quat = _unit_quaternion(values[3:], '/goal_pose', self.get_logger())
+        if quat is None:
             return self._reject_goal('zero quaternion')
-        if abs(norm - 1.0) > 1e-3:
-            self.get_logger().warn(f'/goal_pose quaternion has norm {norm:.6g}: normalised',
-                                   throttle_duration_sec=1.0)
-        quat = quat / norm
         key = tuple(np.round(np.concatenate((values[:3], quat)), 9))
         if key == self._goal_key:
             return None      # the same goal again (a sequencer re-publishing it)
@@ -316,10 +314,10 @@ class RedundancyResolverNode(Node):
         impossible = self._impossible(pose[:3])
         if impossible:
             return self._reject_goal(f'position {pose[:3].tolist()}: {impossible}', REFERENCE)
-        norm = float(np.linalg.norm(pose[3:]))
-        if norm < 1e-6:
+        quat = _unit_quaternion(pose[3:], '/' + REFERENCE, self.get_logger())
+        if quat is None:
             return self._reject_goal('zero quaternion', REFERENCE)
-        x, y, z, w = pose[3:] / norm
+        x, y, z, w = quat
         if not self._tracking:
             self.get_logger().info('tracking /ee_reference')
             self.progress.start()
@@ -347,18 +345,15 @@ class RedundancyResolverNode(Node):
             logger.warn(f'rejected /odom at ({p.x:.6g}, {p.y:.6g}): beyond max_goal_distance '
                         f'{self.p.max_goal_distance} m from the origin', throttle_duration_sec=1.0)
             return
-        limit = 10.0 * self.model.config.base.velocity
-        if np.any(np.abs(twist) > limit):
-            logger.warn(f'rejected /odom with twist {twist.tolist()} beyond ten times the base velocity limits',
-                        throttle_duration_sec=1.0)
+        if np.any(np.abs(twist) > self._plausible_twist):
+            logger.warn(f'rejected /odom with twist {twist.tolist()} beyond {JointSelector.PLAUSIBLE_FACTOR:g} times '
+                        'the base velocity limits', throttle_duration_sec=1.0)
             return
-        norm = _norm(quat)
-        if norm < 1e-6:
+        quat = _unit_quaternion(quat, '/odom', logger)
+        if quat is None:
             logger.warn('rejected /odom with a zero quaternion', throttle_duration_sec=1.0)
             return
-        if abs(norm - 1.0) > 1e-3:
-            logger.warn(f'/odom quaternion has norm {norm:.6g}: normalised', throttle_duration_sec=1.0)
-        x, y, z, w = quat / norm
+        x, y, z, w = quat
         yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
         self._odom = (np.array([p.x, p.y, yaw]), twist)
         self.fresh['odom'].mark(self._now())
@@ -369,18 +364,20 @@ class RedundancyResolverNode(Node):
             return
         p, q = msg.pose.position, msg.pose.orientation
         values = np.array([p.x, p.y, p.z, q.x, q.y, q.z, q.w])
-        if not np.all(np.isfinite(values)) or np.linalg.norm(values[3:]) < 1e-6:
+        quat = _unit_quaternion(values[3:], '/ee_pose', self.get_logger()) if np.all(np.isfinite(values)) else None
+        if quat is None:
             self.get_logger().warn('rejected /ee_pose with non-finite values or a zero quaternion',
                                    throttle_duration_sec=1.0)
             return
-        quat = pin.Quaternion(q.w, q.x, q.y, q.z).normalized()
-        self._ee = (values[:3], quat.toRotationMatrix())
+        x, y, z, w = quat
+        self._ee = (values[:3], pin.Quaternion(w, x, y, z).toRotationMatrix())
         self.fresh['ee_pose'].mark(self._now())
 
     def _arm_state(self, msg):
         q, dq, reason = self.arm.read(msg)
         if q is None:
-            self.get_logger().warn(f'rejected /joint_states {reason}: zero commands', throttle_duration_sec=1.0)
+            self.get_logger().warn(f'rejected /joint_states {reason}: no cycle (the watchdog stops the robot '
+                                   'when no valid one comes within state_timeout)', throttle_duration_sec=1.0)
             return None
         return q, dq
 
@@ -426,19 +423,20 @@ class RedundancyResolverNode(Node):
         if not self.resolver.uses_compensation:
             self._publish_arm(command, stamp)
             return
-        self._pending = (_stamp_key(stamp), command, stamp)
+        self._pending = (stamp_key(stamp), command, stamp)
         if self._wait is None:
             self._finish(None)
         else:
             self._wait.reset()
 
     def _on_feasible(self, msg):
-        if self._pending is None or _stamp_key(msg.header.stamp) != self._pending[0]:
+        if self._pending is None or stamp_key(msg.header.stamp) != self._pending[0]:
             return
         twist = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
-        if not np.all(np.isfinite(twist)) or np.any(np.abs(twist) > 10.0 * self.model.config.base.velocity):
-            self.get_logger().warn(f'rejected /base/feasible_twist {twist.tolist()}: non-finite or beyond ten '
-                                   'times the base velocity limits', throttle_duration_sec=1.0)
+        if not np.all(np.isfinite(twist)) or np.any(np.abs(twist) > self._plausible_twist):
+            self.get_logger().warn(f'rejected /base/feasible_twist {twist.tolist()}: non-finite or beyond '
+                                   f'{JointSelector.PLAUSIBLE_FACTOR:g} times the base velocity limits',
+                                   throttle_duration_sec=1.0)
             return
         self._finish(twist)
 
@@ -462,11 +460,7 @@ class RedundancyResolverNode(Node):
 
     # ------------------------------------------------------------------ outputs
     def _publish_base(self, stamp, twist):
-        msg = TwistStamped()
-        msg.header.stamp = stamp
-        msg.header.frame_id = self.p.base_frame
-        msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z = (float(v) for v in twist)
-        self.pub_base.publish(msg)
+        self.pub_base.publish(twist_stamped(stamp, self.p.base_frame, twist))
 
     def _publish_arm(self, command, stamp):
         """Publish the arm command of the cycle stamped ``stamp`` (and, when due, its diagnostics)."""
@@ -500,8 +494,9 @@ class RedundancyResolverNode(Node):
             self._stall_logged = True
 
     def _no_progress(self):
+        floor = self.progress.min_progress
         return (f'no progress in {self.p.stall_time} s (best error down by less than '
-                f'{100 * self.p.min_progress_ratio:g} %, 1 mm, 1 mrad)')
+                f'{100 * self.p.min_progress_ratio:g} %, {1e3 * floor[0]:g} mm, {1e3 * floor[1]:g} mrad)')
 
     def _diagnostics(self, stamp):
         """Status of the cycle stamped ``stamp`` (the joint state it answers)."""

@@ -43,7 +43,6 @@ steady clock: they keep working under ``use_sim_time``.
 """
 
 import numpy as np
-from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from rclpy.clock import Clock
@@ -56,7 +55,7 @@ from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
     StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, run_node,
-    robot_period, seconds, unapplied_command)
+    robot_period, seconds, twist_stamped, unapplied_command)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['SwmrControllerNode', 'main']
@@ -159,16 +158,12 @@ class SwmrControllerNode(Node):
                                     throttle_duration_sec=1.0)
         self.pub_steer.publish(float_array(out.beta_dot_ref))
         self.pub_drive.publish(float_array(out.phi_dot_ref))
-        twist = TwistStamped()
-        twist.header.stamp = Time(sec=sec, nanosec=nanosec)
-        twist.header.frame_id = self.p.base_frame
-        twist.twist.linear.x, twist.twist.linear.y = float(out.twist_executed[0]), float(out.twist_executed[1])
-        twist.twist.angular.z = float(out.twist_executed[2])
-        self.pub_feasible.publish(twist)
+        feasible = twist_stamped((sec, nanosec), self.p.base_frame, out.twist_executed)
+        self.pub_feasible.publish(feasible)
         self._last = out
         if self.p.diagnostics_period > 0 and now >= self._next_diag:
             self._next_diag = now + self.p.diagnostics_period
-            self.pub_diag.publish(self._diagnostics(twist.header.stamp, out))
+            self.pub_diag.publish(self._diagnostics(feasible.header.stamp, out))
 
     def _restart_unless_applied(self, beta, beta_dot, phi_dot):
         """Restart from the measured state when the rates applied are not the last command's."""
