@@ -331,3 +331,23 @@ def test_a_renamed_node_keeps_its_defaults():
         assert node.get_name() == 'left_arm' and node.p.lambda_p == 1.7
     finally:
         ros.close()
+
+
+@pytest.mark.parametrize('scale', [1.0, 1e200, 1e-3])
+def test_a_measured_quaternion_of_any_scale_is_the_rotation_it_names(scale):
+    """/ee_pose with the quaternion of a rotation by π/2 about y, times 1e200 (its squared norm
+    overflows) or 1e-3: the same rotation, never the identity that an overflowed norm gave."""
+    ros = RosHarness()
+    try:
+        node = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
+            ee_feedback='ground_truth')))
+        pub = ros.add(Node('ee_source', context=ros.context)).create_publisher(PoseStamped, '/ee_pose', 10)
+        msg = PoseStamped()
+        msg.header.frame_id = 'world'
+        msg.pose.position.x = 0.5
+        o = msg.pose.orientation
+        o.x, o.y, o.z, o.w = 0.0, scale * math.sqrt(0.5), 0.0, scale * math.sqrt(0.5)
+        assert ros.spin_until(lambda: (pub.publish(msg), node._ee is not None)[1], timeout=10.0)
+        np.testing.assert_allclose(node._ee[1], [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]], atol=1e-12)
+    finally:
+        ros.close()
