@@ -47,7 +47,7 @@ SYSTEMS = {
     'A': {'robot': 'steerable', 'base': 'swmr_controller', 'groups': ('arm', 'steer', 'drive'),
           'resolver': [], 'goal': (12.0, 3.0, 1.0), 'quat': (0.5 ** 0.5, 0.0, 0.0, 0.5 ** 0.5)},
     'B': {'robot': 'mecanum', 'base': 'mecanum_controller', 'groups': ('arm', 'wheel'),
-          'resolver': ['-p', 'method:=amp'], 'goal': (3.0, 1.0, 0.45), 'quat': (0.0, 0.0, 0.0, 1.0)},
+          'resolver': [], 'goal': (3.0, 1.0, 0.45), 'quat': (0.0, 0.5 ** 0.5, 0.0, 0.5 ** 0.5)},   # amp: B's default
 }
 
 

@@ -71,6 +71,10 @@ def time_resolver(resolver, cycles, warmup=50):
     return times / 1e3
 
 
+#: Xing's circles track the position (r = 3, §4.2–4.3).
+CIRCLE = {'rows': 'position'}
+
+
 def record_circle(radius=0.25, seconds=40.0):
     """(state, target, None) of every period of AMP tracking Xing's circle on robot B."""
     from sim_bridge.closed_loop import ClosedLoop
@@ -78,7 +82,7 @@ def record_circle(radius=0.25, seconds=40.0):
     from wmm_control.resolvers import PoseTarget
     cycles, w = [], np.pi / 20.0
     with SimWorld('mecanum') as world:
-        loop = ClosedLoop(world, make_resolver('amp', 'mecanum'))
+        loop = ClosedLoop(world, make_resolver('amp', 'mecanum', **CIRCLE))
         x0, r0 = loop.state().ee_position.copy(), loop.state().ee_rotation.copy()
         for k in range(int(round(seconds / world.dt))):
             t = k * world.dt
@@ -96,7 +100,7 @@ def report_resolvers(scenario):
                    METHODS, 'task sharing median <= 0.5x pink median; p99 <= 3x own median')
     circle = record_circle()
     report_methods("Xing's R = 0.25 m circle replayed (robot mecanum)", 'mecanum', circle,
-                   (('amp', 'amp', {}), ('traditional', 'traditional', {})),
+                   (('amp', 'amp', CIRCLE), ('traditional', 'traditional', CIRCLE)),
                    'AMP median <= 1.0x pink median')
     report_amp_floor(circle)
 
@@ -117,11 +121,11 @@ def report_amp_floor(cycles):
                              np.zeros((int(act.sum()), jac.shape[0])))
 
     zeros = (np.zeros(7), np.zeros((7, 7)))
-    full = np.median(time_resolver(make_resolver('amp', 'mecanum'), cycles))
+    full = np.median(time_resolver(make_resolver('amp', 'mecanum', **CIRCLE), cycles))
     with mock.patch.object(KinematicModel, '_manipulability_derivatives', lambda self, rows: zeros):
-        no_h = np.median(time_resolver(make_resolver('amp', 'mecanum'), cycles))
+        no_h = np.median(time_resolver(make_resolver('amp', 'mecanum', **CIRCLE), cycles))
         with mock.patch.object(amp, 'sns_accelerations', free_sns):
-            floor = np.median(time_resolver(make_resolver('amp', 'mecanum'), cycles))
+            floor = np.median(time_resolver(make_resolver('amp', 'mecanum', **CIRCLE), cycles))
     print(f'  amp median {full:.1f} µs; with ∇H, ∇²H free {no_h:.1f} µs; with SNS free too {floor:.1f} µs '
           '(the rest of the cycle)')
 

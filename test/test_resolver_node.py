@@ -351,3 +351,24 @@ def test_a_measured_quaternion_of_any_scale_is_the_rotation_it_names(scale):
         np.testing.assert_allclose(node._ee[1], [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]], atol=1e-12)
     finally:
         ros.close()
+
+
+def test_a_new_goal_is_judged_on_its_own_cycles_only(tmp_path):
+    """A goal that replaces a reached one (robot A, task sharing, which holds each arm command
+    for the base's feasible twist): the command computed for the old goal, still waiting when
+    the new one comes, must not count for it. Counted, the old goal's near-zero error became the
+    new goal's best error, and a stall was reported 3 s later while the error fell fast."""
+    path = tmp_path / 'two_goals.yaml'
+    path.write_text("""\
+scenario:
+  name: two_goals
+  robot: steerable
+  frame: world
+  duration: 24.0
+  goals:
+    - {t: 0.0, pose: [2.0, 1.0, 1.0, 0.0, 0.0, 0.0]}
+    - {t: 12.0, pose: [3.0, -2.0, 0.8, 0.0, 0.0, 0.0]}
+""")
+    log = run_with_nodes(load_scenario(path), {'name': 'ts', 'method': 'task_sharing', 'feedback': 'odometry'})
+    assert log.first_stall_s is None
+    assert log.final_status['goal_reached'] == 'True'

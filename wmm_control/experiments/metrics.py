@@ -62,6 +62,7 @@ class RunLog:
         self.wall_time_s = 0.0
         self.sim_counters = None     # the simulator's command counters per group (clamped, rejected, ...)
         self.final_status = None     # nodes engine: the resolver's last /diagnostics key-values (str)
+        self.first_stall_s = None    # nodes engine: the first time /diagnostics reported goal_stalled [s]
         self.frozen = False
 
     def append(self, t, goal, ee_position, ee_rotation, base_pose, q_arm, arm_command, base_reference,

@@ -21,9 +21,11 @@ ground-truth feedback: the runs test the controllers, not the odometry. Its outc
 
 * *converged*: the goal is reached (the node's ``goal_tolerance``) and held until the end (a
   direct run ends once it has held for ``SETTLE_S``);
-* *reported*: not converged, and ``goal_stalled`` is set on ``/diagnostics`` at the end (for
-  the direct engine: :class:`~wmm_control.resolvers.progress.GoalProgress` over the resolver's
-  diagnostics, what the node publishes);
+* *reported*: not converged, and ``goal_stalled`` was set on ``/diagnostics`` during the run
+  (the node then logs the stall once; for the direct engine:
+  :class:`~wmm_control.resolvers.progress.GoalProgress` over the resolver's diagnostics, what
+  the node publishes). A goal reported stalled may make progress again later: the report is
+  what the user was told, whatever the run's end;
 * *failed*: neither, a limit passed, or a non-finite command.
 """
 
@@ -67,9 +69,8 @@ METHOD_RUNS = {
 #: base's pace.
 ROBOT_RUNS = {'mecanum': {'pinv': {'arm_takeover': True}, 'task_sharing': {'arm_takeover': True}}}
 #: Longest run per robot [s]: robot B's base accelerates at 0.025 m/s² (Xing Table 1). Long
-#: enough for the slowest approach that still makes progress (robot A: amp, 64 s; robot B:
-#: task_sharing, 202 s).
-DURATION_S = {'steerable': 90.0, 'mecanum': 240.0}
+#: enough for the slowest approach that never stalls (robot A: amp, 64 s; robot B: amp, 128 s).
+DURATION_S = {'steerable': 90.0, 'mecanum': 180.0}
 #: Drawn arm configurations stay this far inside the position limits [rad].
 ARM_MARGIN = 0.1
 #: Clearance of a drawn configuration from the robot's body and the floor [m].
@@ -165,15 +166,18 @@ def _run_direct(robot, run, goal, duration):
     progress = GoalProgress(tolerance, stall_time, resolver.params.dt, min_progress_ratio=ratio)
     settle = int(round(SETTLE_S / resolver.params.dt))
     held = [0]
+    first_stall = []
 
     def done(diagnostics):
         progress.update(diagnostics)
+        if progress.stalled and not first_stall:
+            first_stall.append(progress.cycles * resolver.params.dt)
         held[0] = held[0] + 1 if progress.reached else 0
         return held[0] >= settle
 
     with SimWorld(robot, base_mode='kinematic') as world:
         log = run_scenario(world, resolver, _scenario(robot, goal, duration), until=done)
-    return log, {'goal_reached': progress.reached, 'goal_stalled': progress.stalled}
+    return log, {'goal_reached': progress.reached, 'first_stall_s': first_stall[0] if first_stall else None}
 
 
 def _run_nodes(robot, run, goal, duration):
@@ -188,8 +192,7 @@ def _run_nodes(robot, run, goal, duration):
         entry = dict(run, name=run['method'], feedback='ground_truth')
         log = run_with_nodes(scenario, entry)
     status = log.final_status or {}
-    return log, {'goal_reached': status.get('goal_reached') == 'True',
-                 'goal_stalled': status.get('goal_stalled') == 'True'}
+    return log, {'goal_reached': status.get('goal_reached') == 'True', 'first_stall_s': log.first_stall_s}
 
 
 def _limit_use(log, robot, dt):
@@ -219,6 +222,7 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
         dict: ``robot``, ``method``, ``goal`` (index), ``outcome`` (``converged`` | ``reported`` |
         ``failed``), ``time_s`` (simulated), ``time_to_reach_s`` (first entry into the
         tolerance, null: never), ``final_position_error_m``, ``final_orientation_error_rad``,
+        ``first_stall_s`` (when the goal was first reported stalled, null: never),
         ``limits_exceeded`` (:func:`~wmm_control.experiments.metrics.run_limit_report`),
         ``limit_use`` (largest fraction of each velocity and acceleration limit, smallest
         distance to an arm position limit), ``sim_clamped`` (command entries the simulator had
@@ -245,18 +249,18 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
         why.append(f'{clamped} command entries clamped by the simulator')
     if status['goal_reached']:
         outcome = 'converged'
-    elif status['goal_stalled']:
+    elif status['first_stall_s'] is not None:
         outcome = 'reported'
     else:
         outcome = 'failed'
-        why.append(f'neither reached nor reported stalled after {duration:g} s')
+        why.append(f'neither reached nor ever reported stalled in {duration:g} s')
     if why:
         outcome = 'failed'
     return {'robot': cfg.name, 'method': method, 'goal': goal.index, 'outcome': outcome,
             'time_s': float(log.t[-1] + dt), 'time_to_reach_s': float(log.t[inside[0]]) if inside.size else None,
             'final_position_error_m': float(pos_err[-1]), 'final_orientation_error_rad': float(ori_err[-1]),
-            'limits_exceeded': exceeded, 'limit_use': _limit_use(log, cfg, dt), 'sim_clamped': int(clamped),
-            'why': '; '.join(why)}
+            'first_stall_s': status['first_stall_s'], 'limits_exceeded': exceeded,
+            'limit_use': _limit_use(log, cfg, dt), 'sim_clamped': int(clamped), 'why': '; '.join(why)}
 
 
 def _angle(rot):

@@ -71,6 +71,7 @@ class Recorder(Node):
         self._rows = {}
         self.last_t = -1.0
         self.final_status = None
+        self.first_stall_s = None
         self.create_subscription(PoseStamped, '/ee_pose', self._on_ee, 10)
         self.create_subscription(Odometry, '/ground_truth/odom', self._on_base, 10)
         self.create_subscription(JointState, '/joint_states', self._on_joints, 10)
@@ -104,6 +105,8 @@ class Recorder(Node):
             if status.name == 'redundancy_resolver':
                 self._row(msg)['diag'] = {kv.key: kv.value for kv in status.values}
                 self.final_status = self._row(msg)['diag']
+                if self.first_stall_s is None and self.final_status.get('goal_stalled') == 'True':
+                    self.first_stall_s = _stamp(msg)
 
     def flush(self):
         """Append every complete row (a period in which a goal was pursued), in time order."""
@@ -226,6 +229,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         recorder.flush()
         log.wall_time_s = time.perf_counter() - start
         log.final_status = recorder.final_status
+        log.first_stall_s = recorder.first_stall_s
         log.sim_counters = {g: dict(c) for g, c in sim.world.counters.items()}   # what /diagnostics reports
     finally:
         for node in nodes:

@@ -419,6 +419,10 @@ class RedundancyResolverNode(Node):
             self.target = PoseTarget(self.target.position, self.target.rotation)
             self._tracking = False
         command = self.resolver.step(state, self.target)
+        # Judged now, against the target the command was computed for: a new goal may come in
+        # before the arm command goes out (it waits for the feasible twist).
+        self.progress.update(command.diagnostics)
+        self._log_stall_once(command.diagnostics)
         self._publish_base(stamp, command.base_twist)
         if not self.resolver.uses_compensation:
             self._publish_arm(command, stamp)
@@ -466,8 +470,6 @@ class RedundancyResolverNode(Node):
         """Publish the arm command of the cycle stamped ``stamp`` (and, when due, its diagnostics)."""
         self.pub_arm.publish(float_array(command.arm_velocity))
         self._last = command
-        self.progress.update(command.diagnostics)
-        self._log_stall_once(command.diagnostics)
         now = self._now()
         if self.p.diagnostics_period > 0 and now >= self._next_diag:
             self._next_diag = now + self.p.diagnostics_period
