@@ -106,3 +106,24 @@ def test_icr_of_disagreeing_wheels_minimises_the_side_slip():
         icr = Icr.from_steer_angles(geom, beta)
         twist = icr.twist_direction
         assert abs(abs(twist @ t) - 1.0) < 1e-9
+
+
+def test_a_restart_goes_on_from_the_measured_state_within_the_steer_rate_limit():
+    """The last command was not applied: both base controllers go on from what the joint state
+    measured, the steerable one from steer rates within its limit (an encoder glitch of 3 rad/s
+    is not followed) and the twist that fits them and the drive rates."""
+    from wmm_control.base import MecanumController, MecanumKinematics, SteerableGeometry, SwmrController, SwmrParams
+    robot = load_robot('steerable')
+    geometry = SteerableGeometry.from_config(robot.steerable)
+    swmr = SwmrController(geometry, SwmrParams.from_robot_config(robot))
+    beta = np.array([0.3, 0.3, 0.3, 0.3])
+    twist = np.array([0.4, 0.1, 0.0])
+    phi_dot = geometry.wheel_rates(beta, np.zeros(4), twist)
+    swmr.restart(beta, np.array([3.0, -3.0, 0.0, 0.0]), phi_dot)
+    limit = swmr.params.steer_rate_limit
+    np.testing.assert_allclose(swmr.beta_dot, [limit, -limit, 0.0, 0.0])
+    np.testing.assert_allclose(swmr.beta, beta)
+    mecanum = MecanumController.from_robot_config(load_robot('mecanum'), 0.025)
+    kinematics = MecanumKinematics.from_config(load_robot('mecanum').mecanum)
+    mecanum.restart(kinematics.wheel_rates((0.1, -0.05, 0.2)))
+    np.testing.assert_allclose(mecanum.twist, (0.1, -0.05, 0.2), atol=1e-12)

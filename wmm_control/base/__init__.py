@@ -1,5 +1,6 @@
 """Mobile-base kinematics and controllers: steerable (Sorour §IV) and Mecanum (Xing eq 16)."""
 
+from wmm_control.base.applied import unapplied_command
 from wmm_control.base.icr import Icr, choose_route
 from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.base.mecanum_controller import MecanumController, MecanumOutput, MecanumParams
@@ -27,4 +28,5 @@ __all__ = [
     'SwmrOutput',
     'SwmrParams',
     'choose_route',
+    'unapplied_command',
 ]

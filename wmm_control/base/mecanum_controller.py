@@ -147,6 +147,11 @@ class MecanumController:
         """
         self._twist = np.zeros(3) if twist is None else self.bound(twist)[0]
 
+    def restart(self, wheel_rates):
+        """Go on from the measured wheel rates [rad/s] (the last command was not applied as sent):
+        the twist they make, scaled into the limits."""
+        self.reset(self.kinematics.twist_from_wheels(wheel_rates))
+
     def bound(self, reference):
         """Scale ``reference`` uniformly into the velocity and wheel rate limits.
 

@@ -604,6 +604,21 @@ class SwmrController:
         self._phi_dot = self.geometry.wheel_rates(self._beta, self._beta_dot, self._twist).tolist()
         self._icr = self._icr_of(self._beta)
 
+    def restart(self, beta, beta_dot, phi_dot):
+        """Go on from the measured state (the last command was not applied as sent): the steer
+        angles, the steer rates within the steer rate limit (an encoder glitch beyond it is not
+        followed) and the twist that best fits those and the drive rates.
+
+        Args:
+            beta, beta_dot, phi_dot: measured steer angles [rad], steer rates and drive rates
+                [rad/s]. Shape (N,) each.
+        """
+        n = self.geometry.n_wheels
+        limit = self.params.steer_rate_limit
+        beta = finite_floats(beta, n, 'beta')
+        beta_dot = [min(limit, max(-limit, r)) for r in finite_floats(beta_dot, n, 'beta_dot')]
+        self.reset(beta, beta_dot, self.geometry.fit_twist(beta, beta_dot, finite_floats(phi_dot, n, 'phi_dot')))
+
     @property
     def beta(self):
         """Commanded steer angles [rad]. Shape (N,)."""

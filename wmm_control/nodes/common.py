@@ -43,7 +43,7 @@ __all__ = [
     'Param', 'declare_parameters', 'load_defaults', 'robot_method', 'robot_period', 'parameter_error', 'float_array', 'parse_command',
     'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node', 'guard_clock',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
-    'BaseReference', 'JointStateWatchdog', 'StampGate', 'unapplied_command', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
+    'BaseReference', 'JointStateWatchdog', 'StampGate', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
     'COMMAND_QOS', 'CLOCK_QOS', 'DIAGNOSTICS_QOS',
 ]
 
@@ -727,31 +727,6 @@ class BaseReference:
             self._node.get_logger().warn(f'/base/reference older than {self.freshness.timeout} s: braking to rest')
             self._stale_logged = True
         return None
-
-
-def unapplied_command(measured, commanded, tolerance):
-    """'' when a joint state's rates are the last command's, else why not.
-
-    A joint state reports the rates the actuator applied over the period it closes: those of
-    the last command, unless that command was not applied as sent. It may have been lost or
-    late, superseded (a controller that answers queued joint states back to back sends several
-    commands within one period, and the actuator applies only the last), or zeroed by the
-    actuator's command timeout. A controller that went on from its own last command would
-    then change the applied rates by as many periods of acceleration as it answered meanwhile.
-
-    Args:
-        measured: the rates of the joint state [rad/s], or None (the message has none).
-        commanded: the rates last commanded [rad/s], or None (none yet), same order.
-        tolerance: largest difference [rad/s] still taken as applied; 0 turns the check off.
-    """
-    if tolerance <= 0.0 or measured is None or commanded is None:
-        return ''
-    worst = float(np.max(np.abs(np.asarray(measured, dtype=float) - np.asarray(commanded, dtype=float))))
-    if worst <= tolerance:
-        return ''
-    return (f'the rates measured differ from the last command by up to {worst:.3g} rad/s (more than '
-            f'{tolerance:g}): it was not applied as sent (lost, late, superseded, or zeroed by the '
-            'actuator\'s command timeout)')
 
 
 class JointStateWatchdog:

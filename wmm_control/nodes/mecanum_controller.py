@@ -48,11 +48,11 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from wmm_control.base import MecanumController
+from wmm_control.base import MecanumController, unapplied_command
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
     StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, run_node,
-    robot_period, seconds, twist_stamped, unapplied_command)
+    robot_period, seconds, twist_stamped)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['MecanumControllerNode', 'main']
@@ -135,14 +135,14 @@ class MecanumControllerNode(Node):
         wheel_rates, has_rates = measured
         now = seconds(self.get_clock())
         if self.watchdog.resync(self.pub_wheels):
-            self.controller.reset(self.controller.kinematics.twist_from_wheels(wheel_rates))
+            self.controller.restart(wheel_rates)
         elif has_rates:
             why = unapplied_command(wheel_rates, self._last_wheels, self.p.applied_rate_tolerance)
             if why:
                 self.counters['commands_not_applied'] += 1
                 self.get_logger().warn(f'last wheel command: {why}; restarting from the measured wheel rates',
                                        throttle_duration_sec=1.0)
-                self.controller.reset(self.controller.kinematics.twist_from_wheels(wheel_rates))
+                self.controller.restart(wheel_rates)
         reference = self.reference.current(now)
         if reference is not None:
             out = self.controller.step(reference)

@@ -51,11 +51,11 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
+from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams, unapplied_command
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
     StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, run_node,
-    robot_period, seconds, twist_stamped, unapplied_command)
+    robot_period, seconds, twist_stamped)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['SwmrControllerNode', 'main']
@@ -93,13 +93,11 @@ class SwmrControllerNode(Node):
         self.p = p
         robot = load_robot(p.robot)
         self.steer_joints = robot.steerable.steer_joints
-        geometry = SteerableGeometry.from_config(robot.steerable)
         params = SwmrParams.from_robot_config(robot, dt=p.period, kp=p.kp, icr_gain=p.icr_gain)
-        self.controller = SwmrController(geometry, params)
+        self.controller = SwmrController(SteerableGeometry.from_config(robot.steerable), params)
         self.reference = BaseReference(self, p.base_frame, p.reference_timeout, params.base_velocity_limit)
         self.steer = JointSelector(self.steer_joints, velocity_limits=params.steer_rate_limit)
         self.drive = JointSelector(robot.steerable.drive_joints, velocity_limits=params.drive_rate_limit)
-        self.geometry = geometry
         self.not_applied = 0
         self._next_diag = 0.0
         self._last = None
@@ -116,7 +114,7 @@ class SwmrControllerNode(Node):
         # Started for each joint state that waits for its reference, cancelled by the cycle.
         # One cycle per joint state, run with the reference of the same stamp (see the module doc).
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, self._steady)
-        self.get_logger().info(f'steerable base controller, robot {robot.name}: {geometry.n_wheels} modules, '
+        self.get_logger().info(f'steerable base controller, robot {robot.name}: {self.controller.geometry.n_wheels} modules, '
                                f't_s {p.period} s, '
                                f'β̇ ≤ {params.steer_rate_limit} rad/s, β̈ ≤ {params.steer_accel_limit} rad/s²')
 
@@ -175,10 +173,7 @@ class SwmrControllerNode(Node):
         self.not_applied += 1
         self.get_logger().warn(f'last steer/drive command: {why}; restarting from the measured state',
                                throttle_duration_sec=1.0)
-        limit = self.controller.params.steer_rate_limit
-        beta_dot = np.clip(beta_dot, -limit, limit)
-        twist = self.geometry.fit_twist(beta.tolist(), beta_dot.tolist(), phi_dot.tolist())
-        self.controller.reset(beta, beta_dot, twist)
+        self.controller.restart(beta, beta_dot, phi_dot)
 
     def _zero_rates(self):
         n = len(self.steer_joints)
