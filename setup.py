@@ -40,6 +40,8 @@ setup(
             'wmm_sim = sim_bridge.node:main',
             'swmr_controller = wmm_control.nodes.swmr_controller:main',
             'mecanum_controller = wmm_control.nodes.mecanum_controller:main',
+            'differential_controller = wmm_control.nodes.mecanum_controller:main_differential',
+            'wmm_robot = wmm_control.cli.robot_setup:main',
             'redundancy_resolver = wmm_control.nodes.redundancy_resolver:main',
             'goal_sequencer = wmm_control.nodes.goal_sequencer:main',
             'wmm_experiment = wmm_control.cli.experiment:main',

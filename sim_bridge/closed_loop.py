@@ -5,7 +5,7 @@ Each period runs what the nodes run in lockstep, in the same order:
 1. read the state (joint states, odometry or ground-truth base pose, end-effector pose);
 2. ``resolver.step(state, target)``: the arm command and the base twist reference;
 3. the base controller answers that reference at once (robot A: :class:`SwmrController`,
-   closed on the measured steer angles; robot B: :class:`MecanumController`), giving wheel
+   closed on the measured steer angles; robot B: :class:`WheelController`), giving wheel
    commands and the feasible twist q̇_bf;
 4. ``resolver.compensate(command, q̇_bf)`` (Sorour eq 14) finishes the arm command;
 5. the world steps one period.
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from wmm_control.base import MecanumController, SteerableGeometry, SwmrController, SwmrParams
+from wmm_control.base import WheelController, SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers import RobotState
@@ -35,7 +35,7 @@ class CycleRecord:
     Attributes:
         t: simulated time at the start of the period [s].
         base_pose: true base pose (x, y, θ). Shape (3,).
-        q_arm: arm joint positions [rad]. Shape (7,).
+        q_arm: arm joint positions [rad or m]. Shape (n,).
         ee_position: true end-effector position [m]. Shape (3,).
         ee_rotation: true end-effector orientation. Shape (3, 3).
         command: the resolver's final command (``ResolverCommand``).
@@ -54,11 +54,11 @@ class CycleRecord:
 
 
 def make_base_controller(robot, dt):
-    """The base controller of a robot: a :class:`SwmrController` (A) or a :class:`MecanumController` (B)."""
+    """The base controller of a robot: a :class:`SwmrController` (A) or a :class:`WheelController` (B)."""
     if robot.steerable is not None:
         return SwmrController(SteerableGeometry.from_config(robot.steerable),
                               SwmrParams.from_robot_config(robot, dt=dt))
-    return MecanumController.from_robot_config(robot, dt)
+    return WheelController.from_robot_config(robot, dt)
 
 
 class ClosedLoop:

@@ -50,7 +50,7 @@ from wmm_control.robot_config import load_robot
 from wmm_control.errors import ConfigError
 from wmm_control.nodes.common import (
     CLOCK_QOS, COMMAND_QOS, DIAGNOSTICS_QOS, STATE_PUB_QOS, Freshness, Param, declare_parameters,
-    diagnostic_array, diagnostic_status, guard_clock, parse_command, robot_period, run_node)
+    diagnostic_array, diagnostic_status, guard_clock, parse_command, robot_param, robot_period, run_node)
 
 __all__ = ['SimNode', 'main', 'wait_groups']
 
@@ -60,8 +60,7 @@ def _robot_start(field):
 
 
 PARAMS = (
-    Param('robot', 'Robot: steerable (A, Sorour) or mecanum (B, Xing), or A/B.',
-          choices=('steerable', 'mecanum', 'A', 'B', 'a', 'b'), read_only=True),
+    robot_param('The robot to simulate.'),
     Param('base_mode', 'kinematic: rolling model + seeded slip; physics: PyBullet wheel contact.',
           choices=BASE_MODES, read_only=True),
     Param('timing', 'realtime: wall-clock steps; lockstep: step when the commands answer the state.',
@@ -85,8 +84,8 @@ PARAMS = (
     Param('seed', 'Seed of the slip noise.', lo=0, hi=2**31 - 1, read_only=True),
     Param('start_base_pose', 'Start base pose (x, y, θ) [m, m, rad]; default: the robot YAML\'s start.',
           lo=-1e4, hi=1e4, size=(3,), read_only=True, default_from=_robot_start('base_pose')),
-    Param('start_arm', 'Start arm joints [rad] (7); default: the robot YAML\'s start.', lo=-2 * math.pi,
-          hi=2 * math.pi, size=(7,), read_only=True, default_from=_robot_start('arm')),
+    Param('start_arm', 'Start arm joints [rad or m] (one per arm joint); default: the robot YAML\'s start.',
+          lo=-2 * math.pi, hi=2 * math.pi, read_only=True, default_from=_robot_start('arm')),
     Param('gui', 'Open the PyBullet GUI.', read_only=True),
 )
 

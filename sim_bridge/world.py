@@ -82,7 +82,7 @@ from typing import NamedTuple
 import numpy as np
 import pybullet as p
 
-from wmm_control.base.mecanum import MecanumKinematics
+from wmm_control.base.wheel_controller import wheel_kinematics
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.errors import ConfigError
 from wmm_control.robot_config import RobotConfig, load_robot
@@ -171,7 +171,7 @@ class SimWorld(OwnedClient):
         seed: seed of the slip noise when ``slip.seed`` is ``None`` [-].
         gui: open a PyBullet GUI window instead of ``p.DIRECT``.
         start_base_pose: (x, y, θ) [m, m, rad]; default the robot's ``start.base_pose``.
-        start_arm: arm joint positions [rad], shape (7,); default ``start.arm``.
+        start_arm: arm joint positions [rad or m], shape (n,); default ``start.arm``.
 
     Attributes:
         robot: the :class:`~wmm_control.robot_config.RobotConfig`.
@@ -208,7 +208,7 @@ class SimWorld(OwnedClient):
                               'in "physics" mode slip comes from the wheel contact')
         self._steerable = self.robot.steerable is not None
         self._geom = (SteerableGeometry.from_config(self.robot.steerable) if self._steerable
-                      else MecanumKinematics.from_config(self.robot.mecanum))
+                      else wheel_kinematics(self.robot))
 
         cfg = self.robot
         if self._steerable:
@@ -217,9 +217,9 @@ class SimWorld(OwnedClient):
                                    'drive': tuple(s.drive_joints)}
             self._r_wheel = s.wheel_radius
         else:
-            self.command_groups = {'arm': tuple(cfg.arm.joints),
-                                   'wheel': tuple(cfg.mecanum.wheel_joints)}
-            self._r_wheel = cfg.mecanum.wheel_radius
+            wheels = cfg.mecanum or cfg.differential
+            self.command_groups = {'arm': tuple(cfg.arm.joints), 'wheel': tuple(wheels.wheel_joints)}
+            self._r_wheel = wheels.wheel_radius
         self.joint_names = tuple(n for g in self.command_groups.values() for n in g)
         self._slices = {}
         start = 0
@@ -321,7 +321,7 @@ class SimWorld(OwnedClient):
         if self._steerable:
             wheel_links = [joints[n] for n in cfg.steerable.drive_joints]
         else:
-            wheel_links = [joints[n] for n in cfg.mecanum.wheel_joints]
+            wheel_links = [joints[n] for n in self.command_groups['wheel']]
         self._wheel_links = wheel_links
 
         if self.base_mode == 'kinematic':
@@ -339,8 +339,13 @@ class SimWorld(OwnedClient):
         forces[arm] *= ARM_FORCE_FACTOR
         forces[forces <= 0.0] = 1e3
         self._forces = forces.tolist()
-        tyre = not self._steerable
+        tyre = self.robot.mecanum is not None
         p.changeDynamics(self.ground_id, -1, lateralFriction=1.0, physicsClientId=cid)
+        for j in range(p.getNumJoints(body, physicsClientId=cid)):
+            # passive casters (links named *caster*) roll freely: no friction
+            if 'caster' in p.getJointInfo(body, j, physicsClientId=cid)[12].decode():
+                p.changeDynamics(body, j, lateralFriction=0.0, rollingFriction=0.0, spinningFriction=0.0,
+                                 physicsClientId=cid)
         for link in self._wheel_links:
             p.changeDynamics(body, link, lateralFriction=0.0 if tyre else WHEEL_FRICTION,
                              rollingFriction=0.0, spinningFriction=0.0, physicsClientId=cid)

@@ -112,7 +112,7 @@ def test_a_restart_goes_on_from_the_measured_state_within_the_steer_rate_limit()
     """The last command was not applied: both base controllers go on from what the joint state
     measured, the steerable one from steer rates within its limit (an encoder glitch of 3 rad/s
     is not followed) and the twist that fits them and the drive rates."""
-    from wmm_control.base import MecanumController, MecanumKinematics, SteerableGeometry, SwmrController, SwmrParams
+    from wmm_control.base import WheelController, MecanumKinematics, SteerableGeometry, SwmrController, SwmrParams
     robot = load_robot('steerable')
     geometry = SteerableGeometry.from_config(robot.steerable)
     swmr = SwmrController(geometry, SwmrParams.from_robot_config(robot))
@@ -123,7 +123,7 @@ def test_a_restart_goes_on_from_the_measured_state_within_the_steer_rate_limit()
     limit = swmr.params.steer_rate_limit
     np.testing.assert_allclose(swmr.beta_dot, [limit, -limit, 0.0, 0.0])
     np.testing.assert_allclose(swmr.beta, beta)
-    mecanum = MecanumController.from_robot_config(load_robot('mecanum'), 0.025)
+    mecanum = WheelController.from_robot_config(load_robot('mecanum'), 0.025)
     kinematics = MecanumKinematics.from_config(load_robot('mecanum').mecanum)
     mecanum.restart(kinematics.wheel_rates((0.1, -0.05, 0.2)))
     np.testing.assert_allclose(mecanum.twist, (0.1, -0.05, 0.2), atol=1e-12)

@@ -16,7 +16,7 @@ from std_msgs.msg import Float64MultiArray
 
 from ros_helpers import ScriptedController, overrides, stamp_s
 from sim_bridge.node import SimNode
-from wmm_control.base import MecanumController, MecanumParams
+from wmm_control.base import WheelController, WheelParams
 from wmm_control.errors import ConfigError, NonFiniteError
 from wmm_control.nodes.common import twist_stamped
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
@@ -31,16 +31,16 @@ WHEEL_MAX = 13.0
 
 
 def controller():
-    return MecanumController.from_robot_config(ROBOT, DT)
+    return WheelController.from_robot_config(ROBOT, DT)
 
 
 def test_limits_and_geometry_come_from_the_robot_yaml():
     c = controller()
-    assert c.params == MecanumParams(DT, (0.25, 0.25, 1.0), (0.025, 0.025, 1.5), 13.0)
+    assert c.params == WheelParams(DT, (0.25, 0.25, 1.0), (0.025, 0.025, 1.5), 13.0)
     k = c.kinematics
     assert (k.wheel_radius, k.d1, k.d2) == (0.076, 0.25, 0.22)
-    with pytest.raises(ConfigError, match='no mecanum section'):
-        MecanumController.from_robot_config(load_robot('steerable'), DT)
+    with pytest.raises(ConfigError, match='has a steerable base, not a Mecanum or differential one'):
+        WheelController.from_robot_config(load_robot('steerable'), DT)
 
 
 # ---------------------------------------------------------------- eq 16
@@ -113,7 +113,7 @@ def test_huge_reference_drives_at_the_limit_in_its_direction():
         out = c.step([1e308, -1e308, 0.0])
     np.testing.assert_allclose(out.twist, [0.25, -0.25, 0.0], atol=1e-12)
     # Robot B's wheel limit admits the whole Table 1 box; with a lower one it binds first.
-    slow = MecanumController(c.kinematics, MecanumParams(DT, VMAX, AMAX, wheel_rate_limit=5.0))
+    slow = WheelController(c.kinematics, WheelParams(DT, VMAX, AMAX, wheel_rate_limit=5.0))
     out = slow.step([1e300, 1e300, 2e300])
     # On the direction (1, 1, 2)·s the largest wheel rate is (s + s + 0.47·2s)/0.076 = 5 at
     # s = 0.38/2.94 = 0.129 m/s, below the 0.25 m/s velocity limit.

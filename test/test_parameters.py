@@ -20,7 +20,7 @@ from sensor_msgs.msg import JointState
 
 from ros_helpers import RosHarness, overrides
 from sim_bridge.node import SimNode
-from wmm_control.base import MecanumParams, SwmrParams
+from wmm_control.base import WheelParams, SwmrParams
 from wmm_control.nodes import goal_sequencer, mecanum_controller, redundancy_resolver, swmr_controller
 from wmm_control.nodes.common import robot_method, robot_period
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
@@ -347,7 +347,7 @@ def test_no_robot_limit_has_a_default_in_code():
     # The base controllers' parameter classes take every limit from the robot YAML.
     limits = {'steer_rate_limit', 'steer_accel_limit', 'drive_rate_limit', 'drive_accel_limit',
               'base_velocity_limit', 'base_accel_limit', 'velocity_limit', 'accel_limit', 'wheel_rate_limit'}
-    for cls in (SwmrParams, MecanumParams):
+    for cls in (SwmrParams, WheelParams):
         with_default = [f.name for f in dataclasses.fields(cls) if f.name in limits and (
             f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING)]
         assert not with_default, f'{cls.__name__}: {with_default} have defaults in code'

@@ -10,17 +10,18 @@ __all__ = ['as_vector', 'as_finite_vector', 'finite_floats']
 
 
 def as_vector(value, size, name):
-    """Return ``value`` as a float64 vector of length ``size``.
+    """Return ``value`` as a float64 vector of length ``size`` (any length when None).
 
     Raises:
-        ShapeError: if ``value`` does not hold exactly ``size`` numbers.
+        ShapeError: if ``value`` does not hold exactly ``size`` numbers (a 1-D list of them).
     """
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ShapeError(f'{name}: expected {size} numbers, got {value!r}') from exc
-    if arr.shape != (size,):
-        raise ShapeError(f'{name}: expected shape ({size},), got {arr.shape}')
+    if arr.ndim != 1 or (size is not None and arr.shape != (size,)):
+        want = f'({size},)' if size is not None else 'a 1-D vector'
+        raise ShapeError(f'{name}: expected shape {want}, got {arr.shape}')
     return arr
 
 

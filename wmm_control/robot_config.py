@@ -1,10 +1,36 @@
-"""Robot descriptions: the YAML file beside each URDF, loaded and validated.
+"""Robot descriptions: a URDF and the YAML file beside it, loaded and validated.
 
-A robot is named ``steerable`` (robot A: steerable wheeled base, Sorour 2019) or
-``mecanum`` (robot B: Mecanum base, Xing et al.); ``A`` and ``B`` are accepted as
-aliases. A path to a YAML file of the same schema works too.
+The URDF is the source of truth for the kinematics: the arm is the joint chain from the
+``arm.root`` link to the ``arm.tool`` link (any number of joints from 6 up: revolute,
+continuous or prismatic), and its position and velocity limits are the URDF's ``<limit>``.
+The base geometry (hips, wheel radius, steer offset, Mecanum half-distances, track) is read
+from the wheel and steer joints' origins and the wheel links' collision cylinders. The YAML
+names those joints and links and gives what a URDF cannot: acceleration limits (default
+:data:`DEFAULT_ACCEL_PER_VELOCITY` × the velocity limit), base twist limits, the dexterous
+posture, the start state, the control period and the default method. Any URDF value may be
+overridden in the YAML (``arm.position_lower`` …, ``steerable.hips`` …).
+
+URDF conventions the base geometry relies on (``wmm_robot init`` writes YAMLs for them):
+
+* ``base_link`` x forward, z up; the base moves in its x-y plane.
+* steerable: each steer joint turns about z, its origin's (x, y) in ``base_link`` is the
+  module's hip; its drive joint turns about the steer link's y axis and sits ``d`` along −y
+  from the steer axis (the wheel offset of Sorour Table I); the drive link's collision
+  cylinder (or sphere) gives the wheel radius.
+* mecanum: four wheel joints about y, order front-left, front-right, rear-left, rear-right;
+  d1 and d2 are the mean |x| and |y| of their origins (Xing eq 16).
+* differential: a left and a right wheel joint about y on one axle through ``base_link``'s
+  origin (x = 0); the track is the distance between them. Casters are fixed links and play
+  no part in the kinematics.
+
+A robot is named by a YAML file's stem in ``config/robots`` (``steerable``, ``mecanum``,
+``ur_mecanum``, ``panda_diff``), by the aliases ``A`` and ``B`` of the two papers' robots,
+or by a path to a robot YAML; its ``urdf`` path is relative to that YAML.
 """
 
+from __future__ import annotations
+
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,16 +39,23 @@ import yaml
 
 from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
+from wmm_control.urdf import MOVING_TYPES, UrdfTree
 
 __all__ = [
     'ArmConfig', 'BaseLimits', 'StartState', 'SteerableConfig', 'MecanumConfig',
-    'RobotConfig', 'load_robot', 'ROBOT_NAMES',
+    'DifferentialConfig', 'RobotConfig', 'load_robot', 'robot_names', 'BASE_FAMILIES',
+    'ALIASES', 'MIN_ARM_JOINTS', 'DEFAULT_ACCEL_PER_VELOCITY', 'read_yaml_section',
+    'resolve_robot_yaml',
 ]
 
-ROBOT_NAMES = {'steerable': 'steerable', 'a': 'steerable', 'mecanum': 'mecanum', 'b': 'mecanum'}
-N_ARM = 7
-N_WHEELS = 4
-
+BASE_FAMILIES = ('steerable', 'mecanum', 'differential')
+ALIASES = {'a': 'steerable', 'b': 'mecanum'}
+MIN_ARM_JOINTS = 6
+#: [1/s] an acceleration limit the YAML does not give is this times the velocity limit
+#: (full speed in half a second).
+DEFAULT_ACCEL_PER_VELOCITY = 2.0
+#: [m] the wheel axle of a differential base may miss base_link's origin by this much.
+_AXLE_TOL = 1e-3
 
 def _vec(raw, key, size, where):
     try:
@@ -70,28 +103,54 @@ def _section(raw, key, where):
     return sec
 
 
-def _names(raw, key, size, where):
-    names = raw.get(key)
-    if not isinstance(names, list) or len(names) != size or not all(isinstance(n, str) for n in names):
-        raise ConfigError(f'{where}.{key}: expected a list of {size} joint names, got {names!r}')
-    return tuple(names)
+def _optional_vec(raw, key, size, where, default):
+    return default if raw.get(key) is None else _vec(raw, key, size, where)
+
+
+def _optional_scalar(raw, key, where, default, positive=True):
+    if raw.get(key) is None:
+        if default is None:
+            raise ConfigError(f'{where}: missing key {key!r} (and the URDF does not give it)')
+        return float(default)
+    return _scalar(raw, key, where, positive)
 
 
 @dataclass(frozen=True)
 class ArmConfig:
-    """The 7-DOF arm: joint names and limits (rad, rad/s, rad/s²), dexterous posture."""
+    """The arm: the URDF chain from ``root`` to ``tool``, its limits and dexterous posture.
+
+    Attributes:
+        joints: the n arm joint names, root first.
+        types: each joint's URDF type (revolute, continuous or prismatic).
+        root, tool: the chain's first and last links; ``tool`` is the end-effector frame.
+        position_lower, position_upper: [rad or m], ±inf for a continuous joint. Shape (n,).
+        velocity: [rad/s or m/s]. Shape (n,).
+        acceleration: [rad/s² or m/s²]. Shape (n,).
+        dexterous: the dexterous posture (Sorour's q_a,dex). Shape (n,).
+    """
 
     joints: tuple
+    types: tuple
+    root: str
+    tool: str
     position_lower: np.ndarray
     position_upper: np.ndarray
     velocity: np.ndarray
     acceleration: np.ndarray
     dexterous: np.ndarray
 
+    @property
+    def n(self) -> int:
+        """Number of arm joints."""
+        return len(self.joints)
+
 
 @dataclass(frozen=True)
 class BaseLimits:
-    """Base twist limits, (vx, vy, ω) in the base frame: [m/s, m/s, rad/s] and per second."""
+    """Base twist limits, (vx, vy, ω) in the base frame: [m/s, m/s, rad/s] and per second.
+
+    A differential base has vy = 0 in both: it cannot move sideways.
+    """
 
     velocity: np.ndarray
     acceleration: np.ndarray
@@ -99,20 +158,25 @@ class BaseLimits:
 
 @dataclass(frozen=True)
 class StartState:
-    """The paper's start state: base pose (x, y, θ), arm joints, expected world EE pose (xyz + RPY)."""
+    """The start state: base pose (x, y, θ), arm joints; optionally the expected world EE pose
+    (xyz + RPY) and its tolerance [m, rad] (the papers' start states are checked against it)."""
 
     base_pose: np.ndarray
     arm: np.ndarray
-    ee_pose: np.ndarray
-    ee_tolerance: tuple
+    ee_pose: np.ndarray | None = None
+    ee_tolerance: tuple | None = None
 
 
 @dataclass(frozen=True)
 class SteerableConfig:
-    """Steerable base geometry (Sorour Table I): hips (4, 2) [m], r_w, d [m], steer/drive limits.
+    """Steerable base of N ≥ 2 steer + drive modules (Sorour §IV, Table I for robot A).
 
-    ``drive_accel_limit`` [rad/s²] is the drive deceleration used to ramp the wheels to rest
-    after a controller failure.
+    Attributes:
+        hips: module hip positions (hx, hy) in the base frame [m]. Shape (N, 2).
+        wheel_radius, wheel_offset: r_w and d [m].
+        steer_rate_limit, steer_accel_limit: β̇ and β̈ bounds [rad/s, rad/s²].
+        drive_rate_limit: |φ̇| bound [rad/s]; ``drive_accel_limit`` [rad/s²] is the drive
+            deceleration used to ramp the wheels to rest after a controller failure.
     """
 
     steer_joints: tuple
@@ -124,6 +188,11 @@ class SteerableConfig:
     steer_accel_limit: float
     drive_rate_limit: float
     drive_accel_limit: float
+
+    @property
+    def n_modules(self) -> int:
+        """Number of steer + drive modules N."""
+        return len(self.steer_joints)
 
 
 @dataclass(frozen=True)
@@ -138,9 +207,27 @@ class MecanumConfig:
 
 
 @dataclass(frozen=True)
+class DifferentialConfig:
+    """Differential-drive base: two wheels on one axle through base_link's origin.
+
+    Attributes:
+        wheel_joints: (left, right).
+        wheel_radius: r [m].
+        track: distance between the two wheels' contact points [m].
+        wheel_rate_limit: |φ̇| bound [rad/s].
+    """
+
+    wheel_joints: tuple
+    wheel_radius: float
+    track: float
+    wheel_rate_limit: float
+
+
+@dataclass(frozen=True)
 class RobotConfig:
     """One robot: its URDF, frames, control period, default redundancy resolution method, arm,
-    base limits, start state and base geometry."""
+    base limits, start state and base geometry (one of ``steerable``, ``mecanum``,
+    ``differential`` is set, after ``base_type``)."""
 
     name: str
     description: str
@@ -155,19 +242,26 @@ class RobotConfig:
     arm: ArmConfig
     base: BaseLimits
     start: StartState
-    steerable: SteerableConfig = None
-    mecanum: MecanumConfig = None
+    steerable: SteerableConfig | None = None
+    mecanum: MecanumConfig | None = None
+    differential: DifferentialConfig | None = None
     raw: dict = field(default=None, repr=False, compare=False)
 
     @property
-    def wheel_joints(self):
-        """Every wheel-side joint name, in command order (steer then drive, or the 4 wheels)."""
-        if self.steerable is not None:
-            return self.steerable.steer_joints + self.steerable.drive_joints
-        return self.mecanum.wheel_joints
+    def base_axes(self) -> tuple:
+        """Indices of the base twist (vx, vy, ω) the base can follow: all three, or (vx, ω)
+        for a differential base."""
+        return (0, 2) if self.base_type == 'differential' else (0, 1, 2)
 
     @property
-    def joint_velocity_limits(self):
+    def wheel_joints(self) -> tuple:
+        """Every wheel-side joint name, in command order (steer then drive, or the wheels)."""
+        if self.steerable is not None:
+            return self.steerable.steer_joints + self.steerable.drive_joints
+        return (self.mecanum or self.differential).wheel_joints
+
+    @property
+    def joint_velocity_limits(self) -> dict:
         """Velocity limit [rad/s] by joint name, for every actuated joint."""
         limits = dict(zip(self.arm.joints, self.arm.velocity.tolist()))
         if self.steerable is not None:
@@ -175,74 +269,201 @@ class RobotConfig:
             limits.update({n: s.steer_rate_limit for n in s.steer_joints})
             limits.update({n: s.drive_rate_limit for n in s.drive_joints})
         else:
-            limits.update({n: self.mecanum.wheel_rate_limit for n in self.mecanum.wheel_joints})
+            wheels = self.mecanum or self.differential
+            limits.update({n: wheels.wheel_rate_limit for n in wheels.wheel_joints})
         return limits
 
 
-def _parse_arm(raw, where):
-    arm = _section(raw, 'arm', where)
-    w = f'{where}.arm'
-    lower = _vec(arm, 'position_lower', N_ARM, w)
-    upper = _vec(arm, 'position_upper', N_ARM, w)
+def _urdf_velocity(tree, name, role):
+    joint = tree.joint(name, role)
+    if joint.type not in ('continuous', 'revolute'):
+        raise ConfigError(f'{tree.path.name}: {role} {name!r} must be continuous or revolute, not {joint.type!r}')
+    return joint.velocity
+
+
+def _parse_arm(raw, tree, where_top):
+    arm = _section(raw, 'arm', where_top)
+    w = 'arm'
+    root = arm.get('root')
+    tool = arm.get('tool', raw.get('ee_frame'))
+    if not isinstance(root, str) or not isinstance(tool, str):
+        raise ConfigError(f'{w}: give the chain as arm.root and arm.tool link names, got {root!r}, {tool!r}')
+    chain = [j for j in tree.chain(root, tool) if j.type != 'fixed']
+    for j in chain:
+        if j.mimic is not None:
+            raise ConfigError(f'{tree.path.name}: arm joint {j.name!r} is a mimic joint (of {j.mimic!r}): '
+                              'an arm joint must be actuated on its own')
+        if j.type not in MOVING_TYPES:
+            raise ConfigError(f'{tree.path.name}: arm joint {j.name!r} has type {j.type!r}: '
+                              f'an arm joint must be one of {MOVING_TYPES}')
+    names = tuple(j.name for j in chain)
+    n = len(names)
+    if n < MIN_ARM_JOINTS:
+        raise ConfigError(f'{w}: the chain {root!r} → {tool!r} has {n} joints {list(names)}; '
+                          f'an arm needs at least {MIN_ARM_JOINTS}')
+    if arm.get('joints') is not None and tuple(arm.get('joints')) != names:
+        raise ConfigError(f'{w}.joints: {arm.get("joints")!r} is not the URDF chain {root!r} → {tool!r}: {list(names)}')
+
+    def urdf_limit(attr):
+        vals = [getattr(j, attr) for j in chain]
+        return None if any(v is None for v in vals) else np.array(vals, dtype=float)
+
+    lower = _optional_vec(arm, 'position_lower', n, w, urdf_limit('lower'))
+    upper = _optional_vec(arm, 'position_upper', n, w, urdf_limit('upper'))
+    velocity = _optional_vec(arm, 'velocity', n, w, urdf_limit('velocity'))
+    for key, val, what in (('position_lower', lower, 'lower'), ('position_upper', upper, 'upper'),
+                           ('velocity', velocity, 'velocity')):
+        if val is None:
+            missing = [j.name for j in chain if getattr(j, what) is None]
+            raise ConfigError(f'{w}: joint {missing[0]!r} has no <limit {what}> in the URDF and '
+                              f'arm.{key} does not override it')
     if np.any(lower >= upper):
         raise ConfigError(f'{w}: position_lower must be below position_upper: {lower.tolist()} vs {upper.tolist()}')
-    dex = _vec(arm, 'dexterous', N_ARM, w)
-    if np.any(dex < lower) or np.any(dex > upper):
-        raise ConfigError(f'{w}.dexterous: outside the position limits: {dex.tolist()}')
-    return ArmConfig(
-        joints=_names(arm, 'joints', N_ARM, w),
-        position_lower=lower,
-        position_upper=upper,
-        velocity=_positive(_vec(arm, 'velocity', N_ARM, w), 'velocity', w),
-        acceleration=_positive(_vec(arm, 'acceleration', N_ARM, w), 'acceleration', w),
-        dexterous=dex,
-    )
+    velocity = _positive(velocity, 'velocity', w)
+    acceleration = _positive(_optional_vec(arm, 'acceleration', n, w, DEFAULT_ACCEL_PER_VELOCITY * velocity),
+                             'acceleration', w)
+    dex = _vec(arm, 'dexterous', n, w)
+    _within(dex, lower, upper, f'{w}.dexterous', names)
+    return ArmConfig(joints=names, types=tuple(j.type for j in chain), root=root, tool=tool,
+                     position_lower=lower, position_upper=upper, velocity=velocity,
+                     acceleration=acceleration, dexterous=dex)
 
 
-def _parse_start(raw, where):
-    st = _section(raw, 'start', where)
-    w = f'{where}.start'
-    tol = _vec(st, 'ee_tolerance', 2, w)
-    return StartState(
-        base_pose=_vec(st, 'base_pose', 3, w),
-        arm=_vec(st, 'arm', N_ARM, w),
-        ee_pose=_vec(st, 'ee_pose', 6, w),
-        ee_tolerance=(float(tol[0]), float(tol[1])),
-    )
+def _within(values, lower, upper, item, names):
+    bad = np.flatnonzero((values < lower) | (values > upper))
+    if bad.size:
+        i = int(bad[0])
+        raise ConfigError(f'{item}: outside the position limits: {names[i]} = {values[i]:.6g} not in '
+                          f'[{lower[i]:.6g}, {upper[i]:.6g}]')
 
 
-def _parse_steerable(raw, where):
-    s = _section(raw, 'steerable', where)
-    w = f'{where}.steerable'
+def _parse_start(raw, arm):
+    st = _section(raw, 'start', 'robot')
+    w = 'start'
+    q = _vec(st, 'arm', arm.n, w)
+    _within(q, arm.position_lower, arm.position_upper, f'{w}.arm', arm.joints)
+    ee_pose = _optional_vec(st, 'ee_pose', 6, w, None)
+    tol = _optional_vec(st, 'ee_tolerance', 2, w, None)
+    return StartState(base_pose=_vec(st, 'base_pose', 3, w), arm=q, ee_pose=ee_pose,
+                      ee_tolerance=None if tol is None else (float(tol[0]), float(tol[1])))
+
+
+def _wheel_radius(tree, name, role):
+    radius = tree.wheel_radius(tree.joint(name, role).child)
+    if radius is not None and not radius > 0.0:
+        raise ConfigError(f'{tree.path.name}: {role} {name!r}: wheel radius must be > 0, got {radius}')
+    return radius
+
+
+def _wheel_origins(tree, base_link, names, role):
+    """(x, y) of each wheel joint's origin in base_link [m], every joint checked to exist."""
+    return np.array([tree.placement(tree.joint(n, role).child, base_link)[1][:2] for n in names])
+
+
+def _joint_names(sec, key, where, size=None, minimum=None):
+    names = sec.get(key)
+    ok = isinstance(names, list) and all(isinstance(n, str) and n for n in names)
+    if not ok or (size is not None and len(names) != size) or (minimum is not None and len(names) < minimum):
+        want = f'{size}' if size is not None else f'at least {minimum}'
+        raise ConfigError(f'{where}.{key}: expected a list of {want} joint names, got {names!r}')
+    return tuple(names)
+
+
+def _parse_steerable(raw, tree, base_link):
+    s = _section(raw, 'steerable', 'robot')
+    w = 'steerable'
+    steer = _joint_names(s, 'steer_joints', w, minimum=2)
+    drive = _joint_names(s, 'drive_joints', w, size=len(steer))
+    urdf_hips = _wheel_origins(tree, base_link, steer, 'steer joint')
+    for name in drive:
+        tree.joint(name, 'drive joint')
     try:
-        hips = np.asarray(s['hips'], dtype=float)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ConfigError(f'{w}.hips: expected 4 pairs (hx, hy)') from exc
-    if hips.shape != (N_WHEELS, 2) or not np.all(np.isfinite(hips)):
-        raise ConfigError(f'{w}.hips: expected shape (4, 2), got {hips.shape}')
+        hips = np.asarray(s['hips'], dtype=float) if s.get('hips') is not None else urdf_hips
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f'{w}.hips: expected {len(steer)} pairs (hx, hy)') from exc
+    if hips.shape != (len(steer), 2) or not np.all(np.isfinite(hips)):
+        raise ConfigError(f'{w}.hips: expected shape ({len(steer)}, 2), one per steer joint, got {hips.shape}')
+    radius, drive_v = _common_wheel_values(tree, drive, 'drive joint')
+    offset = _one({round(-tree.joint(n).xyz[1], 9) for n in drive})
+    steer_rate = _optional_scalar(s, 'steer_rate_limit', w, _one({_urdf_velocity(tree, n, 'steer joint') for n in steer}))
+    drive_rate = _optional_scalar(s, 'drive_rate_limit', w, drive_v)
     return SteerableConfig(
-        steer_joints=_names(s, 'steer_joints', N_WHEELS, w),
-        drive_joints=_names(s, 'drive_joints', N_WHEELS, w),
-        hips=hips,
-        wheel_radius=_scalar(s, 'wheel_radius', w),
-        wheel_offset=_scalar(s, 'wheel_offset', w, positive=False),
-        steer_rate_limit=_scalar(s, 'steer_rate_limit', w),
-        steer_accel_limit=_scalar(s, 'steer_accel_limit', w),
-        drive_rate_limit=_scalar(s, 'drive_rate_limit', w),
-        drive_accel_limit=_scalar(s, 'drive_accel_limit', w),
+        steer_joints=steer, drive_joints=drive, hips=hips,
+        wheel_radius=_optional_scalar(s, 'wheel_radius', w, radius),
+        wheel_offset=_optional_scalar(s, 'wheel_offset', w, offset, positive=False),
+        steer_rate_limit=steer_rate,
+        steer_accel_limit=_optional_scalar(s, 'steer_accel_limit', w, DEFAULT_ACCEL_PER_VELOCITY * steer_rate),
+        drive_rate_limit=drive_rate,
+        drive_accel_limit=_optional_scalar(s, 'drive_accel_limit', w, DEFAULT_ACCEL_PER_VELOCITY * drive_rate),
     )
 
 
-def _parse_mecanum(raw, where):
-    m = _section(raw, 'mecanum', where)
-    w = f'{where}.mecanum'
+def _one(values):
+    """The value every wheel shares, None when they differ or the URDF lacks it."""
+    return next(iter(values)) if len(values) == 1 and None not in values else None
+
+
+def _common_wheel_values(tree, names, role):
+    """(radius, velocity limit) the URDF gives every wheel joint ``names``, None where they differ."""
+    return (_one({_wheel_radius(tree, n, role) for n in names}),
+            _one({_urdf_velocity(tree, n, role) for n in names}))
+
+
+def _parse_mecanum(raw, tree, base_link):
+    m = _section(raw, 'mecanum', 'robot')
+    w = 'mecanum'
+    names = _joint_names(m, 'wheel_joints', w, size=4)
+    origins = _wheel_origins(tree, base_link, names, 'wheel joint')
+    radius, rate = _common_wheel_values(tree, names, 'wheel joint')
     return MecanumConfig(
-        wheel_joints=_names(m, 'wheel_joints', N_WHEELS, w),
-        wheel_radius=_scalar(m, 'wheel_radius', w),
-        d1=_scalar(m, 'd1', w),
-        d2=_scalar(m, 'd2', w),
-        wheel_rate_limit=_scalar(m, 'wheel_rate_limit', w),
+        wheel_joints=names,
+        wheel_radius=_optional_scalar(m, 'wheel_radius', w, radius),
+        d1=_optional_scalar(m, 'd1', w, float(np.mean(np.abs(origins[:, 0])))),
+        d2=_optional_scalar(m, 'd2', w, float(np.mean(np.abs(origins[:, 1])))),
+        wheel_rate_limit=_optional_scalar(m, 'wheel_rate_limit', w, rate),
     )
+
+
+def _parse_differential(raw, tree, base_link):
+    d = _section(raw, 'differential', 'robot')
+    w = 'differential'
+    names = _joint_names(d, 'wheel_joints', w, size=2)
+    origins = _wheel_origins(tree, base_link, names, 'wheel joint')
+    if np.any(np.abs(origins[:, 0]) > _AXLE_TOL) or origins[0, 1] <= origins[1, 1]:
+        raise ConfigError(f'{w}.wheel_joints: the left and right wheels must sit on one axle through '
+                          f'{base_link} (x = 0, left at +y); the URDF puts them at {origins.round(4).tolist()}')
+    radius, rate = _common_wheel_values(tree, names, 'wheel joint')
+    return DifferentialConfig(
+        wheel_joints=names,
+        wheel_radius=_optional_scalar(d, 'wheel_radius', w, radius),
+        track=_optional_scalar(d, 'track', w, float(origins[0, 1] - origins[1, 1])),
+        wheel_rate_limit=_optional_scalar(d, 'wheel_rate_limit', w, rate),
+    )
+
+
+_BASE_PARSERS = {'steerable': _parse_steerable, 'mecanum': _parse_mecanum, 'differential': _parse_differential}
+
+
+def _parse_base_limits(raw, base_type):
+    base = _section(raw, 'base', 'robot')
+    vel = _vec(base, 'velocity', 3, 'base')
+    acc = _vec(base, 'acceleration', 3, 'base')
+    axes = (0, 2) if base_type == 'differential' else (0, 1, 2)
+    for key, arr in (('velocity', vel), ('acceleration', acc)):
+        _positive(arr[list(axes)], key, 'base')
+        if base_type == 'differential' and arr[1] != 0.0:
+            raise ConfigError(f'base.{key}: a differential base cannot move sideways: its vy entry '
+                              f'must be 0, got {arr.tolist()}')
+    return BaseLimits(velocity=vel, acceleration=acc)
+
+
+def _check_unique(cfg):
+    names = list(cfg.arm.joints) + list(cfg.wheel_joints)
+    seen = set()
+    for name in names:
+        if name in seen:
+            raise ConfigError(f'joint {name!r} is named twice among the arm and base joints')
+        seen.add(name)
 
 
 def read_yaml_section(path, key, what):
@@ -256,69 +477,85 @@ def read_yaml_section(path, key, what):
         raise ConfigError(f'{what} not found: {path}')
     try:
         doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f'{path}: not valid YAML: {exc}') from exc
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ConfigError(f'{path}: not valid YAML: {str(exc).splitlines()[0] if str(exc) else exc}') from exc
     raw = doc.get(key) if isinstance(doc, dict) else None
     if not isinstance(raw, dict):
         raise ConfigError(f'{path}: top-level key "{key}" missing')
     return raw
 
 
+def robot_names():
+    """The robots shipped in ``config/robots`` (YAML stems), sorted."""
+    return sorted(p.stem for p in config_path('robots').glob('*.yaml'))
+
+
 def resolve_robot_yaml(robot):
     """Map a robot name, alias (A/B) or YAML path to the YAML file path."""
-    key = str(robot).strip().lower()
-    if key in ROBOT_NAMES:
-        return config_path('robots', f'{ROBOT_NAMES[key]}.yaml')
-    path = Path(robot)
+    key = str(robot).strip()
+    name = ALIASES.get(key.lower(), key.lower())
+    if name in robot_names():
+        return config_path('robots', f'{name}.yaml')
+    path = Path(key).expanduser()
     if path.suffix in ('.yaml', '.yml'):
         return path
     raise ConfigError(
-        f'unknown robot {robot!r}: use one of {sorted(set(ROBOT_NAMES.values()))}, '
-        f'an alias A/B, or a path to a robot YAML file')
+        f'unknown robot {robot!r}: use one of {robot_names()}, an alias A/B, '
+        f'or a path to a robot YAML file')
 
 
 def load_robot(robot='steerable'):
     """Load and validate a robot description.
 
     Args:
-        robot: ``'steerable'`` / ``'A'``, ``'mecanum'`` / ``'B'``, or a YAML path.
+        robot: a shipped robot's name (``'steerable'`` / ``'A'``, ``'mecanum'`` / ``'B'``,
+            ``'ur_mecanum'``, ``'panda_diff'``) or a robot YAML path.
 
     Raises:
-        ConfigError: unknown name, missing file, or a missing/invalid key (the
-            message names the key).
+        ConfigError: unknown name, missing or unreadable file, or an invalid item. The message
+            is one line that names the YAML file and the item.
     """
+    if isinstance(robot, RobotConfig):
+        return robot
     path = resolve_robot_yaml(robot)
     raw = read_yaml_section(path, 'robot', 'robot description')
-    where = path.name
+    try:
+        return _parse(path, raw)
+    except ConfigError as exc:
+        raise ConfigError(f'{path}: {exc}') from exc
+
+
+def _parse(path, raw):
     base_type = raw.get('base_type')
-    if base_type not in ('steerable', 'mecanum'):
-        raise ConfigError(f'{where}.base_type: expected "steerable" or "mecanum", got {base_type!r}')
+    if base_type not in BASE_FAMILIES:
+        raise ConfigError(f'base_type: unknown base family {base_type!r}; expected one of {list(BASE_FAMILIES)}')
     urdf = raw.get('urdf')
     if not isinstance(urdf, str):
-        raise ConfigError(f'{where}: missing key "urdf"')
+        raise ConfigError('missing key "urdf" (the URDF path, relative to this file)')
     urdf_path = (path.parent / urdf).resolve()
     if not urdf_path.is_file():
-        raise ConfigError(f'{where}.urdf: file not found: {urdf_path}')
-    base = _section(raw, 'base', where)
-    return RobotConfig(
+        raise ConfigError(f'urdf: file not found: {urdf_path}')
+    tree = UrdfTree(urdf_path)
+    base_link = raw.get('base_link', 'base_link')
+    tree.require_link(base_link, 'base')
+    arm = _parse_arm(raw, tree, 'robot')
+    geometry = _BASE_PARSERS[base_type](raw, tree, base_link)
+    cfg = RobotConfig(
         name=str(raw.get('name', path.stem)),
         description=str(raw.get('description', '')),
         yaml_path=path.resolve(),
         urdf_path=urdf_path,
         base_type=base_type,
-        base_link=str(raw.get('base_link', 'base_link')),
-        ee_frame=str(raw.get('ee_frame', 'ee_link')),
-        ground_z=float(raw.get('ground_z', 0.0)),
-        period=_scalar(raw, 'period', where),
-        method=_word(raw, 'method', where),
-        arm=_parse_arm(raw, where),
-        base=BaseLimits(
-            velocity=_positive(_vec(base, 'velocity', 3, f'{where}.base'), 'velocity', f'{where}.base'),
-            acceleration=_positive(_vec(base, 'acceleration', 3, f'{where}.base'), 'acceleration',
-                                   f'{where}.base'),
-        ),
-        start=_parse_start(raw, where),
-        steerable=_parse_steerable(raw, where) if base_type == 'steerable' else None,
-        mecanum=_parse_mecanum(raw, where) if base_type == 'mecanum' else None,
+        base_link=base_link,
+        ee_frame=arm.tool,
+        ground_z=_optional_scalar(raw, 'ground_z', 'robot', 0.0, positive=False),
+        period=_scalar(raw, 'period', 'robot'),
+        method=_word(raw, 'method', 'robot'),
+        arm=arm,
+        base=_parse_base_limits(raw, base_type),
+        start=_parse_start(raw, arm),
         raw=raw,
+        **{base_type: geometry},
     )
+    _check_unique(cfg)
+    return cfg

@@ -1,9 +1,11 @@
-"""Mobile-base kinematics and controllers: steerable (Sorour §IV) and Mecanum (Xing eq 16)."""
+"""Mobile-base kinematics and controllers: steerable (Sorour §IV), Mecanum (Xing eq 16) and
+differential drive."""
 
 from wmm_control.base.applied import unapplied_command
+from wmm_control.base.differential import DifferentialKinematics
 from wmm_control.base.icr import Icr, choose_route
 from wmm_control.base.mecanum import MecanumKinematics
-from wmm_control.base.mecanum_controller import MecanumController, MecanumOutput, MecanumParams
+from wmm_control.base.wheel_controller import WheelController, WheelOutput, WheelParams, wheel_kinematics
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.base.swmr_controller import (
     IcrQp,
@@ -15,12 +17,13 @@ from wmm_control.base.swmr_controller import (
 )
 
 __all__ = [
+    'DifferentialKinematics',
     'Icr',
     'IcrQp',
-    'MecanumController',
+    'WheelController',
     'MecanumKinematics',
-    'MecanumOutput',
-    'MecanumParams',
+    'WheelOutput',
+    'WheelParams',
     'OsqpIcrSolver',
     'QpResult',
     'SteerableGeometry',
@@ -29,4 +32,5 @@ __all__ = [
     'SwmrParams',
     'choose_route',
     'unapplied_command',
+    'wheel_kinematics',
 ]

@@ -179,10 +179,10 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     if feedback not in ('ground_truth', 'odometry'):
         raise ConfigError(f'run {run.get("name")}: feedback must be ground_truth or odometry, got {feedback!r}')
     resolver_params = dict(resolver_parameters(run), method=run['method'])
-    resolver_params.update(robot=robot.name, ee_feedback=feedback, diagnostics_period=1e-9,
+    resolver_params.update(robot=str(robot.yaml_path), ee_feedback=feedback, diagnostics_period=1e-9,
                            **LOCKSTEP_WAITS['redundancy_resolver'])
     sim_params = dict(scenario.sim or {})
-    sim_params.update(robot=robot.name, timing='lockstep', diagnostics_period=0.0)
+    sim_params.update(robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0)
     for key in ('slip_drift', 'slip_noise'):
         if key in sim_params:
             sim_params[key] = [float(v) for v in sim_params[key]]
@@ -204,11 +204,11 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         nodes.append(RedundancyResolverNode(context=context, cli_args=remap,
                                             parameter_overrides=params(resolver_params)))
         if robot.steerable is not None:
-            nodes.append(SwmrControllerNode(context=context,
-                                            parameter_overrides=params(LOCKSTEP_WAITS['swmr_controller'])))
+            nodes.append(SwmrControllerNode(context=context, parameter_overrides=params(
+                dict(LOCKSTEP_WAITS['swmr_controller'], robot=str(robot.yaml_path)))))
         else:
-            nodes.append(MecanumControllerNode(context=context, parameter_overrides=params(
-                dict(LOCKSTEP_WAITS['mecanum_controller'], robot=robot.name))))
+            nodes.append(MecanumControllerNode(robot.base_type, context=context, parameter_overrides=params(
+                dict(LOCKSTEP_WAITS['mecanum_controller'], robot=str(robot.yaml_path)))))
         recorder = Recorder(context, robot, scenario, log)
         nodes.append(recorder)
         sim = SimNode(context=context, parameter_overrides=params(sim_params))

@@ -24,6 +24,8 @@ Usage::
     ja = model.arm_jacobian_base()
 """
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 from scipy.linalg import lapack
@@ -96,11 +98,28 @@ class KinematicModel:
 
     def __init__(self, robot='steerable', ee_frame=None):
         self.config = robot if isinstance(robot, RobotConfig) else load_robot(robot)
-        self.full_model = build_pinocchio_model(self.config.urdf_path)
-        arm_names = self.config.arm.joints
+        self._build(self.config.urdf_path, self.config.arm.joints, ee_frame or self.config.ee_frame,
+                    self.config.base_link)
+
+    @classmethod
+    def from_urdf(cls, urdf_path, arm_joints, ee_frame, base_link='base_link'):
+        """A model of a URDF alone, before any robot YAML exists (``config`` is None).
+
+        Args:
+            urdf_path: the URDF.
+            arm_joints: the arm joint names, root first.
+            ee_frame, base_link: frame names.
+        """
+        self = cls.__new__(cls)
+        self.config = None
+        self._build(urdf_path, tuple(arm_joints), ee_frame, base_link)
+        return self
+
+    def _build(self, urdf_path, arm_names, ee_frame, base_link):
+        self.full_model = build_pinocchio_model(urdf_path)
         missing = [n for n in arm_names if not self.full_model.existJointName(n)]
         if missing:
-            raise ConfigError(f'arm joints {missing} are not in {self.config.urdf_path.name}')
+            raise ConfigError(f'arm joints {missing} are not in {Path(urdf_path).name}')
         locked = [self.full_model.getJointId(n) for n in self.full_model.names[1:]
                   if n not in arm_names and n != 'root_joint']
         self.model = pin.buildReducedModel(self.full_model, locked, pin.neutral(self.full_model))
@@ -121,9 +140,9 @@ class KinematicModel:
         self._cont_v = np.array([iv for _, iv in self._continuous], dtype=int)
         self._plain_q = np.array([iq for iq, _ in self._plain], dtype=int)
         self._plain_v = np.array([iv for _, iv in self._plain], dtype=int)
-        self.ee_frame = ee_frame or self.config.ee_frame
+        self.ee_frame = ee_frame
         self._ee_id = self.frame_id(self.ee_frame)
-        self._base_id = self.frame_id(self.config.base_link)
+        self._base_id = self.frame_id(base_link)
         self._q = pin.neutral(self.model)
         self._q_flat = None
         self._v = None
@@ -148,7 +167,7 @@ class KinematicModel:
         """
         if not isinstance(name, str) or not self.model.existFrame(name):
             bodies = [f.name for f in self.model.frames if f.type == pin.FrameType.BODY]
-            raise UnknownFrameError(f'unknown frame {name!r}; body frames of {self.config.name}: {bodies}')
+            raise UnknownFrameError(f'unknown frame {name!r}; body frames of {self.full_model.name}: {bodies}')
         return self.model.getFrameId(name)
 
     # ------------------------------------------------------------------ update

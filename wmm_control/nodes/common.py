@@ -35,12 +35,12 @@ from std_msgs.msg import Float64MultiArray
 
 from wmm_control.errors import ConfigError, WmmError
 from wmm_control.paths import config_path
-from wmm_control.robot_config import load_robot
+from wmm_control.robot_config import load_robot, robot_names
 
 RCLError = _rclpy.RCLError
 
 __all__ = [
-    'Param', 'declare_parameters', 'load_defaults', 'robot_method', 'robot_period', 'parameter_error', 'float_array', 'parse_command',
+    'Param', 'declare_parameters', 'load_defaults', 'robot_method', 'robot_param', 'robot_period', 'require_base', 'parameter_error', 'float_array', 'parse_command',
     'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node', 'guard_clock',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
     'BaseReference', 'JointStateWatchdog', 'StampGate', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
@@ -94,6 +94,22 @@ class Param:
     read_only: bool = False
     size: tuple = None
     default_from: object = None
+
+
+def robot_param(description=''):
+    """The ``robot`` parameter every node has: a shipped robot's name, an alias A/B, or a path to
+    a robot YAML file (validated when the node loads it: an unknown name or a bad file stops the
+    start-up with a message naming the file and the item)."""
+    return Param('robot', (description + ' ' if description else '') +
+                 f'A robot name ({", ".join(robot_names())}; aliases A, B) or a path to a robot YAML file.',
+                 read_only=True)
+
+
+def require_base(robot, families, node_name):
+    """Raise a ConfigError unless ``robot``'s base is one of ``families`` (this node drives those)."""
+    if robot.base_type not in families:
+        raise ConfigError(f'robot {robot.name!r} has a {robot.base_type} base; {node_name} drives '
+                          f'{" and ".join(families)} bases')
 
 
 def robot_period(values):

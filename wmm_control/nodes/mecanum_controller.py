@@ -1,4 +1,6 @@
-"""``mecanum_controller``: the Mecanum base controller of robot B (Xing eq 16) as a node.
+"""``mecanum_controller`` and ``differential_controller``: the base controller of a Mecanum
+base (robot B, Xing eq 16) or a differential-drive base as a node (one class, two executables;
+each checks its robot's base family).
 
 Subscribes:
   ``/base/reference`` (``geometry_msgs/TwistStamped``, frame ``base_frame`` or empty):
@@ -6,8 +8,10 @@ Subscribes:
   ``/joint_states`` (``sensor_msgs/JointState``): each message with the wheel joints runs
   exactly one control cycle.
 Publishes, every cycle:
-  ``/wheel_controller/commands`` (``std_msgs/Float64MultiArray``): the four wheel rates
-  [rad/s], order of the robot YAML's ``wheel_joints`` (fl, fr, rl, rr);
+  ``/wheel_controller/commands`` (``std_msgs/Float64MultiArray``): the wheel rates
+  [rad/s], order of the robot YAML's ``wheel_joints`` (Mecanum fl, fr, rl, rr; differential
+  left, right). A differential base's reference loses its vy (it cannot move sideways):
+  the feasible twist says what it follows, and the resolver's arm compensation covers the rest;
   ``/base/feasible_twist`` (``TwistStamped``, frame ``base_frame``): q̇_bf, the twist the
   wheel rates realise over the coming period, stamped with the joint state the cycle answers;
   ``/diagnostics``: status, scales, reference and twist, every ``diagnostics_period``.
@@ -17,9 +21,9 @@ the cycle that answers the reference stamped S, at once if the latest reference 
 else as soon as it comes, or after ``reference_wait`` seconds of steady time with the latest
 reference (:class:`~wmm_control.nodes.common.StampedExchange`).
 
-Geometry (R, d1, d2), the wheel joints and every limit come from the robot YAML
-(``config/robots/<robot>.yaml``); ``config/mecanum_controller.yaml`` holds only the node's
-tuning.
+Geometry (R, d1, d2 or the track), the wheel joints and every limit come from the robot
+description (its YAML and URDF); ``config/mecanum_controller.yaml`` holds only the node's
+tuning (both executables read it).
 
 Safety: when the latest reference is older than ``reference_timeout`` (this node's clock at
 receipt) the base brakes to rest at the acceleration limits. Non-finite references and
@@ -39,6 +43,8 @@ reported. Every rejection is logged, throttled. Nothing non-finite is ever publi
 the node works under ``use_sim_time``.
 """
 
+import functools
+
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
@@ -48,18 +54,17 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from wmm_control.base import MecanumController, unapplied_command
+from wmm_control.base import WheelController, unapplied_command
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, run_node,
-    robot_period, seconds, twist_stamped)
+    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, require_base,
+    robot_param, robot_period, run_node, seconds, twist_stamped)
 from wmm_control.robot_config import load_robot
 
-__all__ = ['MecanumControllerNode', 'main']
+__all__ = ['MecanumControllerNode', 'main', 'main_differential']
 
 PARAMS = (
-    Param('robot', 'Robot with a Mecanum base: mecanum (B, Xing). Geometry and limits come from its YAML.',
-          choices=('mecanum', 'B', 'b'), read_only=True),
+    robot_param('A robot with a Mecanum or differential base. Geometry and limits come from its description.'),
     Param('period', 'Control period [s]; default: the robot YAML\'s period.', lo=1e-3, hi=1.0, read_only=True,
           default_from=robot_period),
     Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
@@ -75,18 +80,25 @@ PARAMS = (
 
 
 class MecanumControllerNode(Node):
-    """Wraps one :class:`wmm_control.base.MecanumController`."""
+    """Wraps one :class:`wmm_control.base.WheelController`.
 
-    def __init__(self, **kwargs):
-        super().__init__('mecanum_controller', **kwargs)
+    Args:
+        family: the base family this executable drives (``mecanum`` or ``differential``); its
+            default node name is ``<family>_controller``.
+    """
+
+    def __init__(self, family='mecanum', **kwargs):
+        super().__init__(f'{family}_controller', **kwargs)
         guard_clock(self)
-        p = declare_parameters(self, 'mecanum_controller.yaml', PARAMS, on_change={
+        p = declare_parameters(self, f'{family}_controller.yaml', PARAMS, on_change={
             'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
             'joint_state_timeout': lambda v: self.watchdog.set_timeout(v)})
         self.p = p
         robot = load_robot(p.robot)
-        self.controller = MecanumController.from_robot_config(robot, p.period)
-        self.wheels = JointSelector(robot.mecanum.wheel_joints, velocity_limits=robot.mecanum.wheel_rate_limit)
+        require_base(robot, (family,), f'{family}_controller')
+        self.controller = WheelController.from_robot_config(robot, p.period)
+        wheels = robot.mecanum or robot.differential
+        self.wheels = JointSelector(wheels.wheel_joints, velocity_limits=wheels.wheel_rate_limit)
         self.reference = BaseReference(self, p.base_frame, p.reference_timeout, robot.base.velocity)
         self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0, 'commands_not_applied': 0}
         self._last_wheels = None
@@ -97,13 +109,13 @@ class MecanumControllerNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
         self.watchdog = JointStateWatchdog(
-            self, p.joint_state_timeout, p.period, steady, lambda: self.pub_wheels.publish(float_array(np.zeros(4))),
+            self, p.joint_state_timeout, p.period, steady, lambda: self.pub_wheels.publish(float_array(np.zeros(len(wheels.wheel_joints)))),
             'zero wheel rates; will restart from the measured wheel rates')
         self.create_subscription(TwistStamped, 'base/reference', self._on_reference, COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         lim = self.controller.params
         self.get_logger().info(
-            f'Mecanum base controller, robot {robot.name}: t_s {p.period} s, |v| ≤ {list(lim.velocity_limit)}, '
+            f'{family.capitalize()} base controller, robot {robot.name}: t_s {p.period} s, |v| ≤ {list(lim.velocity_limit)}, '
             f'|a| ≤ {list(lim.accel_limit)}, wheels ≤ {lim.wheel_rate_limit} rad/s')
 
     # ------------------------------------------------------------------ inputs
@@ -154,7 +166,7 @@ class MecanumControllerNode(Node):
             self.get_logger().error(f'non-finite command {wheels.tolist()}: zero wheel rates',
                                     throttle_duration_sec=1.0)
             self.controller.reset()
-            wheels, twist = np.zeros(4), np.zeros(3)
+            wheels, twist = np.zeros(len(wheels)), np.zeros(3)
         self.counters['cycles'] += 1
         self.pub_wheels.publish(float_array(wheels))
         self._last_wheels = wheels
@@ -181,6 +193,11 @@ class MecanumControllerNode(Node):
 
 def main(args=None):
     return run_node(MecanumControllerNode, args)
+
+
+def main_differential(args=None):
+    """``differential_controller``: the same node for a differential-drive base."""
+    return run_node(functools.partial(MecanumControllerNode, family='differential'), args)
 
 
 if __name__ == '__main__':

@@ -66,18 +66,16 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, robot_method, robot_period,
-    run_node, stamp_key, twist_stamped)
+    declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, robot_method, robot_param,
+    robot_period, run_node, stamp_key, twist_stamped)
 from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 from wmm_control.resolvers.progress import GoalProgress
 
 __all__ = ['RedundancyResolverNode', 'main']
 
-_ROBOTS = ('steerable', 'mecanum', 'A', 'B', 'a', 'b')
 _SPECS = (
-    Param('robot', 'Robot: steerable (A, Sorour) or mecanum (B, Xing), or A/B.', choices=_ROBOTS,
-          read_only=True),
+    robot_param(),
     Param('method', 'Redundancy resolution method; default: the robot YAML\'s method.', choices=tuple(sorted(METHODS)),
           read_only=True, default_from=robot_method),
     Param('period', 'Control period [s]: the acceleration limits act per period; default: the robot YAML\'s '

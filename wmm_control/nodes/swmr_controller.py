@@ -54,15 +54,14 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams, unapplied_command
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, run_node,
-    robot_period, seconds, twist_stamped)
+    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, require_base,
+    robot_param, robot_period, run_node, seconds, twist_stamped)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['SwmrControllerNode', 'main']
 
 PARAMS = (
-    Param('robot', 'Robot with a steerable base: steerable (A, Sorour). Geometry, joints and limits come from '
-          'its YAML.', choices=('steerable', 'A', 'a'), read_only=True),
+    robot_param('A robot with a steerable base (A, Sorour). Geometry, joints and limits come from its YAML.'),
     Param('period', 'Control period t_s [s]; default: the robot YAML\'s period.', lo=1e-3, hi=1.0, read_only=True,
           default_from=robot_period),
     Param('kp', 'Gain K_p of the twist controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
@@ -92,6 +91,7 @@ class SwmrControllerNode(Node):
             'joint_state_timeout': lambda v: self.watchdog.set_timeout(v)})
         self.p = p
         robot = load_robot(p.robot)
+        require_base(robot, ('steerable',), 'swmr_controller')
         self.steer_joints = robot.steerable.steer_joints
         params = SwmrParams.from_robot_config(robot, dt=p.period, kp=p.kp, icr_gain=p.icr_gain)
         self.controller = SwmrController(SteerableGeometry.from_config(robot.steerable), params)

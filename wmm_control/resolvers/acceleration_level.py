@@ -2,7 +2,11 @@
 acceleration bounds, the manipulability objective, and the integration to velocity commands.
 
 Joint space: the generalized coordinates ``q = (x_b, y_b, θ_b, q_m)`` of Xing eq (2), the
-base in world coordinates (robot B's base is holonomic, so J and J_v coincide). Each period:
+base in world coordinates (robot B's base is holonomic, so J and J_v coincide). A
+differential base cannot move sideways: its rates are ``u_b = (v, ω)`` in its own frame,
+``(ẋ_b, ẏ_b, θ̇_b) = T(θ) u_b`` with ``T = [[cos θ, 0], [sin θ, 0], [0, 1]]``, so its Jacobian
+columns are ``J_b T`` and its drift gains ``J_b Ṫ u_b`` (the nonholonomic model of the base;
+every step below is the same over u = (u_b, q̇_m)). Each period:
 
 1. ``ẍ = ẍ_d + K_d (ẋ_d − J q̇) + K_p e`` (eq 23) on the position rows (r = 3) or the whole
    pose (r = 6, orientation error ``log(R_d Rᵀ)``, world frame); ``J̇q̇`` from pinocchio.
@@ -15,7 +19,7 @@ base in world coordinates (robot B's base is holonomic, so J and J_v coincide). 
    executed (the integrated rate, held for a period) from ever passing the limit.
 3. The method's joint accelerations (a subclass), within the bounds.
 4. ``q̇ ← q̇ + q̈ T``: the arm gets q̇_m; the base gets (ẋ_b, ẏ_b, θ̇_b) turned into its own
-   frame (vx, vy, ω), the reference of its base controller.
+   frame (vx, vy, ω), the reference of its base controller ((v, 0, ω) for a differential base).
 
 A set-point target (zero velocity and acceleration) becomes a smooth trajectory
 (:class:`~wmm_control.resolvers.setpoint_trajectory.SetpointTrajectory`); a trajectory point
@@ -32,7 +36,7 @@ import pinocchio as pin
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.resolvers.interface import N_ARM, Resolver, ResolverCommand, ResolverDiagnostics
+from wmm_control.resolvers.interface import Resolver, ResolverCommand, ResolverDiagnostics
 from wmm_control.resolvers.limits import CommandLimits
 from wmm_control.resolvers.pose_servo import _check_fields, lapack_svd
 from wmm_control.resolvers.setpoint_trajectory import SetpointTrajectory
@@ -41,7 +45,6 @@ from wmm_control.resolvers.sns import task_scale
 __all__ = ['AccelerationParams', 'AccelerationResolver', 'TASK_ROWS']
 
 TASK_ROWS = ('position', 'full')
-_N = 3 + N_ARM
 
 
 @dataclass(frozen=True)
@@ -98,14 +101,17 @@ class AccelerationResolver(Resolver):
         self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
         self.params = params
         self.limits = CommandLimits.for_robot(self.model.config, params.dt)
+        self._unicycle = self.model.config.base_type == 'differential'
+        self.n_base = len(self.model.config.base_axes)
+        self.n = self.n_base + self.model.n_arm
         self._rows = slice(0, 3) if params.rows == 'position' else slice(0, 6)
-        self._position = np.zeros(_N)
+        self._position = np.zeros(self.n)
         self._kp = np.array([params.kp] * 3 + [params.kp_rot] * 3)
         self._kd = np.array([params.kd] * 3 + [params.kd_rot] * 3)
         self.reset()
 
     def reset(self):
-        self._qd = None              # the commanded generalized rates (the integrator)
+        self._qd = None              # the commanded generalized rates u = (u_b, q̇_m) (the integrator)
         self._last_base = np.zeros(3)  # the last base twist sent (base frame)
         self._setpoint = None        # (goal key, trajectory, time along it)
 
@@ -128,38 +134,48 @@ class AccelerationResolver(Resolver):
         """Eq (23) and what the methods need.
 
         Returns:
-            dict with ``jac`` (r, 10), ``xdd`` (r,), ``drift`` J̇q̇ (r,), ``lower``/``upper``
-            joint acceleration bounds (10,), ``brake_lower``/``brake_upper`` those of the
-            braking before a position limit alone (10,), ``qd`` (10,), ``position_error`` [m],
+            dict with ``jac`` (r, n_b + n), ``xdd`` (r,), ``drift`` J̇q̇ (r,), ``lower``/``upper``
+            joint acceleration bounds (n_b + n,), ``brake_lower``/``brake_upper`` those of the
+            braking before a position limit alone, ``qd`` (n_b + n,), ``position_error`` [m],
             ``orientation_error`` [rad], ``sigma`` σ_min of the arm's task rows, ``sigma_position``
             that of its position rows.
         """
         p = self.params
         model = self.model
+        c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])
+        nb = self.n_base
         if self._qd is None:
-            c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])
             v = state.base_twist
-            self._qd = np.concatenate(([c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]], state.dq_arm))
+            base = [v[0], v[2]] if self._unicycle else [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]
+            self._qd = np.concatenate((base, state.dq_arm))
             self._last_base = np.asarray(state.base_twist, dtype=float).copy()
         qd = self._qd
-        model.update(state.base_pose, state.q_arm, qd[:3], qd[3:])
+        if self._unicycle:
+            to_world = np.array([[c, 0.0], [s, 0.0], [0.0, 1.0]])
+            model.update(state.base_pose, state.q_arm, to_world @ qd[:nb], qd[nb:])
+        else:
+            model.update(state.base_pose, state.q_arm, qd[:3], qd[3:])
         if state.ee_position is None:
             pos, rot = model.ee_placement_world()
         else:
             pos, rot = state.ee_position, state.ee_rotation
         ref = self._reference(target, pos, rot)
         jac = model.jacobian_world()
+        drift = model.jdot_qdot()
+        if self._unicycle:      # columns J_b T over (v, ω); drift + J_b Ṫ u_b, Ṫ u_b = ω v (−sin θ, cos θ, 0)
+            drift = drift + jac[:, :2] @ (qd[1] * qd[0] * np.array([-s, c]))
+            jac = np.hstack((jac[:, :3] @ to_world, jac[:, 3:]))
         err = np.concatenate((ref.position - pos, pin.log3(ref.rotation @ rot.T)))
         xd = jac @ qd
         xdd = ref.acceleration + self._kd * (ref.velocity - xd) + self._kp * err
         rows = self._rows
-        self._position[3:] = state.q_arm
+        self._position[nb:] = state.q_arm
         lo_v, hi_v, _ = self.limits.box(self._position, qd)
         down, up = self.limits.braking_rates(self._position)
-        sigma = float(lapack_svd(jac[rows, 3:], compute_uv=False)[-1])
-        sigma_position = sigma if rows.stop == 3 else float(lapack_svd(jac[:3, 3:], compute_uv=False)[-1])
+        sigma = float(lapack_svd(jac[rows, nb:], compute_uv=False)[-1])
+        sigma_position = sigma if rows.stop == 3 else float(lapack_svd(jac[:3, nb:], compute_uv=False)[-1])
         target_err = np.concatenate((target.position - pos, pin.log3(target.rotation @ rot.T)))
-        return {'jac': jac[rows], 'xdd': xdd[rows], 'drift': model.jdot_qdot()[rows], 'qd': qd,
+        return {'jac': jac[rows], 'xdd': xdd[rows], 'drift': drift[rows], 'qd': qd,
                 'lower': (lo_v - qd) / p.dt, 'upper': (hi_v - qd) / p.dt,
                 'brake_lower': (-down - qd) / p.dt, 'brake_upper': (up - qd) / p.dt,
                 'position_error': float(np.linalg.norm(target_err[:3])),
@@ -167,18 +183,19 @@ class AccelerationResolver(Resolver):
                 'sigma_position': sigma_position}
 
     def manipulability_acceleration(self, qd):
-        """Eq (13): ``q̈_A = [0; γ1 ∇²H q̇_m + γ2 (γ1 ∇H − q̇_m)]``, H over the task's rows. Shape (10,)."""
+        """Eq (13): ``q̈_A = [0; γ1 ∇²H q̇_m + γ2 (γ1 ∇H − q̇_m)]``, H over the task's rows. Shape (n_b + n,)."""
         p = self.params
         grad = self.model.manipulability_gradient(self.params.rows)
         hess = self.model.manipulability_hessian(self.params.rows)
-        out = np.zeros(_N)
-        out[3:] = p.gamma1 * hess @ qd[3:] + p.gamma2 * (p.gamma1 * grad - qd[3:])
+        nb = self.n_base
+        out = np.zeros(self.n)
+        out[nb:] = p.gamma1 * hess @ qd[nb:] + p.gamma2 * (p.gamma1 * grad - qd[nb:])
         return out
 
     # ------------------------------------------------------------------ step
     @abstractmethod
     def _accelerations(self, task):
-        """The method: ``(q̈ (10,), diagnostics fields dict)`` within ``task['lower'/'upper']``."""
+        """The method: ``(q̈ (n_b + n,), diagnostics fields dict)`` within ``task['lower'/'upper']``."""
 
     def step(self, state, target):
         t0 = time.perf_counter()
@@ -189,6 +206,13 @@ class AccelerationResolver(Resolver):
         qdd = np.clip(qdd, task['lower'], task['upper'])
         qd = task['qd'] + qdd * self.params.dt
         qd[np.abs(qd) < 1e-12] = 0.0      # a stop is exact: braking by −q̇/T leaves round-off
+        nb = self.n_base
+        if self._unicycle:      # (v, ω) is already the base frame's, within its bounds
+            base = np.array([qd[0], 0.0, qd[1]])
+            base[np.abs(base) < 1e-12] = 0.0
+            qd[:nb] = base[[0, 2]]
+            self._qd, self._last_base = qd, base
+            return self._command(qd, base, task, fields, t0)
         c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])
         base = np.array([c * qd[0] + s * qd[1], -s * qd[0] + c * qd[1], qd[2]])
         # The bounds hold the world-frame rates; the base controller limits its own frame, which
@@ -203,12 +227,15 @@ class AccelerationResolver(Resolver):
         base[np.abs(base) < 1e-12] = 0.0
         qd[:3] = (c * base[0] - s * base[1], s * base[0] + c * base[1], base[2])
         self._qd, self._last_base = qd, base
+        return self._command(qd, base, task, fields, t0)
+
+    def _command(self, qd, base, task, fields, t0):
         time_left = max(self._setpoint[1].duration - self._setpoint[2], 0.0) if self._setpoint else 0.0
         diag = ResolverDiagnostics(
             method=self.name, psi=fields.pop('psi', 1.0), position_error=task['position_error'],
             orientation_error=task['orientation_error'], compensation_scale=1.0, sigma_min=task['sigma'],
             compensated=False, cycle_time_s=time.perf_counter() - t0, reference_time_left=time_left, **fields)
-        return ResolverCommand(arm_velocity=qd[3:].copy(), base_twist=base.copy(), diagnostics=diag)
+        return ResolverCommand(arm_velocity=qd[self.n_base:].copy(), base_twist=base.copy(), diagnostics=diag)
 
     def _tertiary(self, task, qdd, active, active_pinv):
         """Eqs (10)–(11): ``β P_A q̈_A`` with ``P_A = [I − ((I − S) P_N)⁺] P_N``, β keeping the bounds.
@@ -221,16 +248,16 @@ class AccelerationResolver(Resolver):
 
         Args:
             task: :meth:`task_acceleration`'s dict.
-            qdd: the primary and secondary accelerations (10,).
-            active: the active set S (bool, (10,)).
+            qdd: the primary and secondary accelerations (n_b + n,).
+            active: the active set S (bool, (n_b + n,)).
             active_pinv: ``(J S)⁺`` over the active columns, (|S|, r).
 
         Returns:
-            (q̈_t (10,), β).
+            (q̈_t (n_b + n,), β).
         """
         cols = np.flatnonzero(active)
         q_a = self.manipulability_acceleration(task['qd'])[cols]
-        q_t = np.zeros(_N)
+        q_t = np.zeros(self.n)
         q_t[cols] = q_a - active_pinv @ (task['jac'][:, cols] @ q_a)
-        beta, _ = task_scale(qdd, q_t, task['lower'], task['upper'], np.ones(_N, dtype=bool))
+        beta, _ = task_scale(qdd, q_t, task['lower'], task['upper'], np.ones(self.n, dtype=bool))
         return beta * q_t, beta

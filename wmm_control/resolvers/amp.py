@@ -92,14 +92,15 @@ class AmpResolver(AccelerationResolver):
         """Eq (15): the base's accelerations while it is out of the task: full braking to rest."""
         qd, lo, hi = task['qd'], task['lower'], task['upper']
         held = np.zeros(len(qd))
-        held[:3] = np.clip(-qd[:3] / self.params.dt, lo[:3], hi[:3])
+        nb = self.n_base
+        held[:nb] = np.clip(-qd[:nb] / self.params.dt, lo[:nb], hi[:nb])
         return held
 
     def _accelerations(self, task):
         p = self.params
         n = len(task['qd'])
         arm_only = np.ones(n, dtype=bool)
-        arm_only[:3] = False
+        arm_only[:self.n_base] = False
         sigma = self._anticipated_sigma(task['sigma_position'] if p.sigma_rows == 'position' else task['sigma'])
         singular = p.singularity_avoidance and sigma < p.sigma_min
         reason = 'singularity' if singular else ''
@@ -116,7 +117,7 @@ class AmpResolver(AccelerationResolver):
         if p.manipulability and sns.pinv is not None:
             q_t, beta = self._tertiary(task, qdd, active, sns.pinv)
             qdd = qdd + q_t
-        base_on = bool(np.any(active[:3]))
-        mode = f'base active ({reason})' if base_on else ('base stopping' if np.any(task['qd'][:3]) else 'arm only')
+        base_on = bool(np.any(active[:self.n_base]))
+        mode = f'base active ({reason})' if base_on else ('base stopping' if np.any(task['qd'][:self.n_base]) else 'arm only')
         return qdd, {'mode': mode, 'psi': 0.0 if base_on else 1.0, 'limit_scale': alpha, 'accel_scale': 1.0,
                      'null_scale': beta, 'limited': tuple(int(i) for i in np.flatnonzero(saturated))}

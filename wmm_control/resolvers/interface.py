@@ -19,10 +19,18 @@ from wmm_control.errors import ShapeError
 from wmm_control.kinematics.orientation import matrix_from_rpy
 
 __all__ = ['RobotState', 'PoseTarget', 'ResolverDiagnostics', 'ResolverCommand', 'Resolver',
-           'N_ARM', 'N_BASE_TWIST']
+           'base_twist_of']
 
-N_ARM = 7
-N_BASE_TWIST = 3
+
+def base_twist_of(values, axes):
+    """The base twist (vx, vy, ω) whose entries ``axes`` are ``values`` and the rest zero.
+
+    A differential base follows (vx, ω) only (axes (0, 2)): its vy is zero by construction.
+    Shape (3,).
+    """
+    twist = np.zeros(3)
+    twist[list(axes)] = values
+    return twist
 
 
 def _rotation(value, name):
@@ -41,8 +49,8 @@ class RobotState:
         base_pose: (x, y, θ) of ``base_link`` in the world [m, m, rad]. Shape (3,).
         base_twist: measured base twist (vx, vy, ω) in the base frame [m/s, m/s, rad/s].
             Shape (3,).
-        q_arm: arm joint positions [rad]. Shape (7,).
-        dq_arm: arm joint rates [rad/s]. Shape (7,).
+        q_arm: arm joint positions [rad or m]. Shape (n,).
+        dq_arm: arm joint rates [rad/s or m/s]. Shape (n,).
         ee_position: measured end-effector position in the world [m], or None to use forward
             kinematics from the base pose and the arm joints. Shape (3,).
         ee_rotation: measured end-effector orientation in the world, with ``ee_position``.
@@ -62,8 +70,9 @@ class RobotState:
     def __post_init__(self):
         object.__setattr__(self, 'base_pose', as_finite_vector(self.base_pose, 3, 'base_pose'))
         object.__setattr__(self, 'base_twist', as_finite_vector(self.base_twist, 3, 'base_twist'))
-        object.__setattr__(self, 'q_arm', as_finite_vector(self.q_arm, N_ARM, 'q_arm'))
-        object.__setattr__(self, 'dq_arm', as_finite_vector(self.dq_arm, N_ARM, 'dq_arm'))
+        q_arm = as_finite_vector(self.q_arm, None, 'q_arm')
+        object.__setattr__(self, 'q_arm', q_arm)
+        object.__setattr__(self, 'dq_arm', as_finite_vector(self.dq_arm, q_arm.size, 'dq_arm'))
         if (self.ee_position is None) != (self.ee_rotation is None):
             raise ShapeError('give both ee_position and ee_rotation, or neither')
         if self.ee_position is not None:

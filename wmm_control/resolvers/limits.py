@@ -151,16 +151,18 @@ class CommandLimits:
 
     @classmethod
     def for_robot(cls, robot, dt):
-        """Limits of the whole-body command (vx, vy, ω, q̇_1 … q̇_7) of a robot description.
+        """Limits of the whole-body command (base, q̇_1 … q̇_n) of a robot description.
 
-        The base twist has the robot YAML's base velocity and acceleration limits and no
-        position limits; the arm has its joint limits.
+        The base entries are the twist axes the base can follow (``robot.base_axes``: vx, vy,
+        ω, or vx, ω for a differential base), with the robot YAML's base velocity and
+        acceleration limits and no position limits; the arm has its joint limits.
         """
-        arm, inf3 = robot.arm, np.full(3, np.inf)
-        return cls(velocity=np.concatenate((robot.base.velocity, arm.velocity)),
-                   acceleration=np.concatenate((robot.base.acceleration, arm.acceleration)),
-                   position_lower=np.concatenate((-inf3, arm.position_lower)),
-                   position_upper=np.concatenate((inf3, arm.position_upper)), dt=dt)
+        arm, axes = robot.arm, list(robot.base_axes)
+        inf = np.full(len(axes), np.inf)
+        return cls(velocity=np.concatenate((robot.base.velocity[axes], arm.velocity)),
+                   acceleration=np.concatenate((robot.base.acceleration[axes], arm.acceleration)),
+                   position_lower=np.concatenate((-inf, arm.position_lower)),
+                   position_upper=np.concatenate((inf, arm.position_upper)), dt=dt)
 
     def subset(self, index):
         """The limits of some entries only (``index``: a slice or an index array)."""

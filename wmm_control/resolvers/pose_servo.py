@@ -34,15 +34,13 @@ from scipy.linalg import lapack
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import rpy_from_matrix, rpy_rate_map, wrap_angle
-from wmm_control.resolvers.interface import N_ARM, N_BASE_TWIST, Resolver, ResolverCommand, ResolverDiagnostics
+from wmm_control.resolvers.interface import Resolver, ResolverCommand, ResolverDiagnostics, base_twist_of
 from wmm_control.resolvers.limits import CommandLimits
 
 __all__ = ['PoseServoParams', 'PoseServoResolver', 'damped_pinv_solve', 'singularity_damping', 'ORIENTATION_ERRORS']
 
 ORIENTATION_ERRORS = ('rpy', 'log')
-_BASE_COLS = [0, 1, 5]       # columns of H J_b that move: ẋ, ẏ, ω
-_N = N_BASE_TWIST + N_ARM
-_JMM_COLS = np.array(_BASE_COLS + list(range(6, 6 + N_ARM)))   # columns of J_mm over u
+_H_COLS = (0, 1, 5)          # columns of H J_b of the base twist (vx, vy, ω)
 
 
 @dataclass(frozen=True)
@@ -201,19 +199,28 @@ class PoseServoResolver(Resolver):
     def __init__(self, robot, params):
         self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
         self.params = params
-        self.limits = CommandLimits.for_robot(self.model.config, params.dt)
-        self._arm_limits = self.limits.subset(slice(N_BASE_TWIST, None))
-        self._position = np.zeros(_N)
+        config = self.model.config
+        #: indices of (vx, vy, ω) the base can follow; u = (those, q̇_a)
+        self.base_axes = config.base_axes
+        self.n_base = len(self.base_axes)
+        self.n_arm = self.model.n_arm
+        self.n = self.n_base + self.n_arm
+        self._base_cols = [_H_COLS[a] for a in self.base_axes]
+        self._jmm_cols = np.array(self._base_cols + list(range(6, 6 + self.n_arm)))
+        self.limits = CommandLimits.for_robot(config, params.dt)
+        self._arm_limits = self.limits.subset(slice(self.n_base, None))
+        self._position = np.zeros(self.n)
         self.reset()
 
     def reset(self):
-        self._prev = np.zeros(_N)          # last nominal command (base reference, arm before eq 14)
-        self._prev_null = np.zeros(_N)     # its null-space share
-        self._prev_arm = np.zeros(N_ARM)   # last arm command sent
-        self._prev_arm_null = np.zeros(N_ARM)
-        self._arm_before = (np.zeros(N_ARM), np.zeros(N_ARM))
-        self._arm_task = np.zeros(N_ARM)       # this period's arm command: task part...
-        self._arm_null = np.zeros(N_ARM)       # ...and null-space part
+        n, n_arm = self.n, self.n_arm
+        self._prev = np.zeros(n)           # last nominal command (base reference, arm before eq 14)
+        self._prev_null = np.zeros(n)      # its null-space share
+        self._prev_arm = np.zeros(n_arm)   # last arm command sent
+        self._prev_arm_null = np.zeros(n_arm)
+        self._arm_before = (np.zeros(n_arm), np.zeros(n_arm))
+        self._arm_task = np.zeros(n_arm)       # this period's arm command: task part...
+        self._arm_null = np.zeros(n_arm)       # ...and null-space part
         self._q_arm = None
         self._jac = None
         self.arm_damping = self.params.rho
@@ -247,7 +254,7 @@ class PoseServoResolver(Resolver):
             e_lin = e_pos / e_norm * (p.max_linear_speed / p.lambda_p)
         p_ref[:3] = b_r_w @ (p.lambda_p * e_lin + ff[:3])
         if p.orientation_error == 'rpy':
-            jac = model.jmm(p.rpy_damping)[:, _JMM_COLS]
+            jac = model.jmm(p.rpy_damping)[:, self._jmm_cols]
             e_ang = wrap_angle(rpy_from_matrix(target.rotation) - rpy_from_matrix(rot))
             if p.rotate_angular_error:
                 e_ang = b_r_w @ e_ang
@@ -255,9 +262,9 @@ class PoseServoResolver(Resolver):
             if ff[3:].any():   # (a set-point's zero feedforward adds exactly nothing: skip Ω⁻¹)
                 p_ref[3:] += rpy_rate_map(model.ee_pose_base()[3:], p.rpy_damping)[3:, 3:] @ (b_r_w @ ff[3:])
         else:
-            jac = np.empty((6, _N))
-            jac[:, :N_BASE_TWIST] = model.h_matrix()[:, _BASE_COLS]
-            jac[:, N_BASE_TWIST:] = model.arm_jacobian_base()
+            jac = np.empty((6, self.n))
+            jac[:, :self.n_base] = model.h_matrix()[:, self._base_cols]
+            jac[:, self.n_base:] = model.arm_jacobian_base()
             p_ref[3:] = b_r_w @ (p.lambda_p * pin.log3(rot_err) + ff[3:])
         _cap(p_ref[:3], p.max_linear_speed)
         _cap(p_ref[3:], p.max_angular_speed)
@@ -306,34 +313,35 @@ class PoseServoResolver(Resolver):
         p = self.params
         if not (p.hold_joint_limits or p.arm_takeover):
             return task
-        lower, upper = [-math.inf] * _N, [math.inf] * _N
+        nb, n = self.n_base, self.n
+        lower, upper = [-math.inf] * n, [math.inf] * n
         if p.hold_joint_limits:
-            self._position[N_BASE_TWIST:] = q_arm
+            self._position[nb:] = q_arm
             down, up = self.limits.braking_rates(self._position)
-            lower[N_BASE_TWIST:] = (-down[N_BASE_TWIST:]).tolist()
-            upper[N_BASE_TWIST:] = up[N_BASE_TWIST:].tolist()
+            lower[nb:] = (-down[nb:]).tolist()
+            upper[nb:] = up[nb:].tolist()
         if p.arm_takeover:
             # last period's base share of the task (the command less its null-space share) ± a·t_s
-            last = [self._prev[i] - self._prev_null[i] for i in range(N_BASE_TWIST)]
-            step = (self.limits.acceleration[:N_BASE_TWIST] * self.limits.dt).tolist()
-            speed = self.limits.velocity[:N_BASE_TWIST].tolist()
-            for i in range(N_BASE_TWIST):
+            last = [self._prev[i] - self._prev_null[i] for i in range(nb)]
+            step = (self.limits.acceleration[:nb] * self.limits.dt).tolist()
+            speed = self.limits.velocity[:nb].tolist()
+            for i in range(nb):
                 lower[i] = max(last[i] - step[i], -speed[i])
                 upper[i] = min(last[i] + step[i], speed[i])
-        active = np.ones(_N) if activation is None else np.array(activation, dtype=float)
-        fixed = np.zeros(_N)
+        active = np.ones(n) if activation is None else np.array(activation, dtype=float)
+        fixed = np.zeros(n)
         values = task.tolist()
         if p.arm_takeover and any(not lower[i] - 1e-12 <= values[i] <= upper[i] + 1e-12
-                                  for i in range(N_BASE_TWIST)):
+                                  for i in range(nb)):
             # the base turns towards its share by the largest fraction of the way that every axis
             # can go this period (its direction kept), within its velocity limits; the arm does the rest
-            frac = min([1.0] + [step[i] / abs(values[i] - last[i]) for i in range(N_BASE_TWIST)
+            frac = min([1.0] + [step[i] / abs(values[i] - last[i]) for i in range(nb)
                                 if abs(values[i] - last[i]) > step[i]])
-            for i in range(N_BASE_TWIST):
+            for i in range(nb):
                 fixed[i] = min(max(last[i] + frac * (values[i] - last[i]), lower[i]), upper[i])
                 active[i] = 0.0
             task = fixed + damped_pinv_solve(jac, p_ref - jac @ fixed, self.task_damping(jac, active), active)
-        for _ in range(N_ARM):
+        for _ in range(self.n_arm):
             over = [i for i, x in enumerate(task.tolist())
                     if active[i] > 0.0 and (x < lower[i] - 1e-12 or x > upper[i] + 1e-12)]
             if not over:
@@ -360,26 +368,27 @@ class PoseServoResolver(Resolver):
         t0 = time.perf_counter()
         jac, p_ref, e_pos, angle = self.task_reference(state, target)
         task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state)
-        self._position[N_BASE_TWIST:] = state.q_arm
+        nb = self.n_base
+        self._position[nb:] = state.q_arm
         lim = self.limits.apply(task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null)
         self._prev, self._prev_null = lim.command.copy(), lim.secondary.copy()
         self._jac = jac
         self._q_arm = state.q_arm
-        self._arm_null = lim.secondary[N_BASE_TWIST:].copy()
-        self._arm_task = lim.command[N_BASE_TWIST:] - self._arm_null
+        self._arm_null = lim.secondary[nb:].copy()
+        self._arm_task = lim.command[nb:] - self._arm_null
         self._arm_before = (self._prev_arm, self._prev_arm_null)
         arm = self._finish_arm(self._arm_task)
         p = self.params
-        self.arm_damping, sigma = singularity_damping(jac[:, N_BASE_TWIST:], p.rho, p.singular_region,
+        self.arm_damping, sigma = singularity_damping(jac[:, nb:], p.rho, p.singular_region,
                                                       p.max_damping)
-        limited = sorted(set(lim.limited) | {i + N_BASE_TWIST for i in arm.limited})
+        limited = sorted(set(lim.limited) | {i + nb for i in arm.limited})
         diag = ResolverDiagnostics(
             method=self.name, mode=mode, psi=float(psi), position_error=_norm(e_pos),
             orientation_error=angle, limit_scale=lim.scale, accel_scale=lim.accel_scale,
             null_scale=lim.secondary_scale,
             compensation_scale=1.0, limited=tuple(limited), sigma_min=sigma, compensated=False,
             cycle_time_s=time.perf_counter() - t0)
-        return ResolverCommand(arm_velocity=arm.command.copy(), base_twist=lim.command[:N_BASE_TWIST].copy(),
+        return ResolverCommand(arm_velocity=arm.command.copy(), base_twist=base_twist_of(lim.command[:nb], self.base_axes),
                                diagnostics=diag)
 
     def _finish_arm(self, arm_task):
@@ -399,9 +408,9 @@ class PoseServoResolver(Resolver):
         pseudo-inverse damped by :func:`singularity_damping`. Shape (7,).
         """
         jac = self._jac
-        deficit = jac[:, :N_BASE_TWIST] @ (np.asarray(base_reference, dtype=float)
-                                          - np.asarray(feasible_twist, dtype=float))
-        return damped_pinv_solve(jac[:, N_BASE_TWIST:], deficit, self.arm_damping)
+        gap = np.asarray(base_reference, dtype=float) - np.asarray(feasible_twist, dtype=float)
+        deficit = jac[:, :self.n_base] @ gap[list(self.base_axes)]
+        return damped_pinv_solve(jac[:, self.n_base:], deficit, self.arm_damping)
 
     def _add_compensation(self, command, feasible_twist):
         """``command`` with the eq (14) term added to the nominal arm command, within the arm's bounds.

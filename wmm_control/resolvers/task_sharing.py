@@ -28,7 +28,6 @@ import numpy as np
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
-from wmm_control.resolvers.interface import N_ARM, N_BASE_TWIST
 from wmm_control.resolvers.pose_servo import (
     PoseServoParams, PoseServoResolver, _norm, lapack_svd)
 
@@ -81,7 +80,7 @@ class TaskSharingResolver(PoseServoResolver):
     Args:
         robot: robot name, YAML path, RobotConfig or KinematicModel.
         params: :class:`TaskSharingParams` (Table I defaults).
-        q_dex: dexterous arm posture [rad], default the robot's ``arm.dexterous``. Shape (7,).
+        q_dex: dexterous arm posture [rad], default the robot's ``arm.dexterous``. Shape (n,).
     """
 
     name = 'task_sharing'
@@ -89,7 +88,7 @@ class TaskSharingResolver(PoseServoResolver):
     def __init__(self, robot='steerable', params=None, q_dex=None):
         super().__init__(robot, params if params is not None else TaskSharingParams())
         dex = self.model.config.arm.dexterous if q_dex is None else q_dex
-        self.q_dex = as_finite_vector(dex, N_ARM, 'q_dex').copy()
+        self.q_dex = as_finite_vector(dex, self.n_arm, 'q_dex').copy()
         self._psi = None
 
     @property
@@ -112,9 +111,9 @@ class TaskSharingResolver(PoseServoResolver):
 
     def _resolve(self, jac, p_ref, e_pos, state):
         psi, mode = self._share(_norm(e_pos))
-        activation = np.empty(N_BASE_TWIST + N_ARM)
-        activation[:N_BASE_TWIST] = 1.0 - psi
-        activation[N_BASE_TWIST:] = psi
+        activation = np.empty(self.n)
+        activation[:self.n_base] = 1.0 - psi
+        activation[self.n_base:] = psi
         task = self.solve_task(jac, p_ref, state.q_arm, activation)
         return task, self._null_motion(jac, task, state.q_arm), mode, psi
 
@@ -127,17 +126,17 @@ class TaskSharingResolver(PoseServoResolver):
         clipped out of it. Shape (10,).
         """
         p = self.params
-        n = N_BASE_TWIST + N_ARM
+        n, nb = self.n, self.n_base
         z = np.zeros(n)
-        z[N_BASE_TWIST:] = p.lambda_dex * (self.q_dex - q_arm)
-        self._position[N_BASE_TWIST:] = q_arm
+        z[nb:] = p.lambda_dex * (self.q_dex - q_arm)
+        self._position[nb:] = q_arm
         down, up = self.limits.braking_rates(self._position)
         # the room the task leaves, 1e-12 tolerance included; checked on Python floats below
         # (for 10 entries a loop costs less than the half-dozen numpy calls of a mask)
         lower, upper = (-down - task - 1e-12).tolist(), (up - task + 1e-12).tolist()
         held = [False] * n
         rows = jac
-        for _ in range(N_ARM):
+        for _ in range(self.n_arm):
             null = z - _pinv(rows, p.pinv_tolerance) @ (rows @ z)
             over = [i for i, x in enumerate(null.tolist()) if not held[i] and (x < lower[i] or x > upper[i])]
             if not over:
@@ -157,7 +156,7 @@ class TaskSharingResolver(PoseServoResolver):
         """
         if not self.params.compensation:
             return command
-        feasible_twist = as_finite_vector(feasible_twist, N_BASE_TWIST, 'feasible_twist')
+        feasible_twist = as_finite_vector(feasible_twist, 3, 'feasible_twist')
         return self._add_compensation(command, feasible_twist)
 
 

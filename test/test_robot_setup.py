@@ -1,0 +1,236 @@
+"""Any mobile manipulator: robots set up from a URDF with ``wmm_robot init`` reach goals, bad robot
+files fail with one line naming the file and the item, and a differential base never moves sideways."""
+
+import re
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sim_bridge.closed_loop import ClosedLoop, _rotation
+from sim_bridge.world import SimWorld
+from urdf_factory import write_urdf
+from wmm_control.base import DifferentialKinematics, WheelController
+from wmm_control.cli import robot_setup
+from wmm_control.errors import ConfigError
+from wmm_control.resolvers import PoseTarget, make_resolver
+from wmm_control.robot_config import load_robot
+
+
+def _reach(cfg, method, offsets, seconds=40.0, tol=0.01):
+    """Run ``method`` on the direct engine to each goal (start EE position + offset, start
+    orientation) in turn; return the final errors [m] on the ground truth."""
+    world = SimWorld(cfg)
+    try:
+        loop = ClosedLoop(world, make_resolver(method, cfg))
+        p0, q0 = world.ee_pose()
+        errors = []
+        for off in offsets:
+            goal = np.asarray(p0) + off
+            target = PoseTarget(goal, _rotation(q0))
+            for _ in range(int(seconds / world.dt)):
+                loop.step(target)
+                err = float(np.linalg.norm(np.asarray(world.ee_pose()[0]) - goal))
+                if err < 0.5 * tol:
+                    break
+            errors.append(err)
+        return errors
+    finally:
+        world.close()
+
+
+@pytest.mark.parametrize('base,kwargs', [
+    ('steerable', dict(modules=3)),
+    ('steerable', dict(modules=6)),
+    ('mecanum', dict(arm_joints=8, prismatic_lift=True)),
+    ('differential', dict(arm_joints=6)),
+], ids=['steerable-3', 'steerable-6', 'mecanum-8-prismatic', 'differential-6'])
+def test_a_robot_made_by_init_from_an_unseen_urdf_reaches_near_and_far_goals(tmp_path, base, kwargs):
+    urdf = write_urdf(tmp_path / 'made_up.urdf', base, **kwargs)
+    out = tmp_path / 'config' / 'made_up.yaml'
+    robot_setup.init_robot(urdf, base, 'arm_base_link', 'tool_link', out)
+    cfg = load_robot(out)                          # no hand edit
+    assert cfg.arm.n == kwargs.get('arm_joints', 7)
+    if base == 'steerable':
+        assert cfg.steerable.n_modules == kwargs['modules']
+    if kwargs.get('prismatic_lift'):
+        assert cfg.arm.types[0] == 'prismatic'
+    # a goal within the arm's reach, then one that needs the base (1.5 m ahead, 1 m to the right)
+    errors = _reach(cfg, 'amp', [np.array([0.1, 0.05, -0.05]), np.array([1.5, -1.0, 0.0])])
+    assert max(errors) < 0.01, errors
+
+
+def test_init_output_is_a_commented_file_check_accepts(tmp_path, capsys):
+    urdf = write_urdf(tmp_path / 'r.urdf', 'differential', arm_joints=6)
+    out = tmp_path / 'r.yaml'
+    assert robot_setup.main(['init', str(urdf), '--base', 'differential', '--arm-root', 'arm_base_link',
+                             '--tool', 'tool_link', '--out', str(out), '--home', '0,0.3,0.6,0,0.5,0']) == 0
+    text = out.read_text()
+    assert text.startswith('#') and 'wheel_joints: [wheel_left_joint, wheel_right_joint]' in text
+    assert yaml.safe_load(text)['robot']['arm']['dexterous'] == [0, 0.3, 0.6, 0, 0.5, 0]
+    capsys.readouterr()
+    assert robot_setup.main(['check', str(out)]) == 0
+    summary = capsys.readouterr().out
+    assert '6 arm joints' in summary and 'track 0.48 m' in summary
+
+
+def test_init_chooses_a_home_posture_clear_of_the_body():
+    from wmm_control.kinematics.clearance import BodyClearance
+    for name in ('steerable', 'mecanum'):
+        cfg = load_robot(name)
+        home, sigma = robot_setup._choose_home(robot_setup.UrdfTree(cfg.urdf_path), cfg.arm.root, cfg.arm.tool,
+                                               cfg.base_link, cfg.ground_z)
+        assert BodyClearance(cfg.urdf_path, cfg.arm.joints, cfg.arm.root).closest(home)[0] >= robot_setup.HOME_CLEARANCE
+        assert sigma > 0.05
+
+
+# ---------------------------------------------------------------- bad robot files
+def _copy_robot_a(tmp_path):
+    src = load_robot('steerable')
+    shutil.copy(src.urdf_path, tmp_path / 'robot.urdf')
+    raw = yaml.safe_load(src.yaml_path.read_text())
+    raw['robot']['urdf'] = 'robot.urdf'
+    return raw
+
+
+def _edit_urdf(tmp_path, old, new, count=1):
+    path = tmp_path / 'robot.urdf'
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new, count))
+
+
+BAD_FILES = {
+    'urdf unreadable': (lambda t, r: (t / 'robot.urdf').write_text('<robot><link'), 'URDF unreadable'),
+    'link missing': (lambda t, r: r['arm'].__setitem__('root', 'no_such_link'), "arm root link 'no_such_link' not found"),
+    'chain broken': (lambda t, r: r['arm'].__setitem__('root', 'steer_fl_link'), 'chain broken'),
+    'fewer than 6 arm joints': (lambda t, r: r['arm'].__setitem__('root', 'arm_link_2'), 'needs at least 6'),
+    'joint without limits': (lambda t, r: _edit_urdf(t, '<limit lower="-2.094395" upper="2.094395" effort="176" '
+                                                        'velocity="1.919862"/>', ''),
+                             "joint 'arm_joint_2' has no <limit lower>"),
+    'wheel joint missing': (lambda t, r: r['steerable']['drive_joints'].__setitem__(2, 'drive_xx_joint'),
+                            "drive joint 'drive_xx_joint' not found"),
+    'zero radius': (lambda t, r: _edit_urdf(t, '<cylinder radius="0.09" length="0.05"/>',
+                                            '<cylinder radius="0" length="0.05"/>', 2), 'radius must be > 0'),
+    'negative radius override': (lambda t, r: r['steerable'].__setitem__('wheel_radius', -0.1),
+                                 'steerable.wheel_radius: must be finite and > 0'),
+    'NaN in the YAML': (lambda t, r: r['arm'].__setitem__('acceleration', [float('nan')] * 7), 'arm.acceleration: NaN'),
+    'unknown family': (lambda t, r: r.__setitem__('base_type', 'legged'), "unknown base family 'legged'"),
+    'duplicate joint names': (lambda t, r: r['steerable']['drive_joints'].__setitem__(1, 'drive_fl_joint'),
+                              "joint 'drive_fl_joint' is named twice"),
+    'duplicate joint in the URDF': (lambda t, r: _edit_urdf(t, 'name="drive_fr_joint"', 'name="drive_fl_joint"'),
+                                    "duplicate joint name 'drive_fl_joint'"),
+    'mimic joint in the arm': (lambda t, r: _edit_urdf(t, '<joint name="arm_joint_3" type="revolute">',
+                                                       '<joint name="arm_joint_3" type="revolute">'
+                                                       '<mimic joint="arm_joint_2"/>'), 'is a mimic joint'),
+    'start state outside the limits': (lambda t, r: r['start']['arm'].__setitem__(1, 3.0),
+                                       'start.arm: outside the position limits: arm_joint_2 = 3'),
+    'dexterous outside the limits': (lambda t, r: r['arm'].__setitem__('dexterous', [9.0] * 7), 'dexterous: outside'),
+    'urdf file missing': (lambda t, r: r.__setitem__('urdf', 'nowhere.urdf'), 'urdf: file not found'),
+    'sideways limit on a differential base': (
+        lambda t, r: (r.__setitem__('base_type', 'differential'),
+                      r.__setitem__('differential', {'wheel_joints': ['drive_fl_joint', 'drive_fr_joint']})),
+        'wheels must sit on one axle'),
+}
+
+
+@pytest.mark.parametrize('kind', sorted(BAD_FILES))
+def test_a_bad_robot_file_is_one_line_naming_the_file_and_the_item_and_exit_code_2(tmp_path, capsys, kind):
+    raw = _copy_robot_a(tmp_path)
+    mutate, message = BAD_FILES[kind]
+    mutate(tmp_path, raw['robot'])
+    path = tmp_path / 'robot.yaml'
+    path.write_text(yaml.safe_dump(raw))
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        load_robot(path)
+    assert robot_setup.main(['check', str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count('\n') == 0 and str(path) in err and message in err, err
+
+
+def test_check_as_a_process_prints_one_line_and_no_traceback(tmp_path):
+    raw = _copy_robot_a(tmp_path)
+    raw['robot']['arm']['dexterous'] = [9.0] * 7
+    path = tmp_path / 'robot.yaml'
+    path.write_text(yaml.safe_dump(raw))
+    proc = subprocess.run([sys.executable, '-m', 'wmm_control.cli.robot_setup', 'check', str(path)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert 'Traceback' not in proc.stderr and proc.stderr.strip().count('\n') == 0
+
+
+def test_init_names_what_the_urdf_lacks(tmp_path, capsys):
+    urdf = write_urdf(tmp_path / 'r.urdf', 'mecanum')
+    code = robot_setup.main(['init', str(urdf), '--base', 'differential', '--arm-root', 'arm_base_link',
+                             '--tool', 'tool_link', '--out', str(tmp_path / 'r.yaml')])
+    assert code == 2
+    assert 'found 4 wheel joints' in capsys.readouterr().err
+    assert not (tmp_path / 'r.yaml').exists()
+
+
+# ---------------------------------------------------------------- differential base
+_twist = st.tuples(*(st.floats(-3.0, 3.0, allow_nan=False) for _ in range(3)))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(_twist, min_size=1, max_size=40))
+def test_differential_wheel_rates_never_imply_a_sideways_velocity_and_keep_their_limits(references):
+    kin = DifferentialKinematics(wheel_radius=0.1, track=0.5)
+    from wmm_control.base.wheel_controller import WheelParams
+    params = WheelParams(dt=0.025, velocity_limit=(0.6, 0.0, 2.4), accel_limit=(0.6, 0.0, 2.4), wheel_rate_limit=12.0)
+    ctrl = WheelController(kin, params)
+    prev = np.zeros(3)
+    for ref in references:
+        out = ctrl.step(ref)
+        realised = kin.twist_from_wheels(out.wheel_rates)
+        assert realised[1] == 0.0 and out.twist[1] == 0.0
+        np.testing.assert_allclose(realised, out.twist, atol=1e-12)
+        assert np.all(np.abs(out.wheel_rates) <= 12.0 + 1e-9)
+        assert abs(out.twist[0]) <= 0.6 + 1e-12 and abs(out.twist[2]) <= 2.4 + 1e-12
+        assert np.all(np.abs(out.twist - prev)[[0, 2]] <= np.array([0.6, 2.4]) * 0.025 * (1 + 1e-9))
+        assert out.dropped[1] == pytest.approx(ref[1])
+        prev = out.twist
+
+
+def test_differential_controller_follows_the_forward_and_turning_part_of_a_reference():
+    kin = DifferentialKinematics(wheel_radius=0.1, track=0.5)
+    ctrl = WheelController(kin, __import__('wmm_control.base.wheel_controller', fromlist=['WheelParams']).WheelParams(
+        dt=0.025, velocity_limit=(0.6, 0.0, 2.4), accel_limit=(0.6, 0.0, 2.4), wheel_rate_limit=12.0))
+    for _ in range(200):
+        out = ctrl.step([0.3, 0.2, -0.5])
+    np.testing.assert_allclose(out.twist, [0.3, 0.0, -0.5], atol=1e-12)
+    # left wheel faster than the right when turning right (ω < 0)
+    assert out.wheel_rates[0] > out.wheel_rates[1]
+    assert out.wheel_rates == pytest.approx([(0.3 + 0.5 * 0.25) / 0.1, (0.3 - 0.5 * 0.25) / 0.1])
+
+
+def test_amp_commands_a_differential_base_along_its_heading_only(tmp_path):
+    urdf = write_urdf(tmp_path / 'd.urdf', 'differential', arm_joints=6)
+    robot_setup.init_robot(urdf, 'differential', 'arm_base_link', 'tool_link', tmp_path / 'd.yaml')
+    cfg = load_robot(tmp_path / 'd.yaml')
+    world = SimWorld(cfg)
+    try:
+        loop = ClosedLoop(world, make_resolver('amp', cfg))
+        p0, q0 = world.ee_pose()
+        target = PoseTarget(np.asarray(p0) + [0.0, 1.5, 0.0], _rotation(q0))     # straight to the left
+        lateral = []
+        for _ in range(1600):
+            rec = loop.step(target)
+            lateral.append(abs(rec.command.base_twist[1]))
+        assert max(lateral) == 0.0
+        assert np.linalg.norm(np.asarray(world.ee_pose()[0]) - target.position) < 0.01
+        assert abs(world.base_pose()[2]) > 0.2          # it turned to get there
+    finally:
+        world.close()
+
+
+@pytest.mark.parametrize('method', ['pinv', 'task_sharing', 'amp', 'traditional'])
+@pytest.mark.parametrize('robot', ['ur_mecanum', 'panda_diff'])
+def test_the_shipped_robots_reach_a_goal_in_reach_and_one_that_needs_the_base(robot, method):
+    errors = _reach(load_robot(robot), method, [np.array([0.1, 0.05, -0.05]), np.array([1.5, -1.0, 0.0])])
+    assert max(errors) < 0.01, errors

@@ -1,0 +1,307 @@
+"""``wmm_robot``: set a robot up from its URDF, and check a robot description.
+
+Usage::
+
+    wmm_robot init URDF --base {steerable,mecanum,differential} --arm-root LINK --tool LINK \\
+        --out ROBOT.yaml [--home q1,...,qn] [--wheel-joints a,b,...] [--steer-joints ...] \\
+        [--drive-joints ...] [--base-link LINK] [--name NAME] [--method METHOD] [--period S]
+    wmm_robot check ROBOT.yaml
+
+``init`` writes a complete, commented robot YAML beside nothing but the URDF it names (its
+``urdf`` path is relative to the YAML). The arm joints and their position and velocity limits
+stay in the URDF (the YAML may override them); the YAML gets what a URDF cannot give, each
+value commented with the rule that chose it:
+
+* wheel and steer joints, found from the URDF unless named: joints outside the arm that turn
+  about their y axis (wheels) or z axis (steer joints), whose link has a collision cylinder;
+  Mecanum wheels are ordered front-left, front-right, rear-left, rear-right by their
+  position, differential ones left then right;
+* base twist limits from the wheel rate limits: half the wheel rate budget each to the
+  linear and the angular part (so both at once stay within it); base accelerations reach
+  those in one second;
+* a dexterous posture and start state: ``--home``, or else the best of 400 seeded random
+  postures within the limits — the one with the largest σ_min of the arm Jacobian among
+  those whose collision shapes keep 3 cm from the body and from each other, with the tool
+  at least 10 cm above the floor;
+* the control period (0.025 s) and the default method (``task_sharing``).
+
+``check`` loads a description, prints the robot summary and exits 0, or prints one line
+saying what is wrong (file and item) and exits 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from wmm_control.errors import WmmError
+from wmm_control.resolvers import METHODS
+from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, load_robot
+from wmm_control.urdf import UrdfTree
+
+__all__ = ['main', 'init_robot', 'detect_wheels']
+
+HOME_DRAWS = 400
+HOME_CLEARANCE = 0.03     # [m] from the body and between arm links
+TOOL_ABOVE_FLOOR = 0.10   # [m]
+DEFAULT_PERIOD = 0.025
+
+
+def _axis_is(joint, k):
+    axis = joint.axis / max(np.linalg.norm(joint.axis), 1e-12)
+    return abs(abs(axis[k]) - 1.0) < 1e-6
+
+
+def detect_wheels(tree, family, base_link, arm_joints):
+    """Wheel-side joints of ``family`` found by the conventions above.
+
+    Returns:
+        ``{'steer_joints': [...], 'drive_joints': [...]}`` or ``{'wheel_joints': [...]}``.
+
+    Raises:
+        WmmError: the URDF does not hold what the family needs.
+    """
+    arm = set(arm_joints)
+    spinning = [j for j in tree.joints.values() if j.name not in arm and j.type in ('continuous', 'revolute')
+                and j.mimic is None]
+
+    def position(joint):
+        return tree.placement(joint.child, base_link)[1]
+
+    if family == 'steerable':
+        steer = [j for j in spinning if _axis_is(j, 2)
+                 and any(c.type == 'continuous' and _axis_is(c, 1) for c in tree.children(j.child))]
+        drive = [next(c for c in tree.children(j.child) if c.type == 'continuous' and _axis_is(c, 1))
+                 for j in steer]
+        if len(steer) < 2:
+            raise WmmError(f'{tree.path.name}: found {len(steer)} steer + drive modules (a joint about z '
+                           'with a continuous joint about y below it); a steerable base needs 2 or more: '
+                           'name them with --steer-joints and --drive-joints')
+        return {'steer_joints': [j.name for j in steer], 'drive_joints': [j.name for j in drive]}
+    wheels = [j for j in spinning if j.type == 'continuous' and _axis_is(j, 1)
+              and tree.wheel_radius(j.child) is not None and not any(_axis_is(a, 2) for a in tree.ancestors(j.child)
+                                                                   if a.type != 'fixed')]
+    want = 4 if family == 'mecanum' else 2
+    if len(wheels) != want:
+        raise WmmError(f'{tree.path.name}: found {len(wheels)} wheel joints (continuous, about y, a collision '
+                       f'cylinder on the link) {[j.name for j in wheels]}; a {family} base needs {want}: '
+                       'name them with --wheel-joints')
+    if family == 'mecanum':
+        wheels.sort(key=lambda j: (-round(position(j)[0], 6), -round(position(j)[1], 6)))
+    else:
+        wheels.sort(key=lambda j: -position(j)[1])
+    return {'wheel_joints': [j.name for j in wheels]}
+
+
+def _base_limits(cfg_wheels, family, tree, base_link):
+    """Base twist velocity limits (vx, vy, ω) from the wheel rates and geometry (module docstring)."""
+    if family == 'steerable':
+        drive = [tree.joint(n) for n in cfg_wheels['drive_joints']]
+        steer = [tree.joint(n) for n in cfg_wheels['steer_joints']]
+        rate = min(j.velocity or 0.0 for j in drive)
+        radius = tree.wheel_radius(drive[0].child) or 0.0
+        reach = max(np.hypot(*tree.placement(j.child, base_link)[1][:2]) for j in steer)
+        v = 0.5 * rate * radius
+        return [v, v, v / max(reach, 1e-3)]
+    joints = [tree.joint(n) for n in cfg_wheels['wheel_joints']]
+    rate = min(j.velocity or 0.0 for j in joints)
+    radius = tree.wheel_radius(joints[0].child) or 0.0
+    pos = np.array([tree.placement(j.child, base_link)[1][:2] for j in joints])
+    if family == 'mecanum':
+        k = float(np.mean(np.abs(pos[:, 0])) + np.mean(np.abs(pos[:, 1])))
+        v = 0.25 * rate * radius
+        return [v, v, v / max(k, 1e-3)]
+    track = float(pos[0, 1] - pos[1, 1])
+    return [0.5 * rate * radius, 0.0, rate * radius / max(track, 1e-3)]
+
+
+def _floor_height(tree, wheels, base_link):
+    """z of the floor in ``base_link`` [m]: the lowest wheel's centre less its radius."""
+    names = wheels.get('drive_joints') or wheels['wheel_joints']
+    return min(tree.placement(tree.joint(n).child, base_link)[1][2] - (tree.wheel_radius(tree.joint(n).child) or 0.0)
+               for n in names)
+
+
+def _choose_home(tree, arm_root, tool, base_link, ground, seed=0):
+    """The documented posture choice (module docstring): ``(q (n,), σ_min)``."""
+    from wmm_control.kinematics.clearance import BodyClearance
+    from wmm_control.kinematics.model import KinematicModel
+    chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
+    names = [j.name for j in chain]
+    lower = np.array([max(j.lower, -math.pi) if j.lower is not None else -math.pi for j in chain])
+    upper = np.array([min(j.upper, math.pi) if j.upper is not None else math.pi for j in chain])
+    model = KinematicModel.from_urdf(tree.path, names, tool, base_link)
+    clearance = BodyClearance(tree.path, names, arm_root)
+    rng = np.random.default_rng(seed)
+    best, best_sigma = None, -1.0
+    for _ in range(HOME_DRAWS):
+        # away from the limits: the middle 80 % of each range
+        q = lower + (upper - lower) * (0.1 + 0.8 * rng.random(len(chain)))
+        model.update(np.zeros(3), q)
+        pos, _ = model.ee_placement_world()
+        if pos[2] < ground + TOOL_ABOVE_FLOOR:
+            continue
+        sigma = model.sigma_min('full')
+        if sigma <= best_sigma:
+            continue
+        if clearance.closest(q)[0] < HOME_CLEARANCE:
+            continue
+        best, best_sigma = q, sigma
+    if best is None:
+        raise WmmError(f'{tree.path.name}: no posture of {HOME_DRAWS} draws keeps the arm {HOME_CLEARANCE} m clear '
+                       'of the body with the tool above the floor: give one with --home')
+    return best, best_sigma
+
+
+def _names(text):
+    return [n.strip() for n in text.split(',') if n.strip()] if text else None
+
+
+def _fmt_list(values):
+    return '[' + ', '.join(f'{v:.6g}' for v in values) + ']'
+
+
+def init_robot(urdf, family, arm_root, tool, out, home=None, wheel_joints=None, steer_joints=None,
+               drive_joints=None, base_link=None, name=None, method='task_sharing', period=DEFAULT_PERIOD):
+    """Write a robot YAML for ``urdf`` at ``out`` (see the module docstring); returns its text.
+
+    Raises:
+        WmmError (ConfigError among them): what the URDF lacks, or an invalid option.
+    """
+    urdf, out = Path(urdf).resolve(), Path(out).resolve()
+    tree = UrdfTree(urdf)
+    if family not in BASE_FAMILIES:
+        raise WmmError(f'--base: unknown base family {family!r}; expected one of {list(BASE_FAMILIES)}')
+    if method not in METHODS:
+        raise WmmError(f'--method: unknown method {method!r}; expected one of {sorted(METHODS)}')
+    base_link = base_link or tree.root_link
+    if base_link is None:
+        raise WmmError(f'{urdf.name}: the URDF has no single root link: give --base-link')
+    tree.require_link(base_link, 'base')
+    chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
+    if len(chain) < MIN_ARM_JOINTS:
+        raise WmmError(f'{urdf.name}: the chain {arm_root!r} → {tool!r} has {len(chain)} joints; '
+                       f'an arm needs at least {MIN_ARM_JOINTS}')
+    if wheel_joints or steer_joints:
+        wheels = ({'steer_joints': steer_joints, 'drive_joints': drive_joints} if family == 'steerable'
+                  else {'wheel_joints': wheel_joints})
+        if family == 'steerable' and not (steer_joints and drive_joints):
+            raise WmmError('a steerable base needs both --steer-joints and --drive-joints')
+    else:
+        wheels = detect_wheels(tree, family, base_link, [j.name for j in chain])
+    velocity = _base_limits(wheels, family, tree, base_link)
+    if home is not None:
+        q_home = np.asarray(home, dtype=float)
+        if q_home.shape != (len(chain),):
+            raise WmmError(f'--home: expected {len(chain)} joint values, got {len(q_home)}')
+        home_rule = 'given with --home'
+    else:
+        q_home, sigma = _choose_home(tree, arm_root, tool, base_link, _floor_height(tree, wheels, base_link))
+        home_rule = (f'the best of {HOME_DRAWS} seeded draws (σ_min {sigma:.3f}): arm {HOME_CLEARANCE} m clear '
+                     f'of the body and itself, tool ≥ {TOOL_ABOVE_FLOOR} m above the floor')
+    ground = _floor_height(tree, wheels, base_link)
+    rel = Path(_relative(urdf, out.parent))
+    lines = [
+        f'# Robot description of {urdf.name}, written by `wmm_robot init` (check it with `wmm_robot check`).',
+        '# The URDF holds the arm chain, joint limits and base geometry; this file names them and adds',
+        '# what a URDF cannot give. Every value may be edited.',
+        'robot:',
+        f'  name: {name or out.stem}',
+        f'  description: {urdf.stem} with a {family} base',
+        f'  urdf: {rel.as_posix()}',
+        f'  base_type: {family}',
+        f'  base_link: {base_link}',
+        f'  ground_z: {ground:.6g}          # floor height in {base_link} at rest [m]',
+        f'  period: {period}       # control period [s]: the default of every node',
+        f'  method: {method}  # the redundancy_resolver default',
+        '  arm:',
+        f'    root: {arm_root}',
+        f'    tool: {tool}    # the end-effector frame',
+        f'    # {len(chain)} joints from the URDF: {", ".join(j.name for j in chain)};',
+        '    # their position and velocity limits are the URDF\'s <limit> unless given here;',
+        '    # acceleration limits: 2 × the velocity limit (full speed in 0.5 s) unless given here',
+        f'    dexterous: {_fmt_list(q_home)}   # {home_rule}',
+        '  base:',
+        f'    velocity: {_fmt_list(velocity)}   # [m/s, m/s, rad/s]: half the wheel rate budget to v, half to ω',
+        f'    acceleration: {_fmt_list(velocity)}   # [m/s², m/s², rad/s²]: the velocity limits in one second',
+        '  start:',
+        '    base_pose: [0.0, 0.0, 0.0]',
+        f'    arm: {_fmt_list(q_home)}   # = dexterous',
+        f'  {family}:',
+    ]
+    for key, names in wheels.items():
+        lines.append(f'    {key}: [{", ".join(names)}]')
+    lines.append('    # geometry (wheel radius, hips / d1, d2 / track) and wheel rate limits from the URDF')
+    text = '\n'.join(lines) + '\n'
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    try:
+        load_robot(out)
+    except WmmError:
+        out.unlink()
+        raise
+    return text
+
+
+def _relative(path, start):
+    try:
+        return str(Path(path).relative_to(start))
+    except ValueError:
+        import os
+        return os.path.relpath(path, start)
+
+
+def _check(path):
+    from wmm_control.cli.model_info import describe
+    from wmm_control.kinematics import KinematicModel
+    model = KinematicModel(load_robot(path))
+    cfg = model.config
+    return describe(model, cfg.start.base_pose, cfg.start.arm)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='wmm_robot', description='Set up a robot from its URDF; check a robot YAML.')
+    sub = parser.add_subparsers(dest='command', required=True)
+    ini = sub.add_parser('init', help='write a robot YAML from a URDF')
+    ini.add_argument('urdf')
+    ini.add_argument('--base', required=True, choices=BASE_FAMILIES)
+    ini.add_argument('--arm-root', required=True, help='the link the arm chain starts from')
+    ini.add_argument('--tool', required=True, help='the end-effector link')
+    ini.add_argument('--out', required=True, help='the robot YAML to write')
+    ini.add_argument('--home', help='dexterous posture and start state: q1,...,qn [rad or m]')
+    ini.add_argument('--wheel-joints', help='Mecanum (fl,fr,rl,rr) or differential (left,right) wheel joints')
+    ini.add_argument('--steer-joints', help='steerable base: the steer joints')
+    ini.add_argument('--drive-joints', help='steerable base: the drive joints, in the order of the steer joints')
+    ini.add_argument('--base-link', help='the base frame (default: the URDF root link)')
+    ini.add_argument('--name', help='robot name (default: the YAML file stem)')
+    ini.add_argument('--method', default='task_sharing', help='default redundancy resolution method')
+    chk = sub.add_parser('check', help='load a robot YAML and print its summary')
+    chk.add_argument('robot', help='robot YAML path or shipped robot name')
+    args = parser.parse_args(argv)
+    try:
+        if args.command == 'check':
+            print(_check(args.robot))
+            return 0
+        home = None
+        if args.home:
+            try:
+                home = [float(v) for v in args.home.split(',')]
+            except ValueError:
+                raise WmmError(f'--home: not a comma-separated list of numbers: {args.home!r}') from None
+        init_robot(args.urdf, args.base, args.arm_root, args.tool, args.out, home=home,
+                   wheel_joints=_names(args.wheel_joints), steer_joints=_names(args.steer_joints),
+                   drive_joints=_names(args.drive_joints), base_link=args.base_link, name=args.name,
+                   method=args.method)
+        print(f'wrote {args.out}; check it with: wmm_robot check {args.out}')
+        return 0
+    except WmmError as exc:
+        print(f'wmm_robot: error: {exc}', file=sys.stderr)
+        return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())
