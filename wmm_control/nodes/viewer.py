@@ -108,7 +108,8 @@ class ViewerNode(Node):
         guard_clock(self)
         self.server = None
         p = self.p = declare_parameters(self, 'wmm_viewer.yaml', PARAMS, check=_check,
-                                        on_change={'drag_publish_period': self._set_drag_period})
+                                        on_change={'drag_publish_period': self._set_drag_period,
+                                                   'ground_truth_timeout': self._set_ground_truth_timeout})
         self.robot = load_robot(p.robot)
         self.scene = RobotScene(self.robot.urdf_path, self.robot.base_link, self.robot.ee_frame)
         if self.scene.skipped:
@@ -214,6 +215,10 @@ class ViewerNode(Node):
 
     def _set_drag_period(self, period: float) -> None:
         self.drag.period = float(period)
+
+    def _set_ground_truth_timeout(self, timeout: float) -> None:
+        for fresh in self.fresh.values():
+            fresh.timeout = float(timeout)
 
     def _on_joint_states(self, msg: JointState) -> None:
         if len(msg.position) != len(msg.name):
