@@ -32,11 +32,12 @@ import contextlib
 import io
 import math
 import threading
+from types import SimpleNamespace
 
 import numpy as np
 import viser
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, TwistStamped
+from geometry_msgs.msg import Pose, PoseStamped, Transform, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
@@ -50,7 +51,7 @@ from wmm_control.nodes.common import (
     seconds)
 from wmm_control.robot_config import load_robot
 from wmm_control.viewer.drag import GoalDrag
-from wmm_control.viewer.scene import RobotScene, Trail, unit_wxyz, wxyz_from_xyzw, xyzw_from_wxyz
+from wmm_control.viewer.scene import RobotScene, Shape, Trail, unit_wxyz, wxyz_from_xyzw, xyzw_from_wxyz
 from wmm_control.viewer.status import NodeStatus, StatusBoard
 
 __all__ = ['ViewerNode', 'main', 'PARAMS']
@@ -82,13 +83,13 @@ _REFERENCE_COLOR = (130, 60, 200)
 _BASE_REFERENCE_COLOR = (240, 170, 0)
 
 
-def _check(values) -> str:
+def _check(values: SimpleNamespace) -> str:
     if not str(values.host).strip():
         return 'parameter host: empty; give an address, e.g. 0.0.0.0 or 127.0.0.1'
     return ''
 
 
-def _pose_arrays(pose) -> tuple[np.ndarray, np.ndarray | None]:
+def _pose_arrays(pose: Pose | Transform) -> tuple[np.ndarray, np.ndarray | None]:
     """(position, unit wxyz or None) of a ``geometry_msgs/Pose`` or ``Transform``."""
     p = pose.position if hasattr(pose, 'position') else pose.translation
     o = pose.orientation if hasattr(pose, 'orientation') else pose.rotation
@@ -189,7 +190,7 @@ class ViewerNode(Node):
         with server.gui.add_folder('Diagnostics'):
             self.status_text = server.gui.add_markdown(self.board.markdown(0.0))
 
-    def _add_shape(self, name: str, shape):
+    def _add_shape(self, name: str, shape: Shape) -> viser.SceneNodeHandle:
         scene = self.server.scene
         opacity = None if shape.opacity >= 1.0 else shape.opacity
         if shape.kind == 'box':
@@ -297,7 +298,7 @@ class ViewerNode(Node):
                                          status.message, {kv.key: kv.value for kv in status.values}, now))
 
     # ------------------------------------------------------------------ the goal handle
-    def _on_handle(self, event) -> None:
+    def _on_handle(self, event: viser.TransformControlsEvent) -> None:
         """viser's callback (a worker thread): note the pose; :meth:`_tick` publishes."""
         target = event.target
         if event.phase == 'start':
