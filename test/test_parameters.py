@@ -21,9 +21,10 @@ from sensor_msgs.msg import JointState
 from ros_helpers import RosHarness, overrides
 from sim_bridge.node import SimNode
 from wmm_control.base import WheelParams, SwmrParams
-from wmm_control.nodes import goal_sequencer, mecanum_controller, redundancy_resolver, swmr_controller
+from wmm_control.nodes import goal_sequencer, mecanum_controller, redundancy_resolver, swmr_controller, viewer
 from wmm_control.nodes.common import robot_method, robot_period
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
+from wmm_control.nodes.viewer import ViewerNode
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
@@ -43,6 +44,8 @@ NODES = {
     'redundancy_resolver': (RedundancyResolverNode, redundancy_resolver.PARAMS,
                             dict(method='amp', goal_tolerance=[0.02, 0.03], lambda_p=2.5)),
     'goal_sequencer': (GoalSequencerNode, goal_sequencer.PARAMS, dict(republish_period=2.0)),
+    'wmm_viewer': (ViewerNode, viewer.PARAMS, dict(host='127.0.0.1', port=18300, robot='mecanum',
+                                                   drag_publish_period=1.5)),
 }
 
 
@@ -161,6 +164,8 @@ REFUSED = [
     ('redundancy_resolver', 'method', 'amp', 'read-only'),
     ('goal_sequencer', 'republish_period', -0.5, 'out of range'),
     ('goal_sequencer', 'scenario', 'xing_pose', 'read-only'),
+    ('wmm_viewer', 'drag_publish_period', 0.0, 'out of range'),
+    ('wmm_viewer', 'port', 9000, 'read-only'),
 ]
 
 
@@ -295,7 +300,8 @@ def _leaves(tree, prefix=''):
 
 NODE_YAMLS = {'wmm_sim.yaml': sim_node.PARAMS, 'swmr_controller.yaml': swmr_controller.PARAMS,
               'mecanum_controller.yaml': mecanum_controller.PARAMS,
-              'redundancy_resolver.yaml': redundancy_resolver.PARAMS, 'goal_sequencer.yaml': goal_sequencer.PARAMS}
+              'redundancy_resolver.yaml': redundancy_resolver.PARAMS, 'goal_sequencer.yaml': goal_sequencer.PARAMS,
+              'wmm_viewer.yaml': viewer.PARAMS}
 
 
 @pytest.mark.parametrize('yaml_name', sorted(NODE_YAMLS))

@@ -3,12 +3,17 @@
 import importlib
 import os
 import signal
+import subprocess
+import sys
+import threading
 import time
+from pathlib import Path
 
 import pytest
 import rclpy
 from std_msgs.msg import String
 
+from wmm_control.experiments.ros_run import private_domain_id
 from wmm_control.nodes.common import run_node
 
 
@@ -46,3 +51,41 @@ def test_ctrl_c_in_the_middle_of_a_callback_lets_it_finish_and_exits_cleanly():
     assert run_node(factory, args=['sigint_probe']) == 0
     assert published == [True]                 # it finished, the context alive; no second cycle
     assert signal.getsignal(signal.SIGINT) is before
+
+
+@pytest.mark.parametrize('first, second, gap', [(signal.SIGINT, signal.SIGINT, 0.05),
+                                                (signal.SIGINT, signal.SIGINT, 0.2),
+                                                (signal.SIGTERM, signal.SIGINT, 0.1)],
+                         ids=['SIGINT twice 0.05 s apart', 'SIGINT twice 0.2 s apart', 'SIGTERM then SIGINT'])
+def test_a_second_signal_during_teardown_neither_aborts_nor_prints_a_traceback(first, second, gap):
+    """``ros2 launch`` answers Ctrl-C with SIGINT to every process, and a second one shortly
+    after: the node is then being destroyed, or the interpreter is finalizing. Either used to
+    end the process by the second signal (KeyboardInterrupt inside rclpy: an abort; or killed
+    by SIGINT: exit -2) although the node had stopped cleanly."""
+    exe = Path(sys.executable).with_name('redundancy_resolver')
+    if not exe.is_file():
+        pytest.fail(f'{exe} is not installed: run the README set-up (bash scripts/dev.sh test)')
+    env = dict(os.environ, ROS_DOMAIN_ID=str(private_domain_id()))
+    proc = subprocess.Popen([str(exe)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
+    reader.start()
+    try:
+        end = time.monotonic() + 60.0
+        while time.monotonic() < end and proc.poll() is None and not any('waiting for /goal_pose' in ln for ln in lines):
+            time.sleep(0.05)
+        assert proc.poll() is None, ''.join(lines)
+        time.sleep(0.5)                            # spinning
+        proc.send_signal(first)
+        time.sleep(gap)
+        if proc.poll() is None:
+            proc.send_signal(second)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    reader.join(timeout=5)
+    out = ''.join(lines)
+    assert proc.returncode == 0, f'exit {proc.returncode}:\n{out}'
+    assert 'Traceback' not in out and 'terminate called' not in out, out

@@ -9,6 +9,7 @@ appear in the node YAML.
 """
 
 import array
+import atexit
 import math
 import os
 import signal
@@ -425,9 +426,11 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
     A configuration error at start-up (the command line's included) is logged and gives exit
     code 2. Ctrl-C and SIGTERM end the spin loop between callbacks: rclpy's own handlers shut
     the context down at once, in the middle of a callback, whose next publish then fails
-    ("publisher's context is invalid", a traceback on the way out). The process uses Fast
-    DDS's UDP transport alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS``
-    is set.
+    ("publisher's context is invalid", a traceback on the way out). Further ones during the
+    teardown are only noted (``ros2 launch`` sends SIGINT twice); the previous handlers come
+    back once the context is shut down, and from the interpreter's exit on both signals are
+    ignored (:func:`_ignore_stop_signals_at_exit`). The process uses Fast DDS's UDP transport
+    alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS`` is set.
     """
     os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', FASTDDS_TRANSPORTS)
     try:
@@ -440,6 +443,7 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
     if threading.current_thread() is threading.main_thread():     # where Python delivers signals
         previous = {sig: signal.signal(sig, lambda signum, _frame: stop.append(signum))
                     for sig in (signal.SIGINT, signal.SIGTERM)}
+    _ignore_stop_signals_at_exit()
     node = None
     try:
         node = node_factory()
@@ -455,12 +459,39 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
         logger.fatal(f'{type(exc).__name__}: {exc}')
         return 2
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        # The stop handler stays in place until the node and the context are gone: a second
+        # Ctrl-C or SIGTERM during the teardown (``ros2 launch`` sends SIGINT twice) is only
+        # noted, instead of raising KeyboardInterrupt inside rclpy (an abort).
+        try:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
     return 0
+
+
+_EXIT_GUARD = []
+
+
+def _ignore_stop_signals_at_exit():
+    """From the interpreter's exit on, ignore SIGINT and SIGTERM (registered once, by :func:`run_node`).
+
+    After ``main()`` returns, the interpreter's finalization (the middleware's destructors) takes
+    a few tenths of a second, during which Python resets SIGINT to the system default: a second
+    Ctrl-C then killed the process (exit -2) although the node had stopped cleanly. Python keeps
+    an ignored signal ignored through its finalization.
+    """
+    if _EXIT_GUARD or threading.current_thread() is not threading.main_thread():
+        return
+    _EXIT_GUARD.append(True)
+
+    def ignore():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
+
+    atexit.register(ignore)
 
 
 # ---------------------------------------------------------------- base controllers' exchange

@@ -1,0 +1,115 @@
+"""``wmm_viewer``'s wiring, in-process with the simulator: the scene follows the topics, the goal
+handle and "Hold here" publish ``/goal_pose``, names are relative, parameters are checked."""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped
+
+from ros_helpers import overrides
+from sim_bridge.node import SimNode
+from wmm_control.errors import ConfigError
+from wmm_control.nodes.viewer import ViewerNode
+from wmm_control.paths import config_path
+
+
+def viewer(ros, **params):
+    return ros.add(ViewerNode(context=ros.context, parameter_overrides=overrides(host='127.0.0.1', port=18080,
+                                                                                  **params)))
+
+
+def goals_on(ros, topic='/goal_pose'):
+    got = []
+    listener = ros.add(ros_node(ros, 'goal_listener'))
+    listener.create_subscription(PoseStamped, topic, got.append, 10)
+    return got
+
+
+def ros_node(ros, name, namespace=None):
+    import rclpy
+    return rclpy.create_node(name, context=ros.context, namespace=namespace)
+
+
+def test_the_scene_follows_the_simulator_and_hold_here_publishes_the_end_effectors_pose(ros):
+    sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(start_base_pose=[0.5, -0.3, 0.4])))
+    view = viewer(ros)
+    got = goals_on(ros)
+    ee = []
+    listener = ros.add(ros_node(ros, 'ee_listener'))
+    listener.create_subscription(PoseStamped, '/ee_pose', ee.append, 10)
+    assert ros.spin_until(lambda: view.base_source() == 'ground_truth' and view._ee is not None and len(ee) > 2)
+    ros.spin_for(0.3)
+    # The drawn end effector is the simulator's (ground truth), and every shape handle sits where
+    # the scene puts it.
+    position, _ = view._ee
+    truth = ee[-1].pose.position
+    assert position == pytest.approx([truth.x, truth.y, truth.z], abs=1e-6)
+    poses = view.scene.poses(*view._base_pose())
+    for handle, expected in zip(view.shape_handles, poses.positions):
+        assert np.asarray(handle.position) == pytest.approx(expected, abs=1e-9)
+    # Until a goal is known the handle waits at the end effector.
+    assert np.asarray(view.goal_handle.position) == pytest.approx(position, abs=1e-9)
+    view._hold.set()
+    assert ros.spin_until(lambda: len(got) == 1, timeout=5)
+    goal = got[0]
+    assert goal.header.frame_id == 'world'
+    assert [goal.pose.position.x, goal.pose.position.y, goal.pose.position.z] == pytest.approx(position, abs=1e-9)
+    assert sim.world.robot.name == 'steerable'
+
+
+def test_a_drag_publishes_once_at_release_and_never_a_non_finite_pose(ros):
+    view = viewer(ros, drag_publish_period=5.0)
+    got = goals_on(ros)
+    ros.spin_for(0.3)
+
+    def event(phase, position, wxyz):
+        view._on_handle(SimpleNamespace(phase=phase, target=SimpleNamespace(position=position, wxyz=wxyz)))
+
+    event('start', (0, 0, 0), (1, 0, 0, 0))
+    for k in range(10):
+        event('update', (1.0 + 0.01 * k, 0.5, 0.8), (1, 0, 0, 0))
+        ros.spin_for(0.05)
+    assert got == []                                   # shorter than drag_publish_period: nothing yet
+    event('update', (math.nan, 0.5, 0.8), (1, 0, 0, 0))    # a broken update is dropped
+    event('end', (1.2, 0.5, 0.8), (0, 0, 0, 2))
+    assert ros.spin_until(lambda: got, timeout=5)
+    ros.spin_for(0.5)
+    assert len(got) == 1
+    p, o = got[0].pose.position, got[0].pose.orientation
+    assert (p.x, p.y, p.z) == pytest.approx((1.2, 0.5, 0.8)) and (o.x, o.y, o.z, o.w) == pytest.approx((0, 0, 1, 0))
+    # Its own goal comes back on /goal_pose and is drawn; the handle stays there.
+    assert ros.spin_until(lambda: view.goal_frame.visible, timeout=5)
+    assert np.asarray(view.goal_frame.position) == pytest.approx((1.2, 0.5, 0.8))
+    assert not view.publish_goal((0, math.inf, 0), (1, 0, 0, 0)) and not view.publish_goal((0, 0, 0), (0, 0, 0, 0))
+    ros.spin_for(0.3)
+    assert len(got) == 1
+
+
+def test_topic_names_are_relative_to_the_namespace(ros):
+    view = ros.add(ViewerNode(context=ros.context, namespace='/r1', parameter_overrides=overrides(
+        host='127.0.0.1', port=18090, robot='mecanum')))
+    ros.spin_for(0.2)
+    topics = {name for name, _ in view.get_topic_names_and_types()}
+    for name in ('/r1/joint_states', '/r1/odom', '/r1/ground_truth/odom', '/r1/goal_pose', '/r1/ee_reference',
+                 '/r1/base/reference', '/diagnostics'):
+        assert name in topics, name
+    assert view.pub_goal.topic_name == '/r1/goal_pose'
+
+
+def test_a_robot_yaml_path_and_use_sim_time_without_a_clock(ros):
+    ros.add(SimNode(context=ros.context, parameter_overrides=overrides(robot='mecanum', publish_clock=False)))
+    view = viewer(ros, robot=str(config_path('robots', 'mecanum.yaml')), use_sim_time=True)
+    assert view.robot.name == 'mecanum'
+    # The ROS clock stands at 0 (no /clock), the steady timers draw all the same.
+    assert ros.spin_until(lambda: view._ee is not None and view.base_source() != 'none')
+    assert view.get_clock().now().nanoseconds == 0
+
+
+@pytest.mark.parametrize('params, message', [(dict(robot='C'), "unknown robot 'C'"),
+                                             (dict(robot='/nowhere/robot.yaml'), 'not found'),
+                                             (dict(host=' '), 'host')])
+def test_invalid_parameters_fail_with_a_clear_error(ros, params, message):
+    with pytest.raises(ConfigError, match=message):
+        ViewerNode(context=ros.context, parameter_overrides=overrides(**{'port': 18100, **params}))
