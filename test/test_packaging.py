@@ -127,14 +127,20 @@ ROBOT_B = {'wmm_sim': ['--ros-args', '-p', 'robot:=mecanum'], 'mecanum_controlle
            'redundancy_resolver': ['--ros-args', '-p', 'robot:=mecanum']}      # amp: robot B's default
 
 
-# Goals: position, orientation quaternion (x, y, z, w); robot B's tool keeps pointing along world x.
-@pytest.mark.parametrize('system, goal, quat', [(ROBOT_A, (2.0, 1.0, 1.0), (0.0, 0.0, 0.0, 1.0)),
-                                                (ROBOT_B, (0.75, 0.1, 0.45), (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5)))],
-                         ids=['robot A, task sharing', 'robot B, amp'])
-def test_three_installed_executables_take_the_end_effector_to_a_published_goal(install_tree, system, goal, quat):
-    """The simulator, the base controller and redundancy_resolver, each its own process started
-    as ``ros2 run`` does, on a private domain: a goal published from this process is reached
-    (robot A with no arguments at all; robot B with the robot parameter: its default method, amp)."""
+ROBOT_UR = {'wmm_sim': ['--ros-args', '-p', 'robot:=ur_mecanum'],
+            'mecanum_controller': ['--ros-args', '-p', 'robot:=ur_mecanum'],
+            'redundancy_resolver': ['--ros-args', '-p', 'robot:=ur_mecanum']}
+ROBOT_PANDA = {'wmm_sim': ['--ros-args', '-p', 'robot:=panda_diff'], 'differential_controller': [],
+               'redundancy_resolver': ['--ros-args', '-p', 'robot:=panda_diff']}
+NEAR, FAR = (0.1, 0.05, -0.05), (1.5, -1.0, 0.0)     # offsets from the start: in reach, and one for the base
+
+
+def _run_system(install_tree, system, goals):
+    """Start ``system`` (executable → arguments), each its own process as ``ros2 run`` does, on
+    a private domain; publish each goal of ``goals`` from this process until the end effector is
+    within 1 cm and 0.05 rad of it (ground truth, ``/ee_pose``), then the next. A goal is
+    ``(position, quaternion (x, y, z, w))``, or ``(offset, None)``: the start pose moved by the
+    offset. Returns the end-effector pose when each goal was reached (None: not within 90 s)."""
     import numpy as np
     import rclpy
     from geometry_msgs.msg import PoseStamped
@@ -149,31 +155,65 @@ def test_three_installed_executables_take_the_end_effector_to_a_published_goal(i
     node = rclpy.create_node('goal_test', context=context)
     executor = rclpy.executors.SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    goal = np.array(goal)
     ee = []
     node.create_subscription(PoseStamped, '/ee_pose', lambda m: ee.append(np.array([
         m.pose.position.x, m.pose.position.y, m.pose.position.z,
         m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w])), 10)
     pub = node.create_publisher(PoseStamped, '/goal_pose', 10)
-    msg = PoseStamped()
-    msg.header.frame_id = 'world'
-    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in goal)
-    o = msg.pose.orientation
-    o.x, o.y, o.z, o.w = quat
-    reached = False
+    reached_at = []
     try:
-        end = time.monotonic() + 90.0
-        while time.monotonic() < end and not reached:
+        while not ee and len(ee) < 1:
             executor.spin_once(timeout_sec=0.05)
-            if node.count_subscribers('/goal_pose') and int(time.monotonic() * 2) % 2 == 0:
-                pub.publish(msg)         # published again and again: the resolver may join late
-            # within 1 cm, and 0.05 rad of the orientation (|<q, q_goal>| = cos(angle / 2))
-            reached = bool(ee) and np.linalg.norm(ee[-1][:3] - goal) < 0.01 and abs(ee[-1][3:] @ quat) > math.cos(0.025)
+            if any(proc.poll() is not None for proc in procs.values()):
+                break
+        start = ee[0] if ee else None
+        for position, quat in goals:
+            if start is None:
+                break
+            if quat is None:
+                position, quat = start[:3] + np.asarray(position), start[3:]
+            goal, quat = np.asarray(position, dtype=float), np.asarray(quat, dtype=float)
+            msg = PoseStamped()
+            msg.header.frame_id = 'world'
+            msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in goal)
+            o = msg.pose.orientation
+            o.x, o.y, o.z, o.w = (float(v) for v in quat)
+            reached = False
+            end = time.monotonic() + 90.0
+            while time.monotonic() < end and not reached:
+                executor.spin_once(timeout_sec=0.05)
+                if node.count_subscribers('/goal_pose') and int(time.monotonic() * 2) % 2 == 0:
+                    pub.publish(msg)         # published again and again: the resolver may join late
+                # within 1 cm, and 0.05 rad of the orientation (|<q, q_goal>| = cos(angle / 2))
+                reached = bool(ee) and np.linalg.norm(ee[-1][:3] - goal) < 0.01 and abs(ee[-1][3:] @ quat) > math.cos(0.025)
+            reached_at.append(ee[-1] if reached else None)
+            if not reached:
+                break
     finally:
         executor.remove_node(node)
         node.destroy_node()
         rclpy.try_shutdown(context=context)
         results = {name: _stop(proc) for name, proc in procs.items()}
-    assert reached, f'end effector at {ee[-1] if ee else None}, goal {goal}'
     for name, (code, out) in results.items():
         assert code == 0 and 'Traceback' not in out, f'{name} exit {code}:\n{out}'
+    return reached_at, ee[-1] if ee else None
+
+
+# Goals: position, orientation quaternion (x, y, z, w); robot B's tool keeps pointing along world x.
+@pytest.mark.parametrize('system, goal, quat', [(ROBOT_A, (2.0, 1.0, 1.0), (0.0, 0.0, 0.0, 1.0)),
+                                                (ROBOT_B, (0.75, 0.1, 0.45), (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5)))],
+                         ids=['robot A, task sharing', 'robot B, amp'])
+def test_three_installed_executables_take_the_end_effector_to_a_published_goal(install_tree, system, goal, quat):
+    """The simulator, the base controller and redundancy_resolver, each its own process started
+    as ``ros2 run`` does, on a private domain: a goal published from this process is reached
+    (robot A with no arguments at all; robot B with the robot parameter: its default method, amp)."""
+    reached, last = _run_system(install_tree, system, [(goal, quat)])
+    assert reached and reached[0] is not None, f'end effector at {last}, goal {goal}'
+
+
+@pytest.mark.parametrize('system', [ROBOT_UR, ROBOT_PANDA], ids=['ur_mecanum', 'panda_diff'])
+def test_the_new_robots_reach_a_goal_in_reach_and_one_that_needs_the_base_across_processes(install_tree, system):
+    """``robot:=ur_mecanum`` / ``robot:=panda_diff`` (differential_controller, whose default
+    robot it is) on every node: both goals reached within 1 cm on the ground truth."""
+    reached, last = _run_system(install_tree, system, [(NEAR, None), (FAR, None)])
+    assert len(reached) == 2 and all(r is not None for r in reached), f'reached {reached}, end effector at {last}'

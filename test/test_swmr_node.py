@@ -207,7 +207,7 @@ def test_bad_references_are_rejected(ros):
 
 def test_a_robot_without_a_steerable_base_fails_clearly(ros):
     # Geometry and limits come from the robot YAML: only a steerable robot can be chosen.
-    with pytest.raises(ConfigError, match="'mecanum' is not one of"):
+    with pytest.raises(ConfigError, match="robot 'mecanum' has a mecanum base; swmr_controller drives steerable bases"):
         SwmrControllerNode(context=ros.context, parameter_overrides=overrides(robot='mecanum'))
 
 

@@ -68,9 +68,9 @@ METHOD_RUNS = {
 #: the task the base cannot follow (``arm_takeover``) instead of the whole body slowing to the
 #: base's pace.
 ROBOT_RUNS = {'mecanum': {'pinv': {'arm_takeover': True}, 'task_sharing': {'arm_takeover': True}}}
-#: Longest run per robot [s]: robot B's base accelerates at 0.025 m/s² (Xing Table 1). Long
+#: Longest run per robot [s] (90 s for any other): robot B's base accelerates at 0.025 m/s² (Xing Table 1). Long
 #: enough for the slowest approach that never stalls (robot A: amp, 64 s; robot B: amp, 128 s).
-DURATION_S = {'steerable': 90.0, 'mecanum': 180.0}
+DURATION_S = {'steerable': 90.0, 'mecanum': 180.0, 'ur_mecanum': 90.0, 'panda_diff': 90.0}
 #: Drawn arm configurations stay this far inside the position limits [rad].
 ARM_MARGIN = 0.1
 #: Clearance of a drawn configuration from the robot's body and the floor [m].
@@ -229,7 +229,7 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
         to clamp) and ``why`` (the reason of a failure, else empty).
     """
     cfg = load_robot(robot)
-    duration = DURATION_S.get(cfg.name, max(DURATION_S.values())) if duration is None else duration
+    duration = DURATION_S.get(cfg.name, 90.0) if duration is None else duration
     run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(cfg.name, {}).get(method, {}), **(params or {})}
     log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration)
     dt = float(np.median(np.diff(log.t))) if len(log) > 1 else cfg.period
