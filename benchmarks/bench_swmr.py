@@ -8,11 +8,9 @@ switches through infinity, reversals, stops) and prints:
 - the status counts (``unconstrained``: ICR_ref lies in every wedge, OSQP not called;
   ``elastic``: the wedges had no common point; ``not_solved``: steering held at rest);
 - where a cycle's time goes: the median of each part of ``step`` per cycle;
-- the same controller solving through osqp's public ``update()``/``solve()`` instead of its
-  extension object, to show what that non-public shortcut is worth;
 - the floor: a stripped cycle that does only the work a cycle calling OSQP cannot skip (the
-  QP data, one OSQP update and solve through its extension object, and the wheel outputs),
-  replayed over the cycles that call OSQP, with the median of each part.
+  QP data, one OSQP update and solve, and the wheel outputs), replayed over the cycles that
+  call OSQP, with the median of each part.
 
 Side by side, in the same run: one differential-IK step of pink (``pin-pink`` with the
 quadprog solver, a frame task on the end effector and a posture task) on robot A's
@@ -24,7 +22,6 @@ is skipped with a message.
 """
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -34,8 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run from a source checkout
 
 from wmm_control.base import OsqpIcrSolver, SteerableGeometry, SwmrController, SwmrParams  # noqa: E402
-from wmm_control.base.icr import hip_velocity, wrap_half_turn  # noqa: E402
-from wmm_control.base.steerable_kinematics import rolling_row  # noqa: E402
+from wmm_control.base.icr import wedge_rows  # noqa: E402
 from wmm_control.robot_config import load_robot  # noqa: E402
 
 PARTS = ('_resync', '_icr_qp', 'solver', '_steer', '_drive', '_feasible_twist', '_commit')
@@ -64,13 +60,9 @@ def reference(k, dt):
     return np.array([0.6, 0.1, 0.0])
 
 
-def controller(use_extension=True):
+def controller():
     robot = load_robot('steerable')
-    geometry = SteerableGeometry.from_config(robot.steerable)
-    params = SwmrParams.from_robot_config(robot)
-    ctrl = SwmrController(geometry, params)
-    ctrl.solver = OsqpIcrSolver(ctrl.n_rows, params.eps, params.max_iter, use_extension=use_extension)
-    return ctrl
+    return SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
 
 
 def time_steps(ctrl, cycles):
@@ -124,7 +116,7 @@ def record_qps(ctrl, cycles):
     solve = ctrl.solver
 
     def recording(problem):
-        qps.append((problem, list(ctrl._beta), list(ctrl._twist)))
+        qps.append((problem, ctrl.beta, ctrl.twist))
         return solve(problem)
 
     ctrl.solver = recording
@@ -139,37 +131,29 @@ def time_floor(cycles):
     """Median time [µs] of each part of a stripped cycle, over the cycles that call OSQP.
 
     Parts: ``qp data`` (the 2N wedge rows of the period's steer-angle intervals and OSQP's
-    arrays of them), ``osqp`` (one update of q, l, u and A's values and one solve through the
-    extension object, at the controller's settings, warm-started as in the controller), and
-    ``wheel outputs`` (per wheel the steer angle of ICR_next and its drive rate for the
-    twist). The rest of a cycle (ICR*, route, ICR_ref, the wedge sides, the rate clip,
-    the acceleration and drive limits, the executed twist) is left out.
+    arrays of them), ``osqp`` (one update of q, l, u and A's values and one solve, at the
+    controller's settings, warm-started as in the controller), and ``wheel outputs`` (the
+    steer angles of ICR_next and the drive rates for the twist). The rest of a cycle (ICR*,
+    route, ICR_ref, the wedge sides, the rate clip, the acceleration and drive limits, the
+    executed twist) is left out.
     """
     ctrl = controller()
     qps = record_qps(ctrl, cycles)
     solver = OsqpIcrSolver(ctrl.n_rows, ctrl.params.eps, ctrl.params.max_iter)
-    g, scale = ctrl.geometry, ctrl.params.icr_scale
-    d, r_w, dt = g.wheel_offset, g.wheel_radius, ctrl.params.dt
+    g, dt = ctrl.geometry, ctrl.params.dt
+    row_maps = np.repeat(g.hip_velocity_map(ctrl.params.icr_scale), 2, axis=0)
     parts = {'qp data': [], 'osqp': [], 'wheel outputs': [], 'total': []}
     for problem, beta, twist in qps:
-        ctrl._beta = beta
-        zc = problem.icr_curr.z.tolist()
-        e1, e2 = problem.chart
+        signs = np.column_stack((problem.sides, -problem.sides)).ravel()
         t0 = time.perf_counter()
-        problem.wedges = ctrl._wedge_rows(problem.sides, problem.rate_lower, problem.rate_upper, zc, e1, e2)
-        a_x, lb, ub = problem.data()
+        headings = np.column_stack((beta + dt * problem.rate_lower, beta + dt * problem.rate_upper)).ravel()
+        problem.rows, problem.lower = wedge_rows(headings, signs, row_maps, problem.icr_curr.z, problem.basis)
+        a, lb, ub = problem.A, problem.l, problem.u
         t1 = time.perf_counter()
-        y, _ = solver._run(solver._osqp, -problem.x_ref, a_x, lb, ub)
+        y, _ = solver._run(solver._osqp, -problem.x_ref, a, lb, ub)
         t2 = time.perf_counter()
-        x0, x1 = y.tolist()
-        z = problem.z_at(x0, x1)
-        t0_, t1_, t2_ = twist
-        phi_dot = []
-        for b, (hx, hy) in zip(beta, g.hip_list):
-            vx, vy = hip_velocity(z, hx, hy, scale)
-            b_new = b + wrap_half_turn(math.atan2(vy, vx) - b)
-            f0, f1, f2 = rolling_row(math.cos(b_new), math.sin(b_new), hx, hy, d)
-            phi_dot.append((f0 * t0_ + f1 * t1_ + f2 * t2_ + d * (b_new - b) / dt) / r_w)
+        beta_new = g.steer_angles_for_icr(problem.icr_of(y), near=beta)
+        g.drive_rates(g.rolling_rows(beta_new), (beta_new - beta) / dt, twist)
         t3 = time.perf_counter()
         for name, t in (('qp data', t1 - t0), ('osqp', t2 - t1), ('wheel outputs', t3 - t2), ('total', t3 - t0)):
             parts[name].append(t * 1e6)
@@ -188,9 +172,6 @@ def main():
     print(f'  OSQP   median {np.median(solve_us):7.1f} us   p99 {np.percentile(solve_us, 99):7.1f} us   '
           f'over the {len(solve_us)} cycles that call it ({len(solve_us) / args.cycles:.0%})')
     print('  qp status counts:', ', '.join(f'{k}: {v}' for k, v in sorted(statuses.items())))
-    public_us, public_solve_us, _ = time_steps(controller(use_extension=False), args.cycles)
-    print(f'  through osqp\'s public update()/solve(): step median {np.median(public_us):7.1f} us, '
-          f'OSQP median {np.median(public_solve_us):7.1f} us')
     parts = time_parts(controller(), args.cycles)
     print('  per cycle, median / mean [us]: ' + ', '.join(
         f'{name.strip("_")} {m:.1f} / {a:.1f}' for name, (m, a) in parts.items()))

@@ -1,12 +1,10 @@
 """Input validation helpers shared by the core (shape and finiteness checks)."""
 
-import math
-
 import numpy as np
 
 from wmm_control.errors import NonFiniteError, ShapeError
 
-__all__ = ['as_vector', 'as_finite_vector', 'finite_floats']
+__all__ = ['as_vector', 'as_finite_vector']
 
 
 def as_vector(value, size, name):
@@ -33,19 +31,8 @@ def as_finite_vector(value, size, name):
         NonFiniteError: any entry is NaN or infinite.
     """
     arr = as_vector(value, size, name)
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         bad = np.flatnonzero(~np.isfinite(arr)).tolist()
         raise NonFiniteError(f'{name}: non-finite entries at indices {bad}: {arr.tolist()}')
     return arr
 
-
-def finite_floats(value, size, name):
-    """:func:`as_finite_vector` as a list of floats, for the per-period kernels.
-
-    The same checks and errors; a short vector is checked in plain Python, without the
-    cost of numpy's element-wise calls.
-    """
-    values = as_vector(value, size, name).tolist()
-    if not all(map(math.isfinite, values)):
-        as_finite_vector(value, size, name)   # raises the detailed error
-    return values

@@ -21,6 +21,12 @@ shorter one on the sphere, i.e. the sign of ``z*`` with ``z_curr · z* ≥ 0``. 
 p_c, p* this is the direct route iff ``p_c · p* + ℓ² ≥ 0``: switching from an arc of radius R₁
 on one side to an arc of radius R₂ on the other goes through straight-line motion iff
 R₁ R₂ > ℓ², and through the base centre otherwise.
+
+Hip velocities and steer-limit wedges: the velocity of hip i under rotation about the ICR
+``z`` is linear in ``z``, ``v_i = M_i z`` (:func:`hip_velocity_map`, one (2, 3) block per hip,
+all hips at once); a wheel's heading lies along it (up to its twin). A bound on a wheel's
+heading is a half-plane of ICRs through its hip, a linear row in ``z``; :func:`wedge_rows`
+gives every wheel's rows at once in the chart of :func:`tangent_basis`.
 """
 
 import math
@@ -34,11 +40,10 @@ from wmm_control.errors import ConfigError, NonFiniteError
 __all__ = [
     'Icr',
     'choose_route',
-    'hip_velocity',
+    'hip_velocity_map',
     'icr_of_headings',
-    'route_between',
-    'tangent_pair',
-    'wedge_row',
+    'tangent_basis',
+    'wedge_rows',
     'wrap_half_turn',
     'DEFAULT_ICR_BORDER',
     'DEFAULT_ICR_SCALE',
@@ -63,12 +68,19 @@ def wrap_half_turn(angle):
     return (angle + math.pi / 2) % math.pi - math.pi / 2
 
 
-def tangent_pair(z0, z1, z2):
-    """Orthonormal basis (e1, e2) of the plane tangent to the unit sphere at (z0, z1, z2).
+def tangent_basis(z):
+    """Orthonormal basis E = [e1 e2] of the plane tangent to the unit sphere at ``z``.
 
-    The chart ``z = z_c + e1 x₁ + e2 x₂`` of the ICR QP. Returns two 3-tuples of floats,
-    ``e2 = z × e1``.
+    The chart ``z_c + E x`` (x ∈ R²) of the ICR QP: e1 is the coordinate axis least aligned
+    with z, made orthogonal to it, and ``e2 = z × e1``.
+
+    Args:
+        z: a unit homogeneous vector. Shape (3,).
+
+    Returns:
+        E. Shape (3, 2).
     """
+    z0, z1, z2 = np.asarray(z, dtype=float).tolist()
     a = (abs(z0), abs(z1), abs(z2))
     k = 0 if a[0] <= a[1] and a[0] <= a[2] else (1 if a[1] <= a[2] else 2)
     zk = (z0, z1, z2)[k]
@@ -76,7 +88,7 @@ def tangent_pair(z0, z1, z2):
     e[k] += 1.0
     n = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
     a0, a1, a2 = e[0] / n, e[1] / n, e[2] / n
-    return (a0, a1, a2), (z1 * a2 - z2 * a1, z2 * a0 - z0 * a2, z0 * a1 - z1 * a0)   # e2 = z × e1
+    return np.array(((a0, z1 * a2 - z2 * a1), (a1, z2 * a0 - z0 * a2), (a2, z0 * a1 - z1 * a0)))
 
 
 def _check_positive(value, name):
@@ -108,12 +120,13 @@ class Icr:
         object.__setattr__(self, 'z', z / n)
 
     @classmethod
-    def from_point(cls, x, y, scale=DEFAULT_ICR_SCALE, border=DEFAULT_ICR_BORDER):
+    def from_point(cls, x: float, y: float, scale: float = DEFAULT_ICR_SCALE,
+                   border: float = DEFAULT_ICR_BORDER) -> 'Icr':
         """A finite ICR at (x, y) [m] in the base frame."""
         return cls(np.array([x, y, scale], dtype=float), scale, border)
 
     @classmethod
-    def from_twist(cls, twist, scale=DEFAULT_ICR_SCALE, border=DEFAULT_ICR_BORDER):
+    def from_twist(cls, twist, scale: float = DEFAULT_ICR_SCALE, border: float = DEFAULT_ICR_BORDER) -> 'Icr':
         """The ICR of a base twist (vx, vy, ω) [m/s, m/s, rad/s], exact for ω = 0.
 
         Raises:
@@ -123,7 +136,8 @@ class Icr:
         return cls(np.array([-t[1], t[0], scale * t[2]]), scale, border)
 
     @classmethod
-    def from_steer_angles(cls, geometry, beta, scale=DEFAULT_ICR_SCALE, border=DEFAULT_ICR_BORDER, like=None):
+    def from_steer_angles(cls, geometry, beta, scale: float = DEFAULT_ICR_SCALE,
+                          border: float = DEFAULT_ICR_BORDER, like=None) -> 'Icr':
         """The ICR that best fits steer angles β (least squares over the no-side-slip rows).
 
         Exact when the wheels agree on one ICR; for disagreeing wheels it is the twist
@@ -135,30 +149,27 @@ class Icr:
             like: optional homogeneous vector; the sign of ``z`` is chosen on its hemisphere.
         """
         beta = as_finite_vector(beta, geometry.n_wheels, 'beta')
-        z = icr_of_headings(np.cos(beta).tolist(), np.sin(beta).tolist(), geometry.hip_list, scale, like)
-        return cls(np.array(z), scale, border)
+        return cls(icr_of_headings(geometry.slip_rows(beta), scale, like), scale, border)
 
-    def with_z(self, z):
+    def with_z(self, z) -> 'Icr':
         """A new ICR with the same scale and border."""
         return Icr(z, self.scale, self.border)
 
-    def _with_z_unchecked(self, z):
-        """:meth:`with_z` for a finite, non-zero ``z`` computed internally (no input checks)."""
-        z0, z1, z2 = z
-        n = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
+    def _with_z_unchecked(self, z: np.ndarray) -> 'Icr':
+        """:meth:`with_z` for a finite, non-zero ``z`` (Shape (3,)) computed internally (no input checks)."""
         icr = object.__new__(Icr)
-        object.__setattr__(icr, 'z', np.array((z0 / n, z1 / n, z2 / n), dtype=float))
+        object.__setattr__(icr, 'z', z / math.sqrt(z @ z))
         object.__setattr__(icr, 'scale', self.scale)
         object.__setattr__(icr, 'border', self.border)
         return icr
 
     @property
-    def at_infinity(self):
+    def at_infinity(self) -> bool:
         """True when the ICR is on or beyond the border (max(|X|, |Y|) ≥ L), e.g. pure translation."""
         return bool(self.scale * max(abs(self.z[0]), abs(self.z[1])) >= self.border * abs(self.z[2]))
 
     @property
-    def point(self):
+    def point(self) -> np.ndarray:
         """Bounded representation (X, Y) [m], clipped to the border square. Shape (2,).
 
         Inside the square this is the Cartesian ICR. Beyond it (and for pure translation) it is
@@ -174,19 +185,20 @@ class Icr:
         return sign * xy * (self.border / m)
 
     @property
-    def twist_direction(self):
+    def twist_direction(self) -> np.ndarray:
         """Unit twist (vx, vy, ω) compatible with this ICR: rotation about it, ∝ (Y, −X, 1).
 
         For an ICR at infinity this is the pure translation perpendicular to its direction.
         Its sign follows ``z``. Shape (3,).
         """
-        t = np.array([self.z[1], -self.z[0], self.z[2] / self.scale])
-        return t / np.linalg.norm(t)
+        z0, z1, z2 = self.z.tolist()
+        t = np.array((z1, -z0, z2 / self.scale))
+        return t / math.sqrt(t @ t)
 
-    def hip_velocities(self, hips):
+    def hip_velocities(self, hips) -> np.ndarray:
         """Velocity direction of each hip (the wheel heading, up to its twin) for this ICR.
 
-        Linear in ``z`` (:func:`hip_velocity`); it is the hip velocity under
+        ``M_i z`` (:func:`hip_velocity_map`); it is the hip velocity under
         :attr:`twist_direction` (times a positive factor). Zero when the ICR sits on hip i.
 
         Args:
@@ -195,10 +207,9 @@ class Icr:
         Returns:
             Shape (N, 2).
         """
-        hips = np.asarray(hips, dtype=float)
-        return np.column_stack(hip_velocity(self.z, hips[:, 0], hips[:, 1], self.scale))
+        return hip_velocity_map(hips, self.scale) @ self.z
 
-    def angle_to(self, other):
+    def angle_to(self, other: 'Icr') -> float:
         """Distance to another ICR on the projective plane [rad], in [0, π/2].
 
         ``atan2(‖z × z'‖, |z · z'|)``: accurate for nearly equal ICRs too (the arc cosine of the
@@ -210,46 +221,50 @@ class Icr:
         return math.atan2(c, abs(a0 * b0 + a1 * b1 + a2 * b2))
 
 
-def hip_velocity(z, hx, hy, scale):
-    """Velocity direction of the hip (hx, hy) [m] under rotation about the ICR ``z``.
+def hip_velocity_map(hips, scale: float) -> np.ndarray:
+    """The linear maps ``z ↦ v_i`` from a homogeneous ICR to the velocity direction of each hip.
 
-    ``v = (z₁ − hy z₂/ℓ, −z₀ + hx z₂/ℓ)`` ∝ ẑ × (hip − ICR): perpendicular to the line from
-    the ICR to the hip, the heading of a wheel there (up to its twin). Works on floats and on
-    arrays of hips alike.
+    ``M_i = [[0, 1, −hy_i/ℓ], [−1, 0, hx_i/ℓ]]``: ``v_i = M_i z = (z₁ − hy z₂/ℓ, hx z₂/ℓ − z₀)``
+    ∝ ẑ × (hip − ICR), perpendicular to the line from the ICR to the hip: the heading of a
+    wheel there (up to its twin). ``M @ z`` gives all hips' velocities, Shape (N, 2), and
+    ``M @ Z`` for k ICRs at once (Z of Shape (3, k)) Shape (N, 2, k).
+
+    Args:
+        hips: hip positions (hx, hy) [m]. Shape (N, 2).
+        scale: ℓ [m].
 
     Returns:
-        ``(vx, vy)``.
+        M. Shape (N, 2, 3).
     """
-    return z[1] - hy * z[2] / scale, hx * z[2] / scale - z[0]
+    hips = np.asarray(hips, dtype=float)
+    m = np.zeros((hips.shape[0], 2, 3))
+    m[:, 0, 1] = 1.0
+    m[:, 1, 0] = -1.0
+    m[:, 0, 2] = -hips[:, 1] / scale
+    m[:, 1, 2] = hips[:, 0] / scale
+    return m
 
 
-def icr_of_headings(cos_beta, sin_beta, hips, scale, like=None):
+def icr_of_headings(slip_rows: np.ndarray, scale: float, like=None) -> np.ndarray:
     """Least-squares ICR of wheel headings: the kernel of :meth:`Icr.from_steer_angles`.
 
     The twist direction t = (vx, vy, ℓω) minimising ``Σ (g_i · t)²`` over the no-side-slip
-    rows ``g_i = (−sin β_i, cos β_i, (hx_i cos β_i + hy_i sin β_i)/ℓ)`` is the eigenvector of the
-    smallest eigenvalue of S = GᵀG: closed-form eigenvalue (trigonometric method), eigenvector
-    the largest cross product of two rows of S − λI. Near-repeated eigenvalues fall back to an
-    SVD of G. Plain floats, since it runs every control period.
+    rows ``g_i = (−sin β_i, cos β_i, (hx_i cos β_i + hy_i sin β_i)/ℓ)`` is the eigenvector of
+    the smallest eigenvalue of S = GᵀG: closed-form eigenvalue of the 3 × 3 matrix
+    (trigonometric method), eigenvector the largest cross product of two rows of S − λI.
+    Near-repeated eigenvalues fall back to an SVD of G.
 
     Args:
-        cos_beta, sin_beta: cosines and sines of the steer angles (sequences of floats).
-        hips: hip positions as (hx, hy) pairs [m].
+        slip_rows: the rows g(β_i) = (−sin β_i, cos β_i, hx_i cos β_i + hy_i sin β_i) of
+            :meth:`SteerableGeometry.slip_rows`. Shape (N, 3).
         scale: ℓ [m].
         like: optional homogeneous vector; the result is on its hemisphere.
 
     Returns:
-        The homogeneous ICR ``z ∝ (−vy, vx, ℓω)`` as a 3-tuple (unnormalised).
+        The unit homogeneous ICR ``z ∝ (−vy, vx, ℓω)``. Shape (3,).
     """
-    g = [(-s, c, (hx * c + hy * s) / scale) for c, s, (hx, hy) in zip(cos_beta, sin_beta, hips)]
-    s00 = s01 = s02 = s11 = s12 = s22 = 0.0
-    for g0, g1, g2 in g:
-        s00 += g0 * g0
-        s01 += g0 * g1
-        s02 += g0 * g2
-        s11 += g1 * g1
-        s12 += g1 * g2
-        s22 += g2 * g2
+    (s00, s01, s02), (_, s11, s12), (_, _, s22) = (slip_rows.T @ slip_rows).tolist()
+    s02, s12, s22 = s02 / scale, s12 / scale, s22 / (scale * scale)     # the rows' third entry over ℓ
     q = (s00 + s11 + s22) / 3.0
     off = s01 * s01 + s02 * s02 + s12 * s12
     pp = math.sqrt(((s00 - q) ** 2 + (s11 - q) ** 2 + (s22 - q) ** 2 + 2.0 * off) / 6.0)
@@ -271,64 +286,70 @@ def icr_of_headings(cos_beta, sin_beta, hips, scale, like=None):
         if bn > 1e-12 * (pp * pp) ** 2:
             t = best
     if t is None:
-        t = np.linalg.svd(np.array(g))[2][-1].tolist()
-    z = (-t[1], t[0], t[2])
-    if like is not None and z[0] * like[0] + z[1] * like[1] + z[2] * like[2] < 0:
-        z = (-z[0], -z[1], -z[2])
+        t = np.linalg.svd(slip_rows * np.array((1.0, 1.0, 1.0 / scale)))[2][-1].tolist()
+    z = np.array((-t[1], t[0], t[2]))
+    z /= math.sqrt(z @ z)
+    if like is not None and z @ like < 0.0:
+        z = -z
     return z
 
 
-def wedge_row(heading, side, hx, hy, scale, z, e1, e2):
-    """One steer-limit line of the ICR QP in the chart ``z_c + e1 x₁ + e2 x₂``.
+def wedge_rows(headings: np.ndarray, sides: np.ndarray, maps: np.ndarray, zc: np.ndarray,
+               basis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Steer-limit lines of the ICR QP, all at once, in the chart ``z = zc + E x``.
 
-    The ICRs whose hip velocity (:func:`hip_velocity`) lies on the ``side`` (±1) of the wheel
-    heading ``heading`` = (cos a, sin a) form a half-plane through the hip; in chart
-    coordinates it is ``r · x ≥ lb``. A wedge is two such half-planes, for the extreme headings
-    a_lo, a_hi of the period (``side`` +1 for a_lo, −1 for a_hi, times the wheel's orientation σ
-    along its hip velocity): ``cross(e_lo, v) ≥ 0`` and ``cross(v, e_hi) ≥ 0``.
+    Row k bounds the heading of the wheel whose hip velocity map is ``maps[k]``
+    (:func:`hip_velocity_map`): the ICRs whose hip velocity v = M z lies on the ``sides[k]``
+    (±1) side of the heading (cos a_k, sin a_k), ``σ cross((cos a, sin a), v) ≥ 0``, form a
+    half-plane through the hip; in chart coordinates it is ``r_k · x ≥ lb_k``. A wheel's wedge
+    is two such rows, for the extreme headings a_lo, a_hi of the period (side +σ for a_lo, −σ
+    for a_hi, σ the wheel's orientation along its hip velocity).
 
-    Returns:
-        ``(r0, r1, lb)`` normalised (‖r‖ = 1), or ``(0, 0, −inf)`` for a degenerate row.
-    """
-    cos_a, sin_a = heading
-    c0, c1 = -side * sin_a, side * cos_a
-    # row c·M z of the hip velocity v = M z, M = [[0, 1, −hy/ℓ], [−1, 0, hx/ℓ]]
-    r2 = (hx * c1 - hy * c0) / scale
-    a0, a1, a2 = e1
-    b0, b1, b2 = e2
-    w0 = -c1 * a0 + c0 * a1 + r2 * a2
-    w1 = -c1 * b0 + c0 * b1 + r2 * b2
-    nr = math.sqrt(w0 * w0 + w1 * w1)
-    if nr <= 1e-12:
-        return 0.0, 0.0, -math.inf
-    z0, z1, z2 = z
-    return w0 / nr, w1 / nr, (c1 * z0 - c0 * z1 - r2 * z2) / nr
-
-
-def route_between(zc, zt):
-    """The kernel of :func:`choose_route` on homogeneous 3-tuples (``zc`` unit, ``zt`` any norm).
+    Args:
+        headings: a_k [rad]. Shape (K,).
+        sides: ±1. Shape (K,).
+        maps: each row's hip velocity map. Shape (K, 2, 3).
+        zc: the chart centre, a unit homogeneous ICR. Shape (3,).
+        basis: the chart's tangent basis E (:func:`tangent_basis`). Shape (3, 2).
 
     Returns:
-        ``(target, route)``: ``±zt`` on the hemisphere of ``zc``, and 'direct' or 'complementary'.
+        ``(rows, lb)``: rows normalised (‖r_k‖ = 1), Shape (K, 2); bounds, Shape (K,). A
+        degenerate row (the heading bound does not depend on the ICR) is ``0 · x ≥ −inf``.
     """
-    if zc[0] * zt[0] + zc[1] * zt[1] + zc[2] * zt[2] < 0.0:
-        zt = (-zt[0], -zt[1], -zt[2])
-    return zt, ('complementary' if zc[2] * zt[2] < 0.0 else 'direct')
+    # σ cross((cos a, sin a), M z) = σ (cos a M₁ − sin a M₀) z: the row in z, then in the chart
+    in_z = (sides * np.cos(headings))[:, None] * maps[:, 1] - (sides * np.sin(headings))[:, None] * maps[:, 0]
+    rows = in_z @ basis
+    norms = np.hypot(rows[:, 0], rows[:, 1])
+    lower = in_z @ -zc
+    if norms.min() > 1e-12:
+        return rows / norms[:, None], lower / norms
+    degenerate = norms <= 1e-12
+    norms[degenerate] = 1.0
+    rows /= norms[:, None]
+    lower /= norms
+    rows[degenerate] = 0.0
+    lower[degenerate] = -math.inf
+    return rows, lower
 
 
-def choose_route(current, target):
+def choose_route(current, target) -> tuple[np.ndarray, str]:
     """Pick the shorter route from ``current`` to ``target`` (direct or complementary).
 
     Args:
-        current: the ICR of the present steer configuration.
-        target: the desired ICR.
+        current: the ICR of the present steer configuration: an :class:`Icr` or its unit
+            homogeneous vector (Shape (3,)).
+        target: the desired ICR: an :class:`Icr` or a non-zero homogeneous vector (any norm).
 
     Returns:
-        ``(target_z, route)``: the representative of ``target`` (``±target.z``) on the
+        ``(target_z, route)``: the unit representative of ``target`` (``±z``) on the
         current's hemisphere, so that the great-circle arc current → target_z is the
         shorter route, and ``'complementary'`` if that arc passes through the line at
         infinity (pure translation) — the route out through the border and back in from the
         opposite side — else ``'direct'``.
     """
-    tz, route = route_between(current.z.tolist(), target.z.tolist())
-    return np.array(tz), route
+    z0, z1, z2 = np.asarray(getattr(current, 'z', current), dtype=float).tolist()
+    t0, t1, t2 = np.asarray(getattr(target, 'z', target), dtype=float).tolist()
+    n = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    if z0 * t0 + z1 * t1 + z2 * t2 < 0.0:
+        n = -n
+    return np.array((t0 / n, t1 / n, t2 / n)), ('complementary' if z2 * t2 * n < 0.0 else 'direct')

@@ -1,12 +1,14 @@
 """Wheel-level kinematics of a steerable wheeled base with offset steer axes (Sorour §IV).
 
-Module ``i`` has its steer axis at hip ``h_i = (hx_i, hy_i)`` in the base frame. The
-wheel centre sits at distance ``d`` (the wheel offset) to the right of the wheel heading
+Module ``i`` of N (N ≥ 2) has its steer axis at hip ``h_i = (hx_i, hy_i)`` in the base frame.
+The wheel centre sits at distance ``d`` (the wheel offset) to the right of the wheel heading
 ``u_i = (cos β_i, sin β_i)``. For a base twist ``ξ̇ = (vx, vy, ω)`` (base frame):
 
 * rolling:   ``r_w φ̇_i = f(β_i)·ξ̇ + d β̇_i``,
   ``f(β) = [cos β, sin β, d − hy cos β + hx sin β]``  (the inverse actuation model);
 * no side slip: ``g(β_i)·ξ̇ = 0``, ``g(β) = [−sin β, cos β, hx cos β + hy sin β]``.
+
+Every method works on all N modules at once (numpy arrays over the modules).
 """
 
 import math
@@ -14,40 +16,31 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wmm_control.base.icr import Icr, hip_velocity_map, wrap_half_turn
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
 
-__all__ = ['SteerableGeometry', 'rolling_row', 'slip_row']
+__all__ = ['SteerableGeometry']
 
-
-def rolling_row(c, s, hx, hy, d):
-    """Rolling row ``f(β) = (cos β, sin β, d − hy cos β + hx sin β)`` from c = cos β, s = sin β.
-
-    Floats or arrays (broadcast): one formula for the per-period kernels and the batch methods.
-    """
-    return c, s, d - hy * c + hx * s
-
-
-def slip_row(c, s, hx, hy):
-    """No-side-slip row ``g(β) = (−sin β, cos β, hx cos β + hy sin β)``; floats or arrays."""
-    return -s, c, hx * c + hy * s
+_HIP_TOL = 1e-9
+"""A hip velocity (of a unit homogeneous ICR) below this: the ICR sits on the hip, any heading fits."""
 
 
 @dataclass(frozen=True)
 class SteerableGeometry:
-    """Geometry of an N-module steerable base.
+    """Geometry of an N-module steerable base (N ≥ 2).
 
     Attributes:
         hips: steer-axis positions in the base frame [m]. Shape (N, 2).
         wheel_radius: r_w [m].
         wheel_offset: d, steer axis to wheel centre [m].
-        hip_list: the hips as a tuple of (hx, hy) float pairs (derived, for the per-period kernels).
     """
 
     hips: np.ndarray
     wheel_radius: float
     wheel_offset: float
-    hip_list: tuple = field(init=False, repr=False, compare=False, default=())
+    _maps: dict = field(init=False, repr=False, compare=False, default_factory=dict)
+    _hip_sums: tuple = field(init=False, repr=False, compare=False, default=())
 
     def __post_init__(self):
         hips = np.asarray(self.hips, dtype=float)
@@ -57,29 +50,51 @@ class SteerableGeometry:
             raise ConfigError(f'wheel_radius must be > 0, got {self.wheel_radius}')
         if not (np.isfinite(self.wheel_offset) and self.wheel_offset >= 0):
             raise ConfigError(f'wheel_offset must be >= 0, got {self.wheel_offset}')
+        hips = hips.copy()
+        hips.flags.writeable = False
         object.__setattr__(self, 'hips', hips)
-        object.__setattr__(self, 'hip_list', tuple((float(hx), float(hy)) for hx, hy in hips))
+        object.__setattr__(self, '_hip_sums', (float(hips[:, 0].sum()), float(hips[:, 1].sum()),
+                                               float((hips * hips).sum())))
 
     @classmethod
-    def from_config(cls, steerable_config):
+    def from_config(cls, steerable_config) -> 'SteerableGeometry':
         """Build from a :class:`wmm_control.robot_config.SteerableConfig`."""
         return cls(steerable_config.hips, steerable_config.wheel_radius, steerable_config.wheel_offset)
 
     @property
-    def n_wheels(self):
+    def n_wheels(self) -> int:
         return self.hips.shape[0]
 
-    def rolling_rows(self, beta):
+    # ------------------------------------------------------------------ constraint rows
+    def rolling_rows(self, beta) -> np.ndarray:
         """Rows ``f(β_i)`` of the rolling constraint. Shape (..., N, 3) for β of shape (..., N)."""
-        return np.stack(rolling_row(np.cos(beta), np.sin(beta), self.hips[:, 0], self.hips[:, 1],
-                                    self.wheel_offset), axis=-1)
+        return self._rows(beta, rolling=True)
 
-    def slip_rows(self, beta):
+    def slip_rows(self, beta) -> np.ndarray:
         """Rows ``g(β_i)`` of the no-side-slip constraint. Shape (..., N, 3) for β of shape (..., N)."""
-        return np.stack(slip_row(np.cos(beta), np.sin(beta), self.hips[:, 0], self.hips[:, 1]), axis=-1)
+        return self._rows(beta, slip=True)
 
-    def wheel_rates(self, beta, beta_dot, twist):
-        """Inverse actuation: drive rates φ̇ [rad/s] for a base twist.
+    def _rows(self, beta, rolling: bool = False, slip: bool = False) -> np.ndarray:
+        """The rolling rows f(β_i), then the no-side-slip rows g(β_i), of those asked for.
+
+        Returns:
+            Shape (..., N, 3) for one kind, (..., 2N, 3) for both (f first).
+        """
+        c, s = np.cos(beta), np.sin(beta)
+        hx, hy = self.hips[:, 0], self.hips[:, 1]
+        n = self.n_wheels
+        out = np.empty(c.shape[:-1] + ((rolling + slip) * n, 3))
+        f = out[..., :n, :] if rolling else None
+        g = out[..., -n:, :] if slip else None
+        if rolling:
+            f[..., 0], f[..., 1], f[..., 2] = c, s, self.wheel_offset - hy * c + hx * s
+        if slip:
+            g[..., 0], g[..., 1], g[..., 2] = -s, c, hx * c + hy * s
+        return out
+
+    # ------------------------------------------------------------------ inverse actuation
+    def wheel_rates(self, beta, beta_dot, twist) -> np.ndarray:
+        """Inverse actuation: drive rates φ̇ [rad/s] for a base twist (checked inputs).
 
         Args:
             beta: steer angles [rad]. Shape (N,).
@@ -93,14 +108,31 @@ class SteerableGeometry:
         beta = as_finite_vector(beta, n, 'beta')
         beta_dot = as_finite_vector(beta_dot, n, 'beta_dot')
         twist = as_finite_vector(twist, 3, 'twist')
-        return (self.rolling_rows(beta) @ twist + self.wheel_offset * beta_dot) / self.wheel_radius
+        return self.drive_rates(self.rolling_rows(beta), beta_dot, twist)
 
-    def twist_from_wheels(self, beta, beta_dot, phi_dot):
+    def drive_rates(self, rolling_rows: np.ndarray, beta_dot, twist) -> np.ndarray:
+        """The inverse actuation model ``φ̇ = (f(β)·ξ̇ + d β̇)/r_w`` on rolling rows already at hand.
+
+        :meth:`wheel_rates` without its input checks, for a caller that has
+        :meth:`rolling_rows` of β (the controller evaluates several twists on one set of rows).
+
+        Args:
+            rolling_rows: f(β_i). Shape (N, 3).
+            beta_dot: steer rates [rad/s]. Shape (N,) or a scalar.
+            twist: (vx, vy, ω) [m/s, m/s, rad/s]. Shape (3,).
+
+        Returns:
+            Shape (N,).
+        """
+        return (rolling_rows @ twist + self.wheel_offset * beta_dot) / self.wheel_radius
+
+    # ------------------------------------------------------------------ forward kinematics
+    def twist_from_wheels(self, beta, beta_dot, phi_dot) -> np.ndarray:
         """Forward kinematics: the base twist that best satisfies every wheel's constraints.
 
         Least squares over the N rolling and N no-side-slip equations; exact when the
         wheel commands are consistent with one instantaneous centre of rotation
-        (:meth:`fit_twist` on checked arrays).
+        (:meth:`fit_twist` on checked inputs).
 
         Returns:
             (vx, vy, ω) in the base frame. Shape (3,).
@@ -109,51 +141,12 @@ class SteerableGeometry:
         beta = as_finite_vector(beta, n, 'beta')
         beta_dot = as_finite_vector(beta_dot, n, 'beta_dot')
         phi_dot = as_finite_vector(phi_dot, n, 'phi_dot')
-        return np.array(self.fit_twist(beta.tolist(), beta_dot.tolist(), phi_dot.tolist()))
+        return self.fit_twist(beta, beta_dot, phi_dot)
 
-    def fit_twist(self, beta, beta_dot, phi_dot):
-        """The least-squares twist of :meth:`twist_from_wheels` on sequences of floats.
-
-        The 3 × 3 normal equations of the rolling rows f(β_i) (right-hand side
-        ``r_w φ̇_i − d β̇_i``) and the no-side-slip rows g(β_i) (right-hand side 0), solved
-        by Cramer's rule: the per-period kernel that the controller runs. A (near) singular
-        system falls back to ``numpy.linalg.lstsq``.
-
-        Returns:
-            ``(vx, vy, ω)`` as a 3-tuple of floats.
-        """
-        d, r_w = self.wheel_offset, self.wheel_radius
-        n00 = n01 = n02 = n11 = n12 = n22 = b0 = b1 = b2 = 0.0
-        for beta_i, rate, phi, (hx, hy) in zip(beta, beta_dot, phi_dot, self.hip_list):
-            c, s = math.cos(beta_i), math.sin(beta_i)
-            _, _, f2 = rolling_row(c, s, hx, hy, d)
-            _, _, g2 = slip_row(c, s, hx, hy)
-            rhs = r_w * phi - d * rate
-            n00 += 1.0                       # c² + s²
-            n02 += c * f2 - s * g2
-            n12 += s * f2 + c * g2
-            n22 += f2 * f2 + g2 * g2
-            b0 += c * rhs
-            b1 += s * rhs
-            b2 += f2 * rhs
-        n11 = n00                            # the (0, 1) entry c s − s c vanishes
-        m00, m01, m02 = n11 * n22 - n12 * n12, n02 * n12 - n01 * n22, n01 * n12 - n02 * n11
-        det = n00 * m00 + n01 * m01 + n02 * m02
-        if abs(det) <= 1e-12 * n00 * n00 * max(n22, 1.0):
-            a = np.vstack((self.rolling_rows(np.asarray(beta)), self.slip_rows(np.asarray(beta))))
-            rhs = np.concatenate((r_w * np.asarray(phi_dot) - d * np.asarray(beta_dot), np.zeros(len(beta))))
-            return tuple(np.linalg.lstsq(a, rhs, rcond=None)[0].tolist())
-        m11, m12, m22 = n00 * n22 - n02 * n02, n01 * n02 - n00 * n12, n00 * n11 - n01 * n01
-        return ((m00 * b0 + m01 * b1 + m02 * b2) / det,
-                (m01 * b0 + m11 * b1 + m12 * b2) / det,
-                (m02 * b0 + m12 * b1 + m22 * b2) / det)
-
-    def twists_from_wheels(self, beta_sets, beta_dot, phi_dot):
+    def twists_from_wheels(self, beta_sets, beta_dot, phi_dot) -> np.ndarray:
         """:meth:`twist_from_wheels` for several steer-angle sets at once (same rates).
 
-        The same least-squares fit, solved through its 3 × 3 normal equations for every set
-        together; a simulator uses it for the sub-intervals of a steering period. Falls back
-        to :meth:`twist_from_wheels` if a normal matrix is singular.
+        A simulator uses it for the sub-intervals of a steering period (:meth:`fit_twist`).
 
         Args:
             beta_sets: steer angles [rad]. Shape (S, N).
@@ -163,21 +156,92 @@ class SteerableGeometry:
         Returns:
             Base twists (vx, vy, ω) [m/s, m/s, rad/s]. Shape (S, 3).
         """
-        n = self.n_wheels
-        a = np.concatenate((self.rolling_rows(beta_sets), self.slip_rows(beta_sets)), axis=-2)
-        b = np.zeros((a.shape[0], 2 * n, 1))
-        b[:, :n, 0] = self.wheel_radius * np.asarray(phi_dot) - self.wheel_offset * np.asarray(beta_dot)
-        at = a.transpose(0, 2, 1)
-        try:
-            return np.linalg.solve(at @ a, at @ b)[:, :, 0]
-        except np.linalg.LinAlgError:
-            return np.array([self.twist_from_wheels(bb, beta_dot, phi_dot) for bb in beta_sets])
+        return self.fit_twist(np.asarray(beta_sets, dtype=float), np.asarray(beta_dot, dtype=float),
+                              np.asarray(phi_dot, dtype=float))
 
-    def steer_angles_for_icr(self, icr):
-        """Steer angles β_i = atan2(Y − hy_i, X − hx_i) − π/2 for a finite ICR (X, Y) [m]. Shape (N,)."""
-        x, y = float(icr[0]), float(icr[1])
-        return np.arctan2(y - self.hips[:, 1], x - self.hips[:, 0]) - np.pi / 2
+    def fit_twist(self, beta: np.ndarray, beta_dot: np.ndarray, phi_dot: np.ndarray) -> np.ndarray:
+        """The least-squares twist of :meth:`twist_from_wheels`, without input checks.
 
-    def steer_angles_for_translation(self, direction):
-        """Steer angles for pure translation along ``direction`` (vx, vy) (ICR at infinity). Shape (N,)."""
-        return np.full(self.n_wheels, np.arctan2(direction[1], direction[0]))
+        The 3 × 3 normal equations of the rolling rows f(β_i) (right-hand side
+        ``ρ_i = r_w φ̇_i − d β̇_i``) and the no-side-slip rows g(β_i) (right-hand side 0).
+        With c² + s² = 1 the normal matrix Σ f fᵀ + g gᵀ is, writing q_i = hx_i s_i − hy_i c_i
+        (so that f₂ = d + q):
+
+            [[N, 0, d Σc − Σhy], [0, N, d Σs + Σhx], [·, ·, N d² + Σ|h|² + 2 d Σq]]
+
+        and the right-hand side (Σ c ρ, Σ s ρ, Σ q ρ + d Σ ρ): one product of (1, ρ) with
+        (c, s, q) over the wheels, then Cramer's rule. A (near) singular system (wheel centres
+        that coincide) is solved by ``numpy.linalg.lstsq`` instead.
+
+        Args:
+            beta: steer angles [rad]. Shape (N,), or (S, N) for S sets with the same rates.
+            beta_dot, phi_dot: steer and drive rates [rad/s]. Shape (N,).
+
+        Returns:
+            (vx, vy, ω). Shape (3,), or (S, 3).
+        """
+        c, s = np.cos(beta), np.sin(beta)
+        n, d = self.n_wheels, self.wheel_offset
+        w = np.empty(c.shape + (3,))
+        w[..., 0], w[..., 1], w[..., 2] = c, s, self.hips[:, 0] * s - self.hips[:, 1] * c
+        rhs = self.wheel_radius * phi_dot - d * beta_dot
+        sums = np.array((np.ones(n), rhs)) @ w            # (..., 2, 3): Σ(c, s, q) and Σ ρ (c, s, q)
+        sum_hx, sum_hy, sum_h2 = self._hip_sums
+        n02 = d * sums[..., 0, 0] - sum_hy
+        n12 = d * sums[..., 0, 1] + sum_hx
+        n22 = n * d * d + sum_h2 + 2.0 * d * sums[..., 0, 2]
+        b0, b1 = sums[..., 1, 0], sums[..., 1, 1]
+        b2 = sums[..., 1, 2] + d * rhs.sum()
+        # Cramer's rule for [[N, 0, n02], [0, N, n12], [n02, n12, n22]] (det = N · det_2)
+        det_2 = n * n22 - n12 * n12 - n02 * n02
+        if np.all(np.abs(det_2) > 1e-12 * n * np.maximum(n22, 1.0)):
+            w2 = (n * b2 - n02 * b0 - n12 * b1) / det_2     # ω
+            return np.array(((b0 - n02 * w2) / n, (b1 - n12 * w2) / n, w2)).T
+        a = self._rows(beta, rolling=True, slip=True)
+        rhs2 = np.concatenate((rhs, np.zeros(n)))
+        if a.ndim == 2:
+            return np.linalg.lstsq(a, rhs2, rcond=None)[0]
+        return np.array([np.linalg.lstsq(ai, rhs2, rcond=None)[0] for ai in a])
+
+    # ------------------------------------------------------------------ steering for an ICR
+    def hip_velocity_map(self, scale: float) -> np.ndarray:
+        """:func:`~wmm_control.base.icr.hip_velocity_map` of the hips at metric length ℓ (cached).
+
+        Returns:
+            A read-only array. Shape (N, 2, 3).
+        """
+        m = self._maps.get(scale)
+        if m is None:
+            m = hip_velocity_map(self.hips, scale)
+            m.flags.writeable = False
+            self._maps[scale] = m
+        return m
+
+    def steer_angles_for_icr(self, icr, near=None) -> np.ndarray:
+        """Steer angles whose headings follow the hip velocities of rotation about ``icr``.
+
+        Without ``near``: β_i = atan2(v_i) of the hip velocity v_i under
+        :attr:`Icr.twist_direction` (for a finite ICR (X, Y) this is
+        atan2(Y − hy_i, X − hx_i) − π/2, modulo 2π). With ``near``: for each wheel the twin (β or
+        β + π, drive reversed) nearest ``near_i``, ``near_i + wrap_half_turn(β_i − near_i)``;
+        a wheel whose hip the ICR sits on (any heading fits) keeps ``near_i``.
+
+        Args:
+            icr: an :class:`Icr` (at infinity too: pure translation), or a finite point (X, Y) [m].
+            near: steer angles [rad] to stay near. Shape (N,).
+
+        Returns:
+            Shape (N,).
+        """
+        if isinstance(icr, Icr):
+            z, scale = icr.z, icr.scale
+        else:            # (X, Y, 1) as it is: v_i = (Y − hy_i, hx_i − X) without round-off
+            z, scale = np.array((float(icr[0]), float(icr[1]), 1.0)), 1.0
+        v = self.hip_velocity_map(scale) @ z
+        vx, vy = v[:, 0], v[:, 1]
+        heading = np.arctan2(vy, vx)
+        if near is None:
+            return heading
+        delta = wrap_half_turn(heading - near)
+        delta[np.hypot(vx, vy) < _HIP_TOL * math.sqrt(z @ z)] = 0.0
+        return near + delta

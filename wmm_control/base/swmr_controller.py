@@ -1,6 +1,7 @@
 """Steerable wheeled mobile robot (SWMR) base controller (Sorour 2019 §IV, Fig 4).
 
-Each period ``dt`` the controller takes the reference base twist ξ̇* = (vx, vy, ω) [m/s, m/s,
+For any steerable base of N ≥ 2 steer + drive modules (:class:`SteerableGeometry`). Each
+period ``dt`` the controller takes the reference base twist ξ̇* = (vx, vy, ω) [m/s, m/s,
 rad/s] (base frame) and returns steer angles/rates β_ref, β̇_ref, drive rates φ̇_ref and the
 feasible twist ξ̇_ref that those commands realise. A reference beyond ``base_velocity_limit``
 is first scaled into it as a whole (its direction, hence its ICR, kept). :meth:`SwmrController.step`
@@ -10,22 +11,24 @@ is Fig 4 in three parts:
 :meth:`~SwmrController._steer`)
 
 1. ICR* of ξ̇* and ICR_curr of the steer angles (:class:`~wmm_control.base.icr.Icr`,
-   projective, pure translation included); the shorter of the direct and the complementary
-   route (through the border = pure translation) is chosen (:func:`~wmm_control.base.icr.route_between`).
+   projective, pure translation included; :func:`~wmm_control.base.icr.icr_of_headings`);
+   the shorter of the direct and the complementary route (through the border = pure
+   translation) is chosen (:func:`~wmm_control.base.icr.choose_route`).
 2. ICR P-controller ``ICṘ_ref = λ (ICR* − ICR_curr)``, integrated over one period:
    ``ICR_ref`` is ICR_curr moved a fraction ``λ dt`` of the way along the route.
 3. QP ``min ‖ICR_next − ICR_ref‖²`` subject to, for each wheel, the wedge of two lines through
    its hip that bounds the steer change in one period by β̇_max and β̈_max
-   (:func:`~wmm_control.base.icr.wedge_row`). A wheel's headings modulo π fill a *double*
-   wedge (β and its twin β + π); a wheel whose hip lies within the period's ICR step uses the
-   half that holds ICR_ref, so an ICR path through a hip flips that wheel to its twin instead
-   of sweeping it round (if the wedges then have no common point, the QP is solved again on
-   the halves of ICR_curr). While the
+   (:func:`~wmm_control.base.icr.wedge_rows`, all wheels at once). A wheel's headings modulo π
+   fill a *double* wedge (β and its twin β + π); a wheel whose hip lies within the period's
+   ICR step uses the half that holds ICR_ref, so an ICR path through a hip flips that wheel
+   to its twin instead of sweeping it round (if the wedges then have no common point, the QP
+   is solved again on the halves of ICR_curr). While the
    route passes a hip, steps across it cost ``route_weight`` more than along it (the thin
    wedges would otherwise lead ICR_next round the hip). When ICR_ref already lies in every
    wedge it is the optimum and OSQP is not called.
-4. β_ref of ICR_next, the twin (β or β + π, drive reversed) nearest the current angle; the
-   steer rate is then clipped into the per-period interval (hard limits).
+4. β_ref of ICR_next, the twin (β or β + π, drive reversed) nearest the current angle
+   (:meth:`~wmm_control.base.steerable_kinematics.SteerableGeometry.steer_angles_for_icr`);
+   the steer rate is then clipped into the per-period interval (hard limits).
 
 **Drive controller** (:meth:`~SwmrController._drive`)
 
@@ -37,15 +40,17 @@ is Fig 4 in three parts:
    ICR, or translation at infinity); its size along that direction is the one nearest the
    projection that keeps the base velocity, drive rate and base acceleration limits
    (:meth:`~SwmrController._feasible_speed`) → ξ̇_ref; φ̇_ref from the inverse actuation model
-   with wheel offset d (:func:`~wmm_control.base.steerable_kinematics.rolling_row`).
+   with wheel offset d
+   (:meth:`~wmm_control.base.steerable_kinematics.SteerableGeometry.drive_rates`).
 
 The QP lives in a gnomonic chart of the ICR sphere centred on ICR_curr (coordinates ``x ∈ R²``,
-``z = z_curr + E x``). That chart is the paper's Cartesian ICR plane seen from the current ICR:
-lines through the hips stay lines, so the wedges stay linear, and pure translation is an
-ordinary point. (A fixed Cartesian box ``|X|, |Y| ≤ L`` cannot do this: with parallel wheels at
-rest the wedges are β̈_max dt² = 1.25e-3 rad wide and meet only ~0.19/1.25e-3 ≈ 150 m away, so
-the box QP has no solution whenever the wheels are parallel at rest.) The bounded box
-representation is kept for reporting (:attr:`Icr.point`, border ``L``).
+``z = z_curr + E x``, :func:`~wmm_control.base.icr.tangent_basis`). That chart is the paper's
+Cartesian ICR plane seen from the current ICR: lines through the hips stay lines, so the
+wedges stay linear, and pure translation is an ordinary point. (A fixed Cartesian box
+``|X|, |Y| ≤ L`` cannot do this: with parallel wheels at rest the wedges are β̈_max dt² =
+1.25e-3 rad wide and meet only ~0.19/1.25e-3 ≈ 150 m away, so the box QP has no solution
+whenever the wheels are parallel at rest.) The bounded box representation is kept for
+reporting (:attr:`Icr.point`, border ``L``).
 
 When the wedges have no common point (steer rates that no single ICR motion continues), an
 elastic copy of the QP (one common relaxation ``s ≥ 0`` of all wedges, heavily penalised) gives
@@ -56,6 +61,8 @@ drive to zero within ``drive_accel_limit`` (status ``'solver_failure'``).
 Measured steer angles (:meth:`~SwmrController.step` ``beta_meas``) restart each period: at the
 headings of their best-fit ICR, plus the part of each wheel's disagreement with it beyond
 ``measurement_deadband`` (:meth:`~SwmrController._resync`).
+
+Every per-wheel quantity is a numpy array over the N modules; the state (β, β̇, ξ̇, φ̇) too.
 """
 
 import math
@@ -72,15 +79,14 @@ from wmm_control.base.icr import (
     DEFAULT_ICR_BORDER,
     DEFAULT_ICR_SCALE,
     Icr,
-    hip_velocity,
+    choose_route,
     icr_of_headings,
-    route_between,
-    tangent_pair,
-    wedge_row,
+    tangent_basis,
+    wedge_rows,
     wrap_half_turn,
 )
-from wmm_control.base.steerable_kinematics import rolling_row
-from wmm_control.checks import finite_floats
+from wmm_control.base.steerable_kinematics import SteerableGeometry
+from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError, ShapeError
 
 __all__ = ['SwmrParams', 'SwmrOutput', 'IcrQp', 'QpResult', 'OsqpIcrSolver', 'SwmrController']
@@ -92,6 +98,11 @@ _ANGLE_TOL = 1e-12     # [rad] a steer change below this is round-off
 _FEAS_TOL = 1e-9       # a normalised row violated by at most this counts as satisfied
 _HIP_TOL = 1e-9        # a hip velocity below this: the ICR sits on the hip
 ELASTIC_WEIGHT = 1e4
+_BOX_ROWS = np.eye(2)
+_ZERO2 = np.zeros(2)
+_ZERO2.flags.writeable = False
+_ZERO3 = np.zeros(3)
+_ZERO3.flags.writeable = False
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -216,19 +227,23 @@ class IcrQp:
     ICR_curr → ICR* costing 1 + w (``route_weight``) times more than along it, so that
     ICR_next follows the route instead of sliding round the wedges' corners.
 
-    ``x`` are gnomonic chart coordinates around ICR_curr: the ICR is ``z_curr + e1 x₁ + e2 x₂``.
-    Rows of ``A``: ``2i`` and ``2i + 1`` are the two wedge lines of wheel i (normalised, lower
-    bound only), the last two the chart box ``|x_k| ≤ box``.
+    ``x`` are gnomonic chart coordinates around ICR_curr: the ICR is ``z_curr + E x``.
+    Rows of ``A``: ``i`` and ``N + i`` are the two wedge lines of wheel i, for its lowest and
+    its highest heading of the period (:attr:`rows`, normalised, lower bound only), the last
+    two the chart box ``|x_k| ≤ box``.
 
     Attributes:
         x_ref: chart coordinates of ICR_ref (the unconstrained optimum). Shape (2,).
-        wedges: the 2N wedge rows as ``(r0, r1, lb)`` tuples (:func:`wedge_row`).
+        rows: the 2N wedge rows (:func:`~wmm_control.base.icr.wedge_rows`). Shape (2N, 2).
+        lower: their lower bounds (−inf for a degenerate row). Shape (2N,).
         box: half side of the chart box.
-        chart: the tangent basis (e1, e2) at ICR_curr, two 3-tuples.
+        basis: the tangent basis E = [e1 e2] at ICR_curr. Shape (3, 2).
         icr_curr: ICR of the current steer angles.
-        target_z: ICR* on the chosen route (representative on the current hemisphere), 3-tuple.
-        rate_lower, rate_upper: per-wheel steer-rate interval for this period [rad/s].
+        target_z: ICR* on the chosen route (unit representative on the current hemisphere).
+            Shape (3,).
+        rate_lower, rate_upper: per-wheel steer-rate interval for this period [rad/s]. Shape (N,).
         sides: per wheel, +1 or −1: which half of its double wedge (heading or twin) is used.
+            Shape (N,).
         mirrored: a wheel whose hip lies within the ICR step may use its mirror wedge.
         route_weight: w of the cost (:attr:`P`).
         route: 'direct', 'complementary' or 'hold'.
@@ -236,55 +251,46 @@ class IcrQp:
     """
 
     x_ref: np.ndarray
-    wedges: list
+    rows: np.ndarray
+    lower: np.ndarray
     box: float
-    chart: tuple
+    basis: np.ndarray
     icr_curr: Icr
-    target_z: tuple
-    rate_lower: list
-    rate_upper: list
-    sides: list
+    target_z: np.ndarray
+    rate_lower: np.ndarray
+    rate_upper: np.ndarray
+    sides: np.ndarray
     route: str
     stopped: bool
     mirrored: bool = False
     route_weight: float = 0.0
 
-    def data(self):
-        """OSQP's data: ``(A's values column-major, l, u)``, float arrays.
-
-        The rows of :attr:`A` as OSQP stores its dense pattern (first column, then second).
-        Shapes (2(2N + 2),), (2N + 2,), (2N + 2,).
-        """
-        r0, r1, lb = zip(*self.wedges)
-        b = self.box
-        lower = np.array(lb + (-b, -b))
-        if min(lb) < -_INF:             # a degenerate row's −inf, as OSQP's infinity
-            np.maximum(lower, -_INF, out=lower)
-        return np.array(r0 + (1.0, 0.0) + r1 + (0.0, 1.0)), lower, np.array((_INF,) * len(lb) + (b, b))
+    @property
+    def A(self) -> np.ndarray:
+        """Constraint matrix: the wedge rows, then the box rows. Shape (2N + 2, 2)."""
+        return np.concatenate((self.rows, _BOX_ROWS))
 
     @property
-    def A(self):
-        """Constraint matrix. Shape (2N + 2, 2)."""
-        return self.data()[0].reshape(2, -1).T.copy()
+    def l(self) -> np.ndarray:  # noqa: E743 — OSQP's name for the lower bounds
+        """Lower bounds (a degenerate row's −inf as OSQP's infinity). Shape (2N + 2,)."""
+        lower = np.concatenate((self.lower, (-self.box, -self.box)))
+        return np.maximum(lower, -_INF, out=lower)
 
     @property
-    def l(self):  # noqa: E743 — OSQP's name for the lower bounds
-        """Lower bounds. Shape (2N + 2,)."""
-        return self.data()[1]
-
-    @property
-    def u(self):
+    def u(self) -> np.ndarray:
         """Upper bounds (only the box has finite ones). Shape (2N + 2,)."""
-        return self.data()[2]
+        upper = np.full(self.lower.shape[0] + 2, _INF)
+        upper[-2:] = self.box
+        return upper
 
     @property
-    def P(self):
+    def P(self) -> np.ndarray:
         """Cost Hessian ``I + w n nᵀ``, n the unit normal of x_ref: a step across the route costs 1 + w."""
         m = self.metric
         return m @ m
 
     @property
-    def metric(self):
+    def metric(self) -> np.ndarray:
         """Symmetric S with ``S S = P``: in ``y = S x`` the cost is ``½‖y − S x_ref‖²``.
 
         ``S = I + (√(1 + w) − 1) n nᵀ``. Shape (2, 2).
@@ -292,50 +298,41 @@ class IcrQp:
         return self._metric(math.sqrt(1.0 + self.route_weight))
 
     @property
-    def metric_inverse(self):
+    def metric_inverse(self) -> np.ndarray:
         """S⁻¹ = I + (1/√(1 + w) − 1) n nᵀ. Shape (2, 2)."""
         return self._metric(1.0 / math.sqrt(1.0 + self.route_weight))
 
-    def _metric(self, stretch):
+    def _metric(self, stretch: float) -> np.ndarray:
         x0, x1 = self.x_ref.tolist()
         nn = math.hypot(x0, x1)
         if nn == 0.0 or self.route_weight == 0.0:
             return np.eye(2)
-        n0, n1 = -x1 / nn, x0 / nn
-        k = stretch - 1.0
-        return np.array(((1.0 + k * n0 * n0, k * n0 * n1), (k * n0 * n1, 1.0 + k * n1 * n1)))
+        n = np.array((-x1 / nn, x0 / nn))
+        return np.eye(2) + (stretch - 1.0) * np.outer(n, n)
 
-    @property
-    def basis(self):
-        """Tangent basis E = [e1 e2] at ICR_curr. Shape (3, 2)."""
-        return np.array(self.chart).T
-
-    def x_ref_feasible(self):
+    def x_ref_feasible(self) -> bool:
         """True when ICR_ref lies in every wedge and in the box: it is then the optimum."""
-        x0, x1 = self.x_ref.tolist()
-        if abs(x0) > self.box + _FEAS_TOL or abs(x1) > self.box + _FEAS_TOL:
+        x = self.x_ref
+        if abs(x[0]) > self.box + _FEAS_TOL or abs(x[1]) > self.box + _FEAS_TOL:
             return False
-        return all(r0 * x0 + r1 * x1 - lb >= -_FEAS_TOL for r0, r1, lb in self.wedges)
+        return bool((self.rows @ x - self.lower).min() >= -_FEAS_TOL)
 
-    def z_at(self, x0, x1):
-        """Unit homogeneous ICR at chart coordinates (x0, x1), a 3-tuple."""
-        (a0, a1, a2), (b0, b1, b2) = self.chart
-        c0, c1, c2 = self.icr_curr.z.tolist()
-        z0, z1, z2 = c0 + a0 * x0 + b0 * x1, c1 + a1 * x0 + b1 * x1, c2 + a2 * x0 + b2 * x1
-        n = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
-        return z0 / n, z1 / n, z2 / n
+    def z_at(self, x) -> np.ndarray:
+        """Unit homogeneous ICR at chart coordinates ``x`` (Shape (2,)). Shape (3,)."""
+        z = self.icr_curr.z + self.basis @ x
+        return z / math.sqrt(z @ z)
 
-    def icr_of(self, x):
+    def icr_of(self, x) -> Icr:
         """The ICR at chart coordinates ``x`` (Shape (2,))."""
-        return self.icr_curr._with_z_unchecked(self.z_at(*np.asarray(x, dtype=float).tolist()))
+        return self.icr_curr._with_z_unchecked(self.icr_curr.z + self.basis @ np.asarray(x, dtype=float))
 
     @property
-    def icr_ref(self):
+    def icr_ref(self) -> Icr:
         """ICR_ref, this period's P-controller reference."""
         return self.icr_of(self.x_ref)
 
     @property
-    def icr_target(self):
+    def icr_target(self) -> Icr:
         """ICR* (the representative on the chosen route)."""
         return self.icr_curr.with_z(self.target_z)
 
@@ -367,7 +364,8 @@ _STATUS_NAME = {status: status.name.removeprefix('OSQP_').lower() for status in 
 
 
 class OsqpIcrSolver:
-    """OSQP set up once for the ICR QP: fixed dense pattern, warm start, polish off.
+    """OSQP (its public ``setup``/``update``/``solve``) set up once for the ICR QP: fixed dense
+    pattern, values updated each call, warm start, polish off.
 
     Holds a second OSQP instance, also set up once, for the elastic problem (every wedge row
     relaxed by one common ``s ≥ 0``, penalised by ``½ ELASTIC_WEIGHT s²``), solved only when
@@ -379,30 +377,26 @@ class OsqpIcrSolver:
         n_rows: number of constraint rows (2N + 2).
         eps: absolute and relative tolerance.
         max_iter: iteration limit.
-        use_extension: update and solve through osqp's extension object (``OSQP._solver``, not
-            public API) instead of ``update()``/``solve()``. It skips ~15 µs of argument
-            checking and copying per call, a third of the call on this 2-variable problem
-            (``benchmarks/bench_swmr.py`` prints both); a release without that attribute
-            takes the public path, with equal results.
 
     Attributes:
         last_iterations: OSQP iterations of the last solve (the elastic one if it ran).
     """
 
-    def __init__(self, n_rows, eps=1e-6, max_iter=4000, use_extension=True):
+    def __init__(self, n_rows: int, eps: float = 1e-6, max_iter: int = 4000):
         self.n_rows = m = int(n_rows)
         self.last_iterations = 0
-        self.use_extension = bool(use_extension)
         settings = dict(verbose=False, polishing=False, warm_starting=True, eps_abs=eps, eps_rel=eps,
                         max_iter=int(max_iter))
         self._osqp = self._setup(np.eye(2), m, settings)
         # The elastic rows are normalised already; OSQP's Ruiz scaling, fighting the heavy weight
         # on s, would multiply its iteration count by ~15 (median ~2000, often max_iter).
         self._elastic = self._setup(np.diag([1.0, 1.0, ELASTIC_WEIGHT]), m + 1, dict(settings, scaling=0))
-        self._extensions = {solver: self._extension(solver) for solver in (self._osqp, self._elastic)}
+        self._elastic_a = np.zeros((m + 1, 3))
+        self._elastic_a[:m - 2, 2] = 1.0        # every wedge row relaxed by s (the box rows are not)
+        self._elastic_a[m, 2] = 1.0             # s ≥ 0
 
     @staticmethod
-    def _setup(p_dense, m, settings):
+    def _setup(p_dense: np.ndarray, m: int, settings: dict) -> osqp.OSQP:
         # P is constant (set here, never updated). A: dense pattern, every entry stored
         # (placeholder values are non-zero so none is dropped); its values change each cycle.
         n = p_dense.shape[0]
@@ -413,31 +407,17 @@ class OsqpIcrSolver:
         solver.setup(p, np.zeros(n), a, -np.full(m, _INF), np.full(m, _INF), **settings)
         return solver
 
-    @staticmethod
-    def _extension(solver):
-        """osqp's extension object of ``solver`` if it has the calls used here, else None."""
-        ext = getattr(solver, '_solver', None)
-        if ext is not None and hasattr(ext, 'update_data_vec') and hasattr(ext, 'update_data_mat'):
-            return ext
-        return None
+    def _run(self, solver: osqp.OSQP, q: np.ndarray, a: np.ndarray, lb: np.ndarray,
+             ub: np.ndarray) -> tuple[np.ndarray, SolverStatus]:
+        """Update ``solver``'s q, A's values (``a`` dense, stored column-major), l, u and solve."""
+        solver.update(q=q, l=lb, u=ub, Ax=a.ravel(order='F'))
+        res = solver.solve(raise_error=False)    # the status is handled here
+        self.last_iterations = int(res.info.iter)
+        return np.array(res.x, dtype=float), _STATUS[res.info.status_val]
 
-    def _run(self, solver, q, a_x, lb, ub):
-        """Update ``solver``'s q, A (its values column-major), l, u and solve: ``(x, SolverStatus)``."""
-        ext = self._extensions[solver] if self.use_extension else None
-        if ext is not None:
-            ext.update_data_vec(q, lb, ub)
-            ext.update_data_mat(None, None, a_x, None)
-            ext.solve()
-            info, sol = ext.info, ext.solution
-        else:
-            solver.update(q=q, l=lb, u=ub, Ax=a_x)
-            res = solver.solve(raise_error=False)    # the status is handled here
-            info, sol = res.info, res
-        self.last_iterations = int(info.iter)
-        return np.array(sol.x, dtype=float), _STATUS[info.status_val]
-
-    def __call__(self, problem):
-        """Solve ``problem`` (an :class:`IcrQp`); returns a :class:`QpResult`.
+    def __call__(self, problem: IcrQp) -> QpResult:
+        """Solve ``problem`` (its :attr:`~IcrQp.A`, :attr:`~IcrQp.l`, :attr:`~IcrQp.u` and
+        :attr:`~IcrQp.metric`); returns a :class:`QpResult`.
 
         OSQP sees the problem in the coordinates ``y = S x`` of :attr:`IcrQp.metric`, where
         its cost is the identity (constant, set up once) and the rows are normalised again: the
@@ -447,32 +427,27 @@ class OsqpIcrSolver:
         Raises:
             ShapeError: the problem does not have the set-up number of rows.
         """
-        a_x, lb, ub = problem.data()
+        a, lb, ub = problem.A, problem.l, problem.u
         if lb.shape != (self.n_rows,):
-            raise ShapeError(f'ICR QP: A has shape {(lb.shape[0], 2)}, solver set up for ({self.n_rows}, 2)')
-        y_ref = np.asarray(problem.x_ref, dtype=float)
+            raise ShapeError(f'ICR QP: A has shape {a.shape}, solver set up for ({self.n_rows}, 2)')
+        y_ref = problem.x_ref
         s_inv = None
         if problem.route_weight > 0.0 and y_ref.any():
             s_inv = problem.metric_inverse
-            a = a_x.reshape(2, -1).T.copy() @ s_inv
-            norms = np.sqrt(np.einsum('ij,ij->i', a, a))
+            a = a @ s_inv
+            norms = np.sqrt((a * a).sum(axis=1))
             a /= norms[:, None]
-            a_x = a.ravel(order='F')
             lb, ub = np.maximum(lb / norms, -_INF), np.minimum(ub / norms, _INF)
             y_ref = problem.metric @ y_ref
-        y, status = self._run(self._osqp, -y_ref, a_x, lb, ub)
+        y, status = self._run(self._osqp, -y_ref, a, lb, ub)
         if status in _OSQP_ACCEPTED or status not in _OSQP_ELASTIC:
             return QpResult(y if s_inv is None else s_inv @ y, _STATUS_NAME[status])
-        m = lb.shape[0]
-        ae = np.zeros((m + 1, 3))
-        ae[:m, :2] = a_x.reshape(2, -1).T
-        ae[:m - 2, 2] = 1.0          # every wedge row relaxed by s (the box rows are not)
-        ae[m, 2] = 1.0               # s ≥ 0
-        ye, estatus = self._run(self._elastic, np.concatenate((-y_ref, [0.0])), ae.ravel(order='F'),
-                                np.concatenate((lb, [0.0])), np.concatenate((ub, [_INF])))
+        ae = self._elastic_a.copy()
+        ae[:-1, :2] = a
+        ye, estatus = self._run(self._elastic, np.append(-y_ref, 0.0), ae, np.append(lb, 0.0), np.append(ub, _INF))
         if estatus in _OSQP_ACCEPTED:
             return QpResult(ye[:2] if s_inv is None else s_inv @ ye[:2], 'elastic')
-        return QpResult(np.asarray(problem.x_ref, dtype=float).copy(), _STATUS_NAME[status])
+        return QpResult(problem.x_ref.copy(), _STATUS_NAME[status])
 
 
 @dataclass(frozen=True)
@@ -522,7 +497,7 @@ class SwmrOutput:
 class _QpAnswer(NamedTuple):
     """The steering controller's QP answer for one period."""
 
-    x: tuple              # ICR_next in chart coordinates; None when the solver failed
+    x: np.ndarray | None  # ICR_next in chart coordinates, Shape (2,); None when the solver failed
     status: str           # the qp_status of :class:`SwmrOutput`
     solve_time: float     # [s]
 
@@ -530,24 +505,16 @@ class _QpAnswer(NamedTuple):
 class _Steering(NamedTuple):
     """The steering controller's result for one period."""
 
-    beta: list            # β_ref [rad]
-    rate: list            # β̇_ref [rad/s]
+    beta: np.ndarray      # β_ref [rad], Shape (N,)
+    rate: np.ndarray      # β̇_ref [rad/s], Shape (N,)
     icr_next: Icr         # ICR of β_ref
     active: set           # wheels whose rate limit or wedge binds
     qp_status: str
     solve_time: float     # [s]
 
 
-def _narrow(lo, hi, slope, low, high):
-    """``[lo, hi] ∩ {s : low ≤ slope·s ≤ high}`` for ``slope ≠ 0`` (plain floats)."""
-    s1, s2 = low / slope, high / slope
-    if slope < 0.0:
-        s1, s2 = s2, s1
-    return (s1 if s1 > lo else lo), (s2 if s2 < hi else hi)
-
-
 class SwmrController:
-    """The §IV steering + drive controller for an N-module steerable base.
+    """The §IV steering + drive controller for an N-module steerable base (N ≥ 2).
 
     Internal state: the commanded β, β̇ (position-controlled steering: the actuators integrate
     β̇_ref), the last feasible twist (the integrator of the ξ̇ controller) and the drive rates.
@@ -561,10 +528,9 @@ class SwmrController:
             It is called only in periods where ICR_ref leaves some wedge.
     """
 
-    def __init__(self, geometry, params, solver=None):
+    def __init__(self, geometry: SteerableGeometry, params: 'SwmrParams', solver=None):
         self.geometry = geometry
-        self.params = params
-        p = self.params
+        self.params = p = params
         n = geometry.n_wheels
         steer_term = geometry.wheel_offset * p.steer_rate_limit / geometry.wheel_radius
         if steer_term >= p.drive_rate_limit:
@@ -577,18 +543,20 @@ class SwmrController:
         # the twist direction ∝ (z₁, −z₀, z₂/ℓ): its angle changes up to max(ℓ, 1/ℓ) × the ICR's
         self._turn_factor = max(p.icr_scale, 1.0 / p.icr_scale) * math.sqrt(2.0)
         self._turn_budget = min(p.base_accel_limit) * p.dt
-        ell = p.icr_scale
-        # per hip: its unit homogeneous point (route test), and ‖M‖² = 1 + |h|²/ℓ² of the linear
-        # map z ↦ v (:func:`hip_velocity`), which bounds how far an ICR step moves its velocity
-        self._hip_points, self._hip_gain = [], []
-        for hx, hy in geometry.hip_list:
-            hn = math.sqrt(hx * hx + hy * hy + ell * ell)
-            self._hip_points.append((hx / hn, hy / hn, ell / hn))
-            self._hip_gain.append(1.0 + (hx * hx + hy * hy) / (ell * ell))
+        self._velocity_limit = np.array(p.base_velocity_limit)
+        self._accel_limit = np.array(p.base_accel_limit)
+        self._accel_step = self._accel_limit * p.dt                   # |Δξ̇| per period
+        # per hip: its velocity map z ↦ v (also per wedge row: wheel i's at rows i, N + i) and
+        # its unit homogeneous point (the route test)
+        self._hip_map = geometry.hip_velocity_map(p.icr_scale)
+        self._row_maps = np.concatenate((self._hip_map, self._hip_map))
+        self._hip_rows = np.concatenate((self._hip_map[:, 0], self._hip_map[:, 1]))   # (2N, 3): vx rows, vy rows
+        points = np.column_stack((geometry.hips, np.full(n, p.icr_scale)))
+        self._hip_points = points / np.linalg.norm(points, axis=1)[:, None]
         self.reset(np.zeros(n))
 
     # ------------------------------------------------------------------ state
-    def reset(self, beta, beta_dot=None, twist=None):
+    def reset(self, beta, beta_dot=None, twist=None) -> None:
         """Set the commanded state.
 
         Args:
@@ -598,13 +566,13 @@ class SwmrController:
                 ξ̇-controller's integrator state. Shape (3,).
         """
         n = self.geometry.n_wheels
-        self._beta = finite_floats(beta, n, 'beta')
-        self._beta_dot = [0.0] * n if beta_dot is None else finite_floats(beta_dot, n, 'beta_dot')
-        self._twist = [0.0] * 3 if twist is None else finite_floats(twist, 3, 'twist')
-        self._phi_dot = self.geometry.wheel_rates(self._beta, self._beta_dot, self._twist).tolist()
+        self._beta = as_finite_vector(beta, n, 'beta').copy()
+        self._beta_dot = np.zeros(n) if beta_dot is None else as_finite_vector(beta_dot, n, 'beta_dot').copy()
+        self._twist = np.zeros(3) if twist is None else as_finite_vector(twist, 3, 'twist').copy()
+        self._phi_dot = self.geometry.wheel_rates(self._beta, self._beta_dot, self._twist)
         self._icr = self._icr_of(self._beta)
 
-    def restart(self, beta, beta_dot, phi_dot):
+    def restart(self, beta, beta_dot, phi_dot) -> None:
         """Go on from the measured state (the last command was not applied as sent): the steer
         angles, the steer rates within the steer rate limit (an encoder glitch beyond it is not
         followed) and the twist that best fits those and the drive rates.
@@ -615,60 +583,58 @@ class SwmrController:
         """
         n = self.geometry.n_wheels
         limit = self.params.steer_rate_limit
-        beta = finite_floats(beta, n, 'beta')
-        beta_dot = [min(limit, max(-limit, r)) for r in finite_floats(beta_dot, n, 'beta_dot')]
-        self.reset(beta, beta_dot, self.geometry.fit_twist(beta, beta_dot, finite_floats(phi_dot, n, 'phi_dot')))
+        beta = as_finite_vector(beta, n, 'beta')
+        beta_dot = np.clip(as_finite_vector(beta_dot, n, 'beta_dot'), -limit, limit)
+        self.reset(beta, beta_dot, self.geometry.twist_from_wheels(beta, beta_dot, phi_dot))
 
     @property
-    def beta(self):
+    def beta(self) -> np.ndarray:
         """Commanded steer angles [rad]. Shape (N,)."""
-        return np.array(self._beta)
+        return self._beta.copy()
 
     @property
-    def beta_dot(self):
+    def beta_dot(self) -> np.ndarray:
         """Commanded steer rates [rad/s]. Shape (N,)."""
-        return np.array(self._beta_dot)
+        return self._beta_dot.copy()
 
     @property
-    def twist(self):
+    def twist(self) -> np.ndarray:
         """Last feasible twist (vx, vy, ω) [m/s, m/s, rad/s]. Shape (3,)."""
-        return np.array(self._twist)
+        return self._twist.copy()
 
     @property
-    def phi_dot(self):
+    def phi_dot(self) -> np.ndarray:
         """Last drive rates [rad/s]. Shape (N,)."""
-        return np.array(self._phi_dot)
+        return self._phi_dot.copy()
 
     @property
-    def icr(self):
+    def icr(self) -> Icr:
         """ICR of the commanded steer angles."""
         return self._icr
 
-    def _icr_of(self, beta, like=None):
-        """ICR of steer angles β (a sequence of floats): :func:`icr_of_headings`, sign of ``like``."""
-        z = icr_of_headings([math.cos(b) for b in beta], [math.sin(b) for b in beta],
-                            self.geometry.hip_list, self.params.icr_scale, like)
-        return self._icr_proto._with_z_unchecked(z)
+    def _icr_of(self, beta: np.ndarray, like=None) -> Icr:
+        """ICR of steer angles β (Shape (N,)): :func:`icr_of_headings`, on the hemisphere of ``like``."""
+        return self._icr_proto._with_z_unchecked(
+            icr_of_headings(self.geometry.slip_rows(beta), self.params.icr_scale, like))
 
-    def _rate_interval(self):
+    def _rate_interval(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-period steer-rate interval [rad/s]: |β̇| ≤ β̇_max and |β̇ − β̇_prev| ≤ β̈_max dt.
 
         Returns:
-            ``(lower, upper)``, lists of floats, one per wheel.
+            ``(lower, upper)``. Shape (N,) each.
         """
         p = self.params
         dv = p.steer_accel_limit * p.dt
         vmax = p.steer_rate_limit
-        lower, upper = [], []
-        for rate in self._beta_dot:
-            lo, hi = max(-vmax, rate - dv), min(vmax, rate + dv)
-            if lo > hi:   # a resynced (measured) rate beyond β̇_max + β̈_max dt: brake as hard as β̈_max allows
-                lo = hi = rate - math.copysign(dv, rate)
-            lower.append(lo)
-            upper.append(hi)
+        rate = self._beta_dot
+        lower, upper = np.maximum(rate - dv, -vmax), np.minimum(rate + dv, vmax)
+        beyond = lower > upper
+        if beyond.any():   # a resynced (measured) rate beyond β̇_max + β̈_max dt: brake as hard as β̈_max allows
+            brake = rate - np.copysign(dv, rate)
+            lower, upper = np.where(beyond, brake, lower), np.where(beyond, brake, upper)
         return lower, upper
 
-    def _resync(self, beta_meas, beta_dot_meas, stopped):
+    def _resync(self, beta_meas, beta_dot_meas, stopped: bool) -> None:
         """Start the period from measured steer angles and rates (either may be None).
 
         Angles: a wheel set that no single ICR explains exactly has, per wheel, a
@@ -687,38 +653,32 @@ class SwmrController:
         n = self.geometry.n_wheels
         if beta_dot_meas is not None:
             limit = p.steer_rate_limit
-            rates = finite_floats(beta_dot_meas, n, 'beta_dot_meas')
-            self._beta_dot = [min(limit, max(-limit, r)) for r in rates]
-        if beta_meas is not None:
-            meas = finite_floats(beta_meas, n, 'beta_meas')
-            if stopped and not any(self._beta_dot):
-                # held at rest: within the band of the held angle a measurement is noise, beyond
-                # it the wheel was moved and the measurement is taken as it is
-                band = p.measurement_deadband
-                held = [c if abs(m - c) <= band else m for m, c in zip(meas, self._beta)]
-                if held != self._beta:
-                    self._beta = held
-                    self._icr = self._icr_of(held, like=self._icr.z.tolist())
-            elif meas != self._beta:
-                z_cmd = self._icr.z.tolist()
-                z_meas = icr_of_headings([math.cos(b) for b in meas], [math.sin(b) for b in meas],
-                                         self.geometry.hip_list, p.icr_scale, z_cmd)
-                band = p.measurement_deadband
-                start = []
-                for m, c, (hx, hy) in zip(meas, self._beta, self.geometry.hip_list):
-                    v_meas = hip_velocity(z_meas, hx, hy, p.icr_scale)
-                    v_cmd = hip_velocity(z_cmd, hx, hy, p.icr_scale)
-                    if min(math.hypot(*v_meas), math.hypot(*v_cmd)) < _HIP_TOL:   # on the hip: any angle fits
-                        start.append(m)
-                        continue
-                    own = wrap_half_turn(c - math.atan2(v_cmd[1], v_cmd[0]))        # the command's
-                    extra = wrap_half_turn(m - math.atan2(v_meas[1], v_meas[0]) - own)
-                    start.append(m - extra + math.copysign(max(abs(extra) - band, 0.0), extra))
-                self._beta = start
-                self._icr = self._icr_of(start, like=z_cmd)
+            self._beta_dot = np.clip(as_finite_vector(beta_dot_meas, n, 'beta_dot_meas'), -limit, limit)
+        if beta_meas is None:
+            return
+        meas = as_finite_vector(beta_meas, n, 'beta_meas')
+        band = p.measurement_deadband
+        if stopped and not self._beta_dot.any():
+            # held at rest: within the band of the held angle a measurement is noise, beyond
+            # it the wheel was moved and the measurement is taken as it is
+            held = np.where(np.abs(meas - self._beta) <= band, self._beta, meas)
+            if not np.array_equal(held, self._beta):
+                self._beta = held
+                self._icr = self._icr_of(held, like=self._icr.z)
+        elif not np.array_equal(meas, self._beta):
+            z_cmd = self._icr.z
+            z_meas = icr_of_headings(self.geometry.slip_rows(meas), p.icr_scale, z_cmd)
+            v = self._hip_rows @ np.array((z_meas, z_cmd)).T         # (2N, 2): hip velocities, vx then vy
+            heading = np.arctan2(v[n:], v[:n])
+            on_hip = np.hypot(v[n:], v[:n]).min(axis=1) < _HIP_TOL   # any angle fits
+            own = wrap_half_turn(self._beta - heading[:, 1])          # the command's disagreement
+            extra = wrap_half_turn(meas - heading[:, 0] - own)
+            start = meas - extra + np.copysign(np.maximum(np.abs(extra) - band, 0.0), extra)
+            self._beta = np.where(on_hip, meas, start)
+            self._icr = self._icr_of(self._beta, like=z_cmd)
 
     # ------------------------------------------------------------------ the steering controller
-    def build_qp(self, twist_ref):
+    def build_qp(self, twist_ref) -> IcrQp:
         """This period's ICR QP for the reference twist, from the controller state.
 
         Args:
@@ -732,92 +692,67 @@ class SwmrController:
         self._weigh_route(problem)
         return problem
 
-    def _weigh_route(self, problem):
+    def _weigh_route(self, problem: IcrQp) -> None:
         """Set the problem's route weight: ``route_weight`` while its route passes a hip, else 0."""
-        z = problem.icr_curr.z.tolist()
-        passes = self._route_passes_a_hip(z, problem.target_z)
+        passes = self._route_passes_a_hip(problem.icr_curr.z, problem.target_z)
         problem.route_weight = self.params.route_weight if passes else 0.0
 
-    def _icr_qp(self, ref, mirror=True):
+    def _icr_qp(self, ref: np.ndarray, mirror: bool = True) -> IcrQp:
         """Steps 1–3 up to the QP: ICR* and its route, ICR_ref, and the wedges (:class:`IcrQp`).
 
         ``mirror``: a wheel whose hip lies within the ICR step may use its mirror wedge
-        (:meth:`_wedge_side`); False keeps every wheel on the wedge of ICR_curr.
+        (:meth:`_wedge_sides`); False keeps every wheel on the wedge of ICR_curr.
         """
         p = self.params
-        scale = p.icr_scale
-        vx, vy, wz = ref
-        zc = self._icr.z.tolist()
-        e1, e2 = tangent_pair(*zc)
+        zc = self._icr.z
+        basis = tangent_basis(zc)
         stopped = self._stopped(ref)
         step = self._icr_step()
-        x0 = x1 = 0.0
+        x_ref = _ZERO2
         if stopped:
-            zt, route = tuple(zc), 'hold'
+            zt, route = zc, 'hold'
         else:
-            zt, route = route_between(zc, (-vy, vx, scale * wz))
-            tn = math.sqrt(zt[0] * zt[0] + zt[1] * zt[1] + zt[2] * zt[2])
-            zt = (zt[0] / tn, zt[1] / tn, zt[2] / tn)
+            vx, vy, wz = ref.tolist()
+            zt, route = choose_route(zc, (-vy, vx, p.icr_scale * wz))
             # ICR_ref: a fraction λ dt of the arc ICR_curr → ICR*, along the great circle.
-            theta = math.acos(min(1.0, zc[0] * zt[0] + zc[1] * zt[1] + zc[2] * zt[2]))
-            d0 = e1[0] * zt[0] + e1[1] * zt[1] + e1[2] * zt[2]
-            d1 = e2[0] * zt[0] + e2[1] * zt[1] + e2[2] * zt[2]
-            dn = math.sqrt(d0 * d0 + d1 * d1)
+            d0, d1 = (zt @ basis).tolist()              # the arc's direction in the chart
+            dn = math.hypot(d0, d1)
             if dn > 1e-12:
+                theta = math.atan2(dn, float(zc @ zt))
                 k = math.tan(min(p.icr_gain * p.dt * theta, step)) / dn
-                x0, x1 = k * d0, k * d1
-        zr = (zc[0] + e1[0] * x0 + e2[0] * x1, zc[1] + e1[1] * x0 + e2[1] * x1,
-              zc[2] + e1[2] * x0 + e2[2] * x1)
-        rate_lo, rate_hi = self._rate_interval()
-        # |v(ICR_ref) − v(ICR_curr)|² ≤ ‖M‖² |x|² (|zr − zc| = |x|: e1, e2 orthonormal), with a
-        # margin for round-off; -1 when no mirror wedge may be taken
-        reach = (x0 * x0 + x1 * x1) * (1.0 + 1e-6) + 1e-20 if mirror else -1.0
-        sides = [self._wedge_side(beta, hx, hy, zc, zr, zt, reach * gain)
-                 for beta, (hx, hy), gain in zip(self._beta, self.geometry.hip_list, self._hip_gain)]
-        return IcrQp(x_ref=np.array((x0, x1)), wedges=self._wedge_rows(sides, rate_lo, rate_hi, zc, e1, e2),
-                     mirrored=mirror, box=math.tan(step), chart=(e1, e2), icr_curr=self._icr, target_z=zt,
-                     rate_lower=rate_lo, rate_upper=rate_hi, sides=sides, route=route, stopped=stopped)
+                x_ref = np.array((k * d0, k * d1))
+        lower, upper = self._rate_interval()
+        sides = self._wedge_sides(zc, zc + basis @ x_ref, zt, mirror)
+        dt = p.dt
+        # wheel i's rows i, N + i: its extreme headings this period, on the sides +σ_i and −σ_i
+        headings = np.concatenate((self._beta + dt * lower, self._beta + dt * upper))
+        rows, bounds = wedge_rows(headings, np.concatenate((sides, -sides)), self._row_maps, zc, basis)
+        return IcrQp(x_ref=x_ref, rows=rows, lower=bounds, mirrored=mirror, box=math.tan(step), basis=basis,
+                     icr_curr=self._icr, target_z=zt, rate_lower=lower, rate_upper=upper, sides=sides,
+                     route=route, stopped=stopped)
 
-    def _wedge_rows(self, sides, rate_lower, rate_upper, zc, e1, e2):
-        """The QP's wedges: per wheel, the lines of its extreme headings this period (:func:`wedge_row`).
-
-        Returns:
-            2N ``(r0, r1, lb)`` tuples in the chart ``zc + e1 x₁ + e2 x₂``, wheel i's at 2i, 2i + 1.
-        """
-        dt, scale = self.params.dt, self.params.icr_scale
-        wedges = []
-        for beta, side, lo, hi, (hx, hy) in zip(self._beta, sides, rate_lower, rate_upper, self.geometry.hip_list):
-            a_lo, a_hi = beta + dt * lo, beta + dt * hi
-            wedges.append(wedge_row((math.cos(a_lo), math.sin(a_lo)), side, hx, hy, scale, zc, e1, e2))
-            wedges.append(wedge_row((math.cos(a_hi), math.sin(a_hi)), -side, hx, hy, scale, zc, e1, e2))
-        return wedges
-
-    def _route_passes_a_hip(self, zc, zt):
+    def _route_passes_a_hip(self, zc: np.ndarray, zt: np.ndarray) -> bool:
         """True when the great-circle route ICR_curr → ICR* passes within ``route_hip_distance`` of a hip.
 
         Only then does the route weight apply: off the route near a hip, a wheel sweeps round.
         """
-        p = self.params
-        nrm = (zc[1] * zt[2] - zc[2] * zt[1], zc[2] * zt[0] - zc[0] * zt[2], zc[0] * zt[1] - zc[1] * zt[0])
-        sin_theta = math.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2])
+        c0, c1, c2 = zc.tolist()
+        t0, t1, t2 = zt.tolist()
+        normal = (c1 * t2 - c2 * t1, c2 * t0 - c0 * t2, c0 * t1 - c1 * t0)   # zc × zt
+        sin_theta = math.hypot(*normal)
         if sin_theta < 1e-12:
             return False
-        cos_theta = zc[0] * zt[0] + zc[1] * zt[1] + zc[2] * zt[2]
-        for h in self._hip_points:
-            off = abs(h[0] * nrm[0] + h[1] * nrm[1] + h[2] * nrm[2]) / sin_theta
-            # the hip's foot on the route's great circle is a zc + b zt with a, b ≥ 0
-            hc = h[0] * zc[0] + h[1] * zc[1] + h[2] * zc[2]
-            ht = h[0] * zt[0] + h[1] * zt[1] + h[2] * zt[2]
-            between = hc - ht * cos_theta >= 0.0 and ht - hc * cos_theta >= 0.0
-            if off < p.route_hip_distance and between:
-                return True
-        return False
+        cos_theta = c0 * t0 + c1 * t1 + c2 * t2
+        off, hc, ht = np.array((normal, zc, zt)) @ self._hip_points.T
+        # the hip's foot on the route's great circle is a zc + b zt with a, b ≥ 0
+        between = (hc - ht * cos_theta >= 0.0) & (ht - hc * cos_theta >= 0.0)
+        return bool((between & (np.abs(off) < self.params.route_hip_distance * sin_theta)).any())
 
-    def _stopped(self, ref):
+    def _stopped(self, ref: np.ndarray) -> bool:
         """True when the reference (vx, vy, ω) is below ``stop_threshold``: stop, hold the angles."""
-        return math.sqrt(ref[0] * ref[0] + ref[1] * ref[1] + ref[2] * ref[2]) < self.params.stop_threshold
+        return math.sqrt(ref @ ref) < self.params.stop_threshold
 
-    def _icr_step(self):
+    def _icr_step(self) -> float:
         """Largest ICR move of this period on the ICR sphere [rad]: ``max_icr_step``, or less at speed.
 
         Rotating the twist ξ̇ by θ changes it by |ξ̇| sin θ; with θ at most √2 × the chart box
@@ -825,56 +760,52 @@ class SwmrController:
         bound ``|ξ̇| sin θ ≤ min(base_accel_limit) dt`` leaves the feasible twist a size within
         the acceleration limit (:meth:`_feasible_speed`).
         """
-        v0, v1, v2 = self._twist
-        speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        speed = math.sqrt(self._twist @ self._twist)
         if speed <= self._turn_budget:
             return self.params.max_icr_step
         return min(self.params.max_icr_step, math.asin(self._turn_budget / speed) / self._turn_factor)
 
-    def _wedge_side(self, beta, hx, hy, zc, zr, zt, reach):
-        """+1 if the wheel heading β points along its hip velocity, −1 if against it (twin).
+    def _wedge_sides(self, zc: np.ndarray, zr: np.ndarray, zt: np.ndarray, mirror: bool) -> np.ndarray:
+        """Per wheel +1 if its heading β points along its hip velocity, −1 if against it (twin).
 
         The hip velocity is taken at ICR_curr; but when the hip lies within this period's ICR
-        step (|v(ICR_curr)| ≤ |v(ICR_ref) − v(ICR_curr)|, v linear in z), at ICR_ref: the ICR
-        path passes by the hip, and if it crosses it the half of the wheel's double wedge that
-        holds ICR_ref is the mirror one, so the wheel flips to its twin (drive reversed) instead
-        of steering half a turn. ICR* decides when both sit on the hip.
+        step (|v(ICR_curr)| ≤ |v(ICR_ref) − v(ICR_curr)|, v linear in z) and ``mirror``, at
+        ICR_ref: the ICR path passes by the hip, and if it crosses it the half of the wheel's
+        double wedge that holds ICR_ref is the mirror one, so the wheel flips to its twin
+        (drive reversed) instead of steering half a turn. With ICR_curr on the hip, ICR_ref
+        decides, then ICR*.
 
-        ``reach`` bounds |v(ICR_ref) − v(ICR_curr)|² from above (negative: the wedge of
-        ICR_curr is kept); a hip farther than that from the step is not near, without
-        evaluating v(ICR_ref).
+        Returns:
+            Shape (N,).
         """
-        scale = self.params.icr_scale
-        c, s = math.cos(beta), math.sin(beta)
-        vc0, vc1 = hip_velocity(zc, hx, hy, scale)
-        along_c = c * vc0 + s * vc1
-        vc2 = vc0 * vc0 + vc1 * vc1
-        if vc2 <= reach:
-            vr0, vr1 = hip_velocity(zr, hx, hy, scale)
-            along_r = c * vr0 + s * vr1
-            d0, d1 = vr0 - vc0, vr1 - vc1
-            if vc2 <= d0 * d0 + d1 * d1 and abs(along_r) > _HIP_TOL:   # near
-                return 1.0 if along_r > 0 else -1.0
-        if abs(along_c) > _HIP_TOL:
-            return 1.0 if along_c > 0 else -1.0
-        for z in (zr, zt):                         # ICR_curr on the hip: ICR_ref, then ICR*
-            v0, v1 = hip_velocity(z, hx, hy, scale)
-            along = c * v0 + s * v1
-            if abs(along) > _HIP_TOL:
-                return 1.0 if along > 0 else -1.0
-        return 1.0
+        n = self.geometry.n_wheels
+        v = self._hip_rows @ np.array((zc, zr, zt)).T      # (2N, 3): vx then vy of each hip at ICR_curr, _ref, *
+        along = np.cos(self._beta)[:, None] * v[:n] + np.sin(self._beta)[:, None] * v[n:]     # (N, 3)
+        sign = np.where(along > 0.0, 1.0, -1.0)
+        decided = np.abs(along) > _HIP_TOL
+        sides = sign[:, 0]
+        if not decided[:, 0].all():       # ICR_curr on a hip: ICR_ref decides, then ICR*, else +1
+            sides = np.where(decided[:, 0], sides,
+                             np.where(decided[:, 1], sign[:, 1], np.where(decided[:, 2], sign[:, 2], 1.0)))
+        if mirror:
+            vc, step = v[:, 0], v[:, 1] - v[:, 0]
+            closer = vc * vc - step * step                   # per hip: |v_c|² − |v_r − v_c|², x then y
+            near = (closer[:n] + closer[n:] <= 0.0) & decided[:, 1]
+            if near.any():
+                sides = np.where(near, sign[:, 1], sides)
+        return sides
 
-    def _solve(self, problem):
+    def _solve(self, problem: IcrQp) -> _QpAnswer:
         """Step 3: ICR_next in chart coordinates, as a :class:`_QpAnswer`.
 
         Its ``x`` is None when the solver failed (``status`` says why); ICR_ref when no usable
         answer exists (per-wheel clipping follows). OSQP is called only when ICR_ref leaves a
         wedge, and ``'not_solved'`` means the steering is held at rest.
         """
-        if problem.stopped and not any(self._beta_dot):
-            return _QpAnswer((0.0, 0.0), 'not_solved', 0.0)
+        if problem.stopped and not self._beta_dot.any():
+            return _QpAnswer(np.zeros(2), 'not_solved', 0.0)
         if problem.x_ref_feasible():
-            return _QpAnswer(tuple(problem.x_ref.tolist()), 'unconstrained', 0.0)
+            return _QpAnswer(problem.x_ref, 'unconstrained', 0.0)
         self._weigh_route(problem)
         t0 = time.perf_counter()
         try:
@@ -884,18 +815,17 @@ class SwmrController:
             return _QpAnswer(None, f'error: {type(exc).__name__}: {exc}', time.perf_counter() - t0)
         solve_time = time.perf_counter() - t0
         if qp_status.startswith(_CLIPPED):
-            return _QpAnswer(tuple(problem.x_ref.tolist()), qp_status, solve_time)
+            return _QpAnswer(problem.x_ref, qp_status, solve_time)
         if qp_status not in _USED:
             return _QpAnswer(None, qp_status, solve_time)
-        x = x.tolist() if x.shape == (2,) else ()
-        if len(x) != 2 or not all(map(math.isfinite, x)):
+        if x.shape != (2,) or not np.isfinite(x).all():
             return _QpAnswer(None, f'{qp_status} (non-finite x)', solve_time)
-        return _QpAnswer(tuple(x), qp_status, solve_time)
+        return _QpAnswer(x, qp_status, solve_time)
 
-    def _icr_next(self, ref):
+    def _icr_next(self, ref: np.ndarray) -> tuple[IcrQp, _QpAnswer]:
         """Steps 1–3: this period's QP and ICR_next in its chart coordinates.
 
-        The wedges are first chosen per wheel (:meth:`_wedge_side`); when some wheel took its
+        The wedges are first chosen per wheel (:meth:`_wedge_sides`); when some wheel took its
         mirror wedge and the wedges then have no common point, the QP is solved again with every
         wheel on the wedge of ICR_curr.
 
@@ -907,7 +837,7 @@ class SwmrController:
         answer = self._solve(problem)
         if answer.x is not None and answer.status not in _SOLVED:
             plain = self._icr_qp(ref, mirror=False)
-            if plain.sides != problem.sides:
+            if not np.array_equal(plain.sides, problem.sides):
                 again = self._solve(plain)
                 solve_time = answer.solve_time + again.solve_time
                 if again.x is not None and again.status in _SOLVED:
@@ -915,128 +845,113 @@ class SwmrController:
                 answer = answer._replace(solve_time=solve_time)
         return problem, answer
 
-    def _steer(self, problem, answer):
+    def _steer(self, problem: IcrQp, answer: _QpAnswer) -> _Steering:
         """Step 4: β_ref of ICR_next (the nearest twin), β̇_ref clipped into the period's limits.
 
         Returns:
             :class:`_Steering`.
         """
-        p = self.params
-        x0, x1 = answer.x
+        dt = self.params.dt
         qp_status = answer.status
         hold = qp_status == 'not_solved'
-        z_next = problem.z_at(x0, x1)
-        dt, scale = p.dt, p.icr_scale
-        beta_new, rate, active, clipped = [], [], set(), False
-        for i, (beta, lo, hi, (hx, hy)) in enumerate(zip(self._beta, problem.rate_lower, problem.rate_upper,
-                                                         self.geometry.hip_list)):
-            vx, vy = hip_velocity(z_next, hx, hy, scale)
-            wanted = 0.0
-            if not hold and math.hypot(vx, vy) >= _HIP_TOL:      # on a hip any angle fits: keep it
-                delta = wrap_half_turn(math.atan2(vy, vx) - beta)
-                # A change at the round-off of the ICR ↔ β round trip is none: at rest the wheels stay put.
-                if abs(delta) > _ANGLE_TOL:
-                    wanted = delta / dt
-            r = min(max(wanted, lo), hi)
-            if r != wanted:
-                clipped = True
-                if abs(wanted - r) > _RATE_TOL:
-                    active.add(i)
-            rate.append(r)
-            beta_new.append(beta + dt * r)
+        icr = problem.icr_of(answer.x)
+        beta = self._beta
+        if hold:
+            wanted = np.zeros_like(beta)
+        else:
+            # on a hip any angle fits: the wheel keeps it
+            delta = self.geometry.steer_angles_for_icr(icr, near=beta) - beta
+            # A change at the round-off of the ICR ↔ β round trip is none: at rest the wheels stay put.
+            wanted = np.where(np.abs(delta) > _ANGLE_TOL, delta, 0.0) / dt
+        rate = np.minimum(np.maximum(wanted, problem.rate_lower), problem.rate_upper)
+        cut = np.abs(wanted - rate)
+        clipped = bool(cut.any())
+        active = set(np.flatnonzero(cut > _RATE_TOL).tolist()) if clipped else set()
         if qp_status in _USED:
-            for k, (r0, r1, lb) in enumerate(problem.wedges):
-                if r0 * x0 + r1 * x1 - lb <= _ROW_TOL:
-                    active.add(k // 2)
+            binding = problem.rows @ answer.x - problem.lower <= _ROW_TOL
+            active.update((np.flatnonzero(binding) % self.geometry.n_wheels).tolist())
+        beta_new = beta + dt * rate
         if clipped or hold:            # the wheels' own ICR (they may disagree)
-            icr_next = self._icr_of(beta_new, like=z_next)
-        else:                          # every wheel on its heading for ICR_next
-            icr_next = self._icr_proto._with_z_unchecked(z_next)
-        return _Steering(beta_new, rate, icr_next, active, qp_status, answer.solve_time)
+            icr = self._icr_of(beta_new, like=icr.z)
+        return _Steering(beta_new, rate, icr, active, qp_status, answer.solve_time)
 
     # ------------------------------------------------------------------ the drive controller
-    def _drive(self, ref, stopped, brake):
-        """Step 5: the twist controller's next twist ξ̇_ref(init), acceleration-limited."""
+    def _drive(self, ref: np.ndarray, stopped: bool, brake: bool) -> np.ndarray:
+        """Step 5: the twist controller's next twist ξ̇_ref(init), acceleration-limited. Shape (3,)."""
         p = self.params
-        amax, dt, twist = p.base_accel_limit, p.dt, self._twist
+        dt, twist = p.dt, self._twist
+        if stopped and (np.abs(twist) <= self._accel_step).all():
+            return np.zeros(3)             # the last step to rest, within the limits
         if brake:                          # full braking along the twist, scaled to the limits
-            acc = [-v for v in twist]
-            k = min(1.0 / dt, *(am / max(abs(ac), 1e-300) for ac, am in zip(acc, amax)))
+            acc = -twist
+            k_max = 1.0 / dt
         else:
-            goal = (0.0, 0.0, 0.0) if stopped else ref
-            acc = [p.kp * (g - v) for g, v in zip(goal, twist)]
-            k = min(1.0, *(am / max(abs(ac), 1e-300) for ac, am in zip(acc, amax)))
-        if stopped and all(abs(v) <= am * dt for v, am in zip(twist, amax)):
-            return [0.0, 0.0, 0.0]         # the last step to rest, within the limits
-        return [v + dt * k * ac for v, ac in zip(twist, acc)]
+            acc = p.kp * ((0.0 if stopped else ref) - twist)
+            k_max = 1.0
+        k = min(k_max, float((self._accel_limit / np.maximum(np.abs(acc), 1e-300)).min()))
+        return twist + (dt * k) * acc
 
     # ------------------------------------------------------------------ the feasible twist
-    def _feasible_twist(self, init, steer):
+    def _feasible_twist(self, init: np.ndarray, steer: _Steering) -> tuple[np.ndarray, np.ndarray]:
         """Step 6: ξ̇_ref(init) projected onto the motion of ICR_next, within every limit.
 
         Returns:
-            ``(twist, phi_dot)``, lists of floats.
+            ``(twist, phi_dot)``, Shapes (3,), (N,).
         """
-        p, g = self.params, self.geometry
-        z = steer.icr_next.z.tolist()
-        c0, c1, c2 = z[1], -z[0], z[2] / p.icr_scale          # twist direction ∝ (Y, −X, 1)
-        cn = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-        direction = (c0 / cn, c1 / cn, c2 / cn)
-        rows = [rolling_row(math.cos(b), math.sin(b), hx, hy, g.wheel_offset)
-                for b, (hx, hy) in zip(steer.beta, g.hip_list)]
-        proj = sum(c * v for c, v in zip(direction, init))
-        speed = self._feasible_speed(direction, proj, rows, steer.rate)
-        twist = [speed * c for c in direction]
-        d, r_w = g.wheel_offset, g.wheel_radius
-        phi_dot = [(f0 * twist[0] + f1 * twist[1] + f2 * twist[2] + d * r) / r_w
-                   for (f0, f1, f2), r in zip(rows, steer.rate)]
-        return twist, phi_dot
+        g = self.geometry
+        direction = steer.icr_next.twist_direction                 # ∝ (Y, −X, 1)
+        rows = g.rolling_rows(steer.beta)
+        # the drive rates are affine in the size s of the twist s · direction: φ̇ = s a + b
+        steering = g.drive_rates(rows, steer.rate, _ZERO3)
+        per_speed = g.drive_rates(rows, steer.rate, direction) - steering
+        speed = self._feasible_speed(direction.tolist(), float(direction @ init), per_speed, steering)
+        return speed * direction, speed * per_speed + steering
 
-    def _feasible_speed(self, direction, wanted, rows, rate):
+    def _feasible_speed(self, direction: list, wanted: float, per_speed: np.ndarray, steering: np.ndarray) -> float:
         """The size s of the twist ``s · direction`` nearest ``wanted`` within the limits.
 
-        Hard: |s c_k| ≤ base_velocity_limit_k and |φ̇_i(s c)| ≤ drive_rate_limit (an interval
-        of s around 0, since |d β̇_i / r_w| < drive_rate_limit). Then, within it, the change
-        from the last twist: |s c_k − ξ̇_k| ≤ base_accel_limit_k dt, another interval. When the
-        two do not meet (the ICR turned the direction faster than the acceleration limit
-        allows at this speed), s is the one of the first interval that exceeds the
-        acceleration limit least (minimax of the ratios).
+        Hard: |s c_k| ≤ base_velocity_limit_k and |s a_i + b_i| ≤ drive_rate_limit, the drive
+        rates φ̇_i = s a_i + b_i (``per_speed`` a, ``steering`` b = d β̇_i / r_w): an interval of
+        s around 0, since |b_i| < drive_rate_limit. Then, within it, the change from the last
+        twist: |s c_k − ξ̇_k| ≤ base_accel_limit_k dt, another interval. When the two do not
+        meet (the ICR turned the direction faster than the acceleration limit allows at this
+        speed), s is the one of the first interval that exceeds the acceleration limit least
+        (minimax of the ratios).
+
+        Args:
+            direction: the unit twist direction c, 3 floats.
+            wanted: the size of the projection.
+            per_speed, steering: a and b. Shape (N,) each.
         """
         p = self.params
-        d, r_w = self.geometry.wheel_offset, self.geometry.wheel_radius
-        # hard: |s c_k| ≤ V_k, then |s a_i + b_i| ≤ L (a_i = f_i·c / r_w, b_i = d β̇_i / r_w)
-        lo, hi = -math.inf, math.inf
-        for c, vmax in zip(direction, p.base_velocity_limit):
-            if c != 0.0:
-                bound = vmax / abs(c)
-                if bound < hi:
-                    lo, hi = -bound, bound
-        # φ̇_i is recomputed from s·c afterwards: a bound 1e-12 inside keeps its round-off
+        # φ̇_i is computed as s a_i + b_i afterwards: a bound 1e-12 inside keeps its round-off
         # below the limit (a simulator comparing exactly would clamp a command at the limit).
         drive_limit = p.drive_rate_limit * (1.0 - 1e-12)
-        c0, c1, c2 = direction
-        for (f0, f1, f2), r in zip(rows, rate):
-            a = (f0 * c0 + f1 * c1 + f2 * c2) / r_w
-            if a > 1e-300 or a < -1e-300:
-                b = d * r / r_w
-                lo, hi = _narrow(lo, hi, a, -drive_limit - b, drive_limit - b)
-        lo, hi = min(lo, 0.0), max(hi, 0.0)
+        # |s a_i + b_i| ≤ L ⟺ −(L + b_i sgn a_i) ≤ s |a_i| ≤ L − b_i sgn a_i, both bounds > 0:
+        # s ≤ 1/up and s ≥ −1/down, with up, down the largest |a_i| / bound
+        size, toward = np.abs(per_speed), steering * np.sign(per_speed)
+        up = float((size / (drive_limit - toward)).max())
+        down = float((size / (drive_limit + toward)).max())
+        for c, vmax in zip(direction, p.base_velocity_limit):      # and |s c_k| ≤ V_k
+            up, down = max(up, abs(c) / vmax), max(down, abs(c) / vmax)
+        lo, hi = -1.0 / down, 1.0 / up                               # c is a unit vector: up, down > 0
         # acceleration: |s c_k − v_k| ≤ r_k
-        dt = p.dt
+        twist, accel = self._twist.tolist(), self._accel_step.tolist()
         alo, ahi = lo, hi
-        for c, v, am in zip(direction, self._twist, p.base_accel_limit):
-            r = am * dt
+        for c, v, r in zip(direction, twist, accel):
             if c != 0.0:
-                alo, ahi = _narrow(alo, ahi, c, v - r, v + r)
+                s1, s2 = (v - r) / c, (v + r) / c
+                if c < 0.0:
+                    s1, s2 = s2, s1
+                alo, ahi = max(alo, s1), min(ahi, s2)
             elif abs(v) > r:
                 alo, ahi = math.inf, -math.inf
         if alo <= ahi:
-            return alo if wanted < alo else (ahi if wanted > ahi else wanted)
+            return min(max(wanted, alo), ahi)
         # minimax: the convex max of the lines ±(s c_k − v_k)/r_k is least where a rising and a
         # falling one cross
         lines = []
-        for c, v, am in zip(direction, self._twist, p.base_accel_limit):
-            r = am * dt
+        for c, v, r in zip(direction, twist, accel):
             lines += ((c / r, -v / r), (-c / r, v / r))
         best, best_ratio = 0.0, math.inf
         candidates = [lo, hi] + [(o2 - o1) / (k1 - k2) for k1, o1 in lines for k2, o2 in lines
@@ -1049,7 +964,7 @@ class SwmrController:
         return best
 
     # ------------------------------------------------------------------ one period
-    def step(self, twist_ref, beta_meas=None, beta_dot_meas=None, brake=False):
+    def step(self, twist_ref, beta_meas=None, beta_dot_meas=None, brake: bool = False) -> SwmrOutput:
         """One control period: steering controller, drive controller, feasible twist (Fig 4).
 
         Args:
@@ -1085,38 +1000,36 @@ class SwmrController:
         twist, phi_dot = self._feasible_twist(init, steer)
         return self._commit(problem, steer, twist, phi_dot)
 
-    def _commit(self, problem, steer, twist, phi_dot, status=None):
+    def _commit(self, problem: IcrQp, steer: _Steering, twist: np.ndarray, phi_dot: np.ndarray,
+                status: str | None = None) -> SwmrOutput:
         """Store the new state and return it as a :class:`SwmrOutput`."""
         self._beta, self._beta_dot, self._twist, self._phi_dot = steer.beta, steer.rate, twist, phi_dot
         self._icr = steer.icr_next
         executed = twist
-        if any(steer.rate):     # the rolling model at the mid-period steer angles
-            half = 0.5 * self.params.dt
-            executed = self.geometry.fit_twist([b - half * r for b, r in zip(steer.beta, steer.rate)],
-                                               steer.rate, phi_dot)
+        if steer.rate.any():     # the rolling model at the mid-period steer angles
+            executed = self.geometry.fit_twist(steer.beta - (0.5 * self.params.dt) * steer.rate, steer.rate,
+                                               phi_dot)
         if status is None:
             status = 'stopped' if problem.stopped else 'ok'
         return SwmrOutput(
-            beta_ref=np.array(steer.beta), beta_dot_ref=np.array(steer.rate), phi_dot_ref=np.array(phi_dot),
-            twist_feasible=np.array(twist), twist_executed=np.array(executed), icr_next=steer.icr_next,
+            beta_ref=steer.beta.copy(), beta_dot_ref=steer.rate.copy(), phi_dot_ref=phi_dot.copy(),
+            twist_feasible=twist.copy(), twist_executed=executed.copy(), icr_next=steer.icr_next,
             icr_ref=problem.icr_ref, route=problem.route if status != 'solver_failure' else 'hold',
             active_constraints=sorted(steer.active), solve_time_s=steer.solve_time, status=status,
             qp_status=steer.qp_status)
 
-    def _safe_stop(self, problem, answer):
+    def _safe_stop(self, problem: IcrQp, answer: _QpAnswer) -> SwmrOutput:
         """Solver failure: steer rates braked to zero within β̈_max, drive ramped down within φ̈_max."""
         p = self.params
-        rate = [min(max(0.0, lo), hi) for lo, hi in zip(problem.rate_lower, problem.rate_upper)]
-        beta_new = [b + p.dt * r for b, r in zip(self._beta, rate)]
-        peak = max(abs(v) for v in self._phi_dot)
+        rate = np.minimum(np.maximum(0.0, problem.rate_lower), problem.rate_upper)
+        beta_new = self._beta + p.dt * rate
+        peak = float(np.abs(self._phi_dot).max())
         k = max(0.0, 1.0 - p.drive_accel_limit * p.dt / peak) if peak > 0 else 0.0
-        steer = _Steering(beta_new, rate, self._icr_of(beta_new, like=self._icr.z.tolist()), set(), answer.status,
+        steer = _Steering(beta_new, rate, self._icr_of(beta_new, like=self._icr.z), set(), answer.status,
                           answer.solve_time or 0.0)
-        return self._commit(problem, steer, [k * v for v in self._twist], [k * v for v in self._phi_dot],
-                            status='solver_failure')
+        return self._commit(problem, steer, k * self._twist, k * self._phi_dot, status='solver_failure')
 
-
-    def _bounded_reference(self, twist_ref):
+    def _bounded_reference(self, twist_ref) -> np.ndarray:
         """ξ̇* checked and scaled down uniformly into ``|ξ̇*_k| ≤ base_velocity_limit_k``.
 
         A reference beyond the limits is not trusted as given: it is scaled by the largest
@@ -1124,18 +1037,17 @@ class SwmrController:
         is kept, and no later product can overflow (a finite 1e308 would otherwise give NaN).
 
         Returns:
-            ``(vx, vy, ω)`` as floats [m/s, m/s, rad/s].
+            ``(vx, vy, ω)`` [m/s, m/s, rad/s]. Shape (3,).
 
         Raises:
             ShapeError, NonFiniteError: not 3 finite numbers.
         """
-        ref = finite_floats(twist_ref, 3, 'twist_ref')
-        limits = self.params.base_velocity_limit
-        s = 1.0
-        for v, vmax in zip(ref, limits):
-            if abs(v) > vmax:
-                s = min(s, vmax / abs(v))
-        if s == 1.0:
-            return tuple(ref)
-        return tuple(min(vmax, max(-vmax, v * s)) for v, vmax in zip(ref, limits))
+        ref = as_finite_vector(twist_ref, 3, 'twist_ref')
+        limits = self._velocity_limit
+        size = np.abs(ref)
+        beyond = size > limits
+        if not beyond.any():
+            return ref
+        s = float((limits[beyond] / size[beyond]).min())
+        return np.clip(ref * s, -limits, limits)
 
