@@ -12,7 +12,13 @@ Publishes, every period:
   covariances are the mean squared errors the slip model gives,
   :class:`~sim_bridge.slip.OdometryCovariance`),
   ``/ground_truth/odom`` (``nav_msgs/Odometry``: true base pose and twist, frame ``world``),
-  ``/clock`` (sim time; always in lockstep), and ``/diagnostics`` every ``diagnostics_period``.
+  ``clock`` (``rosgraph_msgs/Clock``, sim time; always in lockstep, in realtime with
+  ``publish_clock``), and ``/diagnostics`` every ``diagnostics_period``.
+
+The clock topic is relative: ``/clock`` in the root namespace, ``/r1/clock`` for a simulator in
+``/r1``, so that two simulators in one domain never both publish ``/clock``. The nodes of a
+robot in a namespace that run on its sim time remap their clock to it
+(``--ros-args -r /clock:=/r1/clock``; the launch files do).
 
 Timing: ``realtime`` steps on a wall-clock timer. ``lockstep`` publishes the state at t,
 waits (event-driven) until every group of ``lockstep_groups`` has sent a command, or
@@ -50,7 +56,7 @@ from wmm_control.robot_config import load_robot
 from wmm_control.errors import ConfigError
 from wmm_control.nodes.common import (
     CLOCK_QOS, COMMAND_QOS, DIAGNOSTICS_QOS, STATE_PUB_QOS, Freshness, Param, declare_parameters,
-    diagnostic_array, diagnostic_status, guard_clock, parse_command, robot_param, robot_period, run_node)
+    diagnostic_array, guard_clock, node_status, parse_command, robot_param, robot_period, run_node)
 
 __all__ = ['SimNode', 'main', 'wait_groups']
 
@@ -73,7 +79,8 @@ PARAMS = (
     Param('lockstep_groups', 'Comma-separated command groups lockstep waits for, or "all".'),
     Param('lockstep_timeout', 'Wall time [s] lockstep waits for commands before stepping anyway.',
           lo=1e-3, hi=60.0),
-    Param('publish_clock', 'Publish /clock in realtime mode too.', read_only=True),
+    Param('publish_clock', 'Publish the sim time on clock (relative: /clock in the root namespace, '
+          '<namespace>/clock in one) in realtime mode too; lockstep always does.', read_only=True),
     Param('diagnostics_period', 'Simulated time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
     Param('slip_gain', 'Slip fraction per unit rim speed [1/(m/s)], kinematic mode.', lo=0.0, hi=10.0,
           read_only=True),
@@ -144,7 +151,8 @@ class SimNode(Node):
         self.pub_ee = self.create_publisher(PoseStamped, 'ee_pose', STATE_PUB_QOS)
         self.pub_odom = self.create_publisher(Odometry, 'odom', STATE_PUB_QOS)
         self.pub_truth = self.create_publisher(Odometry, 'ground_truth/odom', STATE_PUB_QOS)
-        self.pub_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+        # Relative: each simulator in its namespace; nodes on its sim time remap /clock to it.
+        self.pub_clock = self.create_publisher(ClockMsg, 'clock', CLOCK_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._arrived = set()
         self._waiting_since = None
@@ -300,11 +308,11 @@ class SimNode(Node):
             stale = self.timed_out[group]
             level = 'warn' if stale or counts['clamped'] or counts['rejected'] else 'ok'
             message = 'no fresh command (zero velocity)' if stale else 'commanded'
-            statuses.append(diagnostic_status(
-                f'wmm_sim: {group} commands', self.world.robot.name, level, message,
+            statuses.append(node_status(
+                self, f'{group} commands', self.world.robot.name, level, message,
                 {**counts, 'command_age_s': self.fresh[group].age(self.now_s())}))
-        statuses.append(diagnostic_status(
-            'wmm_sim: simulation', self.world.robot.name, 'ok', f'{self.p.timing}, {self.p.base_mode}',
+        statuses.append(node_status(
+            self, 'simulation', self.world.robot.name, 'ok', f'{self.p.timing}, {self.p.base_mode}',
             {'sim_time_s': self.world.time, 'steps': self._steps,
              'real_time_factor': self.world.time / wall if wall > 0 else 0.0}))
         return diagnostic_array(stamp, statuses)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
+from rcl_interfaces.msg import Log
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
@@ -46,10 +47,12 @@ class Driver(Node):
         self.create_subscription(TwistStamped, '/base/feasible_twist', self.feasible.append, 10)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
         self.create_subscription(PoseStamped, '/ee_pose', self.ee.append, 10)
+        self.logs = []
+        self.create_subscription(Log, '/rosout', lambda m: self.logs.append((m.name, m.level, m.msg)), 100)
 
     def _on_diag(self, msg):
         for s in msg.status:
-            if s.name == 'redundancy_resolver':
+            if s.name == '/redundancy_resolver':
                 self.diag.append((s.level, s.message, {kv.key: kv.value for kv in s.values}))
 
     def goal(self, xyz, quat=(0.0, 0.0, 0.0, 1.0), frame='world'):
@@ -98,6 +101,8 @@ def test_a_goal_on_the_topic_is_reached_and_held(system):
     assert np.all(np.isfinite(held)) and np.max(np.abs(held)) < 0.01, 'at the goal the robot holds still'
     level, message, values = driver.diag[-1]
     assert values['goal_reached'] == 'True' and message == 'goal reached'
+    reached = [m for name, lvl, m in driver.logs if name == 'redundancy_resolver' and m.startswith('goal reached')]
+    assert len(reached) == 1, f'the goal reached is logged once: {reached}'
 
 
 @pytest.mark.parametrize('frame, xyz, quat, reason', [
@@ -140,6 +145,9 @@ def test_an_unreachable_goal_is_pursued_within_limits_and_reported(system):
     assert np.all(np.isfinite(arm)) and np.all(np.abs(arm) <= 3.6)
     level, message, values = driver.diag[-1]
     assert values['goal_stalled'] == 'True' and 'not reached' in message
+    stalls = [m for name, lvl, m in driver.logs if name == 'redundancy_resolver' and lvl == Log.WARN
+              and m.startswith('goal not reached')]
+    assert len(stalls) == 1, f'the stall is logged once: {stalls}'
 
 
 def test_stale_joint_states_give_zero_commands(system):

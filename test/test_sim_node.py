@@ -93,7 +93,7 @@ def test_commands_beyond_the_velocity_limit_are_clamped_and_reported(ros):
                       diagnostics_period=0.1)
     assert ros.spin_until(lambda: len(ctrl.joint_states) >= 10 and len(ctrl.diagnostics) >= 2)
     np.testing.assert_allclose([ctrl.velocities(5)[n] for n in ARM], limit)
-    arm_status = [s for s in ctrl.diagnostics[-1].status if s.name == 'wmm_sim: arm commands'][0]
+    arm_status = [s for s in ctrl.diagnostics[-1].status if s.name == '/wmm_sim: arm commands'][0]
     clamped = int({kv.key: kv.value for kv in arm_status.values}['clamped'])
     assert clamped >= 7 and arm_status.level == arm_status.WARN
 
@@ -205,3 +205,38 @@ def test_destroying_the_node_closes_its_pybullet_client(ros):
     sim.destroy_node()
     assert not pybullet.isConnected(physicsClientId=cid)
     assert sim.world.client_id == -1
+
+
+def test_two_simulators_in_namespaces_each_drive_their_own_clock_and_name_their_diagnostics(ros):
+    """Two simulators in /r1 and /r2, one domain, on sim time: neither publishes /clock; each
+    publishes <ns>/clock, and a node of each robot (remapping /clock to it) follows its own
+    robot's time. /r1 steps in real time, /r2 in lockstep with nobody answering, so their times
+    part at once. Their /diagnostics statuses carry their fully qualified names."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.node import Node
+
+    sims, clocks = {}, {}
+    for ns, timing in (('r1', 'realtime'), ('r2', 'lockstep')):
+        args = ['--ros-args', '-r', f'__ns:=/{ns}', '-r', f'/clock:=/{ns}/clock']
+        sims[ns] = ros.add(SimNode(context=ros.context, cli_args=args, parameter_overrides=overrides(
+            timing=timing, lockstep_timeout=0.2, publish_clock=True, use_sim_time=True, diagnostics_period=0.1)))
+        clocks[ns] = ros.add(Node('follower', namespace=f'/{ns}', context=ros.context, cli_args=args,
+                                  parameter_overrides=overrides(use_sim_time=True)))
+    statuses = {}
+    probe = ros.add(Node('probe', context=ros.context))
+    probe.create_subscription(DiagnosticArray, '/diagnostics',
+                              lambda m: statuses.update({s.name: s.hardware_id for s in m.status}), 10)
+
+    def now(ns):
+        return clocks[ns].get_clock().now().nanoseconds * 1e-9
+
+    assert ros.spin_until(lambda: now('r1') > 2.0 and now('r2') > 0.05, timeout=30.0)
+    assert probe.count_publishers('/clock') == 0
+    assert probe.count_publishers('/r1/clock') == 1 and probe.count_publishers('/r2/clock') == 1
+    for ns, sim in sims.items():
+        assert now(ns) == pytest.approx(sim.world.time, abs=0.1), ns
+    assert now('r1') > 4 * now('r2'), 'each follows its own simulator, not the other one'
+    assert ros.spin_until(lambda: {'/r1/wmm_sim: simulation', '/r2/wmm_sim: simulation'} <= set(statuses))
+    assert statuses['/r1/wmm_sim: simulation'] == 'steerable /r1/wmm_sim'
+    assert '/r2/wmm_sim: arm commands' in statuses
+

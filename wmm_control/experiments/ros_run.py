@@ -102,7 +102,7 @@ class Recorder(Node):
 
     def _on_diag(self, msg):
         for status in msg.status:
-            if status.name == 'redundancy_resolver':
+            if status.name == '/redundancy_resolver':
                 self._row(msg)['diag'] = {kv.key: kv.value for kv in status.values}
                 self.final_status = self._row(msg)['diag']
                 if self.first_stall_s is None and self.final_status.get('goal_stalled') == 'True':

@@ -66,7 +66,7 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, robot_method, robot_param,
+    declare_parameters, diagnostic_array, float_array, guard_clock, node_status, robot_method, robot_param,
     robot_period, run_node, stamp_key, twist_stamped)
 from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
@@ -217,6 +217,8 @@ class RedundancyResolverNode(Node):
         self.progress = GoalProgress(self._tolerance(p.goal_tolerance), p.stall_time, p.period,
                                      min_progress_ratio=p.min_progress_ratio)
         self._stall_logged = False
+        self._reached_logged = False
+        self._goal_cycles = 0
         self._next_diag = 0.0
         self.counters = {'cycles': 0, 'goals': 0, 'goals_rejected': 0, 'compensation_dropped': 0,
                          'stale_cycles': 0}
@@ -286,8 +288,7 @@ class RedundancyResolverNode(Node):
         self.target = PoseTarget(values[:3], rot)
         self._goal_key = key
         self._tracking = False
-        self.progress.start()
-        self._stall_logged = False
+        self._start_goal()
         self.counters['goals'] += 1
         self.get_logger().info(f'new goal: position {np.round(values[:3], 4).tolist()}, '
                                f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}')
@@ -318,7 +319,7 @@ class RedundancyResolverNode(Node):
         x, y, z, w = quat
         if not self._tracking:
             self.get_logger().info('tracking /ee_reference')
-            self.progress.start()
+            self._start_goal()
         self.target = PoseTarget(pose[:3], pin.Quaternion(w, x, y, z).toRotationMatrix(), velocity=vel, acceleration=acc)
         self._goal_key = None
         self._tracking = True
@@ -420,7 +421,7 @@ class RedundancyResolverNode(Node):
         # Judged now, against the target the command was computed for: a new goal may come in
         # before the arm command goes out (it waits for the feasible twist).
         self.progress.update(command.diagnostics)
-        self._log_stall_once(command.diagnostics)
+        self._log_goal_status(command.diagnostics)
         self._publish_base(stamp, command.base_twist)
         if not self.resolver.uses_compensation:
             self._publish_arm(command, stamp)
@@ -484,8 +485,22 @@ class RedundancyResolverNode(Node):
         self._publish_zero(self.get_clock().now().to_msg())
 
     # ------------------------------------------------------------------ status
-    def _log_stall_once(self, diag):
-        """Warn once when the goal stalls (again after it made progress)."""
+    def _start_goal(self) -> None:
+        """A new goal or trajectory: progress judged afresh, its reach and stall logged anew."""
+        self.progress.start()
+        self._stall_logged = False
+        self._reached_logged = False
+        self._goal_cycles = 0
+
+    def _log_goal_status(self, diag) -> None:
+        """Log once when a goal of /goal_pose is reached, and warn once when a goal stalls (again
+        after it made progress)."""
+        self._goal_cycles += 1
+        if self.progress.reached and not self._reached_logged and not self._tracking:
+            self.get_logger().info(f'goal reached: {diag.position_error:.4f} m, {diag.orientation_error:.4f} rad '
+                                   f'away after {self._goal_cycles * self.p.period:.2f} s '
+                                   f'({self._goal_cycles} cycles)')
+            self._reached_logged = True
         if not self.progress.stalled:
             self._stall_logged = False
         elif not self._stall_logged:
@@ -520,8 +535,8 @@ class RedundancyResolverNode(Node):
                                           f'rad; {self._no_progress()} (out of reach?)')
             else:
                 message = 'goal reached' if reached else d.mode
-        return diagnostic_array(stamp, [diagnostic_status('redundancy_resolver', self.model.config.name,
-                                                          level, message, values)])
+        return diagnostic_array(stamp, [node_status(self, '', self.model.config.name,
+                                            level, message, values)])
 
 
 def main(args=None):
