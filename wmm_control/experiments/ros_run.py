@@ -179,7 +179,9 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     if feedback not in ('ground_truth', 'odometry'):
         raise ConfigError(f'run {run.get("name")}: feedback must be ground_truth or odometry, got {feedback!r}')
     resolver_params = dict(resolver_parameters(run), method=run['method'])
+    # No ~/markers: they are for rviz, on a steady-clock timer, and would not repeat from run to run.
     resolver_params.update(robot=str(robot.yaml_path), ee_feedback=feedback, diagnostics_period=1e-9,
+                           markers_period=0.0,
                            **LOCKSTEP_WAITS['redundancy_resolver'])
     sim_params = dict(scenario.sim or {})
     sim_params.update(robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0)
