@@ -493,7 +493,7 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
         previous = {sig: signal.signal(sig, lambda signum, _frame: stop.append(signum))
                     for sig in (signal.SIGINT, signal.SIGTERM)}
     _ignore_stop_signals_at_exit()
-    node = None
+    node = executor = None
     try:
         node = node_factory()
         executor = executor_factory()
@@ -511,7 +511,13 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
         # The stop handler stays in place until the node and the context are gone: a second
         # Ctrl-C or SIGTERM during the teardown (``ros2 launch`` sends SIGINT twice) is only
         # noted, instead of raising KeyboardInterrupt inside rclpy (an abort).
+        # The executor goes first, here: left to the garbage collector after the handlers are back,
+        # the events executor ran pending callbacks from its destructor, where a signal then raised
+        # KeyboardInterrupt inside rclpy (an abort under ``ros2 launch``).
         try:
+            if executor is not None:
+                executor.shutdown()
+                del executor
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
