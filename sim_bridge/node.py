@@ -12,7 +12,19 @@ Publishes, every period:
   covariances are the mean squared errors the slip model gives,
   :class:`~sim_bridge.slip.OdometryCovariance`),
   ``/ground_truth/odom`` (``nav_msgs/Odometry``: true base pose and twist, frame ``world``),
-  ``/clock`` (sim time; always in lockstep), and ``/diagnostics`` every ``diagnostics_period``.
+  ``/tf`` (world → odom → base_link and the moving joints) where ``tf2_msgs`` can be imported,
+  ``clock`` (``rosgraph_msgs/Clock``, sim time; always in lockstep, in realtime with
+  ``publish_clock``), and ``/diagnostics`` every ``diagnostics_period``.
+
+The clock topic is relative: ``/clock`` in the root namespace, ``/r1/clock`` for a simulator in
+``/r1``, so that two simulators in one domain never both publish ``/clock``. The nodes of a
+robot in a namespace that run on its sim time remap their clock to it
+(``--ros-args -r /clock:=/r1/clock``; the launch files do).
+
+Once, transient local: ``robot_description`` (``std_msgs/String``, the URDF text) and, where
+``tf2_msgs`` can be imported, ``/tf_static`` (the fixed joints); else one log line says why TF
+is not published (:mod:`wmm_control.nodes.robot_frames`). Every frame but ``world`` carries
+``frame_prefix``.
 
 Timing: ``realtime`` steps on a wall-clock timer. ``lockstep`` publishes the state at t,
 waits (event-driven) until every group of ``lockstep_groups`` has sent a command, or
@@ -46,11 +58,12 @@ from std_msgs.msg import Float64MultiArray
 
 from sim_bridge.slip import VARIANCE_FLOOR, OdometryCovariance, SlipParams
 from sim_bridge.world import BASE_MODES, SimWorld
+from wmm_control.nodes.robot_frames import RobotFrames, valid_frame_prefix
 from wmm_control.robot_config import load_robot
 from wmm_control.errors import ConfigError
 from wmm_control.nodes.common import (
     CLOCK_QOS, COMMAND_QOS, DIAGNOSTICS_QOS, STATE_PUB_QOS, Freshness, Param, declare_parameters,
-    diagnostic_array, diagnostic_status, guard_clock, parse_command, robot_param, robot_period, run_node)
+    diagnostic_array, guard_clock, node_status, parse_command, robot_param, robot_period, run_node)
 
 __all__ = ['SimNode', 'main', 'wait_groups']
 
@@ -73,7 +86,8 @@ PARAMS = (
     Param('lockstep_groups', 'Comma-separated command groups lockstep waits for, or "all".'),
     Param('lockstep_timeout', 'Wall time [s] lockstep waits for commands before stepping anyway.',
           lo=1e-3, hi=60.0),
-    Param('publish_clock', 'Publish /clock in realtime mode too.', read_only=True),
+    Param('publish_clock', 'Publish the sim time on clock (relative: /clock in the root namespace, '
+          '<namespace>/clock in one) in realtime mode too; lockstep always does.', read_only=True),
     Param('diagnostics_period', 'Simulated time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
     Param('slip_gain', 'Slip fraction per unit rim speed [1/(m/s)], kinematic mode.', lo=0.0, hi=10.0,
           read_only=True),
@@ -86,6 +100,9 @@ PARAMS = (
           lo=-1e4, hi=1e4, size=(3,), read_only=True, default_from=_robot_start('base_pose')),
     Param('start_arm', 'Start arm joints [rad or m] (one per arm joint); default: the robot YAML\'s start.',
           lo=-2 * math.pi, hi=2 * math.pi, read_only=True, default_from=_robot_start('arm')),
+    Param('publish_tf', 'Publish /tf and /tf_static (needs tf2_msgs, which has no PyPI wheel).', read_only=True),
+    Param('frame_prefix', 'Prefix of the robot\'s frames in TF and odometry (e.g. r1/); world has none.',
+          read_only=True),
     Param('gui', 'Open the PyBullet GUI.', read_only=True),
 )
 
@@ -129,6 +146,9 @@ class SimNode(Node):
             robot=self.p.robot, base_mode=self.p.base_mode, dt=self.p.period, substeps=self.p.substeps,
             slip=slip, seed=self.p.seed, gui=self.p.gui,
             start_base_pose=self.p.start_base_pose, start_arm=self.p.start_arm)
+        reason = valid_frame_prefix(self.p.frame_prefix)
+        if reason:
+            raise ConfigError(reason)
         self.lockstep = self.p.timing == 'lockstep'
         self.odom_covariance = OdometryCovariance()
         groups = self.world.command_groups
@@ -144,8 +164,12 @@ class SimNode(Node):
         self.pub_ee = self.create_publisher(PoseStamped, 'ee_pose', STATE_PUB_QOS)
         self.pub_odom = self.create_publisher(Odometry, 'odom', STATE_PUB_QOS)
         self.pub_truth = self.create_publisher(Odometry, 'ground_truth/odom', STATE_PUB_QOS)
-        self.pub_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+        # Relative: each simulator in its namespace; nodes on its sim time remap /clock to it.
+        self.pub_clock = self.create_publisher(ClockMsg, 'clock', CLOCK_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.frames = RobotFrames(self, self.world.robot, self.p.frame_prefix, publish_tf=self.p.publish_tf)
+        self._odom_frame = self.p.frame_prefix + 'odom'
+        self._base_frame = self.p.frame_prefix + self.world.robot.base_link
         self._arrived = set()
         self._waiting_since = None
         self._steps = 0
@@ -279,9 +303,12 @@ class SimNode(Node):
         (ee.pose.orientation.x, ee.pose.orientation.y, ee.pose.orientation.z,
          ee.pose.orientation.w) = (float(v) for v in ee_quat)
         self.pub_ee.publish(ee)
-        self.pub_odom.publish(_odometry(stamp, 'odom', self.world.odom_pose(), self.world.odom_twist(),
+        odom_pose, true_pose = self.world.odom_pose(), self.world.base_pose()
+        self.pub_odom.publish(_odometry(stamp, self._odom_frame, self._base_frame, odom_pose, self.world.odom_twist(),
                                         self.odom_covariance.pose, self.odom_covariance.twist))
-        self.pub_truth.publish(_odometry(stamp, 'world', self.world.base_pose(), self.world.base_twist()))
+        self.pub_truth.publish(_odometry(stamp, 'world', self._base_frame, true_pose, self.world.base_twist()))
+        if self.frames.publishing_tf:
+            self.frames.publish(stamp, dict(zip(names, pos.tolist())), odom_pose, true_pose)
         if self.now_s() + 1e-9 >= self._next_diag and self.p.diagnostics_period > 0:
             self._next_diag = self.now_s() + self.p.diagnostics_period
             self.pub_diag.publish(self._diagnostics(stamp))
@@ -300,23 +327,23 @@ class SimNode(Node):
             stale = self.timed_out[group]
             level = 'warn' if stale or counts['clamped'] or counts['rejected'] else 'ok'
             message = 'no fresh command (zero velocity)' if stale else 'commanded'
-            statuses.append(diagnostic_status(
-                f'wmm_sim: {group} commands', self.world.robot.name, level, message,
+            statuses.append(node_status(
+                self, f'{group} commands', self.world.robot.name, level, message,
                 {**counts, 'command_age_s': self.fresh[group].age(self.now_s())}))
-        statuses.append(diagnostic_status(
-            'wmm_sim: simulation', self.world.robot.name, 'ok', f'{self.p.timing}, {self.p.base_mode}',
+        statuses.append(node_status(
+            self, 'simulation', self.world.robot.name, 'ok', f'{self.p.timing}, {self.p.base_mode}',
             {'sim_time_s': self.world.time, 'steps': self._steps,
              'real_time_factor': self.world.time / wall if wall > 0 else 0.0}))
         return diagnostic_array(stamp, statuses)
 
 
-def _odometry(stamp, frame, pose, twist, pose_covariance=None, twist_variance=None):
+def _odometry(stamp, frame, child, pose, twist, pose_covariance=None, twist_variance=None):
     """An ``Odometry`` of a planar pose and twist; covariances (x, y, θ) and (vx, vy, ω) when given
     (z, roll, pitch and their rates: :data:`~sim_bridge.slip.VARIANCE_FLOOR`, the base is planar)."""
     msg = Odometry()
     msg.header.stamp = stamp
     msg.header.frame_id = frame
-    msg.child_frame_id = 'base_link'
+    msg.child_frame_id = child
     x, y, th = (float(v) for v in pose)
     msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
     msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(th / 2), math.cos(th / 2)

@@ -92,7 +92,7 @@ class Record(Node):
         self.diagnostics = []
         self.create_subscription(DiagnosticArray, '/diagnostics', lambda m: self.diagnostics.extend(
             (time.monotonic(), {kv.key: kv.value for kv in s.values}) for s in m.status
-            if s.name == 'redundancy_resolver'), 50)
+            if s.name == '/redundancy_resolver'), 50)
 
     def _record(self, msg_type, topic, values):
         series = self.topics.setdefault(topic, [])

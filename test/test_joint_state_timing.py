@@ -88,7 +88,7 @@ class Probe(Node):
 
     def _on_diag(self, msg):
         for s in msg.status:
-            if s.name == 'mecanum_controller':
+            if s.name == '/mecanum_controller':
                 self.diag.append({kv.key: kv.value for kv in s.values})
 
     def _on_log(self, msg):

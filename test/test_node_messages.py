@@ -19,11 +19,11 @@ from wmm_control.robot_config import load_robot
 # The README's /diagnostics table: status name -> its keys (every message of that status).
 SIM_GROUP = {'clamped', 'rejected', 'position_limited', 'command_age_s'}
 DIAGNOSTIC_KEYS = {
-    'wmm_sim: simulation': {'sim_time_s', 'steps', 'real_time_factor'},
-    'swmr_controller': {'status', 'route', 'qp_status', 'icr_next_xy', 'icr_at_infinity', 'active_constraints',
+    '/wmm_sim: simulation': {'sim_time_s', 'steps', 'real_time_factor'},
+    '/swmr_controller': {'status', 'route', 'qp_status', 'icr_next_xy', 'icr_at_infinity', 'active_constraints',
                         'solve_time_us', 'beta_ref', 'feasible_twist', 'reference', 'references_rejected',
                         'joint_states_skipped', 'commands_not_applied', 'measured_period_s'},
-    'mecanum_controller': {'status', 'velocity_scale', 'accel_scale', 'reference', 'reference_limited',
+    '/mecanum_controller': {'status', 'velocity_scale', 'accel_scale', 'reference', 'reference_limited',
                            'feasible_twist', 'wheel_rates', 'wheel_rate_ratio', 'reference_age_s',
                            'references_rejected', 'cycles', 'joint_states_rejected', 'stale_cycles',
                            'commands_not_applied', 'joint_states_skipped', 'measured_period_s'},
@@ -72,15 +72,15 @@ def test_diagnostics_keys_are_the_documented_ones(ros, robot):
     for status in listener.statuses:
         seen.setdefault(status.name, []).append({kv.key for kv in status.values})
     groups = sim.world.command_groups
-    expected = dict(DIAGNOSTIC_KEYS, **{f'wmm_sim: {g} commands': SIM_GROUP for g in groups})
-    base = 'swmr_controller' if robot == 'steerable' else 'mecanum_controller'
-    expected = {k: v for k, v in expected.items() if k != ('mecanum_controller' if base == 'swmr_controller'
-                                                           else 'swmr_controller')}
-    assert set(seen) == set(expected) | {'redundancy_resolver'}
+    expected = dict(DIAGNOSTIC_KEYS, **{f'/wmm_sim: {g} commands': SIM_GROUP for g in groups})
+    base = '/swmr_controller' if robot == 'steerable' else '/mecanum_controller'
+    expected = {k: v for k, v in expected.items() if k != ('/mecanum_controller' if base == '/swmr_controller'
+                                                           else '/swmr_controller')}
+    assert set(seen) == set(expected) | {'/redundancy_resolver'}
     for name, keys in expected.items():
         assert all(k == keys for k in seen[name]), (name, [k ^ keys for k in seen[name]])
     # The resolver: the counters always; the goal keys too once a goal is pursued.
-    resolver_sets = seen['redundancy_resolver']
+    resolver_sets = seen['/redundancy_resolver']
     assert resolver_sets[-1] == RESOLVER_ALWAYS | RESOLVER_GOAL
     assert all(k in (RESOLVER_ALWAYS, RESOLVER_ALWAYS | RESOLVER_GOAL) for k in resolver_sets)
 

@@ -403,3 +403,25 @@ def test_goal_tolerance_stall_time_and_min_progress_ratio_set_at_run_time_judge_
     full.progress.update(near)
     assert not full.progress.reached                                      # r = 6: 0.5 rad is not reached
 
+
+
+def test_an_integer_for_a_double_parameter_is_taken_as_that_double_at_start_up_and_at_run_time(ros):
+    """``-p stall_time:=5`` and ``ros2 param set /redundancy_resolver stall_time 5`` (an integer):
+    taken as 5.0; still checked against the range; an integer parameter stays an integer."""
+    node = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
+        stall_time=5, goal_tolerance=[1, 1])))
+    assert node.p.stall_time == 5.0 and isinstance(node.p.stall_time, float)
+    assert node.get_parameter('stall_time').type_ == Parameter.Type.DOUBLE
+    assert node.p.goal_tolerance == [1.0, 1.0] and node.progress.tolerance == (1.0, 1.0)
+    caller = ros.add(Node('param_cli', context=ros.context))
+    name = node.get_fully_qualified_name()
+    assert set_parameter(ros, caller, name, 'stall_time', 7).successful
+    assert node.p.stall_time == 7.0 and node.progress.stall_time == 7.0
+    assert node.get_parameter('stall_time').type_ == Parameter.Type.DOUBLE
+    refused = set_parameter(ros, caller, name, 'stall_time', 7000)
+    assert not refused.successful and 'out of range' in refused.reason and node.p.stall_time == 7.0
+    assert set_parameter(ros, caller, name, 'goal_tolerance', [1, 2]).successful
+    assert node.p.goal_tolerance == [1.0, 2.0]
+    sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(seed=3, command_timeout=1)))
+    assert sim.p.command_timeout == 1.0 and sim.get_parameter('seed').type_ == Parameter.Type.INTEGER
+    assert not set_parameter(ros, caller, sim.get_fully_qualified_name(), 'seed', 4.0).successful

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
+from rcl_interfaces.msg import Log
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
@@ -46,10 +47,12 @@ class Driver(Node):
         self.create_subscription(TwistStamped, '/base/feasible_twist', self.feasible.append, 10)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
         self.create_subscription(PoseStamped, '/ee_pose', self.ee.append, 10)
+        self.logs = []
+        self.create_subscription(Log, '/rosout', lambda m: self.logs.append((m.name, m.level, m.msg)), 100)
 
     def _on_diag(self, msg):
         for s in msg.status:
-            if s.name == 'redundancy_resolver':
+            if s.name == '/redundancy_resolver':
                 self.diag.append((s.level, s.message, {kv.key: kv.value for kv in s.values}))
 
     def goal(self, xyz, quat=(0.0, 0.0, 0.0, 1.0), frame='world'):
@@ -98,6 +101,8 @@ def test_a_goal_on_the_topic_is_reached_and_held(system):
     assert np.all(np.isfinite(held)) and np.max(np.abs(held)) < 0.01, 'at the goal the robot holds still'
     level, message, values = driver.diag[-1]
     assert values['goal_reached'] == 'True' and message == 'goal reached'
+    reached = [m for name, lvl, m in driver.logs if name == 'redundancy_resolver' and m.startswith('goal reached')]
+    assert len(reached) == 1, f'the goal reached is logged once: {reached}'
 
 
 @pytest.mark.parametrize('frame, xyz, quat, reason', [
@@ -140,6 +145,9 @@ def test_an_unreachable_goal_is_pursued_within_limits_and_reported(system):
     assert np.all(np.isfinite(arm)) and np.all(np.abs(arm) <= 3.6)
     level, message, values = driver.diag[-1]
     assert values['goal_stalled'] == 'True' and 'not reached' in message
+    stalls = [m for name, lvl, m in driver.logs if name == 'redundancy_resolver' and lvl == Log.WARN
+              and m.startswith('goal not reached')]
+    assert len(stalls) == 1, f'the stall is logged once: {stalls}'
 
 
 def test_stale_joint_states_give_zero_commands(system):
@@ -372,3 +380,39 @@ scenario:
     log = run_with_nodes(load_scenario(path), {'name': 'ts', 'method': 'task_sharing', 'feedback': 'odometry'})
     assert log.first_stall_s is None
     assert log.final_status['goal_reached'] == 'True'
+
+
+def test_markers_show_the_goal_the_trail_and_the_footprint(system):
+    """~/markers: the goal's arrow at the goal, the trail ending at the end effector, the base's
+    footprint (closed, on the floor, around the base); every number finite."""
+    from visualization_msgs.msg import Marker, MarkerArray
+    ros, driver, sim = system
+    arrays = []
+    driver.create_subscription(MarkerArray, '/redundancy_resolver/markers', arrays.append, 10)
+    run_until(ros, driver, 0.5)
+    goal = np.array([1.5, 0.5, 1.0])
+    driver.goal(goal, (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)))
+    run_until(ros, driver, 4.0)
+    assert ros.spin_until(lambda: len(arrays) >= 3)
+    by_ns = {m.ns: m for m in arrays[-1].markers}
+    assert set(by_ns) == {'goal', 'reference', 'ee_trail', 'base_footprint'}
+    assert all(m.header.frame_id == 'world' for m in by_ns.values())
+    arrow = by_ns['goal']
+    assert arrow.action == Marker.ADD and arrow.type == Marker.ARROW
+    np.testing.assert_allclose([arrow.pose.position.x, arrow.pose.position.y, arrow.pose.position.z], goal)
+    q = arrow.pose.orientation
+    assert abs(abs(q.z) - math.sqrt(0.5)) < 1e-9 and abs(abs(q.w) - math.sqrt(0.5)) < 1e-9
+    assert by_ns['reference'].action == Marker.DELETE, 'no /ee_reference tracked'
+    trail = np.array([[p.x, p.y, p.z] for p in by_ns['ee_trail'].points])
+    assert len(trail) > 10 and np.linalg.norm(trail[-1] - driver.ee_position()) < 0.1
+    assert np.linalg.norm(trail[-1] - trail[0]) > 0.2, 'the trail follows the end effector'
+    outline = np.array([[p.x, p.y, p.z] for p in by_ns['base_footprint'].points])
+    assert len(outline) == 5 and np.allclose(outline[0], outline[-1]) and np.allclose(outline[:, 2], 0.0)
+    base = sim.world.base_pose()
+    centre = outline[:4, :2].mean(axis=0)
+    assert np.linalg.norm(centre - base[:2]) < 0.3
+    for array in arrays:
+        for m in array.markers:
+            values = [m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w,
+                      *(v for p in m.points for v in (p.x, p.y, p.z))]
+            assert np.all(np.isfinite(values)), m.ns

@@ -93,7 +93,7 @@ def test_commands_beyond_the_velocity_limit_are_clamped_and_reported(ros):
                       diagnostics_period=0.1)
     assert ros.spin_until(lambda: len(ctrl.joint_states) >= 10 and len(ctrl.diagnostics) >= 2)
     np.testing.assert_allclose([ctrl.velocities(5)[n] for n in ARM], limit)
-    arm_status = [s for s in ctrl.diagnostics[-1].status if s.name == 'wmm_sim: arm commands'][0]
+    arm_status = [s for s in ctrl.diagnostics[-1].status if s.name == '/wmm_sim: arm commands'][0]
     clamped = int({kv.key: kv.value for kv in arm_status.values}['clamped'])
     assert clamped >= 7 and arm_status.level == arm_status.WARN
 
@@ -205,3 +205,115 @@ def test_destroying_the_node_closes_its_pybullet_client(ros):
     sim.destroy_node()
     assert not pybullet.isConnected(physicsClientId=cid)
     assert sim.world.client_id == -1
+
+
+def test_two_simulators_in_namespaces_each_drive_their_own_clock_and_name_their_diagnostics(ros):
+    """Two simulators in /r1 and /r2, one domain, on sim time: neither publishes /clock; each
+    publishes <ns>/clock, and a node of each robot (remapping /clock to it) follows its own
+    robot's time. /r1 steps in real time, /r2 in lockstep with nobody answering, so their times
+    part at once. Their /diagnostics statuses carry their fully qualified names."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.node import Node
+
+    sims, clocks = {}, {}
+    for ns, timing in (('r1', 'realtime'), ('r2', 'lockstep')):
+        args = ['--ros-args', '-r', f'__ns:=/{ns}', '-r', f'/clock:=/{ns}/clock']
+        sims[ns] = ros.add(SimNode(context=ros.context, cli_args=args, parameter_overrides=overrides(
+            timing=timing, lockstep_timeout=0.2, publish_clock=True, use_sim_time=True, diagnostics_period=0.1)))
+        clocks[ns] = ros.add(Node('follower', namespace=f'/{ns}', context=ros.context, cli_args=args,
+                                  parameter_overrides=overrides(use_sim_time=True)))
+    statuses = {}
+    probe = ros.add(Node('probe', context=ros.context))
+    probe.create_subscription(DiagnosticArray, '/diagnostics',
+                              lambda m: statuses.update({s.name: s.hardware_id for s in m.status}), 10)
+
+    def now(ns):
+        return clocks[ns].get_clock().now().nanoseconds * 1e-9
+
+    assert ros.spin_until(lambda: now('r1') > 2.0 and now('r2') > 0.05, timeout=30.0)
+    assert probe.count_publishers('/clock') == 0
+    assert probe.count_publishers('/r1/clock') == 1 and probe.count_publishers('/r2/clock') == 1
+    for ns, sim in sims.items():
+        assert now(ns) == pytest.approx(sim.world.time, abs=0.1), ns
+    assert now('r1') > 4 * now('r2'), 'each follows its own simulator, not the other one'
+    assert ros.spin_until(lambda: {'/r1/wmm_sim: simulation', '/r2/wmm_sim: simulation'} <= set(statuses))
+    assert statuses['/r1/wmm_sim: simulation'] == 'steerable /r1/wmm_sim'
+    assert '/r2/wmm_sim: arm commands' in statuses
+
+
+def _chain(transforms, parent, child):
+    """The 4×4 pose of ``child`` in ``parent`` from TransformStamped messages (a tree)."""
+    from wmm_control.kinematics.frames import FrameTransform
+    by_child = {m.child_frame_id: m for m in transforms}
+    out = np.eye(4)
+    frame = child
+    while frame != parent:
+        m = by_child[frame]
+        t, q = m.transform.translation, m.transform.rotation
+        out = FrameTransform(m.header.frame_id, frame, np.array([t.x, t.y, t.z]),
+                             np.array([q.x, q.y, q.z, q.w])).matrix() @ out
+        frame = m.header.frame_id
+    return out
+
+
+def _ee_matrix(msg):
+    from wmm_control.kinematics.frames import FrameTransform
+    p, q = msg.pose.position, msg.pose.orientation
+    return FrameTransform('world', 'ee', np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w])).matrix()
+
+
+@pytest.mark.parametrize('robot', ['steerable', 'mecanum'])
+def test_robot_description_and_the_tf_tree_place_the_end_effector_where_ee_pose_says(ros, robot):
+    """robot_description (transient local) is the URDF; the TF tree world → odom → base_link →
+    … → the tool, with odometry drifting from the truth, puts the tool at the ground-truth
+    /ee_pose. Frames carry frame_prefix, world none."""
+    from rclpy.node import Node
+    from std_msgs.msg import String
+    from wmm_control.kinematics.frames import FrameTransform
+    from wmm_control.nodes.robot_frames import DESCRIPTION_QOS, TFMessage
+
+    config = load_robot(robot)
+    groups = ('arm', 'steer', 'drive') if robot == 'steerable' else ('arm', 'wheel')
+    sizes = {'arm': 7, 'steer': 4, 'drive': 4, 'wheel': 4}
+    moving = {'arm': 0.2, 'steer': 0.3, 'drive': 4.0, 'wheel': 3.0}
+    sim, ctrl = start(ros, lambda t, js: {g: np.full(sizes[g], moving[g] * (-1) ** i) for i, g in enumerate(groups)},
+                      groups=groups, robot=robot, frame_prefix='r1/', slip_drift=[0.02, -0.01, 0.03])
+    assert ros.spin_until(steps(ctrl, 60))
+    late = ros.add(Node('late_listener', context=ros.context))
+    texts = []
+    late.create_subscription(String, '/robot_description', lambda m: texts.append(m.data), DESCRIPTION_QOS)
+    assert ros.spin_until(lambda: texts, timeout=5.0), 'a late subscriber gets robot_description'
+    assert texts[0] == config.urdf_path.read_text()
+    assert sim.frames.publishing_tf == (TFMessage is not None)
+    assert not np.allclose(sim.world.odom_pose(), sim.world.base_pose(), atol=1e-3), 'odometry drifted'
+    names, pos, _ = sim.world.joint_state()
+    stamp = ctrl.ee_poses[-1].header.stamp
+    ee_position, ee_quat = sim.world.ee_pose()          # the state the transforms below are of
+    ee = FrameTransform('world', 'ee', np.asarray(ee_position), np.asarray(ee_quat)).matrix()
+    tfs = sim.frames.static_transforms(stamp) + sim.frames.dynamic_transforms(
+        stamp, dict(zip(names, pos.tolist())), sim.world.odom_pose(), sim.world.base_pose())
+    assert all(m.child_frame_id.startswith('r1/') for m in tfs)
+    assert {m.header.frame_id for m in tfs if not m.header.frame_id.startswith('r1/')} == {'world'}
+    assert len({m.child_frame_id for m in tfs}) == len(tfs), 'each frame has one parent'
+    np.testing.assert_allclose(_chain(tfs, 'world', 'r1/' + config.ee_frame), ee, atol=1e-6)
+    np.testing.assert_allclose(_chain(tfs, 'world', 'r1/' + config.base_link)[:2, 3], sim.world.base_pose()[:2],
+                               atol=1e-9)
+    assert ctrl.odom[-1].header.frame_id == 'r1/odom' and ctrl.odom[-1].child_frame_id == 'r1/' + config.base_link
+
+
+def test_tf_and_tf_static_go_out_where_tf2_msgs_can_be_imported(ros):
+    tf2 = pytest.importorskip('tf2_msgs.msg', reason='tf2_msgs has no PyPI wheel: TF needs a ROS 2 install')
+    from rclpy.node import Node
+    from wmm_control.nodes.robot_frames import DESCRIPTION_QOS
+
+    config = load_robot('steerable')
+    listener = ros.add(Node('tf_listener', context=ros.context))
+    static, dynamic = [], []
+    listener.create_subscription(tf2.TFMessage, '/tf_static', lambda m: static.extend(m.transforms), DESCRIPTION_QOS)
+    listener.create_subscription(tf2.TFMessage, '/tf', lambda m: dynamic.append(list(m.transforms)), 100)
+    sim, ctrl = start(ros, lambda t, js: {'arm': np.full(7, 0.2), 'steer': np.full(4, 0.3), 'drive': np.full(4, 4.0)})
+    assert ros.spin_until(lambda: static and len(dynamic) > 20 and ctrl.ee_poses)
+    by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): m for m in ctrl.ee_poses}
+    last = dynamic[-1]
+    ee = by_stamp[(last[0].header.stamp.sec, last[0].header.stamp.nanosec)]
+    np.testing.assert_allclose(_chain(static + last, 'world', config.ee_frame), _ee_matrix(ee), atol=1e-6)

@@ -55,3 +55,20 @@ def test_floor_and_height_reasons_name_the_numbers(workspaces):
     _, ws = workspaces['mecanum']
     assert 'below the floor (z = -0.4 m)' in ws.impossible([1.0, 0.0, -0.5])
     assert 'above the highest' in ws.impossible([1.0, 0.0, 5.0])
+
+
+def test_the_footprint_holds_every_base_box_and_no_more(model):
+    from wmm_control.kinematics.workspace import Workspace
+    workspace = Workspace(model)
+    corners = workspace.footprint()
+    assert corners.shape == (4, 2) and np.all(np.isfinite(corners))
+    (x0, y0), (x1, y1) = corners[0], corners[2]
+    assert x0 < 0.0 < x1 and y0 < 0.0 < y1
+    touched = set()
+    for _name, rot, centre, half in workspace.boxes:
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        xy = (centre + (signs * half) @ rot.T)[:, :2]
+        assert np.all(xy >= [x0 - 1e-12, y0 - 1e-12]) and np.all(xy <= [x1 + 1e-12, y1 + 1e-12])
+        touched |= {i for i, v in enumerate((x0, y0)) if np.any(np.isclose(xy[:, i], v))}
+        touched |= {i + 2 for i, v in enumerate((x1, y1)) if np.any(np.isclose(xy[:, i], v))}
+    assert touched == {0, 1, 2, 3}, 'each side of the rectangle touches a box'

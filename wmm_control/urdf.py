@@ -48,7 +48,8 @@ class UrdfJoint:
     """One ``<joint>``: its type, links, origin (parent frame), axis and ``<limit>``.
 
     ``lower``/``upper`` are ±inf for a continuous joint, None where the URDF has none;
-    ``velocity`` is None where the URDF has no ``<limit velocity>``.
+    ``velocity`` is None where the URDF has no ``<limit velocity>``; a mimic joint's position is
+    ``mimic_multiplier`` times the position of joint ``mimic`` plus ``mimic_offset``.
     """
 
     name: str
@@ -62,6 +63,8 @@ class UrdfJoint:
     upper: float | None
     velocity: float | None
     mimic: str | None
+    mimic_multiplier: float = 1.0
+    mimic_offset: float = 0.0
 
 
 class UrdfTree:
@@ -115,6 +118,9 @@ class UrdfTree:
             rpy = _floats(origin.get('rpy') if origin is not None else None, 3, (0, 0, 0))
             axis_el = elem.find('axis')
             axis = _floats(axis_el.get('xyz') if axis_el is not None else None, 3, (1, 0, 0))
+            mimic = elem.find('mimic')
+            multiplier = float(mimic.get('multiplier', 1.0)) if mimic is not None else 1.0
+            offset = float(mimic.get('offset', 0.0)) if mimic is not None else 0.0
             limit = elem.find('limit')
             lower = upper = velocity = None
             if limit is not None:
@@ -127,10 +133,10 @@ class UrdfTree:
             raise ConfigError(f'{where}: {exc}') from exc
         if jtype == 'continuous':
             lower, upper = -math.inf, math.inf
-        mimic = elem.find('mimic')
         return UrdfJoint(name=name, type=jtype, parent=parent.get('link'), child=child.get('link'),
                          xyz=xyz, rpy=rpy, axis=axis, lower=lower, upper=upper, velocity=velocity,
-                         mimic=mimic.get('joint') if mimic is not None else None)
+                         mimic=mimic.get('joint') if mimic is not None else None,
+                         mimic_multiplier=multiplier, mimic_offset=offset)
 
     # ------------------------------------------------------------------ structure
     def require_link(self, name: str, role: str) -> None:

@@ -11,7 +11,8 @@ experiments (:data:`MAIN_JOB`: Table II of Sorour et al. 2019 and Xing et al. §
 scenario's ``experiment`` section is simulated with every node in this process over real
 topics (``--engine nodes``, the default: ``wmm_sim`` in lockstep, ``swmr_controller``,
 ``redundancy_resolver``, ``goal_sequencer``), or with the same objects and no ROS in between
-(``--engine direct``, for quick sweeps). DIR receives ``metrics.json`` and the figures.
+(``--engine direct``, for quick sweeps). DIR receives ``metrics.json``, the figures and, with
+``--engine nodes``, one rosbag2 (MCAP) of all the topics of each run, ``rosbag2_<run>/``.
 """
 
 import argparse
@@ -19,6 +20,7 @@ import dataclasses
 import gc
 import json
 import resource
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -58,13 +60,20 @@ def _run_direct(scenario, run, progress):
                             label=run['name'], progress=lambda n: progress(n * world.dt))
 
 
-def _run_nodes(scenario, run, progress):
+def _run_nodes(scenario, run, progress, bag_dir=None):
     from wmm_control.experiments.ros_run import run_with_nodes
-    return run_with_nodes(scenario, run, progress=progress)
+    return run_with_nodes(scenario, run, progress=progress,
+                          bag_path=None if bag_dir is None else bag_path(bag_dir, run['name']))
 
 
-def run_experiment(scenario, runs=None, engine='nodes', show_progress=True):
-    """Simulate the runs of ``scenario``.
+def bag_path(out, run_name):
+    """The rosbag2 folder of run ``run_name`` in the output folder ``out``."""
+    return Path(out) / f'rosbag2_{run_name}'
+
+
+def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_dir=None):
+    """Simulate the runs of ``scenario``; with ``bag_dir`` (engine ``nodes``), each run is
+    recorded there as a rosbag2 (MCAP) of all its topics, :func:`bag_path`.
 
     Returns:
         (logs, summary): ``logs`` maps a run name to its RunLog; ``summary`` is the
@@ -77,13 +86,13 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True):
     selected = [r for r in scenario.runs if runs is None or r['name'] in runs]
     if not selected:
         raise WmmError(f'no run named {sorted(runs)}; the scenario has {[r["name"] for r in scenario.runs]}')
-    runner = _run_nodes if engine == 'nodes' else _run_direct
     logs, summary_runs = {}, {}
     dt = 0.025
     for run in selected:
         with tqdm(total=scenario.duration, desc=run['name'], unit='sim s', disable=not show_progress,
                   bar_format='{desc:<36} {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s [{elapsed}]') as bar:
-            log = runner(scenario, run, bar.update)
+            log = (_run_nodes(scenario, run, bar.update, bag_dir) if engine == 'nodes'
+                   else _run_direct(scenario, run, bar.update))
         logs[run['name']] = log
         entry = {
             'method': run['method'], 'feedback': run.get('feedback', 'ground_truth'),
@@ -94,6 +103,8 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True):
             'limits_exceeded': run_limit_report(log, robot, dt, tol=1e-6),
             'simulator_counters': log.sim_counters,
         }
+        if bag_dir is not None and engine == 'nodes':
+            entry['recording'] = str(bag_path(bag_dir, run['name']))
         if scenario.trajectory is not None:
             entry['tracking'] = trajectory_metrics(log, scenario, model, dt)
         else:
@@ -213,7 +224,11 @@ def _run_one(scenario, args, out):
           'ground truth', flush=True)
     start = time.perf_counter()
     runs = set(args.runs.split(',')) if args.runs else None
-    logs, summary = run_experiment(scenario, runs, engine=args.engine)
+    for run in scenario.runs:           # recordings of an earlier run into this folder
+        old = bag_path(out, run['name'])
+        if (old / 'metadata.yaml').is_file():
+            shutil.rmtree(old)
+    logs, summary = run_experiment(scenario, runs, engine=args.engine, bag_dir=out)
     total_sim = sum(len(log) * 0.025 for log in logs.values())
     elapsed = time.perf_counter() - start
     summary['experiment_wall_time_s'] = elapsed

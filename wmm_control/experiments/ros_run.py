@@ -102,7 +102,7 @@ class Recorder(Node):
 
     def _on_diag(self, msg):
         for status in msg.status:
-            if status.name == 'redundancy_resolver':
+            if status.name == '/redundancy_resolver':
                 self._row(msg)['diag'] = {kv.key: kv.value for kv in status.values}
                 self.final_status = self._row(msg)['diag']
                 if self.first_stall_s is None and self.final_status.get('goal_stalled') == 'True':
@@ -151,7 +151,7 @@ def private_domain_id():
     return 101 + os.getpid() % 100
 
 
-def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=None):
+def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=None, bag_path=None):
     """Run one entry of ``scenario.runs`` with every node in this process.
 
     Args:
@@ -160,6 +160,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         progress: optional callable ``progress(simulated_seconds)`` called as the run advances.
         wall_timeout: give up after this many wall seconds (default: ten times the duration).
         domain_id: ROS domain of the run; default :func:`private_domain_id`.
+        bag_path: a rosbag2 folder (MCAP) to record every topic of the run into
+            (:class:`~wmm_control.experiments.recording.BagRecorder`); None records nothing.
 
     Returns:
         The frozen :class:`RunLog` (``wall_time_s`` set).
@@ -179,7 +181,9 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     if feedback not in ('ground_truth', 'odometry'):
         raise ConfigError(f'run {run.get("name")}: feedback must be ground_truth or odometry, got {feedback!r}')
     resolver_params = dict(resolver_parameters(run), method=run['method'])
+    # No ~/markers: they are for rviz, on a steady-clock timer, and would not repeat from run to run.
     resolver_params.update(robot=str(robot.yaml_path), ee_feedback=feedback, diagnostics_period=1e-9,
+                           markers_period=0.0,
                            **LOCKSTEP_WAITS['redundancy_resolver'])
     sim_params = dict(scenario.sim or {})
     sim_params.update(robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0)
@@ -213,6 +217,12 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         nodes.append(recorder)
         sim = SimNode(context=context, parameter_overrides=params(sim_params))
         nodes.append(sim)
+        bag = None
+        if bag_path is not None:
+            from wmm_control.experiments.recording import BagRecorder
+            bag = BagRecorder(context, bag_path)
+            nodes.append(bag)
+            bag.subscribe_all()
         for node in nodes:
             executor.add_node(node)
         limit = wall_timeout if wall_timeout is not None else 10.0 * scenario.duration + 30.0
@@ -227,6 +237,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
                 raise ConfigError(f'run {run["name"]}: no progress after {limit:.0f} s wall time '
                                   f'(sim time {recorder.last_t:.3f} s)')
         recorder.flush()
+        if bag is not None:
+            bag.close()
         log.wall_time_s = time.perf_counter() - start
         log.final_status = recorder.final_status
         log.first_stall_s = recorder.first_stall_s

@@ -56,6 +56,18 @@ class Workspace:
             if obj.parentJoint == _ROOT_JOINT and half is not None:
                 self.boxes.append((obj.name, obj.placement.rotation.copy(), obj.placement.translation.copy(), half))
 
+    def footprint(self) -> np.ndarray:
+        """The base's footprint: the corners (counter-clockwise) of the rectangle, in the base
+        frame's x-y plane, that holds every base body box (the base frame's origin alone when
+        the URDF has none). Shape (4, 2) [m]."""
+        corners = [np.zeros(2)]
+        for _name, rot, centre, half in self.boxes:
+            signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+            corners.extend((centre + (signs * half) @ rot.T)[:, :2])
+        pts = np.array(corners)
+        (x0, y0), (x1, y1) = pts.min(axis=0), pts.max(axis=0)
+        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+
     def body_part_at(self, position, base_pose):
         """Name of the base part whose box holds the world ``position``, or None.
 

@@ -29,6 +29,7 @@ from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.parameter import Parameter as RosParameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time_source import TimeSource
@@ -42,7 +43,7 @@ RCLError = _rclpy.RCLError
 
 __all__ = [
     'Param', 'declare_parameters', 'load_defaults', 'robot_method', 'robot_param', 'robot_period', 'require_base', 'parameter_error', 'float_array', 'parse_command',
-    'Freshness', 'diagnostic_status', 'diagnostic_array', 'seconds', 'run_node', 'guard_clock',
+    'Freshness', 'diagnostic_status', 'node_status', 'diagnostic_array', 'seconds', 'run_node', 'guard_clock',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
     'BaseReference', 'JointStateWatchdog', 'StampGate', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
     'COMMAND_QOS', 'CLOCK_QOS', 'DIAGNOSTICS_QOS',
@@ -202,6 +203,9 @@ def _plain(value):
 def declare_parameters(node, yaml_name, specs, on_change=None, check=None):
     """Declare every parameter of ``specs``, defaults from ``config/<yaml_name>``, and keep them live.
 
+    An integer for a double parameter (``-p stall_time:=5``, ``ros2 param set NODE stall_time 5``)
+    is taken as that double, at start-up and at run time.
+
     A set at run time (``ros2 param set``, the SetParameters service) is validated by rclpy
     (type, read-only, scalar range) and by :func:`parameter_error` and ``check``; a refused one
     keeps the old value and answers with the reason. An accepted one updates the returned
@@ -241,6 +245,7 @@ def declare_parameters(node, yaml_name, specs, on_change=None, check=None):
             default = float(default)
         if isinstance(default, (list, tuple)) and not default:
             raise ConfigError(f'parameter {spec.name}: an empty list has no type; give a value')
+        _integer_override_as_double(node, spec.name, default)
         try:
             value = _plain(node.declare_parameter(spec.name, default, _descriptor(spec, default)).value)
         except (rclpy.exceptions.InvalidParameterValueException,
@@ -257,6 +262,30 @@ def declare_parameters(node, yaml_name, specs, on_change=None, check=None):
             raise ConfigError(reason)
     _watch(node, namespace, {s.name: s for s in specs}, on_change or {}, check)
     return namespace
+
+
+def _is_double(value) -> bool:
+    """True for a float, or a non-empty list of floats: a parameter of type DOUBLE or DOUBLE_ARRAY."""
+    if isinstance(value, (list, tuple, array.array)):
+        return bool(value) and all(isinstance(v, float) for v in value)
+    return isinstance(value, float)
+
+
+def _as_double(prm: RosParameter) -> RosParameter:
+    """``prm`` with its value as a double (array) when it is an integer (array), else ``prm``."""
+    if prm.type_ == RosParameter.Type.INTEGER:
+        return RosParameter(prm.name, RosParameter.Type.DOUBLE, float(prm.value))
+    if prm.type_ == RosParameter.Type.INTEGER_ARRAY:
+        return RosParameter(prm.name, RosParameter.Type.DOUBLE_ARRAY, [float(v) for v in prm.value])
+    return prm
+
+
+def _integer_override_as_double(node: 'rclpy.node.Node', name: str, default) -> None:
+    """An integer given at start-up (``-p stall_time:=5``, a params file's ``5``) for a double
+    parameter is taken as that double (rclpy refuses it: a type mismatch)."""
+    overrides = node._parameter_overrides      # rclpy's start-up values (command line, params files)
+    if name in overrides and _is_double(default):
+        overrides[name] = _as_double(overrides[name])
 
 
 def _watch(node, namespace, specs, on_change, check):
@@ -287,6 +316,13 @@ def _watch(node, namespace, specs, on_change, check):
                     on_change[prm.name](value)
                 node.get_logger().info(f'parameter {prm.name} set to {value}')
 
+    doubles = {name for name, spec in specs.items() if _is_double(getattr(namespace, name))}
+
+    def integers_as_doubles(params: list[RosParameter]) -> list[RosParameter]:
+        # ``ros2 param set NODE stall_time 5`` sends an integer: taken as 5.0 for a double parameter.
+        return [_as_double(prm) if prm.name in doubles else prm for prm in params]
+
+    node.add_pre_set_parameters_callback(integers_as_doubles)
     node.add_on_set_parameters_callback(validate)
     node.add_post_set_parameters_callback(apply)
 
@@ -355,6 +391,19 @@ def diagnostic_status(name, hardware_id, level, message, values):
     status.message = message
     status.values = [KeyValue(key=str(k), value=_kv(v)) for k, v in values.items()]
     return status
+
+
+def node_status(node: 'rclpy.node.Node', part: str, robot_name: str, level: str, message: str,
+                values: dict) -> DiagnosticStatus:
+    """A ``DiagnosticStatus`` of ``node`` that says which node sent it.
+
+    Its name is the node's fully qualified name, followed by ``: <part>`` when ``part`` is
+    given (``/r1/wmm_sim: simulation``); its hardware id is ``<robot_name> <fully qualified
+    name>``. Two robots in two namespaces, or a renamed node, are told apart on the shared
+    ``/diagnostics``.
+    """
+    fqn = node.get_fully_qualified_name()
+    return diagnostic_status(f'{fqn}: {part}' if part else fqn, f'{robot_name} {fqn}', level, message, values)
 
 
 def _kv(value):
@@ -444,7 +493,7 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
         previous = {sig: signal.signal(sig, lambda signum, _frame: stop.append(signum))
                     for sig in (signal.SIGINT, signal.SIGTERM)}
     _ignore_stop_signals_at_exit()
-    node = None
+    node = executor = None
     try:
         node = node_factory()
         executor = executor_factory()
@@ -462,7 +511,13 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
         # The stop handler stays in place until the node and the context are gone: a second
         # Ctrl-C or SIGTERM during the teardown (``ros2 launch`` sends SIGINT twice) is only
         # noted, instead of raising KeyboardInterrupt inside rclpy (an abort).
+        # The executor goes first, here: left to the garbage collector after the handlers are back,
+        # the events executor ran pending callbacks from its destructor, where a signal then raised
+        # KeyboardInterrupt inside rclpy (an abort under ``ros2 launch``).
         try:
+            if executor is not None:
+                executor.shutdown()
+                del executor
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()

@@ -57,8 +57,8 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import WheelController, unapplied_command
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, require_base,
-    robot_param, robot_period, run_node, seconds, twist_stamped)
+    StampedExchange, declare_parameters, diagnostic_array, float_array, guard_clock, require_base,
+    node_status, robot_param, robot_period, run_node, seconds, twist_stamped)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['MecanumControllerNode', 'main', 'main_differential']
@@ -90,6 +90,7 @@ class MecanumControllerNode(Node):
     def __init__(self, family='mecanum', **kwargs):
         super().__init__(f'{family}_controller', **kwargs)
         guard_clock(self)
+        self.family = family
         p = declare_parameters(self, f'{family}_controller.yaml', PARAMS, on_change={
             'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
             'joint_state_timeout': lambda v: self.watchdog.set_timeout(v)})
@@ -187,8 +188,8 @@ class MecanumControllerNode(Node):
                   'reference_age_s': ref.freshness.age(now), 'references_rejected': ref.rejected,
                   'joint_states_skipped': self.watchdog.skipped,
                   'measured_period_s': self.watchdog.stamps.measured_period, **self.counters}
-        return diagnostic_array(stamp, [diagnostic_status('mecanum_controller', 'mecanum base', level,
-                                                          out.status, values)])
+        return diagnostic_array(stamp, [node_status(self, '', f'{self.family} base', level,
+                                            out.status, values)])
 
 
 def main(args=None):

@@ -22,7 +22,10 @@ Publishes, every cycle:
   robot YAML's order;
   ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) every ``diagnostics_period``, stamped
   with the joint state of the cycle it reports: method, mode, ψ, errors, limit scales, σ_min,
-  compensation, cycle time, the commands sent, goal status.
+  compensation, cycle time, the commands sent, goal status;
+  ``~/markers`` (``visualization_msgs/MarkerArray``, frame ``world_frame``) every
+  ``markers_period`` of steady time: goal, reference, end-effector trail, base footprint
+  (:mod:`wmm_control.nodes.markers`).
 
 The exchange, one per period: on the joint state stamped S the resolver publishes the base
 reference stamped S, waits (steady clock, at most ``compensation_timeout``) for the feasible
@@ -61,16 +64,19 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import MultiDOFJointTrajectory
+from visualization_msgs.msg import MarkerArray
 
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
+from wmm_control.nodes.markers import MarkerSet
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, robot_method, robot_param,
+    declare_parameters, diagnostic_array, float_array, guard_clock, node_status, robot_method, robot_param,
     robot_period, run_node, stamp_key, twist_stamped)
 from wmm_control.resolvers import METHODS, PoseTarget, RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 from wmm_control.resolvers.progress import GoalProgress
+from wmm_control.viewer.scene import Trail
 
 __all__ = ['RedundancyResolverNode', 'main']
 
@@ -142,6 +148,8 @@ _SPECS = (
     Param('min_progress_ratio', 'Fraction [-] of its best value by which an error must fall within stall_time '
           'to count as progress (at least 1 mm / 1 mrad).', lo=0.0, hi=0.9),
     Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
+    Param('markers_period', 'Steady time [s] between ~/markers messages (goal, reference, end-effector trail, '
+          'base footprint for rviz); 0 = none.', lo=0.0, hi=60.0, read_only=True),
 )
 
 
@@ -217,6 +225,8 @@ class RedundancyResolverNode(Node):
         self.progress = GoalProgress(self._tolerance(p.goal_tolerance), p.stall_time, p.period,
                                      min_progress_ratio=p.min_progress_ratio)
         self._stall_logged = False
+        self._reached_logged = False
+        self._goal_cycles = 0
         self._next_diag = 0.0
         self.counters = {'cycles': 0, 'goals': 0, 'goals_rejected': 0, 'compensation_dropped': 0,
                          'stale_cycles': 0}
@@ -233,6 +243,13 @@ class RedundancyResolverNode(Node):
             self.create_subscription(TwistStamped, 'base/feasible_twist', self._on_feasible, COMMAND_QOS)
             self._wait = (self.create_timer(p.compensation_timeout, self._compensation_timeout, clock=self._steady,
                                             autostart=False) if p.compensation_timeout > 0 else None)
+        self._last_state = None
+        if p.markers_period > 0:
+            self._markers = MarkerSet(p.world_frame, self.workspace.footprint(), self.workspace.floor_z)
+            self._marker_model = KinematicModel(p.robot)     # the trail's FK, apart from the resolver's model
+            self._trail = Trail(max_points=2000, min_step=0.005)
+            self.pub_markers = self.create_publisher(MarkerArray, '~/markers', COMMAND_QOS)
+            self.create_timer(p.markers_period, self._publish_markers, clock=self._steady)
         self.watchdog = JointStateWatchdog(self, p.state_timeout, p.period, self._steady, self._stop, 'zero commands')
         self.get_logger().info(
             f'{p.method} on robot {self.model.config.name}: t_s {p.period} s, EE feedback {p.ee_feedback}, '
@@ -286,8 +303,7 @@ class RedundancyResolverNode(Node):
         self.target = PoseTarget(values[:3], rot)
         self._goal_key = key
         self._tracking = False
-        self.progress.start()
-        self._stall_logged = False
+        self._start_goal()
         self.counters['goals'] += 1
         self.get_logger().info(f'new goal: position {np.round(values[:3], 4).tolist()}, '
                                f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}')
@@ -318,7 +334,7 @@ class RedundancyResolverNode(Node):
         x, y, z, w = quat
         if not self._tracking:
             self.get_logger().info('tracking /ee_reference')
-            self.progress.start()
+            self._start_goal()
         self.target = PoseTarget(pose[:3], pin.Quaternion(w, x, y, z).toRotationMatrix(), velocity=vel, acceleration=acc)
         self._goal_key = None
         self._tracking = True
@@ -392,6 +408,7 @@ class RedundancyResolverNode(Node):
             ee = self._ee
         pose, twist = self._odom
         q, dq = arm
+        self._last_state = (pose, q, ee)
         return RobotState(pose, twist, q, dq, ee_position=None if ee is None else ee[0],
                           ee_rotation=None if ee is None else ee[1]), ''
 
@@ -420,7 +437,7 @@ class RedundancyResolverNode(Node):
         # Judged now, against the target the command was computed for: a new goal may come in
         # before the arm command goes out (it waits for the feasible twist).
         self.progress.update(command.diagnostics)
-        self._log_stall_once(command.diagnostics)
+        self._log_goal_status(command.diagnostics)
         self._publish_base(stamp, command.base_twist)
         if not self.resolver.uses_compensation:
             self._publish_arm(command, stamp)
@@ -483,9 +500,38 @@ class RedundancyResolverNode(Node):
         self._pending = None
         self._publish_zero(self.get_clock().now().to_msg())
 
+    # ------------------------------------------------------------------ markers
+    def _publish_markers(self) -> None:
+        """~/markers: the goal, the tracked reference, the end-effector trail, the base footprint."""
+        base = None
+        if self._last_state is not None:
+            base, q_arm, ee = self._last_state
+            if ee is None:
+                self._marker_model.update(base, q_arm)
+                ee = self._marker_model.ee_placement_world()
+            self._trail.add(ee[0])
+        target = None if self.target is None else (self.target.position, self.target.rotation)
+        stamp = self.get_clock().now().to_msg()
+        self.pub_markers.publish(self._markers.build(stamp, None if self._tracking else target,
+                                                     target if self._tracking else None, self._trail.points, base))
+
     # ------------------------------------------------------------------ status
-    def _log_stall_once(self, diag):
-        """Warn once when the goal stalls (again after it made progress)."""
+    def _start_goal(self) -> None:
+        """A new goal or trajectory: progress judged afresh, its reach and stall logged anew."""
+        self.progress.start()
+        self._stall_logged = False
+        self._reached_logged = False
+        self._goal_cycles = 0
+
+    def _log_goal_status(self, diag) -> None:
+        """Log once when a goal of /goal_pose is reached, and warn once when a goal stalls (again
+        after it made progress)."""
+        self._goal_cycles += 1
+        if self.progress.reached and not self._reached_logged and not self._tracking:
+            self.get_logger().info(f'goal reached: {diag.position_error:.4f} m, {diag.orientation_error:.4f} rad '
+                                   f'away after {self._goal_cycles * self.p.period:.2f} s '
+                                   f'({self._goal_cycles} cycles)')
+            self._reached_logged = True
         if not self.progress.stalled:
             self._stall_logged = False
         elif not self._stall_logged:
@@ -520,8 +566,8 @@ class RedundancyResolverNode(Node):
                                           f'rad; {self._no_progress()} (out of reach?)')
             else:
                 message = 'goal reached' if reached else d.mode
-        return diagnostic_array(stamp, [diagnostic_status('redundancy_resolver', self.model.config.name,
-                                                          level, message, values)])
+        return diagnostic_array(stamp, [node_status(self, '', self.model.config.name,
+                                            level, message, values)])
 
 
 def main(args=None):

@@ -54,8 +54,8 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams, unapplied_command
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, diagnostic_status, float_array, guard_clock, require_base,
-    robot_param, robot_period, run_node, seconds, twist_stamped)
+    StampedExchange, declare_parameters, diagnostic_array, float_array, guard_clock, require_base,
+    node_status, robot_param, robot_period, run_node, seconds, twist_stamped)
 from wmm_control.robot_config import load_robot
 
 __all__ = ['SwmrControllerNode', 'main']
@@ -191,8 +191,8 @@ class SwmrControllerNode(Node):
                   'reference': self.reference.value, 'references_rejected': self.reference.rejected,
                   'joint_states_skipped': self.watchdog.skipped, 'commands_not_applied': self.not_applied,
                   'measured_period_s': self.watchdog.stamps.measured_period}
-        return diagnostic_array(stamp, [diagnostic_status('swmr_controller', 'steerable base', level,
-                                                          out.status, values)])
+        return diagnostic_array(stamp, [node_status(self, '', 'steerable base', level,
+                                            out.status, values)])
 
 
 def main(args=None):

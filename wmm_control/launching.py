@@ -1,0 +1,97 @@
+"""What the launch files in ``launch/`` start: one robot's system, in a namespace or not.
+
+A robot's system is ``wmm_sim``, the base controller of its base family (``swmr_controller``
+for a steerable base, ``mecanum_controller``, ``differential_controller``), the
+``redundancy_resolver`` and, with ``viewer:=true``, ``wmm_viewer``. Every node gets the robot
+as its ``robot`` parameter (the robot YAML's path) and ``use_sim_time``. In a namespace
+(``/r1``), the nodes remap ``/clock`` to the simulator's ``/r1/clock`` and the simulator
+prefixes its TF frames with ``r1/``.
+
+Needs ``launch`` and ``launch_ros`` (a ROS 2 install, or the ``ros2`` command line put into the
+venv); the rest of the package does not import this module.
+"""
+
+from __future__ import annotations
+
+from launch import LaunchContext, LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+from wmm_control.errors import ConfigError
+from wmm_control.robot_config import load_robot
+
+__all__ = ['BASE_CONTROLLERS', 'robot_nodes', 'robot_launch_description', 'two_robots_launch_description',
+           'common_arguments']
+
+#: The base controller executable of each base family.
+BASE_CONTROLLERS = {'steerable': 'swmr_controller', 'mecanum': 'mecanum_controller',
+                    'differential': 'differential_controller'}
+
+
+def _flag(context: LaunchContext, name: str) -> bool:
+    value = LaunchConfiguration(name).perform(context).strip().lower()
+    if value not in ('true', 'false'):
+        raise ConfigError(f'launch argument {name}:={value!r}: expected true or false')
+    return value == 'true'
+
+
+def common_arguments() -> list[DeclareLaunchArgument]:
+    """``use_sim_time`` and ``viewer``, the arguments of every launch file."""
+    return [DeclareLaunchArgument('use_sim_time', default_value='false',
+                                  description='Every node on the simulator\'s clock (true or false).'),
+            DeclareLaunchArgument('viewer', default_value='false',
+                                  description='Also start wmm_viewer, the browser view (true or false).')]
+
+
+def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool) -> list[Node]:
+    """The nodes of one robot's system.
+
+    Args:
+        robot: a shipped robot's name or a robot YAML path (:func:`~wmm_control.robot_config.load_robot`).
+        namespace: '' or a namespace such as ``r1`` (no slashes).
+        use_sim_time: every node on the simulator's clock.
+        viewer: start ``wmm_viewer`` too.
+
+    Raises:
+        ConfigError: the robot cannot be loaded.
+    """
+    config = load_robot(robot)
+    common = {'robot': str(config.yaml_path), 'use_sim_time': use_sim_time}
+    remap = [('/clock', f'/{namespace}/clock')] if namespace else []
+    executables = [('wmm_sim', {'frame_prefix': f'{namespace}/' if namespace else ''}),
+                   (BASE_CONTROLLERS[config.base_type], {}), ('redundancy_resolver', {})]
+    if viewer:
+        executables.append(('wmm_viewer', {}))
+    return [Node(package='wmm_control', executable=exe, namespace=namespace or None, output='screen',
+                 parameters=[{**common, **extra}], remappings=remap)
+            for exe, extra in executables]
+
+
+def robot_launch_description(robot: str | None = None) -> LaunchDescription:
+    """One robot's system: ``robot`` fixed, or (None) taken from the ``robot:=`` argument."""
+    arguments = common_arguments()
+    if robot is None:
+        arguments.insert(0, DeclareLaunchArgument('robot', default_value='steerable', description=(
+            'A shipped robot (steerable, mecanum, ur_mecanum, panda_diff; A, B) or a robot YAML path.')))
+
+    def nodes(context: LaunchContext) -> list[Node]:
+        name = robot if robot is not None else LaunchConfiguration('robot').perform(context)
+        return robot_nodes(name, '', _flag(context, 'use_sim_time'), _flag(context, 'viewer'))
+
+    return LaunchDescription([*arguments, OpaqueFunction(function=nodes)])
+
+
+def two_robots_launch_description() -> LaunchDescription:
+    """Two robots in namespaces ``/r1`` and ``/r2`` (``robot1:=``, ``robot2:=``); the viewer
+    (``viewer:=true``) shows ``/r1``."""
+    arguments = [DeclareLaunchArgument('robot1', default_value='steerable', description='The robot in /r1.'),
+                 DeclareLaunchArgument('robot2', default_value='mecanum', description='The robot in /r2.'),
+                 *common_arguments()]
+
+    def nodes(context: LaunchContext) -> list[Node]:
+        sim_time, viewer = _flag(context, 'use_sim_time'), _flag(context, 'viewer')
+        return [*robot_nodes(LaunchConfiguration('robot1').perform(context), 'r1', sim_time, viewer),
+                *robot_nodes(LaunchConfiguration('robot2').perform(context), 'r2', sim_time, False)]
+
+    return LaunchDescription([*arguments, OpaqueFunction(function=nodes)])
