@@ -200,7 +200,9 @@ def test_goal_sequencer_plays_the_scenario_on_sim_time():
         assert ros.spin_until(lambda: sim.world.time >= 21.0, timeout=60.0)
         xs = [(stamp_s(g), g.pose.position.y) for g in goals]
         first_switch = next(t for t, y in xs if abs(y - 1.3) < 1e-9)
-        assert xs[0][1] == pytest.approx(1.5) and first_switch == pytest.approx(20.0, abs=0.03)
+        # The simulator runs free (1 ms of wall time per 25 ms period), so the sequencer's
+        # sim-time timer may fire a few periods late on a loaded machine: 4 periods allowed.
+        assert xs[0][1] == pytest.approx(1.5) and first_switch == pytest.approx(20.0, abs=0.1)
     finally:
         ros.close()
 

@@ -182,7 +182,8 @@ class MecanumControllerNode(Node):
         level = 'warn' if out.status == 'braking' and np.any(ref.value) else 'ok'
         lim = self.controller.params.wheel_rate_limit
         values = {'status': out.status, 'velocity_scale': out.velocity_scale, 'accel_scale': out.accel_scale,
-                  'reference': ref.value, 'reference_limited': out.reference, 'feasible_twist': out.twist,
+                  'reference': ref.value, 'reference_dropped': out.dropped, 'reference_limited': out.reference,
+                  'feasible_twist': out.twist,
                   'wheel_rates': out.wheel_rates,
                   'wheel_rate_ratio': float(np.max(np.abs(out.wheel_rates))) / lim,
                   'reference_age_s': ref.freshness.age(now), 'references_rejected': ref.rejected,
