@@ -374,9 +374,10 @@ class KinematicModel:
     def _manipulability_derivatives(self, rows):
         """(∇H (7,), ∇²H (7, 7)) over q_m, from J_m alone; cached per ``rows`` until :meth:`update`.
 
-        Revolute serial chain, world axes: column i of J_m is ``J_i = (v_i, w_i)``, with
-        ``w_i`` the joint axis and ``v_i = w_i × (p_e − p_i)``. Moving joint k rotates the
-        chain beyond it about its axis, so
+        Serial chain, world axes: column i of J_m is ``J_i = (v_i, w_i)``, with ``w_i`` the
+        joint axis and ``v_i = w_i × (p_e − p_i)`` for a revolute joint, ``(u_i, 0)`` for a
+        prismatic one along u_i. Moving a revolute joint k rotates the chain beyond it about
+        its axis (a prismatic one translates it, which w_k = 0 expresses in every term), so
 
         * ``∂J_i/∂q_k = (w_k × v_i, w_k × w_i)`` for k ≤ i, ``(w_i × v_k, 0)`` for k > i;
         * for l ≤ k: ``∂²J_i/∂q_l∂q_k = w_l × (w_k × J_i)`` (both halves) for k ≤ i,
@@ -396,8 +397,7 @@ class KinematicModel:
         − Σ_{i<k} (w_l·w_i)(a_i·v_k)``, with ``S_k = Σ_{i≥k} (a_i v_iᵀ + b_i w_iᵀ)``,
         ``R_l = Σ_{i<l} a_i w_iᵀ`` and ``c_l = tr R_l``: running sums of 3×3 matrices.
 
-        Raises:
-            numpy.linalg.LinAlgError: ``M`` is singular.
+        At an exact singularity of ``M`` the derivatives are those of det(M + εI), ε = 1e-12 tr M.
         """
         self._require()
         cached = self._manip_cache.get(rows)
@@ -412,7 +412,13 @@ class KinematicModel:
         m = jm @ jm.T
         lu, piv, minv, info = lapack.dgesv(m, _EYE[nr])
         if info != 0:
-            raise np.linalg.LinAlgError(f'Singular matrix (dgesv info {info})')
+            # Exactly singular (a square arm Jacobian, e.g. six joints and six rows, at a
+            # singularity): the derivatives of det(M + εI), ε = 1e-12 tr M, the limit of which
+            # they approach; they point the way out of the singularity.
+            m = m + (1e-12 * max(np.trace(m), 1e-300)) * _EYE[nr]
+            lu, piv, minv, info = lapack.dgesv(m, _EYE[nr])
+            if info != 0:
+                raise np.linalg.LinAlgError(f'Singular matrix (dgesv info {info})')
         h = lu.diagonal().prod()
         if np.count_nonzero(piv != _PIVOT_ID[nr]) % 2:
             h = -h
