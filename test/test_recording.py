@@ -82,3 +82,30 @@ def test_wmm_experiment_writes_a_recording_beside_metrics_json(tmp_path):
     assert metrics['runs']['ts']['recording'] == str(bag_path(out, 'ts'))
     with Reader(bag_path(out, 'ts')) as reader:
         assert {c.topic: c.msgcount for c in reader.connections}['/joint_states'] >= 20
+
+
+def test_an_experiment_run_can_be_watched_live_in_the_browser(tmp_path):
+    """``wmm_experiment --view``: the viewer serves its page while the run goes on, and the
+    run's results are those of a run without it (the viewer only listens and draws)."""
+    import socket
+    import urllib.request
+
+    path = tmp_path / 'viewed.yaml'
+    path.write_text(SCENARIO.format(duration=2.0))
+    scenario = load_scenario(path)
+    with socket.socket() as sock:
+        sock.bind(('127.0.0.1', 0))
+        port = sock.getsockname()[1]
+    pages = []
+
+    def progress(_seconds):
+        if not pages:
+            with urllib.request.urlopen(f'http://127.0.0.1:{port}/', timeout=10) as resp:
+                pages.append((resp.status, resp.read(2000).decode(errors='replace')))
+
+    viewed = run_with_nodes(scenario, scenario.runs[0], progress=progress, view_port=port)
+    plain = run_with_nodes(scenario, scenario.runs[0])
+    assert pages and pages[0][0] == 200 and '<html' in pages[0][1].lower()
+    np.testing.assert_array_equal(viewed.q_arm, plain.q_arm)
+    with pytest.raises(SystemExit):
+        experiment_main(['--scenario', str(path), '--view', '--engine', 'direct', '--out', str(tmp_path)])

@@ -60,10 +60,10 @@ def _run_direct(scenario, run, progress):
                             label=run['name'], progress=lambda n: progress(n * world.dt))
 
 
-def _run_nodes(scenario, run, progress, bag_dir=None):
+def _run_nodes(scenario, run, progress, bag_dir=None, view_port=None):
     from wmm_control.experiments.ros_run import run_with_nodes
     return run_with_nodes(scenario, run, progress=progress,
-                          bag_path=None if bag_dir is None else bag_path(bag_dir, run['name']))
+                          bag_path=None if bag_dir is None else bag_path(bag_dir, run['name']), view_port=view_port)
 
 
 def bag_path(out, run_name):
@@ -71,7 +71,7 @@ def bag_path(out, run_name):
     return Path(out) / f'rosbag2_{run_name}'
 
 
-def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_dir=None):
+def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_dir=None, view_port=None):
     """Simulate the runs of ``scenario``; with ``bag_dir`` (engine ``nodes``), each run is
     recorded there as a rosbag2 (MCAP) of all its topics, :func:`bag_path`.
 
@@ -91,7 +91,7 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_
     for run in selected:
         with tqdm(total=scenario.duration, desc=run['name'], unit='sim s', disable=not show_progress,
                   bar_format='{desc:<36} {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s [{elapsed}]') as bar:
-            log = (_run_nodes(scenario, run, bar.update, bag_dir) if engine == 'nodes'
+            log = (_run_nodes(scenario, run, bar.update, bag_dir, view_port) if engine == 'nodes'
                    else _run_direct(scenario, run, bar.update))
         logs[run['name']] = log
         entry = {
@@ -228,7 +228,8 @@ def _run_one(scenario, args, out):
         old = bag_path(out, run['name'])
         if (old / 'metadata.yaml').is_file():
             shutil.rmtree(old)
-    logs, summary = run_experiment(scenario, runs, engine=args.engine, bag_dir=out)
+    logs, summary = run_experiment(scenario, runs, engine=args.engine, bag_dir=out,
+                                   view_port=args.view_port if args.view else None)
     total_sim = sum(len(log) * 0.025 for log in logs.values())
     elapsed = time.perf_counter() - start
     summary['experiment_wall_time_s'] = elapsed
@@ -254,7 +255,12 @@ def main(argv=None):
                         help='nodes: every node in one process over topics; direct: no ROS (default: nodes)')
     parser.add_argument('--seed', type=int, help="seed of the simulator's slip noise (default: the scenario's)")
     parser.add_argument('--no-figures', action='store_true', help='skip the plots and renders')
+    parser.add_argument('--view', action='store_true',
+                        help='show each run live in the browser (wmm_viewer; engine nodes): open the URL it logs')
+    parser.add_argument('--view-port', type=int, default=8080, help='HTTP port of --view (default: %(default)s)')
     args = parser.parse_args(argv)
+    if args.view and args.engine != 'nodes':
+        parser.error('--view shows the nodes engine: drop --engine direct')
     try:
         names = [args.scenario] if args.scenario else (list(MAIN_JOB) if args.name == 'all' else [args.name])
         matrix = {}

@@ -151,7 +151,7 @@ def private_domain_id():
     return 101 + os.getpid() % 100
 
 
-def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=None, bag_path=None):
+def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=None, bag_path=None, view_port=None):
     """Run one entry of ``scenario.runs`` with every node in this process.
 
     Args:
@@ -162,6 +162,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         domain_id: ROS domain of the run; default :func:`private_domain_id`.
         bag_path: a rosbag2 folder (MCAP) to record every topic of the run into
             (:class:`~wmm_control.experiments.recording.BagRecorder`); None records nothing.
+        view_port: serve the live browser view of the run (``wmm_viewer``) on this HTTP port;
+            None: no viewer.
 
     Returns:
         The frozen :class:`RunLog` (``wall_time_s`` set).
@@ -223,6 +225,10 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
             bag = BagRecorder(context, bag_path)
             nodes.append(bag)
             bag.subscribe_all()
+        if view_port is not None:
+            from wmm_control.nodes.viewer import ViewerNode
+            nodes.append(ViewerNode(context=context, parameter_overrides=params(
+                {'robot': str(robot.yaml_path), 'port': int(view_port)})))
         for node in nodes:
             executor.add_node(node)
         limit = wall_timeout if wall_timeout is not None else 10.0 * scenario.duration + 30.0
