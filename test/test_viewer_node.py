@@ -113,3 +113,23 @@ def test_a_robot_yaml_path_and_use_sim_time_without_a_clock(ros):
 def test_invalid_parameters_fail_with_a_clear_error(ros, params, message):
     with pytest.raises(ConfigError, match=message):
         ViewerNode(context=ros.context, parameter_overrides=overrides(**{'port': 18100, **params}))
+
+
+def test_two_robots_in_namespaces_the_viewer_of_one_draws_that_robot_only(ros):
+    """Robot A in /r1 and robot B in /r2 in one domain, a viewer in /r1: it draws robot A (its
+    URDF), and its base follows /r1's simulator, not /r2's."""
+    r1 = ros.add(SimNode(context=ros.context, namespace='/r1', parameter_overrides=overrides(
+        start_base_pose=[1.0, 2.0, 0.3])))
+    ros.add(SimNode(context=ros.context, namespace='/r2', parameter_overrides=overrides(
+        robot='mecanum', start_base_pose=[-3.0, -1.0, -0.5])))
+    view = ros.add(ViewerNode(context=ros.context, namespace='/r1', parameter_overrides=overrides(
+        host='127.0.0.1', port=18081)))
+    assert ros.spin_until(lambda: view.base_source() == 'ground_truth' and view._ee is not None)
+    ros.spin_for(0.3)
+    assert view.robot.name == 'steerable'
+    x, y, theta = r1.world.base_pose()
+    position, wxyz = view._base_pose()
+    assert np.asarray(position)[:2] == pytest.approx([x, y], abs=1e-6)
+    assert 2.0 * math.atan2(wxyz[3], wxyz[0]) == pytest.approx(theta, abs=1e-6)
+    pos, _ = r1.world.ee_pose()
+    assert view._ee[0] == pytest.approx(pos, abs=1e-6)
