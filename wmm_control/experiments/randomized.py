@@ -198,14 +198,16 @@ def _run_nodes(robot, run, goal, duration):
 def _limit_use(log, robot, dt):
     """How much of each limit the run used: the largest |value| / limit (<= 1 within) and the
     smallest distance of an arm joint to a position limit [rad]."""
-    arm, base = robot.arm, robot.base
-    arm_cmd, base_ref = log.arm_command, log.base_reference
+    arm, base, axes = robot.arm, robot.base, list(robot.base_axes)
+    # (a differential base's vy has a zero limit: any vy at all is a limit passed, which
+    # run_limit_report counts; the use is taken over the axes the base follows)
+    arm_cmd, base_ref = log.arm_command, log.base_reference[:, axes]
     use = {
         'arm_velocity': float(np.max(np.abs(arm_cmd) / arm.velocity)),
         'arm_acceleration': float(np.max(np.abs(np.diff(arm_cmd, axis=0, prepend=0.0)) / (arm.acceleration * dt))),
-        'base_velocity': float(np.max(np.abs(base_ref) / base.velocity)),
+        'base_velocity': float(np.max(np.abs(base_ref) / base.velocity[axes])),
         'base_acceleration': float(np.max(np.abs(np.diff(base_ref, axis=0, prepend=0.0))
-                                          / (base.acceleration * dt))),
+                                          / (base.acceleration[axes] * dt))),
     }
     margin = np.minimum(log.q_arm - arm.position_lower, arm.position_upper - log.q_arm)
     finite = np.isfinite(margin)
