@@ -533,7 +533,7 @@ class SimWorld(OwnedClient):
 
     def _physics_substep(self, vel, odometry=True):
         cid, body = self._cid, self.body_id
-        if not self._steerable:
+        if self.robot.mecanum is not None:      # the roller tyre model of Mecanum wheels
             self._apply_tyre_forces()
         p.stepSimulation(physicsClientId=cid)
         if odometry:

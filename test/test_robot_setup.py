@@ -265,3 +265,19 @@ def test_manipulability_derivatives_hold_for_a_prismatic_joint_and_a_square_sing
     assert ur.manipulability('full') < 1e-12
     assert np.all(np.isfinite(ur.manipulability_gradient('full')))
     assert np.all(np.isfinite(ur.manipulability_hessian('full')))
+
+
+@pytest.mark.parametrize('robot', ['ur_mecanum', 'panda_diff'])
+def test_the_new_robots_reach_a_goal_that_needs_the_base_with_wheel_contact_physics(robot):
+    """base_mode physics: the Mecanum roller tyre model for ur_mecanum, plain wheels with
+    friction and frictionless casters for panda_diff."""
+    cfg = load_robot(robot)
+    with SimWorld(cfg, base_mode='physics') as world:
+        loop = ClosedLoop(world, make_resolver('amp', cfg))
+        p0, q0 = world.ee_pose()
+        goal = np.asarray(p0) + [0.8, 0.3, 0.0]
+        target = PoseTarget(goal, _rotation(q0))
+        for _ in range(1200):
+            loop.step(target)
+        assert np.linalg.norm(np.asarray(world.ee_pose()[0]) - goal) < 0.01
+        assert np.hypot(*world.base_pose()[:2]) > 0.3          # the base carried it

@@ -131,7 +131,7 @@ def goal_metrics(log, scenario, model, r_fm, q_dex, dt):
         scenario: its :class:`~wmm_control.experiments.scenario.Scenario`.
         model: a :class:`~wmm_control.kinematics.KinematicModel` of the robot (footprint).
         r_fm: fine manipulation range [m].
-        q_dex: dexterous arm posture [rad]. Shape (7,).
+        q_dex: dexterous arm posture [rad or m]. Shape (n,).
         dt: control period [s].
 
     Returns:

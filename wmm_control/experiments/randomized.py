@@ -89,7 +89,7 @@ class RandomGoal:
     Attributes:
         index: its number in the draw.
         base_pose: base pose (x, y, θ) of the configuration it comes from [m, m, rad]. Shape (3,).
-        q_arm: arm configuration it comes from [rad]. Shape (7,).
+        q_arm: arm configuration it comes from [rad or m]. Shape (n,).
         pose: the goal [x, y, z, roll, pitch, yaw], world frame [m, rad]. Shape (6,).
         draws: configurations drawn for it (the rejected ones included).
     """

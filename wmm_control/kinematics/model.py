@@ -1,7 +1,7 @@
 """Kinematic model of a wheeled mobile manipulator, on pinocchio.
 
 The generalized coordinates are ``q = (x_b, y_b, θ_b, q_m)``: the planar base pose in
-the world frame followed by the 7 arm joints (Xing eq 2). The wheel-side joints of the
+the world frame followed by the n arm joints (Xing eq 2). The wheel-side joints of the
 URDF (steer, drive, Mecanum wheels) are locked out of this model: they do not move the
 end effector.
 
@@ -11,8 +11,8 @@ Quantities (Sorour §II, Xing §2 and appendices A–B):
 * ``J_a``: arm geometric Jacobian in the base frame (Sorour eq 1). Shape (6, 7);
 * ``H``: the base-to-end-effector velocity map of Sorour eq (4). Shape (6, 6);
 * ``J_mm = M_RPY [H J_b, J_a]`` (eq 7), with ``M_RPY = blockdiag(I, Ω⁻¹)``, the RPY rates
-  of the base-frame end-effector orientation. Shape (6, 13);
-* ``J``: world-frame Jacobian over ``q`` (Xing eq 2) and ``J̇q̇`` (eq 4). Shapes (6, 10), (6,);
+  of the base-frame end-effector orientation. Shape (6, 6 + n);
+* ``J``: world-frame Jacobian over ``q`` (Xing eq 2) and ``J̇q̇`` (eq 4). Shapes (6, 3 + n), (6,);
 * manipulability ``det(J_m J_mᵀ)``, its gradient and Hessian over ``q_m``, and
   ``σ_min(J_m)``; ``J_m`` is the arm Jacobian (position rows, or all six).
 
@@ -84,7 +84,7 @@ def angles_to_pin_q(model, joint_angles):
 
 
 class KinematicModel:
-    """Kinematics of one robot: base pose + 7 arm joints → end effector.
+    """Kinematics of one robot: base pose + n arm joints → end effector.
 
     Args:
         robot: robot name (``'steerable'``/``'A'``, ``'mecanum'``/``'B'``), YAML path, or
@@ -172,10 +172,10 @@ class KinematicModel:
 
     # ------------------------------------------------------------------ update
     def configuration(self, base_pose, q_arm):
-        """Pinocchio configuration vector for a base pose (x, y, θ) and arm angles (7,).
+        """Pinocchio configuration vector for a base pose (x, y, θ) and arm joint values (n,).
 
         Returns:
-            (q_pin, flat): pinocchio's configuration and the (10,) vector (x, y, θ, q_m).
+            (q_pin, flat): pinocchio's configuration and the (3 + n,) vector (x, y, θ, q_m).
         """
         flat = np.empty(self.nv)
         flat[:N_BASE] = _checked(base_pose, N_BASE, 'base_pose')
@@ -195,10 +195,10 @@ class KinematicModel:
 
         Args:
             base_pose: (x, y, θ) of the base in the world [m, m, rad]. Shape (3,).
-            q_arm: arm joint angles [rad]. Shape (7,).
+            q_arm: arm joint values [rad or m]. Shape (n,).
             base_rate: (ẋ, ẏ, θ̇) world-frame base rates [m/s, m/s, rad/s]. Shape (3,).
                 Needed, with ``dq_arm``, for :meth:`jdot_qdot`.
-            dq_arm: arm joint rates [rad/s]. Shape (7,).
+            dq_arm: arm joint rates [rad/s or m/s]. Shape (n,).
 
         Raises:
             ShapeError, NonFiniteError: on a wrong size or a NaN/inf entry.
@@ -281,7 +281,7 @@ class KinematicModel:
     def jacobian_world(self):
         """World-frame Jacobian over (x_b, y_b, θ_b, q_m) at the end-effector point (Xing eq 2).
 
-        Rows: linear then angular velocity, world axes. Shape (6, 10).
+        Rows: linear then angular velocity, world axes. Shape (6, 3 + n).
         """
         self._require()
         return self._jac.copy()
@@ -306,7 +306,7 @@ class KinematicModel:
         return h
 
     def jmm(self, damping=1e-6):
-        """Sorour eq (7): ``J_mm = M_RPY [H J_b, J_a]`` with J_b = I₆. Shape (6, 13).
+        """Sorour eq (7): ``J_mm = M_RPY [H J_b, J_a]`` with J_b = I₆. Shape (6, 6 + n).
 
         ``M_RPY = blockdiag(I₃, Ω⁻¹)`` at the RPY angles of the base-frame EE
         orientation, Ω⁻¹ damped by ``damping`` (see :func:`rpy_rate_map`).
@@ -350,7 +350,7 @@ class KinematicModel:
         return float(np.linalg.det(jm @ jm.T))
 
     def manipulability_gradient(self, rows='position'):
-        """∂H/∂q_m of ``H = det(J_m J_mᵀ)`` (Xing appendix A). Shape (7,).
+        """∂H/∂q_m of ``H = det(J_m J_mᵀ)`` (Xing appendix A). Shape (n,).
 
         ``∂H/∂q_k = H tr(M⁻¹ ∂M/∂q_k)`` with ``M = J_m J_mᵀ``; exact, in closed form (see
         :meth:`_manipulability_derivatives`). Computed with the Hessian and kept until the
@@ -362,7 +362,7 @@ class KinematicModel:
         return self._manipulability_derivatives(rows)[0].copy()
 
     def manipulability_hessian(self, rows='position'):
-        """∂²H/∂q_m² of ``H = det(J_m J_mᵀ)`` (Xing appendix B). Shape (7, 7), symmetric.
+        """∂²H/∂q_m² of ``H = det(J_m J_mᵀ)`` (Xing appendix B). Shape (n, n), symmetric.
 
         Exact, in closed form; shares one evaluation with :meth:`manipulability_gradient`.
 
@@ -372,7 +372,7 @@ class KinematicModel:
         return self._manipulability_derivatives(rows)[1].copy()
 
     def _manipulability_derivatives(self, rows):
-        """(∇H (7,), ∇²H (7, 7)) over q_m, from J_m alone; cached per ``rows`` until :meth:`update`.
+        """(∇H (n,), ∇²H (n, n)) over q_m, from J_m alone; cached per ``rows`` until :meth:`update`.
 
         Serial chain, world axes: column i of J_m is ``J_i = (v_i, w_i)``, with ``w_i`` the
         joint axis and ``v_i = w_i × (p_e − p_i)`` for a revolute joint, ``(u_i, 0)`` for a

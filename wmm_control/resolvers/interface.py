@@ -159,7 +159,7 @@ class ResolverCommand:
     """One period's command.
 
     Attributes:
-        arm_velocity: arm joint velocities [rad/s]. Shape (7,).
+        arm_velocity: arm joint velocities [rad/s or m/s]. Shape (n,).
         base_twist: base twist reference (vx, vy, ω) in the base frame [m/s, m/s, rad/s].
             Shape (3,).
         diagnostics: :class:`ResolverDiagnostics`.

@@ -231,7 +231,7 @@ class PoseServoResolver(Resolver):
 
         Returns:
             (jac, p_ref, position_error (3,) world, orientation_error_angle [rad]):
-            ``jac`` Shape (6, 10) over u = (vx, vy, ω, q̇_a); ``p_ref`` Shape (6,).
+            ``jac`` Shape (6, n_b + n) over u = (base axes, q̇_a): (vx, vy, ω), or (vx, ω) for a differential base; ``p_ref`` Shape (6,).
         """
         p = self.params
         model = self.model
@@ -301,13 +301,13 @@ class PoseServoResolver(Resolver):
         nothing held the result is the plain solution, to the bit.
 
         Args:
-            jac: J over u = (vx, vy, ω, q̇_a). Shape (6, 10).
+            jac: J over u = (base axes, q̇_a). Shape (6, n_b + n).
             p_ref: ṗ_ref. Shape (6,).
-            q_arm: arm positions [rad]. Shape (7,).
-            activation: the diagonal of A (default all ones). Shape (10,).
+            q_arm: arm positions [rad or m]. Shape (n,).
+            activation: the diagonal of A (default all ones). Shape (n_b + n,).
 
         Returns:
-            Shape (10,).
+            Shape (n_b + n,).
         """
         task = damped_pinv_solve(jac, p_ref, self.task_damping(jac, activation), activation)
         p = self.params
@@ -355,7 +355,7 @@ class PoseServoResolver(Resolver):
     # ------------------------------------------------------------------ step
     @abstractmethod
     def _resolve(self, jac, p_ref, e_pos, state):
-        """The method's inversion: ``(u_task (10,), u_null (10,) or None, mode, ψ)``."""
+        """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ)``."""
 
     def step(self, state, target):
         """One period: eq (12), the method's inversion, then the limits.
@@ -405,7 +405,7 @@ class PoseServoResolver(Resolver):
         """Eq (14)'s arm term ``J_a⁺ M_RPY H J_b (q̇_ref(b) − q̇_bf)`` on this period's Jacobian.
 
         ``J_a`` is the arm's part of the same task Jacobian (analytic in ``'rpy'`` mode), its
-        pseudo-inverse damped by :func:`singularity_damping`. Shape (7,).
+        pseudo-inverse damped by :func:`singularity_damping`. Shape (n,).
         """
         jac = self._jac
         gap = np.asarray(base_reference, dtype=float) - np.asarray(feasible_twist, dtype=float)

@@ -123,7 +123,7 @@ class TaskSharingResolver(PoseServoResolver):
         A joint that the pull would drive past its braking bound (Xing eqs 7–8) is held
         still by adding its selection row to J and projecting again, so the motion stays in
         the null space of the task (the end effector does not move) instead of being
-        clipped out of it. Shape (10,).
+        clipped out of it. Shape (n_b + n,).
         """
         p = self.params
         n, nb = self.n, self.n_base
