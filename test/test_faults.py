@@ -354,8 +354,11 @@ def _answers_from_rest_after_the_stall(run, controller, limit):
     step = np.asarray(limit) * PERIOD
     assert len(twist) > 10
     assert np.all(np.abs(twist[0]) <= RESUME_FACTOR * step + 1e-12), np.abs(twist[0]) / step
-    assert np.all(np.abs(np.diff(twist, axis=0)) <= RESUME_FACTOR * step + 1e-12), \
-        np.abs(np.diff(twist, axis=0)).max(axis=0) / step
+    jumps = np.abs(np.diff(twist, axis=0))
+    worst = int(np.argmax(jumps.max(axis=1) / step.max()))
+    context = [(answers[first + k][0], twist[k].round(5).tolist(), run.rec.base_at_rest.get(answers[first + k][0]))
+               for k in range(max(worst - 2, 0), min(worst + 3, len(twist)))]
+    assert np.all(jumps <= RESUME_FACTOR * step + 1e-12), (jumps.max(axis=0) / step, context)
     assert [m for t, name, m in run.rec.logs if name == controller and t > resumed and 'not applied' in m]
 
 
