@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from sim_bridge.closed_loop import ClosedLoop, _rotation
 from sim_bridge.world import SimWorld
 from urdf_factory import write_urdf
-from wmm_control.base import DifferentialKinematics, WheelController
+from wmm_control.base import DifferentialKinematics, WheelController, WheelParams
 from wmm_control.cli import robot_setup
 from wmm_control.errors import ConfigError
 from wmm_control.resolvers import PoseTarget, make_resolver
@@ -181,7 +181,6 @@ _twist = st.tuples(*(st.floats(-3.0, 3.0, allow_nan=False) for _ in range(3)))
 @given(st.lists(_twist, min_size=1, max_size=40))
 def test_differential_wheel_rates_never_imply_a_sideways_velocity_and_keep_their_limits(references):
     kin = DifferentialKinematics(wheel_radius=0.1, track=0.5)
-    from wmm_control.base.wheel_controller import WheelParams
     params = WheelParams(dt=0.025, velocity_limit=(0.6, 0.0, 2.4), accel_limit=(0.6, 0.0, 2.4), wheel_rate_limit=12.0)
     ctrl = WheelController(kin, params)
     prev = np.zeros(3)
@@ -199,8 +198,8 @@ def test_differential_wheel_rates_never_imply_a_sideways_velocity_and_keep_their
 
 def test_differential_controller_follows_the_forward_and_turning_part_of_a_reference():
     kin = DifferentialKinematics(wheel_radius=0.1, track=0.5)
-    ctrl = WheelController(kin, __import__('wmm_control.base.wheel_controller', fromlist=['WheelParams']).WheelParams(
-        dt=0.025, velocity_limit=(0.6, 0.0, 2.4), accel_limit=(0.6, 0.0, 2.4), wheel_rate_limit=12.0))
+    ctrl = WheelController(kin, WheelParams(dt=0.025, velocity_limit=(0.6, 0.0, 2.4), accel_limit=(0.6, 0.0, 2.4),
+                                            wheel_rate_limit=12.0))
     for _ in range(200):
         out = ctrl.step([0.3, 0.2, -0.5])
     np.testing.assert_allclose(out.twist, [0.3, 0.0, -0.5], atol=1e-12)
