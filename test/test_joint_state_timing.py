@@ -23,7 +23,7 @@ from ros_helpers import overrides, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
-from wmm_control.nodes.common import STATE_SUB_QOS, StampGate, twist_stamped
+from wmm_control.nodes.common import StampGate, twist_stamped
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 from wmm_control.robot_config import load_robot
 
@@ -117,33 +117,37 @@ def twist_of(msg):
 
 
 def test_a_second_publisher_replaying_the_simulators_states_runs_no_second_cycle(ros):
-    """A lockstep simulator and the Mecanum controller; a second publisher echoes every joint
-    state the simulator sends (same stamp): one feasible twist per stamp, and the duplicates
-    are logged with the number of publishers."""
+    """A real-time simulator and the Mecanum controller; a second publisher echoes every joint
+    state the simulator sends (same stamp), once the controller has answered it: one feasible
+    twist per stamp, and the duplicates are logged with the number of publishers. (Echoed at
+    once, or to a lockstep simulator that steps on the answer, the copy would meet the next
+    state in the controller's queue, which keeps only the newest.)"""
     probe = ros.add(Probe(ros.context))
     echo = ros.add(Node('echo', context=ros.context))
     pub = echo.create_publisher(JointState, '/joint_states', 10)
-    echoed = set()
+    states, echoed = {}, set()
 
-    def echo_once(msg):              # its own copies come back to it: each stamp is echoed once
-        if stamp_s(msg) not in echoed:
-            echoed.add(stamp_s(msg))
+    def keep(msg):                   # its own copies come back to it: each stamp is echoed once
+        states.setdefault(stamp_s(msg), msg)
+
+    def echo_answered(twist):        # the controller keeps only the newest state: a copy sent at
+        msg = states.pop(stamp_s(twist), None)     # once would replace the original, unseen
+        if msg is not None and stamp_s(twist) not in echoed:
+            echoed.add(stamp_s(twist))
             pub.publish(msg)
-    echo.create_subscription(JointState, '/joint_states', echo_once, 10)
+    echo.create_subscription(JointState, '/joint_states', keep, 10)
+    echo.create_subscription(TwistStamped, '/base/feasible_twist', echo_answered, 10)
     node = ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
-        diagnostics_period=1e-9, **LOCKSTEP_WAITS['mecanum_controller'])))
-    ros.add(SimNode(context=ros.context, parameter_overrides=overrides(
-        robot='mecanum', timing='lockstep', lockstep_groups='wheel')))
+        diagnostics_period=1e-9)))
+    ros.add(SimNode(context=ros.context, parameter_overrides=overrides(robot='mecanum', timing='realtime')))
     reference = echo.create_publisher(TwistStamped, '/base/reference', 10)
     echo.create_subscription(JointState, '/joint_states',
                              lambda m: reference.publish(twist_stamped(m.header.stamp, 'base_link', (0.2, 0.1, 0.5))), 10)
     # Until 70 copies were seen (the echo's discovery may take a moment on a loaded machine).
     assert ros.spin_until(lambda: len(probe.feasible) >= 80 and node.watchdog.skipped >= 70, timeout=60.0)
     assert node.watchdog.skipped <= len(probe.feasible) + 1     # one copy per stamp, no storm
-    # The simulator's first state is stamped 0, which reads as unstamped (published by hand):
-    # its copy runs a cycle too. Every later stamp runs exactly one.
+    # Every stamp runs exactly one cycle.
     counts = probe.per_stamp()
-    counts.pop(0.0)
     assert set(counts.values()) == {1}, {t: n for t, n in counts.items() if n != 1}
     # Logged with the number of publishers (the simulator, the echo and this probe's).
     assert any('not after the last cycle' in w and '3 publisher(s)' in w for w in probe.warnings), probe.warnings
@@ -154,34 +158,65 @@ def test_a_second_publisher_replaying_the_simulators_states_runs_no_second_cycle
     assert np.any(twists)
 
 
-def test_a_burst_runs_one_period_per_message_and_a_gap_still_only_one(ros):
+def test_a_backlog_is_skipped_to_the_newest_state_and_a_gap_runs_only_one_period(ros):
+    """A controller held up while the simulator went on (here: states published while nothing
+    spins) answers the newest state, one period from its last answer, and none of the states
+    queued before it; a gap of five periods after it still moves the twist by one period."""
     probe = ros.add(Probe(ros.context))
     ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
         reference_wait=0.0, reference_timeout=10.0, joint_state_timeout=10.0)))
     ros.spin_for(0.2)
     probe.pub_ref.publish(twist_stamped(_time(0.0), 'base_link', (0.2, 0.0, 0.0)))
     ros.spin_for(0.05)
-    burst = STATE_SUB_QOS.depth          # as many queued states as the subscription keeps
-    for k in range(burst):               # delivered at once
+    probe.state(4.975)                   # one state answered: the controller is under way
+    assert ros.spin_until(lambda: len(probe.feasible) == 1, timeout=5.0)
+    backlog = 8
+    for k in range(backlog):             # published while the controller does not spin
         probe.state(5.0 + k * DT)
-    assert ros.spin_until(lambda: len(probe.feasible) >= burst, timeout=5.0)
-    probe.state(5.0 + (burst + 5) * DT)  # five periods missing
-    assert ros.spin_until(lambda: len(probe.feasible) >= burst + 1, timeout=5.0)
+    newest = 5.0 + (backlog - 1) * DT
+    assert ros.spin_until(lambda: any(stamp_s(m) == pytest.approx(newest) for m in probe.feasible), timeout=5.0)
+    ros.spin_for(0.1)
+    answered = len(probe.feasible) - 1
+    # The subscription keeps only the newest state: at most one older one can have slipped in
+    # (taken while the backlog was still being delivered).
+    assert answered <= 2, [stamp_s(m) for m in probe.feasible]
+    probe.state(newest + 6 * DT)         # five periods missing
+    assert ros.spin_until(lambda: len(probe.feasible) == answered + 2, timeout=5.0)
     ros.spin_for(0.1)
     vx = [twist_of(m)[0] for m in probe.feasible]
     step = ROBOT.base.acceleration[0] * DT
-    # Every cycle, the gap's included, moves the twist by exactly one period of acceleration.
+    # Every cycle, the newest state's and the gap's included, moves the twist by one period.
     np.testing.assert_allclose(np.diff([0.0] + vx), step, rtol=1e-9)
-    assert len(vx) == burst + 1
+    assert len(vx) == answered + 2
+
+
+@pytest.mark.parametrize('max_wait', [0.1, 0.0], ids=['limited', 'unlimited'])
+def test_a_state_that_waited_longer_than_max_state_wait_runs_no_cycle(ros, max_wait):
+    """A state whose reference does not come waits ``reference_wait`` (0.3 s here) in the
+    controller, as it would while the node is held up: beyond ``max_state_wait`` its cycle is
+    skipped (logged, counted); with no limit it runs with the latest reference."""
+    probe = ros.add(Probe(ros.context))
+    node = ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
+        reference_wait=0.3, reference_timeout=10.0, joint_state_timeout=10.0, max_state_wait=max_wait)))
+    ros.spin_for(0.2)
+    probe.pub_ref.publish(twist_stamped(_time(0.0), 'base_link', (0.2, 0.0, 0.0)))
+    ros.spin_for(0.05)
+    probe.state(5.0)
+    ros.spin_for(0.6)
+    if max_wait:
+        assert not probe.feasible and node.watchdog.skipped == 1
+        assert ros.spin_until(lambda: any('beyond max_state_wait 0.1 s' in w for w in probe.warnings), timeout=5.0)
+    else:
+        assert len(probe.feasible) == 1 and twist_of(probe.feasible[0])[0] > 0.0
 
 
 @pytest.mark.parametrize('tolerance', [0.002, 0.0], ids=['checked', 'unchecked'])
-def test_a_burst_of_states_reporting_the_rates_applied_moves_the_base_one_period(ros, tolerance):
-    """As the simulator does, each joint state reports the wheel rates applied over its period. A
-    controller that stalled finds a burst of them, all reporting the rates applied before the
-    stall; the simulator applies only its last answer. Checked, every answer starts from the rates
-    applied, so that last answer is one period of acceleration from them; unchecked, from the
-    controller's own last command, one period further per state of the burst."""
+def test_answers_that_were_not_applied_move_the_base_one_period_from_the_rates_applied(ros, tolerance):
+    """As the simulator does, each joint state reports the wheel rates applied over its period.
+    When the controller's answers are not applied (lost, late, or zeroed by the simulator's
+    command timeout), the states go on reporting the rates applied before. Checked, every answer
+    starts from the rates applied, so the last one is one period of acceleration from them;
+    unchecked, from the controller's own last command, one period further per answer."""
     probe = ros.add(Probe(ros.context))
     ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
         reference_wait=0.0, reference_timeout=10.0, joint_state_timeout=10.0, applied_rate_tolerance=tolerance)))
@@ -195,17 +230,17 @@ def test_a_burst_of_states_reporting_the_rates_applied_moves_the_base_one_period
     ros.spin_for(0.1)
     applied = list(probe.wheels[-1].data)
     before = len(probe.feasible)
-    burst = STATE_SUB_QOS.depth
-    for k in range(burst):
+    unapplied = 5
+    for k in range(unapplied):           # each answered before the next, none applied
         probe.state(5.0 + (10 + k) * DT, applied)
-    assert ros.spin_until(lambda: len(probe.feasible) >= before + burst, timeout=5.0)
+        assert ros.spin_until(lambda: len(probe.feasible) > before + k, timeout=5.0)
     vx_applied = MecanumKinematics.from_config(ROBOT.mecanum).twist_from_wheels(np.array(applied))[0]
     step = ROBOT.base.acceleration[0] * DT
     last = twist_of(probe.feasible[-1])[0] - vx_applied
     if tolerance:
         assert last == pytest.approx(step, rel=1e-6)
     else:
-        assert last == pytest.approx(burst * step, rel=1e-6)
+        assert last == pytest.approx(unapplied * step, rel=1e-6)
 
 
 def test_a_simulator_period_that_disagrees_with_the_controllers_is_reported(ros):

@@ -291,7 +291,7 @@ def test_joint_states_are_read_by_name_and_garbage_runs_no_cycle(ros):
 
 
 def test_a_joint_state_waits_for_the_reference_of_its_stamp(ros):
-    node, rec = start(ros, reference_wait=0.5, reference_timeout=2.0, joint_state_timeout=5.0)
+    node, rec = start(ros, reference_wait=0.5, reference_timeout=2.0, joint_state_timeout=5.0, max_state_wait=0.0)
     # The joint state first: no cycle until the reference of its stamp comes, then at once.
     rec.joint_state(stamp=1.0)
     ros.spin_for(0.1)
@@ -355,7 +355,7 @@ def run_lockstep(ros, value, cycles, delay=0.0, use_sim_time=False):
     sim_time = overrides(use_sim_time=use_sim_time)
     ros.add(SimNode(context=ros.context, parameter_overrides=sim_time + overrides(
         robot='mecanum', timing='lockstep', lockstep_groups='arm,wheel')))
-    ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=sim_time + overrides(reference_wait=0.5)))
+    ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=sim_time + overrides(reference_wait=0.5, max_state_wait=0.0)))
     answerer = ros.add(ReferenceAnswerer(ros.context, value, delay))
     assert ros.spin_until(lambda: len(answerer.feasible) >= cycles and len(answerer.truth) > cycles, timeout=120)
     return answerer

@@ -257,7 +257,7 @@ def test_each_feasible_twist_answers_the_reference_of_its_own_cycle(ros, use_sim
     sim_time = overrides(use_sim_time=use_sim_time)
     ros.add(SimNode(context=ros.context, parameter_overrides=sim_time + overrides(
         timing='lockstep', lockstep_groups='steer,drive')))
-    ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=sim_time + overrides(reference_wait=0.5)))
+    ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=sim_time + overrides(reference_wait=0.5, max_state_wait=0.0)))
     ref = ros.add(DelayedReference(ros.context, value))
     assert ros.spin_until(lambda: len(ref.feasible) >= 60, timeout=60)
     cycles = sorted(ref.feasible)
@@ -274,7 +274,7 @@ def test_each_feasible_twist_answers_the_reference_of_its_own_cycle(ros, use_sim
 
 def test_a_joint_state_waits_for_the_reference_of_its_stamp(ros):
     ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(
-        reference_wait=0.5, reference_timeout=2.0, joint_state_timeout=5.0)))
+        reference_wait=0.5, reference_timeout=2.0, joint_state_timeout=5.0, max_state_wait=0.0)))
     rec = ros.add(Recorder(ros.context))
     ros.spin_for(0.2)
 

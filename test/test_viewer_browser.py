@@ -1,7 +1,7 @@
 """``wmm_viewer`` in a real browser: headless Chromium (software WebGL) on the page it serves.
 
-Robot A's system runs as four processes (simulator, steerable-base controller, resolver,
-viewer) on a private ROS domain; the test drives Chromium through the DevTools protocol and
+Robot A's system (simulator, steerable-base controller, resolver, viewer), and robot B's
+(its Mecanum-base controller, AMP), each runs as four processes on a private ROS domain; the test drives Chromium through the DevTools protocol and
 checks, on screenshots of the canvas and on the topics, that
 1. the robot is drawn where it is: the robot's orange (its URDF colour) around where its arm
    projects through the page's camera, its dark wheels around its wheels, and no orange far
@@ -33,7 +33,14 @@ from browser_helpers import Browser, chromium_path
 REPO = Path(__file__).resolve().parent.parent
 FIGURE = REPO / 'docs' / 'figures' / 'viewer.png'
 WIDTH, HEIGHT = 1280, 800
-GOAL = (2.0, 1.0, 1.0)            # the README's goal of robot A: base and arm both move
+
+#: Per robot: its name, its base controller's module, a goal (position, quaternion x y z w) that
+#: moves the arm, and the brightest channel of its wheels' dark grey once lit.
+ROBOTS = {
+    'A': ('steerable', 'wmm_control.nodes.swmr_controller', (2.0, 1.0, 1.0), (0.0, 0.0, 0.0, 1.0), 70),
+    'B': ('mecanum', 'wmm_control.nodes.mecanum_controller', (1.1, 0.3, 0.7),
+          (0.0, 0.5 ** 0.5, 0.0, 0.5 ** 0.5), 95),
+}
 
 pytestmark = pytest.mark.skipif(chromium_path() is None,
                                 reason='chromium is not installed (apt-get install chromium): browser test skipped')
@@ -88,15 +95,15 @@ def project(points, camera_position, look_at, width, height, fov=math.radians(75
 
 
 def orange(img):
-    """Pixels of the robot's orange (URDF rgba 1 0.45 0), shaded by the lights: red high, green
-    well below it, blue low."""
+    """Pixels of the robot's orange (URDF rgba 1 0.45 0 on robot A, 0.85 0.55 0.10 on B), shaded
+    by the lights: red high, green well below it, blue low."""
     r, g, b = (img[..., k].astype(int) for k in range(3))
     return (r > 140) & (g > 0.25 * r) & (g < 0.75 * r) & (b < 0.35 * r)
 
 
-def dark(img):
-    """Pixels of the wheels' near-black (URDF rgba 0.15 0.15 0.15)."""
-    return img.max(axis=2) < 70
+def dark(img, brightest=70):
+    """Pixels of the wheels' dark grey (URDF rgba 0.15 0.15 0.15 on robot A, 0.25 0.27 0.30 on B)."""
+    return img.max(axis=2) < brightest
 
 
 def gizmo_red(img):
@@ -130,9 +137,9 @@ def densest(mask, around, radius, half=4):
 DISMISS_NOTICES = ("[...document.querySelectorAll('[class*=\"Notification-root\"] button')]"
                    ".map(b => b.click()).length")
 
-@pytest.fixture
-def system(tmp_path):
-    """Robot A's three nodes and the viewer, each its own process, on a private domain."""
+@pytest.fixture(params=sorted(ROBOTS), ids=lambda k: f'robot_{k}')
+def system(request):
+    """A robot's three nodes and the viewer, each its own process, on a private domain."""
     import rclpy
     from geometry_msgs.msg import PoseStamped
     from rclpy.executors import SingleThreadedExecutor
@@ -143,9 +150,11 @@ def system(tmp_path):
     domain = private_domain_id()
     port = free_port()
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1')
-    procs = [Process('sim_bridge.node', [], env), Process('wmm_control.nodes.swmr_controller', [], env),
-             Process('wmm_control.nodes.redundancy_resolver', [], env),
-             Process('wmm_control.nodes.viewer', ['--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}'], env)]
+    name, controller, goal, orientation, brightest = ROBOTS[request.param]
+    robot = ['--ros-args', '-p', f'robot:={name}']
+    procs = [Process('sim_bridge.node', robot, env), Process(controller, [], env),
+             Process('wmm_control.nodes.redundancy_resolver', robot, env),
+             Process('wmm_control.nodes.viewer', [*robot, '-p', 'host:=127.0.0.1', '-p', f'port:={port}'], env)]
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('viewer_test', context=context)
@@ -165,7 +174,8 @@ def system(tmp_path):
     spinner = threading.Thread(target=spin, daemon=True)
     spinner.start()
     state = {'node': node, 'goals': goals, 'joints': joints, 'publisher': publisher, 'procs': procs,
-             'url': f'http://127.0.0.1:{port}'}
+             'url': f'http://127.0.0.1:{port}', 'robot': name, 'goal': goal, 'orientation': orientation,
+             'brightest': brightest, 'key': request.param}
     try:
         yield state
     finally:
@@ -206,11 +216,11 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
     from wmm_control.viewer.scene import RobotScene
 
     viewer = system['procs'][-1]
-    wait_for(lambda: 'viewer of robot steerable at http://' in viewer.output(), 60, 'the viewer\'s URL in its log')
+    wait_for(lambda: f'viewer of robot {system["robot"]} at http://' in viewer.output(), 60, 'the viewer\'s URL in its log')
     wait_for(lambda: len(system['joints']) > 10, 60, '/joint_states')
 
     # Where the robot is: its start state through the page's camera.
-    robot = load_robot('steerable')
+    robot = load_robot(system['robot'])
     scene = RobotScene(robot.urdf_path, robot.base_link, robot.ee_frame)
     scene.set_joints(robot.arm.joints, robot.start.arm)
     x0, y0, th0 = robot.start.base_pose
@@ -218,7 +228,8 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
     camera = CAMERA_POSITION + np.array([x0, y0, 0.0]), CAMERA_LOOK_AT + np.array([x0, y0, 0.0])
     pixels = project(poses.positions, *camera, WIDTH, HEIGHT)
     names = [s.name for s in scene.shapes]
-    arm = pixels[[i for i, n in enumerate(names) if n.startswith('arm_link_') and scene.shapes[i].color[1] < 200]]
+    arm = pixels[[i for i, n in enumerate(names) if n.startswith('arm_link_') and orange(
+        np.array([[scene.shapes[i].color]], dtype=np.uint8))[0, 0]]]
     wheels = pixels[[i for i, n in enumerate(names) if n.startswith('wheel_')]]
     handle = project(poses.ee_position, *camera, WIDTH, HEIGHT)[0]
 
@@ -230,7 +241,7 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
         def robot_drawn():
             img = browser.screenshot()
             hits = sum(window_count(orange(img), x, y, 25) > 20 for x, y in arm)
-            return img if hits >= len(arm) - 1 and sum(window_count(dark(img), x, y, 20) > 15
+            return img if hits >= len(arm) - 1 and sum(window_count(dark(img, system['brightest']), x, y, 20) > 15
                                                       for x, y in wheels) >= 3 else None
         end = time.monotonic() + 120
         img = None
@@ -274,8 +285,9 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
         # 3. Two screenshots while the arm moves to a published goal differ.
         msg = PoseStamped()
         msg.header.frame_id = 'world'
-        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = GOAL
-        msg.pose.orientation.w = 1.0
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = system['goal']
+        o = msg.pose.orientation
+        o.x, o.y, o.z, o.w = system['orientation']
         system['publisher'].publish(msg)
         start = arm_positions(system['joints'][-1])
         wait_for(lambda: np.abs(arm_positions(system['joints'][-1]) - start).max() > 0.05, 60, 'the arm to move')
@@ -287,7 +299,7 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
         assert np.abs(q_second - q_first).max() > 0.01, 'the arm stood still between the screenshots'
         changed = np.abs(first.astype(int) - second.astype(int)).max(axis=2) > 30
         assert changed[:, :WIDTH - 420].sum() > 300, f'only {changed.sum()} pixels changed while the arm moved'
-        if os.environ.get('WMM_UPDATE_FIGURES') == '1':
+        if os.environ.get('WMM_UPDATE_FIGURES') == '1' and system['key'] == 'A':
             time.sleep(4.0)
             FIGURE.parent.mkdir(parents=True, exist_ok=True)
             save(browser.screenshot(), FIGURE)

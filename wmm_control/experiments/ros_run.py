@@ -139,10 +139,11 @@ def _executor(context):
 
 
 #: In lockstep nothing moves until every answer is in, so the nodes may wait as long as a loaded
-#: machine needs (the waits end as soon as the answer comes): the run does not depend on timing.
+#: machine needs (the waits end as soon as the answer comes), and no joint state goes stale while
+#: it waits: the run does not depend on timing.
 LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 0.5},
-                  'swmr_controller': {'reference_wait': 0.5},
-                  'mecanum_controller': {'reference_wait': 0.5}}
+                  'swmr_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0},
+                  'mecanum_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0}}
 
 
 def private_domain_id():

@@ -14,6 +14,7 @@ import math
 import os
 import signal
 import statistics
+import time
 import threading
 from collections import deque
 from pathlib import Path
@@ -30,7 +31,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.parameter import Parameter as RosParameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time_source import TimeSource
 from std_msgs.msg import Float64MultiArray
@@ -45,7 +46,7 @@ __all__ = [
     'Param', 'declare_parameters', 'load_defaults', 'robot_method', 'robot_param', 'robot_period', 'require_base', 'parameter_error', 'float_array', 'parse_command',
     'Freshness', 'diagnostic_status', 'node_status', 'diagnostic_array', 'seconds', 'run_node', 'guard_clock',
     'stamp_key', 'parse_base_reference', 'twist_stamped', 'JointSelector', 'StampedExchange',
-    'BaseReference', 'JointStateWatchdog', 'StampGate', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
+    'BaseReference', 'JointStateWatchdog', 'max_state_wait_param', 'StampGate', 'STATE_PUB_QOS', 'STATE_SUB_QOS',
     'COMMAND_QOS', 'CLOCK_QOS', 'DIAGNOSTICS_QOS',
 ]
 
@@ -57,9 +58,12 @@ __all__ = [
 #: match (REP 2003: a sensor source publishes reliable, its consumers choose).
 STATE_PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.VOLATILE)
-#: State streams a node *consumes*: rclpy's sensor-data profile (best effort, keep last 5,
-#: volatile): a late sample is worth less than the next one, and never stalls the sender.
-STATE_SUB_QOS = qos_profile_sensor_data
+#: State streams a node *consumes*: best effort, keep last 1, volatile. A late sample is worth
+#: less than the next one, and never stalls the sender; only the newest is kept, so a node that
+#: was held up (a stall, a busy machine) answers the state of now, not a backlog of states the
+#: simulator has already stepped past (their answers would be applied late, one by one).
+STATE_SUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                           durability=DurabilityPolicy.VOLATILE)
 #: Commands and set-points (``*/commands``, ``base/reference``, ``base/feasible_twist``,
 #: ``goal_pose``, ``ee_reference``): reliable, keep last 10, volatile: none is lost (the base
 #: exchange matches each reference to its joint state by stamp, so two queued references must
@@ -105,6 +109,13 @@ def robot_param(description=''):
     return Param('robot', (description + ' ' if description else '') +
                  f'A robot name ({", ".join(robot_names())}; aliases A, B) or a path to a robot YAML file.',
                  read_only=True)
+
+
+def max_state_wait_param():
+    """The ``max_state_wait`` parameter of every node that answers ``/joint_states``."""
+    return Param('max_state_wait', 'Longest time [s] a joint state may wait in this node (from its receipt to its '
+                 'cycle, steady clock) and still run a cycle: one that waited longer (the node was held up, and a '
+                 'real-time simulator has stepped past it) runs none. 0: no limit (lockstep).', lo=0.0, hi=60.0)
 
 
 def require_base(robot, families, node_name):
@@ -681,8 +692,9 @@ class StampGate:
     publisher, a replayed or re-ordered message, a zero stamp amid stamped ones) runs no
     cycle, nor does one stamped more than ``max_jump`` after it (a far-future stamp: a
     sender that really paused that long trips the joint-state timeout first, which calls
-    :meth:`restart`). A burst of queued messages runs one cycle each, one period each, as
-    their stamps say. Messages that all carry a zero stamp (published by hand) each run one.
+    :meth:`restart`). Messages that reach the node one after another run one cycle each, one
+    period each, as their stamps say (the subscription keeps only the newest, so a backlog
+    does not reach it). Messages that all carry a zero stamp (published by hand) each run one.
 
     The median of the last ``window`` stamp steps is the sender's period;
     :meth:`period_mismatch` reports it when it differs from ``period`` by more than 10 %.
@@ -840,10 +852,17 @@ class JointStateWatchdog:
     steady clock: a paused sim clock must not hide a stop). A timeout sets
     :attr:`need_resync`, which the node clears once it has resynchronised, and lets the next
     stamp start a new time base.
+
+    :meth:`waited_too_long` tells, when the cycle is about to run, whether the state waited in
+    this node longer than ``max_wait`` since its receipt (the node's steady clock: no clock of
+    the sender's is involved). A node that was held up (stopped, or starved on a busy machine)
+    may run a state that waited for its reference meanwhile; a real-time simulator has stepped
+    past it, and an answer to it would be applied now, as if it were current.
     """
 
-    def __init__(self, node, timeout, period, clock, on_timeout, action, topic='joint_states'):
+    def __init__(self, node, timeout, period, clock, on_timeout, action, topic='joint_states', max_wait=0.0):
         self._node = node
+        self.max_wait = float(max_wait)
         self._clock = clock
         self._on_timeout = on_timeout
         self._action = action
@@ -862,6 +881,20 @@ class JointStateWatchdog:
         """A new timeout [s] (a parameter set at run time): for the age and for the stamp jump."""
         self.freshness.timeout = float(timeout)
         self.stamps.max_jump = self._max_jump(timeout)
+
+    def waited_too_long(self, received_ns):
+        """True (logged, throttled, and counted as skipped) when a joint state received at
+        ``received_ns`` (``time.monotonic_ns()`` in its callback) waited longer than ``max_wait``."""
+        if self.max_wait <= 0.0:
+            return False
+        wait = (time.monotonic_ns() - received_ns) * 1e-9
+        if wait <= self.max_wait:
+            return False
+        self.skipped += 1
+        self._node.get_logger().warn(
+            f'/{self._topic} waited {wait:.3g} s in this node, beyond max_state_wait {self.max_wait:g} s (the node '
+            'was held up): cycle skipped', throttle_duration_sec=1.0)
+        return True
 
     def mark(self):
         """A joint state arrived now."""

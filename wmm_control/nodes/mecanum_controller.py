@@ -44,6 +44,7 @@ the node works under ``use_sim_time``.
 """
 
 import functools
+import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -57,7 +58,7 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import WheelController, unapplied_command
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, float_array, guard_clock, require_base,
+    StampedExchange, declare_parameters, diagnostic_array, float_array, guard_clock, max_state_wait_param, require_base,
     node_status, robot_param, robot_period, run_node, seconds, twist_stamped)
 from wmm_control.robot_config import load_robot
 
@@ -72,6 +73,7 @@ PARAMS = (
     Param('reference_wait', 'Steady time [s] a joint state waits for the reference of its stamp.',
           lo=0.0, hi=1.0, read_only=True),
     Param('joint_state_timeout', 'Joint-state age [s] after which zero wheel rates are commanded.', lo=1e-3, hi=60.0),
+    max_state_wait_param(),
     Param('applied_rate_tolerance', 'Largest difference [rad/s] between the wheel rates of a joint state and the '
           'last command under which that command counts as applied; beyond it the controller restarts from the '
           'measured wheel rates. 0: never.', lo=0.0, hi=100.0, read_only=True),
@@ -93,7 +95,8 @@ class MecanumControllerNode(Node):
         self.family = family
         p = declare_parameters(self, f'{family}_controller.yaml', PARAMS, on_change={
             'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
-            'joint_state_timeout': lambda v: self.watchdog.set_timeout(v)})
+            'joint_state_timeout': lambda v: self.watchdog.set_timeout(v),
+            'max_state_wait': lambda v: setattr(self.watchdog, 'max_wait', float(v))})
         self.p = p
         robot = load_robot(p.robot)
         require_base(robot, (family,), f'{family}_controller')
@@ -111,7 +114,7 @@ class MecanumControllerNode(Node):
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
         self.watchdog = JointStateWatchdog(
             self, p.joint_state_timeout, p.period, steady, lambda: self.pub_wheels.publish(float_array(np.zeros(len(wheels.wheel_joints)))),
-            'zero wheel rates; will restart from the measured wheel rates')
+            'zero wheel rates; will restart from the measured wheel rates', max_wait=p.max_state_wait)
         self.create_subscription(TwistStamped, 'base/reference', self._on_reference, COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         lim = self.controller.params
@@ -136,16 +139,20 @@ class MecanumControllerNode(Node):
         self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped', throttle_duration_sec=1.0)
 
     def _on_joint_states(self, msg):
+        received = time.monotonic_ns()
         rates = self._wheel_rates_measured(msg)
         if rates is None or not self.watchdog.admit(msg.header.stamp):
             return
-        self.exchange.state_received(msg.header.stamp, (rates, bool(len(msg.velocity))))
+        self.exchange.state_received(msg.header.stamp, (rates, bool(len(msg.velocity)), received))
 
     # ------------------------------------------------------------------ cycle
     def _cycle(self, stamp, measured):
         """One period: the latest reference (braking when stale) → wheel rates and q̇_bf; ``measured``
-        is (the wheel rates of the joint state, whether it has velocities)."""
-        wheel_rates, has_rates = measured
+        is (the wheel rates of the joint state, whether it has velocities, when this node
+        received it (``time.monotonic_ns()``))."""
+        wheel_rates, has_rates, received = measured
+        if self.watchdog.waited_too_long(received):
+            return
         now = seconds(self.get_clock())
         if self.watchdog.resync(self.pub_wheels):
             self.controller.restart(wheel_rates)

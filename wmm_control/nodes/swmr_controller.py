@@ -42,6 +42,8 @@ limits is scaled into them, both with a warning. The node's timers run on the
 steady clock: they keep working under ``use_sim_time``.
 """
 
+import time
+
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
@@ -54,7 +56,7 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams, unapplied_command
 from wmm_control.nodes.common import (
     BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, float_array, guard_clock, require_base,
+    StampedExchange, declare_parameters, diagnostic_array, float_array, guard_clock, max_state_wait_param, require_base,
     node_status, robot_param, robot_period, run_node, seconds, twist_stamped)
 from wmm_control.robot_config import load_robot
 
@@ -73,6 +75,7 @@ PARAMS = (
           lo=0.0, hi=1.0, read_only=True),
     Param('joint_state_timeout', 'Joint-state age [s] (steady clock) after which zero rates are commanded.',
           lo=1e-3, hi=60.0),
+    max_state_wait_param(),
     Param('applied_rate_tolerance', 'Largest difference [rad/s] between the steer and drive rates of a joint state '
           'and the last command under which that command counts as applied; beyond it the controller restarts '
           'from the measured state. 0: never.', lo=0.0, hi=100.0, read_only=True),
@@ -88,7 +91,8 @@ class SwmrControllerNode(Node):
         guard_clock(self)
         p = declare_parameters(self, 'swmr_controller.yaml', PARAMS, on_change={
             'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
-            'joint_state_timeout': lambda v: self.watchdog.set_timeout(v)})
+            'joint_state_timeout': lambda v: self.watchdog.set_timeout(v),
+            'max_state_wait': lambda v: setattr(self.watchdog, 'max_wait', float(v))})
         self.p = p
         robot = load_robot(p.robot)
         require_base(robot, ('steerable',), 'swmr_controller')
@@ -110,7 +114,7 @@ class SwmrControllerNode(Node):
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         self.watchdog = JointStateWatchdog(
             self, p.joint_state_timeout, p.period, self._steady, self._zero_rates,
-            'zero steer and drive rates; will resync from the measured angles')
+            'zero steer and drive rates; will resync from the measured angles', max_wait=p.max_state_wait)
         # Started for each joint state that waits for its reference, cancelled by the cycle.
         # One cycle per joint state, run with the reference of the same stamp (see the module doc).
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, self._steady)
@@ -124,6 +128,7 @@ class SwmrControllerNode(Node):
             self.exchange.reference_received(msg.header.stamp)
 
     def _on_joint_states(self, msg):
+        received = time.monotonic_ns()
         beta, beta_dot, reason = self.steer.read(msg)
         if beta is None:
             self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped', throttle_duration_sec=1.0)
@@ -133,14 +138,17 @@ class SwmrControllerNode(Node):
         phi_dot = self.drive.read(msg)[1] if len(msg.velocity) else None
         rates = None if phi_dot is None else (beta_dot, phi_dot)
         if self.watchdog.admit(msg.header.stamp):
-            self.exchange.state_received(msg.header.stamp, (beta, rates))
+            self.exchange.state_received(msg.header.stamp, (beta, rates, received))
 
     # ------------------------------------------------------------------ cycle
     def _cycle(self, stamp, measured):
         """The cycle of the joint state stamped ``stamp`` ((sec, nanosec)), measured steer angles and
-        ``(steer rates, drive rates)`` or None, with the latest reference (braking when it is stale)."""
+        ``(steer rates, drive rates)`` or None, and when this node received it (``time.monotonic_ns()``); with the
+        latest reference (braking when it is stale)."""
+        beta, rates, received = measured
+        if self.watchdog.waited_too_long(received):
+            return
         sec, nanosec = stamp
-        beta, rates = measured
         now = seconds(self.get_clock())
         if self.watchdog.resync(self.pub_steer, self.pub_drive):
             self.controller.reset(beta)
