@@ -18,6 +18,7 @@ from urdf_factory import write_urdf
 from wmm_control.base import DifferentialKinematics, WheelController, WheelParams
 from wmm_control.cli import robot_setup
 from wmm_control.errors import ConfigError
+from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers import PoseTarget, make_resolver
 from wmm_control.robot_config import load_robot
 
@@ -80,12 +81,11 @@ def test_init_output_is_a_commented_file_check_accepts(tmp_path, capsys):
 
 
 def test_init_chooses_a_home_posture_clear_of_the_body():
-    from wmm_control.kinematics.clearance import BodyClearance
     for name in ('steerable', 'mecanum'):
         cfg = load_robot(name)
         home, sigma = robot_setup._choose_home(robot_setup.UrdfTree(cfg.urdf_path), cfg.arm.root, cfg.arm.tool,
                                                cfg.base_link, cfg.ground_z)
-        assert BodyClearance(cfg.urdf_path, cfg.arm.joints, cfg.arm.root).closest(home)[0] >= robot_setup.HOME_CLEARANCE
+        assert CollisionModel(cfg.urdf_path, cfg.arm.joints).closest(home)[0] >= robot_setup.HOME_CLEARANCE
         assert sigma > 0.05
 
 

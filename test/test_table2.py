@@ -29,6 +29,14 @@ def test_no_limit_is_ever_passed_and_no_command_is_non_finite(table2):
         assert run['periods'] == 2600
 
 
+def test_the_safety_stage_leaves_the_papers_experiment_alone(table2):
+    """The arm stays clear of the body: the stage watches (it reports the clearance) but never
+    changes a command, so the table is the paper's method's."""
+    for name, run in table2.items():
+        assert run['collision_changed_periods'] == 0, name
+        assert 0.02 < run['clearance_min_m'] < 1.0, (name, run['clearance_min_m'])
+
+
 def test_goals_2_and_3_are_fine_manipulation_throughout(table2):
     """Below r_fm the arm alone takes the task (ψ = 1); the base still moves, by the null-space pull."""
     for run in ('task_sharing', 'task_sharing_compensation'):

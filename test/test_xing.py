@@ -15,6 +15,9 @@ def tracking(name, with_logs=False):
     logs, summary = run_experiment(scenario, engine='direct', show_progress=False)
     for run_name, run in summary['runs'].items():
         assert not any(run['limits_exceeded'].values()), (name, run_name, run['limits_exceeded'])
+        # the arm stays clear of the body: the safety stage never changes a command (Xing's
+        # experiments are his methods')
+        assert run['collision_changed_periods'] == 0, (name, run_name)
     runs = {n: r['tracking'] for n, r in summary['runs'].items()}
     return (runs, logs, scenario) if with_logs else runs
 

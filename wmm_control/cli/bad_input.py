@@ -193,7 +193,10 @@ class Rig:
         if mutate is not None:
             msgs = mutate(self, msgs)
         for topic, msg in msgs:
-            self.publish(topic, msg)
+            if topic is None:                 # PAUSE: spin for ``msg`` seconds
+                self.spin_until(lambda: False, msg)
+            else:
+                self.publish(topic, msg)
         self.k += 1
         return self.spin_until(lambda: self._cycle_count() > before, wait)
 
@@ -600,13 +603,19 @@ def _clock(sec):
     return lambda rig: ('/clock', ClockMsg(clock=Time(sec=sec)))
 
 
+#: In a cycle's message list: let the node take what was published so far before the rest.
+PAUSE = (None, 0.01)
+
+
 def _twice(rig, msgs):
-    """The joint state delivered twice (a second publisher replaying it)."""
+    """The joint state delivered twice (a second publisher replaying it, 10 ms later, and the
+    node given the time to take it: sent at once, or followed at once by the next state, the
+    copy would be replaced in the node's queue, which keeps only the newest)."""
     out = []
     for t, m in msgs:
         out.append((t, m))
         if t.lstrip('/') == 'joint_states':
-            out.append((t, m))
+            out += [PAUSE, (t, m), PAUSE]
     return out
 
 

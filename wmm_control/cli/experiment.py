@@ -102,6 +102,10 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_
             'resolver_cycle_median_us': float(np.median(log.cycle_time_s) * 1e6),
             'limits_exceeded': run_limit_report(log, robot, dt, tol=1e-6),
             'simulator_counters': log.sim_counters,
+            # the safety stage: the closest it saw the arm come to the body, itself or the floor,
+            # and the periods in which it changed the method's arm command
+            'clearance_min_m': float(np.min(log.clearance)),
+            'collision_changed_periods': int(np.count_nonzero(log.collision_changed)),
         }
         if bag_dir is not None and engine == 'nodes':
             entry['recording'] = str(bag_path(bag_dir, run['name']))

@@ -128,14 +128,14 @@ def _floor_height(tree, wheels, base_link):
 
 def _choose_home(tree, arm_root, tool, base_link, ground, seed=0):
     """The documented posture choice (module docstring): ``(q (n,), σ_min)``."""
-    from wmm_control.kinematics.clearance import BodyClearance
+    from wmm_control.kinematics.collision import CollisionModel
     from wmm_control.kinematics.model import KinematicModel
     chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
     names = [j.name for j in chain]
     lower = np.array([max(j.lower, -math.pi) if j.lower is not None else -math.pi for j in chain])
     upper = np.array([min(j.upper, math.pi) if j.upper is not None else math.pi for j in chain])
     model = KinematicModel.from_urdf(tree.path, names, tool, base_link)
-    clearance = BodyClearance(tree.path, names, arm_root)
+    clearance = CollisionModel(tree.path, names)
     rng = np.random.default_rng(seed)
     best, best_sigma = None, -1.0
     for _ in range(HOME_DRAWS):

@@ -48,12 +48,15 @@ class RunLog:
     ``ee_position`` (K, 3), ``ee_rotation`` (K, 3, 3), ``base_pose`` (K, 3), ``q_arm`` (K, 7),
     ``arm_command`` (K, 7), ``base_reference`` (K, 3), ``feasible_twist`` (K, 3), ``psi``,
     ``mode`` (list of str), ``limit_scale``, ``accel_scale``, ``null_scale``,
-    ``compensation_scale``, ``compensated`` (bool), ``cycle_time_s``, ``sigma_min``.
+    ``compensation_scale``, ``compensated`` (bool), ``cycle_time_s``, ``sigma_min``,
+    ``clearance`` [m] (the safety stage's closest pair) and ``collision_changed`` (bool: the
+    stage changed the arm command).
     """
 
     COLUMNS = ('t', 'goal', 'ee_position', 'ee_rotation', 'base_pose', 'q_arm', 'arm_command',
                'base_reference', 'feasible_twist', 'psi', 'mode', 'limit_scale', 'accel_scale',
-               'null_scale', 'compensation_scale', 'compensated', 'cycle_time_s', 'sigma_min')
+               'null_scale', 'compensation_scale', 'compensated', 'cycle_time_s', 'sigma_min', 'clearance',
+               'collision_changed')
 
     def __init__(self, method='', label=''):
         self.method = method
@@ -90,6 +93,8 @@ class RunLog:
         r['compensated'].append(d.compensated)
         r['cycle_time_s'].append(d.cycle_time_s)
         r['sigma_min'].append(d.sigma_min)
+        r['clearance'].append(d.clearance)
+        r['collision_changed'].append(d.collision_changed)
 
     def freeze(self):
         """Turn the columns into arrays; returns self."""

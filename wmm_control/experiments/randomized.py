@@ -11,7 +11,10 @@
    the robot's own body or the floor (:class:`~sim_bridge.collision.SelfCollisionChecker`).
 
 So every goal is reached by at least one configuration within the limits and clear of the
-robot's body. The path to it is not checked: no method here avoids collisions.
+robot's body. The path to it is checked: every period's arm configuration against the
+robot's body, itself and the floor, on the simulator's own geometry
+(:class:`~sim_bridge.collision.SelfCollisionChecker`, independent of the controllers' distance
+model); a run that goes more than ``CONTACT_DEPTH`` into contact has failed.
 
 **A run** starts from the robot's start state (its YAML), with the goal given at t = 0 as a
 set-point, in lockstep: the direct engine (:func:`sim_bridge.closed_loop.run_scenario`, the
@@ -26,7 +29,7 @@ ground-truth feedback: the runs test the controllers, not the odometry. Its outc
   :class:`~wmm_control.resolvers.progress.GoalProgress` over the resolver's diagnostics, what
   the node publishes). A goal reported stalled may make progress again later: the report is
   what the user was told, whatever the run's end;
-* *failed*: neither, a limit passed, or a non-finite command.
+* *failed*: neither, a limit passed, a non-finite command, or contact.
 """
 
 import math
@@ -46,7 +49,7 @@ from wmm_control.resolvers.progress import GoalProgress
 from wmm_control.robot_config import load_robot
 
 __all__ = ['RandomGoal', 'sample_goals', 'run_goal', 'summarize', 'ROBOTS', 'METHOD_RUNS', 'ROBOT_RUNS', 'DURATION_S',
-           'ARM_MARGIN', 'COLLISION_MARGIN', 'SETTLE_S', 'goal_settings']
+           'ARM_MARGIN', 'COLLISION_MARGIN', 'CONTACT_DEPTH', 'SETTLE_S', 'goal_settings', 'run_contact']
 
 #: The robots, by name.
 ROBOTS = ('steerable', 'mecanum')
@@ -75,6 +78,8 @@ DURATION_S = {'steerable': 90.0, 'mecanum': 180.0, 'ur_mecanum': 90.0, 'panda_di
 ARM_MARGIN = 0.1
 #: Clearance of a drawn configuration from the robot's body and the floor [m].
 COLLISION_MARGIN = 0.02
+#: A run whose arm goes this far into the body, itself or the floor is in contact [m].
+CONTACT_DEPTH = 0.001
 #: A direct run ends once the goal has been held this long [s].
 SETTLE_S = 2.0
 #: Tolerance of the limit checks on the nodes engine, whose commands come back through the
@@ -215,6 +220,21 @@ def _limit_use(log, robot, dt):
     return use
 
 
+def run_contact(robot, q_arm):
+    """The deepest contact of a run's arm configurations ``q_arm`` (one row per period) with
+    the robot's body, itself or the floor, on the simulator's geometry: ``(depth [m], 'a/b')``,
+    ``(0.0, '')`` when every period is clear."""
+    from sim_bridge.collision import SelfCollisionChecker
+
+    depth, pair = 0.0, ''
+    with SelfCollisionChecker(robot, margin=0.0) as checker:
+        for q in q_arm:
+            for a, b, d in checker.collisions(q):
+                if -d > depth:
+                    depth, pair = -d, f'{a}/{b}'
+    return depth, pair
+
+
 def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
     """One closed-loop run of ``method`` to ``goal`` from the robot's start state.
 
@@ -226,6 +246,7 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
         tolerance, null: never), ``final_position_error_m``, ``final_orientation_error_rad``,
         ``first_stall_s`` (when the goal was first reported stalled, null: never),
         ``limits_exceeded`` (:func:`~wmm_control.experiments.metrics.run_limit_report`),
+        ``contact_depth_m`` and ``contact_pair`` (:func:`run_contact`),
         ``limit_use`` (largest fraction of each velocity and acceleration limit, smallest
         distance to an arm position limit), ``sim_clamped`` (command entries the simulator had
         to clamp) and ``why`` (the reason of a failure, else empty).
@@ -249,6 +270,9 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
     why += [f'{k} limit passed by {v:.3g}' for k, v in exceeded.items() if k != 'non_finite' and v > 0]
     if clamped:
         why.append(f'{clamped} command entries clamped by the simulator')
+    depth, pair = run_contact(cfg, log.q_arm)
+    if depth > CONTACT_DEPTH:
+        why.append(f'{pair} {depth * 100:.1f} cm into contact')
     if status['goal_reached']:
         outcome = 'converged'
     elif status['first_stall_s'] is not None:
@@ -262,6 +286,7 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
             'time_s': float(log.t[-1] + dt), 'time_to_reach_s': float(log.t[inside[0]]) if inside.size else None,
             'final_position_error_m': float(pos_err[-1]), 'final_orientation_error_rad': float(ori_err[-1]),
             'first_stall_s': status['first_stall_s'], 'limits_exceeded': exceeded,
+            'contact_depth_m': depth, 'contact_pair': pair,
             'limit_use': _limit_use(log, cfg, dt), 'sim_clamped': int(clamped), 'why': '; '.join(why)}
 
 
@@ -273,7 +298,8 @@ def summarize(results):
     """Per robot and method: ``runs``, ``converged``, ``reported``, ``failed``, the worst final
     errors of the converged runs, the median and largest time to converge, and the worst use of
     every limit over all runs (``limit_use_max``: largest fraction of a velocity or acceleration
-    limit; ``position_margin_min_rad``).
+    limit; ``position_margin_min_rad``), the runs in contact (``in_contact``) and the deepest
+    contact (``deepest_contact_m``).
 
     Returns:
         dict keyed by ``(robot, method)``.
@@ -297,5 +323,7 @@ def summarize(results):
             'limit_use_max': max(use),
             'position_margin_min_rad': min(r['limit_use']['arm_position_margin_rad'] for r in rows),
             'non_finite': sum(r['limits_exceeded']['non_finite'] for r in rows),
+            'in_contact': sum(r.get('contact_depth_m', 0.0) > CONTACT_DEPTH for r in rows),
+            'deepest_contact_m': max(r.get('contact_depth_m', 0.0) for r in rows),
         }
     return table

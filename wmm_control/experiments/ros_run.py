@@ -123,7 +123,9 @@ class Recorder(Node):
                 compensation_scale=f['compensation_scale'],
                 limited=tuple(int(v) for v in _vector(d.get('limited', '[]'))), sigma_min=f['sigma_min'],
                 compensated=bool(f['compensated']), cycle_time_s=f['cycle_time_us'] * 1e-6,
-                reference_time_left=f['reference_time_left_s'])
+                reference_time_left=f['reference_time_left_s'], clearance=float(f['clearance_m']),
+                closest_pair=str(f['closest_pair']), collision_constraints=int(f['collision_constraints']),
+                collision_changed=bool(f['collision_changed']))
             self.log.append(row['t'], self.scenario.goal_index(row['t']), row['ee'][0], row['ee'][1], row['base'],
                             row['q_arm'], _vector(d['arm_command']), _vector(d['base_reference']),
                             row.get('feasible'), diag)

@@ -117,6 +117,14 @@ _SPECS = (
           read_only=True),
     Param('gamma2', 'γ2 of eq (13) (amp, traditional).', lo=0.0, hi=1e3, read_only=True),
     Param('manipulability', 'Run the manipulability objective (amp, traditional).', read_only=True),
+    Param('collision_avoidance', 'Pass every arm command through the safety stage (velocity dampers that keep '
+          'the arm off the body, itself and the floor).', read_only=True),
+    Param('collision_influence', 'Distance d_i [m] under which a pair is constrained.', lo=1e-3, hi=1.0,
+          read_only=True),
+    Param('collision_safety', 'Distance d_s [m] the dampers keep; below it a pair must separate.', lo=1e-4,
+          hi=1.0, read_only=True),
+    Param('collision_gain', 'Approach speed ξ [m/s] allowed at the influence distance.', lo=1e-3, hi=10.0,
+          read_only=True),
     Param('sigma_min', 'σ_m,min: the base is activated below it (amp).', lo=0.0, hi=10.0, read_only=True),
     Param('singularity_avoidance', 'Activate the base near a singularity (amp).', read_only=True),
     Param('sigma_rows', 'Rows of J_m for σ_m: task (the task rows) or position (amp).', choices=('task', 'position'),
@@ -559,6 +567,8 @@ class RedundancyResolverNode(Node):
                 'compensation_scale': d.compensation_scale, 'compensated': d.compensated,
                 'limited': list(d.limited), 'sigma_min': d.sigma_min, 'cycle_time_us': d.cycle_time_s * 1e6,
                 'reference_time_left_s': d.reference_time_left,
+                'clearance_m': d.clearance, 'closest_pair': d.closest_pair,
+                'collision_constraints': d.collision_constraints, 'collision_changed': d.collision_changed,
                 'goal_reached': reached, 'goal_stalled': stalled,
                 'arm_command': self._last.arm_velocity, 'base_reference': self._last.base_twist})
             if stalled:

@@ -36,9 +36,11 @@ import pinocchio as pin
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers.interface import Resolver, ResolverCommand, ResolverDiagnostics
 from wmm_control.resolvers.limits import CommandLimits
 from wmm_control.resolvers.pose_servo import _check_fields, lapack_svd
+from wmm_control.resolvers.safety import SafetyParams, SafetyStage
 from wmm_control.resolvers.setpoint_trajectory import SetpointTrajectory
 from wmm_control.resolvers.sns import task_scale
 
@@ -48,8 +50,9 @@ TASK_ROWS = ('position', 'full')
 
 
 @dataclass(frozen=True)
-class AccelerationParams:
-    """Parameters shared by the acceleration-level methods (Xing §4 defaults).
+class AccelerationParams(SafetyParams):
+    """Parameters shared by the acceleration-level methods (Xing §4 defaults), and the safety
+    stage's (:class:`~wmm_control.resolvers.safety.SafetyParams`).
 
     Attributes:
         dt: control period T [s].
@@ -82,6 +85,7 @@ class AccelerationParams:
     _allow_zero = ('gamma1', 'gamma2')
 
     def __post_init__(self):
+        super().__post_init__()
         _check_fields(self, self._allow_zero)
         if self.rows not in TASK_ROWS:
             raise ConfigError(f'rows must be one of {TASK_ROWS}, got {self.rows!r}')
@@ -101,6 +105,7 @@ class AccelerationResolver(Resolver):
         self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
         self.params = params
         self.limits = CommandLimits.for_robot(self.model.config, params.dt)
+        self.safety = SafetyStage(CollisionModel.from_robot(self.model.config), params)
         self._unicycle = self.model.config.base_type == 'differential'
         self.n_base = len(self.model.config.base_axes)
         self.n = self.n_base + self.model.n_arm
@@ -175,8 +180,8 @@ class AccelerationResolver(Resolver):
         sigma = float(lapack_svd(jac[rows, nb:], compute_uv=False)[-1])
         sigma_position = sigma if rows.stop == 3 else float(lapack_svd(jac[:3, nb:], compute_uv=False)[-1])
         target_err = np.concatenate((target.position - pos, pin.log3(target.rotation @ rot.T)))
-        return {'jac': jac[rows], 'xdd': xdd[rows], 'drift': drift[rows], 'qd': qd,
-                'lower': (lo_v - qd) / p.dt, 'upper': (hi_v - qd) / p.dt,
+        return {'jac': jac[rows], 'xdd': xdd[rows], 'drift': drift[rows], 'qd': qd, 'q_arm': state.q_arm,
+                'box_lower': lo_v, 'box_upper': hi_v, 'lower': (lo_v - qd) / p.dt, 'upper': (hi_v - qd) / p.dt,
                 'brake_lower': (-down - qd) / p.dt, 'brake_upper': (up - qd) / p.dt,
                 'position_error': float(np.linalg.norm(target_err[:3])),
                 'orientation_error': float(np.linalg.norm(target_err[3:])), 'sigma': sigma,
@@ -207,6 +212,11 @@ class AccelerationResolver(Resolver):
         qd = task['qd'] + qdd * self.params.dt
         qd[np.abs(qd) < 1e-12] = 0.0      # a stop is exact: braking by −q̇/T leaves round-off
         nb = self.n_base
+        # the safety stage on the arm's rates, within this period's box (q̇_prev ± q̈_max T, ...)
+        safety = self.safety.filter(task['q_arm'], qd[nb:], task['box_lower'][nb:], task['box_upper'][nb:])
+        qd[nb:] = safety.command
+        fields.update(clearance=safety.clearance, closest_pair=safety.closest_pair,
+                      collision_constraints=safety.active, collision_changed=safety.changed)
         if self._unicycle:      # (v, ω) is already the base frame's, within its bounds
             base = np.array([qd[0], 0.0, qd[1]])
             base[np.abs(base) < 1e-12] = 0.0

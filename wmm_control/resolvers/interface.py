@@ -9,6 +9,7 @@ reference with the twist it can execute.
 Frames: the world frame is fixed, z up; the base frame is ``base_link`` (x forward).
 """
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field, replace
 
@@ -136,6 +137,11 @@ class ResolverDiagnostics:
         reference_time_left: time [s] the set-point trajectory a goal became still has to run
             (the acceleration-level methods); 0 otherwise. Until it ends the goal is not yet
             the target, so it cannot stall (:mod:`~wmm_control.resolvers.progress`).
+        clearance: distance of the closest pair the safety stage checks (arm against body,
+            itself, the floor) [m]; inf when it checks none.
+        closest_pair: that pair's links, ``'a/b'``.
+        collision_constraints: pairs within the influence distance (damper rows) this period.
+        collision_changed: True when the safety stage changed the method's arm command.
     """
 
     method: str
@@ -152,6 +158,10 @@ class ResolverDiagnostics:
     compensated: bool
     cycle_time_s: float
     reference_time_left: float = 0.0
+    clearance: float = math.inf
+    closest_pair: str = ''
+    collision_constraints: int = 0
+    collision_changed: bool = False
 
 
 @dataclass(frozen=True)

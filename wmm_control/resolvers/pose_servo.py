@@ -25,7 +25,7 @@ Task space (``orientation_error``):
 import math
 import time
 from abc import abstractmethod
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 import pinocchio as pin
@@ -33,9 +33,11 @@ from scipy.linalg import lapack
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.kinematics.orientation import rpy_from_matrix, rpy_rate_map, wrap_angle
 from wmm_control.resolvers.interface import Resolver, ResolverCommand, ResolverDiagnostics, base_twist_of
 from wmm_control.resolvers.limits import CommandLimits
+from wmm_control.resolvers.safety import SafetyParams, SafetyStage
 
 __all__ = ['PoseServoParams', 'PoseServoResolver', 'damped_pinv_solve', 'singularity_damping', 'ORIENTATION_ERRORS']
 
@@ -44,8 +46,9 @@ _H_COLS = (0, 1, 5)          # columns of H J_b of the base twist (vx, vy, ω)
 
 
 @dataclass(frozen=True)
-class PoseServoParams:
-    """Parameters shared by the velocity-level resolvers (Sorour Table I defaults).
+class PoseServoParams(SafetyParams):
+    """Parameters shared by the velocity-level resolvers (Sorour Table I defaults), and the
+    safety stage's (:class:`~wmm_control.resolvers.safety.SafetyParams`).
 
     Attributes:
         dt: control period t_s [s].
@@ -85,6 +88,7 @@ class PoseServoParams:
     _allow_zero = ('max_damping',)
 
     def __post_init__(self):
+        super().__post_init__()
         _check_fields(self, self._allow_zero)
         if self.orientation_error not in ORIENTATION_ERRORS:
             raise ConfigError(f'orientation_error must be one of {ORIENTATION_ERRORS}, '
@@ -209,6 +213,7 @@ class PoseServoResolver(Resolver):
         self._jmm_cols = np.array(self._base_cols + list(range(6, 6 + self.n_arm)))
         self.limits = CommandLimits.for_robot(config, params.dt)
         self._arm_limits = self.limits.subset(slice(self.n_base, None))
+        self.safety = SafetyStage(CollisionModel.from_robot(config), params)
         self._position = np.zeros(self.n)
         self.reset()
 
@@ -223,6 +228,7 @@ class PoseServoResolver(Resolver):
         self._arm_null = np.zeros(n_arm)       # ...and null-space part
         self._q_arm = None
         self._jac = None
+        self._safety = None                    # the safety stage's answer on the last arm command
         self.arm_damping = self.params.rho
 
     # ------------------------------------------------------------------ eq (12)
@@ -387,18 +393,28 @@ class PoseServoResolver(Resolver):
             orientation_error=angle, limit_scale=lim.scale, accel_scale=lim.accel_scale,
             null_scale=lim.secondary_scale,
             compensation_scale=1.0, limited=tuple(limited), sigma_min=sigma, compensated=False,
-            cycle_time_s=time.perf_counter() - t0)
+            cycle_time_s=time.perf_counter() - t0, **self._safety_fields())
         return ResolverCommand(arm_velocity=arm.command.copy(), base_twist=base_twist_of(lim.command[:nb], self.base_axes),
                                diagnostics=diag)
 
     def _finish_arm(self, arm_task):
         """The arm command sent: task part ``arm_task`` plus this period's null-space share,
-        within the arm's bounds relative to the arm command sent last period."""
+        within the arm's bounds relative to the arm command sent last period, then through the
+        safety stage (:mod:`~wmm_control.resolvers.safety`) within the same bounds."""
         before, before_null = self._arm_before
         arm = self._arm_limits.apply(arm_task, self._q_arm, before, secondary=self._arm_null,
                                      previous_secondary=before_null)
+        self._safety = self.safety.filter(self._q_arm, arm.command, arm.lower, arm.upper)
+        if self._safety.changed:
+            arm = replace(arm, command=self._safety.command)
         self._prev_arm, self._prev_arm_null = arm.command.copy(), arm.secondary.copy()
         return arm
+
+    def _safety_fields(self):
+        """The safety stage's diagnostics fields of the last arm command."""
+        out = self._safety
+        return dict(clearance=out.clearance, closest_pair=out.closest_pair, collision_constraints=out.active,
+                    collision_changed=out.changed)
 
     # ------------------------------------------------------------------ eq (14)
     def compensation_term(self, base_reference, feasible_twist):
@@ -425,7 +441,7 @@ class PoseServoResolver(Resolver):
         arm = self._finish_arm(self._arm_task + term)
         elapsed = command.diagnostics.cycle_time_s + time.perf_counter() - t0
         return command.with_arm(arm.command.copy(), compensation_scale=arm.scale * arm.accel_scale,
-                                compensated=True, cycle_time_s=elapsed)
+                                compensated=True, cycle_time_s=elapsed, **self._safety_fields())
 
 
 # The helpers below work on 3-vectors, where a numpy reduction (np.max, np.linalg.norm)
