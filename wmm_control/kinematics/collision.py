@@ -181,6 +181,7 @@ class CollisionModel:
         if not near.size:
             return [], *closest
         pin.computeJointJacobians(model, data, q)
+        self._jacobians = {}                 # per joint, this call's: pairs share their joints
         out = []
         for k in near.tolist():
             pair, result = self.geom.collisionPairs[k], self.geom_data.distanceResults[k]
@@ -200,11 +201,11 @@ class CollisionModel:
         joint = self.geom.geometryObjects[geometry].parentJoint
         if joint == 0:
             return np.zeros((3, self.n_arm))
-        jac = pin.getJointJacobian(self.model, self.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-        origin = self.data.oMi[joint].translation
-        r = point - origin
-        linear = jac[:3] - _skew(r) @ jac[3:]
-        return linear[:, self._idx_v]
+        if joint not in self._jacobians:
+            jac = pin.getJointJacobian(self.model, self.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            self._jacobians[joint] = (jac[:3, self._idx_v], jac[3:, self._idx_v], self.data.oMi[joint].translation)
+        linear, angular, origin = self._jacobians[joint]
+        return linear - _skew(point - origin) @ angular
 
 
 def _halfspace():

@@ -125,6 +125,10 @@ _SPECS = (
           hi=1.0, read_only=True),
     Param('collision_gain', 'Approach speed ξ [m/s] allowed at the influence distance.', lo=1e-3, hi=10.0,
           read_only=True),
+    Param('collision_lookahead', 'Distance d_b [m] under which a pair approaches no faster than braking at '
+          'collision_braking can stop.', lo=1e-3, hi=2.0, read_only=True),
+    Param('collision_braking', 'Deceleration a_b [m/s²] of a distance that braking counts on.', lo=1e-3, hi=100.0,
+          read_only=True),
     Param('sigma_min', 'σ_m,min: the base is activated below it (amp).', lo=0.0, hi=10.0, read_only=True),
     Param('singularity_avoidance', 'Activate the base near a singularity (amp).', read_only=True),
     Param('sigma_rows', 'Rows of J_m for σ_m: task (the task rows) or position (amp).', choices=('task', 'position'),

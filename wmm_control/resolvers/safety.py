@@ -8,8 +8,15 @@ faster than (Faverjon and Tournassoud's velocity damper)
     ḋ ≥ −ξ (d − d_s) / (d_i − d_s),
 
 so the arm may approach at ``ξ`` at the influence distance, ever more slowly nearer, and not
-at all at the safety distance ``d_s`` (below it, the pair must move apart). With
-``ḋ = j · q̇``, each pair is one linear row on the arm command. The stage returns the command
+at all at the safety distance ``d_s`` (below it, the pair must move apart). An arm that
+arrives at ``d_i`` much faster than ``ξ`` cannot slow down to it at once within its
+acceleration limits, so a pair closer than the look-ahead distance ``d_b`` (≥ ``d_i``) also
+keeps its approach within what braking at ``a_b`` can stop before ``d_s``:
+
+    ḋ ≥ −√(2 a_b (d − d_s)),
+
+the stricter of the two where both hold. With ``ḋ = j · q̇``, each pair is one linear row on
+the arm command. The stage returns the command
 nearest the method's own in the method's weighting,
 
     min ½ (q̇ − q̇₀)ᵀ W (q̇ − q̇₀)   subject to   the dampers, and   lower ≤ q̇ ≤ upper,
@@ -60,21 +67,31 @@ class SafetyParams:
         collision_influence: d_i, distance under which a pair is constrained [m].
         collision_safety: d_s, distance the dampers keep [m]; below it, the pair must separate.
         collision_gain: ξ, the approach speed allowed at the influence distance [m/s].
+        collision_lookahead: d_b ≥ d_i, distance under which a pair's approach is kept within
+            what braking can stop [m].
+        collision_braking: a_b, the deceleration of a distance that braking counts on [m/s²]
+            (below what the arm's joint acceleration limits give).
     """
 
     collision_avoidance: bool = True
     collision_influence: float = 0.10
     collision_safety: float = 0.02
     collision_gain: float = 0.2
+    collision_lookahead: float = 0.3
+    collision_braking: float = 1.0
 
     def __post_init__(self):
-        for name in ('collision_influence', 'collision_safety', 'collision_gain'):
+        for name in ('collision_influence', 'collision_safety', 'collision_gain', 'collision_lookahead',
+                     'collision_braking'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigError(f'{name} must be finite and > 0, got {value}')
         if self.collision_safety >= self.collision_influence:
             raise ConfigError(f'collision_safety ({self.collision_safety} m) must be below collision_influence '
                               f'({self.collision_influence} m)')
+        if self.collision_lookahead < self.collision_influence:
+            raise ConfigError(f'collision_lookahead ({self.collision_lookahead} m) must not be below '
+                              f'collision_influence ({self.collision_influence} m)')
 
 
 @dataclass(frozen=True)
@@ -85,7 +102,7 @@ class SafetyResult:
         command: the arm command [rad/s or m/s]. Shape (n,).
         clearance: distance of the closest checked pair [m] (inf when none is checked).
         closest_pair: its links, ``'a/b'`` ('' when none).
-        active: number of damper rows (pairs within the influence distance).
+        active: number of damper rows (pairs within the look-ahead distance).
         changed: True when the command differs from the method's.
     """
 
@@ -107,7 +124,7 @@ class SafetyStage:
     def __init__(self, collision, params: SafetyParams = SafetyParams()):
         self.collision = collision
         self.params = params
-        self._settings = dict(verbose=False, eps_abs=1e-7, eps_rel=1e-7, max_iter=4000, polishing=True)
+        self._settings = dict(verbose=False, eps_abs=1e-5, eps_rel=1e-5, max_iter=4000, polishing=True)
 
     def filter(self, q_arm, command, lower, upper, weights=None) -> SafetyResult:
         """The arm command ``command`` at arm joints ``q_arm``, within the dampers and the box.
@@ -124,25 +141,46 @@ class SafetyStage:
         if not p.collision_avoidance:
             return SafetyResult(command, math.inf, '', 0, False)
         d_i, d_s = p.collision_influence, p.collision_safety
-        pairs, clearance, names = self.collision.within(q_arm, d_i)
+        pairs, clearance, names = self.collision.within(q_arm, p.collision_lookahead)
         label = '/'.join(names) if names else ''
         if not pairs:
             return SafetyResult(command, clearance, label, 0, False)
         rows = np.array([pair.rate_jacobian for pair in pairs])
-        bound = np.array([-p.collision_gain * (pair.distance - d_s) / (d_i - d_s) for pair in pairs])
-        if np.all(rows @ command >= bound - TOLERANCE):
+        bound = -np.array([self.allowed_approach(pair.distance) for pair in pairs])
+        violated = rows @ command < bound - TOLERANCE
+        if not violated.any():
             return SafetyResult(command, clearance, label, len(pairs), False)
-        solved = self._solve(command, rows, bound, np.asarray(lower, dtype=float), np.asarray(upper, dtype=float),
-                             np.ones(command.size) if weights is None else np.asarray(weights, dtype=float))
+        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+        weights = np.ones(command.size) if weights is None else np.asarray(weights, dtype=float)
+        # active set: the rows the command breaks, then any the answer breaks, until it breaks none
+        # (most periods one solve: the rows far from binding never enter the QP)
+        use = violated
+        for _ in range(len(pairs)):
+            solved = self._solve(command, rows[use], bound[use], lower, upper, weights)
+            broken = (rows @ solved < bound - 1e-7) & ~use
+            if not broken.any():
+                break
+            use = use | broken
         return SafetyResult(solved, clearance, label, len(pairs), True)
 
+    def allowed_approach(self, distance: float) -> float:
+        """The fastest a pair ``distance`` [m] apart may approach [m/s] (negative: it must separate)."""
+        p = self.params
+        d_i, d_s = p.collision_influence, p.collision_safety
+        braking = math.sqrt(2.0 * p.collision_braking * max(distance - d_s, 0.0))
+        damper = p.collision_gain * (distance - d_s) / (d_i - d_s) if distance < d_i else math.inf
+        return min(damper, braking)
+
     def _solve(self, command, rows, bound, lower, upper, weights):
-        """The QP of the module docstring over (q̇, slack)."""
+        """The QP of the module docstring over (q̇, slack), the dampers ``rows`` ≥ ``bound``."""
         n, m = command.size, bound.size
-        p_mat = sparse.diags(np.concatenate((weights, np.full(m, SLACK_WEIGHT))), format='csc')
+        p_mat = sparse.csc_matrix(np.diag(np.concatenate((weights, np.full(m, SLACK_WEIGHT)))))
         q_vec = np.concatenate((-weights * command, np.full(m, SLACK_COST)))
-        a_mat = sparse.vstack([sparse.hstack([sparse.csc_matrix(rows), sparse.identity(m)]),
-                               sparse.identity(n + m)], format='csc')
+        dense = np.zeros((m + n + m, n + m))        # [rows I; I 0; 0 I], small enough to build dense
+        dense[:m, :n] = rows
+        dense[:m, n:] = np.eye(m)
+        dense[m:, :] = np.eye(n + m)
+        a_mat = sparse.csc_matrix(dense)
         lo = np.concatenate((bound, lower, np.zeros(m)))
         hi = np.concatenate((np.full(m, np.inf), upper, np.full(m, np.inf)))
         solver = osqp.OSQP()
