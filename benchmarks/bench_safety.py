@@ -1,0 +1,57 @@
+"""Cost of the safety stage per cycle on every shipped robot. Prints figures, asserts nothing.
+
+For each robot: the number of checked pairs, then :meth:`SafetyStage.filter` at random arm
+configurations within the position limits (a random command of 0.5 rad/s per joint, the
+velocity limits as the box), split by whether the command passed unchanged (distances and
+the rows of the pairs within the look-ahead distance) or a QP was solved; median and p99
+[µs]. Random configurations are harder than a run's: many of them have the arm folded close
+to the body or to itself.
+
+    python benchmarks/bench_safety.py [--configurations 300]
+"""
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))                 # run from a source checkout
+
+from wmm_control.kinematics.collision import CollisionModel  # noqa: E402
+from wmm_control.resolvers.safety import SafetyStage  # noqa: E402
+from wmm_control.robot_config import load_robot, robot_names  # noqa: E402
+
+
+def _figures(times):
+    if not times:
+        return '—'
+    us = np.array(times) * 1e6
+    return f'median {np.median(us):6.0f} µs, p99 {np.percentile(us, 99):6.0f} µs ({len(us)} cycles)'
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--configurations', type=int, default=300)
+    args = parser.parse_args(argv)
+    for name in robot_names():
+        robot = load_robot(name)
+        stage = SafetyStage(CollisionModel.from_robot(robot))
+        arm = robot.arm
+        rng = np.random.default_rng(0)
+        lower = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
+        upper = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
+        passed, solved = [], []
+        for q in rng.uniform(lower, upper, size=(args.configurations, lower.size)):
+            command = 0.5 * rng.normal(size=lower.size)
+            t0 = time.perf_counter()
+            out = stage.filter(q, np.clip(command, -arm.velocity, arm.velocity), -arm.velocity, arm.velocity)
+            (solved if out.changed else passed).append(time.perf_counter() - t0)
+        print(f'{name:12s} {len(stage.collision.pairs):4d} pairs   passed: {_figures(passed)}   '
+              f'QP: {_figures(solved)}')
+
+
+if __name__ == '__main__':
+    main()
