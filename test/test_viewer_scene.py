@@ -200,7 +200,8 @@ def test_the_status_panel_shows_what_the_diagnostics_say():
     board.update(NodeStatus('redundancy_resolver', 0, 'mobile_manipulation', {
         'method': 'task_sharing', 'mode': 'mobile_manipulation', 'psi': '0.512345678', 'sigma_min': '0.0321',
         'position_error_m': '0.25', 'orientation_error_rad': '0.1', 'goal_reached': 'False',
-        'goal_stalled': 'False', 'cycle_time_us': '812.5', 'limit_scale': '0.75', 'arm_command': '[0, 0]'},
+        'goal_stalled': 'False', 'cycle_time_us': '812.5', 'limit_scale': '0.75', 'arm_command': '[0, 0]',
+        'clearance_m': '0.04321', 'closest_pair': 'arm_link_7/chassis_link', 'collision_changed': 'True'},
         received=9.0))
     board.update(NodeStatus('swmr_controller', 2, 'solver_failure', {'status': 'solver_failure'}, received=9.0))
     text = board.markdown(10.0)
@@ -209,6 +210,8 @@ def test_the_status_panel_shows_what_the_diagnostics_say():
     for shown in ('| method | task_sharing |', '| ψ (task sharing) | 0.5123 |', '| σ_min | 0.0321 |',
                   '| position error [m] | 0.25 |', '| goal reached | False |', '| cycle time [µs] | 812.5 |',
                   '| task scale α / s_v | 0.75 |', '**swmr_controller** — ERROR: solver_failure',
+                  '| clearance [m] | 0.04321 |', '| closest pair | arm_link_7/chassis_link |',
+                  '| avoiding contact | True |',
                   '| command age [s] | inf |', 'WARN, 10 s old: no fresh command (zero velocity)'):
         assert shown in text, shown
     assert 'arm_command' not in text

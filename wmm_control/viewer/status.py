@@ -3,7 +3,8 @@
 Each node's status (one ``DiagnosticStatus`` per node; the simulator has one per command
 group and one for the simulation) is kept by name, newest first replaced. The panel shows,
 per status, its level and message and the keys a user watches (:data:`KEYS`): the resolver's
-method, mode, ψ, task scale (α of AMP), σ_min, errors, goal reached or stalled and cycle time;
+method, mode, ψ, task scale (α of AMP), σ_min, errors, goal reached or stalled, the safety
+stage's clearance, closest pair and whether it changed the command, and cycle time;
 the base controllers' status, solve time and rejected or stale inputs; the simulator's command
 watchdogs (a group whose commands timed out is held at zero velocity) and real-time factor.
 """
@@ -29,6 +30,9 @@ KEYS = (
     ('orientation_error_rad', 'orientation error [rad]'),
     ('goal_reached', 'goal reached'),
     ('goal_stalled', 'goal stalled'),
+    ('clearance_m', 'clearance [m]'),
+    ('closest_pair', 'closest pair'),
+    ('collision_changed', 'avoiding contact'),
     ('cycle_time_us', 'cycle time [µs]'),
     ('status', 'status'),
     ('route', 'route'),
