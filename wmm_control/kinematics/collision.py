@@ -125,7 +125,7 @@ class CollisionModel:
         for a, b in pairs:
             self.geom.addCollisionPair(pin.CollisionPair(a, b))
         self.geom_data = pin.GeometryData(self.geom)
-        start = self._distances(np.zeros(self.n_arm) if start_arm is None else start_arm)
+        start = self._distances(self._configuration(np.zeros(self.n_arm) if start_arm is None else start_arm))
         keep = [k for k, d in enumerate(start) if d >= margin]
         self.excluded_at_start = [(link_of[pairs[k][0]], link_of[pairs[k][1]]) for k in range(len(pairs))
                                   if k not in set(keep)]
@@ -152,8 +152,9 @@ class CollisionModel:
                 q[iq] = val
         return q
 
-    def _distances(self, q_arm) -> list[float]:
-        pin.computeDistances(self.model, self.data, self.geom, self.geom_data, self._configuration(q_arm))
+    def _distances(self, q) -> list[float]:
+        """Every checked pair's distance at the full configuration ``q``."""
+        pin.computeDistances(self.model, self.data, self.geom, self.geom_data, q)
         return [r.min_distance for r in self.geom_data.distanceResults]
 
     def closest(self, q_arm) -> tuple[float, tuple[str, str] | None]:
@@ -161,7 +162,7 @@ class CollisionModel:
         ``q_arm``; ``(inf, None)`` when no pair is checked."""
         if not self.geom.collisionPairs:
             return float('inf'), None
-        dists = self._distances(q_arm)
+        dists = self._distances(self._configuration(q_arm))
         k = int(np.argmin(dists))
         pair = self.geom.collisionPairs[k]
         return float(dists[k]), (self._link_of[pair.first], self._link_of[pair.second])
@@ -173,7 +174,7 @@ class CollisionModel:
             return [], float('inf'), None
         model, data = self.model, self.data
         q = self._configuration(q_arm)
-        dists = np.array(self._distances(q_arm))
+        dists = np.array(self._distances(q))
         k_min = int(np.argmin(dists))
         first = self.geom.collisionPairs[k_min]
         closest = (float(dists[k_min]), (self._link_of[first.first], self._link_of[first.second]))
@@ -196,10 +197,8 @@ class CollisionModel:
     def _point_jacobian(self, geometry: int, point: np.ndarray) -> np.ndarray:
         """Linear velocity of ``point`` (root frame) fixed to geometry ``geometry``, per arm joint
         rate. Shape (3, n_arm)."""
-        if geometry >= len(self.geom.geometryObjects) or self._link_of[geometry] == FLOOR:
-            return np.zeros((3, self.n_arm))
         joint = self.geom.geometryObjects[geometry].parentJoint
-        if joint == 0:
+        if joint == 0:                       # fixed to the root: the body's links and the floor
             return np.zeros((3, self.n_arm))
         if joint not in self._jacobians:
             jac = pin.getJointJacobian(self.model, self.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
