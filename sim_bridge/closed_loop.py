@@ -36,6 +36,7 @@ class CycleRecord:
         t: simulated time at the start of the period [s].
         base_pose: true base pose (x, y, θ). Shape (3,).
         q_arm: arm joint positions [rad or m]. Shape (n,).
+        q: every simulated joint's position (``world.joint_names``) [rad or m]. Shape (J,).
         ee_position: true end-effector position [m]. Shape (3,).
         ee_rotation: true end-effector orientation. Shape (3, 3).
         command: the resolver's final command (``ResolverCommand``).
@@ -46,6 +47,7 @@ class CycleRecord:
     t: float
     base_pose: np.ndarray
     q_arm: np.ndarray
+    q: np.ndarray
     ee_position: np.ndarray
     ee_rotation: np.ndarray
     command: object
@@ -122,13 +124,14 @@ class ClosedLoop:
         t = w.time
         pose = w.base_pose()
         ee_pos, ee_quat = w.ee_pose()
+        _, q_all, _ = w.joint_state()
         state = self.state()
         command = self.resolver.step(state, target)
         feasible = self._base_answer(command.base_twist)
         command = self.resolver.compensate(command, feasible)
         w.set_command('arm', command.arm_velocity)
         w.step()
-        return CycleRecord(t=t, base_pose=pose, q_arm=state.q_arm, ee_position=ee_pos,
+        return CycleRecord(t=t, base_pose=pose, q_arm=state.q_arm, q=q_all.copy(), ee_position=ee_pos,
                            ee_rotation=_rotation(ee_quat), command=command,
                            feasible_twist=np.asarray(feasible, dtype=float), base_velocity=w.base_twist())
 
@@ -158,8 +161,11 @@ def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', p
     import time
     from wmm_control.experiments.metrics import RunLog
 
+    # the scenario's obstacles, in the world and in the controller's collision model
+    world.set_obstacles(scenario.obstacles)
+    resolver.set_obstacles(scenario.obstacles)
     loop = ClosedLoop(world, resolver, feedback=feedback)
-    log = RunLog(method=resolver.name, label=label)
+    log = RunLog(method=resolver.name, label=label, joint_names=world.joint_names)
     reference = scenario.reference(KinematicModel(world.robot)) if scenario.trajectory is not None else None
     n = int(round(scenario.duration / world.dt))
     t0 = time.perf_counter()
@@ -168,7 +174,7 @@ def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', p
         rec = loop.step(scenario.target(world.time, reference))
         cmd = rec.command
         log.append(rec.t, gi, rec.ee_position, rec.ee_rotation, rec.base_pose, rec.q_arm, cmd.arm_velocity,
-                   cmd.base_twist, rec.feasible_twist, cmd.diagnostics)
+                   cmd.base_twist, rec.feasible_twist, cmd.diagnostics, q=rec.q)
         if progress is not None:
             progress(1)
         if until is not None and until(cmd.diagnostics):

@@ -12,17 +12,48 @@ link comes within ``margin`` of the floor. Checked pairs: moving–body and movi
 except a link and its parent or grandparent (one joint apart they share the joint; two
 joints apart the crude cylinders of the URDF overlap as soon as the joint between them bends,
 which the real wrist allows) and the pairs that are already closer than ``margin`` at the
-robot's start state (they touch by design, e.g. the first arm link resting on its mount). The base pose does not matter: the floor is a plane under the wheels.
+robot's start state (they touch by design, e.g. the first arm link resting on its mount).
+The base pose does not matter for those: the floor is a plane under the wheels. Obstacles
+(:mod:`wmm_control.kinematics.obstacles`) are checked against every link, and for them it
+does: they are placed around the robot from the base's pose.
 """
 
 import itertools
 
+import numpy as np
+import pinocchio as pin
 import pybullet as p
 
 from sim_bridge.client import OwnedClient
 from wmm_control.robot_config import RobotConfig, load_robot
 
-__all__ = ['SelfCollisionChecker']
+__all__ = ['SelfCollisionChecker', 'add_obstacle', 'OBSTACLE_RGBA']
+
+#: Colour of the obstacles in the simulator's GUI and images.
+OBSTACLE_RGBA = (0.85, 0.55, 0.25, 1.0)
+
+
+def add_obstacle(obstacle, cid, visual=True):
+    """A static PyBullet body for ``obstacle`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`)
+    at its world pose in client ``cid``; returns its body id."""
+    size = obstacle.size
+    if obstacle.shape == 'box':
+        kind, collision, drawing = p.GEOM_BOX, {'halfExtents': [0.5 * v for v in size]}, None
+    elif obstacle.shape == 'sphere':
+        kind, collision, drawing = p.GEOM_SPHERE, {'radius': size[0]}, None
+    else:            # PyBullet names a cylinder's length "height" in one call and "length" in the other
+        kind, collision, drawing = p.GEOM_CYLINDER, {'radius': size[0], 'height': size[1]}, \
+            {'radius': size[0], 'length': size[1]}
+    shape = p.createCollisionShape(kind, **collision, physicsClientId=cid)
+    vis = (p.createVisualShape(kind, **(drawing or collision), rgbaColor=OBSTACLE_RGBA, physicsClientId=cid)
+           if visual else -1)
+    return p.createMultiBody(0.0, shape, vis, basePosition=obstacle.position.tolist(),
+                             baseOrientation=_quaternion(obstacle.rotation), physicsClientId=cid)
+
+
+def _quaternion(rotation):
+    """(x, y, z, w) of a rotation matrix, PyBullet's order."""
+    return pin.Quaternion(rotation).coeffs().tolist()
 
 
 class SelfCollisionChecker(OwnedClient):
@@ -31,11 +62,12 @@ class SelfCollisionChecker(OwnedClient):
     Args:
         robot: robot name, alias, YAML path or :class:`~wmm_control.robot_config.RobotConfig`.
         margin: clearance required between checked pairs [m], >= 0.
+        obstacles: :class:`~wmm_control.kinematics.obstacles.Obstacle` s in the world frame.
 
     Use as a context manager, or call :meth:`close`.
     """
 
-    def __init__(self, robot, margin=0.02):
+    def __init__(self, robot, margin=0.02, obstacles=()):
         self.robot = robot if isinstance(robot, RobotConfig) else load_robot(robot)
         self.margin = float(margin)
         self._cid = p.connect(p.DIRECT)
@@ -67,6 +99,19 @@ class SelfCollisionChecker(OwnedClient):
         pairs = [(a, b) for a, b in pairs if not (near(a, b) or near(b, a))]
         self._set(self.robot.start.arm)
         self._pairs = [(a, b) for a, b in pairs if self._distance(a, b) >= self.margin]
+        self._links = sorted(shaped) + ([-1] if p.getCollisionShapeData(self._body, -1, physicsClientId=cid) else [])
+        self.obstacles = tuple(obstacles)
+        self._obstacles = [add_obstacle(o, cid, visual=False) for o in self.obstacles]
+
+    def _place_obstacles(self, base_pose):
+        """Obstacles around the robot (fixed at the origin) as they are around the base at
+        ``base_pose`` (x, y, θ) in the world."""
+        x, y, theta = (float(v) for v in base_pose)
+        root_inv = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, theta), np.array([x, y, 0.0])).inverse()
+        for body, obstacle in zip(self._obstacles, self.obstacles):
+            local = root_inv * obstacle.placement
+            p.resetBasePositionAndOrientation(body, local.translation.tolist(), _quaternion(local.rotation),
+                                              physicsClientId=self._cid)
 
     def _set(self, q_arm):
         for j, q in zip(self._arm, q_arm):
@@ -80,15 +125,24 @@ class SelfCollisionChecker(OwnedClient):
                                  linkIndexB=b, physicsClientId=self._cid)
         return min((pt[8] for pt in pts), default=bound)
 
-    def collisions(self, q_arm):
-        """The pairs closer than ``margin`` at arm configuration ``q_arm`` [rad].
+    def collisions(self, q_arm, base_pose=None):
+        """The pairs closer than ``margin`` at arm configuration ``q_arm`` [rad] (and, with
+        obstacles, base pose ``base_pose`` (x, y, θ) [m, m, rad]).
 
         Returns:
-            list of (link name, link name or ``'floor'``, distance [m]); empty when clear.
+            list of (link name, link name, ``'floor'`` or an obstacle's name, distance [m]);
+            empty when clear.
         """
         self._set(q_arm)
         out = [(self.link_names[a], self.link_names[b], d) for a, b in self._pairs
                if (d := self._distance(a, b)) < self.margin]
         out += [(self.link_names[a], 'floor', d) for a in self._moving
                 if (d := self._distance(a, -1, self._ground)) < self.margin]
+        if self._obstacles:
+            if base_pose is None:
+                raise ValueError('SelfCollisionChecker: the base pose is needed to place the obstacles')
+            self._place_obstacles(base_pose)
+            for body, obstacle in zip(self._obstacles, self.obstacles):
+                out += [(self.link_names.get(a, 'base_link'), obstacle.name, d) for a in self._links
+                        if (d := self._distance(a, -1, body)) < self.margin]
         return out

@@ -3,7 +3,10 @@
 Subscribes (``std_msgs/Float64MultiArray``, ros2_control JointGroupVelocityController style,
 joint order = the robot YAML's):
   ``/arm_controller/commands`` (7); robot A ``/steer_controller/commands`` and
-  ``/drive_controller/commands`` (4 each); robot B ``/wheel_controller/commands`` (4).
+  ``/drive_controller/commands`` (4 each); robot B ``/wheel_controller/commands`` (4);
+  ``/obstacles`` (``visualization_msgs/MarkerArray``, frame ``world``): obstacles added and
+  removed live, beside those of the ``obstacles`` file (:mod:`wmm_control.nodes.obstacle_topic`):
+  static bodies of the simulated world.
 Publishes, every period:
   ``/joint_states`` (``sensor_msgs/JointState``: every simulated joint, position and velocity),
   ``/ee_pose`` (``geometry_msgs/PoseStamped``, ground-truth end effector, frame ``world``),
@@ -14,7 +17,10 @@ Publishes, every period:
   ``/ground_truth/odom`` (``nav_msgs/Odometry``: true base pose and twist, frame ``world``),
   ``/tf`` (world → odom → base_link and the moving joints) where ``tf2_msgs`` can be imported,
   ``clock`` (``rosgraph_msgs/Clock``, sim time; always in lockstep, in realtime with
-  ``publish_clock``), and ``/diagnostics`` every ``diagnostics_period``.
+  ``publish_clock``), and ``/diagnostics`` every ``diagnostics_period``: the command
+  counters, the simulation's pace and, with obstacles, the robot's true clearance from them
+  (status ``obstacles``: ``clearance_m``, the closest link and obstacle, ``contact_periods``
+  and ``deepest_contact_m``; level ERROR while in contact, which is also logged).
 
 The clock topic is relative: ``/clock`` in the root namespace, ``/r1/clock`` for a simulator in
 ``/r1``, so that two simulators in one domain never both publish ``/clock``. The nodes of a
@@ -55,9 +61,11 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
 
 from sim_bridge.slip import VARIANCE_FLOOR, OdometryCovariance, SlipParams
 from sim_bridge.world import BASE_MODES, SimWorld
+from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet, describe
 from wmm_control.nodes.robot_frames import RobotFrames, valid_frame_prefix
 from wmm_control.robot_config import load_robot
 from wmm_control.errors import ConfigError
@@ -104,6 +112,7 @@ PARAMS = (
     Param('frame_prefix', 'Prefix of the robot\'s frames in TF and odometry (e.g. r1/); world has none.',
           read_only=True),
     Param('gui', 'Open the PyBullet GUI.', read_only=True),
+    Param('obstacles', OBSTACLE_PARAM_HELP, read_only=True),
 )
 
 
@@ -142,10 +151,13 @@ class SimNode(Node):
                        'lockstep_groups': self._set_wait_groups},
             check=lambda v: wait_groups(v.lockstep_groups, self.world.command_groups)[1] if self.world else '')
         slip = SlipParams(gain=self.p.slip_gain, drift=tuple(self.p.slip_drift), noise_std=tuple(self.p.slip_noise))
+        self.obstacles = ObstacleSet(self.p.obstacles, 'world')
         self.world = SimWorld(
             robot=self.p.robot, base_mode=self.p.base_mode, dt=self.p.period, substeps=self.p.substeps,
             slip=slip, seed=self.p.seed, gui=self.p.gui,
-            start_base_pose=self.p.start_base_pose, start_arm=self.p.start_arm)
+            start_base_pose=self.p.start_base_pose, start_arm=self.p.start_arm, obstacles=self.obstacles.obstacles)
+        self.contact = {'clearance_m': math.inf, 'closest_link': '', 'closest_obstacle': '', 'contact_periods': 0,
+                        'deepest_contact_m': 0.0}
         reason = valid_frame_prefix(self.p.frame_prefix)
         if reason:
             raise ConfigError(reason)
@@ -160,6 +172,7 @@ class SimNode(Node):
         self.subs = [self.create_subscription(Float64MultiArray, f'{g}_controller/commands',
                                               lambda msg, g=g: self._on_command(g, msg), COMMAND_QOS)
                      for g in groups]
+        self.create_subscription(MarkerArray, 'obstacles', self._on_obstacles, COMMAND_QOS)
         self.pub_joints = self.create_publisher(JointState, 'joint_states', STATE_PUB_QOS)
         self.pub_ee = self.create_publisher(PoseStamped, 'ee_pose', STATE_PUB_QOS)
         self.pub_odom = self.create_publisher(Odometry, 'odom', STATE_PUB_QOS)
@@ -192,7 +205,23 @@ class SimNode(Node):
             self.timer = self.create_timer(self.p.period, self._realtime_tick, clock=steady)
         self.get_logger().info(
             f'simulating {self.world.robot.name} ({self.p.base_mode} base, {self.p.timing}, '
-            f'period {self.p.period} s); command groups {sorted(groups)}')
+            f'period {self.p.period} s); command groups {sorted(groups)}; {describe(self.obstacles.obstacles)}')
+
+    def _on_obstacles(self, msg):
+        if self.obstacles.take(msg, self.get_logger()):
+            self.world.set_obstacles(self.obstacles.obstacles)
+
+    def _check_obstacles(self):
+        """The true clearance from the obstacles after a step; contact counted and logged."""
+        if not self.world.obstacles:
+            return
+        distance, link, obstacle = self.world.obstacle_clearance()
+        self.contact.update(clearance_m=distance, closest_link=link, closest_obstacle=obstacle)
+        if distance < 0.0:
+            self.contact['contact_periods'] += 1
+            self.contact['deepest_contact_m'] = max(self.contact['deepest_contact_m'], -distance)
+            self.get_logger().error(f'{link} is {-distance * 1e3:.1f} mm into obstacle {obstacle!r}',
+                                    throttle_duration_sec=1.0)
 
     def _set_command_timeout(self, timeout):
         for fresh in self.fresh.values():
@@ -256,6 +285,7 @@ class SimNode(Node):
         self._apply_watchdog()
         theta = self.world.odom_pose()[2]
         self.world.step()
+        self._check_obstacles()
         twist = self.world.odom_twist()
         self.odom_covariance.update(theta, twist, *self.world.slip.twist_error(twist, self.world.rim_speed),
                                     self.world.dt)
@@ -334,6 +364,12 @@ class SimNode(Node):
             self, 'simulation', self.world.robot.name, 'ok', f'{self.p.timing}, {self.p.base_mode}',
             {'sim_time_s': self.world.time, 'steps': self._steps,
              'real_time_factor': self.world.time / wall if wall > 0 else 0.0}))
+        if self.world.obstacles:
+            touching = self.contact['clearance_m'] < 0.0
+            statuses.append(node_status(
+                self, 'obstacles', self.world.robot.name, 'error' if touching else 'ok',
+                f'{self.contact["closest_link"]} in contact with {self.contact["closest_obstacle"]}' if touching
+                else f'clear ({len(self.world.obstacles)} obstacles)', self.contact))
         return diagnostic_array(stamp, statuses)
 
 

@@ -88,6 +88,7 @@ from wmm_control.errors import ConfigError
 from wmm_control.robot_config import RobotConfig, load_robot
 
 from sim_bridge.client import OwnedClient
+from sim_bridge.collision import add_obstacle
 from sim_bridge.slip import SlipModel
 
 __all__ = ['SimWorld', 'CommandResult', 'se2_step', 'BASE_MODES']
@@ -172,6 +173,8 @@ class SimWorld(OwnedClient):
         gui: open a PyBullet GUI window instead of ``p.DIRECT``.
         start_base_pose: (x, y, θ) [m, m, rad]; default the robot's ``start.base_pose``.
         start_arm: arm joint positions [rad or m], shape (n,); default ``start.arm``.
+        obstacles: :class:`~wmm_control.kinematics.obstacles.Obstacle` s, static bodies in
+            the world (:meth:`set_obstacles` changes them; :meth:`obstacle_clearance` measures).
 
     Attributes:
         robot: the :class:`~wmm_control.robot_config.RobotConfig`.
@@ -188,7 +191,7 @@ class SimWorld(OwnedClient):
     """
 
     def __init__(self, robot='steerable', base_mode='kinematic', dt=0.025, substeps=10,
-                 slip=None, seed=0, gui=False, start_base_pose=None, start_arm=None):
+                 slip=None, seed=0, gui=False, start_base_pose=None, start_arm=None, obstacles=()):
         self.robot = robot if isinstance(robot, RobotConfig) else load_robot(robot)
         if base_mode not in BASE_MODES:
             raise ConfigError(f'base_mode: expected one of {BASE_MODES}, got {base_mode!r}')
@@ -244,12 +247,15 @@ class SimWorld(OwnedClient):
         self._odom_twist = (0.0, 0.0, 0.0)
         self.rim_speed = 0.0          # [m/s] mean absolute rim speed of the last period (kinematic mode)
         self._twist_cache = None
+        self.obstacles = ()
+        self._obstacle_ids = []
 
         self._cid = p.connect(p.GUI if gui else p.DIRECT)
         if self._cid < 0:
             raise ConfigError('could not connect to PyBullet (a GUI is already open in this process?)')
         try:
             self._build()
+            self.set_obstacles(obstacles)
         except Exception:
             p.disconnect(physicsClientId=self._cid)
             self._cid = -1
@@ -331,6 +337,30 @@ class SimWorld(OwnedClient):
             self._place()
         else:
             self._setup_physics(efforts)
+
+    def set_obstacles(self, obstacles):
+        """Replace the world's obstacles (:class:`~wmm_control.kinematics.obstacles.Obstacle`)."""
+        for body in self._obstacle_ids:
+            p.removeBody(body, physicsClientId=self._cid)
+        self.obstacles = tuple(obstacles)
+        self._obstacle_ids = [add_obstacle(o, self._cid) for o in self.obstacles]
+        self._link_names = None
+
+    def obstacle_clearance(self, reach=1.0):
+        """The robot's closest approach to an obstacle, on the simulator's shapes and the true
+        pose: ``(distance [m], link, obstacle)``, negative when they overlap; ``(inf, '', '')``
+        when no obstacle is within ``reach`` [m]."""
+        cid = self._cid
+        if self._link_names is None:
+            self._link_names = {-1: p.getBodyInfo(self.body_id, physicsClientId=cid)[0].decode()}
+            for j in range(p.getNumJoints(self.body_id, physicsClientId=cid)):
+                self._link_names[j] = p.getJointInfo(self.body_id, j, physicsClientId=cid)[12].decode()
+        best = (math.inf, '', '')
+        for body, obstacle in zip(self._obstacle_ids, self.obstacles):
+            for point in p.getClosestPoints(self.body_id, body, reach, physicsClientId=cid):
+                if point[8] < best[0]:
+                    best = (float(point[8]), self._link_names[point[3]], obstacle.name)
+        return best
 
     def _setup_physics(self, efforts):
         cid, body = self._cid, self.body_id

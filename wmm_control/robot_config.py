@@ -466,6 +466,21 @@ def _check_unique(cfg):
         seen.add(name)
 
 
+def read_yaml(path, what):
+    """The document of the YAML file ``path``.
+
+    Raises:
+        ConfigError: the file is missing or not YAML (``what`` names the kind of file in the
+            message).
+    """
+    if not path.is_file():
+        raise ConfigError(f'{what} not found: {path}')
+    try:
+        return yaml.safe_load(path.read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ConfigError(f'{path}: not valid YAML: {str(exc).splitlines()[0] if str(exc) else exc}') from exc
+
+
 def read_yaml_section(path, key, what):
     """The mapping under top-level ``key`` of the YAML file ``path``.
 
@@ -473,12 +488,7 @@ def read_yaml_section(path, key, what):
         ConfigError: the file is missing or not YAML, or has no such mapping (``what`` names
             the kind of file in the message).
     """
-    if not path.is_file():
-        raise ConfigError(f'{what} not found: {path}')
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise ConfigError(f'{path}: not valid YAML: {str(exc).splitlines()[0] if str(exc) else exc}') from exc
+    doc = read_yaml(path, what)
     raw = doc.get(key) if isinstance(doc, dict) else None
     if not isinstance(raw, dict):
         raise ConfigError(f'{path}: top-level key "{key}" missing')

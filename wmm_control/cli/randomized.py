@@ -3,14 +3,21 @@
 Usage::
 
     wmm_randomized [--goals N] [--seed S] [--robots steerable,mecanum] [--methods pinv,...]
-                   [--indices I,...] [--engine direct|nodes] [--out FILE]
+                   [--indices I,...] [--engine direct|nodes] [--obstacles FILE] [--record DIR]
+                   [--jobs N] [--out FILE]
 
 Draws ``N`` reachable goals per robot (:mod:`wmm_control.experiments.randomized` says what
 reachable means), runs each method to each goal from the robot's start state in lockstep, in
 this process, and prints per robot and method: runs, converged, reported (stalled, on
 ``/diagnostics``), failed, the worst final error of the converged runs, the time to converge,
 and the worst use of any velocity or acceleration limit. ``--indices`` runs only those goals
-of the draw (one run again, say). ``--out`` writes every run as JSON.
+of the draw (one run again, say). ``--obstacles`` puts an obstacle file's obstacles
+(:mod:`wmm_control.kinematics.obstacles`) in the simulator and the controller, and draws the
+goals clear of them (in the file's ``goal_region``, if it has one); every period's clearance
+is checked on the simulator's geometry. ``--record DIR`` writes each run as
+``DIR/<robot>_<method>_<goal>.npz`` (:mod:`wmm_control.experiments.randomized` documents the
+arrays). ``--jobs`` runs that many runs at once, in separate processes (the results are the
+same as one at a time). ``--out`` writes every run as JSON.
 The exit status is 1 when a run failed (a limit passed, a non-finite command, or neither
 converged nor reported).
 """
@@ -66,6 +73,31 @@ def _indices(text, goals):
     return out
 
 
+def _run_one(job, options):
+    robot, method, goal = job
+    return run_goal(robot, method, goal, **options)
+
+
+def _run_all(jobs, options, workers, bar):
+    """Every run of ``jobs``, in their order, ``workers`` at a time (separate processes)."""
+    if workers == 1:
+        results = []
+        for job in jobs:
+            bar.set_description(f'{job[0]} {job[1]}')
+            results.append(_run_one(job, options))
+            bar.update(1)
+        return results
+    from concurrent.futures import ProcessPoolExecutor
+    from functools import partial
+
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        results = []
+        for result in pool.map(partial(_run_one, options=options), jobs):
+            results.append(result)
+            bar.update(1)
+        return results
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='wmm_randomized', description=__doc__.split('\n\n')[0])
     parser.add_argument('--goals', type=int, default=100, help='goals per robot (default: %(default)s)')
@@ -79,6 +111,10 @@ def main(argv=None):
                              'topics (default: %(default)s)')
     parser.add_argument('--param', action='append', default=[], metavar='NAME=VALUE',
                         help='a resolver parameter for every run, e.g. orientation_error=log (repeatable)')
+    parser.add_argument('--obstacles', default='',
+                        help='obstacle file: a name in config/obstacles (e.g. table_pillar) or a YAML path')
+    parser.add_argument('--record', metavar='DIR', help='write each run to DIR/<robot>_<method>_<goal>.npz')
+    parser.add_argument('--jobs', type=int, default=1, help='runs at once, in separate processes (default: %(default)s)')
     parser.add_argument('--out', help='write every run as JSON to this file')
     args = parser.parse_args(argv)
     from tqdm import tqdm
@@ -90,18 +126,16 @@ def main(argv=None):
         if unknown or args.goals < 1:
             raise WmmError(f'--methods: unknown {unknown}, expected some of {list(METHOD_RUNS)}' if unknown
                            else f'--goals must be >= 1, got {args.goals}')
+        if args.jobs < 1:
+            raise WmmError(f'--jobs must be >= 1, got {args.jobs}')
         params = dict(_param(text) for text in args.param)
         indices = _indices(args.indices, args.goals)
-        draws = {r: [g for g in sample_goals(r, args.goals, seed=args.seed) if indices is None or g.index in indices]
-                 for r in robots}
-        results = []
-        with tqdm(total=sum(len(draws[r]) for r in robots) * len(methods), unit='run', file=sys.stderr) as bar:
-            for robot in robots:
-                for method in methods:
-                    bar.set_description(f'{robot} {method}')
-                    for goal in draws[robot]:
-                        results.append(run_goal(robot, method, goal, engine=args.engine, params=params))
-                        bar.update(1)
+        draws = {r: [g for g in sample_goals(r, args.goals, seed=args.seed, obstacles=args.obstacles)
+                     if indices is None or g.index in indices] for r in robots}
+        jobs = [(robot, method, goal) for robot in robots for method in methods for goal in draws[robot]]
+        options = dict(engine=args.engine, params=params, obstacles=args.obstacles, record=args.record)
+        with tqdm(total=len(jobs), unit='run', file=sys.stderr) as bar:
+            results = _run_all(jobs, options, args.jobs, bar)
     except WmmError as exc:
         print(f'wmm_randomized: {exc}', file=sys.stderr)
         return 2

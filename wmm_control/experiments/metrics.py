@@ -49,18 +49,20 @@ class RunLog:
     ``arm_command`` (K, 7), ``base_reference`` (K, 3), ``feasible_twist`` (K, 3), ``psi``,
     ``mode`` (list of str), ``limit_scale``, ``accel_scale``, ``null_scale``,
     ``compensation_scale``, ``compensated`` (bool), ``cycle_time_s``, ``sigma_min``,
-    ``clearance`` [m] (the safety stage's closest pair) and ``collision_changed`` (bool: the
-    stage changed the arm command).
+    ``clearance`` [m] (the safety stage's closest pair), ``collision_changed`` (bool: the
+    stage changed the command) and ``q`` (K, J): every joint of ``joint_names`` (the
+    simulator's joints, the arm's first; NaN rows where a period's were not recorded).
     """
 
     COLUMNS = ('t', 'goal', 'ee_position', 'ee_rotation', 'base_pose', 'q_arm', 'arm_command',
                'base_reference', 'feasible_twist', 'psi', 'mode', 'limit_scale', 'accel_scale',
                'null_scale', 'compensation_scale', 'compensated', 'cycle_time_s', 'sigma_min', 'clearance',
-               'collision_changed')
+               'collision_changed', 'q')
 
-    def __init__(self, method='', label=''):
+    def __init__(self, method='', label='', joint_names=()):
         self.method = method
         self.label = label
+        self.joint_names = tuple(joint_names)
         self.rows = {c: [] for c in self.COLUMNS}
         self.wall_time_s = 0.0
         self.sim_counters = None     # the simulator's command counters per group (clamped, rejected, ...)
@@ -69,9 +71,10 @@ class RunLog:
         self.frozen = False
 
     def append(self, t, goal, ee_position, ee_rotation, base_pose, q_arm, arm_command, base_reference,
-               feasible_twist, diagnostics):
+               feasible_twist, diagnostics, q=None):
         """Add one period: the state at its start, the commands sent, and the resolver's
-        :class:`~wmm_control.resolvers.ResolverDiagnostics`. ``feasible_twist`` may be None."""
+        :class:`~wmm_control.resolvers.ResolverDiagnostics`. ``feasible_twist`` may be None;
+        ``q`` (every joint of ``joint_names``) too."""
         d = diagnostics
         r = self.rows
         r['t'].append(float(t))
@@ -95,6 +98,7 @@ class RunLog:
         r['sigma_min'].append(d.sigma_min)
         r['clearance'].append(d.clearance)
         r['collision_changed'].append(d.collision_changed)
+        r['q'].append(np.full(len(self.joint_names), np.nan) if q is None else np.asarray(q, dtype=float))
 
     def freeze(self):
         """Turn the columns into arrays; returns self."""

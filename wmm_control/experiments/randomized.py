@@ -5,16 +5,29 @@
 1. an arm configuration drawn uniformly within the position limits, ``ARM_MARGIN`` inside
    them (joints without limits: within (−π, π]);
 2. a base pose drawn uniformly: (x, y) in a disc of radius ``base_radius`` around the start
-   pose, heading uniform in (−π, π];
+   pose (or in the obstacle file's ``goal_region``), heading uniform in (−π, π];
 3. the goal is that configuration's end-effector pose (forward kinematics);
 4. the draw is rejected, and drawn again, when the arm comes within ``COLLISION_MARGIN`` of
-   the robot's own body or the floor (:class:`~sim_bridge.collision.SelfCollisionChecker`).
+   the robot's own body or the floor, or the robot within it of an obstacle, if any
+   (:class:`~sim_bridge.collision.SelfCollisionChecker`).
 
 So every goal is reached by at least one configuration within the limits and clear of the
-robot's body. The path to it is checked: every period's arm configuration against the
-robot's body, itself and the floor, on the simulator's own geometry
-(:class:`~sim_bridge.collision.SelfCollisionChecker`, independent of the controllers' distance
-model); a run that goes more than ``CONTACT_DEPTH`` into contact has failed.
+robot's body and the obstacles. The path to it is checked: every period's configuration
+against the robot's body, itself, the floor and the obstacles, on the simulator's own
+geometry and the true base pose (:class:`~sim_bridge.collision.SelfCollisionChecker`,
+independent of the controllers' distance model); a run that goes more than
+``CONTACT_DEPTH`` into contact has failed.
+
+**A recorded run** (``record``, ``wmm_randomized --record DIR``) is one
+``DIR/<robot>_<method>_<goal>.npz`` (numpy's ``np.load``) with
+
+* ``t`` [s], shape (K,): the start of each control period;
+* ``base_pose``, shape (K, 3): the base's true pose (x [m], y [m], θ [rad]) in the world;
+* ``joint_names``, shape (J,): every moving joint of the robot's URDF that the simulator
+  drives (the arm's, then the steer and drive joints or the wheels);
+* ``q``, shape (K, J): their positions [rad or m] at the start of each period;
+* ``goal_pose``, shape (6,): the goal [x, y, z, roll, pitch, yaw], world frame [m, rad];
+* ``obstacles``: the obstacle file's text ('' without obstacles).
 
 **A run** starts from the robot's start state (its YAML), with the goal given at t = 0 as a
 set-point, in lockstep: the direct engine (:func:`sim_bridge.closed_loop.run_scenario`, the
@@ -44,12 +57,14 @@ import yaml
 from wmm_control.experiments.metrics import run_limit_report
 from wmm_control.experiments.scenario import Goal, Scenario, load_scenario
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.obstacles import load_goal_region, load_obstacles, obstacle_file
 from wmm_control.kinematics.orientation import rpy_from_matrix
 from wmm_control.resolvers.progress import GoalProgress
 from wmm_control.robot_config import load_robot
 
 __all__ = ['RandomGoal', 'sample_goals', 'run_goal', 'summarize', 'ROBOTS', 'METHOD_RUNS', 'ROBOT_RUNS', 'DURATION_S',
-           'ARM_MARGIN', 'COLLISION_MARGIN', 'CONTACT_DEPTH', 'SETTLE_S', 'goal_settings', 'run_contact']
+           'ARM_MARGIN', 'COLLISION_MARGIN', 'CONTACT_DEPTH', 'SETTLE_S', 'goal_settings', 'run_contact',
+           'write_record']
 
 #: The robots, by name.
 ROBOTS = ('steerable', 'mecanum')
@@ -123,8 +138,9 @@ def _arm_box(arm):
     return lo, hi
 
 
-def sample_goals(robot, count, seed=0, base_radius=1.0):
-    """``count`` reachable goals for ``robot`` (see the module docstring), reproducible by ``seed``.
+def sample_goals(robot, count, seed=0, base_radius=1.0, obstacles=''):
+    """``count`` reachable goals for ``robot`` (see the module docstring), reproducible by
+    ``seed``, clear of the obstacles of the file ``obstacles`` (name or path; '' for none).
 
     Returns:
         list of :class:`RandomGoal`.
@@ -132,12 +148,17 @@ def sample_goals(robot, count, seed=0, base_radius=1.0):
     from sim_bridge.collision import SelfCollisionChecker
 
     cfg = load_robot(robot)
+    around = load_obstacles(obstacles)
+    region = load_goal_region(obstacles)
     model = KinematicModel(cfg)
     rng = np.random.default_rng(seed)
     lo, hi = _arm_box(cfg.arm)
     start = np.asarray(cfg.start.base_pose, dtype=float)
+    if region is not None:
+        start = np.array([region[0][0], region[0][1], 0.0])
+        base_radius = region[1]
     goals = []
-    with SelfCollisionChecker(cfg, margin=COLLISION_MARGIN) as checker:
+    with SelfCollisionChecker(cfg, margin=COLLISION_MARGIN, obstacles=around) as checker:
         while len(goals) < count:
             draws = 0
             while True:
@@ -146,7 +167,7 @@ def sample_goals(robot, count, seed=0, base_radius=1.0):
                 radius, bearing = base_radius * math.sqrt(rng.uniform()), rng.uniform(-math.pi, math.pi)
                 base = start + np.array([radius * math.cos(bearing), radius * math.sin(bearing), 0.0])
                 base[2] = rng.uniform(-math.pi, math.pi)
-                if not checker.collisions(q):
+                if not checker.collisions(q, base):
                     break
             model.update(base, q)
             pos, rot = model.ee_placement_world()
@@ -154,13 +175,14 @@ def sample_goals(robot, count, seed=0, base_radius=1.0):
     return goals
 
 
-def _scenario(robot, goal, duration, path=None):
+def _scenario(robot, goal, duration, obstacles):
     return Scenario(name=f'random_{robot.name}_{goal.index}', description='random reachable goal', robot=robot.name,
-                    frame='world', duration=duration, goals=(Goal(0.0, duration, goal.pose),), path=path,
-                    sim={'base_mode': 'kinematic'}, runs=())
+                    frame='world', duration=duration, goals=(Goal(0.0, duration, goal.pose),), path=None,
+                    sim={'base_mode': 'kinematic'}, runs=(), obstacles_file=obstacles,
+                    obstacles=load_obstacles(obstacles))
 
 
-def _run_direct(robot, run, goal, duration):
+def _run_direct(robot, run, goal, duration, obstacles):
     from sim_bridge.closed_loop import run_scenario
     from sim_bridge.world import SimWorld
     from wmm_control.experiments.scenario import resolver_parameters
@@ -181,18 +203,19 @@ def _run_direct(robot, run, goal, duration):
         return held[0] >= settle
 
     with SimWorld(robot, base_mode='kinematic') as world:
-        log = run_scenario(world, resolver, _scenario(robot, goal, duration), until=done)
+        log = run_scenario(world, resolver, _scenario(robot, goal, duration, obstacles), until=done)
     return log, {'goal_reached': progress.reached, 'first_stall_s': first_stall[0] if first_stall else None}
 
 
-def _run_nodes(robot, run, goal, duration):
+def _run_nodes(robot, run, goal, duration, obstacles):
     from wmm_control.experiments.ros_run import run_with_nodes
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / 'goal.yaml'
         path.write_text(yaml.safe_dump({'scenario': {
             'name': f'random_{robot.name}_{goal.index}', 'robot': robot.name, 'frame': 'world', 'duration': duration,
-            'goals': [{'t': 0.0, 'pose': [float(v) for v in goal.pose]}]}}))
+            'goals': [{'t': 0.0, 'pose': [float(v) for v in goal.pose]}],
+            'obstacles': str(obstacle_file(obstacles).resolve()) if obstacles else ''}}))
         scenario = load_scenario(path)
         entry = dict(run, name=run['method'], feedback='ground_truth')
         log = run_with_nodes(scenario, entry)
@@ -220,25 +243,29 @@ def _limit_use(log, robot, dt):
     return use
 
 
-def run_contact(robot, q_arm):
-    """The deepest contact of a run's arm configurations ``q_arm`` (one row per period) with
-    the robot's body, itself or the floor, on the simulator's geometry: ``(depth [m], 'a/b')``,
-    ``(0.0, '')`` when every period is clear."""
+def run_contact(robot, q_arm, base_pose=None, obstacles=()):
+    """The deepest contact of a run's configurations (arm ``q_arm``, true base pose
+    ``base_pose``, one row per period) with the robot's body, itself, the floor or an
+    obstacle, on the simulator's geometry: ``(depth [m], 'a/b')``, ``(0.0, '')`` when every
+    period is clear."""
     from sim_bridge.collision import SelfCollisionChecker
 
     depth, pair = 0.0, ''
-    with SelfCollisionChecker(robot, margin=0.0) as checker:
-        for q in q_arm:
-            for a, b, d in checker.collisions(q):
+    poses = [None] * len(q_arm) if base_pose is None else base_pose
+    with SelfCollisionChecker(robot, margin=0.0, obstacles=obstacles) as checker:
+        for q, pose in zip(q_arm, poses):
+            for a, b, d in checker.collisions(q, pose):
                 if -d > depth:
                     depth, pair = -d, f'{a}/{b}'
     return depth, pair
 
 
-def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
+def run_goal(robot, method, goal, engine='direct', duration=None, params=None, obstacles='', record=None):
     """One closed-loop run of ``method`` to ``goal`` from the robot's start state.
 
     ``params`` (resolver parameters) override those of :data:`METHOD_RUNS` and :data:`ROBOT_RUNS`.
+    ``obstacles``: an obstacle file (name or path; '' for none), in the simulator and the
+    controller. ``record``: a folder to write the run to (the module docstring says how).
 
     Returns:
         dict: ``robot``, ``method``, ``goal`` (index), ``outcome`` (``converged`` | ``reported`` |
@@ -254,7 +281,9 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
     cfg = load_robot(robot)
     duration = DURATION_S.get(cfg.name, 90.0) if duration is None else duration
     run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(cfg.name, {}).get(method, {}), **(params or {})}
-    log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration)
+    log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles)
+    if record is not None:
+        write_record(Path(record) / f'{cfg.name}_{method}_{goal.index}.npz', log, goal.pose, obstacles)
     dt = float(np.median(np.diff(log.t))) if len(log) > 1 else cfg.period
     target = Goal(0.0, duration, goal.pose).target
     pos_err = np.linalg.norm(log.ee_position - target.position, axis=1)
@@ -270,7 +299,7 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
     why += [f'{k} limit passed by {v:.3g}' for k, v in exceeded.items() if k != 'non_finite' and v > 0]
     if clamped:
         why.append(f'{clamped} command entries clamped by the simulator')
-    depth, pair = run_contact(cfg, log.q_arm)
+    depth, pair = run_contact(cfg, log.q_arm, log.base_pose, load_obstacles(obstacles))
     if depth > CONTACT_DEPTH:
         why.append(f'{pair} {depth * 100:.1f} cm into contact')
     if status['goal_reached']:
@@ -288,6 +317,14 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None):
             'first_stall_s': status['first_stall_s'], 'limits_exceeded': exceeded,
             'contact_depth_m': depth, 'contact_pair': pair,
             'limit_use': _limit_use(log, cfg, dt), 'sim_clamped': int(clamped), 'why': '; '.join(why)}
+
+
+def write_record(path, log, goal_pose, obstacles=''):
+    """Write the run ``log`` to ``path`` (``.npz``, the module docstring says what it holds)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = obstacle_file(obstacles).read_text() if obstacles else ''
+    np.savez_compressed(path, t=log.t, base_pose=log.base_pose, joint_names=np.array(log.joint_names, dtype=str),
+                        q=log.q, goal_pose=np.asarray(goal_pose, dtype=float), obstacles=np.array(text))
 
 
 def _angle(rot):

@@ -94,7 +94,9 @@ class Recorder(Node):
         if self._index is None:
             names = list(msg.name)
             self._index = [names.index(j) for j in self.arm_joints]
-        self._row(msg)['q_arm'] = np.asarray(msg.position)[self._index]
+            self.log.joint_names = tuple(names)
+        self._row(msg)['q'] = np.asarray(msg.position, dtype=float)
+        self._row(msg)['q_arm'] = self._row(msg)['q'][self._index]
         self.last_t = max(self.last_t, _stamp(msg))
 
     def _on_feasible(self, msg):
@@ -128,7 +130,7 @@ class Recorder(Node):
                 collision_changed=bool(f['collision_changed']))
             self.log.append(row['t'], self.scenario.goal_index(row['t']), row['ee'][0], row['ee'][1], row['base'],
                             row['q_arm'], _vector(d['arm_command']), _vector(d['base_reference']),
-                            row.get('feasible'), diag)
+                            row.get('feasible'), diag, q=row['q'])
         self._rows.clear()
 
 
@@ -192,6 +194,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
                            **LOCKSTEP_WAITS['redundancy_resolver'])
     sim_params = dict(scenario.sim or {})
     sim_params.update(robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0)
+    if scenario.obstacles_file:
+        sim_params['obstacles'] = resolver_params['obstacles'] = scenario.obstacles_file
     for key in ('slip_drift', 'slip_noise'):
         if key in sim_params:
             sim_params[key] = [float(v) for v in sim_params[key]]

@@ -8,6 +8,8 @@ Schema::
       robot: steerable            # robot name, alias or YAML path
       frame: world                # frame of every goal pose
       duration: 65.0              # [s]
+      obstacles: table_pillar     # optional: an obstacle file (config/obstacles/<name>.yaml, or a
+                                  # path, relative to this file's folder)
       goals:                      # each holds from t until the next goal's t
         - {t: 0.0, pose: [x, y, z, roll, pitch, yaw]}     # [m, rad], RPY = ZYX Euler
       # or, instead of goals, a reference trajectory from the start pose (Xing et al. §4):
@@ -35,6 +37,7 @@ from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
 from wmm_control.robot_config import read_yaml_section
 from wmm_control.experiments.trajectories import make_trajectory
+from wmm_control.kinematics.obstacles import load_obstacles
 from wmm_control.resolvers.interface import PoseTarget
 
 __all__ = ['Goal', 'Scenario', 'load_scenario', 'resolver_parameters', 'DEFAULT_RUNS', 'SIM_KEYS', 'RUN_KEYS']
@@ -110,6 +113,9 @@ class Scenario:
     sim: dict = None
     runs: tuple = DEFAULT_RUNS
     trajectory: dict = None
+    #: the obstacle file ('' for none) and its obstacles
+    obstacles_file: str = ''
+    obstacles: tuple = ()
 
     def reference(self, model):
         """The trajectory ``t -> PoseTarget`` of a trajectory scenario, from the end effector's pose
@@ -145,9 +151,15 @@ def load_scenario(name_or_path):
     if duration <= 0:
         raise ConfigError(f'{where}.duration must be > 0, got {duration}')
     sim, runs = _experiment(raw.get('experiment') or {}, where)
+    obstacles_file = raw.get('obstacles') or ''
+    if not isinstance(obstacles_file, str):
+        raise ConfigError(f'{where}.obstacles: expected the name or path of an obstacle file, got {obstacles_file!r}')
+    if obstacles_file.endswith(('.yaml', '.yml')) and not Path(obstacles_file).is_absolute():
+        obstacles_file = str(path.parent / obstacles_file)
     common = dict(name=str(raw.get('name', path.stem)), description=str(raw.get('description', '')),
                   robot=str(raw.get('robot', 'steerable')), frame=str(raw.get('frame', 'world')),
-                  duration=duration, path=path, sim=sim, runs=runs)
+                  duration=duration, path=path, sim=sim, runs=runs, obstacles_file=obstacles_file,
+                  obstacles=load_obstacles(obstacles_file))
     if 'trajectory' in raw:
         if 'goals' in raw:
             raise ConfigError(f'{where}: give goals or a trajectory, not both')

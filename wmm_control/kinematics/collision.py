@@ -1,29 +1,34 @@
-"""How far the arm is from the robot's own body, from itself and from the floor, and how fast
-that distance changes with the arm's joint rates.
+"""How far the robot's arm is from its own body, from itself, from the floor and from
+obstacles, and how fast those distances change with the arm's joint rates and the base's twist.
 
 Built on pinocchio's collision model of the URDF's ``<collision>`` shapes (coal, in the
 ``pin`` wheel), in the frame of the URDF's root link (``base_link``): the body does not move
-in it, and neither does the floor, since the base moves in its own plane. Links split into
+in it, and neither does the floor, since the base moves in its own plane; obstacles
+(:mod:`~wmm_control.kinematics.obstacles`, fixed in the world) are placed in it from the
+base's pose at each call. Links split into
 
 * *moving* links: the links an arm joint moves (the arm's links, the tool and what is fixed
   to them);
 * *body* links: the others (chassis, wheels, steer modules, the arm's mount).
 
-Checked pairs: moving against body, moving against moving, and moving against the floor (a
-half-space at the robot YAML's ``ground_z``), except
+Checked pairs: moving against body, moving against moving, moving against the floor (a
+half-space at the robot YAML's ``ground_z``), and every link against every obstacle, except
 
-* a link and its parent or grandparent link: one joint apart they share that joint; two
-  joints apart the primitive shapes of a URDF (cylinders around each link) meet as soon as
-  the joint between them bends, which the real arm allows;
-* pairs closer than ``margin`` at the robot's start state: they touch by design (the arm's
-  first link resting on its mount; :mod:`wmm_control.cli.robot_setup`, which has no start
-  state yet, takes every joint at zero).
+* a link and its parent link: one joint apart, they share that joint;
+* a link and its grandparent link: two joints apart, the primitive shapes of a URDF
+  (cylinders around each link) meet as soon as the joint between them bends, which the real
+  arm allows;
+* robot pairs closer than ``margin`` at the robot's start state: they touch by design (the
+  arm's first link resting on its mount; :mod:`wmm_control.cli.robot_setup`, which has no
+  start state yet, takes every joint at zero).
 
 The simulator's own check (``sim_bridge.collision.SelfCollisionChecker``, PyBullet's
 geometry) uses the same rules; it judges the ground truth, this model serves the controller.
 
-Each pair's distance ``d`` comes with its rate ``ḋ = j · q̇_arm``: ``n · (v_b − v_a)`` at the
-two nearest points, ``n`` the unit vector from a's nearest point to b's.
+Each pair's distance ``d`` comes with its rate ``ḋ = j · q̇_arm + j_b · (vx, vy, ω)``:
+``n · (v_b − v_a)`` at the two nearest points, ``n`` the unit vector from a's nearest point
+to b's, the base's twist in its own frame. For two points on the robot the base's share
+cancels; against the floor it is zero (the base moves parallel to it).
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ import numpy as np
 import pinocchio as pin
 
 from wmm_control.errors import ConfigError
+from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.urdf import UrdfTree
 
 __all__ = ['CollisionModel', 'PairDistance', 'FLOOR']
@@ -50,19 +56,22 @@ class PairDistance:
 
     Attributes:
         distance: signed distance [m]; negative when the shapes overlap.
-        links: the two link names (``'floor'`` for the floor).
+        links: the two link names (``'floor'`` for the floor, an obstacle's name for it).
         shapes: the two collision shapes' names (a link may have several).
-        rate_jacobian: ``j`` with ``ḋ = j · q̇_arm`` [m/rad or m/m]. Shape (n_arm,).
+        rate_jacobian: ``j`` with ``ḋ = j · q̇_arm + j_b · (vx, vy, ω)`` [m/rad or m/m]. Shape (n_arm,).
+        base_jacobian: ``j_b`` [m/m, m/rad]: zero unless one of the two is fixed in the world
+            (an obstacle). Shape (3,).
     """
 
     distance: float
     links: tuple[str, str]
     shapes: tuple[str, str]
     rate_jacobian: np.ndarray
+    base_jacobian: np.ndarray
 
 
 class CollisionModel:
-    """Distances and their Jacobians between the arm, the body and the floor.
+    """Distances and their Jacobians between the arm, the body, the floor and obstacles.
 
     Args:
         urdf_path: the robot's URDF.
@@ -71,18 +80,21 @@ class CollisionModel:
         start_arm: the arm posture whose pairs closer than ``margin`` touch by design and are
             not checked (default: every joint at zero).
         margin: [m].
+        obstacles: :class:`~wmm_control.kinematics.obstacles.Obstacle` s in the world frame
+            (:meth:`set_obstacles` changes them).
 
     Raises:
         ConfigError: pinocchio cannot load the URDF or its collision shapes.
     """
 
     @classmethod
-    def from_robot(cls, robot, margin: float = 0.02):
+    def from_robot(cls, robot, margin: float = 0.02, obstacles=()):
         """The model of a :class:`~wmm_control.robot_config.RobotConfig`: its floor, and its start
         state's contacts left out."""
-        return cls(robot.urdf_path, robot.arm.joints, robot.ground_z, robot.start.arm, margin)
+        return cls(robot.urdf_path, robot.arm.joints, robot.ground_z, robot.start.arm, margin, obstacles)
 
-    def __init__(self, urdf_path, arm_joints, ground_z=None, start_arm=None, margin: float = 0.02):
+    def __init__(self, urdf_path, arm_joints, ground_z=None, start_arm=None, margin: float = 0.02,
+                 obstacles=()):
         path = str(urdf_path)
         try:
             self.model = pin.buildModelFromUrdf(path)
@@ -114,13 +126,16 @@ class CollisionModel:
                 la, lb = link_of[a], link_of[b]
                 if (moving[a] or moving[b]) and la != lb and not (near(la, lb) or near(lb, la)):
                     pairs.append((a, b))
+        self._world_fixed = set()
         if ground_z is not None:
             floor = pin.GeometryObject(FLOOR, 0, 0, pin.SE3(np.eye(3), np.array([0.0, 0.0, float(ground_z)])),
                                        _halfspace())
             floor_id = self.geom.addGeometryObject(floor)
+            self._world_fixed.add(floor_id)
             link_of.append(FLOOR)
             pairs += [(a, floor_id) for a in range(len(moving)) if moving[a]]
         self._link_of = link_of
+        self._n_robot = len(moving)          # geometry objects of the robot's own links
         self.data = model.createData()
         for a, b in pairs:
             self.geom.addCollisionPair(pin.CollisionPair(a, b))
@@ -132,11 +147,44 @@ class CollisionModel:
         self.geom.removeAllCollisionPairs()
         for k in keep:
             self.geom.addCollisionPair(pin.CollisionPair(*pairs[k]))
-        self.geom_data = pin.GeometryData(self.geom)
+        self._robot_geom = self.geom.copy()
+        self._robot_link_of = list(link_of)
+        self.obstacles: tuple[Obstacle, ...] = ()
+        self.set_obstacles(obstacles)
+
+    def set_obstacles(self, obstacles) -> None:
+        """Check the robot against ``obstacles`` (world frame) from now on, instead of the
+        previous ones."""
+        obstacles = tuple(obstacles)
+        geom = self._robot_geom.copy()
+        link_of = list(self._robot_link_of)
+        self._obstacle_ids = []
+        for obstacle in obstacles:
+            gid = geom.addGeometryObject(pin.GeometryObject(obstacle.name, 0, 0, obstacle.placement,
+                                                            obstacle.geometry()))
+            self._obstacle_ids.append(gid)
+            link_of.append(obstacle.name)
+            for a in range(self._n_robot):
+                geom.addCollisionPair(pin.CollisionPair(a, gid))
+        self.geom, self._link_of, self.obstacles = geom, link_of, obstacles
+        self._fixed = self._world_fixed | set(self._obstacle_ids)
+        self.geom_data = pin.GeometryData(geom)
         for request in self.geom_data.distanceRequests:
             # GJK to 1e-9 m: at coal's default (1e-6) the nearest points of curved shapes (the
             # cylinders around the links) are off by degrees, and so is the rate of the distance
             request.gjk_tolerance = GJK_TOLERANCE
+
+    def _place_obstacles(self, base_pose) -> None:
+        """Obstacles into the root frame, the base at ``base_pose`` (x, y, θ) in the world."""
+        if not self.obstacles:
+            return
+        if base_pose is None:
+            raise ValueError('CollisionModel: the base pose is needed to place the obstacles')
+        x, y, theta = (float(v) for v in base_pose)
+        root_inv = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, theta), np.array([x, y, 0.0])).inverse()
+        objects = self.geom.geometryObjects
+        for gid, obstacle in zip(self._obstacle_ids, self.obstacles):
+            objects[gid].placement = root_inv * obstacle.placement
 
     @property
     def pairs(self) -> list[tuple[str, str]]:
@@ -157,21 +205,26 @@ class CollisionModel:
         pin.computeDistances(self.model, self.data, self.geom, self.geom_data, q)
         return [r.min_distance for r in self.geom_data.distanceResults]
 
-    def closest(self, q_arm) -> tuple[float, tuple[str, str] | None]:
+    def closest(self, q_arm, base_pose=None) -> tuple[float, tuple[str, str] | None]:
         """``(distance [m], (link a, link b))`` of the closest checked pair at arm joints
-        ``q_arm``; ``(inf, None)`` when no pair is checked."""
+        ``q_arm`` (and base pose ``base_pose`` (x, y, θ), needed with obstacles); ``(inf,
+        None)`` when no pair is checked."""
         if not self.geom.collisionPairs:
             return float('inf'), None
+        self._place_obstacles(base_pose)
         dists = self._distances(self._configuration(q_arm))
         k = int(np.argmin(dists))
         pair = self.geom.collisionPairs[k]
         return float(dists[k]), (self._link_of[pair.first], self._link_of[pair.second])
 
-    def within(self, q_arm, influence: float) -> tuple[list[PairDistance], float, tuple[str, str] | None]:
-        """The pairs closer than ``influence`` [m] at ``q_arm``, each with its rate Jacobian, and
-        the closest pair's distance and names (``inf, None`` when no pair is checked)."""
+    def within(self, q_arm, influence: float, base_pose=None) -> tuple[list[PairDistance], float,
+                                                                       tuple[str, str] | None]:
+        """The pairs closer than ``influence`` [m] at ``q_arm`` (and base pose ``base_pose`` (x,
+        y, θ), needed with obstacles), each with its rate Jacobians, and the closest pair's
+        distance and names (``inf, None`` when no pair is checked)."""
         if not self.geom.collisionPairs:
             return [], float('inf'), None
+        self._place_obstacles(base_pose)
         model, data = self.model, self.data
         q = self._configuration(q_arm)
         dists = np.array(self._distances(q))
@@ -189,16 +242,25 @@ class CollisionModel:
             p_a, p_b = np.asarray(result.getNearestPoint1()), np.asarray(result.getNearestPoint2())
             normal = np.asarray(result.normal, dtype=float)    # coal's: from the first shape to the second
             jac = (self._point_jacobian(pair.second, p_b) - self._point_jacobian(pair.first, p_a))
+            base = self._base_point_jacobian(pair.second, p_b) - self._base_point_jacobian(pair.first, p_a)
             objects = self.geom.geometryObjects
             out.append(PairDistance(float(dists[k]), (self._link_of[pair.first], self._link_of[pair.second]),
-                                    (objects[pair.first].name, objects[pair.second].name), normal @ jac))
+                                    (objects[pair.first].name, objects[pair.second].name), normal @ jac,
+                                    normal @ base))
         return out, *closest
+
+    def _base_point_jacobian(self, geometry: int, point: np.ndarray) -> np.ndarray:
+        """Velocity of ``point`` (root frame) fixed to geometry ``geometry`` relative to the
+        world, in the root frame, per base twist (vx, vy, ω). Shape (3, 3)."""
+        if geometry in self._fixed:          # the floor and the obstacles do not move in the world
+            return np.zeros((3, 3))
+        return np.array([[1.0, 0.0, -point[1]], [0.0, 1.0, point[0]], [0.0, 0.0, 0.0]])
 
     def _point_jacobian(self, geometry: int, point: np.ndarray) -> np.ndarray:
         """Linear velocity of ``point`` (root frame) fixed to geometry ``geometry``, per arm joint
         rate. Shape (3, n_arm)."""
         joint = self.geom.geometryObjects[geometry].parentJoint
-        if joint == 0:                       # fixed to the root: the body's links and the floor
+        if joint == 0:                       # fixed to the root: the body, the floor, the obstacles
             return np.zeros((3, self.n_arm))
         if joint not in self._jacobians:
             jac = pin.getJointJacobian(self.model, self.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)

@@ -9,7 +9,8 @@ impossible for a reason a user can act on:
   surely out of reach, while some goals it lets pass may still be: the resolvers pursue
   those as far as the limits allow);
 * inside the base's own body: the collision shapes of the URDF fixed to the base (chassis,
-  wheel modules), each taken as its box in its own frame.
+  wheel modules), each taken as its box in its own frame;
+* inside an obstacle (:mod:`~wmm_control.kinematics.obstacles`).
 """
 
 import numpy as np
@@ -84,12 +85,13 @@ class Workspace:
                 return name
         return None
 
-    def impossible(self, position, base_pose=None):
+    def impossible(self, position, base_pose=None, obstacles=()):
         """'' when a goal at world ``position`` may be reached, else why it cannot.
 
         Args:
             position: world (x, y, z) [m].
             base_pose: the base's current pose (x, y, θ); without it the body is not checked.
+            obstacles: :class:`~wmm_control.kinematics.obstacles.Obstacle` s (world frame).
         """
         z = float(position[2])
         if z < self.floor_z:
@@ -100,4 +102,7 @@ class Workspace:
             part = self.body_part_at(position, base_pose)
             if part is not None:
                 return f'it lies inside the robot\'s own body ({part}, at the current base pose)'
+        for obstacle in obstacles:
+            if obstacle.signed_distance(position) < 0.0:
+                return f'it lies inside the obstacle {obstacle.name!r} ({obstacle.shape})'
         return ''

@@ -14,7 +14,10 @@ Subscribes:
   ``/ee_pose`` (``geometry_msgs/PoseStamped``): measured end-effector pose, used only when
   ``ee_feedback`` is ``ground_truth`` (otherwise forward kinematics from odometry and joints);
   ``/base/feasible_twist`` (``geometry_msgs/TwistStamped``): the base controller's answer to
-  this cycle's base reference (Sorour eq 15), for the arm compensation of eq (14).
+  this cycle's base reference (Sorour eq 15), for the arm compensation of eq (14);
+  ``/obstacles`` (``visualization_msgs/MarkerArray``, frame ``world_frame``): obstacles added
+  and removed live, beside those of the ``obstacles`` file (:mod:`wmm_control.nodes.obstacle_topic`);
+  the safety stage keeps the robot off them.
 Publishes, every cycle:
   ``/base/reference`` (``geometry_msgs/TwistStamped``, frame ``base_frame``): the base twist,
   stamped with the joint state the cycle answers;
@@ -38,8 +41,8 @@ states, the odometry or (with ground-truth feedback) the end-effector pose are o
 ``state_timeout`` (steady clock, at receipt); a watchdog publishes zeros when the joint
 states stop. A goal (or ``/ee_reference`` point) in another frame, with NaN/inf or a zero
 quaternion, beyond ``max_goal_distance`` from the world origin, below the floor, above the
-highest the end effector can reach, or inside the base's body at its current pose
-(:class:`~wmm_control.kinematics.workspace.Workspace`) is rejected with a logged reason; a
+highest the end effector can reach, inside the base's body at its current pose or inside an
+obstacle (:class:`~wmm_control.kinematics.workspace.Workspace`) is rejected with a logged reason; a
 non-unit quaternion is normalised with a warning. Odometry with NaN/inf, a zero quaternion
 or a twist beyond ten times the base limits, and joint states lacking an arm joint or naming
 one twice, with non-finite values, rates beyond ten times the limits or positions beyond
@@ -69,6 +72,7 @@ from visualization_msgs.msg import MarkerArray
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.markers import MarkerSet
+from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet, describe
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
     declare_parameters, diagnostic_array, float_array, guard_clock, node_status, robot_method, robot_param,
@@ -145,7 +149,8 @@ _SPECS = (
           read_only=True),
     Param('ee_feedback', 'End-effector pose from odometry + forward kinematics, or from /ee_pose.',
           choices=('odometry', 'ground_truth'), read_only=True),
-    Param('world_frame', 'Frame of /goal_pose and /ee_pose.', read_only=True),
+    Param('obstacles', OBSTACLE_PARAM_HELP, read_only=True),
+    Param('world_frame', 'Frame of /goal_pose, /ee_pose and /obstacles.', read_only=True),
     Param('base_frame', 'Frame of /base/reference and /base/feasible_twist.', read_only=True),
     Param('state_timeout', 'Age [s] of joint states, odometry, EE pose or trajectory reference (steady clock, '
           'at receipt) after which commands are zero.', lo=1e-3, hi=60.0),
@@ -222,6 +227,8 @@ class RedundancyResolverNode(Node):
         self.arm = JointSelector(arm.joints, velocity_limits=arm.velocity,
                                  position_limits=(arm.position_lower, arm.position_upper))
         self.workspace = Workspace(self.model)
+        self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
+        self.resolver.set_obstacles(self.obstacles.obstacles)
         # /odom and /base/feasible_twist beyond this are glitches
         self._plausible_twist = JointSelector.PLAUSIBLE_FACTOR * self.model.config.base.velocity
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -249,6 +256,7 @@ class RedundancyResolverNode(Node):
         self.create_subscription(MultiDOFJointTrajectory, 'ee_reference', self._on_reference, COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         self.create_subscription(Odometry, 'odom', self._on_odom, STATE_SUB_QOS)
+        self.create_subscription(MarkerArray, 'obstacles', self._on_obstacles, COMMAND_QOS)
         if p.ee_feedback == 'ground_truth':
             self.create_subscription(PoseStamped, 'ee_pose', self._on_ee_pose, STATE_SUB_QOS)
         if self.resolver.uses_compensation:
@@ -265,8 +273,8 @@ class RedundancyResolverNode(Node):
         self.watchdog = JointStateWatchdog(self, p.state_timeout, p.period, self._steady, self._stop, 'zero commands')
         self.get_logger().info(
             f'{p.method} on robot {self.model.config.name}: t_s {p.period} s, EE feedback {p.ee_feedback}, '
-            f'compensation {"on" if self.resolver.uses_compensation else "off"}; waiting for /goal_pose '
-            f'(frame {p.world_frame!r})')
+            f'compensation {"on" if self.resolver.uses_compensation else "off"}, {describe(self.obstacles.obstacles)}; '
+            f'waiting for /goal_pose (frame {p.world_frame!r})')
 
     def _tolerance(self, goal_tolerance):
         """(position, orientation) tolerance of a goal; a method that tracks the position alone
@@ -356,7 +364,11 @@ class RedundancyResolverNode(Node):
     def _impossible(self, position):
         """'' or why no motion reaches an end-effector goal at the world ``position``."""
         fresh = self._odom is not None and self.fresh['odom'].fresh(self._now())
-        return self.workspace.impossible(position, self._odom[0] if fresh else None)
+        return self.workspace.impossible(position, self._odom[0] if fresh else None, self.obstacles.obstacles)
+
+    def _on_obstacles(self, msg):
+        if self.obstacles.take(msg, self.get_logger()):
+            self.resolver.set_obstacles(self.obstacles.obstacles)
 
     def _on_odom(self, msg):
         p, q, t = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
@@ -559,7 +571,8 @@ class RedundancyResolverNode(Node):
     def _diagnostics(self, stamp):
         """Status of the cycle stamped ``stamp`` (the joint state it answers)."""
         values = dict(self.counters, joint_states_skipped=self.watchdog.skipped,
-                      measured_period_s=self.watchdog.stamps.measured_period)
+                      measured_period_s=self.watchdog.stamps.measured_period,
+                      obstacles=len(self.obstacles.obstacles))
         level, message = 'ok', 'no goal'
         if self._last is not None and self.target is not None:
             d = self._last.diagnostics

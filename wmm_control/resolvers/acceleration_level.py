@@ -36,7 +36,6 @@ import pinocchio as pin
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers.interface import Resolver, ResolverCommand, ResolverDiagnostics
 from wmm_control.resolvers.limits import CommandLimits
 from wmm_control.resolvers.pose_servo import _check_fields, lapack_svd
@@ -105,7 +104,7 @@ class AccelerationResolver(Resolver):
         self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
         self.params = params
         self.limits = CommandLimits.for_robot(self.model.config, params.dt)
-        self.safety = SafetyStage(CollisionModel.from_robot(self.model.config), params)
+        self.safety = SafetyStage.for_robot(self.model.config, params)
         self._unicycle = self.model.config.base_type == 'differential'
         self.n_base = len(self.model.config.base_axes)
         self.n = self.n_base + self.model.n_arm
@@ -212,9 +211,12 @@ class AccelerationResolver(Resolver):
         qd = task['qd'] + qdd * self.params.dt
         qd[np.abs(qd) < 1e-12] = 0.0      # a stop is exact: braking by −q̇/T leaves round-off
         nb = self.n_base
-        # the safety stage on the arm's rates, within this period's box (q̇_prev ± q̈_max T, ...)
-        safety = self.safety.filter(task['q_arm'], qd[nb:], task['box_lower'][nb:], task['box_upper'][nb:])
-        qd[nb:] = safety.command
+        # the safety stage on the rates, within this period's box (q̇_prev ± q̈_max T, ...); the
+        # base's are the world frame's (ẋ, ẏ, θ̇), or a differential base's own (v, ω)
+        safety = self.safety.filter(task['q_arm'], qd, task['box_lower'], task['box_upper'],
+                                    base_pose=state.base_pose, base_axes=self.model.config.base_axes,
+                                    world_rates=not self._unicycle, task_jacobian=task['jac'])
+        qd = safety.command.copy()
         fields.update(clearance=safety.clearance, closest_pair=safety.closest_pair,
                       collision_constraints=safety.active, collision_changed=safety.changed)
         if self._unicycle:      # (v, ω) is already the base frame's, within its bounds

@@ -203,6 +203,14 @@ class Resolver(ABC):
             :class:`ResolverCommand`; every entry finite and within the robot's limits.
         """
 
+    #: the method's :class:`~wmm_control.resolvers.safety.SafetyStage`, which every command passes
+    safety = None
+
+    def set_obstacles(self, obstacles):
+        """Keep the robot off ``obstacles`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`,
+        world frame) from now on, instead of the previous ones."""
+        self.safety.set_obstacles(obstacles)
+
     def compensate(self, command, feasible_twist):
         """Finish ``command`` with the base controller's answer ``feasible_twist``.
 

@@ -33,7 +33,6 @@ from scipy.linalg import lapack
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.kinematics.orientation import rpy_from_matrix, rpy_rate_map, wrap_angle
 from wmm_control.resolvers.interface import Resolver, ResolverCommand, ResolverDiagnostics, base_twist_of
 from wmm_control.resolvers.limits import CommandLimits
@@ -213,7 +212,7 @@ class PoseServoResolver(Resolver):
         self._jmm_cols = np.array(self._base_cols + list(range(6, 6 + self.n_arm)))
         self.limits = CommandLimits.for_robot(config, params.dt)
         self._arm_limits = self.limits.subset(slice(self.n_base, None))
-        self.safety = SafetyStage(CollisionModel.from_robot(config), params)
+        self.safety = SafetyStage.for_robot(config, params)
         self._position = np.zeros(self.n)
         self.reset()
 
@@ -229,6 +228,7 @@ class PoseServoResolver(Resolver):
         self._q_arm = None
         self._jac = None
         self._safety = None                    # the safety stage's answer on the last arm command
+        self._base_pose = None
         self.arm_damping = self.params.rho
 
     # ------------------------------------------------------------------ eq (12)
@@ -383,7 +383,8 @@ class PoseServoResolver(Resolver):
         self._arm_null = lim.secondary[nb:].copy()
         self._arm_task = lim.command[nb:] - self._arm_null
         self._arm_before = (self._prev_arm, self._prev_arm_null)
-        arm = self._finish_arm(self._arm_task)
+        self._base_pose = state.base_pose
+        arm, base = self._finish_arm(self._arm_task, lim)
         p = self.params
         self.arm_damping, sigma = singularity_damping(jac[:, nb:], p.rho, p.singular_region,
                                                       p.max_damping)
@@ -394,21 +395,42 @@ class PoseServoResolver(Resolver):
             null_scale=lim.secondary_scale,
             compensation_scale=1.0, limited=tuple(limited), sigma_min=sigma, compensated=False,
             cycle_time_s=time.perf_counter() - t0, **self._safety_fields())
-        return ResolverCommand(arm_velocity=arm.command.copy(), base_twist=base_twist_of(lim.command[:nb], self.base_axes),
+        return ResolverCommand(arm_velocity=arm.command.copy(), base_twist=base_twist_of(base, self.base_axes),
                                diagnostics=diag)
 
-    def _finish_arm(self, arm_task):
+    def _finish_arm(self, arm_task, whole=None, feasible_twist=None):
         """The arm command sent: task part ``arm_task`` plus this period's null-space share,
         within the arm's bounds relative to the arm command sent last period, then through the
-        safety stage (:mod:`~wmm_control.resolvers.safety`) within the same bounds."""
+        safety stage (:mod:`~wmm_control.resolvers.safety`) within the same bounds.
+
+        With ``whole`` (the limited whole-body command, a :class:`LimitResult`) the stage
+        filters the base's reference with the arm, within the base's box too, and the answer is
+        ``(arm, base reference)``; otherwise the base moves at ``feasible_twist`` (the base
+        controller's answer) and only the arm is left to choose.
+        """
         before, before_null = self._arm_before
         arm = self._arm_limits.apply(arm_task, self._q_arm, before, secondary=self._arm_null,
                                      previous_secondary=before_null)
-        self._safety = self.safety.filter(self._q_arm, arm.command, arm.lower, arm.upper)
-        if self._safety.changed:
-            arm = replace(arm, command=self._safety.command)
+        nb = self.n_base
+        if whole is None:
+            self._safety = self.safety.filter(self._q_arm, arm.command, arm.lower, arm.upper,
+                                              base_pose=self._base_pose, base_twist=feasible_twist,
+                                              task_jacobian=self._jac[:, nb:])
+            base = None
+            if self._safety.changed:
+                arm = replace(arm, command=self._safety.command)
+        else:
+            base = whole.command[:nb]
+            self._safety = self.safety.filter(
+                self._q_arm, np.concatenate((base, arm.command)), np.concatenate((whole.lower[:nb], arm.lower)),
+                np.concatenate((whole.upper[:nb], arm.upper)), base_pose=self._base_pose, base_axes=self.base_axes,
+                task_jacobian=self._jac)
+            if self._safety.changed:
+                base = self._safety.command[:nb].copy()
+                self._prev[:nb] = base          # the base reference sent: next period's acceleration bound
+                arm = replace(arm, command=self._safety.command[nb:])
         self._prev_arm, self._prev_arm_null = arm.command.copy(), arm.secondary.copy()
-        return arm
+        return arm if whole is None else (arm, base)
 
     def _safety_fields(self):
         """The safety stage's diagnostics fields of the last arm command."""
@@ -438,7 +460,7 @@ class PoseServoResolver(Resolver):
         """
         t0 = time.perf_counter()
         term = self.compensation_term(command.base_twist, feasible_twist)
-        arm = self._finish_arm(self._arm_task + term)
+        arm = self._finish_arm(self._arm_task + term, feasible_twist=feasible_twist)
         elapsed = command.diagnostics.cycle_time_s + time.perf_counter() - t0
         return command.with_arm(arm.command.copy(), compensation_scale=arm.scale * arm.accel_scale,
                                 compensated=True, cycle_time_s=elapsed, **self._safety_fields())

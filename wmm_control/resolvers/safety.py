@@ -1,5 +1,5 @@
-"""The safety stage every method passes its arm command through: velocity dampers that keep
-the arm off the robot's own body, off itself and off the floor.
+"""The safety stage every method passes its command through: velocity dampers that keep the
+arm off the robot's own body, off itself and off the floor, and the whole robot off obstacles.
 
 For each checked pair closer than the influence distance ``d_i``
 (:class:`~wmm_control.kinematics.collision.CollisionModel`), the distance may shrink no
@@ -15,11 +15,26 @@ keeps its approach within what braking at ``a_b`` can stop before ``d_s``:
 
     ḋ ≥ −√(2 a_b (d − d_s)),
 
-the stricter of the two where both hold. With ``ḋ = j · q̇``, each pair is one linear row on
-the arm command. The stage returns the command
-nearest the method's own in the method's weighting,
+the stricter of the two where both hold. ``a_b`` is taken no larger than the deceleration the
+command's own acceleration limits can give that distance (``Σ_i |j_i| q̈_max,i`` over the arm's
+joints and the base's linear axes): a Mecanum base that brakes at 0.025 m/s² is not counted on
+to stop at 1 m/s². With obstacles, whose
+distance the base's twist changes too, the look-ahead grows to the base's stopping distance
+(``d_s + v_max² / (2 a_max)`` over its linear axes) so that it brakes in time.
 
-    min ½ (q̇ − q̇₀)ᵀ W (q̇ − q̇₀)   subject to   the dampers, and   lower ≤ q̇ ≤ upper,
+With ``ḋ = j · q̇`` (``q̇`` the command: the base's axes, when the method commands the base
+with it, then the arm's joints; :class:`~wmm_control.kinematics.collision.CollisionModel`),
+each pair is one linear row on the command; a base twist that is not part of the command
+(the base controller's, when only the arm is left to choose) moves each row's bound by its
+share. The stage returns the command nearest the method's own,
+
+    min ½ (q̇ − q̇₀)ᵀ (JᵀJ + μ W) (q̇ − q̇₀)   subject to   the dampers, and   lower ≤ q̇ ≤ upper,
+
+``J`` the method's task Jacobian over the command and ``W`` its weighting of the entries (``μ``
+= :data:`SELF_WEIGHT`): what changes least at the end effector, so that a damper is met in the
+task's null space where it can be (an elbow stops sinking towards a table while the end
+effector holds its goal) rather than by whatever entry is cheapest (the base backing away
+from the goal). Without ``J``, the nearest in ``W``.
 
 ``[lower, upper]`` being the period's box the method already keeps (velocity, acceleration,
 braking before a position limit), solved with OSQP. Each damper row has a slack of high
@@ -46,6 +61,7 @@ import osqp
 from scipy import sparse
 
 from wmm_control.errors import ConfigError
+from wmm_control.kinematics.collision import CollisionModel
 
 __all__ = ['SafetyParams', 'SafetyResult', 'SafetyStage']
 
@@ -54,6 +70,8 @@ __all__ = ['SafetyParams', 'SafetyResult', 'SafetyStage']
 #: the command; and its small quadratic term, which keeps the problem strictly convex.
 SLACK_COST = 1e3
 SLACK_WEIGHT = 1.0
+#: μ: the weight of the command's own change against the end effector's (with a task Jacobian).
+SELF_WEIGHT = 1e-2
 #: The command is taken as meeting a damper within this much [m/s].
 TOLERANCE = 1e-9
 
@@ -99,7 +117,7 @@ class SafetyResult:
     """The stage's answer.
 
     Attributes:
-        command: the arm command [rad/s or m/s]. Shape (n,).
+        command: the command (base axes, then arm) [rad/s or m/s]. Shape (n,).
         clearance: distance of the closest checked pair [m] (inf when none is checked).
         closest_pair: its links, ``'a/b'`` ('' when none).
         active: number of damper rows (pairs within the look-ahead distance).
@@ -114,68 +132,134 @@ class SafetyResult:
 
 
 class SafetyStage:
-    """Velocity dampers on the arm command of a :class:`CollisionModel`.
+    """Velocity dampers on a command of a :class:`CollisionModel`.
 
     Args:
         collision: a :class:`~wmm_control.kinematics.collision.CollisionModel`.
         params: :class:`SafetyParams` (or a method's parameters, which derive from it).
+        arm_acceleration: the arm joints' acceleration limits [rad/s² or m/s²], shape
+            (n_arm,); None: every row brakes at ``collision_braking``.
+        base_velocity, base_acceleration: the base's limits on (vx, vy, ω) [m/s, rad/s; /s]
+            (only with ``arm_acceleration``); they set the look-ahead with obstacles.
     """
 
-    def __init__(self, collision, params: SafetyParams = SafetyParams()):
+    @classmethod
+    def for_robot(cls, robot, params: SafetyParams = SafetyParams(), obstacles=()):
+        """The stage of a :class:`~wmm_control.robot_config.RobotConfig`: its collision model
+        (with ``obstacles``) and its acceleration limits."""
+        return cls(CollisionModel.from_robot(robot, obstacles=obstacles), params, robot.arm.acceleration,
+                   robot.base.velocity, robot.base.acceleration)
+
+    def __init__(self, collision, params: SafetyParams = SafetyParams(), arm_acceleration=None,
+                 base_velocity=None, base_acceleration=None):
         self.collision = collision
         self.params = params
+        self._arm_acc = None if arm_acceleration is None else np.asarray(arm_acceleration, dtype=float)
+        self._base_acc = (np.zeros(3) if base_acceleration is None
+                          else np.asarray(base_acceleration, dtype=float))
+        stopping = 0.0
+        if base_velocity is not None and base_acceleration is not None:
+            stopping = max((float(v) ** 2 / (2.0 * float(a)) for v, a in zip(base_velocity[:2], base_acceleration[:2])
+                            if a > 0.0), default=0.0)
+        #: [m] how far an obstacle is looked at: the base's stopping distance from full speed
+        self.obstacle_lookahead = max(params.collision_lookahead, params.collision_safety + stopping)
         self._settings = dict(verbose=False, eps_abs=1e-5, eps_rel=1e-5, max_iter=4000, polishing=True)
 
-    def filter(self, q_arm, command, lower, upper, weights=None) -> SafetyResult:
-        """The arm command ``command`` at arm joints ``q_arm``, within the dampers and the box.
+    def set_obstacles(self, obstacles) -> None:
+        """Keep the robot off ``obstacles`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`) from now on."""
+        self.collision.set_obstacles(obstacles)
+
+    def filter(self, q_arm, command, lower, upper, weights=None, *, base_pose=None, base_axes=(),
+               base_twist=None, world_rates=False, task_jacobian=None) -> SafetyResult:
+        """The command ``command`` at arm joints ``q_arm``, within the dampers and the box.
 
         Args:
-            q_arm: arm joint positions. Shape (n,).
-            command: the method's arm command, within ``[lower, upper]``. Shape (n,).
-            lower, upper: this period's box. Shape (n,) each.
-            weights: the diagonal of W, the method's weighting of the arm joints (default
-                ones). Shape (n,).
+            q_arm: arm joint positions. Shape (n_arm,).
+            command: the method's command within ``[lower, upper]``: the base's twist on
+                ``base_axes`` (if any), then the arm's rates. Shape (len(base_axes) + n_arm,).
+            lower, upper: this period's box. Same shape.
+            weights: the diagonal of W, the method's weighting of the entries (default
+                ones). Same shape.
+            base_pose: (x, y, θ) of the base in the world [m, rad]; needed with obstacles.
+            base_axes: indices into (vx, vy, ω) of the command's base entries.
+            base_twist: the base's twist (vx, vy, ω) when it is not part of the command (None:
+                taken as at rest, or as commanded on ``base_axes``).
+            world_rates: the command's base entries are the world frame's (ẋ, ẏ, θ̇) instead
+                of the base frame's (vx, vy, ω).
+            task_jacobian: J, the end effector's task Jacobian over the command. Shape (r, n).
         """
         command = np.asarray(command, dtype=float)
         p = self.params
         if not p.collision_avoidance:
             return SafetyResult(command, math.inf, '', 0, False)
-        d_i, d_s = p.collision_influence, p.collision_safety
-        pairs, clearance, names = self.collision.within(q_arm, p.collision_lookahead)
+        axes = list(base_axes)
+        d_b = p.collision_lookahead
+        reach = self.obstacle_lookahead if self.collision.obstacles else d_b
+        pairs, clearance, names = self.collision.within(q_arm, reach, base_pose)
+        # a pair the base cannot move is constrained within the arm's look-ahead only
+        pairs = [pair for pair in pairs if pair.distance < d_b or pair.base_jacobian.any()]
         label = '/'.join(names) if names else ''
         if not pairs:
             return SafetyResult(command, clearance, label, 0, False)
-        rows = np.array([pair.rate_jacobian for pair in pairs])
-        bound = -np.array([self.allowed_approach(pair.distance) for pair in pairs])
+        base_rows = np.array([pair.base_jacobian for pair in pairs])
+        if world_rates:                       # (vx, vy) = R(θ)ᵀ (ẋ, ẏ)
+            c, s = math.cos(base_pose[2]), math.sin(base_pose[2])
+            base_rows = base_rows @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        rows = np.hstack((base_rows[:, axes], [pair.rate_jacobian for pair in pairs]))
+        base_share = (np.zeros(len(pairs)) if base_twist is None
+                      else np.array([pair.base_jacobian @ np.asarray(base_twist, dtype=float) for pair in pairs]))
+        bound = -self._allowed(pairs, rows, axes) - base_share
         violated = rows @ command < bound - TOLERANCE
         if not violated.any():
             return SafetyResult(command, clearance, label, len(pairs), False)
         lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
         weights = np.ones(command.size) if weights is None else np.asarray(weights, dtype=float)
+        if task_jacobian is None:
+            hessian = np.diag(weights)
+        else:
+            jac = np.asarray(task_jacobian, dtype=float)
+            hessian = jac.T @ jac + SELF_WEIGHT * np.diag(weights)
         # active set: the rows the command breaks, then any the answer breaks, until it breaks none
         # (most periods one solve: the rows far from binding never enter the QP)
         use = violated
         for _ in range(len(pairs)):
-            solved = self._solve(command, rows[use], bound[use], lower, upper, weights)
+            solved = self._solve(command, rows[use], bound[use], lower, upper, hessian)
             broken = (rows @ solved < bound - 1e-7) & ~use
             if not broken.any():
                 break
             use = use | broken
         return SafetyResult(solved, clearance, label, len(pairs), True)
 
-    def allowed_approach(self, distance: float) -> float:
-        """The fastest a pair ``distance`` [m] apart may approach [m/s] (negative: it must separate)."""
+    def _allowed(self, pairs, rows, axes) -> np.ndarray:
+        """Each pair's fastest allowed approach [m/s], braking no harder than the command's
+        acceleration limits can slow that distance. The base's turn rate is left out: turning
+        swings the near point aside for a moment, but does not stop a base that drives at an
+        obstacle."""
+        if self._arm_acc is None:
+            return np.array([self.allowed_approach(pair.distance) for pair in pairs])
+        acc = np.concatenate((np.where(np.arange(3) == 2, 0.0, self._base_acc)[axes], self._arm_acc))
+        reach = np.abs(rows) @ acc
+        return np.array([self.allowed_approach(pair.distance, braking) for pair, braking in zip(pairs, reach)])
+
+    def allowed_approach(self, distance: float, deceleration: float = math.inf) -> float:
+        """The fastest a pair ``distance`` [m] apart may approach [m/s] (negative: it must
+        separate), its distance braking at no more than ``deceleration`` [m/s²] (and
+        ``collision_braking``)."""
         p = self.params
         d_i, d_s = p.collision_influence, p.collision_safety
-        braking = math.sqrt(2.0 * p.collision_braking * max(distance - d_s, 0.0))
+        braking = math.sqrt(2.0 * min(p.collision_braking, deceleration) * max(distance - d_s, 0.0))
         damper = p.collision_gain * (distance - d_s) / (d_i - d_s) if distance < d_i else math.inf
         return min(damper, braking)
 
-    def _solve(self, command, rows, bound, lower, upper, weights):
-        """The QP of the module docstring over (q̇, slack), the dampers ``rows`` ≥ ``bound``."""
+    def _solve(self, command, rows, bound, lower, upper, hessian):
+        """The QP of the module docstring over (q̇, slack), the dampers ``rows`` ≥ ``bound``,
+        ``hessian`` its matrix over q̇."""
         n, m = command.size, bound.size
-        p_mat = sparse.csc_matrix(np.diag(np.concatenate((weights, np.full(m, SLACK_WEIGHT)))))
-        q_vec = np.concatenate((-weights * command, np.full(m, SLACK_COST)))
+        p_dense = np.zeros((n + m, n + m))
+        p_dense[:n, :n] = hessian
+        p_dense[n:, n:] = SLACK_WEIGHT * np.eye(m)
+        p_mat = sparse.csc_matrix(np.triu(p_dense))
+        q_vec = np.concatenate((-hessian @ command, np.full(m, SLACK_COST)))
         dense = np.zeros((m + n + m, n + m))        # [rows I; I 0; 0 I], small enough to build dense
         dense[:m, :n] = rows
         dense[:m, n:] = np.eye(m)

@@ -1,0 +1,222 @@
+"""Obstacles: the file format, the distances and their rates against the simulator's geometry,
+the safety stage on the base, goals inside an obstacle, the /obstacles topic, the simulator's
+contact report, and the recorded runs."""
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ros_helpers import RosHarness, overrides
+from sim_bridge.collision import SelfCollisionChecker
+from sim_bridge.node import SimNode
+from sim_bridge.world import SimWorld
+from wmm_control.errors import ConfigError
+from wmm_control.experiments.randomized import run_goal, sample_goals
+from wmm_control.experiments.scenario import load_scenario
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.collision import CollisionModel
+from wmm_control.kinematics.obstacles import load_obstacles, parse_obstacles
+from wmm_control.kinematics.workspace import Workspace
+from wmm_control.nodes.obstacle_topic import ObstacleSet
+from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
+from wmm_control.resolvers.safety import SafetyStage
+from wmm_control.robot_config import load_robot
+
+BALLS = parse_obstacles([{'name': 'ball', 'shape': 'sphere', 'size': [0.15], 'pose': [0.7, 0.5, 1.1]},
+                         {'name': 'low', 'shape': 'sphere', 'size': [0.2], 'pose': [0.9, -0.3, 0.2]}], 'test')
+
+
+@pytest.mark.parametrize('entry, message', [
+    ({'shape': 'cone', 'size': [1.0], 'pose': [0, 0, 0]}, 'shape must be one of'),
+    ({'shape': 'box', 'size': [1.0, 1.0], 'pose': [0, 0, 0]}, 'takes 3 size entries'),
+    ({'shape': 'sphere', 'size': [0.0], 'pose': [0, 0, 0]}, 'finite and > 0'),
+    ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0]}, 'expected 3 or 6 numbers'),
+    ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0, float('nan')]}, 'finite'),
+    ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0, 0], 'colour': 'red'}, 'unknown keys'),
+])
+def test_a_bad_obstacle_entry_is_refused_with_its_reason(entry, message):
+    with pytest.raises(ConfigError, match=message):
+        parse_obstacles([entry], 'test.yaml')
+
+
+def test_obstacle_files_are_checked(tmp_path):
+    with pytest.raises(ConfigError, match='not found'):
+        load_obstacles(tmp_path / 'missing.yaml')
+    twice = tmp_path / 'twice.yaml'
+    twice.write_text('obstacles:\n  - {name: a, shape: sphere, size: [0.1], pose: [0, 0, 0]}\n'
+                     '  - {name: a, shape: sphere, size: [0.1], pose: [1, 0, 0]}\n')
+    with pytest.raises(ConfigError, match='used twice'):
+        load_obstacles(twice)
+    assert [o.name for o in load_obstacles('table_pillar')] == ['table', 'pillar']
+
+
+def test_signed_distances_of_the_three_shapes():
+    box, ball, post = parse_obstacles([
+        {'shape': 'box', 'size': [2.0, 1.0, 0.5], 'pose': [1.0, 0.0, 0.0, 0.0, 0.0, np.pi / 2]},
+        {'shape': 'sphere', 'size': [0.5], 'pose': [0.0, 0.0, 1.0]},
+        {'shape': 'cylinder', 'size': [0.1, 2.0], 'pose': [0.0, 2.0, 1.0]}], 'test')
+    assert box.signed_distance([1.0, 0.0, 0.0]) == pytest.approx(-0.25)          # the centre: 0.25 to the top
+    assert box.signed_distance([1.0, 1.5, 0.0]) == pytest.approx(0.5)            # turned: its x is the world's y
+    assert ball.signed_distance([0.0, 0.0, 2.0]) == pytest.approx(0.5)
+    assert post.signed_distance([0.0, 2.05, 1.5]) == pytest.approx(-0.05)
+    assert post.signed_distance([0.0, 2.0, 2.5]) == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize('name', ['steerable', 'mecanum'])
+def test_obstacle_distances_agree_with_the_simulator_and_their_rates_are_their_derivatives(name):
+    robot = load_robot(name)
+    model = CollisionModel.from_robot(robot, obstacles=BALLS)
+    rng = np.random.default_rng(3)
+    h = 1e-4
+    with SelfCollisionChecker(robot, margin=1.0, obstacles=BALLS) as checker:
+        for _ in range(15):
+            q = np.array(robot.start.arm) + rng.uniform(-0.5, 0.5, len(robot.start.arm))
+            base = np.array([rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), rng.uniform(-np.pi, np.pi)])
+            pairs, _, _ = model.within(q, 1.0, base)
+            truth = {(a, b): d for a, b, d in checker.collisions(q, base) if b in ('ball', 'low')}
+            mine = [p for p in pairs if p.links[1] in ('ball', 'low')]
+            assert mine, 'some link within 1 m of an obstacle'
+            nearest = {}                      # a link may have several shapes: PyBullet's is the nearest
+            for pair in mine:
+                nearest[pair.links] = min(nearest.get(pair.links, np.inf), pair.distance)
+            for links, distance in nearest.items():
+                assert distance == pytest.approx(truth[links], abs=2e-3), links
+            # ḋ = j q̇ + j_b (vx, vy, ω), the base's twist in its own frame
+            qd, twist = rng.normal(size=q.size), rng.normal(size=3)
+            c, s = np.cos(base[2]), np.sin(base[2])
+            world = np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1], twist[2]])
+            ahead = {(p.links, p.shapes): p.distance for p in model.within(q + h * qd, 2.0, base + h * world)[0]}
+            behind = {(p.links, p.shapes): p.distance for p in model.within(q - h * qd, 2.0, base - h * world)[0]}
+            for pair in mine:
+                key = (pair.links, pair.shapes)
+                rate = (ahead[key] - behind[key]) / (2 * h)
+                assert pair.rate_jacobian @ qd + pair.base_jacobian @ twist == pytest.approx(rate, abs=1e-4), key
+
+
+def test_a_base_driving_at_an_obstacle_is_slowed_to_what_it_can_brake():
+    robot = load_robot('mecanum')        # its base brakes at 0.025 m/s²: 1.25 m from full speed
+    pillar = parse_obstacles([{'name': 'pillar', 'shape': 'cylinder', 'size': [0.1, 2.0], 'pose': [0.9, 0.0, 0.0]}],
+                             'test')
+    stage = SafetyStage.for_robot(robot)
+    stage.set_obstacles(pillar)
+    assert stage.obstacle_lookahead == pytest.approx(0.02 + 0.25 ** 2 / (2 * 0.025))
+    q = np.array(robot.start.arm)
+    n = q.size
+    command = np.concatenate(([0.25, 0.0, 0.0], np.zeros(n)))          # full speed ahead, the arm still
+    box = np.concatenate((robot.base.velocity, robot.arm.velocity))
+    out = stage.filter(q, command, -box, box, base_pose=np.zeros(3), base_axes=(0, 1, 2))
+    assert out.changed
+    # the base's front is about half a metre from the pillar: braking at 0.025 m/s² stops from
+    # √(2 · 0.025 · (d − d_s)) ≈ 0.15 m/s at most (the arm, nearer, can pull back faster)
+    nearest = min(p.distance for p in stage.collision.within(q, 2.0, np.zeros(3))[0]
+                  if 'pillar' in p.links and not p.rate_jacobian.any())
+    assert 0.4 < nearest < 0.6
+    assert 0.0 < out.command[0] <= np.sqrt(2 * 0.025 * (nearest - 0.02)) + 1e-6
+    away = stage.filter(q, -command, -box, box, base_pose=np.zeros(3), base_axes=(0, 1, 2))
+    assert not away.changed, 'backing away passes'
+    # the same base behind the pillar's far side (turned round) is not held back
+    far = stage.filter(q, command, -box, box, base_pose=np.array([2.0, 0.0, 0.0]), base_axes=(0, 1, 2))
+    assert not far.changed
+
+
+def test_a_goal_inside_an_obstacle_is_impossible():
+    model = KinematicModel('steerable')
+    workspace = Workspace(model)
+    table = load_obstacles('table_pillar')
+    assert 'inside the obstacle \'table\'' in workspace.impossible([1.5, 0.0, 0.3], None, table)
+    assert workspace.impossible([1.5, 0.0, 0.9], None, table) == ''
+
+
+def _marker(kind, action=Marker.ADD, frame='world', marker_id=0, scale=(0.2, 0.2, 0.2), position=(1.0, 0.0, 0.5),
+            quat=(0.0, 0.0, 0.0, 1.0)):
+    m = Marker()
+    m.header.frame_id = frame
+    m.ns, m.id, m.type, m.action = 'test', marker_id, kind, action
+    m.scale.x, m.scale.y, m.scale.z = scale
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = position
+    m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = quat
+    return m
+
+
+def test_markers_add_replace_and_delete_obstacles_and_bad_ones_are_rejected():
+    obstacles = ObstacleSet('table_pillar', 'world')
+    fixed = len(obstacles.obstacles)
+    changed, errors = obstacles.apply(MarkerArray(markers=[
+        _marker(Marker.CUBE, scale=(0.4, 0.6, 0.8)), _marker(Marker.SPHERE, marker_id=1),
+        _marker(Marker.CYLINDER, marker_id=2, scale=(0.3, 0.3, 1.0)),
+        _marker(Marker.ARROW, marker_id=3), _marker(Marker.CUBE, marker_id=4, frame='map'),
+        _marker(Marker.CUBE, marker_id=5, quat=(0.0, 0.0, 0.0, 0.0)),
+        _marker(Marker.SPHERE, marker_id=6, scale=(float('nan'), 0.1, 0.1))]))
+    assert changed and len(obstacles.obstacles) == fixed + 3
+    assert len(errors) == 4 and 'not an obstacle' in errors[0] and "'map'" in errors[1]
+    box, ball, post = obstacles.obstacles[fixed:]
+    assert (box.shape, box.size, ball.size, post.size) == ('box', (0.4, 0.6, 0.8), (0.1,), (0.15, 1.0))
+    assert obstacles.apply(MarkerArray(markers=[_marker(Marker.SPHERE, marker_id=1)])) == (False, [])
+    changed, _ = obstacles.apply(MarkerArray(markers=[_marker(Marker.SPHERE, Marker.DELETE, marker_id=1)]))
+    assert changed and len(obstacles.obstacles) == fixed + 2
+    obstacles.apply(MarkerArray(markers=[_marker(Marker.SPHERE, Marker.DELETEALL)]))
+    assert len(obstacles.obstacles) == fixed, 'the file\'s obstacles stay'
+
+
+def test_the_nodes_take_obstacles_live_reject_goals_inside_them_and_the_simulator_reports_contact():
+    ros = RosHarness()
+    try:
+        resolver = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
+            diagnostics_period=1e-9)))
+        sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(diagnostics_period=0.05)))
+        driver = ros.add(Node('obstacle_driver', context=ros.context))
+        pub = driver.create_publisher(MarkerArray, '/obstacles', 10)
+        goals = driver.create_publisher(PoseStamped, '/goal_pose', 10)
+        reports = []
+        driver.create_subscription(DiagnosticArray, '/diagnostics', lambda m: reports.extend(
+            {kv.key: kv.value for kv in s.values} | {'level': s.level} for s in m.status if s.name.endswith('obstacles')), 10)
+        # a box over the robot's arm: the simulator reports the contact
+        pub.publish(MarkerArray(markers=[_marker(Marker.CUBE, scale=(0.3, 0.3, 0.3), position=(0.6, 0.0, 1.0))]))
+        assert ros.spin_until(lambda: len(resolver.obstacles.obstacles) == 1 and len(sim.world.obstacles) == 1
+                              and reports, timeout=20.0)
+        assert ros.spin_until(lambda: any(r['contact_periods'] != '0' for r in reports), timeout=20.0)
+        last = reports[-1]
+        assert float(last['clearance_m']) < 0.0 and last['closest_obstacle'] == 'test/0' and last['level'] == b'\x02'
+        goal = PoseStamped()
+        goal.header.frame_id = 'world'
+        goal.pose.position.x, goal.pose.position.z, goal.pose.orientation.w = 0.6, 1.0, 1.0
+        goals.publish(goal)
+        assert ros.spin_until(lambda: resolver.counters['goals_rejected'] == 1, timeout=10.0)
+        assert resolver.target is None
+    finally:
+        ros.close()
+
+
+def test_a_recorded_run_holds_the_documented_arrays(tmp_path):
+    goal = sample_goals('steerable', 1, seed=0, obstacles='table_pillar')[0]
+    out = run_goal('steerable', 'pinv', goal, duration=1.0, obstacles='table_pillar', record=tmp_path)
+    data = np.load(tmp_path / 'steerable_pinv_0.npz')
+    k = len(data['t'])
+    assert k == 40 and out['contact_depth_m'] == 0.0
+    names = list(data['joint_names'])
+    robot = load_robot('steerable')
+    assert names[:7] == list(robot.arm.joints) and 'steer_fl_joint' in names and data['q'].shape == (k, len(names))
+    assert data['base_pose'].shape == (k, 3) and np.all(np.isfinite(data['q']))
+    np.testing.assert_allclose(data['q'][0, :7], robot.start.arm)
+    assert 'pillar' in str(data['obstacles']) and data['goal_pose'].shape == (6,)
+
+
+def test_table_reach_amp_reaches_over_the_table_without_touching_it():
+    from sim_bridge.closed_loop import run_scenario
+    from wmm_control.experiments.randomized import run_contact
+    from wmm_control.experiments.scenario import resolver_parameters
+    from wmm_control.resolvers import make_resolver
+
+    scenario = load_scenario('table_reach')
+    run = next(r for r in scenario.runs if r['name'] == 'amp')
+    resolver = make_resolver('amp', scenario.robot, **resolver_parameters(run))
+    with SimWorld(scenario.robot) as world:
+        log = run_scenario(world, resolver, scenario)
+    goal = scenario.goals[0].target.position
+    assert np.linalg.norm(log.ee_position[-1] - goal) < 0.01
+    depth, pair = run_contact(world.robot, log.q_arm, log.base_pose, scenario.obstacles)
+    assert depth == 0.0, pair
+    assert np.min(log.clearance) > 0.0 and log.collision_changed.any(), 'the stage kept it off the table'
