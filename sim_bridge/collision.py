@@ -9,13 +9,15 @@ and the collision shapes of the links are compared pair by pair with
 
 A configuration is clear when every checked pair is at least ``margin`` apart and no moving
 link comes within ``margin`` of the floor. Checked pairs: moving–body and moving–moving,
-except a link and its parent or grandparent (one joint apart they share the joint; two
-joints apart the crude cylinders of the URDF overlap as soon as the joint between them bends,
-which the real wrist allows) and the pairs that are already closer than ``margin`` at the
-robot's start state (they touch by design, e.g. the first arm link resting on its mount).
-The base pose does not matter for those: the floor is a plane under the wheels. Obstacles
-(:mod:`wmm_control.kinematics.obstacles`) are checked against every link, and for them it
-does: they are placed around the robot from the base's pose.
+except a link and its parent link (they meet at the joint between them) and the pairs that
+are already closer than ``margin`` at the robot's start state (they touch by design, e.g. the
+first arm link resting on its mount). A link and its grandparent are checked: the shipped
+robots' collision shapes keep them apart over the joint limits wherever the real arm does
+(on ``ur_mecanum`` the wrist meets the shoulder and the upper arm with the elbow folded past
+about 160°, as the real arm would). The base pose does not matter for those: the floor is a
+plane under the wheels. :mod:`wmm_control.kinematics.collision` uses the same rules.
+Obstacles (:mod:`wmm_control.kinematics.obstacles`) are checked against every link, and for
+them it does: they are placed around the robot from the base's pose.
 """
 
 import itertools
@@ -93,8 +95,8 @@ class SelfCollisionChecker(OwnedClient):
         body = sorted(shaped - moving)
         pairs = [(a, b) for a in self._moving for b in body]
         pairs += list(itertools.combinations(self._moving, 2))
-        def near(a, b):           # b is a's parent or grandparent
-            return parents[a] == b or (parents[a] >= 0 and parents[parents[a]] == b)
+        def near(a, b):           # b is a's parent link
+            return parents[a] == b
 
         pairs = [(a, b) for a, b in pairs if not (near(a, b) or near(b, a))]
         self._set(self.robot.start.arm)

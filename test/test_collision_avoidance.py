@@ -11,6 +11,7 @@ from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.safety import SafetyParams, SafetyStage
 from wmm_control.robot_config import load_robot, robot_names
+from wmm_control.urdf import UrdfTree
 
 ROBOTS = robot_names()
 
@@ -66,6 +67,42 @@ def test_the_distance_model_agrees_with_the_simulators_geometry(name):
             if ours > 0.02:
                 assert deepest == np.inf, (q, deepest, ours)
     assert both >= 3
+
+
+@pytest.mark.parametrize('name', ROBOTS)
+def test_links_two_joints_apart_are_checked_and_meet_only_where_the_real_arm_does(name):
+    """Only a link and its parent are left out: a link and its grandparent are checked, and
+    their shapes keep apart at random configurations within the limits, but on ur_mecanum with
+    the elbow folded past 160° (the wrist into the shoulder and the upper arm, as on the real
+    arm)."""
+    robot = load_robot(name)
+    model = CollisionModel.from_robot(robot)
+    parent = {j.child: j.parent for j in UrdfTree(robot.urdf_path).joints.values()}
+
+    def two_apart(a, b):
+        return parent.get(parent.get(a)) == b or parent.get(parent.get(b)) == a
+
+    assert any(two_apart(a, b) for a, b in model.pairs)
+    assert not any(parent.get(a) == b or parent.get(b) == a for a, b in model.pairs)
+    met = []
+    for q in _configurations(robot, 1000, seed=6):
+        pairs, _, _ = model.within(q, 0.0)
+        met += [(q, p.links) for p in pairs if two_apart(*p.links)]
+    if name == 'ur_mecanum':
+        assert met and all(abs(q[2]) > np.radians(160) for q, _ in met), met[:3]
+    else:
+        assert met == [], met[:3]
+
+
+def test_robot_a_wrist_bends_all_the_way_clear_of_its_forearm():
+    """Robot A's flange (arm_link_7) and forearm (arm_link_5), two joints apart: clear by 2 cm
+    at every joint-6 angle within the limits, on the simulator's shapes too."""
+    robot = load_robot('steerable')
+    with SelfCollisionChecker(robot) as checker:
+        for q6 in np.linspace(robot.arm.position_lower[5], robot.arm.position_upper[5], 25):
+            q = np.array(robot.start.arm)
+            q[5] = q6
+            assert checker.collisions(q) == [], q6
 
 
 # ---------------------------------------------------------------- the stage alone

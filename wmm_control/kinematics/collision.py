@@ -14,13 +14,18 @@ base's pose at each call. Links split into
 Checked pairs: moving against body, moving against moving, moving against the floor (a
 half-space at the robot YAML's ``ground_z``), and every link against every obstacle, except
 
-* a link and its parent link: one joint apart, they share that joint;
-* a link and its grandparent link: two joints apart, the primitive shapes of a URDF
-  (cylinders around each link) meet as soon as the joint between them bends, which the real
-  arm allows;
-* robot pairs closer than ``margin`` at the robot's start state: they touch by design (the
-  arm's first link resting on its mount; :mod:`wmm_control.cli.robot_setup`, which has no
-  start state yet, takes every joint at zero).
+* a link and its parent link (the link it hangs from in the URDF's tree): they meet at the
+  joint between them;
+* robot pairs closer than ``margin`` at the robot's start state: they touch by design (the arm's
+  first link resting on its mount; :mod:`wmm_control.cli.robot_setup`, which has no start
+  state yet, takes every joint at zero).
+
+A link and its grandparent, two joints apart, are checked: the shipped robots' collision
+shapes are drawn so that they stay apart over the joint limits wherever the real arm does
+(robot A's forearm shape stops short of the wrist joint, whose housing is a shape of the
+next link about that joint's axis, so the flange clears the forearm at any wrist bend). On
+``ur_mecanum`` they do meet, where the real arm does: the wrist runs into the shoulder and
+the upper arm when the elbow folds past about 160°, which the ±π elbow limit allows.
 
 The simulator's own check (``sim_bridge.collision.SelfCollisionChecker``, PyBullet's
 geometry) uses the same rules; it judges the ground truth, this model serves the controller.
@@ -116,9 +121,8 @@ class CollisionModel:
         link_of = [model.frames[g.parentFrame].name for g in self.geom.geometryObjects]
         moving = [g.parentJoint in moving_joints for g in self.geom.geometryObjects]
 
-        def near(a, b):                                # b is a's parent or grandparent link
-            up = parent_link.get(a)
-            return up == b or (up is not None and parent_link.get(up) == b)
+        def near(a, b):                                # b is a's parent link
+            return parent_link.get(a) == b
 
         pairs = []
         for a in range(len(link_of)):
