@@ -153,6 +153,8 @@ class CollisionModel:
             self.geom.addCollisionPair(pin.CollisionPair(*pairs[k]))
         self._robot_geom = self.geom.copy()
         self._robot_link_of = list(link_of)
+        # [joint, i]: arm joint i moves the joint (none moves the root: the body, the floor, the obstacles)
+        self._moved_by = np.array([[a in model.supports[j] for a in arm_ids] for j in range(model.njoints)])
         self.obstacles: tuple[Obstacle, ...] = ()
         self.set_obstacles(obstacles)
 
@@ -177,6 +179,21 @@ class CollisionModel:
             # GJK to 1e-9 m: at coal's default (1e-6) the nearest points of curved shapes (the
             # cylinders around the links) are off by degrees, and so is the rate of the distance
             request.gjk_tolerance = GJK_TOLERANCE
+        self._tabulate_pairs()
+
+    def _tabulate_pairs(self):
+        """Each checked pair's links, shapes and joints, looked up once (call again after adding pairs)."""
+        objects = self.geom.geometryObjects
+        self._pair_links, self._pair_shapes, joints, robot = [], [], [], []
+        for pair in self.geom.collisionPairs:
+            a, b = objects[pair.first], objects[pair.second]
+            self._pair_links.append((self._link_of[pair.first], self._link_of[pair.second]))
+            self._pair_shapes.append((a.name, b.name))
+            joints.append((a.parentJoint, b.parentJoint))
+            robot.append((pair.first not in self._fixed, pair.second not in self._fixed))
+        self._pair_joints = np.array(joints, dtype=int).reshape(-1, 2)
+        #: [pair, side]: that side is on the robot (moves with the base), not the floor or an obstacle
+        self._pair_on_robot = np.array(robot, dtype=float).reshape(-1, 2)
 
     def _place_obstacles(self, base_pose) -> None:
         """Obstacles into the root frame, the base at ``base_pose`` (x, y, θ) in the world."""
@@ -193,7 +210,7 @@ class CollisionModel:
     @property
     def pairs(self) -> list[tuple[str, str]]:
         """The checked pairs, by link names."""
-        return [(self._link_of[p.first], self._link_of[p.second]) for p in self.geom.collisionPairs]
+        return list(self._pair_links)
 
     def _configuration(self, q_arm) -> np.ndarray:
         q = pin.neutral(self.model)
@@ -204,10 +221,10 @@ class CollisionModel:
                 q[iq] = val
         return q
 
-    def _distances(self, q) -> list[float]:
+    def _distances(self, q) -> np.ndarray:
         """Every checked pair's distance at the full configuration ``q``."""
         pin.computeDistances(self.model, self.data, self.geom, self.geom_data, q)
-        return [r.min_distance for r in self.geom_data.distanceResults]
+        return np.array([r.min_distance for r in self.geom_data.distanceResults])
 
     def closest(self, q_arm, base_pose=None) -> tuple[float, tuple[str, str] | None]:
         """``(distance [m], (link a, link b))`` of the closest checked pair at arm joints
@@ -218,8 +235,7 @@ class CollisionModel:
         self._place_obstacles(base_pose)
         dists = self._distances(self._configuration(q_arm))
         k = int(np.argmin(dists))
-        pair = self.geom.collisionPairs[k]
-        return float(dists[k]), (self._link_of[pair.first], self._link_of[pair.second])
+        return float(dists[k]), self._pair_links[k]
 
     def within(self, q_arm, influence: float, base_pose=None) -> tuple[list[PairDistance], float,
                                                                        tuple[str, str] | None]:
@@ -231,52 +247,37 @@ class CollisionModel:
         self._place_obstacles(base_pose)
         model, data = self.model, self.data
         q = self._configuration(q_arm)
-        dists = np.array(self._distances(q))
+        dists = self._distances(q)
         k_min = int(np.argmin(dists))
-        first = self.geom.collisionPairs[k_min]
-        closest = (float(dists[k_min]), (self._link_of[first.first], self._link_of[first.second]))
+        closest = (float(dists[k_min]), self._pair_links[k_min])
         near = np.flatnonzero(dists < influence)
         if not near.size:
             return [], *closest
+        results = self.geom_data.distanceResults
+        points, normals = np.empty((2, near.size, 3)), np.empty((near.size, 3))
+        for i, k in enumerate(near.tolist()):          # each pair's nearest points, on a and on b
+            result = results[k]
+            points[0, i], points[1, i] = result.getNearestPoint1(), result.getNearestPoint2()
+            normals[i] = result.normal                  # coal's: from the first shape to the second
+        # ḋ = n · (v_b − v_a); a point p fixed to a joint moves at v = v₀ + ω × p, (v₀, ω) the
+        # joint's spatial velocity in the root frame, so n · v = n · v₀ + (p × n) · ω
         pin.computeJointJacobians(model, data, q)
-        self._jacobians = {}                 # per joint, this call's: pairs share their joints
-        out = []
-        for k in near.tolist():
-            pair, result = self.geom.collisionPairs[k], self.geom_data.distanceResults[k]
-            p_a, p_b = np.asarray(result.getNearestPoint1()), np.asarray(result.getNearestPoint2())
-            normal = np.asarray(result.normal, dtype=float)    # coal's: from the first shape to the second
-            jac = (self._point_jacobian(pair.second, p_b) - self._point_jacobian(pair.first, p_a))
-            base = self._base_point_jacobian(pair.second, p_b) - self._base_point_jacobian(pair.first, p_a)
-            objects = self.geom.geometryObjects
-            out.append(PairDistance(float(dists[k]), (self._link_of[pair.first], self._link_of[pair.second]),
-                                    (objects[pair.first].name, objects[pair.second].name), normal @ jac,
-                                    normal @ base))
+        twists = data.J[:, self._idx_v]                 # (v₀, ω) per arm joint rate
+        along = normals @ twists[:3] + np.cross(points, normals) @ twists[3:]
+        along *= self._moved_by[self._pair_joints[near].T]   # only the arm joints that move p
+        rates = along[1] - along[0]
+        # the base's twist (vx, vy, ω) moves a point p of the robot at (vx − ω p_y, vy + ω p_x, 0):
+        # n · v = n_x vx + n_y vy + (p × n)_z ω; the floor and the obstacles stay put
+        sides = np.stack([np.column_stack((normals[:, 0], normals[:, 1],
+                                           points[i, :, 0] * normals[:, 1] - points[i, :, 1] * normals[:, 0]))
+                          for i in (0, 1)])
+        sides *= self._pair_on_robot[near].T[:, :, None]
+        base = sides[1] - sides[0]
+        out = [PairDistance(float(dists[k]), self._pair_links[k], self._pair_shapes[k], j, b)
+               for k, j, b in zip(near.tolist(), rates, base)]
         return out, *closest
-
-    def _base_point_jacobian(self, geometry: int, point: np.ndarray) -> np.ndarray:
-        """Velocity of ``point`` (root frame) fixed to geometry ``geometry`` relative to the
-        world, in the root frame, per base twist (vx, vy, ω). Shape (3, 3)."""
-        if geometry in self._fixed:          # the floor and the obstacles do not move in the world
-            return np.zeros((3, 3))
-        return np.array([[1.0, 0.0, -point[1]], [0.0, 1.0, point[0]], [0.0, 0.0, 0.0]])
-
-    def _point_jacobian(self, geometry: int, point: np.ndarray) -> np.ndarray:
-        """Linear velocity of ``point`` (root frame) fixed to geometry ``geometry``, per arm joint
-        rate. Shape (3, n_arm)."""
-        joint = self.geom.geometryObjects[geometry].parentJoint
-        if joint == 0:                       # fixed to the root: the body, the floor, the obstacles
-            return np.zeros((3, self.n_arm))
-        if joint not in self._jacobians:
-            jac = pin.getJointJacobian(self.model, self.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-            self._jacobians[joint] = (jac[:3, self._idx_v], jac[3:, self._idx_v], self.data.oMi[joint].translation)
-        linear, angular, origin = self._jacobians[joint]
-        return linear - _skew(point - origin) @ angular
 
 
 def _halfspace():
     """The floor's shape: z ≤ 0 in its own frame (coal, as pinocchio exposes it)."""
     return pin.coal.Halfspace(np.array([0.0, 0.0, 1.0]), 0.0)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

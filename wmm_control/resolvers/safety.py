@@ -37,10 +37,13 @@ effector holds its goal) rather than by whatever entry is cheapest (the base bac
 from the goal). Without ``J``, the nearest in ``W``.
 
 ``[lower, upper]`` being the period's box the method already keeps (velocity, acceleration,
-braking before a position limit), solved with OSQP. Each damper row has a slack of high
-linear cost: where the box leaves no command that meets every damper (the arm arrives faster
-than its acceleration limits can brake), the answer meets them as far as the box allows, and
-the solve never fails for it; where it leaves room, the slack is zero.
+braking before a position limit). Each damper row has a slack of high linear cost: where the
+box leaves no command that meets every damper (the arm arrives faster than its acceleration
+limits can brake), the answer meets them as far as the box allows, and the solve never fails
+for it; where it leaves room, the slack is zero. The QP is small (the arm's joints, a slack
+per damper row the command breaks) and solved exactly by a dual active-set method
+(:func:`_least_distance`): its answer meets every constraint to rounding, and its cost is a
+few small linear solves per constraint that binds.
 
 When no pair is within ``d_i``, or the command already meets every damper, it passes through
 unchanged: a method runs as its paper has it until the arm nears the body.
@@ -57,8 +60,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import osqp
-from scipy import sparse
+from scipy.linalg import lapack, solve_triangular
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.collision import CollisionModel
@@ -74,6 +76,9 @@ SLACK_WEIGHT = 1.0
 SELF_WEIGHT = 1e-2
 #: The command is taken as meeting a damper within this much [m/s].
 TOLERANCE = 1e-9
+#: The QP's answer meets every constraint within this much (a distance in its scaled variables,
+#: about [m/s] for weights about 1).
+LEAST_DISTANCE_TOLERANCE = 1e-10
 
 
 @dataclass(frozen=True)
@@ -163,7 +168,6 @@ class SafetyStage:
                             if a > 0.0), default=0.0)
         #: [m] how far an obstacle is looked at: the base's stopping distance from full speed
         self.obstacle_lookahead = max(params.collision_lookahead, params.collision_safety + stopping)
-        self._settings = dict(verbose=False, eps_abs=1e-5, eps_rel=1e-5, max_iter=4000, polishing=True)
 
     def set_obstacles(self, obstacles) -> None:
         """Keep the robot off ``obstacles`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`) from now on."""
@@ -252,26 +256,99 @@ class SafetyStage:
         return min(damper, braking)
 
     def _solve(self, command, rows, bound, lower, upper, hessian):
-        """The QP of the module docstring over (q̇, slack), the dampers ``rows`` ≥ ``bound``,
-        ``hessian`` its matrix over q̇."""
+        """The QP of the module docstring over y = (q̇, slack), the dampers ``rows`` ≥ ``bound``.
+
+        Its cost is ½ (y − y₀)ᵀ H (y − y₀) plus a constant, H = diag(``hessian``, SLACK_WEIGHT I)
+        and y₀ = (q̇₀, −SLACK_COST / SLACK_WEIGHT) its unconstrained minimum; with H = L Lᵀ
+        (Cholesky) and z = Lᵀ (y − y₀) it is the nearest point to the origin that meets every
+        constraint (:func:`_least_distance`), started from the slacks held at zero: there, y =
+        (q̇₀, 0), each slack's bound has the multiplier SLACK_COST.
+        """
         n, m = command.size, bound.size
-        p_dense = np.zeros((n + m, n + m))
-        p_dense[:n, :n] = hessian
-        p_dense[n:, n:] = SLACK_WEIGHT * np.eye(m)
-        p_mat = sparse.csc_matrix(np.triu(p_dense))
-        q_vec = np.concatenate((-hessian @ command, np.full(m, SLACK_COST)))
-        dense = np.zeros((m + n + m, n + m))        # [rows I; I 0; 0 I], small enough to build dense
-        dense[:m, :n] = rows
-        dense[:m, n:] = np.eye(m)
-        dense[m:, :] = np.eye(n + m)
-        a_mat = sparse.csc_matrix(dense)
-        lo = np.concatenate((bound, lower, np.zeros(m)))
-        hi = np.concatenate((np.full(m, np.inf), upper, np.full(m, np.inf)))
-        solver = osqp.OSQP()
-        solver.setup(p_mat, q_vec, a_mat, lo, hi, **self._settings)
-        result = solver.solve(raise_error=False)
-        x = np.asarray(result.x, dtype=float)[:n] if result.x is not None else None
-        if x is None or not np.all(np.isfinite(x)) or result.info.status not in ('solved', 'solved inaccurate'):
-            # no answer: brake as hard as the box allows (the command nearest rest)
+        scale = np.zeros((n + m, n + m))            # L⁻ᵀ: y = y₀ + L⁻ᵀ z
+        scale[:n, :n] = solve_triangular(np.linalg.cholesky(hessian), np.eye(n), lower=True).T
+        scale[n:, n:] = np.eye(m) / math.sqrt(SLACK_WEIGHT)
+        y0 = np.concatenate((command, np.full(m, -SLACK_COST / SLACK_WEIGHT)))
+        # a y ≥ e: the dampers (rows q̇ + slack ≥ bound), slack ≥ 0, q̇ ≥ lower and −q̇ ≥ −upper
+        a = np.zeros((2 * m + 2 * n, n + m))
+        a[:m, :n] = rows
+        a[:m, n:] = a[m:2 * m, n:] = np.eye(m)
+        a[2 * m:2 * m + n, :n] = np.eye(n)
+        a[2 * m + n:, :n] = -np.eye(n)
+        e = np.concatenate((bound, np.zeros(m), lower, -upper))
+        try:
+            z = _least_distance(a @ scale, e - a @ y0, list(range(m, 2 * m)))
+        except np.linalg.LinAlgError:                   # active constraints dependent through rounding
+            z = None
+        if z is None:
+            # no answer (a box with lower > upper): brake as hard as the box allows
             return np.clip(np.zeros(n), lower, upper)
-        return np.clip(x, lower, upper)
+        return np.clip(command + scale[:n, :n] @ z[:n], lower, upper)
+
+
+def _least_distance(normals, rhs, active):
+    """The ``z`` of least norm with ``normals @ z ≥ rhs``, or None when there is none.
+
+    Goldfarb and Idnani's dual method ("A numerically stable dual method for solving strictly
+    convex quadratic programs", Math. Programming 27, 1983), for the identity Hessian. It starts
+    from the nearest point that meets the constraints ``active`` as equalities (their
+    multipliers must be ≥ 0) and adds the most violated constraint: it moves z along the part
+    of the new constraint's normal that the active ones leave free, raising its multiplier,
+    until the new constraint is met, or, first, an active multiplier falls to zero and that
+    constraint is dropped. Every multiplier stays ≥ 0 and ½ |z|² never falls, so no active set
+    comes back; it ends, exactly, when no constraint is violated. A normal in the span of the
+    active ones (to 1e-6 of its length) moves no z and only drops: the active normals stay
+    independent. The answer is computed anew from the last active set, without the steps'
+    rounding.
+
+    Raises:
+        numpy.linalg.LinAlgError: the active normals became dependent through rounding.
+    """
+    active = list(active)
+    u = _gram_solve(normals[active], rhs[active])     # the active constraints' multipliers
+    z = u @ normals[active]
+    norms = np.linalg.norm(normals, axis=1)
+    adding, u_add = None, 0.0
+    for _ in range(20 * len(rhs)):
+        if adding is None:
+            gap = (rhs - normals @ z) / norms           # how far z is from meeting each
+            gap[active] = -np.inf
+            adding = int(np.argmax(gap))
+            if gap[adding] <= LEAST_DISTANCE_TOLERANCE:
+                a = normals[active]
+                return _gram_solve(a, rhs[active]) @ a
+            u_add = 0.0
+        n_add, a = normals[adding], normals[active]
+        r = _gram_solve(a, a @ n_add)                   # n_add's part in the span of the active normals
+        d = n_add - r @ a                               # the rest: moving z along it keeps them met
+        dd = d @ d
+        full = (rhs[adding] - n_add @ z) / dd if dd > 1e-12 * (n_add @ n_add) else np.inf
+        ratios = np.full(r.size, np.inf)                # as u_add rises by t, u falls by t r:
+        np.divide(u, r, out=ratios, where=r > 0)        # the t that takes each to zero
+        drop = int(np.argmin(ratios)) if r.size else -1
+        partial = ratios[drop] if r.size else np.inf
+        step = min(full, partial)
+        if not np.isfinite(step):
+            return None                                 # n_add in the span, nothing to drop
+        if np.isfinite(full):
+            z = z + step * d
+        u = u - step * r
+        u_add += step
+        if full <= partial:
+            active.append(adding)
+            u = np.append(u, u_add)
+            adding = None
+        else:
+            del active[drop]
+            u = np.delete(u, drop)
+    return None
+
+
+def _gram_solve(a, b):
+    """``x`` with ``(a aᵀ) x = b``, the rows of ``a`` independent (Cholesky, LAPACK's dposv)."""
+    if not a.shape[0]:
+        return np.zeros(0)
+    _, x, info = lapack.dposv(a @ a.T, b)
+    if info != 0:
+        raise np.linalg.LinAlgError(f'dependent rows (dposv info {info})')
+    return x
