@@ -2,6 +2,7 @@
 (swmr_controller, mecanum_controller or differential_controller) and redundancy_resolver.
 
     ros2 launch wmm_control robot.launch.py robot:=<name or robot YAML path> [use_sim_time:=true] [viewer:=true]
+        [obstacles:=<name in config/obstacles or YAML path>]
 """
 
 from wmm_control.launching import robot_launch_description

@@ -172,7 +172,7 @@ class SimNode(Node):
         self.subs = [self.create_subscription(Float64MultiArray, f'{g}_controller/commands',
                                               lambda msg, g=g: self._on_command(g, msg), COMMAND_QOS)
                      for g in groups]
-        self.create_subscription(MarkerArray, 'obstacles', self._on_obstacles, COMMAND_QOS)
+        self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
         self.pub_joints = self.create_publisher(JointState, 'joint_states', STATE_PUB_QOS)
         self.pub_ee = self.create_publisher(PoseStamped, 'ee_pose', STATE_PUB_QOS)
         self.pub_odom = self.create_publisher(Odometry, 'odom', STATE_PUB_QOS)

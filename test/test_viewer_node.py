@@ -133,3 +133,21 @@ def test_two_robots_in_namespaces_the_viewer_of_one_draws_that_robot_only(ros):
     assert 2.0 * math.atan2(wxyz[3], wxyz[0]) == pytest.approx(theta, abs=1e-6)
     pos, _ = r1.world.ee_pose()
     assert view._ee[0] == pytest.approx(pos, abs=1e-6)
+
+
+def test_obstacles_of_the_file_and_the_topic_are_drawn_where_they_are(ros):
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    view = viewer(ros, obstacles='table_pillar')
+    assert [h.name for h in view.obstacle_handles] == ['/obstacles/table', '/obstacles/pillar']
+    assert np.asarray(view.obstacle_handles[0].position) == pytest.approx([1.5, -0.2, -0.1])
+    publisher = ros.add(ros_node(ros, 'obstacle_publisher')).create_publisher(MarkerArray, '/obstacles', 10)
+    marker = Marker()
+    marker.header.frame_id = 'world'
+    marker.ns, marker.id, marker.type, marker.action = 'live', 3, Marker.SPHERE, Marker.ADD
+    marker.scale.x = marker.scale.y = marker.scale.z = 0.3
+    marker.pose.position.x, marker.pose.orientation.w = 2.0, 1.0
+    assert ros.spin_until(lambda: publisher.get_subscription_count() > 0, timeout=5)
+    publisher.publish(MarkerArray(markers=[marker]))
+    assert ros.spin_until(lambda: len(view.obstacle_handles) == 3, timeout=5)
+    assert np.asarray(view.obstacle_handles[2].position) == pytest.approx([2.0, 0.0, 0.0])

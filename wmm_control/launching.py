@@ -19,6 +19,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from wmm_control.errors import ConfigError
+from wmm_control.kinematics.obstacles import load_obstacles, obstacle_file
 from wmm_control.robot_config import load_robot
 
 __all__ = ['BASE_CONTROLLERS', 'robot_nodes', 'robot_launch_description', 'two_robots_launch_description',
@@ -41,10 +42,13 @@ def common_arguments() -> list[DeclareLaunchArgument]:
     return [DeclareLaunchArgument('use_sim_time', default_value='false',
                                   description='Every node on the simulator\'s clock (true or false).'),
             DeclareLaunchArgument('viewer', default_value='false',
-                                  description='Also start wmm_viewer, the browser view (true or false).')]
+                                  description='Also start wmm_viewer, the browser view (true or false).'),
+            DeclareLaunchArgument('obstacles', default_value='', description=(
+                'Obstacle file for the simulator and the resolver: a name in config/obstacles (table_pillar, '
+                'table_reach) or a YAML path; empty for none.'))]
 
 
-def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool) -> list[Node]:
+def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool, obstacles: str = '') -> list[Node]:
     """The nodes of one robot's system.
 
     Args:
@@ -52,17 +56,21 @@ def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool) ->
         namespace: '' or a namespace such as ``r1`` (no slashes).
         use_sim_time: every node on the simulator's clock.
         viewer: start ``wmm_viewer`` too.
+        obstacles: an obstacle file (name or path; '' for none) for the simulator and the resolver.
 
     Raises:
-        ConfigError: the robot cannot be loaded.
+        ConfigError: the robot or the obstacle file cannot be loaded.
     """
     config = load_robot(robot)
+    if obstacles:
+        load_obstacles(obstacles)                   # a bad file fails here, not in two nodes
+        obstacles = str(obstacle_file(obstacles).resolve())
     common = {'robot': str(config.yaml_path), 'use_sim_time': use_sim_time}
     remap = [('/clock', f'/{namespace}/clock')] if namespace else []
-    executables = [('wmm_sim', {'frame_prefix': f'{namespace}/' if namespace else ''}),
-                   (BASE_CONTROLLERS[config.base_type], {}), ('redundancy_resolver', {})]
+    executables = [('wmm_sim', {'frame_prefix': f'{namespace}/' if namespace else '', 'obstacles': obstacles}),
+                   (BASE_CONTROLLERS[config.base_type], {}), ('redundancy_resolver', {'obstacles': obstacles})]
     if viewer:
-        executables.append(('wmm_viewer', {}))
+        executables.append(('wmm_viewer', {'obstacles': obstacles}))
     return [Node(package='wmm_control', executable=exe, namespace=namespace or None, output='screen',
                  parameters=[{**common, **extra}], remappings=remap)
             for exe, extra in executables]
@@ -77,7 +85,8 @@ def robot_launch_description(robot: str | None = None) -> LaunchDescription:
 
     def nodes(context: LaunchContext) -> list[Node]:
         name = robot if robot is not None else LaunchConfiguration('robot').perform(context)
-        return robot_nodes(name, '', _flag(context, 'use_sim_time'), _flag(context, 'viewer'))
+        return robot_nodes(name, '', _flag(context, 'use_sim_time'), _flag(context, 'viewer'),
+                           LaunchConfiguration('obstacles').perform(context).strip())
 
     return LaunchDescription([*arguments, OpaqueFunction(function=nodes)])
 
@@ -91,7 +100,8 @@ def two_robots_launch_description() -> LaunchDescription:
 
     def nodes(context: LaunchContext) -> list[Node]:
         sim_time, viewer = _flag(context, 'use_sim_time'), _flag(context, 'viewer')
-        return [*robot_nodes(LaunchConfiguration('robot1').perform(context), 'r1', sim_time, viewer),
-                *robot_nodes(LaunchConfiguration('robot2').perform(context), 'r2', sim_time, False)]
+        obstacles = LaunchConfiguration('obstacles').perform(context).strip()
+        return [*robot_nodes(LaunchConfiguration('robot1').perform(context), 'r1', sim_time, viewer, obstacles),
+                *robot_nodes(LaunchConfiguration('robot2').perform(context), 'r2', sim_time, False, obstacles)]
 
     return LaunchDescription([*arguments, OpaqueFunction(function=nodes)])

@@ -256,7 +256,7 @@ class RedundancyResolverNode(Node):
         self.create_subscription(MultiDOFJointTrajectory, 'ee_reference', self._on_reference, COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         self.create_subscription(Odometry, 'odom', self._on_odom, STATE_SUB_QOS)
-        self.create_subscription(MarkerArray, 'obstacles', self._on_obstacles, COMMAND_QOS)
+        self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
         if p.ee_feedback == 'ground_truth':
             self.create_subscription(PoseStamped, 'ee_pose', self._on_ee_pose, STATE_SUB_QOS)
         if self.resolver.uses_compensation:

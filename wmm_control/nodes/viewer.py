@@ -15,7 +15,9 @@ Subscribes:
   ``/ee_reference`` (``trajectory_msgs/MultiDOFJointTrajectory``): its first point, drawn;
   ``/base/reference`` (``geometry_msgs/TwistStamped``): the resolver's base twist, drawn as
   the base's course over the next second;
-  ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``): the status panel.
+  ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``): the status panel;
+  ``/obstacles`` (``visualization_msgs/MarkerArray``): obstacles drawn live, beside those of the
+  ``obstacles`` file (:mod:`wmm_control.nodes.obstacle_topic`).
 Publishes:
   ``/goal_pose`` (``geometry_msgs/PoseStamped``, frame ``world_frame``) when the goal handle is
   released (and at most every ``drag_publish_period`` during a drag), and the end effector's
@@ -35,6 +37,7 @@ import threading
 from types import SimpleNamespace
 
 import numpy as np
+import pinocchio as pin
 import viser
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Pose, PoseStamped, Transform, TwistStamped
@@ -44,11 +47,13 @@ from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import MultiDOFJointTrajectory
+from visualization_msgs.msg import MarkerArray
 
 from wmm_control.errors import ConfigError, NonFiniteError
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS, Freshness, Param, declare_parameters, guard_clock, robot_param,
     run_node, seconds)
+from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet
 from wmm_control.robot_config import load_robot
 from wmm_control.viewer.drag import GoalDrag
 from wmm_control.viewer.scene import RobotScene, Shape, Trail, unit_wxyz, wxyz_from_xyzw, xyzw_from_wxyz
@@ -61,7 +66,8 @@ PARAMS = (
     Param('host', 'Address the HTTP server listens on (0.0.0.0: every interface).', read_only=True),
     Param('port', 'HTTP port of the viewer; when it is taken, the next free one (logged).', lo=1, hi=65535,
           read_only=True),
-    Param('world_frame', 'Frame of /goal_pose and /ee_reference.', read_only=True),
+    Param('world_frame', 'Frame of /goal_pose, /ee_reference and /obstacles.', read_only=True),
+    Param('obstacles', OBSTACLE_PARAM_HELP, read_only=True),
     Param('update_period', 'Steady time [s] between two scene updates sent to the browser.', lo=0.01, hi=1.0,
           read_only=True),
     Param('drag_publish_period', 'While the goal handle is dragged, /goal_pose goes out at most this often [s]; '
@@ -72,6 +78,7 @@ PARAMS = (
     Param('trail_step', 'Distance [m] between two points of a path.', lo=1e-4, hi=10.0, read_only=True),
 )
 
+_OBSTACLE_COLOR = (217, 140, 64)
 #: The camera the page opens with (and "Reset View" returns to), relative to the start base position.
 CAMERA_LOOK_AT = np.array([0.8, 0.3, 0.6])
 CAMERA_POSITION = np.array([0.8, -2.8, 1.9])
@@ -131,7 +138,10 @@ class ViewerNode(Node):
         self._dirty = True
         self._status_due = 0.0
         self.counters = {'joint_states_rejected': 0, 'unknown_joints': 0, 'goals_sent': 0}
+        self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
+        self.obstacle_handles = []
         self._start_server()
+        self._draw_obstacles()
         self.pub_goal = self.create_publisher(PoseStamped, 'goal_pose', COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         self.create_subscription(Odometry, 'ground_truth/odom', lambda m: self._on_base(m, 'ground_truth'),
@@ -141,6 +151,7 @@ class ViewerNode(Node):
         self.create_subscription(MultiDOFJointTrajectory, 'ee_reference', self._on_reference, COMMAND_QOS)
         self.create_subscription(TwistStamped, 'base/reference', self._on_base_reference, COMMAND_QOS)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, DIAGNOSTICS_QOS)
+        self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
         self.timer = self.create_timer(p.update_period, self._tick, clock=self._steady)
         self.url = f'http://{p.host}:{self.server.get_port()}'
         self.get_logger().info(f'viewer of robot {self.robot.name} at {self.url} ({len(self.scene.shapes)} shapes '
@@ -200,6 +211,22 @@ class ViewerNode(Node):
         if shape.kind == 'sphere':
             return scene.add_icosphere(name, radius=shape.size[0], color=shape.color, opacity=opacity)
         return scene.add_mesh_simple(name, shape.vertices, shape.faces, color=shape.color, opacity=opacity)
+
+    def _draw_obstacles(self) -> None:
+        """The obstacles, drawn anew."""
+        for handle in self.obstacle_handles:
+            handle.remove()
+        self.obstacle_handles = []
+        for obstacle in self.obstacles.obstacles:
+            handle = self._add_shape(f'/obstacles/{obstacle.name}',
+                                     Shape(obstacle.name, obstacle.shape, obstacle.size, _OBSTACLE_COLOR, 1.0))
+            handle.position = obstacle.position
+            handle.wxyz = wxyz_from_xyzw(pin.Quaternion(obstacle.rotation).coeffs())
+            self.obstacle_handles.append(handle)
+
+    def _on_obstacles(self, msg: MarkerArray) -> None:
+        if self.obstacles.take(msg, self.get_logger()):
+            self._draw_obstacles()
 
     def destroy_node(self) -> bool:
         """Stop the HTTP server, then destroy the node."""
