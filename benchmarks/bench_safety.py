@@ -2,9 +2,9 @@
 
 For each robot: the number of checked pairs, then :meth:`SafetyStage.filter` at random arm
 configurations within the position limits (a random command of 0.5 rad/s per joint, the
-velocity limits as the box), split by whether the command passed unchanged (distances and
-the rows of the pairs within the look-ahead distance) or a QP was solved; median and p99
-[µs]. Random configurations are harder than a run's: many of them have the arm folded close
+velocity limits as the box, the arm's task Jacobian as the methods pass it), split by whether
+the command passed unchanged (distances and the rows of the pairs within the look-ahead
+distance) or a QP was solved; median and p99 [µs]. Random configurations are harder than a run's: many of them have the arm folded close
 to the body or to itself.
 
     python benchmarks/bench_safety.py [--configurations 300]
@@ -20,7 +20,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))                 # run from a source checkout
 
-from wmm_control.kinematics.collision import CollisionModel  # noqa: E402
+from wmm_control.kinematics import KinematicModel  # noqa: E402
 from wmm_control.resolvers.safety import SafetyStage  # noqa: E402
 from wmm_control.robot_config import load_robot, robot_names  # noqa: E402
 
@@ -38,7 +38,8 @@ def main(argv=None):
     args = parser.parse_args(argv)
     for name in robot_names():
         robot = load_robot(name)
-        stage = SafetyStage(CollisionModel.from_robot(robot))
+        stage = SafetyStage.for_robot(robot)
+        model = KinematicModel(robot)
         arm = robot.arm
         rng = np.random.default_rng(0)
         lower = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
@@ -46,8 +47,11 @@ def main(argv=None):
         passed, solved = [], []
         for q in rng.uniform(lower, upper, size=(args.configurations, lower.size)):
             command = 0.5 * rng.normal(size=lower.size)
+            model.update(robot.start.base_pose, q)
+            jacobian = model.arm_jacobian_base()
             t0 = time.perf_counter()
-            out = stage.filter(q, np.clip(command, -arm.velocity, arm.velocity), -arm.velocity, arm.velocity)
+            out = stage.filter(q, np.clip(command, -arm.velocity, arm.velocity), -arm.velocity, arm.velocity,
+                               base_pose=robot.start.base_pose, task_jacobian=jacobian)
             (solved if out.changed else passed).append(time.perf_counter() - t0)
         print(f'{name:12s} {len(stage.collision.pairs):4d} pairs   passed: {_figures(passed)}   '
               f'QP: {_figures(solved)}')
