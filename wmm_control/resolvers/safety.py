@@ -18,9 +18,9 @@ keeps its approach within what braking at ``a_b`` can stop before ``d_s``:
 the stricter of the two where both hold. ``a_b`` is taken no larger than the deceleration the
 command's own acceleration limits can give that distance (``Σ_i |j_i| q̈_max,i`` over the arm's
 joints and the base's linear axes): a Mecanum base that brakes at 0.025 m/s² is not counted on
-to stop at 1 m/s². With obstacles, whose
-distance the base's twist changes too, the look-ahead grows to the base's stopping distance
-(``d_s + v_max² / (2 a_max)`` over its linear axes) so that it brakes in time.
+to stop at 1 m/s². With obstacles, whose distance the base's twist changes too, the look-ahead
+grows to the base's stopping distance (``d_s + v_max² / (2 a_max)`` over its linear axes) so
+that it brakes in time.
 
 With ``ḋ = j · q̇`` (``q̇`` the command: the base's axes, when the method commands the base
 with it, then the arm's joints; :class:`~wmm_control.kinematics.collision.CollisionModel`),
