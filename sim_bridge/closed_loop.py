@@ -16,11 +16,11 @@ Use it for fast experiments and tests. The ROS nodes do the same over topics.
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
 
 from wmm_control.base import WheelController, SteerableGeometry, SwmrController, SwmrParams
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.orientation import matrix_from_quaternion
 from wmm_control.resolvers import RobotState
 
 __all__ = ['ClosedLoop', 'CycleRecord', 'FEEDBACKS', 'make_base_controller']
@@ -98,7 +98,7 @@ class ClosedLoop:
         if self.feedback == 'ground_truth':
             pos, quat = w.ee_pose()
             return RobotState(w.base_pose(), w.base_twist(), q[self._arm], qd[self._arm],
-                              ee_position=pos, ee_rotation=_rotation(quat))
+                              ee_position=pos, ee_rotation=matrix_from_quaternion(quat))
         return RobotState(w.odom_pose(), w.odom_twist(), q[self._arm], qd[self._arm])
 
     def _base_answer(self, reference):
@@ -132,13 +132,8 @@ class ClosedLoop:
         w.set_command('arm', command.arm_velocity)
         w.step()
         return CycleRecord(t=t, base_pose=pose, q_arm=state.q_arm, q=q_all.copy(), ee_position=ee_pos,
-                           ee_rotation=_rotation(ee_quat), command=command,
+                           ee_rotation=matrix_from_quaternion(ee_quat), command=command,
                            feasible_twist=np.asarray(feasible, dtype=float), base_velocity=w.base_twist())
-
-
-def _rotation(quat_xyzw):
-    x, y, z, qw = (float(v) for v in quat_xyzw)
-    return pin.Quaternion(qw, x, y, z).normalized().toRotationMatrix()
 
 
 def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', progress=None, until=None):

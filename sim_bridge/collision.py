@@ -27,6 +27,7 @@ import pinocchio as pin
 import pybullet as p
 
 from sim_bridge.client import OwnedClient
+from wmm_control.kinematics.orientation import quaternion_from_matrix
 from wmm_control.robot_config import RobotConfig, load_robot
 
 __all__ = ['SelfCollisionChecker', 'add_obstacle', 'OBSTACLE_RGBA']
@@ -55,7 +56,7 @@ def add_obstacle(obstacle, cid, visual=True):
 
 def _quaternion(rotation):
     """(x, y, z, w) of a rotation matrix, PyBullet's order."""
-    return pin.Quaternion(rotation).coeffs().tolist()
+    return quaternion_from_matrix(rotation).tolist()
 
 
 class SelfCollisionChecker(OwnedClient):

@@ -65,6 +65,7 @@ from visualization_msgs.msg import MarkerArray
 
 from sim_bridge.slip import VARIANCE_FLOOR, OdometryCovariance, SlipParams
 from sim_bridge.world import BASE_MODES, SimWorld
+from wmm_control.kinematics.orientation import quaternion_from_yaw
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet, describe
 from wmm_control.nodes.robot_frames import RobotFrames, valid_frame_prefix
 from wmm_control.robot_config import load_robot
@@ -382,7 +383,7 @@ def _odometry(stamp, frame, child, pose, twist, pose_covariance=None, twist_vari
     msg.child_frame_id = child
     x, y, th = (float(v) for v in pose)
     msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
-    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(th / 2), math.cos(th / 2)
+    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = (float(v) for v in quaternion_from_yaw(th)[2:])
     vx, vy, w = (float(v) for v in twist)
     msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z = vx, vy, w
     if pose_covariance is not None:

@@ -85,6 +85,7 @@ import pybullet as p
 from wmm_control.base.wheel_controller import wheel_kinematics
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.errors import ConfigError
+from wmm_control.kinematics.orientation import quaternion_from_yaw, quaternion_multiply, yaw_from_quaternion
 from wmm_control.robot_config import RobotConfig, load_robot
 
 from sim_bridge.client import OwnedClient
@@ -147,15 +148,6 @@ def se2_step(pose, twist, dt):
 def _wrap(angle):
     """Angle wrapped to [−π, π] [rad]."""
     return math.remainder(angle, 2.0 * math.pi)
-
-
-def _quat_mul(q1, q2):
-    x1, y1, z1, w1 = q1
-    x2, y2, z2, w2 = q2
-    return (w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2)
 
 
 class SimWorld(OwnedClient):
@@ -401,12 +393,12 @@ class SimWorld(OwnedClient):
     # ------------------------------------------------------------------ placing / reading
     def _com_pose(self, pose):
         x, y, th = pose
-        qz = (0.0, 0.0, math.sin(0.5 * th), math.cos(0.5 * th))
+        qz = quaternion_from_yaw(th)
         if self._com_identity:
             return (x, y, 0.0), qz
         (lx, ly, lz), ql = self._com_local
         c, s = math.cos(th), math.sin(th)
-        return (x + c * lx - s * ly, y + s * lx + c * ly, lz), _quat_mul(qz, ql)
+        return (x + c * lx - s * ly, y + s * lx + c * ly, lz), quaternion_multiply(qz, ql)
 
     def _place(self):
         """Write the kinematic state (base pose, joint positions and rates) into PyBullet."""
@@ -429,8 +421,7 @@ class SimWorld(OwnedClient):
         self._q = np.array([s[0] for s in states])
         self._qd = np.array([s[1] for s in states])
         pos, orn = self._base_link_pose()
-        x, y, z, w = orn
-        th = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        th = yaw_from_quaternion(orn)
         self._pose = (pos[0], pos[1], th)
         lin, ang = p.getBaseVelocity(body, physicsClientId=cid)
         com_pos, _ = p.getBasePositionAndOrientation(body, physicsClientId=cid)

@@ -29,7 +29,7 @@ DIAGNOSTIC_KEYS = {
                            'commands_not_applied', 'joint_states_skipped', 'measured_period_s'},
 }
 RESOLVER_ALWAYS = {'cycles', 'goals', 'goals_rejected', 'compensation_dropped', 'stale_cycles',
-                   'joint_states_skipped', 'measured_period_s'}
+                   'joint_states_skipped', 'measured_period_s', 'obstacles'}
 RESOLVER_GOAL = {'method', 'mode', 'psi', 'position_error_m', 'orientation_error_rad', 'limit_scale', 'accel_scale',
                  'null_scale', 'compensation_scale', 'compensated', 'limited', 'sigma_min', 'cycle_time_us', 'reference_time_left_s',
                  'clearance_m', 'closest_pair', 'collision_constraints', 'collision_changed',

@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 from wmm_control.base import (
     Icr,
     IcrQp,
-    OsqpIcrSolver,
     QpResult,
     SteerableGeometry,
     SwmrController,

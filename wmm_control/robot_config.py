@@ -30,7 +30,6 @@ or by a path to a robot YAML; its ``urdf`` path is relative to that YAML.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 

@@ -33,7 +33,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
 import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
@@ -52,6 +51,7 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 from wmm_control.experiments.ros_run import private_domain_id
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.orientation import quaternion_from_matrix
 from wmm_control.nodes.common import float_array, twist_stamped
 from wmm_control.robot_config import load_robot
 
@@ -83,9 +83,8 @@ def _pose(xyz, rot, frame='world', stamp=None):
     if stamp is not None:
         msg.header.stamp = stamp
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in xyz)
-    q = pin.Quaternion(np.asarray(rot))
     msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z, msg.pose.orientation.w = \
-        float(q.x), float(q.y), float(q.z), float(q.w)
+        (float(v) for v in quaternion_from_matrix(rot))
     return msg
 
 

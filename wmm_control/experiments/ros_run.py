@@ -13,7 +13,6 @@ import os
 import time
 
 import numpy as np
-import pinocchio as pin
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
@@ -26,6 +25,7 @@ from sensor_msgs.msg import JointState
 from wmm_control.errors import ConfigError
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.scenario import resolver_parameters
+from wmm_control.kinematics.orientation import matrix_from_quaternion, yaw_from_quaternion
 from wmm_control.resolvers import ResolverDiagnostics
 
 __all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_WAITS']
@@ -84,11 +84,11 @@ class Recorder(Node):
     def _on_ee(self, msg):
         p, q = msg.pose.position, msg.pose.orientation
         self._row(msg)['ee'] = (np.array([p.x, p.y, p.z]),
-                                pin.Quaternion(q.w, q.x, q.y, q.z).normalized().toRotationMatrix())
+                                matrix_from_quaternion((q.x, q.y, q.z, q.w)))
 
     def _on_base(self, msg):
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
-        self._row(msg)['base'] = np.array([p.x, p.y, 2.0 * np.arctan2(q.z, q.w)])
+        self._row(msg)['base'] = np.array([p.x, p.y, yaw_from_quaternion((q.x, q.y, q.z, q.w))])
 
     def _on_joints(self, msg):
         if self._index is None:

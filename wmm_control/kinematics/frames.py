@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from wmm_control.errors import ConfigError, NonFiniteError
+from wmm_control.kinematics.orientation import quaternion_from_matrix, quaternion_multiply
 from wmm_control.urdf import UrdfJoint, UrdfTree, rotation_rpy
 
 __all__ = ['FrameTransform', 'JointTransforms', 'planar_transform', 'world_to_odom', 'quaternion_from_matrix',
@@ -50,42 +51,13 @@ class FrameTransform:
         return out
 
 
-def quaternion_from_matrix(rotation: np.ndarray) -> np.ndarray:
-    """Unit quaternion (x, y, z, w), w ≥ 0, of a 3×3 rotation matrix (Shepperd's method)."""
-    m = np.asarray(rotation, dtype=float)
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    if trace > 0.0:
-        s = 2.0 * math.sqrt(1.0 + trace)
-        q = np.array([(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s])
-    else:
-        i = int(np.argmax(np.diag(m)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(max(1.0 + m[i, i] - m[j, j] - m[k, k], 1e-300))
-        q = np.zeros(4)
-        q[i] = 0.25 * s
-        q[j] = (m[j, i] + m[i, j]) / s
-        q[k] = (m[k, i] + m[i, k]) / s
-        q[3] = (m[k, j] - m[j, k]) / s
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0.0 else q
-
-
-def _quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return np.array([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz])
-
-
 def compose(first: FrameTransform, second: FrameTransform) -> FrameTransform:
     """``first`` then ``second`` (``second.parent`` must be ``first.child``): parent of the first
     to child of the second."""
     if second.parent != first.child:
         raise ValueError(f'cannot compose {first.parent}→{first.child} with {second.parent}→{second.child}')
     rot = first.matrix()[:3, :3]
-    quat = _quaternion_multiply(first.quaternion, second.quaternion)
+    quat = quaternion_multiply(first.quaternion, second.quaternion)
     return FrameTransform(first.parent, second.child, first.translation + rot @ second.translation,
                           quat / np.linalg.norm(quat))
 
@@ -177,7 +149,7 @@ class JointTransforms:
             else:
                 motion = np.concatenate((axis * math.sin(q / 2), [math.cos(q / 2)]))
                 out.append(FrameTransform(joint.parent, joint.child, joint.xyz.copy(),
-                                          _quaternion_multiply(quat, motion)))
+                                          quaternion_multiply(quat, motion)))
         return out
 
     def link_poses(self, positions: Mapping[str, float]) -> dict[str, FrameTransform]:

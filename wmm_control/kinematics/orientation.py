@@ -1,4 +1,5 @@
-"""Orientation utilities: RPY (ZYX Euler) angles, Sorour's Ω_RPY, pose errors.
+"""Orientation utilities, the package's one home for rotations: RPY (ZYX Euler) angles,
+Sorour's Ω_RPY, pose errors, and quaternions as ROS messages order them, (x, y, z, w).
 
 RPY convention (Sorour §II-A): θ = [γ, β, α] = [roll, pitch, yaw] with
 ``R = Rz(α) Ry(β) Rx(γ)``.
@@ -13,7 +14,8 @@ from wmm_control.checks import as_finite_vector
 
 __all__ = [
     'wrap_angle', 'rpy_from_matrix', 'matrix_from_rpy', 'omega_rpy', 'rpy_rate_map',
-    'pose_error_rpy', 'pose_error_log',
+    'pose_error_rpy', 'pose_error_log', 'quaternion_from_matrix', 'matrix_from_quaternion',
+    'quaternion_multiply', 'quaternion_from_yaw', 'yaw_from_quaternion',
 ]
 
 
@@ -91,3 +93,51 @@ def pose_error_log(desired_pos, desired_rot, current_pos, current_rot):
         current_pos, 3, 'current position')
     err[3:] = pin.log3(np.asarray(desired_rot, dtype=float) @ np.asarray(current_rot, dtype=float).T)
     return err
+
+
+def quaternion_from_matrix(rotation: np.ndarray) -> np.ndarray:
+    """Unit quaternion (x, y, z, w), w ≥ 0, of a 3×3 rotation matrix (Shepperd's method)."""
+    m = np.asarray(rotation, dtype=float)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = np.array([(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s])
+    else:
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(max(1.0 + m[i, i] - m[j, j] - m[k, k], 1e-300))
+        q = np.zeros(4)
+        q[i] = 0.25 * s
+        q[j] = (m[j, i] + m[i, j]) / s
+        q[k] = (m[k, i] + m[i, k]) / s
+        q[3] = (m[k, j] - m[j, k]) / s
+    q /= np.linalg.norm(q)
+    return -q if q[3] < 0.0 else q
+
+
+def matrix_from_quaternion(quat) -> np.ndarray:
+    """Rotation matrix of a quaternion (x, y, z, w), normalised first. Shape (3, 3)."""
+    x, y, z, w = (float(v) for v in quat)
+    return pin.Quaternion(w, x, y, z).normalized().toRotationMatrix()
+
+
+def quaternion_multiply(a, b) -> np.ndarray:
+    """The product ``a b`` of quaternions (x, y, z, w): the rotation ``b`` then ``a``. Shape (4,)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return np.array([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz])
+
+
+def quaternion_from_yaw(yaw: float) -> np.ndarray:
+    """The quaternion (x, y, z, w) of a rotation by ``yaw`` [rad] about z. Shape (4,)."""
+    return np.array([0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)])
+
+
+def yaw_from_quaternion(quat) -> float:
+    """The heading [rad] of a quaternion (x, y, z, w): the yaw of its ZYX Euler angles (for a
+    planar pose, its rotation about z)."""
+    x, y, z, w = (float(v) for v in quat)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

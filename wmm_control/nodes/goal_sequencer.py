@@ -33,6 +33,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 from wmm_control.experiments.scenario import load_scenario
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.orientation import quaternion_from_matrix
 from wmm_control.nodes.common import (
     CLOCK_QOS, COMMAND_QOS, Param, declare_parameters, guard_clock, run_node)
 
@@ -46,11 +47,6 @@ PARAMS = (
     Param('republish_period', 'Time [s] between re-publications of the goal in force; 0 = never.',
           lo=0.0, hi=3600.0),
 )
-
-
-def _quaternion(rot):
-    q = pin.Quaternion(rot)
-    return float(q.x), float(q.y), float(q.z), float(q.w)
 
 
 def _twist(values):
@@ -68,7 +64,7 @@ def reference_message(target, frame, stamp, t):
     point = MultiDOFJointTrajectoryPoint()
     tf = Transform()
     tf.translation.x, tf.translation.y, tf.translation.z = (float(v) for v in target.position)
-    tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w = _quaternion(target.rotation)
+    tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w = (float(v) for v in quaternion_from_matrix(target.rotation))
     point.transforms = [tf]
     point.velocities = [_twist(target.velocity)]
     point.accelerations = [_twist(target.acceleration)]
@@ -86,7 +82,7 @@ def goal_message(goal, frame, stamp):
     x, y, z, roll, pitch, yaw = (float(v) for v in goal.pose)
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
     (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
-     msg.pose.orientation.w) = _quaternion(pin.rpy.rpyToMatrix(roll, pitch, yaw))
+     msg.pose.orientation.w) = (float(v) for v in quaternion_from_matrix(pin.rpy.rpyToMatrix(roll, pitch, yaw)))
     return msg
 
 

@@ -22,7 +22,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point
 from visualization_msgs.msg import Marker, MarkerArray
 
-from wmm_control.kinematics.frames import quaternion_from_matrix
+from wmm_control.kinematics.orientation import quaternion_from_matrix
 
 __all__ = ['MarkerSet', 'MARKER_NAMESPACES']
 

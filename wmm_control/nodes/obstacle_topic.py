@@ -18,11 +18,11 @@ non-positive size, is rejected with a logged reason; the array's other markers s
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 from visualization_msgs.msg import Marker
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import Obstacle, load_obstacles
+from wmm_control.kinematics.orientation import matrix_from_quaternion
 
 __all__ = ['ObstacleSet', 'obstacle_from_marker', 'describe', 'OBSTACLE_PARAM_HELP']
 
@@ -54,7 +54,7 @@ def obstacle_from_marker(marker, frame: str) -> Obstacle:
     if not (np.all(np.isfinite(quat)) and norm > 1e-6):
         raise ConfigError(f'marker {name}: the orientation must be a finite, non-zero quaternion')
     quat /= norm
-    rotation = pin.Quaternion(quat[3], quat[0], quat[1], quat[2]).toRotationMatrix()
+    rotation = matrix_from_quaternion(quat)
     return Obstacle(name, shape, tuple(float(v) for v in size), np.array([pos.x, pos.y, pos.z]), rotation)
 
 

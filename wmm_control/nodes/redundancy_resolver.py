@@ -57,7 +57,6 @@ import dataclasses
 import math
 
 import numpy as np
-import pinocchio as pin
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Odometry
@@ -70,6 +69,7 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.orientation import matrix_from_quaternion, yaw_from_quaternion
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.markers import MarkerSet
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet, describe
@@ -319,7 +319,7 @@ class RedundancyResolverNode(Node):
         key = tuple(np.round(np.concatenate((values[:3], quat)), 9))
         if key == self._goal_key:
             return None      # the same goal again (a sequencer re-publishing it)
-        rot = pin.Quaternion(quat[3], quat[0], quat[1], quat[2]).toRotationMatrix()
+        rot = matrix_from_quaternion(quat)
         self.target = PoseTarget(values[:3], rot)
         self._goal_key = key
         self._tracking = False
@@ -351,11 +351,10 @@ class RedundancyResolverNode(Node):
         quat = _unit_quaternion(pose[3:], '/' + REFERENCE, self.get_logger())
         if quat is None:
             return self._reject_goal('zero quaternion', REFERENCE)
-        x, y, z, w = quat
         if not self._tracking:
             self.get_logger().info('tracking /ee_reference')
             self._start_goal()
-        self.target = PoseTarget(pose[:3], pin.Quaternion(w, x, y, z).toRotationMatrix(), velocity=vel, acceleration=acc)
+        self.target = PoseTarget(pose[:3], matrix_from_quaternion(quat), velocity=vel, acceleration=acc)
         self._goal_key = None
         self._tracking = True
         self.fresh['reference'].mark(self._now())
@@ -391,8 +390,7 @@ class RedundancyResolverNode(Node):
         if quat is None:
             logger.warn('rejected /odom with a zero quaternion', throttle_duration_sec=1.0)
             return
-        x, y, z, w = quat
-        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        yaw = yaw_from_quaternion(quat)
         self._odom = (np.array([p.x, p.y, yaw]), twist)
         self.fresh['odom'].mark(self._now())
 
@@ -407,8 +405,7 @@ class RedundancyResolverNode(Node):
             self.get_logger().warn('rejected /ee_pose with non-finite values or a zero quaternion',
                                    throttle_duration_sec=1.0)
             return
-        x, y, z, w = quat
-        self._ee = (values[:3], pin.Quaternion(w, x, y, z).toRotationMatrix())
+        self._ee = (values[:3], matrix_from_quaternion(quat))
         self.fresh['ee_pose'].mark(self._now())
 
     def _arm_state(self, msg):

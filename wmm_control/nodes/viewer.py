@@ -37,7 +37,6 @@ import threading
 from types import SimpleNamespace
 
 import numpy as np
-import pinocchio as pin
 import viser
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Pose, PoseStamped, Transform, TwistStamped
@@ -53,6 +52,7 @@ from wmm_control.errors import ConfigError, NonFiniteError
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS, Freshness, Param, declare_parameters, guard_clock, robot_param,
     run_node, seconds)
+from wmm_control.kinematics.orientation import quaternion_from_matrix, yaw_from_quaternion
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet
 from wmm_control.robot_config import load_robot
 from wmm_control.viewer.drag import GoalDrag
@@ -221,7 +221,7 @@ class ViewerNode(Node):
             handle = self._add_shape(f'/obstacles/{obstacle.name}',
                                      Shape(obstacle.name, obstacle.shape, obstacle.size, _OBSTACLE_COLOR, 1.0))
             handle.position = obstacle.position
-            handle.wxyz = wxyz_from_xyzw(pin.Quaternion(obstacle.rotation).coeffs())
+            handle.wxyz = wxyz_from_xyzw(quaternion_from_matrix(obstacle.rotation))
             self.obstacle_handles.append(handle)
 
     def _on_obstacles(self, msg: MarkerArray) -> None:
@@ -402,8 +402,7 @@ class ViewerNode(Node):
             self.base_course.visible = False
             return
         pos, quat = self._base_pose()
-        w, _, _, z = quat
-        yaw = 2.0 * math.atan2(z, w)
+        yaw = yaw_from_quaternion(xyzw_from_wxyz(quat))
         c, s = math.cos(yaw), math.sin(yaw)
         velocity = np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1], 0.0])
         start = np.array([pos[0], pos[1], self.robot.ground_z + 0.01])
