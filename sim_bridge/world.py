@@ -92,7 +92,10 @@ from sim_bridge.client import OwnedClient
 from sim_bridge.collision import add_obstacle
 from sim_bridge.slip import SlipModel
 
-__all__ = ['SimWorld', 'CommandResult', 'se2_step', 'BASE_MODES']
+__all__ = ['SimWorld', 'CommandResult', 'se2_step', 'BASE_MODES', 'CLAMP_TOLERANCE']
+
+#: A command beyond its velocity limit by less than this fraction is round-off: clipped, not counted.
+CLAMP_TOLERANCE = 1e-12
 
 BASE_MODES = ('kinematic', 'physics')
 GRAVITY = 9.81              # [m/s²]
@@ -463,10 +466,11 @@ class SimWorld(OwnedClient):
             bad = np.flatnonzero(~np.isfinite(arr)).tolist()
             return CommandResult(False, 0, f'{group}: non-finite values at indices {bad}')
         lim = self.velocity_limits[sl]
-        over = np.abs(arr) > lim
+        # at the limit to round-off (a controller's command exactly at it) is not counted
+        over = np.abs(arr) > lim * (1.0 + CLAMP_TOLERANCE)
         clamped = int(np.count_nonzero(over))
+        arr = np.clip(arr, -lim, lim)
         if clamped:
-            arr = np.clip(arr, -lim, lim)
             self.counters[group]['clamped'] += clamped
             names = [self.command_groups[group][i] for i in np.flatnonzero(over)]
             reason = f'{group}: {clamped} value(s) clamped to the velocity limit: {names}'

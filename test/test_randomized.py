@@ -203,6 +203,24 @@ def test_the_cli_runs_the_goals_it_is_given(tmp_path, capsys):
     assert '--indices' in capsys.readouterr().err
 
 
+def test_runs_in_parallel_give_the_serial_results_and_records(tmp_path):
+    import json
+    from wmm_control.cli.randomized import main
+    common = ['--robots', 'steerable', '--methods', 'pinv,amp', '--goals', '3', '--seed', str(SUBSET_SEED),
+              '--indices', '0,1']
+    assert main([*common, '--out', str(tmp_path / 'serial.json')]) == 0
+    assert main([*common, '--jobs', '2', '--record', str(tmp_path / 'runs'), '--out', str(tmp_path / 'jobs.json')]) == 0
+    serial, jobs = (json.loads((tmp_path / f'{n}.json').read_text())['runs'] for n in ('serial', 'jobs'))
+    key = [(r['method'], r['goal'], r['outcome']) for r in serial]
+    assert key == [(r['method'], r['goal'], r['outcome']) for r in jobs] and len(key) == 4
+    for a, b in zip(serial, jobs):
+        assert a['time_s'] == b['time_s'] and a['final_position_error_m'] == pytest.approx(b['final_position_error_m'],
+                                                                                         abs=1e-9)
+    assert sorted(p.name for p in (tmp_path / 'runs').iterdir()) == [
+        'steerable_amp_0.npz', 'steerable_amp_1.npz', 'steerable_pinv_0.npz', 'steerable_pinv_1.npz']
+    assert main([*common, '--jobs', '0']) == 2
+
+
 def test_no_stall_while_the_set_point_trajectory_still_runs():
     """An acceleration-level method's goal becomes a trajectory: while it runs the end effector
     may lag and draw away from the goal (robot A's amp did so for 2.5 s on a far goal); that is

@@ -101,7 +101,7 @@ class SafetyParams:
     collision_safety: float = 0.02
     collision_gain: float = 0.2
     collision_lookahead: float = 0.3
-    collision_braking: float = 1.0
+    collision_braking: float = 0.5
 
     def __post_init__(self):
         for name in ('collision_influence', 'collision_safety', 'collision_gain', 'collision_lookahead',
