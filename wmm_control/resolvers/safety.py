@@ -19,8 +19,8 @@ the stricter of the two where both hold. ``a_b`` is taken no larger than the dec
 command's own acceleration limits can give that distance (``Σ_i |j_i| q̈_max,i`` over the arm's
 joints and the base's linear axes): a Mecanum base that brakes at 0.025 m/s² is not counted on
 to stop at 1 m/s². With obstacles, whose distance the base's twist changes too, the look-ahead
-grows to the base's stopping distance (``d_s + v_max² / (2 a_max)`` over its linear axes) so
-that it brakes in time.
+grows to the base's stopping distance (``d_s + v_max² / (2 min(a_max, a_b))`` over its linear
+axes) so that it brakes in time.
 
 With ``ḋ = j · q̇`` (``q̇`` the command: the base's axes, when the method commands the base
 with it, then the arm's joints; :class:`~wmm_control.kinematics.collision.CollisionModel`),
@@ -164,8 +164,9 @@ class SafetyStage:
                           else np.asarray(base_acceleration, dtype=float))
         stopping = 0.0
         if base_velocity is not None and base_acceleration is not None:
-            stopping = max((float(v) ** 2 / (2.0 * float(a)) for v, a in zip(base_velocity[:2], base_acceleration[:2])
-                            if a > 0.0), default=0.0)
+            # from full speed, braking as its rows count on: at its limit, and no harder than a_b
+            stopping = max((float(v) ** 2 / (2.0 * min(float(a), params.collision_braking))
+                            for v, a in zip(base_velocity[:2], base_acceleration[:2]) if a > 0.0), default=0.0)
         #: [m] how far an obstacle is looked at: the base's stopping distance from full speed
         self.obstacle_lookahead = max(params.collision_lookahead, params.collision_safety + stopping)
 
