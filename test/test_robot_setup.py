@@ -12,7 +12,8 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim_bridge.closed_loop import ClosedLoop, _rotation
+from sim_bridge.closed_loop import ClosedLoop
+from wmm_control.kinematics.orientation import matrix_from_quaternion
 from sim_bridge.world import SimWorld
 from urdf_factory import write_urdf
 from wmm_control.base import DifferentialKinematics, WheelController, WheelParams
@@ -33,7 +34,7 @@ def _reach(cfg, method, offsets, seconds=40.0, tol=0.01):
         errors = []
         for off in offsets:
             goal = np.asarray(p0) + off
-            target = PoseTarget(goal, _rotation(q0))
+            target = PoseTarget(goal, matrix_from_quaternion(q0))
             for _ in range(int(seconds / world.dt)):
                 loop.step(target)
                 err = float(np.linalg.norm(np.asarray(world.ee_pose()[0]) - goal))
@@ -216,7 +217,7 @@ def test_amp_commands_a_differential_base_along_its_heading_only(tmp_path):
     try:
         loop = ClosedLoop(world, make_resolver('amp', cfg))
         p0, q0 = world.ee_pose()
-        target = PoseTarget(np.asarray(p0) + [0.0, 1.5, 0.0], _rotation(q0))     # straight to the left
+        target = PoseTarget(np.asarray(p0) + [0.0, 1.5, 0.0], matrix_from_quaternion(q0))     # straight to the left
         lateral = []
         for _ in range(1600):
             rec = loop.step(target)
@@ -275,7 +276,7 @@ def test_the_new_robots_reach_a_goal_that_needs_the_base_with_wheel_contact_phys
         loop = ClosedLoop(world, make_resolver('amp', cfg))
         p0, q0 = world.ee_pose()
         goal = np.asarray(p0) + [0.8, 0.3, 0.0]
-        target = PoseTarget(goal, _rotation(q0))
+        target = PoseTarget(goal, matrix_from_quaternion(q0))
         for _ in range(1200):
             loop.step(target)
         assert np.linalg.norm(np.asarray(world.ee_pose()[0]) - goal) < 0.01
