@@ -22,11 +22,10 @@ them it does: they are placed around the robot from the base's pose.
 
 import itertools
 
-import numpy as np
-import pinocchio as pin
 import pybullet as p
 
 from sim_bridge.client import OwnedClient
+from wmm_control.kinematics.obstacles import around_base
 from wmm_control.kinematics.orientation import quaternion_from_matrix
 from wmm_control.robot_config import RobotConfig, load_robot
 
@@ -109,10 +108,7 @@ class SelfCollisionChecker(OwnedClient):
     def _place_obstacles(self, base_pose):
         """Obstacles around the robot (fixed at the origin) as they are around the base at
         ``base_pose`` (x, y, θ) in the world."""
-        x, y, theta = (float(v) for v in base_pose)
-        root_inv = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, theta), np.array([x, y, 0.0])).inverse()
-        for body, obstacle in zip(self._obstacles, self.obstacles):
-            local = root_inv * obstacle.placement
+        for body, local in zip(self._obstacles, around_base(self.obstacles, base_pose)):
             p.resetBasePositionAndOrientation(body, local.translation.tolist(), _quaternion(local.rotation),
                                               physicsClientId=self._cid)
 

@@ -44,7 +44,7 @@ import numpy as np
 import pinocchio as pin
 
 from wmm_control.errors import ConfigError
-from wmm_control.kinematics.obstacles import Obstacle
+from wmm_control.kinematics.obstacles import Obstacle, around_base
 from wmm_control.urdf import UrdfTree
 
 __all__ = ['CollisionModel', 'PairDistance', 'FLOOR']
@@ -201,11 +201,9 @@ class CollisionModel:
             return
         if base_pose is None:
             raise ValueError('CollisionModel: the base pose is needed to place the obstacles')
-        x, y, theta = (float(v) for v in base_pose)
-        root_inv = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, theta), np.array([x, y, 0.0])).inverse()
         objects = self.geom.geometryObjects
-        for gid, obstacle in zip(self._obstacle_ids, self.obstacles):
-            objects[gid].placement = root_inv * obstacle.placement
+        for gid, placement in zip(self._obstacle_ids, around_base(self.obstacles, base_pose)):
+            objects[gid].placement = placement
 
     @property
     def pairs(self) -> list[tuple[str, str]]:

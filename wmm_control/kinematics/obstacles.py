@@ -36,7 +36,7 @@ from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
 from wmm_control.robot_config import read_yaml
 
-__all__ = ['Obstacle', 'SHAPES', 'load_goal_region', 'load_obstacles', 'obstacle_file', 'parse_obstacles']
+__all__ = ['Obstacle', 'SHAPES', 'around_base', 'load_goal_region', 'load_obstacles', 'obstacle_file', 'parse_obstacles']
 
 #: The shapes an obstacle may have, with the number of ``size`` entries of each.
 SHAPES = {'box': 3, 'sphere': 1, 'cylinder': 2}
@@ -101,6 +101,14 @@ class Obstacle:
             axial = abs(local[2]) - 0.5 * self.size[1]
             return _box_distance(np.array([radial, axial]))
         return _box_distance(np.abs(local) - 0.5 * np.asarray(self.size))
+
+
+def around_base(obstacles, base_pose) -> list[pin.SE3]:
+    """Each obstacle's placement in the frame of a base at ``base_pose`` (x, y, θ) in the world
+    (the root link's frame: the world's, turned by θ about z and moved by (x, y))."""
+    x, y, theta = (float(v) for v in base_pose)
+    world_to_base = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, theta), np.array([x, y, 0.0])).inverse()
+    return [world_to_base * obstacle.placement for obstacle in obstacles]
 
 
 def _box_distance(excess: np.ndarray) -> float:
