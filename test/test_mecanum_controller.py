@@ -354,7 +354,8 @@ def stamp_s_of(stamp):
 def run_lockstep(ros, value, cycles, delay=0.0, use_sim_time=False):
     sim_time = overrides(use_sim_time=use_sim_time)
     ros.add(SimNode(context=ros.context, parameter_overrides=sim_time + overrides(
-        robot='mecanum', timing='lockstep', lockstep_groups='arm,wheel')))
+        robot='mecanum', timing='lockstep', lockstep_groups='arm,wheel', lockstep_timeout=10.0)))
+    # (a long lockstep timeout: on a loaded machine the simulator must not step without the commands)
     ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=sim_time + overrides(reference_wait=0.5, max_state_wait=0.0)))
     answerer = ros.add(ReferenceAnswerer(ros.context, value, delay))
     assert ros.spin_until(lambda: len(answerer.feasible) >= cycles and len(answerer.truth) > cycles, timeout=120)

@@ -319,6 +319,33 @@ def test_a_joint_state_waits_for_the_reference_of_its_stamp(ros):
     assert len(rec.drive) == len(rec.steer) == 5
 
 
+def test_a_joint_state_queued_while_the_node_was_held_up_runs_no_cycle(ros):
+    """States that arrive one period apart, stamped one period apart, each run a cycle; one that
+    arrives 0.4 s later than its stamp says (it waited in the transport while the node was held
+    up) runs none, whatever its stamp's clock; the next one on time runs again."""
+    ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(
+        reference_wait=0.0, joint_state_timeout=5.0, max_state_wait=0.1)))
+    rec = ros.add(Recorder(ros.context))
+    ros.spin_for(0.2)
+    origin = 1000.0 - time.time()           # the sender's clock: any offset from this one's
+    answered = []
+
+    def send(stamp):
+        n = len(rec.feasible)
+        rec.reference((0.2, 0.0, 0.0))
+        rec.joint_state(np.zeros(4), stamp=stamp)
+        answered.append(ros.spin_until(lambda: len(rec.feasible) > n, timeout=0.3))
+
+    for _ in range(8):
+        send(time.time() + origin)
+        ros.spin_for(0.025)
+    stamp = time.time() + origin
+    ros.spin_for(0.4)
+    send(stamp)                              # stamped 0.4 s before it arrives
+    send(time.time() + origin)
+    assert answered == [True] * 8 + [False, True]
+
+
 def test_joint_states_are_read_by_name(ros):
     # A zero reference holds the steer angles at the measured ones, so the controller's
     # state shows which positions it read as steer angles.
@@ -329,10 +356,11 @@ def test_joint_states_are_read_by_name(ros):
     stop = (0.0, 0.0, 0.0)
 
     def cycle(**js):
+        # a cycle answers within 0.5 s, even on a loaded machine; a rejected state never does
         n = len(rec.feasible)
         rec.reference(stop)
         rec.joint_state(None, **js)
-        ros.spin_for(0.05)
+        ros.spin_until(lambda: len(rec.feasible) > n, timeout=0.5)
         return len(rec.feasible) - n
 
     assert cycle(positions=[0.1, 0.2, 0.3, 0.4]) == 1

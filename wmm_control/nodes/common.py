@@ -115,7 +115,9 @@ def max_state_wait_param():
     """The ``max_state_wait`` parameter of every node that answers ``/joint_states``."""
     return Param('max_state_wait', 'Longest time [s] a joint state may wait in this node (from its receipt to its '
                  'cycle, steady clock) and still run a cycle: one that waited longer (the node was held up, and a '
-                 'real-time simulator has stepped past it) runs none. 0: no limit (lockstep).', lo=0.0, hi=60.0)
+                 'real-time simulator has stepped past it) runs none; nor does one that reached this node that much '
+                 'later than joint states usually do (it was queued in the transport while the node was held up). '
+                 '0: no limit (lockstep).', lo=0.0, hi=60.0)
 
 
 def require_base(robot, families, node_name):
@@ -843,6 +845,10 @@ class BaseReference:
         return None
 
 
+#: Joint states over which :class:`JointStateWatchdog` finds the usual delivery (about 1 s at 40 Hz).
+DELIVERY_WINDOW = 40
+
+
 class JointStateWatchdog:
     """The timing of a controller's ``/joint_states`` input: stamps, age and period.
 
@@ -858,6 +864,14 @@ class JointStateWatchdog:
     the sender's is involved). A node that was held up (stopped, or starved on a busy machine)
     may run a state that waited for its reference meanwhile; a real-time simulator has stepped
     past it, and an answer to it would be applied now, as if it were current.
+
+    With ``max_wait`` set, :meth:`admit` also skips a state that reached this node more than
+    ``max_wait`` later than the joint states usually do: its receipt on the node's clock minus its
+    stamp, against the smallest such offset of the last :data:`DELIVERY_WINDOW` states (a constant
+    offset between the sender's clock and this node's cancels). A node held up (stopped, or
+    starved) finds the states sent meanwhile queued in its transport: they reach its callback one
+    by one after it goes on, the oldest first, each looking new to it, and each reports rates the
+    simulator has since changed.
     """
 
     def __init__(self, node, timeout, period, clock, on_timeout, action, topic='joint_states', max_wait=0.0):
@@ -872,6 +886,7 @@ class JointStateWatchdog:
         self.stamps = StampGate(period, max_jump=self._max_jump(timeout))
         self.skipped = 0
         self.need_resync = True
+        self._offsets = deque(maxlen=DELIVERY_WINDOW)   # receipt − stamp [ns] of the last joint states
         self.timer = node.create_timer(period, self._check, clock=clock)
 
     def _max_jump(self, timeout):
@@ -900,10 +915,27 @@ class JointStateWatchdog:
         """A joint state arrived now."""
         self.freshness.mark(seconds(self._clock))
 
+    def late(self, stamp):
+        """How much later [s] than the usual delivery the joint state stamped ``stamp`` reached this
+        node now (0 when it is the earliest of the window, or unstamped: a zero stamp tells no time)."""
+        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        if ns == 0:
+            return 0.0
+        offset = self._node.get_clock().now().nanoseconds - ns
+        self._offsets.append(offset)
+        return (offset - min(self._offsets)) * 1e-9
+
     def admit(self, stamp):
         """True when the joint state stamped ``stamp`` runs a cycle (it is then marked fresh)."""
-        reason = self.stamps.admit(stamp)
         logger = self._node.get_logger()
+        late = self.late(stamp) if self.max_wait > 0.0 else 0.0
+        if late > self.max_wait:
+            self.skipped += 1
+            logger.warn(f'/{self._topic} arrived {late:.3g} s later than the usual delivery, beyond max_state_wait '
+                        f'{self.max_wait:g} s (it was queued while this node was held up): cycle skipped',
+                        throttle_duration_sec=1.0)
+            return False
+        reason = self.stamps.admit(stamp)
         if reason:
             self.skipped += 1
             publishers = self._node.count_publishers(self._topic)
@@ -937,4 +969,5 @@ class JointStateWatchdog:
             self._node.get_logger().warn(f'no /{self._topic} for {self.freshness.timeout} s: {self._action}')
             self.need_resync = True
         self.stamps.restart()
+        self._offsets.clear()
         self._on_timeout()
