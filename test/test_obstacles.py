@@ -121,6 +121,45 @@ def test_a_base_driving_at_an_obstacle_is_slowed_to_what_it_can_brake():
     assert not far.changed
 
 
+def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own_path():
+    """Robot A's base follows its reference with a lag of 1/K_p = 0.5 s. Its reference is held to
+    what it can stop from after that lag; and where its measured twist is already too fast (it
+    lagged, or its wheels swept round while it changed its ICR), it is sent a twist on its own
+    path, slower, whatever the method asked."""
+    robot = load_robot('steerable')
+    table = parse_obstacles([{'name': 'table', 'shape': 'box', 'size': [0.5, 1.2, 0.8], 'pose': [0.9, 0.0, 0.0]}],
+                            'test')
+    stage = SafetyStage.for_robot(robot)
+    stage.set_obstacles(table)
+    assert stage.base_lag == pytest.approx(0.5)
+    assert stage.obstacle_lookahead == pytest.approx(0.02 + 1.0 * 0.5 + 1.0 / (2 * 0.5))
+    q = np.array(robot.start.arm)
+    box = np.concatenate((robot.base.velocity, robot.arm.velocity))
+    pose = np.zeros(3)
+    near = min(p.distance for p in stage.collision.within(q, 2.0, pose)[0] if p.base_jacobian.any())
+    assert 0.2 < near < 0.4
+    allowed = 0.5 * (np.sqrt(0.25 + 2 * (near - 0.02) / 0.5) - 0.5)       # after the lag
+    assert allowed < np.sqrt(2 * 0.5 * (near - 0.02)) - 0.1                # well below the rows without it
+    command = np.concatenate(([0.6, 0.0, 0.0], np.zeros(q.size)))          # the method's: at the table
+    slow = stage.filter(q, command, -box, box, base_pose=pose, base_axes=(0, 1, 2),
+                        base_velocity=np.array([0.05, 0.0, 0.0]))
+    assert slow.changed and 0.0 < slow.command[0] <= allowed + 1e-6
+    # measured at 0.5 m/s, sideways and turning (not the method's direction): the base is sent a
+    # twist along its own, slower, while the method asked for the table at 0.6 m/s
+    measured = np.array([0.5, 0.2, 0.3])
+    fast = stage.filter(q, command, -box, box, base_pose=pose, base_axes=(0, 1, 2), base_velocity=measured)
+    assert fast.changed
+    base = fast.command[:3]
+    scale = base @ measured / (measured @ measured)
+    np.testing.assert_allclose(base, scale * measured, atol=1e-12)
+    assert scale < 0.7
+    # without a lag (a wheeled base) the same call only holds the reference to its rows
+    wheeled = SafetyStage(stage.collision, stage.params, robot.arm.acceleration, robot.base.velocity,
+                          robot.base.acceleration)
+    plain = wheeled.filter(q, command, -box, box, base_pose=pose, base_axes=(0, 1, 2), base_velocity=measured)
+    assert plain.command[0] > allowed and abs(plain.command[1]) < 0.05
+
+
 def test_a_goal_inside_an_obstacle_is_impossible():
     model = KinematicModel('steerable')
     workspace = Workspace(model)

@@ -1,8 +1,8 @@
-"""``wmm_randomized``: randomized closed-loop runs, every method on both robots.
+"""``wmm_randomized``: randomized closed-loop runs, every method on every shipped robot.
 
 Usage::
 
-    wmm_randomized [--goals N] [--seed S] [--robots steerable,mecanum] [--methods pinv,...]
+    wmm_randomized [--goals N] [--seed S] [--robots steerable,mecanum,...] [--methods pinv,...]
                    [--indices I,...] [--engine direct|nodes] [--obstacles FILE] [--record DIR]
                    [--jobs N] [--out FILE]
 
@@ -27,7 +27,8 @@ import json
 import sys
 
 from wmm_control.errors import WmmError
-from wmm_control.experiments.randomized import METHOD_RUNS, ROBOTS, run_goal, sample_goals, summarize
+from wmm_control.experiments.randomized import METHOD_RUNS, run_goal, sample_goals, summarize
+from wmm_control.robot_config import robot_names
 
 __all__ = ['main', 'format_summary']
 
@@ -102,7 +103,8 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog='wmm_randomized', description=__doc__.split('\n\n')[0])
     parser.add_argument('--goals', type=int, default=100, help='goals per robot (default: %(default)s)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the draw (default: %(default)s)')
-    parser.add_argument('--robots', default=','.join(ROBOTS), help='comma-separated (default: %(default)s)')
+    parser.add_argument('--robots', default=','.join(robot_names()),
+                        help='comma-separated (default: every shipped robot, %(default)s)')
     parser.add_argument('--methods', default=','.join(METHOD_RUNS), help='comma-separated (default: %(default)s)')
     parser.add_argument('--indices', default='',
                         help='comma-separated goal indices of the draw to run, e.g. 24,29 (default: all)')

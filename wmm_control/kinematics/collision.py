@@ -184,16 +184,20 @@ class CollisionModel:
     def _tabulate_pairs(self):
         """Each checked pair's links, shapes and joints, looked up once (call again after adding pairs)."""
         objects = self.geom.geometryObjects
-        self._pair_links, self._pair_shapes, joints, robot = [], [], [], []
+        self._pair_links, self._pair_shapes, joints, robot, obstacle = [], [], [], [], []
         for pair in self.geom.collisionPairs:
             a, b = objects[pair.first], objects[pair.second]
             self._pair_links.append((self._link_of[pair.first], self._link_of[pair.second]))
             self._pair_shapes.append((a.name, b.name))
             joints.append((a.parentJoint, b.parentJoint))
             robot.append((pair.first not in self._fixed, pair.second not in self._fixed))
+            obstacle.append(pair.first in self._obstacle_ids or pair.second in self._obstacle_ids)
         self._pair_joints = np.array(joints, dtype=int).reshape(-1, 2)
         #: [pair, side]: that side is on the robot (moves with the base), not the floor or an obstacle
         self._pair_on_robot = np.array(robot, dtype=float).reshape(-1, 2)
+        #: [pair]: the base's twist changes its distance (a robot shape and an obstacle); it leaves
+        #: a pair on the robot as it is, and a shape's height over the floor
+        self._pair_base_moves = np.array(obstacle, dtype=float)
 
     def _place_obstacles(self, base_pose) -> None:
         """Obstacles into the root frame, the base at ``base_pose`` (x, y, θ) in the world."""
@@ -270,7 +274,7 @@ class CollisionModel:
                                            points[i, :, 0] * normals[:, 1] - points[i, :, 1] * normals[:, 0]))
                           for i in (0, 1)])
         sides *= self._pair_on_robot[near].T[:, :, None]
-        base = sides[1] - sides[0]
+        base = (sides[1] - sides[0]) * self._pair_base_moves[near, None]
         out = [PairDistance(float(dists[k]), self._pair_links[k], self._pair_shapes[k], j, b)
                for k, j, b in zip(near.tolist(), rates, base)]
         return out, *closest

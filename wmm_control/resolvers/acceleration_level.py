@@ -215,7 +215,8 @@ class AccelerationResolver(Resolver):
         # base's are the world frame's (ẋ, ẏ, θ̇), or a differential base's own (v, ω)
         safety = self.safety.filter(task['q_arm'], qd, task['box_lower'], task['box_upper'],
                                     base_pose=state.base_pose, base_axes=self.model.config.base_axes,
-                                    world_rates=not self._unicycle, task_jacobian=task['jac'])
+                                    base_velocity=state.base_twist, world_rates=not self._unicycle,
+                                    task_jacobian=task['jac'])
         qd = safety.command.copy()
         fields.update(clearance=safety.clearance, closest_pair=safety.closest_pair,
                       collision_constraints=safety.active, collision_changed=safety.changed)

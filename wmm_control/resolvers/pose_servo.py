@@ -229,6 +229,7 @@ class PoseServoResolver(Resolver):
         self._jac = None
         self._safety = None                    # the safety stage's answer on the last arm command
         self._base_pose = None
+        self._base_velocity = None
         self.arm_damping = self.params.rho
 
     # ------------------------------------------------------------------ eq (12)
@@ -384,6 +385,7 @@ class PoseServoResolver(Resolver):
         self._arm_task = lim.command[nb:] - self._arm_null
         self._arm_before = (self._prev_arm, self._prev_arm_null)
         self._base_pose = state.base_pose
+        self._base_velocity = state.base_twist
         arm, base = self._finish_arm(self._arm_task, lim)
         p = self.params
         self.arm_damping, sigma = singularity_damping(jac[:, nb:], p.rho, p.singular_region,
@@ -424,7 +426,7 @@ class PoseServoResolver(Resolver):
             self._safety = self.safety.filter(
                 self._q_arm, np.concatenate((base, arm.command)), np.concatenate((whole.lower[:nb], arm.lower)),
                 np.concatenate((whole.upper[:nb], arm.upper)), base_pose=self._base_pose, base_axes=self.base_axes,
-                task_jacobian=self._jac)
+                base_velocity=self._base_velocity, task_jacobian=self._jac)
             if self._safety.changed:
                 base = self._safety.command[:nb].copy()
                 self._prev[:nb] = base          # the base reference sent: next period's acceleration bound

@@ -19,8 +19,25 @@ the stricter of the two where both hold. ``a_b`` is taken no larger than the dec
 command's own acceleration limits can give that distance (``Σ_i |j_i| q̈_max,i`` over the arm's
 joints and the base's linear axes): a Mecanum base that brakes at 0.025 m/s² is not counted on
 to stop at 1 m/s². With obstacles, whose distance the base's twist changes too, the look-ahead
-grows to the base's stopping distance (``d_s + v_max² / (2 min(a_max, a_b))`` over its linear
-axes) so that it brakes in time.
+grows to the base's stopping distance (``d_s + v_max τ + v_max² / (2 min(a_max, a_b))`` over its
+linear axes) so that it brakes in time.
+
+The stage shapes the base's *reference*; a base whose twist follows its reference with a lag
+(a steerable base's twist controller, ξ̈ = K_p (ξ̇* − ξ̇): a time constant τ = 1/K_p, 0.5 s on
+robot A) drives on at about the reference of τ ago. A row the base moves (a pair with an
+obstacle) therefore counts on stopping within ``v τ + v² / (2 a_b)``:
+
+    ḋ ≥ −a_b (√(τ² + 2 (d − d_s) / a_b) − τ),
+
+and its damper gain is no steeper than ``1/τ``. Where the base's measured twist ``v₀`` already
+approaches a pair faster than that (it lagged, or a steerable base swept its wheels round
+towards the obstacle while changing its ICR), the base is sent ``s v₀``: a twist on its own
+path, which a steerable base follows by slowing its wheels without steering them, with ``s``
+low enough (down to −1) to brake the approach within the room left, within the method's box.
+The part of the reference along ``v₀`` is held to the same row as the reference: a steerable
+base first drives on along its path at that part while its wheels turn to the new one. A
+wheeled base that tracks its reference within its acceleration limits has τ = 0: the rows
+above, and no such braking.
 
 With ``ḋ = j · q̇`` (``q̇`` the command: the base's axes, when the method commands the base
 with it, then the arm's joints; :class:`~wmm_control.kinematics.collision.CollisionModel`),
@@ -62,10 +79,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack, solve_triangular
 
+from wmm_control.base.swmr_controller import SwmrParams
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.collision import CollisionModel
 
-__all__ = ['SafetyParams', 'SafetyResult', 'SafetyStage']
+__all__ = ['SafetyParams', 'SafetyResult', 'SafetyStage', 'base_lag']
 
 #: Cost per unit of damper slack [per m/s], linear (an exact penalty: no slack at all where
 #: the box leaves room, which a quadratic cost would not give), against weights of about 1 on
@@ -76,6 +94,8 @@ SLACK_WEIGHT = 1.0
 SELF_WEIGHT = 1e-2
 #: The command is taken as meeting a damper within this much [m/s].
 TOLERANCE = 1e-9
+#: [m/s] a lagging base's measured twist below this tells no path (at rest).
+PATH_SPEED = 1e-4
 #: The QP's answer meets every constraint within this much (a distance in its scaled variables,
 #: about [m/s] for weights about 1).
 LEAST_DISTANCE_TOLERANCE = 1e-10
@@ -146,6 +166,8 @@ class SafetyStage:
             (n_arm,); None: every row brakes at ``collision_braking``.
         base_velocity, base_acceleration: the base's limits on (vx, vy, ω) [m/s, rad/s; /s]
             (only with ``arm_acceleration``); they set the look-ahead with obstacles.
+        base_lag: τ, the time constant [s] with which the base's twist follows its reference
+            (:func:`base_lag`).
     """
 
     @classmethod
@@ -153,19 +175,22 @@ class SafetyStage:
         """The stage of a :class:`~wmm_control.robot_config.RobotConfig`: its collision model
         (with ``obstacles``) and its acceleration limits."""
         return cls(CollisionModel.from_robot(robot, obstacles=obstacles), params, robot.arm.acceleration,
-                   robot.base.velocity, robot.base.acceleration)
+                   robot.base.velocity, robot.base.acceleration, base_lag(robot))
 
     def __init__(self, collision, params: SafetyParams = SafetyParams(), arm_acceleration=None,
-                 base_velocity=None, base_acceleration=None):
+                 base_velocity=None, base_acceleration=None, base_lag=0.0):
         self.collision = collision
         self.params = params
+        if not (math.isfinite(base_lag) and base_lag >= 0.0):
+            raise ConfigError(f'base_lag must be finite and >= 0, got {base_lag}')
+        self.base_lag = float(base_lag)
         self._arm_acc = None if arm_acceleration is None else np.asarray(arm_acceleration, dtype=float)
         self._base_acc = (np.zeros(3) if base_acceleration is None
                           else np.asarray(base_acceleration, dtype=float))
         stopping = 0.0
         if base_velocity is not None and base_acceleration is not None:
             # from full speed, braking as its rows count on: at its limit, and no harder than a_b
-            stopping = max((float(v) ** 2 / (2.0 * min(float(a), params.collision_braking))
+            stopping = max((float(v) * self.base_lag + float(v) ** 2 / (2.0 * min(float(a), params.collision_braking))
                             for v, a in zip(base_velocity[:2], base_acceleration[:2]) if a > 0.0), default=0.0)
         #: [m] how far an obstacle is looked at: the base's stopping distance from full speed
         self.obstacle_lookahead = max(params.collision_lookahead, params.collision_safety + stopping)
@@ -175,7 +200,7 @@ class SafetyStage:
         self.collision.set_obstacles(obstacles)
 
     def filter(self, q_arm, command, lower, upper, weights=None, *, base_pose=None, base_axes=(),
-               base_twist=None, world_rates=False, task_jacobian=None) -> SafetyResult:
+               base_twist=None, base_velocity=None, world_rates=False, task_jacobian=None) -> SafetyResult:
         """The command ``command`` at arm joints ``q_arm``, within the dampers and the box.
 
         Args:
@@ -189,6 +214,8 @@ class SafetyStage:
             base_axes: indices into (vx, vy, ω) of the command's base entries.
             base_twist: the base's twist (vx, vy, ω) when it is not part of the command (None:
                 taken as at rest, or as commanded on ``base_axes``).
+            base_velocity: the base's measured twist (vx, vy, ω) [m/s, rad/s], when the command
+                holds its reference: a lagging base's rows hold on the twist it will have.
             world_rates: the command's base entries are the world frame's (ẋ, ẏ, θ̇) instead
                 of the base frame's (vx, vy, ω).
             task_jacobian: J, the end effector's task Jacobian over the command. Shape (r, n).
@@ -211,13 +238,19 @@ class SafetyStage:
             c, s = math.cos(base_pose[2]), math.sin(base_pose[2])
             base_rows = base_rows @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
         rows = np.hstack((base_rows[:, axes], [pair.rate_jacobian for pair in pairs]))
-        base_share = (np.zeros(len(pairs)) if base_twist is None
-                      else np.array([pair.base_jacobian @ np.asarray(base_twist, dtype=float) for pair in pairs]))
-        bound = -self._allowed(pairs, rows, axes) - base_share
+        allowed = self._allowed(pairs, rows, axes)
+        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+        bound = -allowed
+        overtaking = False
+        if base_twist is not None:
+            bound = bound - np.array([pair.base_jacobian @ np.asarray(base_twist, dtype=float) for pair in pairs])
+        elif axes and base_velocity is not None and self.base_lag > 0.0:
+            command, lower, upper, overtaking = self._brake_on_path(pairs, rows, bound, axes, command, base_velocity,
+                                                                   base_pose, world_rates, lower, upper)
+            rows, bound = self._along_path(pairs, rows, bound, axes, base_velocity, base_pose, world_rates)
         violated = rows @ command < bound - TOLERANCE
         if not violated.any():
-            return SafetyResult(command, clearance, label, len(pairs), False)
-        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+            return SafetyResult(command, clearance, label, len(pairs), overtaking)
         weights = np.ones(command.size) if weights is None else np.asarray(weights, dtype=float)
         if task_jacobian is None:
             hessian = np.diag(weights)
@@ -227,7 +260,7 @@ class SafetyStage:
         # active set: the rows the command breaks, then any the answer breaks, until it breaks none
         # (most periods one solve: the rows far from binding never enter the QP)
         use = violated
-        for _ in range(len(pairs)):
+        for _ in range(len(bound)):
             solved = self._solve(command, rows[use], bound[use], lower, upper, hessian)
             broken = (rows @ solved < bound - 1e-7) & ~use
             if not broken.any():
@@ -235,26 +268,82 @@ class SafetyStage:
             use = use | broken
         return SafetyResult(solved, clearance, label, len(pairs), True)
 
+    def _along_path(self, pairs, rows, bound, axes, base_velocity, base_pose, world_rates):
+        """``rows`` and ``bound`` with, for each pair the base moves, the same row on the part of the
+        reference along the base's measured twist ``v₀``: a steerable base first moves along its
+        current path, at that part, while its wheels turn towards the reference's (a sideways
+        reference drives it on along its wheels' heading for a while, into what lies ahead)."""
+        v0 = np.asarray(base_velocity, dtype=float)
+        norm = float(v0 @ v0)
+        moved = [i for i, pair in enumerate(pairs) if pair.base_jacobian.any()]
+        if norm < PATH_SPEED ** 2 or not moved:
+            return rows, bound
+        along = np.array([pairs[i].base_jacobian @ v0 for i in moved])[:, None] * v0 / norm   # j_b v₀ v₀ᵀ / |v₀|²
+        if world_rates:                       # (vx, vy) = R(θ)ᵀ (ẋ, ẏ)
+            c, s = math.cos(base_pose[2]), math.sin(base_pose[2])
+            along = along @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        extra = np.hstack((along[:, axes], rows[moved, len(axes):]))
+        return np.vstack((rows, extra)), np.concatenate((bound, bound[moved]))
+
+    def _brake_on_path(self, pairs, rows, bound, axes, command, base_velocity, base_pose, world_rates, lower, upper):
+        """A lagging base that already approaches a pair faster than allowed (its measured twist
+        ``v₀``, with the arm's share of ``command``) is sent ``s v₀`` instead of its reference:
+        the largest ``s`` in [−1, 1] that the pairs allow. That twist lies on the base's own path
+        (a steerable base keeps its ICR and only slows its wheels: no re-steering, whose sweep
+        would carry it on towards the obstacle), and the base entries are held there for the
+        arm's QP. Returns ``(command, lower, upper, overtaking)``."""
+        nb = len(axes)
+        v0 = np.asarray(base_velocity, dtype=float)
+        moved = np.array([pair.base_jacobian.any() for pair in pairs])
+        own = np.array([pair.base_jacobian @ v0 for pair in pairs])         # the base's approach rate
+        arm = rows[:, nb:] @ command[nb:]
+        approaching = moved & (own < -TOLERANCE)
+        if not (approaching & (own + arm < bound - TOLERANCE)).any():
+            return command, lower, upper, False
+        # the approach at the pair's bound once the base has settled at s v₀, and braking at
+        # K_p (1 − s) |ḋ_b| from now on strong enough to stop it within the room left
+        scale = 1.0
+        d_s = self.params.collision_safety
+        for i in np.flatnonzero(approaching):
+            room = max(pairs[i].distance - d_s, 1e-6)
+            scale = min(scale, (bound[i] - arm[i]) / own[i], 1.0 + own[i] * self.base_lag / (2.0 * room))
+        scale = max(scale, -1.0)
+        if world_rates:                       # (ẋ, ẏ, θ̇) = R(θ) (vx, vy), ω
+            c, s = math.cos(base_pose[2]), math.sin(base_pose[2])
+            v0 = np.array([c * v0[0] - s * v0[1], s * v0[0] + c * v0[1], v0[2]])
+        command, lower, upper = command.copy(), lower.copy(), upper.copy()
+        # within the method's box: the reference changes no faster than its own limits allow
+        command[:nb] = lower[:nb] = upper[:nb] = np.clip(scale * v0[axes], lower[:nb], upper[:nb])
+        return command, lower, upper, True
+
     def _allowed(self, pairs, rows, axes) -> np.ndarray:
         """Each pair's fastest allowed approach [m/s], braking no harder than the command's
         acceleration limits can slow that distance. The base's turn rate is left out: turning
         swings the near point aside for a moment, but does not stop a base that drives at an
         obstacle."""
+        lags = [self.base_lag if pair.base_jacobian.any() else 0.0 for pair in pairs]
         if self._arm_acc is None:
-            return np.array([self.allowed_approach(pair.distance) for pair in pairs])
+            return np.array([self.allowed_approach(pair.distance, lag=lag) for pair, lag in zip(pairs, lags)])
         acc = np.concatenate((np.where(np.arange(3) == 2, 0.0, self._base_acc)[axes], self._arm_acc))
         reach = np.abs(rows) @ acc
-        return np.array([self.allowed_approach(pair.distance, braking) for pair, braking in zip(pairs, reach)])
+        return np.array([self.allowed_approach(pair.distance, braking, lag)
+                         for pair, braking, lag in zip(pairs, reach, lags)])
 
-    def allowed_approach(self, distance: float, deceleration: float = math.inf) -> float:
+    def allowed_approach(self, distance: float, deceleration: float = math.inf, lag: float = 0.0) -> float:
         """The fastest a pair ``distance`` [m] apart may approach [m/s] (negative: it must
         separate), its distance braking at no more than ``deceleration`` [m/s²] (and
-        ``collision_braking``)."""
+        ``collision_braking``) after a lag of ``lag`` [s]."""
         p = self.params
         d_i, d_s = p.collision_influence, p.collision_safety
-        braking = math.sqrt(2.0 * min(p.collision_braking, deceleration) * max(distance - d_s, 0.0))
-        damper = p.collision_gain * (distance - d_s) / (d_i - d_s) if distance < d_i else math.inf
+        a = min(p.collision_braking, deceleration)
+        room = max(distance - d_s, 0.0)
+        braking = a * (math.sqrt(lag * lag + 2.0 * room / a) - lag) if a > 0.0 else 0.0
+        gain = p.collision_gain / (d_i - d_s)
+        if lag > 0.0:
+            gain = min(gain, 1.0 / lag)
+        damper = gain * (distance - d_s) if distance < d_i else math.inf
         return min(damper, braking)
+
 
     def _solve(self, command, rows, bound, lower, upper, hessian):
         """The QP of the module docstring over y = (q̇, slack), the dampers ``rows`` ≥ ``bound``.
@@ -353,3 +442,12 @@ def _gram_solve(a, b):
     if info != 0:
         raise np.linalg.LinAlgError(f'dependent rows (dposv info {info})')
     return x
+
+
+def base_lag(robot) -> float:
+    """τ [s], the time constant with which ``robot``'s base twist follows its reference: 1/K_p
+    of a steerable base's twist controller (its default, Sorour Table I), 0 for a wheeled base,
+    whose wheel controller tracks the reference within its acceleration limits."""
+    if getattr(robot, 'steerable', None) is None:
+        return 0.0
+    return 1.0 / SwmrParams.from_robot_config(robot).kp
