@@ -1,4 +1,4 @@
-"""What the nodes publish for a ROS user: the /diagnostics key sets (documented in the README) and
+"""What the nodes publish for a ROS user: the /diagnostics key sets (documented in docs/nodes.md) and
 the QoS of every topic."""
 
 import numpy as np
@@ -16,7 +16,7 @@ from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
 from wmm_control.robot_config import load_robot
 
-# The README's /diagnostics table: status name -> its keys (every message of that status).
+# The /diagnostics table of docs/nodes.md: status name -> its keys (every message of that status).
 SIM_GROUP = {'clamped', 'rejected', 'position_limited', 'command_age_s'}
 DIAGNOSTIC_KEYS = {
     '/wmm_sim: simulation': {'sim_time_s', 'steps', 'real_time_factor'},
@@ -92,7 +92,7 @@ def _reliability(node, topic, publisher):
 
 
 def test_qos_sensor_data_and_commands(ros):
-    # The README's QoS table: the sim publishes its state reliable (any subscriber matches); the
+    # The QoS table of docs/nodes.md: the sim publishes its state reliable (any subscriber matches); the
     # controllers consume it best effort; commands are reliable both ways.
     ros.add(SimNode(context=ros.context))
     ros.add(SwmrControllerNode(context=ros.context))

@@ -67,7 +67,7 @@ def test_every_method_converges_within_every_limit(subset, method):
     for goal in goals:
         r = run_goal(robot, method, goal)
         if (robot, method) == ('mecanum', 'task_sharing'):
-            # converges on about 4 goals in 10 (README): each run converges or is reported
+            # converges on about 4 goals in 10 (docs/results.md): each run converges or is reported
             assert r['outcome'] in ('converged', 'reported'), r
         else:
             assert r['outcome'] == 'converged', r

@@ -210,7 +210,7 @@ def test_goal_sequencer_plays_the_scenario_on_sim_time():
 def test_the_goal_is_reached_with_wheel_contact_physics():
     """base_mode physics: the base moves through PyBullet wheel contact, the steering is closed on
     the measured steer angles; with the end effector measured (as the paper's simulator does) it
-    reaches the goal. (On wheel odometry alone the contact slip leaves a few cm: see the README.)"""
+    reaches the goal. (On wheel odometry alone the contact slip leaves a few cm: see docs/methods.md.)"""
     feedback = 'ground_truth'
     ros = RosHarness()
     try:

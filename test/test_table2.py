@@ -1,6 +1,6 @@
-"""Sorour et al. 2019, Table II: the paper's claims, checked on the scenario the README's main
-job runs (kinematic base with slip, fixed seed), here without ROS in between (the node chain
-gives the same commands, see test_resolver_node.py)."""
+"""Sorour et al. 2019, Table II: the paper's claims, checked on the scenario the main job
+(docs/results.md) runs (kinematic base with slip, fixed seed), here without ROS in between
+(the node chain gives the same commands, see test_resolver_node.py)."""
 
 import pytest
 

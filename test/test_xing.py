@@ -1,5 +1,5 @@
 """Xing et al. §4 on robot B (wheel slip on, odometry feedback, errors on the ground truth):
-the paper's claims, checked on the scenarios the README's main job runs, here without ROS in
+the paper's claims, checked on the scenarios the main job (docs/results.md) runs, here without ROS in
 between (the node chain gives the same commands: test_resolver_node.py)."""
 
 import numpy as np

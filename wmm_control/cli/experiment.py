@@ -36,7 +36,7 @@ from wmm_control.resolvers import TaskSharingParams
 
 __all__ = ['main', 'run_experiment', 'format_table', 'format_matrix', 'MAIN_JOB', 'MATRIX']
 
-#: The scenarios of ``wmm_experiment all``, the README's main job: both papers' experiments.
+#: The scenarios of ``wmm_experiment all``, the main job (docs/results.md): both papers' experiments.
 MAIN_JOB = ('sorour_table2', 'xing_circle_0.10', 'xing_circle_0.25', 'xing_pose', 'xing_singularity',
             'matrix_circle_0.25_a', 'matrix_circle_0.25_b')
 #: The scenarios of the one table no paper has: one circle, both robots, all four methods.
@@ -77,7 +77,7 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_
 
     Returns:
         (logs, summary): ``logs`` maps a run name to its RunLog; ``summary`` is the
-        ``metrics.json`` content (see the README for its keys).
+        ``metrics.json`` content (see docs/results.md for its keys).
     """
     from tqdm import tqdm
 

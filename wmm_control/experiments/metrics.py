@@ -14,7 +14,7 @@ from wmm_control.kinematics.orientation import rpy_from_matrix, wrap_angle
 __all__ = ['RunLog', 'goal_metrics', 'trajectory_metrics', 'run_limit_report', 'pose_error_norm', 'METRIC_KEYS',
            'TRAJECTORY_METRIC_KEYS']
 
-#: Per-goal keys of :func:`goal_metrics` and what they mean (documented in the README).
+#: Per-goal keys of :func:`goal_metrics` and what they mean (documented in docs/results.md).
 METRIC_KEYS = {
     'area': 'area under the pose-error norm ‖e_p‖ (eq 12, position [m] and wrapped RPY [rad]) '
             'over the goal window [m·s] (the numbers of Sorour Fig 6)',
@@ -219,7 +219,7 @@ def _dex_deviation(log, idx, q_dex):
     return (max(after) if after else None), max(starts)
 
 
-#: Keys of :func:`trajectory_metrics` (Xing et al. Tables 2–3), documented in the README.
+#: Keys of :func:`trajectory_metrics` (Xing et al. Tables 2–3), documented in docs/results.md.
 TRAJECTORY_METRIC_KEYS = {
     'base_rms': 'RMS of the commanded base velocity (vx, vy [m/s], ω [rad/s]) over the run',
     'base_active_s': 'time during which each commanded base velocity component is not zero [s]',

@@ -39,7 +39,7 @@ class AmpParams(AccelerationParams):
             default) or ``'task'`` (the task's rows: all six for r = 6). On robot B at its start
             state σ_m over all six rows is 0.162, below §4.4's 0.19 and near 0.15, so with
             ``'task'`` the base is active from t = 0 in the full-pose run and moves for a goal
-            the arm alone reaches; over the position rows it is 0.245 (README, "Full pose").
+            the arm alone reaches; over the position rows it is 0.245 (docs/results.md, "Full pose").
             For r = 3 both are the position rows.
         sigma_lookahead: anticipation τ [s]: the singularity test uses σ_m + τ·min(σ̇_m, 0), σ̇_m
             from the last period, so the base is switched on τ before σ_m would reach σ_m,min at
