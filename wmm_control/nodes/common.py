@@ -51,7 +51,7 @@ __all__ = [
 ]
 
 
-# ---------------------------------------------------------------- QoS (the README's table)
+# ---------------------------------------------------------------- QoS (docs/nodes.md's table)
 
 #: State streams a node *publishes* (``joint_states``, ``odom``, ``ee_pose``): reliable, keep
 #: last 10, volatile (the system default), so that reliable and best-effort subscribers both
@@ -478,7 +478,7 @@ def guard_clock(node):
 #: Fast DDS transports of the executables, unless the environment names others: UDP alone.
 #: With its shared-memory transport too (Fast DDS's default), a peer killed (SIGKILL) or
 #: stopped (SIGSTOP) at the wrong moment stalled the surviving processes' traffic for 0.2 to 2 s
-#: (measured, see the README), which fired their watchdogs; over UDP it never did.
+#: (measured, see docs/robustness.md), which fired their watchdogs; over UDP it never did.
 FASTDDS_TRANSPORTS = 'UDPv4'
 
 
