@@ -31,7 +31,7 @@ class Answerer(Node):
 
     def on_state(self, msg):
         self.last_t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        for g, (pub, n) in self.pubs.items():
+        for pub, n in self.pubs.values():
             out = Float64MultiArray()
             out.data = (0.05 * np.sin(self.last_t + np.arange(n))).tolist()
             pub.publish(out)

@@ -52,7 +52,7 @@ def test_tertiary_projector_is_the_printed_one(rows):
         jac = rng.normal(size=(rows, 10))
         q_a = rng.normal(size=10)
         q_a[:3] = 0.0
-        resolver.manipulability_acceleration = lambda qd: q_a
+        resolver.manipulability_acceleration = lambda qd, q_a=q_a: q_a
         p_n = np.eye(10) - np.linalg.pinv(jac) @ jac
         # rcond: the exact zeros of (I − S) P_N come out at round-off, which pinv must not invert.
         p_a = (np.eye(10) - np.linalg.pinv(np.diag((~active).astype(float)) @ p_n, rcond=1e-10)) @ p_n

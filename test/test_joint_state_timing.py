@@ -226,14 +226,14 @@ def test_answers_that_were_not_applied_move_the_base_one_period_from_the_rates_a
     for k in range(10):                  # nominal periods: each state reports the command it followed
         applied = list(probe.wheels[-1].data) if probe.wheels else [0.0] * 4
         probe.state(5.0 + k * DT, applied)
-        assert ros.spin_until(lambda: len(probe.feasible) > k, timeout=5.0)
+        assert ros.spin_until(lambda k=k: len(probe.feasible) > k, timeout=5.0)
     ros.spin_for(0.1)
     applied = list(probe.wheels[-1].data)
     before = len(probe.feasible)
     unapplied = 5
     for k in range(unapplied):           # each answered before the next, none applied
         probe.state(5.0 + (10 + k) * DT, applied)
-        assert ros.spin_until(lambda: len(probe.feasible) > before + k, timeout=5.0)
+        assert ros.spin_until(lambda k=k: len(probe.feasible) > before + k, timeout=5.0)
     vx_applied = MecanumKinematics.from_config(ROBOT.mecanum).twist_from_wheels(np.array(applied))[0]
     step = ROBOT.base.acceleration[0] * DT
     last = twist_of(probe.feasible[-1])[0] - vx_applied

@@ -172,7 +172,10 @@ def test_odometry_covariance_is_the_slip_models_error(ros):
                       slip_gain=0.05, slip_drift=[0.003, 0.0, 0.002], slip_noise=noise, seed=3)
     assert ros.spin_until(lambda: len(ctrl.odom) >= 161 and len(ctrl.truth) >= 161)
     odom, truth = ctrl.odom[1:161], ctrl.truth[1:161]
-    twist = lambda m: np.array([m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.angular.z])
+
+    def twist(m):
+        return np.array([m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.angular.z])
+
     err = np.array([twist(t) - twist(o) for o, t in zip(odom, truth)])
     reported = np.array([np.diag(_planar(o.twist.covariance)) for o in odom])
     # Mean squared twist error per axis vs the mean reported variance: equal within sampling error.

@@ -77,7 +77,10 @@ class Process:
 
 # ---------------------------------------------------------------- where things are on the page
 
-def project(points, camera_position, look_at, width, height, fov=math.radians(75.0)):
+FOV = math.radians(75.0)     # the vertical field of view of the page's camera
+
+
+def project(points, camera_position, look_at, width, height, fov=FOV):
     """Pixel (x, y) of world ``points`` (n, 3) seen by a pinhole camera, z up (three.js' perspective
     camera: vertical field of view ``fov``, the page's aspect)."""
     c = np.asarray(camera_position, dtype=float)

@@ -225,5 +225,5 @@ class Resolver(ABC):
         """True when :meth:`compensate` changes the command (it needs the feasible twist)."""
         return False
 
-    def reset(self):
+    def reset(self):  # noqa: B027 (a default: a method without state has nothing to forget)
         """Forget the previous command (the next one starts from rest)."""
