@@ -65,7 +65,7 @@ class SlipParams:
     gain: float = 0.0
     drift: tuple = (0.0, 0.0, 0.0)
     noise_std: tuple = (0.0, 0.0, 0.0)
-    seed: int = None
+    seed: int | None = None
 
     def __post_init__(self):
         gain = float(self.gain)

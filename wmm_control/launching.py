@@ -13,7 +13,9 @@ venv); the rest of the package does not import this module.
 
 from __future__ import annotations
 
-from launch import LaunchContext, LaunchDescription
+# launch has no type information, so mypy takes the repository's launch/ folder (launch files, no
+# __init__.py) for it, as a namespace package without these names.
+from launch import LaunchContext, LaunchDescription  # type: ignore[attr-defined]
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
@@ -72,7 +74,7 @@ def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool, ob
     if viewer:
         executables.append(('wmm_viewer', {'obstacles': obstacles}))
     return [Node(package='wmm_control', executable=exe, namespace=namespace or None, output='screen',
-                 parameters=[{**common, **extra}], remappings=remap)
+                 parameters=[dict(common, **extra)], remappings=remap)
             for exe, extra in executables]
 
 

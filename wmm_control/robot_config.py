@@ -244,7 +244,7 @@ class RobotConfig:
     steerable: SteerableConfig | None = None
     mecanum: MecanumConfig | None = None
     differential: DifferentialConfig | None = None
-    raw: dict = field(default=None, repr=False, compare=False)
+    raw: dict | None = field(default=None, repr=False, compare=False)
 
     @property
     def base_axes(self) -> tuple:
@@ -257,7 +257,9 @@ class RobotConfig:
         """Every wheel-side joint name, in command order (steer then drive, or the wheels)."""
         if self.steerable is not None:
             return self.steerable.steer_joints + self.steerable.drive_joints
-        return (self.mecanum or self.differential).wheel_joints
+        wheels = self.mecanum or self.differential
+        assert wheels is not None       # one base geometry is always set (load_robot)
+        return wheels.wheel_joints
 
     @property
     def joint_velocity_limits(self) -> dict:
@@ -269,6 +271,7 @@ class RobotConfig:
             limits.update({n: s.drive_rate_limit for n in s.drive_joints})
         else:
             wheels = self.mecanum or self.differential
+            assert wheels is not None
             limits.update({n: wheels.wheel_rate_limit for n in wheels.wheel_joints})
         return limits
 

@@ -14,6 +14,7 @@ import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -89,9 +90,9 @@ class UrdfTree:
         if root.tag != 'robot':
             raise ConfigError(f'{self.path}: URDF unreadable: the root element is <{root.tag}>, not <robot>')
         self.name = root.get('name', self.path.stem)
-        self.links = {}
+        self.links: dict[str, ET.Element] = {}
         for link in root.findall('link'):
-            name = link.get('name')
+            name = cast(str, link.get('name'))      # None only for a nameless <link> (not a valid URDF)
             if name in self.links:
                 raise ConfigError(f'{self.path}: link {name!r} is defined twice')
             self.links[name] = link
@@ -127,13 +128,16 @@ class UrdfTree:
                 if limit.get('lower') is not None or limit.get('upper') is not None:
                     lower = float(limit.get('lower', 0.0))
                     upper = float(limit.get('upper', 0.0))
-                if limit.get('velocity') is not None:
-                    velocity = float(limit.get('velocity'))
+                velocity_text = limit.get('velocity')
+                if velocity_text is not None:
+                    velocity = float(velocity_text)
         except ValueError as exc:
             raise ConfigError(f'{where}: {exc}') from exc
         if jtype == 'continuous':
             lower, upper = -math.inf, math.inf
-        return UrdfJoint(name=name, type=jtype, parent=parent.get('link'), child=child.get('link'),
+        # None only for a <parent>/<child> without a link attribute (not a valid URDF)
+        parent_link, child_link = cast(str, parent.get('link')), cast(str, child.get('link'))
+        return UrdfJoint(name=name, type=jtype, parent=parent_link, child=child_link,
                          xyz=xyz, rpy=rpy, axis=axis, lower=lower, upper=upper, velocity=velocity,
                          mimic=mimic.get('joint') if mimic is not None else None,
                          mimic_multiplier=multiplier, mimic_offset=offset)
@@ -210,9 +214,10 @@ class UrdfTree:
             shape = geom.find('cylinder')
             if shape is None:
                 shape = geom.find('sphere')
-            if shape is not None and shape.get('radius') is not None:
+            radius = shape.get('radius') if shape is not None else None
+            if radius is not None:
                 try:
-                    return float(shape.get('radius'))
+                    return float(radius)
                 except ValueError:
                     return None
         return None

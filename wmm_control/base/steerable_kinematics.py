@@ -84,11 +84,11 @@ class SteerableGeometry:
         hx, hy = self.hips[:, 0], self.hips[:, 1]
         n = self.n_wheels
         out = np.empty(c.shape[:-1] + ((rolling + slip) * n, 3))
-        f = out[..., :n, :] if rolling else None
-        g = out[..., -n:, :] if slip else None
         if rolling:
+            f = out[..., :n, :]
             f[..., 0], f[..., 1], f[..., 2] = c, s, self.wheel_offset - hy * c + hx * s
         if slip:
+            g = out[..., -n:, :]
             g[..., 0], g[..., 1], g[..., 2] = -s, c, hx * c + hy * s
         return out
 

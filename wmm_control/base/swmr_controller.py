@@ -950,7 +950,7 @@ class SwmrController:
             return min(max(wanted, alo), ahi)
         # minimax: the convex max of the lines ±(s c_k − v_k)/r_k is least where a rising and a
         # falling one cross
-        lines = []
+        lines: list[tuple[float, float]] = []
         for c, v, r in zip(direction, twist, accel):
             lines += ((c / r, -v / r), (-c / r, v / r))
         best, best_ratio = 0.0, math.inf

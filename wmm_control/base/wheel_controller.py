@@ -129,7 +129,7 @@ class WheelOutput:
     velocity_scale: float
     accel_scale: float
     status: str
-    dropped: np.ndarray = None
+    dropped: np.ndarray | None = None
 
 
 class WheelController:

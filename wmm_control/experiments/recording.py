@@ -12,12 +12,14 @@ rosbags' ROS 2 Jazzy type store; a topic whose type it lacks is left out and nam
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
+from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -54,9 +56,9 @@ class BagRecorder(Node):
         if self.path.exists():
             raise ConfigError(f'recording {self.path}: it exists already')
         self._typestore = get_typestore(Stores.ROS2_JAZZY)
-        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self._writer: Writer | None = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
-        self._connections = {}
+        self._connections: dict[str, Connection] = {}
         #: Messages written, by topic.
         self.counts: dict[str, int] = {}
         #: Topics left out, with the reason.
@@ -77,14 +79,15 @@ class BagRecorder(Node):
                 continue
             offered = publishers[0].qos_profile
             qos = QoSProfile(depth=100, reliability=offered.reliability, durability=offered.durability)
+            assert self._writer is not None, 'subscribe_all() after close()'
             self._connections[topic] = self._writer.add_connection(topic, type_name, typestore=self._typestore)
             self.counts[topic] = 0
-            self.create_subscription(_type_class(type_name), topic, lambda data, t=topic: self._write(t, data), qos,
-                                     raw=True)
+            self.create_subscription(_type_class(type_name), topic, partial(self._write, topic), qos, raw=True)
             added.append(topic)
         return added
 
     def _write(self, topic: str, data: bytes) -> None:
+        assert self._writer is not None, 'a message after close()'
         self._writer.write(self._connections[topic], self.get_clock().now().nanoseconds, data)
         self.counts[topic] += 1
 

@@ -110,9 +110,9 @@ class Scenario:
     duration: float
     goals: tuple
     path: Path
-    sim: dict = None
+    sim: dict | None = None
     runs: tuple = DEFAULT_RUNS
-    trajectory: dict = None
+    trajectory: dict | None = None
     #: the obstacle file ('' for none) and its obstacles
     obstacles_file: str = ''
     obstacles: tuple = ()

@@ -94,11 +94,11 @@ class Param:
 
     name: str
     description: str
-    lo: float = None
-    hi: float = None
-    choices: tuple = None
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple | None = None
     read_only: bool = False
-    size: tuple = None
+    size: tuple | None = None
     default_from: object = None
 
 
@@ -540,7 +540,7 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
     return 0
 
 
-_EXIT_GUARD = []
+_EXIT_GUARD: list[bool] = []
 
 
 def _ignore_stop_signals_at_exit():

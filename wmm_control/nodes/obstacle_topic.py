@@ -41,6 +41,7 @@ def obstacle_from_marker(marker, frame: str) -> Obstacle:
     if marker.header.frame_id != frame:
         raise ConfigError(f'marker {name}: frame {marker.header.frame_id!r}, expected {frame!r}')
     s, pos, q = marker.scale, marker.pose.position, marker.pose.orientation
+    size: tuple[float, ...]
     if marker.type == Marker.CUBE:
         shape, size = 'box', (s.x, s.y, s.z)
     elif marker.type == Marker.SPHERE:

@@ -35,6 +35,7 @@ import io
 import math
 import threading
 from types import SimpleNamespace
+from typing import cast
 
 import numpy as np
 import viser
@@ -113,7 +114,7 @@ class ViewerNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('wmm_viewer', **kwargs)
         guard_clock(self)
-        self.server = None
+        self.server: viser.ViserServer | None = None
         p = self.p = declare_parameters(self, 'wmm_viewer.yaml', PARAMS, check=_check,
                                         on_change={'drag_publish_period': self._set_drag_period,
                                                    'ground_truth_timeout': self._set_ground_truth_timeout})
@@ -128,19 +129,20 @@ class ViewerNode(Node):
         self.board = StatusBoard()
         self.fresh = {k: Freshness(p.ground_truth_timeout) for k in ('ground_truth', 'odom')}
         self.joint_fresh = Freshness(math.inf)
-        self._base = {'ground_truth': None, 'odom': None}     # (position, wxyz) per source
-        self._base_twist = None                                # (vx, vy, ω) of /base/reference
+        # (position, wxyz) per source
+        self._base: dict[str, tuple[np.ndarray, np.ndarray] | None] = {'ground_truth': None, 'odom': None}
+        self._base_twist: np.ndarray | None = None             # (vx, vy, ω) of /base/reference
         self._base_twist_fresh = Freshness(1.0)
-        self._ee = None                                        # (position, wxyz) last drawn
-        self._goal = None                                      # (position, wxyz) in force
+        self._ee: tuple[np.ndarray, np.ndarray] | None = None      # (position, wxyz) last drawn
+        self._goal: tuple[np.ndarray, np.ndarray] | None = None    # (position, wxyz) in force
         self._handle_placed = False
         self._hold = threading.Event()
         self._dirty = True
         self._status_due = 0.0
         self.counters = {'joint_states_rejected': 0, 'unknown_joints': 0, 'goals_sent': 0}
         self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
-        self.obstacle_handles = []
-        self._start_server()
+        self.obstacle_handles: list[viser.SceneNodeHandle] = []
+        server = self._start_server()
         self._draw_obstacles()
         self.pub_goal = self.create_publisher(PoseStamped, 'goal_pose', COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
@@ -153,12 +155,12 @@ class ViewerNode(Node):
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, DIAGNOSTICS_QOS)
         self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
         self.timer = self.create_timer(p.update_period, self._tick, clock=self._steady)
-        self.url = f'http://{p.host}:{self.server.get_port()}'
+        self.url = f'http://{p.host}:{server.get_port()}'
         self.get_logger().info(f'viewer of robot {self.robot.name} at {self.url} ({len(self.scene.shapes)} shapes '
                                f'from {self.robot.urdf_path.name}); drag the goal handle to publish /goal_pose')
 
     # ------------------------------------------------------------------ the browser scene
-    def _start_server(self) -> None:
+    def _start_server(self) -> viser.ViserServer:
         p = self.p
         try:
             with contextlib.redirect_stdout(io.StringIO()):     # viser's banner: the node logs the URL
@@ -199,12 +201,15 @@ class ViewerNode(Node):
             self.inputs_text = server.gui.add_markdown('*Waiting for /joint_states.*')
         with server.gui.add_folder('Diagnostics'):
             self.status_text = server.gui.add_markdown(self.board.markdown(0.0))
+        return server
 
     def _add_shape(self, name: str, shape: Shape) -> viser.SceneNodeHandle:
+        assert self.server is not None         # started in __init__, None only once destroyed
         scene = self.server.scene
         opacity = None if shape.opacity >= 1.0 else shape.opacity
-        if shape.kind == 'box':
-            return scene.add_box(name, color=shape.color, dimensions=shape.size, opacity=opacity)
+        if shape.kind == 'box':         # size (x, y, z)
+            return scene.add_box(name, color=shape.color, dimensions=cast(tuple[float, float, float], shape.size),
+                                 opacity=opacity)
         if shape.kind == 'cylinder':
             return scene.add_cylinder(name, radius=shape.size[0], height=shape.size[1], color=shape.color,
                                       opacity=opacity)
@@ -376,7 +381,9 @@ class ViewerNode(Node):
         source = self.base_source()
         if source == 'none':
             return np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
-        return self._base[source]
+        pose = self._base[source]
+        assert pose is not None                 # base_source() names a source with a pose
+        return pose
 
     def _draw_robot(self) -> None:
         base_pos, base_quat = self._base_pose()
@@ -384,6 +391,7 @@ class ViewerNode(Node):
         self._ee = (poses.ee_position, poses.ee_wxyz)
         ee_moved = self.ee_trail.add(poses.ee_position)
         base_moved = self.base_trail.add((base_pos[0], base_pos[1], self.robot.ground_z + 0.005))
+        assert self.server is not None
         with self.server.atomic():
             for handle, position, wxyz in zip(self.shape_handles, poses.positions, poses.wxyz):
                 handle.position, handle.wxyz = position, wxyz

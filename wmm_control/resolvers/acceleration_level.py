@@ -30,6 +30,7 @@ import math
 import time
 from abc import abstractmethod
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -81,7 +82,7 @@ class AccelerationParams(SafetyParams):
     setpoint_angular_accel: float = 0.3
     rcond: float = 1e-6
 
-    _allow_zero = ('gamma1', 'gamma2')
+    _allow_zero: ClassVar[tuple[str, ...]] = ('gamma1', 'gamma2')
 
     def __post_init__(self):
         super().__post_init__()

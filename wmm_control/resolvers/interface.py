@@ -65,8 +65,8 @@ class RobotState:
     base_twist: np.ndarray
     q_arm: np.ndarray
     dq_arm: np.ndarray
-    ee_position: np.ndarray = None
-    ee_rotation: np.ndarray = None
+    ee_position: np.ndarray | None = None
+    ee_rotation: np.ndarray | None = None
 
     def __post_init__(self):
         object.__setattr__(self, 'base_pose', as_finite_vector(self.base_pose, 3, 'base_pose'))

@@ -26,6 +26,7 @@ import math
 import time
 from abc import abstractmethod
 from dataclasses import dataclass, fields, replace
+from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -84,7 +85,7 @@ class PoseServoParams(SafetyParams):
     arm_takeover: bool = False
 
     #: numeric fields that may be zero (the others must be > 0)
-    _allow_zero = ('max_damping',)
+    _allow_zero: ClassVar[tuple[str, ...]] = ('max_damping',)
 
     def __post_init__(self):
         super().__post_init__()

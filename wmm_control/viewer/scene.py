@@ -102,7 +102,8 @@ def _wxyz(rotation: np.ndarray) -> np.ndarray:
 
 def _rgb(color) -> tuple[tuple[int, int, int], float]:
     rgba = np.clip(np.nan_to_num(np.asarray(color, dtype=float), nan=1.0), 0.0, 1.0)
-    return tuple(int(round(255 * c)) for c in rgba[:3]), float(rgba[3])
+    red, green, blue = (int(round(255 * c)) for c in rgba[:3])
+    return (red, green, blue), float(rgba[3])
 
 
 def _mesh_arrays(geometry) -> tuple[np.ndarray, np.ndarray]:
