@@ -2,7 +2,7 @@
 # Set up a local virtual environment (.venv) and run one job in it.
 #
 #   bash scripts/dev.sh run     # set-up, then the main job
-#   bash scripts/dev.sh test    # set-up, then the lint check and the test suite
+#   bash scripts/dev.sh test    # set-up, then the lint and type checks and the test suite
 #   bash scripts/dev.sh bench   # set-up, then the benchmarks (they print figures)
 #
 # Needs only Python >= 3.11 with venv (Debian/Ubuntu: python3 python3-venv). PYTHON picks
@@ -45,6 +45,7 @@ case "$job" in
   run)   exec "$VENV/bin/python" -m wmm_control.cli.experiment "$@" ;;
   test)
     "$VENV/bin/ruff" check .            # lint (ruff.toml)
+    "$VENV/bin/mypy" wmm_control sim_bridge   # types (setup.cfg [mypy])
     exec "$VENV/bin/python" -m pytest test -q "$@" ;;
   bench)
     # pink (a QP-based IK) is a comparison point of bench_swmr.py only, not a dependency.
