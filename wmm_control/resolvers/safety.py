@@ -233,21 +233,23 @@ class SafetyStage:
         label = '/'.join(names) if names else ''
         if not pairs:
             return SafetyResult(command, clearance, label, 0, False)
-        base_rows = np.array([pair.base_jacobian for pair in pairs])
-        if world_rates:                       # (vx, vy) = R(θ)ᵀ (ẋ, ẏ)
-            c, s = math.cos(base_pose[2]), math.sin(base_pose[2])
-            base_rows = base_rows @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        rows = np.hstack((base_rows[:, axes], [pair.rate_jacobian for pair in pairs]))
-        allowed = self._allowed(pairs, rows, axes)
+        base_full = np.array([pair.base_jacobian for pair in pairs])      # over (vx, vy, ω), base frame
+        moved = base_full.any(axis=1)                                      # pairs with an obstacle
+        # the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for world-frame rates
+        to_base = _world_to_base(base_pose[2]) if world_rates else np.eye(3)
+        rows = np.hstack(((base_full @ to_base)[:, axes], [pair.rate_jacobian for pair in pairs]))
+        allowed = self._allowed(pairs, rows, axes, moved)
         lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
         bound = -allowed
         overtaking = False
         if base_twist is not None:
             bound = bound - np.array([pair.base_jacobian @ np.asarray(base_twist, dtype=float) for pair in pairs])
         elif axes and base_velocity is not None and self.base_lag > 0.0:
-            command, lower, upper, overtaking = self._brake_on_path(pairs, rows, bound, axes, command, base_velocity,
-                                                                   base_pose, world_rates, lower, upper)
-            rows, bound = self._along_path(pairs, rows, bound, axes, base_velocity, base_pose, world_rates)
+            v0 = np.asarray(base_velocity, dtype=float)
+            own = base_full @ v0                                           # the base's approach rates
+            command, lower, upper, overtaking = self._brake_on_path(pairs, rows, bound, axes, command, v0, own,
+                                                                   moved, to_base, lower, upper)
+            rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
         violated = rows @ command < bound - TOLERANCE
         if not violated.any():
             return SafetyResult(command, clearance, label, len(pairs), overtaking)
@@ -268,34 +270,27 @@ class SafetyStage:
             use = use | broken
         return SafetyResult(solved, clearance, label, len(pairs), True)
 
-    def _along_path(self, pairs, rows, bound, axes, base_velocity, base_pose, world_rates):
-        """``rows`` and ``bound`` with, for each pair the base moves, the same row on the part of the
-        reference along the base's measured twist ``v₀``: a steerable base first moves along its
-        current path, at that part, while its wheels turn towards the reference's (a sideways
-        reference drives it on along its wheels' heading for a while, into what lies ahead)."""
-        v0 = np.asarray(base_velocity, dtype=float)
+    def _along_path(self, rows, bound, axes, v0, own, moved, to_base):
+        """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the same row on the
+        part of the reference along the base's measured twist ``v0`` (``own`` = j_b v₀): a steerable
+        base first moves along its current path, at that part, while its wheels turn towards the
+        reference's (a sideways reference drives it on along its wheels' heading for a while, into
+        what lies ahead)."""
         norm = float(v0 @ v0)
-        moved = [i for i, pair in enumerate(pairs) if pair.base_jacobian.any()]
-        if norm < PATH_SPEED ** 2 or not moved:
+        if norm < PATH_SPEED ** 2 or not moved.any():
             return rows, bound
-        along = np.array([pairs[i].base_jacobian @ v0 for i in moved])[:, None] * v0 / norm   # j_b v₀ v₀ᵀ / |v₀|²
-        if world_rates:                       # (vx, vy) = R(θ)ᵀ (ẋ, ẏ)
-            c, s = math.cos(base_pose[2]), math.sin(base_pose[2])
-            along = along @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        along = (own[moved, None] * v0 / norm) @ to_base                  # j_b v₀ v₀ᵀ / |v₀|²
         extra = np.hstack((along[:, axes], rows[moved, len(axes):]))
         return np.vstack((rows, extra)), np.concatenate((bound, bound[moved]))
 
-    def _brake_on_path(self, pairs, rows, bound, axes, command, base_velocity, base_pose, world_rates, lower, upper):
+    def _brake_on_path(self, pairs, rows, bound, axes, command, v0, own, moved, to_base, lower, upper):
         """A lagging base that already approaches a pair faster than allowed (its measured twist
-        ``v₀``, with the arm's share of ``command``) is sent ``s v₀`` instead of its reference:
-        the largest ``s`` in [−1, 1] that the pairs allow. That twist lies on the base's own path
-        (a steerable base keeps its ICR and only slows its wheels: no re-steering, whose sweep
-        would carry it on towards the obstacle), and the base entries are held there for the
-        arm's QP. Returns ``(command, lower, upper, overtaking)``."""
+        ``v0``, approach rates ``own`` = j_b v₀, with the arm's share of ``command``) is sent
+        ``s v₀`` instead of its reference: the largest ``s`` in [−1, 1] that the pairs allow. That
+        twist lies on the base's own path (a steerable base keeps its ICR and only slows its
+        wheels: no re-steering, whose sweep would carry it on towards the obstacle), and the base
+        entries are held there for the arm's QP. Returns ``(command, lower, upper, overtaking)``."""
         nb = len(axes)
-        v0 = np.asarray(base_velocity, dtype=float)
-        moved = np.array([pair.base_jacobian.any() for pair in pairs])
-        own = np.array([pair.base_jacobian @ v0 for pair in pairs])         # the base's approach rate
         arm = rows[:, nb:] @ command[nb:]
         approaching = moved & (own < -TOLERANCE)
         if not (approaching & (own + arm < bound - TOLERANCE)).any():
@@ -308,20 +303,19 @@ class SafetyStage:
             room = max(pairs[i].distance - d_s, 1e-6)
             scale = min(scale, (bound[i] - arm[i]) / own[i], 1.0 + own[i] * self.base_lag / (2.0 * room))
         scale = max(scale, -1.0)
-        if world_rates:                       # (ẋ, ẏ, θ̇) = R(θ) (vx, vy), ω
-            c, s = math.cos(base_pose[2]), math.sin(base_pose[2])
-            v0 = np.array([c * v0[0] - s * v0[1], s * v0[0] + c * v0[1], v0[2]])
         command, lower, upper = command.copy(), lower.copy(), upper.copy()
-        # within the method's box: the reference changes no faster than its own limits allow
-        command[:nb] = lower[:nb] = upper[:nb] = np.clip(scale * v0[axes], lower[:nb], upper[:nb])
+        # the twist in the command's terms, v₀ᵀ R(θ)ᵀ = (R(θ) v₀)ᵀ (to_base is a rotation), within the
+        # method's box: the reference changes no faster than its own limits allow
+        target = (v0 @ to_base)[axes] * scale
+        command[:nb] = lower[:nb] = upper[:nb] = np.clip(target, lower[:nb], upper[:nb])
         return command, lower, upper, True
 
-    def _allowed(self, pairs, rows, axes) -> np.ndarray:
+    def _allowed(self, pairs, rows, axes, moved) -> np.ndarray:
         """Each pair's fastest allowed approach [m/s], braking no harder than the command's
         acceleration limits can slow that distance. The base's turn rate is left out: turning
         swings the near point aside for a moment, but does not stop a base that drives at an
         obstacle."""
-        lags = [self.base_lag if pair.base_jacobian.any() else 0.0 for pair in pairs]
+        lags = np.where(moved, self.base_lag, 0.0)
         if self._arm_acc is None:
             return np.array([self.allowed_approach(pair.distance, lag=lag) for pair, lag in zip(pairs, lags)])
         acc = np.concatenate((np.where(np.arange(3) == 2, 0.0, self._base_acc)[axes], self._arm_acc))
@@ -451,3 +445,9 @@ def base_lag(robot) -> float:
     if getattr(robot, 'steerable', None) is None:
         return 0.0
     return 1.0 / SwmrParams.from_robot_config(robot).kp
+
+
+def _world_to_base(theta: float) -> np.ndarray:
+    """R(θ)ᵀ on (ẋ, ẏ, θ̇): the world-frame rates of a base at heading ``theta`` as (vx, vy, ω)."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
