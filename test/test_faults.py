@@ -422,7 +422,9 @@ def test_a_killed_resolver_stops_arm_and_base_by_their_timeouts(run):
     stop = next(i for i, (_, _, v) in enumerate(answers) if not np.any(v))
     braking = float(np.max(np.max(np.abs([v for _, _, v in answers[:stop]]), axis=0) / BASE_ACCEL_LIMIT))
     # (+2: the reference's delivery and the period in which its age is noticed; +1: the zero answer)
-    assert stop <= np.ceil(SWMR['reference_timeout'] / PERIOD) + 2 + np.ceil(braking / PERIOD - 1e-9) + 1, stop
+    bound = np.ceil(SWMR['reference_timeout'] / PERIOD) + 2 + np.ceil(braking / PERIOD - 1e-9) + 1
+    assert stop <= bound, (stop, bound, killed, [(round(s, 3), round(t, 3), np.round(v, 3).tolist())
+                                                 for s, t, v in answers[:stop + 1]])
     # The simulator applies the zero answer: at rest within a period or two of receiving it.
     periods, _ = _moving_periods(rec, 'ground_truth/odom', answers[stop][1])
     assert periods <= 3, periods

@@ -859,19 +859,23 @@ class Cell:
         return self.outcome not in FAILURES
 
 
-def _run_steps(rig, kind_case, overrides=()):
-    """Warm-up, injection, recovery; returns (outputs of the injection, alive)."""
+def _run_steps(rig, kind_case, overrides=(), wait=CYCLE_WAIT):
+    """Warm-up, injection, recovery; returns (outputs of the injection, alive).
+
+    ``wait`` is how long each cycle's answer is awaited: short where the input may be rejected
+    (no answer comes), long where two runs are compared cycle by cycle, so that on a loaded
+    machine a late answer is not taken for none and the runs stay in step."""
     rig.start(overrides)
     rig.logs.clear()
     rig.bad.clear()
     start = len(rig.records)
     for _ in range(REPEATS):
-        rig.step(kind_case)
+        rig.step(kind_case, wait=wait)
     injected = len(rig.records)
     if isinstance(rig, ResolverRig):
         rig.feasible_twist = None
     for _ in range(RECOVERY):
-        rig.step()
+        rig.step(wait=wait)
     alive = rig.step(wait=ALIVE_WAIT)
     return rig.records[start:injected], alive
 
@@ -935,7 +939,8 @@ def run_cell(rig_factory, kind):
         if case is None:
             return Cell('n/a')
         expected, what, mutate = case
-        result, failed = _harm(rig, lambda: _run_steps(rig, mutate, kind.start), 'the bad input')
+        wait = ALIVE_WAIT if expected == 'by name' else CYCLE_WAIT
+        result, failed = _harm(rig, lambda: _run_steps(rig, mutate, kind.start, wait), 'the bad input')
         if failed:
             return failed
         outputs, _ = result
@@ -943,7 +948,7 @@ def run_cell(rig_factory, kind):
         if expected == 'by name':
             twin = rig_factory()
             try:
-                reference, _ = _run_steps(twin, None, kind.start)
+                reference, _ = _run_steps(twin, None, kind.start, wait)
             finally:
                 twin.close()
             same = len(reference) == len(outputs) and all(
