@@ -65,7 +65,7 @@ from visualization_msgs.msg import MarkerArray
 
 from sim_bridge.slip import VARIANCE_FLOOR, OdometryCovariance, SlipParams
 from sim_bridge.world import BASE_MODES, SimWorld
-from wmm_control.kinematics.orientation import quaternion_from_yaw
+from wmm_control.nodes.conversions import set_planar_pose, set_planar_twist, set_pose
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet, describe
 from wmm_control.nodes.robot_frames import RobotFrames, valid_frame_prefix
 from wmm_control.robot_config import load_robot
@@ -330,9 +330,7 @@ class SimNode(Node):
         ee = PoseStamped()
         ee.header.stamp = stamp
         ee.header.frame_id = 'world'
-        ee.pose.position.x, ee.pose.position.y, ee.pose.position.z = (float(v) for v in ee_pos)
-        (ee.pose.orientation.x, ee.pose.orientation.y, ee.pose.orientation.z,
-         ee.pose.orientation.w) = (float(v) for v in ee_quat)
+        set_pose(ee.pose, ee_pos, ee_quat)
         self.pub_ee.publish(ee)
         odom_pose, true_pose = self.world.odom_pose(), self.world.base_pose()
         self.pub_odom.publish(_odometry(stamp, self._odom_frame, self._base_frame, odom_pose, self.world.odom_twist(),
@@ -381,11 +379,8 @@ def _odometry(stamp, frame, child, pose, twist, pose_covariance=None, twist_vari
     msg.header.stamp = stamp
     msg.header.frame_id = frame
     msg.child_frame_id = child
-    x, y, th = (float(v) for v in pose)
-    msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
-    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = (float(v) for v in quaternion_from_yaw(th)[2:])
-    vx, vy, w = (float(v) for v in twist)
-    msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z = vx, vy, w
+    set_planar_pose(msg.pose.pose, pose)
+    set_planar_twist(msg.twist.twist, twist)
     if pose_covariance is not None:
         msg.pose.covariance = _planar_covariance(pose_covariance)
         msg.twist.covariance = _planar_covariance(np.diag(twist_variance))

@@ -80,12 +80,13 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+import pinocchio as pin
 import pybullet as p
 
 from wmm_control.base.wheel_controller import wheel_kinematics
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.errors import ConfigError
-from wmm_control.kinematics.orientation import quaternion_from_yaw, quaternion_multiply, yaw_from_quaternion
+from wmm_control.kinematics.orientation import quaternion_from_yaw, yaw_from_quaternion
 from wmm_control.robot_config import RobotConfig, load_robot
 
 from sim_bridge.client import OwnedClient
@@ -314,7 +315,7 @@ class SimWorld(OwnedClient):
 
         # base_link <-> PyBullet base (inertial/COM) frame.
         dyn = p.getDynamicsInfo(body, -1, physicsClientId=cid)
-        self._com_local = (tuple(dyn[3]), tuple(dyn[4]))
+        self._com_local = pin.XYZQUATToSE3(np.array([*dyn[3], *dyn[4]]))
         self._com_identity = (max(abs(v) for v in dyn[3]) < 1e-12
                               and abs(abs(dyn[4][3]) - 1.0) < 1e-12)
         self._com_inv = p.invertTransform(dyn[3], dyn[4])
@@ -395,13 +396,14 @@ class SimWorld(OwnedClient):
 
     # ------------------------------------------------------------------ placing / reading
     def _com_pose(self, pose):
+        """(position, quaternion) in the world of PyBullet's base frame (the COM's) at the planar base pose."""
         x, y, th = pose
         qz = quaternion_from_yaw(th)
         if self._com_identity:
-            return (x, y, 0.0), qz
-        (lx, ly, lz), ql = self._com_local
-        c, s = math.cos(th), math.sin(th)
-        return (x + c * lx - s * ly, y + s * lx + c * ly, lz), quaternion_multiply(qz, ql)
+            return (x, y, 0.0), qz.tolist()
+        # The base pose, then the COM in it (p.multiplyTransforms is the same in single precision).
+        com = pin.SE3ToXYZQUAT(pin.XYZQUATToSE3(np.array([x, y, 0.0, *qz])) * self._com_local)
+        return com[:3].tolist(), com[3:].tolist()
 
     def _place(self):
         """Write the kinematic state (base pose, joint positions and rates) into PyBullet."""

@@ -1,10 +1,12 @@
-"""Input validation helpers shared by the core (shape and finiteness checks)."""
+"""Input validation helpers shared by the core (shape and finiteness checks, the age of an input)."""
+
+import math
 
 import numpy as np
 
 from wmm_control.errors import NonFiniteError, ShapeError
 
-__all__ = ['as_vector', 'as_finite_vector']
+__all__ = ['as_vector', 'as_finite_vector', 'Freshness']
 
 
 def as_vector(value, size, name):
@@ -36,3 +38,30 @@ def as_finite_vector(value, size, name):
         raise NonFiniteError(f'{name}: non-finite entries at indices {bad}: {arr.tolist()}')
     return arr
 
+
+class Freshness:
+    """Age of the last received message, judged by the receiver's clock at receipt.
+
+    A message's own header stamp is never used: a sender with a skewed or paused clock
+    cannot make stale data look fresh.
+    """
+
+    def __init__(self, timeout):
+        self.timeout = float(timeout)
+        self._last = None
+
+    def mark(self, now):
+        """Record a receipt at time ``now`` [s]."""
+        self._last = now
+
+    def reset(self):
+        self._last = None
+
+    def age(self, now):
+        """Seconds since the last receipt; infinity before the first one."""
+        return math.inf if self._last is None else now - self._last
+
+    def fresh(self, now):
+        """True when a message arrived within the timeout (and the clock did not jump back)."""
+        age = self.age(now)
+        return 0.0 <= age <= self.timeout

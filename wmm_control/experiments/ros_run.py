@@ -25,7 +25,7 @@ from sensor_msgs.msg import JointState
 from wmm_control.errors import ConfigError
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.scenario import resolver_parameters
-from wmm_control.kinematics.orientation import matrix_from_quaternion, yaw_from_quaternion
+from wmm_control.nodes.conversions import odometry_pose, planar_twist, pose_rotation
 from wmm_control.resolvers import ResolverDiagnostics
 
 __all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_WAITS']
@@ -82,13 +82,10 @@ class Recorder(Node):
         return self._rows.setdefault(_key(msg), {'t': _stamp(msg)})
 
     def _on_ee(self, msg):
-        p, q = msg.pose.position, msg.pose.orientation
-        self._row(msg)['ee'] = (np.array([p.x, p.y, p.z]),
-                                matrix_from_quaternion((q.x, q.y, q.z, q.w)))
+        self._row(msg)['ee'] = pose_rotation(msg.pose)
 
     def _on_base(self, msg):
-        p, q = msg.pose.pose.position, msg.pose.pose.orientation
-        self._row(msg)['base'] = np.array([p.x, p.y, yaw_from_quaternion((q.x, q.y, q.z, q.w))])
+        self._row(msg)['base'] = odometry_pose(msg)[0]
 
     def _on_joints(self, msg):
         if self._index is None:
@@ -100,7 +97,7 @@ class Recorder(Node):
         self.last_t = max(self.last_t, _stamp(msg))
 
     def _on_feasible(self, msg):
-        self._row(msg)['feasible'] = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
+        self._row(msg)['feasible'] = planar_twist(msg.twist)
 
     def _on_diag(self, msg):
         for status in msg.status:

@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from wmm_control.errors import ConfigError, NonFiniteError
-from wmm_control.kinematics.orientation import quaternion_from_matrix, quaternion_multiply
+from wmm_control.kinematics.orientation import (
+    quaternion_from_axis_angle, quaternion_from_matrix, quaternion_from_yaw, quaternion_multiply)
 from wmm_control.urdf import UrdfJoint, UrdfTree, rotation_rpy
 
 __all__ = ['FrameTransform', 'JointTransforms', 'planar_transform', 'world_to_odom', 'quaternion_from_matrix',
@@ -67,7 +68,7 @@ def planar_transform(parent: str, child: str, pose) -> FrameTransform:
     x, y, th = (float(v) for v in pose)
     if not all(math.isfinite(v) for v in (x, y, th)):
         raise NonFiniteError(f'planar pose {parent}→{child} is not finite: {(x, y, th)}')
-    return FrameTransform(parent, child, np.array([x, y, 0.0]), np.array([0.0, 0.0, math.sin(th / 2), math.cos(th / 2)]))
+    return FrameTransform(parent, child, np.array([x, y, 0.0]), quaternion_from_yaw(th))
 
 
 def world_to_odom(world: str, odom: str, true_pose, odom_pose) -> FrameTransform:
@@ -147,9 +148,8 @@ class JointTransforms:
             if joint.type == 'prismatic':
                 out.append(FrameTransform(joint.parent, joint.child, joint.xyz + rot @ (axis * q), quat))
             else:
-                motion = np.concatenate((axis * math.sin(q / 2), [math.cos(q / 2)]))
                 out.append(FrameTransform(joint.parent, joint.child, joint.xyz.copy(),
-                                          quaternion_multiply(quat, motion)))
+                                          quaternion_multiply(quat, quaternion_from_axis_angle(axis, q))))
         return out
 
     def link_poses(self, positions: Mapping[str, float]) -> dict[str, FrameTransform]:

@@ -15,8 +15,11 @@ from wmm_control.checks import as_finite_vector
 __all__ = [
     'wrap_angle', 'rpy_from_matrix', 'matrix_from_rpy', 'omega_rpy', 'rpy_rate_map',
     'pose_error_rpy', 'pose_error_log', 'quaternion_from_matrix', 'matrix_from_quaternion',
-    'quaternion_multiply', 'quaternion_from_yaw', 'yaw_from_quaternion',
+    'quaternion_multiply', 'quaternion_from_axis_angle', 'quaternion_from_yaw', 'yaw_from_quaternion',
+    'unit_quaternion',
 ]
+
+_Z = np.array([0.0, 0.0, 1.0])
 
 
 def wrap_angle(angle):
@@ -95,49 +98,50 @@ def pose_error_log(desired_pos, desired_rot, current_pos, current_rot):
     return err
 
 
+def _pin_quaternion(quat) -> pin.Quaternion:
+    """pinocchio's quaternion of ``quat`` (x, y, z, w)."""
+    x, y, z, w = (float(v) for v in quat)
+    return pin.Quaternion(w, x, y, z)
+
+
+def unit_quaternion(quat, min_norm=1e-6) -> tuple[np.ndarray | None, float]:
+    """(``quat`` (x, y, z, w, finite) scaled to unit norm, or None when its norm is below
+    ``min_norm``; its norm). The norm does not overflow for entries near the largest double
+    (``np.hypot``)."""
+    q = np.asarray(quat, dtype=float)
+    norm = float(np.hypot.reduce(q))
+    return (None if norm < min_norm else q / norm), norm
+
+
 def quaternion_from_matrix(rotation: np.ndarray) -> np.ndarray:
-    """Unit quaternion (x, y, z, w), w ≥ 0, of a 3×3 rotation matrix (Shepperd's method)."""
-    m = np.asarray(rotation, dtype=float)
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    if trace > 0.0:
-        s = 2.0 * math.sqrt(1.0 + trace)
-        q = np.array([(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s])
-    else:
-        i = int(np.argmax(np.diag(m)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(max(1.0 + m[i, i] - m[j, j] - m[k, k], 1e-300))
-        q = np.zeros(4)
-        q[i] = 0.25 * s
-        q[j] = (m[j, i] + m[i, j]) / s
-        q[k] = (m[k, i] + m[i, k]) / s
-        q[3] = (m[k, j] - m[j, k]) / s
-    q /= np.linalg.norm(q)
+    """Unit quaternion (x, y, z, w), w ≥ 0, of a 3×3 rotation matrix (by pinocchio)."""
+    q = np.array(pin.Quaternion(np.asarray(rotation, dtype=float)).normalized().coeffs())
     return -q if q[3] < 0.0 else q
 
 
 def matrix_from_quaternion(quat) -> np.ndarray:
     """Rotation matrix of a quaternion (x, y, z, w), normalised first. Shape (3, 3)."""
-    x, y, z, w = (float(v) for v in quat)
-    return pin.Quaternion(w, x, y, z).normalized().toRotationMatrix()
+    return _pin_quaternion(quat).normalized().toRotationMatrix()
 
 
 def quaternion_multiply(a, b) -> np.ndarray:
     """The product ``a b`` of quaternions (x, y, z, w): the rotation ``b`` then ``a``. Shape (4,)."""
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return np.array([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz])
+    return np.array((_pin_quaternion(a) * _pin_quaternion(b)).coeffs())
+
+
+def quaternion_from_axis_angle(axis, angle: float) -> np.ndarray:
+    """The quaternion (x, y, z, w) of a rotation by ``angle`` [rad] about the unit ``axis``. Shape (4,)."""
+    return np.array(pin.Quaternion(pin.AngleAxis(float(angle), np.asarray(axis, dtype=float))).coeffs())
 
 
 def quaternion_from_yaw(yaw: float) -> np.ndarray:
     """The quaternion (x, y, z, w) of a rotation by ``yaw`` [rad] about z. Shape (4,)."""
-    return np.array([0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)])
+    return quaternion_from_axis_angle(_Z, yaw)
 
 
 def yaw_from_quaternion(quat) -> float:
-    """The heading [rad] of a quaternion (x, y, z, w): the yaw of its ZYX Euler angles (for a
-    planar pose, its rotation about z)."""
-    x, y, z, w = (float(v) for v in quat)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    """The heading [rad] of a quaternion (x, y, z, w), normalised first: the direction of its
+    rotated x axis in the xy plane, the yaw of its ZYX Euler angles (for a planar pose, its
+    rotation about z)."""
+    rot = matrix_from_quaternion(quat)
+    return math.atan2(rot[1, 0], rot[0, 0])

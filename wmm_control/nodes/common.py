@@ -24,9 +24,7 @@ from types import SimpleNamespace
 import numpy as np
 import rclpy
 import yaml
-from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import TwistStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -34,9 +32,10 @@ from rclpy.parameter import Parameter as RosParameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time_source import TimeSource
-from std_msgs.msg import Float64MultiArray
 
+from wmm_control.checks import Freshness
 from wmm_control.errors import ConfigError, WmmError
+from wmm_control.nodes.conversions import float_array, twist_stamped
 from wmm_control.paths import config_path
 from wmm_control.robot_config import load_robot, robot_names
 
@@ -340,13 +339,6 @@ def _watch(node, namespace, specs, on_change, check):
     node.add_post_set_parameters_callback(apply)
 
 
-def float_array(values):
-    """A ``std_msgs/Float64MultiArray`` holding ``values``."""
-    msg = Float64MultiArray()
-    msg.data = [float(v) for v in values]
-    return msg
-
-
 def parse_command(msg, size):
     """Validate a ``Float64MultiArray`` command.
 
@@ -364,34 +356,6 @@ def parse_command(msg, size):
 def seconds(clock):
     """The clock's current time in seconds (float)."""
     return clock.now().nanoseconds * 1e-9
-
-
-class Freshness:
-    """Age of the last received message, judged by the receiver's clock at receipt.
-
-    A message's own header stamp is never used: a sender with a skewed or paused clock
-    cannot make stale data look fresh.
-    """
-
-    def __init__(self, timeout):
-        self.timeout = float(timeout)
-        self._last = None
-
-    def mark(self, now):
-        """Record a receipt at time ``now`` [s]."""
-        self._last = now
-
-    def reset(self):
-        self._last = None
-
-    def age(self, now):
-        """Seconds since the last receipt; infinity before the first one."""
-        return math.inf if self._last is None else now - self._last
-
-    def fresh(self, now):
-        """True when a message arrived within the timeout (and the clock did not jump back)."""
-        age = self.age(now)
-        return 0.0 <= age <= self.timeout
 
 
 def diagnostic_status(name, hardware_id, level, message, values):
@@ -589,16 +553,6 @@ def parse_base_reference(msg, base_frame):
     if any(abs(v) > 1e-9 for v in other):
         warnings.append('linear.z, angular.x, angular.y are ignored (planar base)')
     return ref, '; '.join(warnings)
-
-
-def twist_stamped(stamp, frame, twist):
-    """A ``TwistStamped`` of the planar twist (vx, vy, ω); ``stamp`` a Time or ``(sec, nanosec)``."""
-    msg = TwistStamped()
-    msg.header.stamp = stamp if isinstance(stamp, Time) else Time(sec=stamp[0], nanosec=stamp[1])
-    msg.header.frame_id = frame
-    msg.twist.linear.x, msg.twist.linear.y = float(twist[0]), float(twist[1])
-    msg.twist.angular.z = float(twist[2])
-    return msg
 
 
 class JointSelector:

@@ -22,7 +22,6 @@ again, and one that jumps more than 10 s ahead skips to that time; both are logg
 
 import math
 
-import pinocchio as pin
 from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import PoseStamped, Transform, Twist
 from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
@@ -33,7 +32,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 from wmm_control.experiments.scenario import load_scenario
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.orientation import quaternion_from_matrix
+from wmm_control.kinematics.orientation import matrix_from_rpy, quaternion_from_matrix
+from wmm_control.nodes.conversions import set_pose, set_twist
 from wmm_control.nodes.common import (
     CLOCK_QOS, COMMAND_QOS, Param, declare_parameters, guard_clock, run_node)
 
@@ -51,7 +51,7 @@ PARAMS = (
 
 def _twist(values):
     msg = Twist()
-    msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.x, msg.angular.y, msg.angular.z = (float(v) for v in values)
+    set_twist(msg, values)
     return msg
 
 
@@ -63,8 +63,7 @@ def reference_message(target, frame, stamp, t):
     msg.joint_names = ['end_effector']
     point = MultiDOFJointTrajectoryPoint()
     tf = Transform()
-    tf.translation.x, tf.translation.y, tf.translation.z = (float(v) for v in target.position)
-    tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w = (float(v) for v in quaternion_from_matrix(target.rotation))
+    set_pose(tf, target.position, quaternion_from_matrix(target.rotation))
     point.transforms = [tf]
     point.velocities = [_twist(target.velocity)]
     point.accelerations = [_twist(target.acceleration)]
@@ -79,10 +78,8 @@ def goal_message(goal, frame, stamp):
     msg = PoseStamped()
     msg.header.stamp = stamp
     msg.header.frame_id = frame
-    x, y, z, roll, pitch, yaw = (float(v) for v in goal.pose)
-    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
-    (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
-     msg.pose.orientation.w) = (float(v) for v in quaternion_from_matrix(pin.rpy.rpyToMatrix(roll, pitch, yaw)))
+    pose = [float(v) for v in goal.pose]
+    set_pose(msg.pose, pose[:3], quaternion_from_matrix(matrix_from_rpy(pose[3:])))
     return msg
 
 

@@ -23,6 +23,7 @@ from geometry_msgs.msg import Point
 from visualization_msgs.msg import Marker, MarkerArray
 
 from wmm_control.kinematics.orientation import quaternion_from_matrix
+from wmm_control.nodes.conversions import set_pose
 
 __all__ = ['MarkerSet', 'MARKER_NAMESPACES']
 
@@ -70,9 +71,7 @@ class MarkerSet:
             marker.action = Marker.DELETE
             return marker
         position, rotation = pose
-        p, q = marker.pose.position, marker.pose.orientation
-        p.x, p.y, p.z = (float(v) for v in position)
-        q.x, q.y, q.z, q.w = (float(v) for v in quaternion_from_matrix(rotation))
+        set_pose(marker.pose, position, quaternion_from_matrix(rotation))
         marker.scale.x, marker.scale.y, marker.scale.z = 0.15, 0.015, 0.015
         return marker
 

@@ -23,6 +23,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_msgs.msg import String
 
 from wmm_control.kinematics.frames import FrameTransform, JointTransforms, planar_transform, world_to_odom
+from wmm_control.nodes.conversions import set_pose
 from wmm_control.robot_config import RobotConfig
 
 try:
@@ -57,9 +58,7 @@ def transform_stamped(stamp: Time, tf: FrameTransform, parent: str, child: str) 
     msg.header.stamp = stamp
     msg.header.frame_id = parent
     msg.child_frame_id = child
-    t, q = msg.transform.translation, msg.transform.rotation
-    t.x, t.y, t.z = (float(v) for v in tf.translation)
-    q.x, q.y, q.z, q.w = (float(v) for v in tf.quaternion)
+    set_pose(msg.transform, tf.translation, tf.quaternion)
     return msg
 
 

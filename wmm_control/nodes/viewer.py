@@ -54,6 +54,7 @@ from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS, Freshness, Param, declare_parameters, guard_clock, robot_param,
     run_node, seconds)
 from wmm_control.kinematics.orientation import quaternion_from_matrix, yaw_from_quaternion
+from wmm_control.nodes.conversions import planar_twist, pose_values, set_pose
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet
 from wmm_control.robot_config import load_robot
 from wmm_control.viewer.drag import GoalDrag
@@ -98,10 +99,9 @@ def _check(values: SimpleNamespace) -> str:
 
 def _pose_arrays(pose: Pose | Transform) -> tuple[np.ndarray, np.ndarray | None]:
     """(position, unit wxyz or None) of a ``geometry_msgs/Pose`` or ``Transform``."""
-    p = pose.position if hasattr(pose, 'position') else pose.translation
-    o = pose.orientation if hasattr(pose, 'orientation') else pose.rotation
-    pos = np.array([p.x, p.y, p.z], dtype=float)
-    quat = unit_wxyz(wxyz_from_xyzw((o.x, o.y, o.z, o.w)))
+    values = pose_values(pose)
+    pos = values[:3]
+    quat = unit_wxyz(wxyz_from_xyzw(values[3:]))
     if not np.all(np.isfinite(pos)):
         return pos, None
     return pos, quat
@@ -316,7 +316,7 @@ class ViewerNode(Node):
         self.reference_frame.visible = True
 
     def _on_base_reference(self, msg: TwistStamped) -> None:
-        twist = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
+        twist = planar_twist(msg.twist)
         if np.all(np.isfinite(twist)):
             self._base_twist = twist
             self._base_twist_fresh.mark(self._now())
@@ -349,9 +349,7 @@ class ViewerNode(Node):
         msg = PoseStamped()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = self.p.world_frame
-        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in pos)
-        o = msg.pose.orientation
-        o.x, o.y, o.z, o.w = (float(v) for v in xyzw_from_wxyz(quat))
+        set_pose(msg.pose, pos, xyzw_from_wxyz(quat))
         self.pub_goal.publish(msg)
         self.counters['goals_sent'] += 1
         self.get_logger().info(f'goal sent: ({pos[0]:.3f}, {pos[1]:.3f}, {pos[2]:.3f}) m, '

@@ -20,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from wmm_control.errors import ConfigError, NonFiniteError, UnknownFrameError
+from wmm_control.kinematics.orientation import matrix_from_quaternion, quaternion_from_matrix, unit_quaternion
 
 __all__ = ['Shape', 'RobotScene', 'ScenePoses', 'Trail', 'unit_wxyz', 'wxyz_from_xyzw', 'xyzw_from_wxyz']
 
@@ -79,10 +80,7 @@ def unit_wxyz(quat) -> np.ndarray | None:
     q = np.asarray(quat, dtype=float)
     if q.shape != (4,) or not np.all(np.isfinite(q)):
         return None
-    norm = float(np.hypot.reduce(q))
-    if not norm > 1e-9:
-        return None
-    return q / norm
+    return unit_quaternion(q, min_norm=1e-9)[0]
 
 
 def _se3(position, wxyz) -> pin.SE3:
@@ -91,13 +89,11 @@ def _se3(position, wxyz) -> pin.SE3:
     if quat is None or pos.shape != (3,) or not np.all(np.isfinite(pos)):
         raise NonFiniteError(f'not a pose: position {np.asarray(position).tolist()}, '
                              f'quaternion (w, x, y, z) {np.asarray(wxyz).tolist()}')
-    w, x, y, z = quat
-    return pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), pos)
+    return pin.SE3(matrix_from_quaternion(xyzw_from_wxyz(quat)), pos)
 
 
 def _wxyz(rotation: np.ndarray) -> np.ndarray:
-    quat = pin.Quaternion(rotation)
-    return np.array([quat.w, quat.x, quat.y, quat.z])
+    return wxyz_from_xyzw(quaternion_from_matrix(rotation))
 
 
 def _rgb(color) -> tuple[tuple[int, int, int], float]:

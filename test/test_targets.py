@@ -1,0 +1,203 @@
+"""TargetManager and CompensationExchange (ROS-free): what redundancy_resolver pursues, and the
+arm command's wait for the base's answer."""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from wmm_control.kinematics.obstacles import Obstacle
+from wmm_control.kinematics.workspace import Workspace
+from wmm_control.resolvers.exchange import CompensationExchange
+from wmm_control.resolvers.targets import TargetManager
+
+IDENTITY = (0.0, 0.0, 0.0, 1.0)
+TIMEOUT = 0.5
+
+
+@pytest.fixture(scope='module')
+def workspace(steerable_model):
+    return Workspace(steerable_model)
+
+
+@pytest.fixture
+def targets(workspace):
+    return TargetManager(workspace, 'world', 50.0, TIMEOUT, (0.01, 0.05), 1.0, 0.1, 0.1)
+
+
+def kinds(events):
+    return [e.kind for e in events]
+
+
+def diag(position_error, orientation_error=0.0):
+    return SimpleNamespace(position_error=position_error, orientation_error=orientation_error, mode='mobile',
+                           reference_time_left=0.0)
+
+
+def goal(targets, xyz=(1.5, 0.3, 1.0), quat=IDENTITY, frame='world', base=None):
+    return targets.goal(frame, [*xyz, *quat], base)
+
+
+def point(targets, now, xyz=(1.5, 0.3, 1.0), quat=IDENTITY, velocity=(0.1, 0.0, 0.0, 0.0, 0.0, 0.2)):
+    return targets.trajectory_point('world', [*xyz, *quat], velocity, np.zeros(6), now)
+
+
+def test_a_goal_becomes_the_target(targets):
+    half_turn_z = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))
+    events = goal(targets, (1.5, 0.3, 1.0), half_turn_z)
+    assert kinds(events) == ['accepted'] and events[0].message.startswith('new goal: position [1.5, 0.3, 1.0]')
+    np.testing.assert_allclose(targets.target.position, [1.5, 0.3, 1.0])
+    np.testing.assert_allclose(targets.target.rotation, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12)
+    assert not targets.tracking and targets.goals == 1
+
+
+def test_the_same_goal_again_is_not_restarted(targets):
+    goal(targets)
+    for _ in range(5):
+        targets.judge(diag(0.2))
+    assert goal(targets) == [] and targets.goals == 1
+    assert targets.progress.cycles == 5, 'its progress goes on'
+    # the same goal to within rounding, and a non-unit quaternion of the same rotation: the same goal
+    assert kinds(goal(targets, (1.5 + 1e-12, 0.3, 1.0), (0.0, 0.0, 0.0, 2.0))) == ['normalised']
+    assert targets.goals == 1 and targets.progress.cycles == 5
+    assert kinds(goal(targets, (1.5, 0.31, 1.0))) == ['accepted']
+    assert targets.goals == 2 and targets.progress.cycles == 0
+
+
+@pytest.mark.parametrize('frame, xyz, quat, reason', [
+    ('map', (1.0, 0.0, 1.0), IDENTITY, "frame 'map', expected 'world'"),
+    ('world', (math.nan, 0.0, 1.0), IDENTITY, 'non-finite values [nan, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]'),
+    ('world', (1.0, 0.0, 1.0), (0.0, 0.0, math.inf, 1.0), 'non-finite values'),
+    ('world', (1.0, 0.0, 1.0), (0.0, 0.0, 0.0, 0.0), 'zero quaternion'),
+    ('world', (1.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1e-9), 'zero quaternion'),
+    ('world', (60.0, 0.0, 1.0), IDENTITY, 'is beyond max_goal_distance 50.0 m'),
+    ('world', (1.0, 0.0, -0.1), IDENTITY, 'below the floor'),
+    ('world', (1.0, 0.0, 5.0), IDENTITY, 'above the highest the end effector can reach'),
+])
+def test_a_bad_goal_is_rejected_with_its_reason_and_leaves_no_target(targets, frame, xyz, quat, reason):
+    goal(targets)
+    events = goal(targets, xyz, quat, frame)
+    assert kinds(events) == ['rejected']
+    assert events[0].message.startswith('rejected goal_pose: ') and reason in events[0].message
+    assert events[0].message.endswith('; holding still')
+    assert targets.target is None and targets.rejected == 1 and targets.goals == 1
+    assert kinds(goal(targets)) == ['accepted'], 'the goal rejected in between is forgotten: the old one is new again'
+
+
+def test_a_goal_inside_the_body_or_an_obstacle_is_rejected(targets):
+    base = np.array([0.0, 0.0, 0.0])
+    assert kinds(goal(targets, (0.0, 0.0, 0.3), base=None)) == ['accepted'], 'no base pose: the body is not checked'
+    events = goal(targets, (0.0, 0.0, 0.3), base=base)
+    assert kinds(events) == ['rejected'] and "inside the robot's own body" in events[0].message
+    targets.obstacles = (Obstacle('crate', 'sphere', (0.2,), np.array([2.0, 0.0, 1.0]), np.eye(3)),)
+    events = goal(targets, (2.05, 0.0, 1.0), base=base)
+    assert kinds(events) == ['rejected'] and "inside the obstacle 'crate'" in events[0].message
+    assert kinds(goal(targets, (2.5, 0.0, 1.0), base=base)) == ['accepted']
+
+
+def test_a_non_unit_quaternion_is_normalised_with_a_note(targets):
+    q = np.array([0.0, 0.0, math.sin(0.2), math.cos(0.2)]) * 3.0
+    events = goal(targets, quat=q)
+    assert kinds(events) == ['normalised', 'accepted']
+    assert events[0].message == '/goal_pose quaternion has norm 3: normalised'
+    np.testing.assert_allclose(np.linalg.det(targets.target.rotation), 1.0, atol=1e-12)
+    np.testing.assert_allclose(targets.target.rotation[:2, 0], [math.cos(0.4), math.sin(0.4)], atol=1e-12)
+
+
+def test_a_fresh_trajectory_is_followed(targets):
+    goal(targets)
+    assert kinds(point(targets, 10.0)) == ['tracking']
+    assert targets.tracking and targets.progress.cycles == 0
+    for k in range(1, 10):      # points every 0.1 s: each one the target, velocity and all
+        assert point(targets, 10.0 + 0.1 * k, xyz=(1.5 + 0.01 * k, 0.3, 1.0)) == []
+        target, events = targets.current(10.0 + 0.1 * k + 0.05)
+        assert events == [] and target is targets.target
+        np.testing.assert_allclose(target.position, [1.5 + 0.01 * k, 0.3, 1.0])
+        np.testing.assert_allclose(target.velocity, [0.1, 0.0, 0.0, 0.0, 0.0, 0.2])
+    assert targets.goals == 1, 'a trajectory is no goal'
+
+
+def test_a_stale_trajectory_is_held_at_its_last_pose(targets):
+    point(targets, 10.0, xyz=(1.4, 0.2, 0.9))
+    target, events = targets.current(10.0 + TIMEOUT)
+    assert events == [] and targets.tracking, 'within the timeout: still followed'
+    target, events = targets.current(10.0 + TIMEOUT + 0.01)
+    assert kinds(events) == ['held'] and not targets.tracking
+    np.testing.assert_allclose(target.position, [1.4, 0.2, 0.9])
+    np.testing.assert_allclose(target.velocity, 0.0)
+    np.testing.assert_allclose(target.acceleration, 0.0)
+    assert targets.current(20.0) == (target, []), 'held once, told once'
+    assert kinds(point(targets, 30.0)) == ['tracking'], 'a new point tracks again'
+
+
+def test_a_clock_that_jumps_back_makes_the_trajectory_stale(targets):
+    point(targets, 10.0)
+    assert kinds(targets.current(9.0)[1]) == ['held']
+
+
+@pytest.mark.parametrize('pose, velocity, reason', [
+    (None, np.zeros(6), 'no point or no transform'),
+    ([1.5, 0.3, math.nan, *IDENTITY], np.zeros(6), 'non-finite values'),
+    ([1.5, 0.3, 1.0, *IDENTITY], [2e3, 0, 0, 0, 0, 0], 'a twist or acceleration beyond 1e3'),
+    ([1.5, 0.3, 1.0, 0.0, 0.0, 0.0, 0.0], np.zeros(6), 'zero quaternion'),
+    ([1.5, 0.3, -1.0, *IDENTITY], np.zeros(6), 'below the floor'),
+])
+def test_a_bad_trajectory_point_is_rejected(targets, pose, velocity, reason):
+    point(targets, 1.0)
+    events = targets.trajectory_point('world', pose, velocity, np.zeros(6), 1.1)
+    assert kinds(events) == ['rejected'] and events[0].message.startswith('rejected ee_reference: ')
+    assert reason in events[0].message
+    assert targets.target is None and not targets.tracking
+
+
+def test_a_goal_is_reached_once_and_a_stall_is_told_once_until_progress(targets):
+    goal(targets)
+    events = [targets.judge(diag(0.5 * 0.5 ** k)) for k in range(12)]
+    reached = [e for e in sum(events, []) if e.kind == 'reached']
+    assert [kinds(e) for e in events].index(['reached']) == 6, '0.5 m halved each cycle is under 1 cm at cycle 6'
+    assert [e.message for e in reached] == ['goal reached: 0.0078 m, 0.0000 rad away after 0.70 s (7 cycles)']
+    goal(targets, (1.6, 0.3, 1.0))
+    stalls = [k for k in range(40) if 'stalled' in kinds(targets.judge(diag(0.3)))]
+    assert len(stalls) == 1, 'a goal that stays 0.3 m away stalls, told once'
+    message = targets.status(diag(0.3))[1]
+    assert targets.status(diag(0.3))[0] == 'warn' and message.startswith('goal not reached: 0.300 m')
+    assert 'no progress in 1.0 s (best error down by less than 10 %, 1 mm, 1 mrad)' in message
+    errors = [0.3 * 0.9 ** k for k in range(1, 25)] + [0.3 * 0.9 ** 24] * 40    # approaching, then held
+    later = [(targets.progress.stalled, kinds(targets.judge(diag(e)))) for e in errors]
+    assert not all(stalled for stalled, _ in later), 'progress clears the stall...'
+    assert sum('stalled' in k for _, k in later) == 1, '...and a new stall is told once'
+
+
+def test_a_trajectory_is_never_reported_reached(targets):
+    point(targets, 0.0)
+    assert all('reached' not in kinds(targets.judge(diag(0.0))) for _ in range(5))
+    assert targets.status(diag(0.0)) == ('ok', 'goal reached')
+
+
+def test_a_position_only_method_ignores_the_orientation(workspace):
+    targets = TargetManager(workspace, 'world', 50.0, TIMEOUT, (0.01, 0.05), 1.0, 0.1, 0.1, position_only=True)
+    assert targets.progress.tolerance == (0.01, math.inf)
+    goal(targets)
+    assert kinds(targets.judge(diag(0.005, 3.0))) == ['reached']
+
+
+class _Resolver:
+    def compensate(self, command, feasible):
+        return ('compensated', command, tuple(feasible))
+
+
+def test_the_arm_command_waits_for_the_answer_to_its_own_cycle():
+    exchange = CompensationExchange(_Resolver(), (1.0, 1.0, 2.0))
+    assert not exchange.pending and not exchange.awaits((1, 0))
+    exchange.hold((1, 0), 'cmd1', 'stamp1')
+    assert exchange.pending and exchange.awaits((1, 0)) and not exchange.awaits((0, 900))
+    assert exchange.plausible([0.5, -0.5, 1.0])
+    assert not exchange.plausible([math.nan, 0.0, 0.0]) and not exchange.plausible([0.0, 0.0, 2.5])
+    assert exchange.finish([0.1, 0.0, 0.0]) == (('compensated', 'cmd1', (0.1, 0.0, 0.0)), 'stamp1')
+    assert not exchange.pending and exchange.dropped == 0
+    exchange.hold((2, 0), 'cmd2', 'stamp2')
+    assert exchange.finish() == ('cmd2', 'stamp2') and exchange.dropped == 1, 'no answer: sent as it is, counted'
+    exchange.hold((3, 0), 'cmd3', 'stamp3')
+    exchange.clear()
+    assert not exchange.pending and exchange.dropped == 1

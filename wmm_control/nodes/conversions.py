@@ -1,0 +1,111 @@
+"""ROS messages to and from the core's arrays, in one place.
+
+A pose is a position (x, y, z) [m] and a quaternion (x, y, z, w) as ROS orders it; a planar
+pose is (x, y, θ); a twist is (linear, angular) [m/s, rad/s], a planar one (vx, vy, ω). The
+readers take the values as they are (no check: the nodes judge them); the rotation maths is
+:mod:`wmm_control.kinematics.orientation`'s.
+"""
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import TwistStamped
+from std_msgs.msg import Float64MultiArray
+
+from wmm_control.kinematics.orientation import (
+    matrix_from_quaternion, quaternion_from_matrix, quaternion_from_yaw, yaw_from_quaternion)
+
+__all__ = [
+    'pose_values', 'set_pose', 'set_quaternion', 'set_rotation', 'pose_rotation', 'odometry_values',
+    'odometry_pose', 'set_planar_pose', 'twist_values', 'set_twist', 'planar_twist', 'set_planar_twist', 'twist_stamped', 'float_array',
+]
+
+
+def pose_values(pose) -> np.ndarray:
+    """(x, y, z, qx, qy, qz, qw) of a ``geometry_msgs/Pose`` or ``Transform``. Shape (7,)."""
+    p = pose.position if hasattr(pose, 'position') else pose.translation
+    q = pose.orientation if hasattr(pose, 'orientation') else pose.rotation
+    return np.array([p.x, p.y, p.z, q.x, q.y, q.z, q.w], dtype=float)
+
+
+def pose_rotation(pose) -> tuple[np.ndarray, np.ndarray]:
+    """(position (3,), rotation (3, 3)) of a ``geometry_msgs/Pose`` or ``Transform`` (the
+    quaternion normalised)."""
+    values = pose_values(pose)
+    return values[:3], matrix_from_quaternion(values[3:])
+
+
+def set_quaternion(orientation, quat) -> None:
+    """Write the quaternion (x, y, z, w) into a ``geometry_msgs/Quaternion``."""
+    orientation.x, orientation.y, orientation.z, orientation.w = (float(v) for v in quat)
+
+
+def set_rotation(orientation, rotation) -> None:
+    """Write the quaternion of a rotation matrix into a ``geometry_msgs/Quaternion``."""
+    set_quaternion(orientation, quaternion_from_matrix(rotation))
+
+
+def set_pose(pose, position, quat) -> None:
+    """Write a position and a quaternion (x, y, z, w) into a ``geometry_msgs/Pose`` or ``Transform``."""
+    if hasattr(pose, 'position'):
+        p, q = pose.position, pose.orientation
+    else:
+        p, q = pose.translation, pose.rotation
+    p.x, p.y, p.z = (float(v) for v in position)
+    set_quaternion(q, quat)
+
+
+def odometry_values(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(position (x, y), quaternion (x, y, z, w), planar twist (vx, vy, ω)) of a ``nav_msgs/Odometry``."""
+    p = msg.pose.pose.position
+    values = pose_values(msg.pose.pose)
+    return np.array([p.x, p.y], dtype=float), values[3:], planar_twist(msg.twist.twist)
+
+
+def odometry_pose(msg) -> tuple[np.ndarray, np.ndarray]:
+    """(planar pose (x, y, θ), planar twist (vx, vy, ω)) of a ``nav_msgs/Odometry``."""
+    xy, quat, twist = odometry_values(msg)
+    return np.array([xy[0], xy[1], yaw_from_quaternion(quat)]), twist
+
+
+def set_planar_pose(pose, planar) -> None:
+    """Write a planar pose (x, y, θ) into a ``geometry_msgs/Pose`` (z = 0)."""
+    x, y, th = (float(v) for v in planar)
+    set_pose(pose, (x, y, 0.0), quaternion_from_yaw(th))
+
+
+def twist_values(twist) -> np.ndarray:
+    """(linear, angular) of a ``geometry_msgs/Twist`` (or ``Accel``). Shape (6,)."""
+    return np.array([twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y,
+                     twist.angular.z], dtype=float)
+
+
+def set_twist(twist, values) -> None:
+    """Write (linear, angular) into a ``geometry_msgs/Twist`` (or ``Accel``)."""
+    (twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y,
+     twist.angular.z) = (float(v) for v in values)
+
+
+def planar_twist(twist) -> np.ndarray:
+    """(vx, vy, ω) of a ``geometry_msgs/Twist``. Shape (3,)."""
+    return np.array([twist.linear.x, twist.linear.y, twist.angular.z], dtype=float)
+
+
+def set_planar_twist(twist, values) -> None:
+    """Write (vx, vy, ω) into a ``geometry_msgs/Twist``."""
+    twist.linear.x, twist.linear.y, twist.angular.z = (float(v) for v in values)
+
+
+def twist_stamped(stamp, frame, twist):
+    """A ``TwistStamped`` of the planar twist (vx, vy, ω); ``stamp`` a Time or ``(sec, nanosec)``."""
+    msg = TwistStamped()
+    msg.header.stamp = stamp if isinstance(stamp, Time) else Time(sec=stamp[0], nanosec=stamp[1])
+    msg.header.frame_id = frame
+    set_planar_twist(msg.twist, twist)
+    return msg
+
+
+def float_array(values):
+    """A ``std_msgs/Float64MultiArray`` holding ``values``."""
+    msg = Float64MultiArray()
+    msg.data = [float(v) for v in values]
+    return msg

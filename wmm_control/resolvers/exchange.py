@@ -1,0 +1,64 @@
+"""The arm command's wait for the base's answer (Sorour eqs 14–15), ROS-free.
+
+One exchange per control cycle: the cycle's base reference goes out, the base controller
+answers that very reference with the twist it can follow (the feasible twist), and the arm
+command goes out compensated for the difference (:meth:`Resolver.compensate
+<wmm_control.resolvers.interface.Resolver.compensate>`). :class:`CompensationExchange` holds
+the arm command of the cycle under way; an answer for another cycle is not its answer, and a
+command whose answer does not come (a timeout, or the next cycle starting) goes out without
+the compensation, counted.
+"""
+
+import numpy as np
+
+__all__ = ['CompensationExchange']
+
+
+class CompensationExchange:
+    """The arm command of one cycle, held until the feasible twist of its base reference comes.
+
+    Args:
+        resolver: the :class:`~wmm_control.resolvers.Resolver` that compensates.
+        plausible_twist: (vx, vy, ω) beyond which a feasible twist is a glitch.
+
+    Attributes:
+        dropped: commands that went out without their compensation.
+    """
+
+    def __init__(self, resolver, plausible_twist):
+        self.resolver = resolver
+        self.plausible_twist = np.asarray(plausible_twist, dtype=float)
+        self.dropped = 0
+        self._pending = None
+
+    @property
+    def pending(self) -> bool:
+        """An arm command waits for its answer."""
+        return self._pending is not None
+
+    def hold(self, key, command, stamp) -> None:
+        """Hold the arm ``command`` of the cycle ``key`` (its reference's stamp) until its answer."""
+        self._pending = (key, command, stamp)
+
+    def awaits(self, key) -> bool:
+        """Whether an answer to the reference ``key`` is the one awaited."""
+        return self._pending is not None and key == self._pending[0]
+
+    def plausible(self, twist) -> bool:
+        """Whether a feasible twist (vx, vy, ω) is finite and within the plausible bound."""
+        twist = np.asarray(twist, dtype=float)
+        return bool(np.all(np.isfinite(twist)) and not np.any(np.abs(twist) > self.plausible_twist))
+
+    def finish(self, feasible=None):
+        """(arm command, stamp) of the held cycle, compensated for the feasible twist (vx, vy, ω)
+        when it is given, else as it is (counted in ``dropped``); nothing is held afterwards."""
+        _, command, stamp = self._pending
+        self._pending = None
+        if feasible is None:
+            self.dropped += 1
+            return command, stamp
+        return self.resolver.compensate(command, feasible), stamp
+
+    def clear(self) -> None:
+        """Give up the held command (the robot is being stopped)."""
+        self._pending = None

@@ -1,0 +1,219 @@
+"""The end effector's target, ROS-free: goals and trajectory points checked and taken, a stopped
+trajectory held, and how the goal fares. ``redundancy_resolver`` wires its topics to it.
+
+:class:`TargetManager` takes
+
+* **goals** (``/goal_pose``): a pose (x, y, z, qx, qy, qz, qw) in a frame. A goal in another
+  frame than the world's, with NaN/inf or a zero quaternion, beyond ``max_goal_distance``
+  from the world origin, or where :meth:`Workspace.impossible
+  <wmm_control.kinematics.workspace.Workspace.impossible>` says no motion reaches it (below
+  the floor, above the highest the end effector can reach, inside the base's body at its
+  current pose, inside an obstacle) is rejected with its reason, and the target is then none
+  (the robot holds still). A non-unit quaternion is normalised with a note. The same goal
+  again (a sequencer re-publishing it) changes nothing: the goal is not restarted;
+* **trajectory points** (``/ee_reference``): a pose with its twist and acceleration (world
+  axes), checked as goals are (a twist or acceleration entry beyond 1e3 is rejected too). The
+  latest of a goal and a point is the target. A trajectory whose last point is older than
+  ``timeout`` is held as a set-point at that point's pose (:meth:`TargetManager.current`).
+
+Time is an argument (seconds of a steady clock), never read here. Each call answers with
+:class:`TargetEvent` s for the node to log: ``accepted`` (a new goal), ``tracking`` (a
+trajectory starts), ``normalised``, ``rejected`` (with the reason), ``held`` (a trajectory
+stopped), ``reached`` (a goal, once) and ``stalled`` (once, again after it made progress),
+judged by :class:`~wmm_control.resolvers.progress.GoalProgress` on the diagnostics of the
+commands computed for the target (:meth:`TargetManager.judge`).
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from wmm_control.checks import Freshness
+from wmm_control.kinematics.orientation import matrix_from_quaternion, unit_quaternion
+from wmm_control.resolvers.interface import PoseTarget
+from wmm_control.resolvers.progress import GoalProgress
+
+__all__ = ['GOAL', 'REFERENCE', 'TargetEvent', 'TargetManager', 'checked_quaternion']
+
+GOAL = 'goal_pose'
+REFERENCE = 'ee_reference'
+#: Largest entry of a trajectory point's twist or acceleration.
+MAX_REFERENCE_RATE = 1e3
+
+
+@dataclass(frozen=True)
+class TargetEvent:
+    """Something to log: ``kind`` (accepted, tracking, normalised, rejected, held, reached,
+    stalled) and its ``message``."""
+
+    kind: str
+    message: str
+
+
+def checked_quaternion(quat, topic) -> tuple[np.ndarray | None, list[TargetEvent]]:
+    """(``quat`` (x, y, z, w, finite) normalised, or None when it is zero; a ``normalised``
+    event when its norm was off 1 by more than 1e-3, naming ``topic``)."""
+    unit, norm = unit_quaternion(quat)
+    if unit is None or abs(norm - 1.0) <= 1e-3:
+        return unit, []
+    return unit, [TargetEvent('normalised', f'{topic} quaternion has norm {norm:.6g}: normalised')]
+
+
+class TargetManager:
+    """The target of the end effector and the events of its goals (module docstring).
+
+    Args:
+        workspace: :class:`~wmm_control.kinematics.workspace.Workspace` of the robot.
+        world_frame: the frame of goals and trajectory points.
+        max_goal_distance: goals farther than this from the world origin are rejected [m].
+        timeout: age [s] after which a trajectory point is held as a set-point.
+        tolerance: (position [m], orientation [rad]) under which a goal is reached.
+        stall_time, period, min_progress_ratio: of :class:`GoalProgress`.
+        position_only: the method tracks the position alone; the orientation never counts.
+
+    Attributes:
+        target: the :class:`PoseTarget` pursued, or None.
+        tracking: the target is a point of a trajectory.
+        obstacles: the obstacles a goal must not lie in (world frame).
+        goals, rejected: goals (and trajectories) taken, and goals and points rejected.
+        progress: the :class:`GoalProgress` of the target.
+    """
+
+    def __init__(self, workspace, world_frame, max_goal_distance, timeout, tolerance, stall_time, period,
+                 min_progress_ratio, position_only=False) -> None:
+        self.workspace = workspace
+        self.world_frame = world_frame
+        self.max_goal_distance = float(max_goal_distance)
+        self.reference = Freshness(timeout)
+        self.position_only = position_only
+        self.progress = GoalProgress(self.tolerance(tolerance), stall_time, period,
+                                     min_progress_ratio=min_progress_ratio)
+        self.obstacles = ()
+        self.target: PoseTarget | None = None
+        self.tracking = False
+        self.goals = 0
+        self.rejected = 0
+        self._goal_key: tuple | None = None
+        self._cycles = 0
+        self._reached_logged = False
+        self._stall_logged = False
+
+    def tolerance(self, goal_tolerance) -> tuple[float, float]:
+        """(position, orientation) tolerance of ``goal_tolerance``: a method that tracks the
+        position alone leaves the orientation free, so only the position counts."""
+        return float(goal_tolerance[0]), math.inf if self.position_only else float(goal_tolerance[1])
+
+    # ------------------------------------------------------------------ inputs
+    def reject(self, reason, topic=GOAL) -> list[TargetEvent]:
+        """Reject an input of ``topic`` for ``reason``: no target until the next one."""
+        self.rejected += 1
+        self.target = None
+        self._goal_key = None
+        self.tracking = False
+        return [TargetEvent('rejected', f'rejected {topic}: {reason}; holding still')]
+
+    def goal(self, frame, pose, base=None) -> list[TargetEvent]:
+        """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``; ``base`` the base's pose
+        (x, y, θ) while it is known (a goal inside the body is rejected then), else None."""
+        values = np.asarray(pose, dtype=float)
+        if frame != self.world_frame:
+            return self.reject(f'frame {frame!r}, expected {self.world_frame!r}')
+        if not np.all(np.isfinite(values)):
+            return self.reject(f'non-finite values {values.tolist()}')
+        if float(np.max(np.abs(values[:3]))) > self.max_goal_distance:
+            return self.reject(f'position {values[:3].tolist()} is beyond max_goal_distance '
+                               f'{self.max_goal_distance} m')
+        impossible = self.workspace.impossible(values[:3], base, self.obstacles)
+        if impossible:
+            return self.reject(f'position {values[:3].tolist()}: {impossible}')
+        quat, events = checked_quaternion(values[3:], '/' + GOAL)
+        if quat is None:
+            return events + self.reject('zero quaternion')
+        key = tuple(np.round(np.concatenate((values[:3], quat)), 9))
+        if key == self._goal_key:
+            return events        # the same goal again (a sequencer re-publishing it)
+        self.target = PoseTarget(values[:3], matrix_from_quaternion(quat))
+        self._goal_key = key
+        self.tracking = False
+        self._start()
+        self.goals += 1
+        return events + [TargetEvent('accepted', f'new goal: position {np.round(values[:3], 4).tolist()}, '
+                                                 f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}')]
+
+    def trajectory_point(self, frame, pose, velocity, acceleration, now, base=None) -> list[TargetEvent]:
+        """A trajectory point received at ``now`` [s]: ``pose`` as a goal's (None: the message
+        had no point), ``velocity`` and ``acceleration`` (linear, angular; world axes)."""
+        if frame != self.world_frame:
+            return self.reject(f'frame {frame!r}, expected {self.world_frame!r}', REFERENCE)
+        if pose is None:
+            return self.reject('no point or no transform', REFERENCE)
+        pose, vel, acc = (np.asarray(v, dtype=float) for v in (pose, velocity, acceleration))
+        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel)) and np.all(np.isfinite(acc))):
+            return self.reject('non-finite values', REFERENCE)
+        if float(np.max(np.abs(pose[:3]))) > self.max_goal_distance or \
+                float(np.max(np.abs(np.concatenate((vel, acc))))) > MAX_REFERENCE_RATE:
+            return self.reject('beyond max_goal_distance, or a twist or acceleration beyond 1e3', REFERENCE)
+        impossible = self.workspace.impossible(pose[:3], base, self.obstacles)
+        if impossible:
+            return self.reject(f'position {pose[:3].tolist()}: {impossible}', REFERENCE)
+        quat, events = checked_quaternion(pose[3:], '/' + REFERENCE)
+        if quat is None:
+            return events + self.reject('zero quaternion', REFERENCE)
+        if not self.tracking:
+            events.append(TargetEvent('tracking', 'tracking /ee_reference'))
+            self._start()
+        self.target = PoseTarget(pose[:3], matrix_from_quaternion(quat), velocity=vel, acceleration=acc)
+        self._goal_key = None
+        self.tracking = True
+        self.reference.mark(now)
+        return events
+
+    # ------------------------------------------------------------------ cycles
+    def current(self, now) -> tuple[PoseTarget | None, list[TargetEvent]]:
+        """The target of a cycle at ``now`` [s]: a trajectory whose last point is older than
+        the timeout is held at that point's pose, a set-point from then on."""
+        if self.tracking and self.target is not None and not self.reference.fresh(now):
+            self.target = PoseTarget(self.target.position, self.target.rotation)
+            self.tracking = False
+            return self.target, [TargetEvent('held', '/ee_reference stopped: holding its last pose')]
+        return self.target, []
+
+    def judge(self, diagnostics) -> list[TargetEvent]:
+        """Account for the diagnostics of a command computed for the target: a goal reached is
+        told once; a stall once, and again after the goal made progress."""
+        self.progress.update(diagnostics)
+        self._cycles += 1
+        events = []
+        pos, ori = diagnostics.position_error, diagnostics.orientation_error
+        if self.progress.reached and not self._reached_logged and not self.tracking:
+            events.append(TargetEvent('reached', f'goal reached: {pos:.4f} m, {ori:.4f} rad away after '
+                                                 f'{self._cycles * self.progress.period:.2f} s ({self._cycles} cycles)'))
+            self._reached_logged = True
+        if not self.progress.stalled:
+            self._stall_logged = False
+        elif not self._stall_logged:
+            events.append(TargetEvent('stalled', f'goal not reached: {pos:.3f} m, {ori:.3f} rad away, '
+                                                 f'{self.no_progress()} (out of reach, or held by a limit?)'))
+            self._stall_logged = True
+        return events
+
+    def status(self, diagnostics) -> tuple[str, str]:
+        """(level, message) of the goal, ``diagnostics`` those of the last command."""
+        if self.progress.stalled:
+            return 'warn', (f'goal not reached: {diagnostics.position_error:.3f} m, '
+                            f'{diagnostics.orientation_error:.3f} rad; {self.no_progress()} (out of reach?)')
+        return 'ok', 'goal reached' if self.progress.reached else diagnostics.mode
+
+    def no_progress(self) -> str:
+        """What 'no progress' means with the current settings."""
+        floor = self.progress.min_progress
+        return (f'no progress in {self.progress.stall_time} s (best error down by less than '
+                f'{100 * self.progress.min_progress_ratio:g} %, {1e3 * floor[0]:g} mm, {1e3 * floor[1]:g} mrad)')
+
+    def _start(self) -> None:
+        """A new goal or trajectory: progress judged afresh, its reach and stall told anew."""
+        self.progress.start()
+        self._stall_logged = False
+        self._reached_logged = False
+        self._cycles = 0
