@@ -1,5 +1,5 @@
-"""TargetManager and CompensationExchange (ROS-free): what redundancy_resolver pursues, and the
-arm command's wait for the base's answer."""
+"""TargetManager, CompensationExchange and MeasuredInputs (ROS-free): what redundancy_resolver
+pursues, the arm command's wait for the base's answer, and the checks of the measured inputs."""
 
 import math
 from types import SimpleNamespace
@@ -10,6 +10,7 @@ import pytest
 from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.resolvers.exchange import CompensationExchange
+from wmm_control.resolvers.inputs import MeasuredInputs
 from wmm_control.resolvers.targets import TargetManager
 
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -188,12 +189,10 @@ class _Resolver:
 
 
 def test_the_arm_command_waits_for_the_answer_to_its_own_cycle():
-    exchange = CompensationExchange(_Resolver(), (1.0, 1.0, 2.0))
+    exchange = CompensationExchange(_Resolver())
     assert not exchange.pending and not exchange.awaits((1, 0))
     exchange.hold((1, 0), 'cmd1', 'stamp1')
     assert exchange.pending and exchange.awaits((1, 0)) and not exchange.awaits((0, 900))
-    assert exchange.plausible([0.5, -0.5, 1.0])
-    assert not exchange.plausible([math.nan, 0.0, 0.0]) and not exchange.plausible([0.0, 0.0, 2.5])
     assert exchange.finish([0.1, 0.0, 0.0]) == (('compensated', 'cmd1', (0.1, 0.0, 0.0)), 'stamp1')
     assert not exchange.pending and exchange.dropped == 0
     exchange.hold((2, 0), 'cmd2', 'stamp2')
@@ -201,3 +200,50 @@ def test_the_arm_command_waits_for_the_answer_to_its_own_cycle():
     exchange.hold((3, 0), 'cmd3', 'stamp3')
     exchange.clear()
     assert not exchange.pending and exchange.dropped == 1
+
+
+@pytest.fixture
+def inputs():
+    return MeasuredInputs('world', 50.0, (1.0, 1.0, 2.0), 10.0)
+
+
+@pytest.mark.parametrize('xy, quat, twist, kind, reason', [
+    ((math.nan, 0.0), IDENTITY, (0.0, 0.0, 0.0), 'odom non-finite', 'rejected /odom with non-finite values [nan, '),
+    ((0.0, 0.0), (0.0, 0.0, math.inf, 1.0), (0.0, 0.0, 0.0), 'odom non-finite', 'non-finite values'),
+    ((0.0, 60.0), IDENTITY, (0.0, 0.0, 0.0), 'odom far', 'rejected /odom at (0, 60): beyond max_goal_distance 50.0 m'),
+    ((0.0, 0.0), IDENTITY, (0.0, 0.0, 25.0), 'odom twist', 'beyond 10 times the base velocity limits'),
+    ((0.0, 0.0), (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 'odom zero quaternion', 'rejected /odom with a zero quaternion'),
+])
+def test_implausible_odometry_is_rejected_each_reason_apart(inputs, xy, quat, twist, kind, reason):
+    odom, events = inputs.odometry(xy, quat, twist)
+    assert odom is None and kinds(events) == [kind] and reason in events[0].message
+
+
+@pytest.mark.parametrize('scale', [1.0, 3.0, 1e200, 1e-3])
+def test_odometry_gives_the_heading_of_its_quaternion_at_any_scale(inputs, scale):
+    quat = np.array([0.0, 0.0, math.sin(1.2), math.cos(1.2)]) * scale
+    (pose, twist), events = inputs.odometry((1.0, -2.0), quat, (0.5, 0.0, 0.1))
+    np.testing.assert_allclose(pose, [1.0, -2.0, 2.4], atol=1e-12)
+    np.testing.assert_allclose(twist, [0.5, 0.0, 0.1])
+    assert kinds(events) == ([] if scale == 1.0 else ['normalised'])
+
+
+def test_the_measured_end_effector_pose_is_checked(inputs):
+    pose = [0.5, 0.0, 1.0, 0.0, 1e200 * math.sqrt(0.5), 0.0, 1e200 * math.sqrt(0.5)]
+    (position, rotation), events = inputs.ee_pose('world', pose)
+    np.testing.assert_allclose(position, [0.5, 0.0, 1.0])
+    np.testing.assert_allclose(rotation, [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-12)
+    assert kinds(events) == ['normalised']
+    assert kinds(inputs.ee_pose('map', pose)[1]) == ['ee_pose frame']
+    assert kinds(inputs.ee_pose('world', [0.5, 0.0, math.nan, *IDENTITY])[1]) == ['ee_pose invalid']
+    assert kinds(inputs.ee_pose('world', [0.5, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0])[1]) == ['ee_pose invalid']
+
+
+def test_an_implausible_feasible_twist_is_rejected(inputs):
+    twist, events = inputs.feasible_twist([0.5, -0.5, 1.0])
+    np.testing.assert_allclose(twist, [0.5, -0.5, 1.0])
+    assert events == []
+    for bad in ([math.nan, 0.0, 0.0], [0.0, 0.0, 25.0]):
+        twist, events = inputs.feasible_twist(bad)
+        assert twist is None and kinds(events) == ['feasible twist']
+        assert events[0].message.endswith('non-finite or beyond 10 times the base velocity limits')

@@ -42,20 +42,25 @@ states, the odometry or (with ground-truth feedback) the end-effector pose are o
 states stop. A goal (or ``/ee_reference`` point) in another frame, with NaN/inf or a zero
 quaternion, beyond ``max_goal_distance`` from the world origin, below the floor, above the
 highest the end effector can reach, inside the base's body at its current pose or inside an
-obstacle (:class:`~wmm_control.kinematics.workspace.Workspace`) is rejected with a logged reason; a
-non-unit quaternion is normalised with a warning (:mod:`wmm_control.resolvers.targets`). Odometry with NaN/inf, a zero quaternion
-or a twist beyond ten times the base limits, and joint states lacking an arm joint or naming
-one twice, with non-finite values, rates beyond ten times the limits or positions beyond
-the limits, are rejected. A joint state whose stamp is not after the last cycle's, or jumps
-more than ``state_timeout`` ahead, runs no cycle (a second publisher, a replayed message).
-A goal that stops making progress is logged once. Every command stays within the robot's limits
-(:mod:`wmm_control.resolvers.limits`); a goal out of reach is pursued as far as they allow
-and reported on ``/diagnostics``.
+obstacle (:class:`~wmm_control.kinematics.workspace.Workspace`) is rejected with a logged
+reason; a non-unit quaternion is normalised with a warning. Odometry with NaN/inf, a zero
+quaternion or a twist beyond ten times the base limits, and joint states lacking an arm
+joint or naming one twice, with non-finite values, rates beyond ten times the limits or
+positions beyond the limits, are rejected. A joint state whose stamp is not after the last
+cycle's, or jumps more than ``state_timeout`` ahead, runs no cycle (a second publisher, a
+replayed message). A goal that stops making progress is logged once. Every command stays
+within the robot's limits (:mod:`wmm_control.resolvers.limits`); a goal out of reach is
+pursued as far as they allow and reported on ``/diagnostics``.
 
-This module wires parameters (:mod:`wmm_control.nodes.redundancy_resolver_params`), topics
-(:mod:`wmm_control.nodes.conversions`) and timers to the ROS-free core: the target and its
-events in :class:`~wmm_control.resolvers.targets.TargetManager`, the commands in the resolver.
+This module only wires parameters (:mod:`~wmm_control.nodes.redundancy_resolver_params`),
+topics (through :mod:`~wmm_control.nodes.conversions`) and timers to the ROS-free core:
+the target, its checks and its events in :class:`~wmm_control.resolvers.targets.TargetManager`,
+the checks of odometry, end-effector pose and feasible twist in
+:class:`~wmm_control.resolvers.inputs.MeasuredInputs`, the exchange in
+:class:`~wmm_control.resolvers.exchange.CompensationExchange`, the commands in the resolver.
 """
+
+import math
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -70,7 +75,6 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.orientation import matrix_from_quaternion, yaw_from_quaternion
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.common import (
     COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, STATE_SUB_QOS, declare_parameters,
@@ -82,21 +86,16 @@ from wmm_control.nodes.obstacle_topic import ObstacleSet, describe
 from wmm_control.nodes.redundancy_resolver_params import PARAMS
 from wmm_control.resolvers import RobotState, make_resolver, method_parameters
 from wmm_control.resolvers.exchange import CompensationExchange
-from wmm_control.resolvers.targets import TargetManager, checked_quaternion
+from wmm_control.resolvers.inputs import MeasuredInputs
+from wmm_control.resolvers.targets import TargetManager
 from wmm_control.viewer.scene import Trail
 
 __all__ = ['PARAMS', 'RedundancyResolverNode', 'main']
 
-#: How each kind of target event is logged; one call site per kind, each with its own throttle.
-_LOG = {
-    'accepted': lambda log, text: log.info(text),
-    'tracking': lambda log, text: log.info(text),
-    'reached': lambda log, text: log.info(text),
-    'normalised': lambda log, text: log.warn(text, throttle_duration_sec=1.0),
-    'rejected': lambda log, text: log.warn(text, throttle_duration_sec=1.0),
-    'held': lambda log, text: log.warn(text, throttle_duration_sec=5.0),
-    'stalled': lambda log, text: log.warn(text),
-}
+#: The events logged as information; the others are warnings, each kind at most once every
+#: second (steady clock) but for these.
+_INFO = ('accepted', 'tracking', 'reached')
+_THROTTLE = {'held': 5.0, 'stalled': 0.0}
 
 
 class RedundancyResolverNode(Node):
@@ -107,7 +106,7 @@ class RedundancyResolverNode(Node):
         guard_clock(self)
         p = self.p = declare_parameters(self, 'redundancy_resolver.yaml', PARAMS, on_change={
             'state_timeout': self._set_state_timeout,
-            'max_goal_distance': lambda v: setattr(self.targets, 'max_goal_distance', float(v)),
+            'max_goal_distance': self._set_max_goal_distance,
             'goal_tolerance': lambda v: setattr(self.progress, 'tolerance', self.targets.tolerance(v)),
             'stall_time': lambda v: setattr(self.progress, 'stall_time', float(v)),
             'min_progress_ratio': lambda v: setattr(self.progress, 'min_progress_ratio', float(v))})
@@ -122,15 +121,16 @@ class RedundancyResolverNode(Node):
         self.targets = TargetManager(self.workspace, p.world_frame, p.max_goal_distance, p.state_timeout,
                                      p.goal_tolerance, p.stall_time, p.period, p.min_progress_ratio,
                                      position_only=getattr(self.resolver.params, 'rows', 'full') == 'position')
+        self.inputs = MeasuredInputs(p.world_frame, p.max_goal_distance, self.model.config.base.velocity,
+                                     JointSelector.PLAUSIBLE_FACTOR)
+        self.exchange = CompensationExchange(self.resolver)
         self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
         self._set_obstacles()
-        # /odom and /base/feasible_twist beyond this are glitches
-        self._plausible_twist = JointSelector.PLAUSIBLE_FACTOR * self.model.config.base.velocity
-        self.exchange = CompensationExchange(self.resolver, self._plausible_twist)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.fresh = {k: Freshness(p.state_timeout) for k in ('odom', 'ee_pose')}
         self._odom = self._ee = self._wait = self._last = self._last_state = None
         self._next_diag = 0.0
+        self._logged = {}           # the last time each kind of warning was logged
         self._cycles = self._stale_cycles = 0
         self.pub_arm = self.create_publisher(Float64MultiArray, 'arm_controller/commands', COMMAND_QOS)
         self.pub_base = self.create_publisher(TwistStamped, 'base/reference', COMMAND_QOS)
@@ -179,12 +179,20 @@ class RedundancyResolverNode(Node):
             fresh.timeout = timeout
         self.watchdog.set_timeout(timeout)
 
+    def _set_max_goal_distance(self, distance):
+        self.targets.max_goal_distance = self.inputs.max_distance = float(distance)
+
     def _now(self):
         return self._steady.now().nanoseconds * 1e-9
 
     def _log(self, events):
+        now = self._now()
         for event in events:
-            _LOG[event.kind](self.get_logger(), event.message)
+            if event.kind in _INFO:
+                self.get_logger().info(event.message)
+            elif now - self._logged.get(event.kind, -math.inf) >= _THROTTLE.get(event.kind, 1.0):
+                self._logged[event.kind] = now
+                self.get_logger().warn(event.message)
 
     # ------------------------------------------------------------------ inputs
     def _base(self):
@@ -212,41 +220,18 @@ class RedundancyResolverNode(Node):
             self._set_obstacles()
 
     def _on_odom(self, msg):
-        (x, y), quat, twist = odometry_values(msg)
-        values = np.concatenate(([x, y], quat, twist))
-        logger = self.get_logger()
-        if not np.all(np.isfinite(values)):
-            logger.warn(f'rejected /odom with non-finite values {values.tolist()}', throttle_duration_sec=1.0)
-            return
-        if max(abs(x), abs(y)) > self.p.max_goal_distance:
-            logger.warn(f'rejected /odom at ({x:.6g}, {y:.6g}): beyond max_goal_distance '
-                        f'{self.p.max_goal_distance} m from the origin', throttle_duration_sec=1.0)
-            return
-        if np.any(np.abs(twist) > self._plausible_twist):
-            logger.warn(f'rejected /odom with twist {twist.tolist()} beyond {JointSelector.PLAUSIBLE_FACTOR:g} times '
-                        'the base velocity limits', throttle_duration_sec=1.0)
-            return
-        quat, events = checked_quaternion(quat, '/odom')
+        odom, events = self.inputs.odometry(*odometry_values(msg))
         self._log(events)
-        if quat is None:
-            logger.warn('rejected /odom with a zero quaternion', throttle_duration_sec=1.0)
-            return
-        self._odom = (np.array([x, y, yaw_from_quaternion(quat)]), twist)
-        self.fresh['odom'].mark(self._now())
+        if odom is not None:
+            self._odom = odom
+            self.fresh['odom'].mark(self._now())
 
     def _on_ee_pose(self, msg):
-        if msg.header.frame_id != self.p.world_frame:
-            self.get_logger().warn(f'rejected /ee_pose in frame {msg.header.frame_id!r}', throttle_duration_sec=1.0)
-            return
-        values = pose_values(msg.pose)
-        quat, events = checked_quaternion(values[3:], '/ee_pose') if np.all(np.isfinite(values)) else (None, [])
+        ee, events = self.inputs.ee_pose(msg.header.frame_id, pose_values(msg.pose))
         self._log(events)
-        if quat is None:
-            self.get_logger().warn('rejected /ee_pose with non-finite values or a zero quaternion',
-                                   throttle_duration_sec=1.0)
-            return
-        self._ee = (values[:3], matrix_from_quaternion(quat))
-        self.fresh['ee_pose'].mark(self._now())
+        if ee is not None:
+            self._ee = ee
+            self.fresh['ee_pose'].mark(self._now())
 
     # ------------------------------------------------------------------ cycle
     def _state(self, msg):
@@ -304,13 +289,10 @@ class RedundancyResolverNode(Node):
     def _on_feasible(self, msg):
         if not self.exchange.awaits(stamp_key(msg.header.stamp)):
             return
-        twist = planar_twist(msg.twist)
-        if not self.exchange.plausible(twist):
-            self.get_logger().warn(f'rejected /base/feasible_twist {twist.tolist()}: non-finite or beyond '
-                                   f'{JointSelector.PLAUSIBLE_FACTOR:g} times the base velocity limits',
-                                   throttle_duration_sec=1.0)
-            return
-        self._finish(twist)
+        twist, events = self.inputs.feasible_twist(planar_twist(msg.twist))
+        self._log(events)
+        if twist is not None:
+            self._finish(twist)
 
     def _compensation_timeout(self):
         if self.exchange.pending:

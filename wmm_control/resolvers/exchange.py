@@ -9,8 +9,6 @@ command whose answer does not come (a timeout, or the next cycle starting) goes 
 the compensation, counted.
 """
 
-import numpy as np
-
 __all__ = ['CompensationExchange']
 
 
@@ -19,17 +17,15 @@ class CompensationExchange:
 
     Args:
         resolver: the :class:`~wmm_control.resolvers.Resolver` that compensates.
-        plausible_twist: (vx, vy, ω) beyond which a feasible twist is a glitch.
 
     Attributes:
         dropped: commands that went out without their compensation.
     """
 
-    def __init__(self, resolver, plausible_twist):
+    def __init__(self, resolver) -> None:
         self.resolver = resolver
-        self.plausible_twist = np.asarray(plausible_twist, dtype=float)
         self.dropped = 0
-        self._pending = None
+        self._pending: tuple | None = None
 
     @property
     def pending(self) -> bool:
@@ -43,11 +39,6 @@ class CompensationExchange:
     def awaits(self, key) -> bool:
         """Whether an answer to the reference ``key`` is the one awaited."""
         return self._pending is not None and key == self._pending[0]
-
-    def plausible(self, twist) -> bool:
-        """Whether a feasible twist (vx, vy, ω) is finite and within the plausible bound."""
-        twist = np.asarray(twist, dtype=float)
-        return bool(np.all(np.isfinite(twist)) and not np.any(np.abs(twist) > self.plausible_twist))
 
     def finish(self, feasible=None):
         """(arm command, stamp) of the held cycle, compensated for the feasible twist (vx, vy, ω)

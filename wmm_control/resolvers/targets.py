@@ -17,7 +17,7 @@ trajectory held, and how the goal fares. ``redundancy_resolver`` wires its topic
   ``timeout`` is held as a set-point at that point's pose (:meth:`TargetManager.current`).
 
 Time is an argument (seconds of a steady clock), never read here. Each call answers with
-:class:`TargetEvent` s for the node to log: ``accepted`` (a new goal), ``tracking`` (a
+:class:`LogEvent` s for the node to log: ``accepted`` (a new goal), ``tracking`` (a
 trajectory starts), ``normalised``, ``rejected`` (with the reason), ``held`` (a trajectory
 stopped), ``reached`` (a goal, once) and ``stalled`` (once, again after it made progress),
 judged by :class:`~wmm_control.resolvers.progress.GoalProgress` on the diagnostics of the
@@ -34,7 +34,7 @@ from wmm_control.kinematics.orientation import matrix_from_quaternion, unit_quat
 from wmm_control.resolvers.interface import PoseTarget
 from wmm_control.resolvers.progress import GoalProgress
 
-__all__ = ['GOAL', 'REFERENCE', 'TargetEvent', 'TargetManager', 'checked_quaternion']
+__all__ = ['GOAL', 'REFERENCE', 'LogEvent', 'TargetManager', 'checked_quaternion']
 
 GOAL = 'goal_pose'
 REFERENCE = 'ee_reference'
@@ -43,7 +43,7 @@ MAX_REFERENCE_RATE = 1e3
 
 
 @dataclass(frozen=True)
-class TargetEvent:
+class LogEvent:
     """Something to log: ``kind`` (accepted, tracking, normalised, rejected, held, reached,
     stalled) and its ``message``."""
 
@@ -51,13 +51,13 @@ class TargetEvent:
     message: str
 
 
-def checked_quaternion(quat, topic) -> tuple[np.ndarray | None, list[TargetEvent]]:
+def checked_quaternion(quat, topic) -> tuple[np.ndarray | None, list[LogEvent]]:
     """(``quat`` (x, y, z, w, finite) normalised, or None when it is zero; a ``normalised``
     event when its norm was off 1 by more than 1e-3, naming ``topic``)."""
     unit, norm = unit_quaternion(quat)
     if unit is None or abs(norm - 1.0) <= 1e-3:
         return unit, []
-    return unit, [TargetEvent('normalised', f'{topic} quaternion has norm {norm:.6g}: normalised')]
+    return unit, [LogEvent('normalised', f'{topic} quaternion has norm {norm:.6g}: normalised')]
 
 
 class TargetManager:
@@ -105,15 +105,15 @@ class TargetManager:
         return float(goal_tolerance[0]), math.inf if self.position_only else float(goal_tolerance[1])
 
     # ------------------------------------------------------------------ inputs
-    def reject(self, reason, topic=GOAL) -> list[TargetEvent]:
+    def reject(self, reason, topic=GOAL) -> list[LogEvent]:
         """Reject an input of ``topic`` for ``reason``: no target until the next one."""
         self.rejected += 1
         self.target = None
         self._goal_key = None
         self.tracking = False
-        return [TargetEvent('rejected', f'rejected {topic}: {reason}; holding still')]
+        return [LogEvent('rejected', f'rejected {topic}: {reason}; holding still')]
 
-    def goal(self, frame, pose, base=None) -> list[TargetEvent]:
+    def goal(self, frame, pose, base=None) -> list[LogEvent]:
         """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``; ``base`` the base's pose
         (x, y, θ) while it is known (a goal inside the body is rejected then), else None."""
         values = np.asarray(pose, dtype=float)
@@ -138,10 +138,10 @@ class TargetManager:
         self.tracking = False
         self._start()
         self.goals += 1
-        return events + [TargetEvent('accepted', f'new goal: position {np.round(values[:3], 4).tolist()}, '
+        return events + [LogEvent('accepted', f'new goal: position {np.round(values[:3], 4).tolist()}, '
                                                  f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}')]
 
-    def trajectory_point(self, frame, pose, velocity, acceleration, now, base=None) -> list[TargetEvent]:
+    def trajectory_point(self, frame, pose, velocity, acceleration, now, base=None) -> list[LogEvent]:
         """A trajectory point received at ``now`` [s]: ``pose`` as a goal's (None: the message
         had no point), ``velocity`` and ``acceleration`` (linear, angular; world axes)."""
         if frame != self.world_frame:
@@ -161,7 +161,7 @@ class TargetManager:
         if quat is None:
             return events + self.reject('zero quaternion', REFERENCE)
         if not self.tracking:
-            events.append(TargetEvent('tracking', 'tracking /ee_reference'))
+            events.append(LogEvent('tracking', 'tracking /ee_reference'))
             self._start()
         self.target = PoseTarget(pose[:3], matrix_from_quaternion(quat), velocity=vel, acceleration=acc)
         self._goal_key = None
@@ -170,16 +170,16 @@ class TargetManager:
         return events
 
     # ------------------------------------------------------------------ cycles
-    def current(self, now) -> tuple[PoseTarget | None, list[TargetEvent]]:
+    def current(self, now) -> tuple[PoseTarget | None, list[LogEvent]]:
         """The target of a cycle at ``now`` [s]: a trajectory whose last point is older than
         the timeout is held at that point's pose, a set-point from then on."""
         if self.tracking and self.target is not None and not self.reference.fresh(now):
             self.target = PoseTarget(self.target.position, self.target.rotation)
             self.tracking = False
-            return self.target, [TargetEvent('held', '/ee_reference stopped: holding its last pose')]
+            return self.target, [LogEvent('held', '/ee_reference stopped: holding its last pose')]
         return self.target, []
 
-    def judge(self, diagnostics) -> list[TargetEvent]:
+    def judge(self, diagnostics) -> list[LogEvent]:
         """Account for the diagnostics of a command computed for the target: a goal reached is
         told once; a stall once, and again after the goal made progress."""
         self.progress.update(diagnostics)
@@ -187,13 +187,13 @@ class TargetManager:
         events = []
         pos, ori = diagnostics.position_error, diagnostics.orientation_error
         if self.progress.reached and not self._reached_logged and not self.tracking:
-            events.append(TargetEvent('reached', f'goal reached: {pos:.4f} m, {ori:.4f} rad away after '
+            events.append(LogEvent('reached', f'goal reached: {pos:.4f} m, {ori:.4f} rad away after '
                                                  f'{self._cycles * self.progress.period:.2f} s ({self._cycles} cycles)'))
             self._reached_logged = True
         if not self.progress.stalled:
             self._stall_logged = False
         elif not self._stall_logged:
-            events.append(TargetEvent('stalled', f'goal not reached: {pos:.3f} m, {ori:.3f} rad away, '
+            events.append(LogEvent('stalled', f'goal not reached: {pos:.3f} m, {ori:.3f} rad away, '
                                                  f'{self.no_progress()} (out of reach, or held by a limit?)'))
             self._stall_logged = True
         return events

@@ -1,0 +1,72 @@
+"""The measured inputs of ``redundancy_resolver`` checked, ROS-free: the base's odometry, the
+end effector's measured pose and the base controller's feasible twist.
+
+Each check answers the value, or None, with the :class:`~wmm_control.resolvers.targets.LogEvent`
+s that tell why (one kind per reason, so that a node throttles each reason apart) and the
+note of a normalised quaternion. Rejected: odometry with NaN/inf, beyond the distance bound
+from the world origin, with a twist beyond ``factor`` times the base velocity limits or a zero
+quaternion; an end-effector pose in another frame than the world's, with NaN/inf or a zero
+quaternion; a feasible twist with NaN/inf or beyond ``factor`` times the base limits.
+"""
+
+import numpy as np
+
+from wmm_control.kinematics.orientation import matrix_from_quaternion, yaw_from_quaternion
+from wmm_control.resolvers.targets import LogEvent, checked_quaternion
+
+__all__ = ['MeasuredInputs']
+
+
+class MeasuredInputs:
+    """Checks of the measured inputs.
+
+    Args:
+        world_frame: the frame of the end-effector pose.
+        max_distance: odometry farther than this from the world origin is a glitch [m].
+        base_velocity: the base's velocity limits (vx, vy, ω).
+        factor: a twist beyond this many times the limits is a glitch [-].
+    """
+
+    def __init__(self, world_frame, max_distance, base_velocity, factor) -> None:
+        self.world_frame = world_frame
+        self.max_distance = float(max_distance)
+        self.factor = float(factor)
+        self.plausible_twist = self.factor * np.asarray(base_velocity, dtype=float)
+
+    def odometry(self, xy, quat, twist) -> tuple[tuple[np.ndarray, np.ndarray] | None, list[LogEvent]]:
+        """(((x, y, θ), twist (vx, vy, ω)) or None, events) of the base's odometry: position
+        (x, y), quaternion (x, y, z, w) and planar twist."""
+        (x, y), twist = (float(v) for v in xy), np.asarray(twist, dtype=float)
+        values = np.concatenate(([x, y], np.asarray(quat, dtype=float), twist))
+        if not np.all(np.isfinite(values)):
+            return None, [LogEvent('odom non-finite', f'rejected /odom with non-finite values {values.tolist()}')]
+        if max(abs(x), abs(y)) > self.max_distance:
+            return None, [LogEvent('odom far', f'rejected /odom at ({x:.6g}, {y:.6g}): beyond max_goal_distance '
+                                               f'{self.max_distance} m from the origin')]
+        if np.any(np.abs(twist) > self.plausible_twist):
+            return None, [LogEvent('odom twist', f'rejected /odom with twist {twist.tolist()} beyond '
+                                                 f'{self.factor:g} times the base velocity limits')]
+        unit, events = checked_quaternion(values[2:6], '/odom')
+        if unit is None:
+            return None, events + [LogEvent('odom zero quaternion', 'rejected /odom with a zero quaternion')]
+        return (np.array([x, y, yaw_from_quaternion(unit)]), twist), events
+
+    def ee_pose(self, frame, pose) -> tuple[tuple[np.ndarray, np.ndarray] | None, list[LogEvent]]:
+        """((position, rotation) or None, events) of the end effector's measured ``pose``
+        (x, y, z, qx, qy, qz, qw) in ``frame``."""
+        if frame != self.world_frame:
+            return None, [LogEvent('ee_pose frame', f'rejected /ee_pose in frame {frame!r}')]
+        values = np.asarray(pose, dtype=float)
+        unit, events = checked_quaternion(values[3:], '/ee_pose') if np.all(np.isfinite(values)) else (None, [])
+        if unit is None:
+            return None, events + [LogEvent('ee_pose invalid',
+                                            'rejected /ee_pose with non-finite values or a zero quaternion')]
+        return (values[:3], matrix_from_quaternion(unit)), events
+
+    def feasible_twist(self, twist) -> tuple[np.ndarray | None, list[LogEvent]]:
+        """(``twist`` (vx, vy, ω) or None, events) of the base controller's answer."""
+        twist = np.asarray(twist, dtype=float)
+        if np.all(np.isfinite(twist)) and not np.any(np.abs(twist) > self.plausible_twist):
+            return twist, []
+        return None, [LogEvent('feasible twist', f'rejected /base/feasible_twist {twist.tolist()}: non-finite or '
+                                                 f'beyond {self.factor:g} times the base velocity limits')]
