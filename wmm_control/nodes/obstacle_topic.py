@@ -22,7 +22,8 @@ from visualization_msgs.msg import Marker
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import Obstacle, load_obstacles
-from wmm_control.kinematics.orientation import matrix_from_quaternion
+from wmm_control.kinematics.orientation import matrix_from_quaternion, unit_quaternion
+from wmm_control.nodes.conversions import pose_values
 
 __all__ = ['ObstacleSet', 'obstacle_from_marker', 'describe', 'OBSTACLE_PARAM_HELP']
 
@@ -40,7 +41,7 @@ def obstacle_from_marker(marker, frame: str) -> Obstacle:
     name = f'{marker.ns}/{marker.id}'
     if marker.header.frame_id != frame:
         raise ConfigError(f'marker {name}: frame {marker.header.frame_id!r}, expected {frame!r}')
-    s, pos, q = marker.scale, marker.pose.position, marker.pose.orientation
+    s, pose = marker.scale, pose_values(marker.pose)
     size: tuple[float, ...]
     if marker.type == Marker.CUBE:
         shape, size = 'box', (s.x, s.y, s.z)
@@ -50,13 +51,10 @@ def obstacle_from_marker(marker, frame: str) -> Obstacle:
         shape, size = 'cylinder', (0.5 * max(s.x, s.y), s.z)
     else:
         raise ConfigError(f'marker {name}: type {marker.type} is not an obstacle (CUBE, SPHERE or CYLINDER)')
-    quat = np.array([q.x, q.y, q.z, q.w], dtype=float)
-    norm = float(np.linalg.norm(quat))
-    if not (np.all(np.isfinite(quat)) and norm > 1e-6):
+    quat = unit_quaternion(pose[3:])[0] if np.all(np.isfinite(pose[3:])) else None
+    if quat is None:
         raise ConfigError(f'marker {name}: the orientation must be a finite, non-zero quaternion')
-    quat /= norm
-    rotation = matrix_from_quaternion(quat)
-    return Obstacle(name, shape, tuple(float(v) for v in size), np.array([pos.x, pos.y, pos.z]), rotation)
+    return Obstacle(name, shape, tuple(float(v) for v in size), pose[:3], matrix_from_quaternion(quat))
 
 
 class ObstacleSet:
