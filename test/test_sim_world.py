@@ -437,3 +437,26 @@ def test_render_png_headless(tmp_path, view, world_a):
     assert len(colours) > 20                                       # floor, robot, shading
     with pytest.raises(ConfigError):
         render_png(world_a, tmp_path / 'x.png', view='fisheye')
+
+
+def test_a_base_whose_inertial_frame_is_offset_is_placed_at_its_link_pose(world_b):
+    """PyBullet places a body by its inertial frame; with one offset and turned from the base
+    link (no shipped robot has one), the link still lands at the planar pose, the COM where
+    PyBullet's own composition of the two puts it."""
+    import pinocchio as pin
+    import pybullet as p
+    from wmm_control.kinematics.orientation import quaternion_from_yaw
+    local_pos, local_quat = (0.05, -0.02, 0.1), tuple(np.array([0.1, 0.2, 0.05, 0.97]) / np.linalg.norm([0.1, 0.2, 0.05, 0.97]))
+    world_b._com_local = pin.XYZQUATToSE3(np.array([*local_pos, *local_quat]))
+    world_b._com_inv = p.invertTransform(local_pos, local_quat)
+    world_b._com_identity = False
+    pose = (1.2, -0.4, 2.5)
+    com_pos, com_quat = world_b._com_pose(pose)
+    ref_pos, ref_quat = p.multiplyTransforms((1.2, -0.4, 0.0), quaternion_from_yaw(2.5).tolist(), local_pos, local_quat)
+    np.testing.assert_allclose(com_pos, ref_pos, atol=1e-6)
+    assert min(np.linalg.norm(np.subtract(com_quat, ref_quat)), np.linalg.norm(np.add(com_quat, ref_quat))) < 1e-6
+    world_b._pose = pose
+    world_b._place()
+    link_pos, link_quat = world_b._base_link_pose()
+    np.testing.assert_allclose(link_pos, [1.2, -0.4, 0.0], atol=1e-6)
+    assert abs(math.remainder(p.getEulerFromQuaternion(link_quat)[2] - 2.5, 2 * math.pi)) < 1e-6
