@@ -234,8 +234,9 @@ class RedundancyResolverNode(Node):
             self.fresh['ee_pose'].mark(self._now())
 
     # ------------------------------------------------------------------ cycle
-    def _state(self, msg):
-        """The RobotState of this cycle, or (None, reason) when some input is missing or stale."""
+    def _state(self, arm):
+        """The RobotState of this cycle with the arm's ``(q, dq)``, or (None, reason) when some
+        input is missing or stale."""
         now = self._now()
         if self._odom is None or not self.fresh['odom'].fresh(now):
             return None, 'no fresh /odom'
@@ -244,7 +245,7 @@ class RedundancyResolverNode(Node):
             if self._ee is None or not self.fresh['ee_pose'].fresh(now):
                 return None, 'no fresh /ee_pose'
             ee = self._ee
-        (pose, twist), (q, dq) = self._odom, msg
+        (pose, twist), (q, dq) = self._odom, arm
         self._last_state = (pose, q, ee)
         return RobotState(pose, twist, q, dq, ee_position=None if ee is None else ee[0],
                           ee_rotation=None if ee is None else ee[1]), ''
