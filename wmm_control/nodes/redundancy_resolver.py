@@ -186,7 +186,7 @@ class RedundancyResolverNode(Node):
         return self._steady.now().nanoseconds * 1e-9
 
     def _log(self, events):
-        now = self._now()
+        now = self._now() if events else 0.0
         for event in events:
             if event.kind in _INFO:
                 self.get_logger().info(event.message)
