@@ -250,6 +250,10 @@ class SafetyStage:
             command, lower, upper, overtaking = self._brake_on_path(pairs, rows, bound, axes, command, v0, own,
                                                                    moved, to_base, lower, upper)
             rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
+        if base_twist is None and self.base_lag == 0.0:
+            # a base that tracks its reference: its linear approach must brake on its own (a
+            # lagging base's is held along its measured path above)
+            rows, bound = _without_turn(rows, bound, axes, base_full, moved, to_base)
         violated = rows @ command < bound - TOLERANCE
         if not violated.any():
             return SafetyResult(command, clearance, label, len(pairs), overtaking)
@@ -318,8 +322,16 @@ class SafetyStage:
         lags = np.where(moved, self.base_lag, 0.0)
         if self._arm_acc is None:
             return np.array([self.allowed_approach(pair.distance, lag=lag) for pair, lag in zip(pairs, lags)])
-        acc = np.concatenate((np.where(np.arange(3) == 2, 0.0, self._base_acc)[axes], self._arm_acc))
-        reach = np.abs(rows) @ acc
+        nb = len(axes)
+        reach = np.abs(rows[:, nb:]) @ self._arm_acc
+        linear = [k for k, axis in enumerate(axes) if axis < 2]
+        if linear:
+            # the base's linear axes brake the distance at no more than |j_xy| times the slower
+            # axis's limit, whichever way the pair's normal turns while it brakes (Σ |j_i| a_i
+            # would count on braking both axes at once along a normal that the base's turn, or
+            # its approach to another face, changes under it)
+            slowest = float(np.min(self._base_acc[[axes[k] for k in linear]]))
+            reach = reach + np.linalg.norm(rows[:, linear], axis=1) * slowest
         return np.array([self.allowed_approach(pair.distance, braking, lag)
                          for pair, braking, lag in zip(pairs, reach, lags)])
 
@@ -368,6 +380,24 @@ class SafetyStage:
             # no answer (a box with lower > upper): brake as hard as the box allows
             return np.clip(np.zeros(n), lower, upper)
         return np.clip(command + scale[:n, :n] @ z[:n], lower, upper)
+
+
+def _without_turn(rows, bound, axes, base_full, moved, to_base):
+    """``rows`` and ``bound`` with, for each pair of the base's own body (chassis, wheels: no arm
+    joint moves it) and an obstacle whose distance the base's turn changes, the same row without
+    the turn's share: the base's linear approach brakes as the row counts on even when the turn
+    stops. Without it, a turn that swings a corner away for the moment meets the row while the
+    base drives on at the obstacle faster than its linear acceleration limits can stop (and the
+    next corner swings in). The arm's pairs keep the turn: the arm brakes its own share fast."""
+    if 2 not in axes:
+        return rows, bound
+    n = len(moved)                                  # the pairs' own rows come first
+    turning = moved & (base_full[:, 2] != 0.0) & ~rows[:n, len(axes):].any(axis=1)
+    if not turning.any():
+        return rows, bound
+    linear = base_full[turning] * np.array([1.0, 1.0, 0.0])
+    extra = np.hstack(((linear @ to_base)[:, axes], rows[:n][turning, len(axes):]))
+    return np.vstack((rows, extra)), np.concatenate((bound, bound[:n][turning]))
 
 
 def _least_distance(normals, rhs, active):
