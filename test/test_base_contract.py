@@ -59,6 +59,7 @@ def test_every_family_meets_the_contract_with_the_simulators_groups(robot):
     assert set(base.required_groups) <= set(base.command_groups)
     assert set(base.rate_limits) == set(base.command_groups)
     np.testing.assert_array_equal(base.velocity_limit, robot.base.velocity)
+    assert base.resync_from_rates is (robot.steerable is None)     # the steerable base re-reads its angles
 
 
 def test_rates_per_group_are_finite_and_realise_the_feasible_twist(robot):

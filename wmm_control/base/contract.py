@@ -67,6 +67,9 @@ class BaseController(Protocol):
             (those whose positions the controller closes on, or whose rates it reads).
         rate_limits: |q̇| bound per group [rad/s] (a number or one per joint).
         velocity_limit: |vx|, |vy|, |ω| bounds of the base [m/s, m/s, rad/s]. Shape (3,).
+        resync_from_rates: whether a start after a gap in the measurements (``reset`` when they
+            come back) goes on from the measured rates (a wheeled base) or starts at rest from
+            the measured positions (a steerable base: it re-reads its steer angles).
         controller: the wrapped family controller.
     """
 
@@ -75,6 +78,7 @@ class BaseController(Protocol):
     required_groups: tuple
     rate_limits: Mapping[str, Any]
     velocity_limit: np.ndarray
+    resync_from_rates: bool
     controller: Any
 
     def reset(self, positions: Groups | None = None, rates: Groups | None = None) -> None:
@@ -102,6 +106,7 @@ class SteerableBase:
 
     family = 'steerable'
     required_groups = ('steer',)
+    resync_from_rates = False
 
     def __init__(self, controller: SwmrController, steer_joints, drive_joints):
         self.controller = controller
@@ -155,6 +160,7 @@ class WheelBase:
     """
 
     required_groups = ('wheel',)
+    resync_from_rates = True
 
     def __init__(self, controller: WheelController, wheel_joints, family='mecanum'):
         self.controller = controller

@@ -35,16 +35,16 @@ period; a steerable base holds its steer angles). Non-finite references and refe
 another frame are rejected (an empty frame is taken as ``base_frame``, with a warning); finite
 references beyond the limits are scaled into them by the core, with a warning. When joint
 states stop for ``joint_state_timeout`` (steady clock, so a paused sim clock cannot hide it),
-zero rates are published on every command topic, and the controller restarts from the
-measured state when they come back. A joint state also reports the rates applied over its
+zero rates are published on every command topic, and when they come back the controller
+restarts from the measured state (a steerable base re-reads its steer angles and starts at
+rest; a wheeled one goes on from the measured wheel rates). A joint state also reports the rates applied over its
 period: when they differ from the last command by more than ``applied_rate_tolerance``, that
 command was not applied as sent (lost or late, superseded when queued joint states are
 answered back to back, or zeroed by the simulator's command timeout), and the controller
-restarts from the measured state (logged, counted): the rates the base receives then change by
-at most one period of acceleration. The measured state is the joints' positions and, when the
-joint state carries the rates of every group, those rates (a steerable base: the measured steer
-angles, steer rates and the twist that best fits them and the drive rates; a wheeled one: the
-twist of the measured wheel rates). A joint state without a required joint or naming one
+goes on from the measured state (logged, counted): the rates the base receives then change by
+at most one period of acceleration. That state is, for a steerable base, the measured steer
+angles, steer rates and the twist that best fits them and the drive rates; for a wheeled one,
+the twist of the measured wheel rates. A joint state without a required joint or naming one
 twice, with positions or velocities not matching its names, non-finite values or rates beyond
 ten times their limit, runs no cycle. Nor does one whose stamp is not after the last cycle's
 or jumps more than the timeout ahead (:class:`~wmm_control.nodes.common.StampGate`: a second
@@ -147,9 +147,11 @@ class BaseControllerNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         # One cycle per joint state, run with the reference of the same stamp (see the module doc).
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
-        self.watchdog = JointStateWatchdog(
-            self, p.joint_state_timeout, p.period, steady, self._zero_rates,
-            f'zero {" and ".join(self.groups)} rates; will restart from the measured state', max_wait=p.max_state_wait)
+        then = 'restart from the measured wheel rates' if self.base.resync_from_rates else \
+            'resync from the measured angles'
+        self.watchdog = JointStateWatchdog(self, p.joint_state_timeout, p.period, steady, self._zero_rates,
+                                           f'zero {" and ".join(self.groups)} rates; will {then}',
+                                           max_wait=p.max_state_wait)
         self.create_subscription(TwistStamped, 'base/reference', self._on_reference, COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         self.get_logger().info(f'{family} base controller, robot {robot.name}: {self.base.describe()}')
@@ -195,7 +197,7 @@ class BaseControllerNode(Node):
             return
         now = seconds(self.get_clock())
         if self.watchdog.resync(*self.pub_commands.values()):
-            self.base.reset(positions, rates)
+            self.base.reset(positions, rates if self.base.resync_from_rates else None)
         elif rates is not None and self._last is not None:
             self._restart_unless_applied(positions, rates)
         reference = self.reference.current(now)
