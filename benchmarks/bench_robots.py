@@ -27,10 +27,12 @@ sys.path.insert(0, str(ROOT / 'test'))        # the URDF factory of the tests
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_swmr import bench_pink  # noqa: E402
-from sim_bridge.closed_loop import ClosedLoop, _rotation, make_base_controller  # noqa: E402
+from sim_bridge.closed_loop import ClosedLoop  # noqa: E402
 from sim_bridge.world import SimWorld  # noqa: E402
 from urdf_factory import write_urdf  # noqa: E402
+from wmm_control.base import make_base_controller  # noqa: E402
 from wmm_control.cli.robot_setup import init_robot  # noqa: E402
+from wmm_control.kinematics.orientation import matrix_from_quaternion  # noqa: E402
 from wmm_control.resolvers import PoseTarget, make_resolver  # noqa: E402
 from wmm_control.robot_config import load_robot, robot_names  # noqa: E402
 
@@ -45,7 +47,7 @@ def record(cfg, cycles):
         loop = ClosedLoop(world, make_resolver('amp', cfg))
         p0, q0 = world.ee_pose()
         for k in range(cycles):
-            target = PoseTarget(np.asarray(p0) + OFFSETS[0 if k < cycles // 3 else 1], _rotation(q0))
+            target = PoseTarget(np.asarray(p0) + OFFSETS[0 if k < cycles // 3 else 1], matrix_from_quaternion(q0))
             state = loop.state()
             rec = loop.step(target)
             out.append((state, target, rec.command.base_twist))

@@ -32,7 +32,7 @@ def test_no_kind_of_bad_input_hurts_the_node(column):
 def test_the_matrix_sees_a_node_that_runs_a_cycle_per_duplicate(monkeypatch):
     """Without the stamp gate, a second publisher's copy runs a second cycle, silently (once the
     check that the last command was applied, which notices the second cycle's effect, is off too)."""
-    import wmm_control.nodes.mecanum_controller as node_module
+    import wmm_control.nodes.base_controller as node_module
     monkeypatch.setattr(StampGate, 'admit', lambda self, stamp: '')
     monkeypatch.setattr(node_module, 'unapplied_command', lambda measured, commanded, tolerance: '')
     kind = next(k for k in bad_input.KINDS if k.name == 'duplicated message')
@@ -50,7 +50,7 @@ def test_the_table_prints_one_row_per_kind_and_one_column_per_node():
 
 def test_without_the_clock_guard_a_negative_clock_crashes_the_node(monkeypatch):
     """rclpy's own time source raises on a negative /clock; the guard is what the matrix sees."""
-    import wmm_control.nodes.swmr_controller as node_module
+    import wmm_control.nodes.base_controller as node_module
     monkeypatch.setattr(node_module, 'guard_clock', lambda node: None)
     kind = next(k for k in bad_input.KINDS if k.name == 'negative /clock')
     cell = bad_input.run_cell(bad_input.RIGS['swmr_controller'], kind)

@@ -5,7 +5,7 @@ import struct
 import numpy as np
 import pytest
 
-from sim_bridge.closed_loop import run_scenario
+from wmm_control.experiments.direct import run_scenario
 from sim_bridge.world import SimWorld
 from wmm_control.experiments import figures
 from wmm_control.experiments.metrics import goal_metrics, pose_error_norm

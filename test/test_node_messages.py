@@ -21,7 +21,8 @@ SIM_GROUP = {'clamped', 'rejected', 'position_limited', 'command_age_s'}
 DIAGNOSTIC_KEYS = {
     '/wmm_sim: simulation': {'sim_time_s', 'steps', 'real_time_factor'},
     '/swmr_controller': {'status', 'route', 'qp_status', 'icr_next_xy', 'icr_at_infinity', 'active_constraints',
-                        'solve_time_us', 'beta_ref', 'feasible_twist', 'reference', 'references_rejected',
+                        'solve_time_us', 'beta_ref', 'feasible_twist', 'reference', 'reference_age_s',
+                        'references_rejected', 'cycles', 'joint_states_rejected', 'stale_cycles',
                         'joint_states_skipped', 'commands_not_applied', 'measured_period_s'},
     '/mecanum_controller': {'status', 'velocity_scale', 'accel_scale', 'reference', 'reference_dropped', 'reference_limited',
                            'feasible_twist', 'wheel_rates', 'wheel_rate_ratio', 'reference_age_s',

@@ -11,7 +11,7 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from ros_helpers import RosHarness, overrides, stamp_s
-from sim_bridge.closed_loop import run_scenario
+from wmm_control.experiments.direct import run_scenario
 from sim_bridge.node import SimNode
 from sim_bridge.world import SimWorld
 from wmm_control.experiments.ros_run import LOCKSTEP_WAITS, run_with_nodes

@@ -1,5 +1,5 @@
 """Mobile-base kinematics and controllers: steerable (Sorour §IV), Mecanum (Xing eq 16) and
-differential drive."""
+differential drive, and the one contract they all meet (:mod:`wmm_control.base.contract`)."""
 
 from wmm_control.base.applied import unapplied_command
 from wmm_control.base.differential import DifferentialKinematics
@@ -15,22 +15,28 @@ from wmm_control.base.swmr_controller import (
     SwmrOutput,
     SwmrParams,
 )
+from wmm_control.base.contract import BaseCommand, BaseController, SteerableBase, WheelBase, make_base_controller
 
 __all__ = [
+    'BaseCommand',
+    'BaseController',
     'DifferentialKinematics',
     'Icr',
     'IcrQp',
+    'WheelBase',
     'WheelController',
     'MecanumKinematics',
     'WheelOutput',
     'WheelParams',
     'OsqpIcrSolver',
     'QpResult',
+    'SteerableBase',
     'SteerableGeometry',
     'SwmrController',
     'SwmrOutput',
     'SwmrParams',
     'choose_route',
+    'make_base_controller',
     'unapplied_command',
     'wheel_kinematics',
 ]

@@ -342,11 +342,8 @@ class BaseControllerRig(PlantRig):
         self._feasible = 0
 
     def make_node(self, overrides):
-        if self.config.steerable:
-            from wmm_control.nodes.swmr_controller import SwmrControllerNode as cls
-        else:
-            from wmm_control.nodes.mecanum_controller import MecanumControllerNode as cls
-        return cls(context=self.context, parameter_overrides=[
+        from wmm_control.nodes.base_controller import BaseControllerNode
+        return BaseControllerNode(self.config.base_type, context=self.context, parameter_overrides=[
             Parameter('diagnostics_period', value=PERIOD), *overrides])
 
     def _watch_outputs(self):

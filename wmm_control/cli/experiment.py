@@ -44,7 +44,7 @@ MATRIX = ('matrix_circle_0.25_a', 'matrix_circle_0.25_b')
 
 
 def _run_direct(scenario, run, progress):
-    from sim_bridge.closed_loop import run_scenario
+    from wmm_control.experiments.direct import run_scenario
     from sim_bridge.slip import SlipParams
     from sim_bridge.world import SimWorld
     from wmm_control.resolvers import make_resolver

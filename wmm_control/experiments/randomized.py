@@ -30,7 +30,7 @@ independent of the controllers' distance model); a run that goes more than
 * ``obstacles``: the obstacle file's text ('' without obstacles).
 
 **A run** starts from the robot's start state (its YAML), with the goal given at t = 0 as a
-set-point, in lockstep: the direct engine (:func:`sim_bridge.closed_loop.run_scenario`, the
+set-point, in lockstep: the direct engine (:func:`wmm_control.experiments.direct.run_scenario`, the
 same core objects the nodes run) or every node in this process over topics
 (:func:`~wmm_control.experiments.ros_run.run_with_nodes`). Kinematic base, no slip,
 ground-truth feedback: the runs test the controllers, not the odometry. Its outcome is
@@ -183,7 +183,7 @@ def _scenario(robot, goal, duration, obstacles):
 
 
 def _run_direct(robot, run, goal, duration, obstacles):
-    from sim_bridge.closed_loop import run_scenario
+    from wmm_control.experiments.direct import run_scenario
     from sim_bridge.world import SimWorld
     from wmm_control.experiments.scenario import resolver_parameters
     from wmm_control.resolvers import make_resolver

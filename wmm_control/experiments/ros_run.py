@@ -144,7 +144,8 @@ def _executor(context):
 #: it waits: the run does not depend on timing.
 LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 0.5},
                   'swmr_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0},
-                  'mecanum_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0}}
+                  'mecanum_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0},
+                  'differential_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0}}
 
 
 def private_domain_id():
@@ -175,9 +176,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     """
     from sim_bridge.node import SimNode
     from wmm_control.nodes.goal_sequencer import GoalSequencerNode
-    from wmm_control.nodes.mecanum_controller import MecanumControllerNode
+    from wmm_control.nodes.base_controller import NODE_NAMES, BaseControllerNode
     from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
-    from wmm_control.nodes.swmr_controller import SwmrControllerNode
     from wmm_control.robot_config import load_robot
 
     robot = load_robot(scenario.robot)
@@ -213,12 +213,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
             {'scenario': str(scenario.path), 'use_sim_time': True})))
         nodes.append(RedundancyResolverNode(context=context, cli_args=remap,
                                             parameter_overrides=params(resolver_params)))
-        if robot.steerable is not None:
-            nodes.append(SwmrControllerNode(context=context, parameter_overrides=params(
-                dict(LOCKSTEP_WAITS['swmr_controller'], robot=str(robot.yaml_path)))))
-        else:
-            nodes.append(MecanumControllerNode(robot.base_type, context=context, parameter_overrides=params(
-                dict(LOCKSTEP_WAITS['mecanum_controller'], robot=str(robot.yaml_path)))))
+        nodes.append(BaseControllerNode(robot.base_type, context=context, parameter_overrides=params(
+            dict(LOCKSTEP_WAITS[NODE_NAMES[robot.base_type]], robot=str(robot.yaml_path)))))
         recorder = Recorder(context, robot, scenario, log)
         nodes.append(recorder)
         sim = SimNode(context=context, parameter_overrides=params(sim_params))

@@ -1,0 +1,51 @@
+"""A whole scenario played on the direct engine: a :class:`~sim_bridge.closed_loop.ClosedLoop`
+on a :class:`~sim_bridge.world.SimWorld`, no ROS in between, logged as a
+:class:`~wmm_control.experiments.metrics.RunLog`."""
+
+import time
+
+from sim_bridge.closed_loop import ClosedLoop
+from wmm_control.experiments.metrics import RunLog
+from wmm_control.kinematics import KinematicModel
+
+__all__ = ['run_scenario']
+
+
+def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', progress=None, until=None):
+    """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
+
+    Args:
+        world: a fresh :class:`~sim_bridge.world.SimWorld` of the scenario's robot.
+        resolver: the method under test.
+        scenario: a :class:`~wmm_control.experiments.scenario.Scenario`.
+        feedback: see :class:`~sim_bridge.closed_loop.ClosedLoop`.
+        label: name of the run in the log.
+        progress: optional callable ``progress(n_periods)`` called after each period.
+        until: optional callable ``until(diagnostics)``, given each period's
+            :class:`~wmm_control.resolvers.ResolverDiagnostics`: the run ends early when it
+            returns True.
+
+    Returns:
+        The frozen :class:`~wmm_control.experiments.metrics.RunLog`.
+    """
+    # the scenario's obstacles, in the world and in the controller's collision model
+    world.set_obstacles(scenario.obstacles)
+    resolver.set_obstacles(scenario.obstacles)
+    loop = ClosedLoop(world, resolver, feedback=feedback)
+    log = RunLog(method=resolver.name, label=label, joint_names=world.joint_names)
+    reference = scenario.reference(KinematicModel(world.robot)) if scenario.trajectory is not None else None
+    n = int(round(scenario.duration / world.dt))
+    t0 = time.perf_counter()
+    for _ in range(n):
+        gi = scenario.goal_index(world.time)
+        rec = loop.step(scenario.target(world.time, reference))
+        cmd = rec.command
+        log.append(rec.t, gi, rec.ee_position, rec.ee_rotation, rec.base_pose, rec.q_arm, cmd.arm_velocity,
+                   cmd.base_twist, rec.feasible_twist, cmd.diagnostics, q=rec.q)
+        if progress is not None:
+            progress(1)
+        if until is not None and until(cmd.diagnostics):
+            break
+    log.wall_time_s = time.perf_counter() - t0
+    log.sim_counters = {g: dict(c) for g, c in world.counters.items()}
+    return log.freeze()

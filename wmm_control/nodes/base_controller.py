@@ -1,0 +1,250 @@
+"""The base controller node: any :class:`~wmm_control.base.BaseController` over topics.
+
+One class, three executables, each for one base family (it checks its robot's):
+``swmr_controller`` (steerable, Sorour §IV; :mod:`wmm_control.nodes.swmr_controller`),
+``mecanum_controller`` (robot B, Xing eq 16) and ``differential_controller``
+(:mod:`wmm_control.nodes.mecanum_controller`). Geometry, joints and every limit come from the
+robot description; ``config/<executable>.yaml`` holds only the node's tuning.
+
+Subscribes:
+  ``/base/reference`` (``geometry_msgs/TwistStamped``, frame ``base_frame`` or empty):
+  ξ̇* = (ẋ, ẏ, ω);
+  ``/joint_states`` (``sensor_msgs/JointState``): each message with the joints of the
+  controller's required groups (the steer joints; the wheel joints) runs exactly one cycle.
+Publishes, every cycle:
+  ``/<group>_controller/commands`` (``std_msgs/Float64MultiArray``), one per command group
+  of the controller, in the order of the robot YAML's joints: ``steer`` (β̇_ref) and
+  ``drive`` (φ̇_ref) for a steerable base, ``wheel`` for a Mecanum (fl, fr, rl, rr) or
+  differential (left, right) one;
+  ``/base/feasible_twist`` (``TwistStamped``, frame ``base_frame``): q̇_bf, the twist the base
+  executes over the coming period, stamped with the joint state the cycle answers;
+  ``/diagnostics``: status, the family's values, reference and counters, every
+  ``diagnostics_period``.
+
+The exchange, one per period: a joint state stamped S runs the cycle that answers the
+reference stamped S, at once if the latest reference carries S, else as soon as it comes, or
+after ``reference_wait`` seconds of steady (wall) time with the latest reference
+(:class:`~wmm_control.nodes.common.StampedExchange`). A resolver that answers each joint state
+with a reference of the same stamp therefore gets its feasible twist in the same period, and a
+reference published by hand (stamp 0) still drives the base, one short wait later. A
+steerable base closes each cycle on the measured steer angles.
+
+Safety: when the latest reference is older than ``reference_timeout`` (this node's clock at
+receipt) the base brakes to rest at its acceleration limits (at rest within |v|/a + one
+period; a steerable base holds its steer angles). Non-finite references and references in
+another frame are rejected (an empty frame is taken as ``base_frame``, with a warning); finite
+references beyond the limits are scaled into them by the core, with a warning. When joint
+states stop for ``joint_state_timeout`` (steady clock, so a paused sim clock cannot hide it),
+zero rates are published on every command topic, and when they come back the controller
+restarts from the measured state (a steerable base re-reads its steer angles and starts at
+rest; a wheeled one goes on from the measured wheel rates). A joint state also reports the rates applied over its
+period: when they differ from the last command by more than ``applied_rate_tolerance``, that
+command was not applied as sent (lost or late, superseded when queued joint states are
+answered back to back, or zeroed by the simulator's command timeout), and the controller
+goes on from the measured state (logged, counted): the rates the base receives then change by
+at most one period of acceleration. That state is, for a steerable base, the measured steer
+angles, steer rates and the twist that best fits them and the drive rates; for a wheeled one,
+the twist of the measured wheel rates. A joint state without a required joint or naming one
+twice, with positions or velocities not matching its names, non-finite values or rates beyond
+ten times their limit, runs no cycle. Nor does one whose stamp is not after the last cycle's
+or jumps more than the timeout ahead (:class:`~wmm_control.nodes.common.StampGate`: a second
+publisher, a replayed message), nor one that waited in the node longer than
+``max_state_wait`` (:class:`~wmm_control.nodes.common.JointStateWatchdog`); a joint-state
+period that differs from ``period`` is reported. Every rejection is logged, throttled. Nothing
+non-finite is ever published. Timers run on the steady clock, so the node works under
+``use_sim_time``.
+"""
+
+import time
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TwistStamped
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from wmm_control.base import make_base_controller, unapplied_command
+from wmm_control.nodes.common import (
+    BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
+    StampedExchange, declare_parameters, diagnostic_array, float_array, guard_clock, max_state_wait_param, require_base,
+    node_status, robot_param, robot_period, seconds, twist_stamped)
+from wmm_control.robot_config import load_robot
+
+__all__ = ['BaseControllerNode', 'NODE_NAMES', 'STEERABLE_PARAMS', 'WHEEL_PARAMS']
+
+#: The node (and executable) name of each base family.
+NODE_NAMES = {'steerable': 'swmr_controller', 'mecanum': 'mecanum_controller',
+              'differential': 'differential_controller'}
+
+#: The steerable controller's gains (Sorour Table I), its only parameters of its own.
+GAINS = (Param('kp', 'Gain K_p of the twist controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
+         Param('icr_gain', 'Gain λ of the ICR P-controller [1/s].', lo=1e-3, hi=40.0, read_only=True))
+
+
+def _params(robot_help, gains=()):
+    return (
+        robot_param(robot_help),
+        Param('period', 'Control period t_s [s]; default: the robot YAML\'s period.', lo=1e-3, hi=1.0,
+              read_only=True, default_from=robot_period),
+        *gains,
+        Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
+        Param('reference_timeout', 'Reference age [s] (this node\'s clock at receipt) after which the base brakes '
+              'to rest.', lo=1e-3, hi=60.0),
+        Param('reference_wait', 'Steady time [s] a joint state waits for its reference.', lo=0.0, hi=1.0, read_only=True),
+        Param('joint_state_timeout', 'Joint-state age [s] (steady clock) after which zero rates are commanded.',
+              lo=1e-3, hi=60.0),
+        max_state_wait_param(),
+        Param('applied_rate_tolerance', 'Largest difference [rad/s] between the rates of a joint state and the '
+              'last command under which that command counts as applied; beyond it the controller restarts from '
+              'the measured state. 0: never.', lo=0.0, hi=100.0, read_only=True),
+        Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
+    )
+
+
+STEERABLE_PARAMS = _params('A robot with a steerable base (A, Sorour). Geometry, joints and limits come from its '
+                           'YAML.', GAINS)
+WHEEL_PARAMS = _params('A robot with a Mecanum or differential base. Geometry and limits come from its description.')
+
+
+class BaseControllerNode(Node):
+    """Wraps the base controller of one robot (:func:`~wmm_control.base.make_base_controller`).
+
+    Args:
+        family: the base family this executable drives (``steerable``, ``mecanum`` or
+            ``differential``); the node name is :data:`NODE_NAMES` ``[family]``.
+    """
+
+    def __init__(self, family, **kwargs):
+        name = NODE_NAMES[family]
+        super().__init__(name, **kwargs)
+        guard_clock(self)
+        self.family = family
+        specs = STEERABLE_PARAMS if family == 'steerable' else WHEEL_PARAMS
+        p = declare_parameters(self, f'{name}.yaml', specs, on_change={
+            'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
+            'joint_state_timeout': lambda v: self.watchdog.set_timeout(v),
+            'max_state_wait': lambda v: setattr(self.watchdog, 'max_wait', float(v))})
+        self.p = p
+        robot = load_robot(p.robot)
+        require_base(robot, (family,), name)
+        gains = {g.name: getattr(p, g.name) for g in GAINS if g in specs}
+        self.base = make_base_controller(robot, p.period, **gains)
+        self.controller = self.base.controller
+        self.groups = tuple(self.base.command_groups)
+        self.selectors = {g: JointSelector(joints, velocity_limits=self.base.rate_limits[g])
+                          for g, joints in self.base.command_groups.items()}
+        self.reference = BaseReference(self, p.base_frame, p.reference_timeout, self.base.velocity_limit)
+        self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0, 'commands_not_applied': 0}
+        self._last = None            # the last command's rates, all groups in a row
+        self._next_diag = 0.0
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.pub_commands = {g: self.create_publisher(Float64MultiArray, f'{g}_controller/commands', COMMAND_QOS)
+                             for g in self.groups}
+        self.pub_feasible = self.create_publisher(TwistStamped, 'base/feasible_twist', COMMAND_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        # One cycle per joint state, run with the reference of the same stamp (see the module doc).
+        self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
+        then = 'restart from the measured wheel rates' if self.base.resync_from_rates else \
+            'resync from the measured angles'
+        self.watchdog = JointStateWatchdog(self, p.joint_state_timeout, p.period, steady, self._zero_rates,
+                                           f'zero {" and ".join(self.groups)} rates; will {then}',
+                                           max_wait=p.max_state_wait)
+        self.create_subscription(TwistStamped, 'base/reference', self._on_reference, COMMAND_QOS)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
+        self.get_logger().info(f'{family} base controller, robot {robot.name}: {self.base.describe()}')
+
+    # ------------------------------------------------------------------ inputs
+    def _on_reference(self, msg):
+        if self.reference.accept(msg):
+            self.exchange.reference_received(msg.header.stamp)
+
+    def _measured(self, msg):
+        """``(positions, rates)`` per group, or None (logged, counted) when a required group cannot
+        be read. ``rates`` is None unless the message has velocities for every group."""
+        positions = {}
+        rates = {} if len(msg.velocity) else None
+        for group, selector in self.selectors.items():
+            q, dq, reason = selector.read(msg)
+            if q is None:
+                if group in self.base.required_groups:
+                    self.counters['joint_states_rejected'] += 1
+                    self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped',
+                                           throttle_duration_sec=1.0)
+                    return None
+                rates = None
+                continue
+            positions[group] = q
+            if rates is not None:
+                rates[group] = dq
+        return positions, rates
+
+    def _on_joint_states(self, msg):
+        received = time.monotonic_ns()
+        measured = self._measured(msg)
+        if measured is not None and self.watchdog.admit(msg.header.stamp):
+            self.exchange.state_received(msg.header.stamp, (*measured, received))
+
+    # ------------------------------------------------------------------ cycle
+    def _cycle(self, stamp, measured):
+        """The cycle of the joint state stamped ``stamp``: ``measured`` is (positions and rates per
+        group, when this node received it (``time.monotonic_ns()``)); with the latest reference
+        (braking when it is stale)."""
+        positions, rates, received = measured
+        if self.watchdog.waited_too_long(received):
+            return
+        now = seconds(self.get_clock())
+        if self.watchdog.resync(*self.pub_commands.values()):
+            self.base.reset(positions, rates if self.base.resync_from_rates else None)
+        elif rates is not None and self._last is not None:
+            self._restart_unless_applied(positions, rates)
+        reference = self.reference.current(now)
+        if reference is None:
+            self.counters['stale_cycles'] += 1
+        command = self.base.step(reference, positions)
+        if command.status == 'solver_failure':
+            self.get_logger().error(f'ICR QP failed ({command.detail.qp_status}): steering held, drive ramping down',
+                                    throttle_duration_sec=1.0)
+        out = {g: command.rates[g] for g in self.groups}
+        twist = command.feasible_twist
+        if not all(np.all(np.isfinite(v)) for v in (twist, *out.values())):   # cannot happen: never publish it
+            self.get_logger().error(f'non-finite command {[v.tolist() for v in out.values()]}: zero rates',
+                                    throttle_duration_sec=1.0)
+            self.base.reset(positions)
+            out, twist = {g: np.zeros(len(v)) for g, v in out.items()}, np.zeros(3)
+        self.counters['cycles'] += 1
+        for group, rates_out in out.items():
+            self.pub_commands[group].publish(float_array(rates_out))
+        self._last = np.concatenate(list(out.values()))
+        feasible = twist_stamped(stamp, self.p.base_frame, twist)
+        self.pub_feasible.publish(feasible)
+        if self.p.diagnostics_period > 0 and now >= self._next_diag:
+            self._next_diag = now + self.p.diagnostics_period
+            self.pub_diag.publish(self._diagnostics(feasible.header.stamp, command, twist, now))
+
+    def _restart_unless_applied(self, positions, rates):
+        """Restart from the measured state when the rates applied are not the last command's."""
+        why = unapplied_command(np.concatenate([rates[g] for g in self.groups]), self._last,
+                                self.p.applied_rate_tolerance)
+        if why:
+            self.counters['commands_not_applied'] += 1
+            self.get_logger().warn(f'last {"/".join(self.groups)} command: {why}; restarting from the measured state',
+                                   throttle_duration_sec=1.0)
+            self.base.reset(positions, rates)
+
+    def _zero_rates(self):
+        for group, joints in self.base.command_groups.items():
+            self.pub_commands[group].publish(float_array(np.zeros(len(joints))))
+
+    def _diagnostics(self, stamp, command, twist, now):
+        ref = self.reference
+        status = command.status
+        level = ('error' if status == 'solver_failure'
+                 else 'warn' if status == 'braking' and np.any(ref.value) else 'ok')
+        values = {'status': status, **self.base.diagnostic_values(command), 'feasible_twist': twist,
+                  'reference': ref.value, 'reference_age_s': ref.freshness.age(now),
+                  'references_rejected': ref.rejected, 'joint_states_skipped': self.watchdog.skipped,
+                  'measured_period_s': self.watchdog.stamps.measured_period, **self.counters}
+        return diagnostic_array(stamp, [node_status(self, '', f'{self.family} base', level, status, values)])
