@@ -22,11 +22,18 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
+from sim_bridge.node import SimNode
 from wmm_control.errors import ConfigError
 from wmm_control.experiments.metrics import RunLog
+from wmm_control.experiments.recording import BagRecorder
 from wmm_control.experiments.scenario import resolver_parameters
 from wmm_control.kinematics.orientation import matrix_from_quaternion, yaw_from_quaternion
+from wmm_control.nodes.goal_sequencer import GoalSequencerNode
+from wmm_control.nodes.mecanum_controller import MecanumControllerNode
+from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
+from wmm_control.nodes.swmr_controller import SwmrControllerNode
 from wmm_control.resolvers import ResolverDiagnostics
+from wmm_control.robot_config import load_robot
 
 __all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_WAITS']
 
@@ -150,10 +157,12 @@ LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 0.5},
                   'mecanum_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0}}
 
 
-def private_domain_id():
+def private_domain_id(offset=0):
     """A ROS domain for this process alone (101–200, from the process id), so that an experiment
-    never hears, nor drives, a robot system running on the machine's usual domain."""
-    return 101 + os.getpid() % 100
+    never hears, nor drives, a robot system running on the machine's usual domain. ``offset``
+    gives the process's worker runs domains of their own: offsets 1, 2, … are other domains,
+    up to a hundred of them."""
+    return 101 + (os.getpid() + offset) % 100
 
 
 def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=None, bag_path=None, view_port=None):
@@ -176,13 +185,6 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     Raises:
         ConfigError: a bad run entry, or the run stalled (no progress for ``wall_timeout``).
     """
-    from sim_bridge.node import SimNode
-    from wmm_control.nodes.goal_sequencer import GoalSequencerNode
-    from wmm_control.nodes.mecanum_controller import MecanumControllerNode
-    from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
-    from wmm_control.nodes.swmr_controller import SwmrControllerNode
-    from wmm_control.robot_config import load_robot
-
     robot = load_robot(scenario.robot)
     feedback = run.get('feedback', 'ground_truth')
     if feedback not in ('ground_truth', 'odometry'):
@@ -228,11 +230,11 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         nodes.append(sim)
         bag = None
         if bag_path is not None:
-            from wmm_control.experiments.recording import BagRecorder
             bag = BagRecorder(context, bag_path)
             nodes.append(bag)
             bag.subscribe_all()
         if view_port is not None:
+            # viser (the browser viewer) is imported only by runs that show themselves live
             from wmm_control.nodes.viewer import ViewerNode
             nodes.append(ViewerNode(context=context, parameter_overrides=params(
                 {'robot': str(robot.yaml_path), 'port': int(view_port)})))
