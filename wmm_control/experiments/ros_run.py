@@ -150,11 +150,16 @@ def _executor(context):
 
 
 #: In lockstep nothing moves until every answer is in, so the nodes may wait as long as a loaded
-#: machine needs (the waits end as soon as the answer comes), and no joint state goes stale while
-#: it waits: the run does not depend on timing.
-LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 0.5},
-                  'swmr_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0},
-                  'mecanum_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0}}
+#: machine needs (the waits end as soon as the answer comes), and no input goes stale while it
+#: waits: the timeouts measured on the wall clock are far beyond any wait. The run does not
+#: depend on timing, also when other processes (the runs of ``wmm_experiment --jobs``) take the
+#: cores.
+LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 1.0, 'state_timeout': 30.0},
+                  'swmr_controller': {'reference_wait': 1.0, 'max_state_wait': 0.0, 'joint_state_timeout': 30.0,
+                                      'reference_timeout': 30.0},
+                  'mecanum_controller': {'reference_wait': 1.0, 'max_state_wait': 0.0, 'joint_state_timeout': 30.0,
+                                         'reference_timeout': 30.0},
+                  'wmm_sim': {'command_timeout': 10.0, 'lockstep_timeout': 10.0}}
 
 
 def private_domain_id(offset=0):
@@ -195,7 +200,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
                            markers_period=0.0,
                            **LOCKSTEP_WAITS['redundancy_resolver'])
     sim_params = dict(scenario.sim or {})
-    sim_params.update(robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0)
+    sim_params.update(robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0, **LOCKSTEP_WAITS['wmm_sim'])
     if scenario.obstacles_file:
         sim_params['obstacles'] = resolver_params['obstacles'] = scenario.obstacles_file
     for key in ('slip_drift', 'slip_noise'):
