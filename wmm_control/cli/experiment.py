@@ -122,12 +122,12 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_
         ``metrics.json`` content (see docs/results.md for its keys).
     """
     selected = _selected(scenario, runs)
-    todo = _run_jobs(scenario, selected, engine, bag_dir, view_port, 'bar' if show_progress else 'none', jobs)
+    todo = _jobs_of(scenario, selected, engine, bag_dir, view_port, 'bar' if show_progress else 'none', jobs)
     logs = {run['name']: log for run, (log, _) in zip(selected, run_jobs(simulate, todo, jobs))}
     return logs, summarize_runs(scenario, selected, logs, engine, bag_dir)
 
 
-def _run_jobs(scenario, selected, engine, bag_dir, view_port, progress, workers, first=0):
+def _jobs_of(scenario, selected, engine, bag_dir, view_port, progress, workers, first=0):
     """The :class:`RunJob` of each selected run. With several workers, each run reports a line
     when done instead of a bar, and each nodes run gets a ROS domain of its own (``first``
     numbers the jobs across scenarios)."""
@@ -313,7 +313,7 @@ def _run_all(plans, args):
     at once, and write each scenario's results in the order of ``plans``; its summaries."""
     todo = []
     for scenario, selected, out in plans:
-        todo += _run_jobs(scenario, selected, args.engine, out, args.view_port if args.view else None, 'bar',
+        todo += _jobs_of(scenario, selected, args.engine, out, args.view_port if args.view else None, 'bar',
                           args.jobs, first=len(todo))
     results = run_jobs(simulate, todo, args.jobs)
     summaries = []
