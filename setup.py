@@ -48,7 +48,6 @@ setup(
             'wmm_viewer = wmm_control.nodes.viewer:main',
             'wmm_experiment = wmm_control.cli.experiment:main',
             'wmm_randomized = wmm_control.cli.randomized:main',
-            'wmm_bad_input = wmm_control.cli.bad_input:main',
         ],
     },
 )

@@ -1,5 +1,6 @@
 """In-process ROS test helpers: a private context per test, spinning until a condition holds,
-and a scripted controller that answers each joint state with commands."""
+and a scripted controller that answers each joint state with commands. The fault matrix
+(:mod:`fault_matrix`) runs each of its cells on a :class:`RosHarness` too."""
 
 import time
 
@@ -11,6 +12,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -18,17 +20,24 @@ from wmm_control.experiments.ros_run import private_domain_id
 from wmm_control.nodes.common import float_array
 
 
+#: What a probe subscribes to ``/rosout`` with: every message a node logged, also those logged
+#: before the subscription.
+ROSOUT_QOS = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+
+
 def overrides(**params):
     return [Parameter(k, value=v) for k, v in params.items()]
 
 
 class RosHarness:
-    """A private rclpy Context and executor; nodes added to it are destroyed at close()."""
+    """A private rclpy Context and executor; nodes added to it are destroyed at close().
 
-    def __init__(self):
+    ``args``: ROS arguments of the context, e.g. ``['--ros-args', '--disable-stdout-logs']``."""
+
+    def __init__(self, args=None):
         self.context = rclpy.Context()
         # A domain of this test process alone: no crosstalk with other ROS processes on the machine.
-        rclpy.init(context=self.context, domain_id=private_domain_id())
+        rclpy.init(context=self.context, domain_id=private_domain_id(), args=args)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes = []
 
@@ -37,13 +46,18 @@ class RosHarness:
         self.executor.add_node(node)
         return node
 
-    def spin_until(self, predicate, timeout=20.0):
-        """Spin until ``predicate()`` is true; False if the wall-clock timeout passes first."""
+    def probe(self, name, **kwargs):
+        """A plain node of this context (publishers, subscriptions, clients of a test), added."""
+        return self.add(Node(name, context=self.context, **kwargs))
+
+    def spin_until(self, predicate, timeout=20.0, poll=0.005):
+        """Spin until ``predicate()`` is true; False if the wall-clock timeout passes first.
+        ``poll``: the longest a single wait for work lasts [s]."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if predicate():
                 return True
-            self.executor.spin_once(timeout_sec=0.005)
+            self.executor.spin_once(timeout_sec=poll)
         return predicate()
 
     def spin_for(self, seconds):

@@ -1,28 +1,35 @@
-"""Every node against every kind of bad input (the matrix that ``wmm_bad_input`` prints).
+"""Every node against every kind of bad input (the fault matrix, :mod:`fault_matrix`; its table
+is in docs/robustness.md, printed by ``scripts/fault_table.py``).
 
-Each column runs every kind on one node, in process on a private domain
-(:mod:`wmm_control.cli.bad_input`): no crash, no NaN on any output, no command beyond the
+Each column runs every kind on one node, in process on a private domain: no crash, no NaN on any output, no command beyond the
 limits, the node still answers afterwards, and a throttled warning that says what was wrong
 (or, for valid input in another layout, the very same commands).
 """
 
 import pytest
+from builtin_interfaces.msg import Time
+from rcl_interfaces.msg import Log
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
 
-from wmm_control.cli import bad_input
+import fault_matrix
+import wmm_control.nodes.base_controller as node_module
+from ros_helpers import ROSOUT_QOS
 from wmm_control.nodes.common import StampGate
+from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 
 
 def test_the_matrix_has_at_least_25_kinds_and_every_node_meets_some():
-    assert len(bad_input.KINDS) >= 25
+    assert len(fault_matrix.KINDS) >= 25
     families = {'sim', 'base', 'resolver', 'sequencer'}
     for family in families:
-        applicable = [k for k in bad_input.KINDS if family in k.cases or k.param is not None]
+        applicable = [k for k in fault_matrix.KINDS if family in k.cases or k.param is not None]
         assert len(applicable) >= 6, family
 
 
-@pytest.mark.parametrize('column', list(bad_input.RIGS))
+@pytest.mark.parametrize('column', list(fault_matrix.RIGS))
 def test_no_kind_of_bad_input_hurts_the_node(column):
-    results = bad_input.run_matrix(columns=[column])
+    results = fault_matrix.run_matrix(columns=[column])
     failed = {kind: f'{cell.outcome}: {cell.detail}' for (kind, _), cell in results.items() if not cell.ok}
     assert not failed, failed
     ran = [cell for cell in results.values() if cell.outcome != 'n/a']
@@ -32,17 +39,16 @@ def test_no_kind_of_bad_input_hurts_the_node(column):
 def test_the_matrix_sees_a_node_that_runs_a_cycle_per_duplicate(monkeypatch):
     """Without the stamp gate, a second publisher's copy runs a second cycle, silently (once the
     check that the last command was applied, which notices the second cycle's effect, is off too)."""
-    import wmm_control.nodes.base_controller as node_module
     monkeypatch.setattr(StampGate, 'admit', lambda self, stamp: '')
     monkeypatch.setattr(node_module, 'unapplied_command', lambda measured, commanded, tolerance: '')
-    kind = next(k for k in bad_input.KINDS if k.name == 'duplicated message')
-    cell = bad_input.run_cell(bad_input.RIGS['mecanum_controller'], kind)
+    kind = next(k for k in fault_matrix.KINDS if k.name == 'duplicated message')
+    cell = fault_matrix.run_cell(fault_matrix.RIGS['mecanum_controller'], kind)
     assert cell.outcome == 'SILENT'
 
 
 def test_the_table_prints_one_row_per_kind_and_one_column_per_node():
-    results = bad_input.run_matrix(kinds=['NaN field', 'command empty'], columns=['wmm_sim (A)', 'goal_sequencer'])
-    table = bad_input.format_table(results).splitlines()
+    results = fault_matrix.run_matrix(kinds=['NaN field', 'command empty'], columns=['wmm_sim (A)', 'goal_sequencer'])
+    table = fault_matrix.format_table(results).splitlines()
     assert table[0] == '| kind | wmm_sim (A) | goal_sequencer |'
     assert table[2] == '| NaN field | rejected | n/a |'
     assert table[3] == '| command empty | rejected | n/a |'
@@ -50,30 +56,20 @@ def test_the_table_prints_one_row_per_kind_and_one_column_per_node():
 
 def test_without_the_clock_guard_a_negative_clock_crashes_the_node(monkeypatch):
     """rclpy's own time source raises on a negative /clock; the guard is what the matrix sees."""
-    import wmm_control.nodes.base_controller as node_module
     monkeypatch.setattr(node_module, 'guard_clock', lambda node: None)
-    kind = next(k for k in bad_input.KINDS if k.name == 'negative /clock')
-    cell = bad_input.run_cell(bad_input.RIGS['swmr_controller'], kind)
+    kind = next(k for k in fault_matrix.KINDS if k.name == 'negative /clock')
+    cell = fault_matrix.run_cell(fault_matrix.RIGS['swmr_controller'], kind)
     assert cell.outcome == 'CRASH', cell
 
 
 def test_use_sim_time_set_at_run_time_is_guarded_too(ros):
     """The time source subscribes to /clock when use_sim_time is set; that subscription drops a
     negative time with a warning too, and the clock takes the next valid one."""
-    from builtin_interfaces.msg import Time
-    from rcl_interfaces.msg import Log
-    from rclpy.node import Node
-    from rclpy.parameter import Parameter
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from rosgraph_msgs.msg import Clock
-
-    from wmm_control.nodes.mecanum_controller import MecanumControllerNode
     node = ros.add(MecanumControllerNode(context=ros.context))
-    probe = ros.add(Node('clock_probe', context=ros.context))
+    probe = ros.probe('clock_probe')
     warnings = []
     probe.create_subscription(Log, '/rosout', lambda m: warnings.append(m.msg) if m.level >= Log.WARN else None,
-                              QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                                         reliability=ReliabilityPolicy.RELIABLE))
+                              ROSOUT_QOS)
     pub = probe.create_publisher(Clock, '/clock', 10)
     assert node.set_parameters([Parameter('use_sim_time', value=True)])[0].successful
     assert ros.spin_until(lambda: pub.get_subscription_count() > 0)

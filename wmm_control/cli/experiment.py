@@ -3,7 +3,7 @@
 Usage::
 
     wmm_experiment [SCENARIO|all] [--scenario PATH] [--out DIR] [--runs NAME,...] [--engine nodes|direct]
-                   [--seed N] [--no-figures]
+                   [--seed N] [--no-figures] [--jobs N]
 
 ``SCENARIO`` names ``config/scenarios/<SCENARIO>.yaml``; ``all`` (the default) runs both papers'
 experiments (:data:`MAIN_JOB`: Table II of Sorour et al. 2019 and Xing et al. §4), each into
@@ -13,6 +13,9 @@ topics (``--engine nodes``, the default: ``wmm_sim`` in lockstep, ``swmr_control
 ``redundancy_resolver``, ``goal_sequencer``), or with the same objects and no ROS in between
 (``--engine direct``, for quick sweeps). DIR receives ``metrics.json``, the figures and, with
 ``--engine nodes``, one rosbag2 (MCAP) of all the topics of each run, ``rosbag2_<run>/``.
+``--jobs N`` runs that many runs at once, each in a process of its own (default: one per core;
+1: one after the other in this process); every run is deterministic, so the numbers are those
+of a serial run, and this process writes the tables and figures.
 """
 
 import argparse
@@ -23,32 +26,37 @@ import resource
 import shutil
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+from wmm_control.experiments.direct import run_scenario
+from sim_bridge.slip import SlipParams
+from sim_bridge.world import SimWorld
 from wmm_control.errors import WmmError
+from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
 from wmm_control.experiments.metrics import (
     METRIC_KEYS, TRAJECTORY_METRIC_KEYS, goal_metrics, run_limit_report, trajectory_metrics)
+from wmm_control.experiments.ros_run import private_domain_id, run_with_nodes
 from wmm_control.experiments.scenario import load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
-from wmm_control.resolvers import TaskSharingParams
+from wmm_control.resolvers import TaskSharingParams, make_resolver
 
-__all__ = ['main', 'run_experiment', 'format_table', 'format_matrix', 'MAIN_JOB', 'MATRIX']
+__all__ = ['main', 'run_experiment', 'simulate', 'summarize_runs', 'RunJob', 'format_table', 'format_matrix',
+           'MAIN_JOB', 'MATRIX']
 
 #: The scenarios of ``wmm_experiment all``, the main job (docs/results.md): both papers' experiments.
 MAIN_JOB = ('sorour_table2', 'xing_circle_0.10', 'xing_circle_0.25', 'xing_pose', 'xing_singularity',
             'matrix_circle_0.25_a', 'matrix_circle_0.25_b')
 #: The scenarios of the one table no paper has: one circle, both robots, all four methods.
 MATRIX = ('matrix_circle_0.25_a', 'matrix_circle_0.25_b')
+#: The control period of the runs [s].
+DT = 0.025
 
 
 def _run_direct(scenario, run, progress):
-    from wmm_control.experiments.direct import run_scenario
-    from sim_bridge.slip import SlipParams
-    from sim_bridge.world import SimWorld
-    from wmm_control.resolvers import make_resolver
-
     sim = dict(scenario.sim or {})
     slip = SlipParams(gain=float(sim.get('slip_gain', 0.0)), drift=tuple(sim.get('slip_drift', (0.0,) * 3)),
                       noise_std=tuple(sim.get('slip_noise', (0.0,) * 3)))
@@ -60,40 +68,84 @@ def _run_direct(scenario, run, progress):
                             label=run['name'], progress=lambda n: progress(n * world.dt))
 
 
-def _run_nodes(scenario, run, progress, bag_dir=None, view_port=None):
-    from wmm_control.experiments.ros_run import run_with_nodes
-    return run_with_nodes(scenario, run, progress=progress,
-                          bag_path=None if bag_dir is None else bag_path(bag_dir, run['name']), view_port=view_port)
-
-
 def bag_path(out, run_name):
     """The rosbag2 folder of run ``run_name`` in the output folder ``out``."""
     return Path(out) / f'rosbag2_{run_name}'
 
 
-def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_dir=None, view_port=None):
-    """Simulate the runs of ``scenario``; with ``bag_dir`` (engine ``nodes``), each run is
-    recorded there as a rosbag2 (MCAP) of all its topics, :func:`bag_path`.
+@dataclass(frozen=True)
+class RunJob:
+    """One run of a scenario, as handed to a worker process (:func:`simulate`)."""
+
+    scenario: object
+    run: dict
+    engine: str = 'nodes'
+    bag_dir: Path | None = None
+    view_port: int | None = None
+    #: 'bar': a progress bar; 'line': a line when the run is done (a worker's); 'none'
+    progress: str = 'bar'
+    #: ROS domain of a nodes run; None: the process's own (:func:`private_domain_id`)
+    domain_id: int | None = None
+
+
+def simulate(job):
+    """Simulate one run: ``(its frozen RunLog, the peak memory of this process [MB])``."""
+    scenario, run = job.scenario, job.run
+    with tqdm(total=scenario.duration, desc=run['name'], unit='sim s', disable=job.progress != 'bar',
+              bar_format='{desc:<36} {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s [{elapsed}]') as bar:
+        if job.engine == 'nodes':
+            log = run_with_nodes(scenario, run, progress=bar.update, domain_id=job.domain_id,
+                                 bag_path=None if job.bag_dir is None else bag_path(job.bag_dir, run['name']),
+                                 view_port=job.view_port)
+        else:
+            log = _run_direct(scenario, run, bar.update)
+    if job.progress == 'line':
+        print(f'  {scenario.name} / {run["name"]}: {len(log) * DT:.0f} sim s in {log.wall_time_s:.0f} s',
+              file=sys.stderr, flush=True)
+    return log, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _selected(scenario, runs):
+    selected = [r for r in scenario.runs if runs is None or r['name'] in runs]
+    if not selected:
+        raise WmmError(f'no run named {sorted(runs)}; the scenario has {[r["name"] for r in scenario.runs]}')
+    return selected
+
+
+def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_dir=None, view_port=None, jobs=1):
+    """Simulate the runs of ``scenario``, ``jobs`` at once (separate processes; 1: in this
+    process); with ``bag_dir`` (engine ``nodes``), each run is recorded there as a rosbag2
+    (MCAP) of all its topics, :func:`bag_path`.
 
     Returns:
         (logs, summary): ``logs`` maps a run name to its RunLog; ``summary`` is the
         ``metrics.json`` content (see docs/results.md for its keys).
     """
-    from tqdm import tqdm
+    selected = _selected(scenario, runs)
+    todo = _jobs_of(scenario, selected, engine, bag_dir, view_port, 'bar' if show_progress else 'none', jobs)
+    logs = {run['name']: log for run, (log, _) in zip(selected, run_jobs(simulate, todo, jobs))}
+    return logs, summarize_runs(scenario, selected, logs, engine, bag_dir)
 
+
+def _jobs_of(scenario, selected, engine, bag_dir, view_port, progress, workers, first=0):
+    """The :class:`RunJob` of each selected run. With several workers, each run reports a line
+    when done instead of a bar, and each nodes run gets a ROS domain of its own (``first``
+    numbers the jobs across scenarios)."""
+    if workers == 1:
+        return [RunJob(scenario, run, engine, bag_dir, view_port, progress) for run in selected]
+    return [RunJob(scenario, run, engine, bag_dir, view_port, 'line' if progress != 'none' else 'none',
+                   private_domain_id(offset=1 + first + i)) for i, run in enumerate(selected)]
+
+
+def summarize_runs(scenario, selected, logs, engine='nodes', bag_dir=None):
+    """The ``metrics.json`` content of the runs ``selected`` of ``scenario``, simulated into
+    ``logs`` (run name -> RunLog)."""
     model = KinematicModel(scenario.robot)
     robot = model.config
-    selected = [r for r in scenario.runs if runs is None or r['name'] in runs]
-    if not selected:
-        raise WmmError(f'no run named {sorted(runs)}; the scenario has {[r["name"] for r in scenario.runs]}')
-    logs, summary_runs = {}, {}
-    dt = 0.025
+    summary_runs = {}
+    dt = DT
     for run in selected:
-        with tqdm(total=scenario.duration, desc=run['name'], unit='sim s', disable=not show_progress,
-                  bar_format='{desc:<36} {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s [{elapsed}]') as bar:
-            log = (_run_nodes(scenario, run, bar.update, bag_dir, view_port) if engine == 'nodes'
-                   else _run_direct(scenario, run, bar.update))
-        logs[run['name']] = log
+        log = logs[run['name']]
         entry = {
             'method': run['method'], 'feedback': run.get('feedback', 'ground_truth'),
             'parameters': resolver_parameters(run),
@@ -123,7 +175,7 @@ def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_
         'runs': summary_runs,
         'metric_keys': TRAJECTORY_METRIC_KEYS if scenario.trajectory is not None else METRIC_KEYS,
     }
-    return logs, summary
+    return summary
 
 
 def _goal_summary(log, scenario, model, run, dt):
@@ -199,6 +251,7 @@ def format_table(summary):
 
 def _figures(scenario, logs, summary, out):
     """The figures of a run: Sorour's Figs 5–7 for goals, Xing's for a trajectory."""
+    # matplotlib is paid for only when figures are written (not by --help nor --no-figures)
     from wmm_control.experiments.figures import write_figures, write_tracking_figures
     plotted = {r['name']: logs[r['name']] for r in scenario.runs if r['name'] in logs and r.get('plot', True)}
     if not plotted:
@@ -213,11 +266,21 @@ def _figures(scenario, logs, summary, out):
     return write_figures(plotted, metrics, scenario, model, out, render_label=render, zoom_labels=zoom)
 
 
-def _run_one(scenario, args, out):
-    """Run one scenario's experiment and write ``metrics.json`` and the figures into ``out``."""
+def _prepare(scenario, args, out):
+    """The scenario with ``--seed`` applied and its selected runs; ``out`` made, without the
+    recordings of an earlier run."""
     if args.seed is not None:
         scenario = dataclasses.replace(scenario, sim=dict(scenario.sim or {}, seed=args.seed))
+    selected = _selected(scenario, set(args.runs.split(',')) if args.runs else None)
     out.mkdir(parents=True, exist_ok=True)
+    for run in scenario.runs:
+        old = bag_path(out, run['name'])
+        if (old / 'metadata.yaml').is_file():
+            shutil.rmtree(old)
+    return scenario, selected, out
+
+
+def _header(scenario, args):
     sim = scenario.sim or {}
     engine = ('all nodes in one process over topics, wmm_sim in lockstep' if args.engine == 'nodes'
               else 'no ROS (direct)')
@@ -226,19 +289,16 @@ def _run_one(scenario, args, out):
           f'{sim.get("slip_gain", 0.0)}, drift {sim.get("slip_drift", [0, 0, 0])}, noise '
           f'{sim.get("slip_noise", [0, 0, 0])}, seed {sim.get("seed", 0)}; end-effector error measured on the '
           'ground truth', flush=True)
-    start = time.perf_counter()
-    runs = set(args.runs.split(',')) if args.runs else None
-    for run in scenario.runs:           # recordings of an earlier run into this folder
-        old = bag_path(out, run['name'])
-        if (old / 'metadata.yaml').is_file():
-            shutil.rmtree(old)
-    logs, summary = run_experiment(scenario, runs, engine=args.engine, bag_dir=out,
-                                   view_port=args.view_port if args.view else None)
-    total_sim = sum(len(log) * 0.025 for log in logs.values())
-    elapsed = time.perf_counter() - start
+
+
+def _write(scenario, selected, logs, args, out, elapsed, peak_mb):
+    """Write ``metrics.json`` and the figures of one scenario's runs into ``out``; print its table."""
+    summary = summarize_runs(scenario, selected, logs, engine=args.engine, bag_dir=out)
+    total_sim = sum(len(log) * DT for log in logs.values())
+    summary['jobs'] = args.jobs
     summary['experiment_wall_time_s'] = elapsed
     summary['experiment_sim_to_wall_ratio'] = total_sim / elapsed
-    summary['peak_memory_mb'] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    summary['peak_memory_mb'] = peak_mb
     if not args.no_figures:
         summary['figures'] = [str(p) for p in _figures(scenario, logs, summary, out)]
     (out / 'metrics.json').write_text(json.dumps(summary, indent=2, default=float) + '\n')
@@ -246,6 +306,33 @@ def _run_one(scenario, args, out):
     print(f'{total_sim:.0f} simulated s in {elapsed:.1f} s wall ({total_sim / elapsed:.1f}x), peak memory '
           f'{summary["peak_memory_mb"]:.0f} MB; wrote {out / "metrics.json"}')
     return summary
+
+
+def _run_all(plans, args):
+    """Simulate the runs of every ``(scenario, selected runs, out)`` of ``plans``, ``args.jobs``
+    at once, and write each scenario's results in the order of ``plans``; its summaries."""
+    todo = []
+    for scenario, selected, out in plans:
+        todo += _jobs_of(scenario, selected, args.engine, out, args.view_port if args.view else None, 'bar',
+                          args.jobs, first=len(todo))
+    results = run_jobs(simulate, todo, args.jobs)
+    summaries = []
+    start = time.perf_counter()
+    try:
+        for scenario, selected, out in plans:
+            _header(scenario, args)
+            if args.jobs == 1:      # one after the other: the scenario's own time
+                start = time.perf_counter()
+            logs, peak_mb = {}, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+            for run in selected:
+                logs[run['name']], worker_mb = next(results)
+                peak_mb = max(peak_mb, worker_mb)
+            summaries.append(_write(scenario, selected, logs, args, out, time.perf_counter() - start, peak_mb))
+            del logs
+            gc.collect()         # the runs' logs and figures are done with: keep the peak memory down
+    finally:
+        results.close()
+    return summaries
 
 
 def main(argv=None):
@@ -259,26 +346,31 @@ def main(argv=None):
                         help='nodes: every node in one process over topics; direct: no ROS (default: nodes)')
     parser.add_argument('--seed', type=int, help="seed of the simulator's slip noise (default: the scenario's)")
     parser.add_argument('--no-figures', action='store_true', help='skip the plots and renders')
+    parser.add_argument('--jobs', type=jobs_argument, metavar='N',
+                        help='runs at once, each in a process of its own; 1: one after the other in this process '
+                             f'(default: one per core, {default_jobs()} here; 1 with --view)')
     parser.add_argument('--view', action='store_true',
                         help='show each run live in the browser (wmm_viewer; engine nodes): open the URL it logs')
     parser.add_argument('--view-port', type=int, default=8080, help='HTTP port of --view (default: %(default)s)')
     args = parser.parse_args(argv)
     if args.view and args.engine != 'nodes':
         parser.error('--view shows the nodes engine: drop --engine direct')
+    if args.view and args.jobs not in (None, 1):
+        parser.error('--view shows one run at a time: drop --jobs or give --jobs 1')
+    if args.jobs is None:
+        args.jobs = 1 if args.view else default_jobs()
     try:
         names = [args.scenario] if args.scenario else (list(MAIN_JOB) if args.name == 'all' else [args.name])
-        matrix = {}
+        plans = []
         for name in names:
             scenario = load_scenario(name)
             if len(names) > 1 and args.runs and not set(args.runs.split(',')) & {r['name'] for r in scenario.runs}:
                 print(f'\n{scenario.name}: no run named {args.runs}; skipped')
                 continue
-            summary = _run_one(scenario, args, Path(args.out) / scenario.name if len(names) > 1 else Path(args.out))
-            if scenario.name in MATRIX:
-                matrix[scenario.name] = summary
-            gc.collect()         # the runs' logs and figures are done with: keep the peak memory down
+            plans.append(_prepare(scenario, args, Path(args.out) / scenario.name if len(names) > 1 else Path(args.out)))
+        matrix = [s for s in _run_all(plans, args) if s['scenario'] in MATRIX]
         if len(matrix) == len(MATRIX):
-            print(f'\nThe R = 0.25 m circle on both robots with all four methods:\n{format_matrix(list(matrix.values()))}')
+            print(f'\nThe R = 0.25 m circle on both robots with all four methods:\n{format_matrix(matrix)}')
     except WmmError as exc:
         print(f'wmm_experiment: {type(exc).__name__}: {exc}', file=sys.stderr)
         return 2

@@ -25,8 +25,10 @@ converged nor reported).
 import argparse
 import json
 import sys
+from functools import partial
 
 from wmm_control.errors import WmmError
+from wmm_control.experiments.jobs import run_jobs
 from wmm_control.experiments.randomized import METHOD_RUNS, run_goal, sample_goals, summarize
 from wmm_control.robot_config import robot_names
 
@@ -81,22 +83,12 @@ def _run_one(job, options):
 
 def _run_all(jobs, options, workers, bar):
     """Every run of ``jobs``, in their order, ``workers`` at a time (separate processes)."""
-    if workers == 1:
-        results = []
-        for job in jobs:
-            bar.set_description(f'{job[0]} {job[1]}')
-            results.append(_run_one(job, options))
-            bar.update(1)
-        return results
-    from concurrent.futures import ProcessPoolExecutor
-    from functools import partial
-
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        results = []
-        for result in pool.map(partial(_run_one, options=options), jobs):
-            results.append(result)
-            bar.update(1)
-        return results
+    results = []
+    for job, result in zip(jobs, run_jobs(partial(_run_one, options=options), jobs, workers)):
+        bar.set_description(f'{job[0]} {job[1]}')
+        results.append(result)
+        bar.update(1)
+    return results
 
 
 def main(argv=None):

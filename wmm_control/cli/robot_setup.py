@@ -33,12 +33,16 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from wmm_control.cli.model_info import describe
 from wmm_control.errors import WmmError
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers import METHODS
 from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, load_robot
 from wmm_control.urdf import UrdfTree
@@ -128,8 +132,6 @@ def _floor_height(tree, wheels, base_link):
 
 def _choose_home(tree, arm_root, tool, base_link, ground, seed=0):
     """The documented posture choice (module docstring): ``(q (n,), σ_min)``."""
-    from wmm_control.kinematics.collision import CollisionModel
-    from wmm_control.kinematics.model import KinematicModel
     chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
     names = [j.name for j in chain]
     lower = np.array([max(j.lower, -math.pi) if j.lower is not None else -math.pi for j in chain])
@@ -251,13 +253,10 @@ def _relative(path, start):
     try:
         return str(Path(path).relative_to(start))
     except ValueError:
-        import os
         return os.path.relpath(path, start)
 
 
 def _check(path):
-    from wmm_control.cli.model_info import describe
-    from wmm_control.kinematics import KinematicModel
     model = KinematicModel(load_robot(path))
     cfg = model.config
     return describe(model, cfg.start.base_pose, cfg.start.arm)

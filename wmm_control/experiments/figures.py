@@ -19,6 +19,8 @@ import matplotlib
 import numpy as np
 import pinocchio as pin
 
+from sim_bridge.render import render_rgb, write_png
+from sim_bridge.world import SimWorld
 from wmm_control.experiments.metrics import pose_error_norm
 
 matplotlib.use('Agg')
@@ -290,9 +292,6 @@ def render_goal_pictures(logs, scenario, out_dir, label, view='iso'):
     Returns:
         The written paths: the goal pictures, then the composite.
     """
-    from sim_bridge.render import render_rgb, write_png
-    from sim_bridge.world import SimWorld
-
     log = logs[label]
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -54,11 +54,17 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from wmm_control.experiments.direct import run_scenario
+from sim_bridge.collision import SelfCollisionChecker
+from sim_bridge.world import SimWorld
 from wmm_control.experiments.metrics import run_limit_report
-from wmm_control.experiments.scenario import Goal, Scenario, load_scenario
+from wmm_control.experiments.ros_run import run_with_nodes
+from wmm_control.experiments.scenario import Goal, Scenario, load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import load_goal_region, load_obstacles, obstacle_file
 from wmm_control.kinematics.orientation import rpy_from_matrix
+from wmm_control.nodes.common import load_defaults
+from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.progress import GoalProgress
 from wmm_control.robot_config import load_robot
 
@@ -125,8 +131,6 @@ def goal_settings():
     """``(goal_tolerance, stall_time, min_progress_ratio)`` of the ``redundancy_resolver``
     node, from its defaults (``config/redundancy_resolver.yaml``): (position [m], orientation
     [rad]), [s] and [-]."""
-    from wmm_control.nodes.common import load_defaults
-
     defaults = load_defaults('redundancy_resolver.yaml', 'redundancy_resolver')
     return (tuple(float(v) for v in defaults['goal_tolerance']), float(defaults['stall_time']),
             float(defaults['min_progress_ratio']))
@@ -145,8 +149,6 @@ def sample_goals(robot, count, seed=0, base_radius=1.0, obstacles=''):
     Returns:
         list of :class:`RandomGoal`.
     """
-    from sim_bridge.collision import SelfCollisionChecker
-
     cfg = load_robot(robot)
     around = load_obstacles(obstacles)
     region = load_goal_region(obstacles)
@@ -183,11 +185,6 @@ def _scenario(robot, goal, duration, obstacles):
 
 
 def _run_direct(robot, run, goal, duration, obstacles):
-    from wmm_control.experiments.direct import run_scenario
-    from sim_bridge.world import SimWorld
-    from wmm_control.experiments.scenario import resolver_parameters
-    from wmm_control.resolvers import make_resolver
-
     resolver = make_resolver(run['method'], robot, **resolver_parameters(run))
     tolerance, stall_time, ratio = goal_settings()
     progress = GoalProgress(tolerance, stall_time, resolver.params.dt, min_progress_ratio=ratio)
@@ -208,8 +205,6 @@ def _run_direct(robot, run, goal, duration, obstacles):
 
 
 def _run_nodes(robot, run, goal, duration, obstacles):
-    from wmm_control.experiments.ros_run import run_with_nodes
-
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / 'goal.yaml'
         path.write_text(yaml.safe_dump({'scenario': {
@@ -248,8 +243,6 @@ def run_contact(robot, q_arm, base_pose=None, obstacles=()):
     ``base_pose``, one row per period) with the robot's body, itself, the floor or an
     obstacle, on the simulator's geometry: ``(depth [m], 'a/b')``, ``(0.0, '')`` when every
     period is clear."""
-    from sim_bridge.collision import SelfCollisionChecker
-
     depth, pair = 0.0, ''
     poses = [None] * len(q_arm) if base_pose is None else base_pose
     with SelfCollisionChecker(robot, margin=0.0, obstacles=obstacles) as checker:

@@ -22,11 +22,17 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
+from sim_bridge.node import SimNode
 from wmm_control.errors import ConfigError
 from wmm_control.experiments.metrics import RunLog
+from wmm_control.experiments.recording import BagRecorder
 from wmm_control.experiments.scenario import resolver_parameters
 from wmm_control.nodes.conversions import odometry_pose, planar_twist, pose_rotation
+from wmm_control.nodes.goal_sequencer import GoalSequencerNode
+from wmm_control.nodes.base_controller import NODE_NAMES, BaseControllerNode
+from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.resolvers import ResolverDiagnostics
+from wmm_control.robot_config import load_robot
 
 __all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_WAITS']
 
@@ -140,18 +146,26 @@ def _executor(context):
 
 
 #: In lockstep nothing moves until every answer is in, so the nodes may wait as long as a loaded
-#: machine needs (the waits end as soon as the answer comes), and no joint state goes stale while
-#: it waits: the run does not depend on timing.
-LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 0.5},
-                  'swmr_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0},
-                  'mecanum_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0},
-                  'differential_controller': {'reference_wait': 0.5, 'max_state_wait': 0.0}}
+#: machine needs (the waits end as soon as the answer comes), and no input goes stale while it
+#: waits: the timeouts measured on the wall clock are far beyond any wait. The run does not
+#: depend on timing, also when other processes (the runs of ``wmm_experiment --jobs``) take the
+#: cores.
+LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 1.0, 'state_timeout': 30.0},
+                  'swmr_controller': {'reference_wait': 1.0, 'max_state_wait': 0.0, 'joint_state_timeout': 30.0,
+                                      'reference_timeout': 30.0},
+                  'mecanum_controller': {'reference_wait': 1.0, 'max_state_wait': 0.0, 'joint_state_timeout': 30.0,
+                                         'reference_timeout': 30.0},
+                  'differential_controller': {'reference_wait': 1.0, 'max_state_wait': 0.0,
+                                              'joint_state_timeout': 30.0, 'reference_timeout': 30.0},
+                  'wmm_sim': {'command_timeout': 10.0, 'lockstep_timeout': 10.0}}
 
 
-def private_domain_id():
+def private_domain_id(offset=0):
     """A ROS domain for this process alone (101–200, from the process id), so that an experiment
-    never hears, nor drives, a robot system running on the machine's usual domain."""
-    return 101 + os.getpid() % 100
+    never hears, nor drives, a robot system running on the machine's usual domain. ``offset``
+    gives the process's worker runs domains of their own: offsets 1, 2, … are other domains,
+    up to a hundred of them."""
+    return 101 + (os.getpid() + offset) % 100
 
 
 def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=None, bag_path=None, view_port=None):
@@ -174,12 +188,6 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     Raises:
         ConfigError: a bad run entry, or the run stalled (no progress for ``wall_timeout``).
     """
-    from sim_bridge.node import SimNode
-    from wmm_control.nodes.goal_sequencer import GoalSequencerNode
-    from wmm_control.nodes.base_controller import NODE_NAMES, BaseControllerNode
-    from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
-    from wmm_control.robot_config import load_robot
-
     robot = load_robot(scenario.robot)
     feedback = run.get('feedback', 'ground_truth')
     if feedback not in ('ground_truth', 'odometry'):
@@ -190,7 +198,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
                            markers_period=0.0,
                            **LOCKSTEP_WAITS['redundancy_resolver'])
     sim_params = dict(scenario.sim or {})
-    sim_params.update(robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0)
+    sim_params.update(robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0, **LOCKSTEP_WAITS['wmm_sim'])
     if scenario.obstacles_file:
         sim_params['obstacles'] = resolver_params['obstacles'] = scenario.obstacles_file
     for key in ('slip_drift', 'slip_noise'):
@@ -221,11 +229,11 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         nodes.append(sim)
         bag = None
         if bag_path is not None:
-            from wmm_control.experiments.recording import BagRecorder
             bag = BagRecorder(context, bag_path)
             nodes.append(bag)
             bag.subscribe_all()
         if view_port is not None:
+            # viser (the browser viewer) is imported only by runs that show themselves live
             from wmm_control.nodes.viewer import ViewerNode
             nodes.append(ViewerNode(context=context, parameter_overrides=params(
                 {'robot': str(robot.yaml_path), 'port': int(view_port)})))

@@ -8,6 +8,7 @@
 from dataclasses import fields
 
 
+from wmm_control.errors import ConfigError
 from wmm_control.resolvers.interface import (
     PoseTarget, Resolver, ResolverCommand, ResolverDiagnostics, RobotState)
 from wmm_control.resolvers.limits import CommandLimits, LimitResult
@@ -41,7 +42,6 @@ def make_resolver(method, robot='steerable', **params):
     Raises:
         ConfigError: unknown method or an invalid parameter.
     """
-    from wmm_control.errors import ConfigError
     try:
         cls, params_cls = METHODS[method]
     except KeyError as exc:

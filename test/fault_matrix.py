@@ -1,11 +1,7 @@
-"""``wmm_bad_input``: every node against every kind of bad input; prints kinds × nodes → outcome.
+"""The fault matrix: every node against every kind of bad input, kinds × nodes → outcome.
 
-Usage::
-
-    wmm_bad_input                    # the table (Markdown), then the failures if any
-    wmm_bad_input --reasons          # and, per cell, the warning the node logged
-    wmm_bad_input --kinds nan,inf --nodes swmr_controller
-    python -m wmm_control.cli.bad_input
+``test_bad_input.py`` runs it and fails on any bad outcome; ``scripts/fault_table.py`` prints
+it as the Markdown table of docs/robustness.md.
 
 Each cell runs one node, in this process on a private ROS domain, fed by a probe that plays
 the rest of the system over real topics (a tiny kinematic plant closes the loop): a few
@@ -21,41 +17,37 @@ The probe records every output topic of the node and its ``/rosout``. A cell pas
   with a reason (else ``ACCEPTED``);
 * valid input in another layout (joints in another order) gives the very same commands as
   the nominal layout (else ``WRONG``).
-
-Exit code 0 when every cell passes, 1 otherwise.
 """
 
-import argparse
 import gc
 import math
-import sys
-import time
 from dataclasses import dataclass
 
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Log
 from rcl_interfaces.srv import SetParameters
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-from wmm_control.experiments.ros_run import private_domain_id
+from ros_helpers import ROSOUT_QOS, RosHarness
+from sim_bridge.node import SimNode
+from sim_bridge.world import SimWorld
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import quaternion_from_matrix
 from wmm_control.nodes.common import float_array, twist_stamped
+from wmm_control.nodes.goal_sequencer import GoalSequencerNode
+from wmm_control.nodes.base_controller import BaseControllerNode
+from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.robot_config import load_robot
 
-__all__ = ['KINDS', 'RIGS', 'run_matrix', 'format_table', 'main']
+__all__ = ['KINDS', 'RIGS', 'FAILURES', 'run_cell', 'run_matrix', 'format_table']
 
 PERIOD = load_robot('steerable').period   # [s] the robots' control period (robot YAML; both 0.025 s)
 T0 = 100.0                # [s] stamp of the first nominal cycle
@@ -65,7 +57,6 @@ RECOVERY = 4
 CYCLE_WAIT = 0.05         # [s] wall time a cycle's answer is awaited (rejected input gives none)
 ALIVE_WAIT = 3.0          # [s] wall time the answer to nominal input is awaited after the injection
 FAILURES = ('CRASH', 'NaN', 'LIMIT', 'DEAD', 'SILENT', 'FLOOD', 'ACCEPTED', 'WRONG')
-_LOG_QOS = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
 
 
 def _time(t):
@@ -95,7 +86,8 @@ class Crash(Exception):
 # ------------------------------------------------------------------------------------ rigs
 
 class Rig:
-    """One node under test, fed and watched by a probe node, in a private rclpy context.
+    """One node under test, fed and watched by a probe node, on a :class:`~ros_helpers.RosHarness`
+    of its own.
 
     Subclasses give ``family``, ``column``, :meth:`make_node`, :meth:`nominal` (the messages
     of cycle ``k`` as ``[(topic, msg)]``), :meth:`_watch_outputs` and :meth:`_cycle_count`.
@@ -105,11 +97,9 @@ class Rig:
     column = ''
 
     def __init__(self):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=private_domain_id(), args=['--ros-args', '--disable-stdout-logs'])
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.probe = Node('bad_input_probe', context=self.context)
-        self.executor.add_node(self.probe)
+        self.ros = RosHarness(args=['--ros-args', '--disable-stdout-logs'])
+        self.context = self.ros.context
+        self.probe = self.ros.probe('bad_input_probe')
         self.node = None
         self.k = 0
         self.mutate = None
@@ -117,7 +107,7 @@ class Rig:
         self.bad = []            # (failure, text)
         self.records = []        # (topic, values) of every output, in order
         self._pubs = {}
-        self.probe.create_subscription(Log, '/rosout', self._on_log, _LOG_QOS)
+        self.probe.create_subscription(Log, '/rosout', self._on_log, ROSOUT_QOS)
         self._watch_outputs()
 
     # ---------------------------------------------------------------- plumbing
@@ -154,36 +144,23 @@ class Rig:
         self.probe.create_subscription(DiagnosticArray, '/diagnostics', callback, 10)
 
     def spin_until(self, predicate, timeout):
-        end = time.monotonic() + timeout
-        while True:
-            if predicate():
-                return True
-            if time.monotonic() > end:
-                return False
-            try:
-                self.executor.spin_once(timeout_sec=0.002)
-            except Exception as exc:  # noqa: BLE001 - any exception out of a callback is the finding
-                raise Crash(f'{type(exc).__name__}: {exc}') from exc
+        try:
+            return self.ros.spin_until(predicate, timeout, poll=0.002)
+        except Exception as exc:  # noqa: BLE001 - any exception out of a callback is the finding
+            raise Crash(f'{type(exc).__name__}: {exc}') from exc
 
     # ---------------------------------------------------------------- life cycle
     def start(self, overrides=()):
-        self.node = self.make_node([Parameter(k, value=v) for k, v in dict(overrides).items()])
-        self.executor.add_node(self.node)
+        self.node = self.ros.add(self.make_node([Parameter(k, value=v) for k, v in dict(overrides).items()]))
         self.spin_until(lambda: False, 0.05)      # discovery within the context
         for _ in range(WARMUP):
             self.step()
 
     def close(self):
-        if self.node is not None:
-            self.executor.remove_node(self.node)
-            self.node.destroy_node()
-            world = getattr(self.node, 'world', None)
-            if world is not None:
-                world.close()       # now, not whenever the garbage collector gets to it
-        self.executor.remove_node(self.probe)
-        self.probe.destroy_node()
-        self.executor.shutdown()
-        rclpy.try_shutdown(context=self.context)
+        world = getattr(self.node, 'world', None)
+        self.ros.close()
+        if world is not None:
+            world.close()       # now, not whenever the garbage collector gets to it
 
     def step(self, mutate=None, wait=CYCLE_WAIT):
         """One cycle of nominal messages (``mutate(rig, msgs) -> msgs`` first); True when it was answered."""
@@ -221,7 +198,6 @@ class SimRig(Rig):
     family = 'sim'
 
     def __init__(self, robot='steerable'):
-        from sim_bridge.world import SimWorld
         self.robot = robot
         world = SimWorld(robot=robot)
         self.groups = dict(world.command_groups)
@@ -236,7 +212,6 @@ class SimRig(Rig):
         self.probe.create_subscription(JointState, '/joint_states', self._on_state, 10)
 
     def make_node(self, overrides):
-        from sim_bridge.node import SimNode
         return SimNode(context=self.context, parameter_overrides=[
             Parameter('robot', value=self.robot), Parameter('timing', value='lockstep'),
             Parameter('lockstep_timeout', value=CYCLE_WAIT), Parameter('diagnostics_period', value=PERIOD),
@@ -342,7 +317,6 @@ class BaseControllerRig(PlantRig):
         self._feasible = 0
 
     def make_node(self, overrides):
-        from wmm_control.nodes.base_controller import BaseControllerNode
         return BaseControllerNode(self.config.base_type, context=self.context, parameter_overrides=[
             Parameter('diagnostics_period', value=PERIOD), *overrides])
 
@@ -397,7 +371,6 @@ class ResolverRig(PlantRig):
         self._arm = 0
 
     def make_node(self, overrides):
-        from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
         return RedundancyResolverNode(context=self.context, parameter_overrides=[
             Parameter('robot', value=self.config.name), Parameter('method', value=self.method),
             Parameter('diagnostics_period', value=PERIOD), Parameter('stall_time', value=0.5),
@@ -460,7 +433,6 @@ class SequencerRig(Rig):
         super().__init__()
 
     def make_node(self, overrides):
-        from wmm_control.nodes.goal_sequencer import GoalSequencerNode
         return GoalSequencerNode(context=self.context, parameter_overrides=[
             Parameter('use_sim_time', value=True), Parameter('republish_period', value=PERIOD / 2), *overrides])
 
@@ -993,38 +965,3 @@ def format_table(results):
     for kind in kinds:
         lines.append(f'| {kind} | ' + ' | '.join(results[(kind, c)].outcome for c in columns) + ' |')
     return '\n'.join(lines)
-
-
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog='wmm_bad_input', description=__doc__.split('\n\n')[0])
-    parser.add_argument('--kinds', help='comma-separated kind names (default: all)')
-    parser.add_argument('--nodes', help='comma-separated column names (default: all): ' + ', '.join(RIGS))
-    parser.add_argument('--reasons', action='store_true', help='print what each cell sent and logged')
-    parser.add_argument('--list', action='store_true', help='list the kinds and exit')
-    args = parser.parse_args(argv)
-    if args.list:
-        for kind in KINDS:
-            print(kind.name)
-        return 0
-    kinds = args.kinds.split(',') if args.kinds else None
-    columns = args.nodes.split(',') if args.nodes else None
-    if columns:
-        columns = [c for c in RIGS if any(c.startswith(n.strip()) for n in columns)]
-    t0 = time.monotonic()
-    results = run_matrix(kinds, columns, progress=lambda k, c, cell: print(
-        f'  {c:<40} {k:<36} {cell.outcome}', file=sys.stderr, flush=True))
-    print(format_table(results))
-    bad = {key: cell for key, cell in results.items() if not cell.ok}
-    if args.reasons or bad:
-        print()
-        for (kind, column), cell in results.items():
-            if cell.detail and (args.reasons or not cell.ok):
-                print(f'- {kind} / {column}: {cell.outcome}: {cell.detail}')
-    cells = [c for c in results.values() if c.outcome != 'n/a']
-    print(f'\n{len(cells)} cells run ({len(KINDS)} kinds), {len(bad)} failed, '
-          f'{time.monotonic() - t0:.0f} s')
-    return 1 if bad else 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())
