@@ -160,6 +160,35 @@ def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own
     assert plain.command[0] > allowed and abs(plain.command[1]) < 0.05
 
 
+def test_a_slow_braking_base_is_not_let_on_at_an_obstacle_because_its_turn_swings_a_corner_away():
+    """Robot B brakes at 0.025 m/s² along x and y, but turns at 1.5 rad/s². Driving at a pillar
+    beside its front corner faster than it can stop from, while turning, the turn keeps the
+    distance's rate within the row for the moment; the stage must brake the linear approach
+    anyway, as hard as the base's acceleration box allows."""
+    robot = load_robot('mecanum')
+    pillar = parse_obstacles([{'name': 'pillar', 'shape': 'cylinder', 'size': [0.06, 3.0],
+                               'pose': [0.65, -0.4, 0.0]}], 'test')
+    stage = SafetyStage.for_robot(robot)
+    stage.set_obstacles(pillar)
+    q, pose = np.array(robot.start.arm), np.zeros(3)
+    twist = np.array([0.185, 0.1, -0.3])                                    # the base's twist now
+    step = np.asarray(robot.base.acceleration) * robot.period
+    arm = np.asarray(robot.arm.velocity)
+    lower, upper = np.concatenate((twist - step, -arm)), np.concatenate((twist + step, arm))
+    body = [p for p in stage.collision.within(q, stage.obstacle_lookahead, pose)[0]
+            if p.base_jacobian.any() and not p.rate_jacobian.any()]                # chassis and wheels
+    near = min(body, key=lambda p: p.distance)
+    j = near.base_jacobian
+    slowest = float(np.min(robot.base.acceleration[:2]))
+    # the linear approach is beyond what the base can stop from; with the turn, the row holds
+    assert j[:2] @ twist[:2] < -stage.allowed_approach(near.distance, np.linalg.norm(j[:2]) * slowest)
+    assert j @ twist >= -stage.allowed_approach(near.distance, np.linalg.norm(j[:2]) * slowest)
+    out = stage.filter(q, np.concatenate((twist, np.zeros(q.size))), lower, upper, base_pose=pose, base_axes=(0, 1, 2))
+    assert out.changed
+    braked = j[:2] @ out.command[:2] - j[:2] @ twist[:2]
+    assert braked >= 0.99 * np.abs(j[:2]) @ step[:2]
+
+
 def test_a_goal_inside_an_obstacle_is_impossible():
     model = KinematicModel('steerable')
     workspace = Workspace(model)

@@ -17,8 +17,12 @@ keeps its approach within what braking at ``a_b`` can stop before ``d_s``:
 
 the stricter of the two where both hold. ``a_b`` is taken no larger than the deceleration the
 command's own acceleration limits can give that distance (``Σ_i |j_i| q̈_max,i`` over the arm's
-joints and the base's linear axes): a Mecanum base that brakes at 0.025 m/s² is not counted on
-to stop at 1 m/s². With obstacles, whose distance the base's twist changes too, the look-ahead
+joints, plus ``|j_xy|`` times the slower of the base's linear axes: the pair's normal turns
+under a base that brakes, so both axes are not counted on at once): a Mecanum base that brakes
+at 0.025 m/s² is not counted on to stop at 1 m/s². For a pair of a wheeled base's own body
+(chassis, wheels) and an obstacle, the row also holds without the turn's share: a turn that
+swings one corner away for the moment cannot hide a linear approach faster than the base can
+stop. With obstacles, whose distance the base's twist changes too, the look-ahead
 grows to the base's stopping distance (``d_s + v_max τ + v_max² / (2 min(a_max, a_b))`` over its
 linear axes) so that it brakes in time.
 
