@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set up a local virtual environment (.venv) and run one job in it.
 #
-#   bash scripts/dev.sh run     # set-up, then the main job
+#   bash scripts/dev.sh run     # set-up, then the main job (writes docs/results.md)
 #   bash scripts/dev.sh test    # set-up, then the lint and type checks and the test suite
 #   bash scripts/dev.sh bench   # set-up, then the benchmarks (they print figures)
 #
@@ -42,7 +42,7 @@ setup() {
 
 setup
 case "$job" in
-  run)   exec "$VENV/bin/python" -m wmm_control.cli.experiment "$@" ;;
+  run)   exec "$VENV/bin/python" -m wmm_control.cli.experiment --report docs/results.md "$@" ;;
   test)
     "$VENV/bin/ruff" check .            # lint (ruff.toml)
     "$VENV/bin/mypy" wmm_control sim_bridge   # types (setup.cfg [mypy])

@@ -3,7 +3,7 @@
 Usage::
 
     wmm_experiment [SCENARIO|all] [--scenario PATH] [--out DIR] [--runs NAME,...] [--engine nodes|direct]
-                   [--seed N] [--no-figures] [--jobs N]
+                   [--seed N] [--no-figures] [--jobs N] [--report PAGE]
 
 ``SCENARIO`` names ``config/scenarios/<SCENARIO>.yaml``; ``all`` (the default) runs both papers'
 experiments (:data:`MAIN_JOB`: Table II of Sorour et al. 2019 and Xing et al. §4), each into
@@ -15,7 +15,10 @@ topics (``--engine nodes``, the default: ``wmm_sim`` in lockstep, ``swmr_control
 ``--engine nodes``, one rosbag2 (MCAP) of all the topics of each run, ``rosbag2_<run>/``.
 ``--jobs N`` runs that many runs at once, each in a process of its own (default: one per core;
 1: one after the other in this process); every run is deterministic, so the numbers are those
-of a serial run, and this process writes the tables and figures.
+of a serial run, and this process writes the tables and figures. ``--report PAGE`` also writes
+a Markdown page of every table the run produced (:mod:`wmm_control.experiments.report`), with
+the text of ``<PAGE stem>_intro.md`` beside it, if there is one, first (``bash scripts/dev.sh
+run`` writes docs/results.md so, after docs/results_intro.md).
 """
 
 import argparse
@@ -37,6 +40,7 @@ from sim_bridge.slip import SlipParams
 from sim_bridge.world import SimWorld
 from wmm_control.errors import WmmError
 from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
+from wmm_control.experiments.report import write_report
 from wmm_control.experiments.metrics import (
     METRIC_KEYS, TRAJECTORY_METRIC_KEYS, goal_metrics, run_limit_report, trajectory_metrics)
 from wmm_control.experiments.ros_run import private_domain_id, run_with_nodes
@@ -352,6 +356,10 @@ def main(argv=None):
     parser.add_argument('--view', action='store_true',
                         help='show each run live in the browser (wmm_viewer; engine nodes): open the URL it logs')
     parser.add_argument('--view-port', type=int, default=8080, help='HTTP port of --view (default: %(default)s)')
+    parser.add_argument('--report', metavar='PAGE',
+                        help='also write the tables of the run as a Markdown page, after the text of '
+                             '<PAGE stem>_intro.md if that file exists (figures outside its folder are copied '
+                             'to <folder>/figures/<scenario>/)')
     args = parser.parse_args(argv)
     if args.view and args.engine != 'nodes':
         parser.error('--view shows the nodes engine: drop --engine direct')
@@ -368,9 +376,13 @@ def main(argv=None):
                 print(f'\n{scenario.name}: no run named {args.runs}; skipped')
                 continue
             plans.append(_prepare(scenario, args, Path(args.out) / scenario.name if len(names) > 1 else Path(args.out)))
-        matrix = [s for s in _run_all(plans, args) if s['scenario'] in MATRIX]
+        summaries = _run_all(plans, args)
+        matrix = [s for s in summaries if s['scenario'] in MATRIX]
         if len(matrix) == len(MATRIX):
             print(f'\nThe R = 0.25 m circle on both robots with all four methods:\n{format_matrix(matrix)}')
+        if args.report:
+            page = Path(args.report)
+            print(f'wrote {write_report(page, summaries, page.with_name(page.stem + "_intro.md"))}')
     except WmmError as exc:
         print(f'wmm_experiment: {type(exc).__name__}: {exc}', file=sys.stderr)
         return 2
