@@ -42,7 +42,11 @@ setup() {
 
 setup
 case "$job" in
-  run)   exec "$VENV/bin/python" -m wmm_control.cli.experiment --report docs/results.md "$@" ;;
+  run)
+    # the whole main job writes docs/results.md; a chosen scenario or option set writes only its
+    # own output (pass --report PAGE for a page of it)
+    if [ "$#" -eq 0 ]; then set -- --report docs/results.md; fi
+    exec "$VENV/bin/python" -m wmm_control.cli.experiment "$@" ;;
   test)
     "$VENV/bin/ruff" check .            # lint (ruff.toml)
     "$VENV/bin/mypy" wmm_control sim_bridge   # types (setup.cfg [mypy])
