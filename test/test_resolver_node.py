@@ -75,8 +75,9 @@ class Driver(Node):
 def system():
     ros = RosHarness()
     driver = ros.add(Driver(ros.context))
+    # the lockstep waits, but the node's own state timeout: a test here stops the joint states
     ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-        diagnostics_period=1e-9, **LOCKSTEP_WAITS['redundancy_resolver'])))
+        diagnostics_period=1e-9, **dict(LOCKSTEP_WAITS['redundancy_resolver'], state_timeout=0.2))))
     ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller'])))
     sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep')))
     yield ros, driver, sim
