@@ -39,7 +39,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from wmm_control.nodes.common import default_executor, float_array
+from wmm_control.nodes.conversions import float_array
+from wmm_control.nodes.runner import default_executor
 from wmm_control.robot_config import load_robot
 
 BIN = Path(sys.executable).parent

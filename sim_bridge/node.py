@@ -65,14 +65,16 @@ from visualization_msgs.msg import MarkerArray
 
 from sim_bridge.slip import VARIANCE_FLOOR, OdometryCovariance, SlipParams
 from sim_bridge.world import BASE_MODES, SimWorld
-from wmm_control.nodes.conversions import set_planar_pose, set_planar_twist, set_pose
+from wmm_control.nodes.conversions import parse_command, set_planar_pose, set_planar_twist, set_pose
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet, describe
 from wmm_control.nodes.robot_frames import RobotFrames, valid_frame_prefix
 from wmm_control.robot_config import load_robot
 from wmm_control.errors import ConfigError
-from wmm_control.nodes.common import (
-    CLOCK_QOS, COMMAND_QOS, DIAGNOSTICS_QOS, STATE_PUB_QOS, Freshness, Param, declare_parameters,
-    diagnostic_array, guard_clock, node_status, parse_command, robot_param, robot_period, run_node)
+from wmm_control.checks import Freshness
+from wmm_control.nodes.diagnostics import diagnostic_array, node_status
+from wmm_control.nodes.parameters import Param, declare_parameters, robot_param, robot_period
+from wmm_control.nodes.qos import CLOCK_QOS, COMMAND_QOS, DIAGNOSTICS_QOS, STATE_PUB_QOS
+from wmm_control.nodes.runner import guard_clock, run_node
 
 __all__ = ['SimNode', 'main', 'wait_groups']
 

@@ -41,7 +41,7 @@ from sim_bridge.node import SimNode
 from sim_bridge.world import SimWorld
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import quaternion_from_matrix
-from wmm_control.nodes.common import float_array, twist_stamped
+from wmm_control.nodes.conversions import float_array, twist_stamped
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.base_controller import BaseControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode

@@ -17,7 +17,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from wmm_control.experiments.ros_run import private_domain_id
-from wmm_control.nodes.common import float_array
+from wmm_control.nodes.conversions import float_array
 
 
 #: What a probe subscribes to ``/rosout`` with: every message a node logged, also those logged

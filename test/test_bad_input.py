@@ -15,7 +15,7 @@ from rosgraph_msgs.msg import Clock
 import fault_matrix
 import wmm_control.nodes.base_controller as node_module
 from ros_helpers import ROSOUT_QOS
-from wmm_control.nodes.common import StampGate
+from wmm_control.nodes.stamps import StampGate
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 
 

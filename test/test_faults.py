@@ -39,7 +39,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from wmm_control.nodes.common import load_defaults
+from wmm_control.nodes.parameters import load_defaults
 from wmm_control.robot_config import load_robot
 
 BIN = Path(sys.executable).parent

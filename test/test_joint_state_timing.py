@@ -23,7 +23,8 @@ from ros_helpers import overrides, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
-from wmm_control.nodes.common import StampGate, twist_stamped
+from wmm_control.nodes.conversions import twist_stamped
+from wmm_control.nodes.stamps import StampGate
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 from wmm_control.robot_config import load_robot
 

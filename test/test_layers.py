@@ -107,8 +107,8 @@ def test_no_module_imports_a_higher_layer(module):
 
 def test_an_upward_import_inside_a_function_is_found():
     source = ('from wmm_control.errors import ConfigError\n\n\n'
-              'def f():\n    from wmm_control.nodes.common import load_defaults\n    return load_defaults\n\n\n'
+              'def f():\n    from wmm_control.nodes.parameters import load_defaults\n    return load_defaults\n\n\n'
               'class C:\n    def g(self):\n        from ..cli import experiment\n        return experiment\n')
-    assert upward('wmm_control.kinematics.model', source) == [(5, 'wmm_control.nodes.common'),
+    assert upward('wmm_control.kinematics.model', source) == [(5, 'wmm_control.nodes.parameters'),
                                                              (11, 'wmm_control.cli.experiment')]
     assert upward('wmm_control.cli.experiment', source) == []

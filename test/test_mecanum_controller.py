@@ -18,7 +18,7 @@ from ros_helpers import ScriptedController, overrides, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.base import WheelController, WheelParams
 from wmm_control.errors import ConfigError, NonFiniteError
-from wmm_control.nodes.common import twist_stamped
+from wmm_control.nodes.conversions import twist_stamped
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 from wmm_control.robot_config import load_robot
 

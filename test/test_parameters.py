@@ -22,7 +22,7 @@ from ros_helpers import RosHarness, overrides
 from sim_bridge.node import SimNode
 from wmm_control.base import WheelParams, SwmrParams
 from wmm_control.nodes import goal_sequencer, mecanum_controller, redundancy_resolver, swmr_controller, viewer
-from wmm_control.nodes.common import robot_method, robot_period
+from wmm_control.nodes.parameters import robot_method, robot_period
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.viewer import ViewerNode
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode

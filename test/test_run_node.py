@@ -14,7 +14,7 @@ import rclpy
 from std_msgs.msg import String
 
 from wmm_control.experiments.ros_run import private_domain_id
-from wmm_control.nodes.common import run_node
+from wmm_control.nodes.runner import run_node
 
 
 @pytest.mark.parametrize('module', ['sim_bridge.node', 'wmm_control.nodes.swmr_controller',

@@ -63,7 +63,7 @@ from wmm_control.experiments.scenario import Goal, Scenario, load_scenario, reso
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import load_goal_region, load_obstacles, obstacle_file
 from wmm_control.kinematics.orientation import rpy_from_matrix
-from wmm_control.nodes.common import load_defaults
+from wmm_control.nodes.parameters import load_defaults
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.progress import GoalProgress
 from wmm_control.robot_config import load_robot

@@ -24,7 +24,7 @@ Publishes, every cycle:
 The exchange, one per period: a joint state stamped S runs the cycle that answers the
 reference stamped S, at once if the latest reference carries S, else as soon as it comes, or
 after ``reference_wait`` seconds of steady (wall) time with the latest reference
-(:class:`~wmm_control.nodes.common.StampedExchange`). A resolver that answers each joint state
+(:class:`~wmm_control.nodes.stamps.StampedExchange`). A resolver that answers each joint state
 with a reference of the same stamp therefore gets its feasible twist in the same period, and a
 reference published by hand (stamp 0) still drives the base, one short wait later. A
 steerable base closes each cycle on the measured steer angles.
@@ -47,9 +47,9 @@ angles, steer rates and the twist that best fits them and the drive rates; for a
 the twist of the measured wheel rates. A joint state without a required joint or naming one
 twice, with positions or velocities not matching its names, non-finite values or rates beyond
 ten times their limit, runs no cycle. Nor does one whose stamp is not after the last cycle's
-or jumps more than the timeout ahead (:class:`~wmm_control.nodes.common.StampGate`: a second
+or jumps more than the timeout ahead (:class:`~wmm_control.nodes.stamps.StampGate`: a second
 publisher, a replayed message), nor one that waited in the node longer than
-``max_state_wait`` (:class:`~wmm_control.nodes.common.JointStateWatchdog`); a joint-state
+``max_state_wait`` (:class:`~wmm_control.nodes.inputs.JointStateWatchdog`); a joint-state
 period that differs from ``period`` is reported. Every rejection is logged, throttled. Nothing
 non-finite is ever published. Timers run on the steady clock, so the node works under
 ``use_sim_time``.
@@ -67,10 +67,14 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from wmm_control.base import make_base_controller, unapplied_command
-from wmm_control.nodes.common import (
-    BaseReference, COMMAND_QOS, DIAGNOSTICS_QOS, JointSelector, JointStateWatchdog, Param, STATE_SUB_QOS,
-    StampedExchange, declare_parameters, diagnostic_array, float_array, guard_clock, max_state_wait_param, require_base,
-    node_status, robot_param, robot_period, seconds, twist_stamped)
+from wmm_control.nodes.conversions import float_array, twist_stamped
+from wmm_control.nodes.diagnostics import diagnostic_array, node_status
+from wmm_control.nodes.inputs import BaseReference, JointSelector, JointStateWatchdog
+from wmm_control.nodes.parameters import (
+    Param, declare_parameters, max_state_wait_param, require_base, robot_param, robot_period)
+from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
+from wmm_control.nodes.runner import guard_clock
+from wmm_control.nodes.stamps import StampedExchange, seconds
 from wmm_control.robot_config import load_robot
 
 __all__ = ['BaseControllerNode', 'NODE_NAMES', 'STEERABLE_PARAMS', 'WHEEL_PARAMS']

@@ -2,7 +2,8 @@
 
 A pose is a position (x, y, z) [m] and a quaternion (x, y, z, w) as ROS orders it; a planar
 pose is (x, y, θ); a twist is (linear, angular) [m/s, rad/s], a planar one (vx, vy, ω). The
-readers take the values as they are (no check: the nodes judge them); the rotation maths is
+readers take the values as they are (no check: the nodes judge them), except the ``parse_*``
+ones, which validate a command and say why they refuse it; the rotation maths is
 :mod:`wmm_control.kinematics.orientation`'s, imported where it is used, so that a node that
 needs none of it (a base controller) starts without loading pinocchio.
 """
@@ -15,6 +16,7 @@ from std_msgs.msg import Float64MultiArray
 __all__ = [
     'pose_values', 'set_pose', 'set_quaternion', 'set_rotation', 'pose_rotation', 'odometry_values',
     'odometry_pose', 'set_planar_pose', 'twist_values', 'set_twist', 'planar_twist', 'set_planar_twist', 'twist_stamped', 'float_array',
+    'parse_command', 'parse_base_reference',
 ]
 
 
@@ -111,3 +113,39 @@ def float_array(values):
     msg = Float64MultiArray()
     msg.data = [float(v) for v in values]
     return msg
+
+
+def parse_command(msg, size):
+    """Validate a ``Float64MultiArray`` command.
+
+    Returns:
+        ``(array, '')`` when it holds ``size`` finite numbers, else ``(None, reason)``.
+    """
+    data = np.asarray(msg.data, dtype=float)
+    if data.shape != (size,):
+        return None, f'expected {size} values, got {data.size}'
+    if not np.all(np.isfinite(data)):
+        return None, f'non-finite values at indices {np.flatnonzero(~np.isfinite(data)).tolist()}'
+    return data, ''
+
+
+def parse_base_reference(msg, base_frame):
+    """Validate a ``/base/reference`` ``TwistStamped`` of a planar base.
+
+    Returns:
+        ``(array (vx, vy, ω), warning)`` when it is finite and in ``base_frame`` (or has an
+        empty frame, taken as ``base_frame``); ``warning`` is '' unless the frame is empty or
+        it moves out of the plane (ignored). Else ``(None, reason)``.
+    """
+    ref = np.array([msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
+    if not np.all(np.isfinite(ref)):
+        return None, f'non-finite values {ref.tolist()}'
+    if msg.header.frame_id not in ('', base_frame):
+        return None, f'frame {msg.header.frame_id!r}: expected {base_frame!r}'
+    warnings = []
+    if not msg.header.frame_id:
+        warnings.append(f'empty frame_id, taken as {base_frame!r}')
+    other = (msg.twist.linear.z, msg.twist.angular.x, msg.twist.angular.y)
+    if any(abs(v) > 1e-9 for v in other):
+        warnings.append('linear.z, angular.x, angular.y are ignored (planar base)')
+    return ref, '; '.join(warnings)

@@ -34,8 +34,9 @@ from wmm_control.experiments.scenario import load_scenario
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import matrix_from_rpy, quaternion_from_matrix
 from wmm_control.nodes.conversions import set_pose, set_twist
-from wmm_control.nodes.common import (
-    CLOCK_QOS, COMMAND_QOS, Param, declare_parameters, guard_clock, run_node)
+from wmm_control.nodes.parameters import Param, declare_parameters
+from wmm_control.nodes.qos import CLOCK_QOS, COMMAND_QOS
+from wmm_control.nodes.runner import guard_clock, run_node
 
 __all__ = ['GoalSequencerNode', 'main']
 

@@ -19,7 +19,7 @@ import functools
 
 from wmm_control.nodes.base_controller import WHEEL_PARAMS as PARAMS
 from wmm_control.nodes.base_controller import BaseControllerNode
-from wmm_control.nodes.common import run_node
+from wmm_control.nodes.runner import run_node
 
 __all__ = ['MecanumControllerNode', 'PARAMS', 'main', 'main_differential']
 

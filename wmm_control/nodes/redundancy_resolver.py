@@ -76,9 +76,13 @@ from visualization_msgs.msg import MarkerArray
 
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
-from wmm_control.nodes.common import (
-    COMMAND_QOS, DIAGNOSTICS_QOS, Freshness, JointSelector, JointStateWatchdog, STATE_SUB_QOS, declare_parameters,
-    diagnostic_array, guard_clock, node_status, run_node, stamp_key)
+from wmm_control.checks import Freshness
+from wmm_control.nodes.diagnostics import diagnostic_array, node_status
+from wmm_control.nodes.inputs import JointSelector, JointStateWatchdog
+from wmm_control.nodes.parameters import declare_parameters
+from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
+from wmm_control.nodes.runner import guard_clock, run_node
+from wmm_control.nodes.stamps import stamp_key
 from wmm_control.nodes.conversions import (
     float_array, odometry_values, planar_twist, pose_values, twist_stamped, twist_values)
 from wmm_control.nodes.markers import MarkerSet

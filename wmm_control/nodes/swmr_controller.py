@@ -15,7 +15,7 @@ Table I).
 
 from wmm_control.nodes.base_controller import STEERABLE_PARAMS as PARAMS
 from wmm_control.nodes.base_controller import BaseControllerNode
-from wmm_control.nodes.common import run_node
+from wmm_control.nodes.runner import run_node
 
 __all__ = ['PARAMS', 'SwmrControllerNode', 'main']
 

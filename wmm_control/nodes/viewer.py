@@ -50,9 +50,11 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from wmm_control.errors import ConfigError, NonFiniteError
-from wmm_control.nodes.common import (
-    COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS, Freshness, Param, declare_parameters, guard_clock, robot_param,
-    run_node, seconds)
+from wmm_control.checks import Freshness
+from wmm_control.nodes.parameters import Param, declare_parameters, robot_param
+from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
+from wmm_control.nodes.runner import guard_clock, run_node
+from wmm_control.nodes.stamps import seconds
 from wmm_control.kinematics.orientation import quaternion_from_matrix, yaw_from_quaternion
 from wmm_control.nodes.conversions import planar_twist, pose_values, set_pose
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP, ObstacleSet

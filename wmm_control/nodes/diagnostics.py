@@ -1,0 +1,49 @@
+"""``/diagnostics`` messages of the nodes."""
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+__all__ = ['diagnostic_status', 'node_status', 'diagnostic_array']
+
+
+def diagnostic_status(name, hardware_id, level, message, values):
+    """A ``DiagnosticStatus``; ``level`` is 'ok', 'warn' or 'error'; values become KeyValues."""
+    status = DiagnosticStatus()
+    status.level = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
+                    'error': DiagnosticStatus.ERROR}[level]
+    status.name = name
+    status.hardware_id = hardware_id
+    status.message = message
+    status.values = [KeyValue(key=str(k), value=_kv(v)) for k, v in values.items()]
+    return status
+
+
+def node_status(node: 'rclpy.node.Node', part: str, robot_name: str, level: str, message: str,
+                values: dict) -> DiagnosticStatus:
+    """A ``DiagnosticStatus`` of ``node`` that says which node sent it.
+
+    Its name is the node's fully qualified name, followed by ``: <part>`` when ``part`` is
+    given (``/r1/wmm_sim: simulation``); its hardware id is ``<robot_name> <fully qualified
+    name>``. Two robots in two namespaces, or a renamed node, are told apart on the shared
+    ``/diagnostics``.
+    """
+    fqn = node.get_fully_qualified_name()
+    return diagnostic_status(f'{fqn}: {part}' if part else fqn, f'{robot_name} {fqn}', level, message, values)
+
+
+def _kv(value):
+    if isinstance(value, float):
+        return f'{value:.9g}'
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return '[' + ', '.join(_kv(float(v)) if isinstance(v, (float, np.floating)) else str(v)
+                               for v in value) + ']'
+    return str(value)
+
+
+def diagnostic_array(stamp, statuses):
+    """A ``DiagnosticArray`` with header stamp ``stamp``."""
+    msg = DiagnosticArray()
+    msg.header.stamp = stamp
+    msg.status = list(statuses)
+    return msg

@@ -1,0 +1,276 @@
+"""A controller's inputs: joint states read by name and watched for their timing, the base reference."""
+
+import math
+import time
+from collections import deque
+
+import numpy as np
+
+from wmm_control.checks import Freshness
+from wmm_control.nodes.conversions import parse_base_reference
+from wmm_control.nodes.stamps import StampGate, seconds
+
+__all__ = ['JointSelector', 'BaseReference', 'JointStateWatchdog', 'DELIVERY_WINDOW']
+
+
+class JointSelector:
+    """Reads named joints from ``sensor_msgs/JointState`` messages, whatever their order.
+
+    The index of each name layout is cached (senders use one or two layouts).
+
+    Args:
+        joints: the joint names to read, in the order they are returned.
+        velocity_limits: optional |q̇| limit per joint [rad/s]; a measured rate beyond
+            ``PLAUSIBLE_FACTOR`` times it is taken for a glitch and the message is rejected.
+        position_limits: optional ``(lower, upper)`` per joint [rad]; a position beyond them by
+            more than ``POSITION_MARGIN`` is rejected.
+    """
+
+    PLAUSIBLE_FACTOR = 10.0
+    POSITION_MARGIN = 0.5       # [rad]
+    MAX_POSITION = 1e9          # [rad] no joint angle is larger (a wheel at 12 rad/s needs 2.6 years)
+
+    def __init__(self, joints, cache_size=16, velocity_limits=None, position_limits=None):
+        self.joints = tuple(joints)
+        self._cache = {}
+        self._cache_size = cache_size
+        self._max_rate = None if velocity_limits is None else \
+            self.PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), len(self.joints))
+        self._bounds = None if position_limits is None else (
+            np.asarray(position_limits[0], dtype=float) - self.POSITION_MARGIN,
+            np.asarray(position_limits[1], dtype=float) + self.POSITION_MARGIN)
+
+    def _layout(self, names):
+        where = {}
+        for i, name in enumerate(names):
+            where.setdefault(name, []).append(i)
+        missing = [j for j in self.joints if j not in where]
+        if missing:
+            return f'without joints {missing}'
+        twice = [j for j in self.joints if len(where[j]) > 1]
+        if twice:
+            return f'listing joints {twice} more than once (ambiguous)'
+        return np.array([where[j][0] for j in self.joints])
+
+    def indices(self, msg):
+        """Indices of the joints in ``msg`` and '' or ``(None, reason)``.
+
+        A message lacking a joint, naming one of them twice, or whose positions (or
+        non-empty velocities) differ in length from its names, gives None.
+        """
+        names = tuple(msg.name)
+        if names not in self._cache:
+            if len(self._cache) >= self._cache_size:
+                self._cache.clear()
+            self._cache[names] = self._layout(names)
+        idx = self._cache[names]
+        if isinstance(idx, str):
+            return None, idx
+        if len(msg.position) != len(names):
+            return None, f'with {len(msg.position)} positions for {len(names)} names'
+        if len(msg.velocity) not in (0, len(names)):
+            return None, f'with {len(msg.velocity)} velocities for {len(names)} names'
+        return idx, ''
+
+    def read(self, msg):
+        """``(positions, velocities, '')`` of the joints, or ``(None, None, reason)``.
+
+        Velocities are zero when the message has none. Non-finite values, and values beyond
+        the plausibility bounds given at construction, give a reason.
+        """
+        idx, reason = self.indices(msg)
+        if idx is None:
+            return None, None, reason
+        q = np.asarray(msg.position, dtype=float)[idx]
+        dq = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else np.zeros(len(idx))
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
+            return None, None, f'with non-finite values: positions {q.tolist()}, velocities {dq.tolist()}'
+        if self._max_rate is not None and np.any(np.abs(dq) > self._max_rate):
+            bad = [self.joints[i] for i in np.flatnonzero(np.abs(dq) > self._max_rate)]
+            return None, None, (f'with rates of {bad} beyond {self.PLAUSIBLE_FACTOR:g} times their limits '
+                                f'(a measurement glitch?)')
+        if np.any(np.abs(q) > self.MAX_POSITION):
+            return None, None, f'with positions beyond {self.MAX_POSITION:g} rad: not joint angles'
+        if self._bounds is not None and (np.any(q < self._bounds[0]) or np.any(q > self._bounds[1])):
+            bad = [self.joints[i] for i in np.flatnonzero((q < self._bounds[0]) | (q > self._bounds[1]))]
+            return None, None, (f'with positions of {bad} more than {self.POSITION_MARGIN} rad beyond '
+                                'their limits')
+        return q, dq, ''
+
+
+class BaseReference:
+    """The latest ``/base/reference`` of a planar base, validated, with its age.
+
+    Its age is judged by the node's clock at receipt (:class:`Freshness`), never by its stamp.
+
+    Args:
+        node: the node whose clock and logger are used.
+        base_frame: the one frame accepted besides an empty one.
+        timeout: age [s] beyond which :meth:`current` gives None.
+        velocity_limit: |vx|, |vy|, |ω| limits; a reference beyond them is kept (the
+            controller scales it into them) with a logged warning.
+    """
+
+    def __init__(self, node, base_frame, timeout, velocity_limit=None):
+        self._node = node
+        self.base_frame = base_frame
+        self.value = np.zeros(3)
+        self.freshness = Freshness(timeout)
+        self.rejected = 0
+        self._limit = None if velocity_limit is None else np.asarray(velocity_limit, dtype=float)
+        self._stale_logged = False
+
+    def accept(self, msg):
+        """Store ``msg`` if valid (True); else count and log the rejection (False)."""
+        ref, reason = parse_base_reference(msg, self.base_frame)
+        logger = self._node.get_logger()
+        if ref is None:
+            self.rejected += 1
+            logger.warn(f'rejected /base/reference: {reason}', throttle_duration_sec=1.0)
+            return False
+        if reason:
+            logger.warn(f'/base/reference: {reason}', throttle_duration_sec=10.0)
+        if self._limit is not None and np.any(np.abs(ref) > self._limit):
+            logger.warn(f'/base/reference {ref.tolist()} is beyond the velocity limits {self._limit.tolist()}: '
+                        'scaled into them', throttle_duration_sec=1.0)
+        self.value = ref
+        self.freshness.mark(seconds(self._node.get_clock()))
+        self._stale_logged = False
+        return True
+
+    def current(self, now):
+        """The reference at node time ``now`` [s], or None when it is stale (logged once)."""
+        if self.freshness.fresh(now):
+            return self.value
+        if not self._stale_logged and np.any(self.value):
+            self._node.get_logger().warn(f'/base/reference older than {self.freshness.timeout} s: braking to rest')
+            self._stale_logged = True
+        return None
+
+
+#: Joint states over which :class:`JointStateWatchdog` finds the usual delivery (about 1 s at 40 Hz).
+DELIVERY_WINDOW = 40
+
+
+class JointStateWatchdog:
+    """The timing of a controller's ``/joint_states`` input: stamps, age and period.
+
+    :meth:`admit` decides, by the stamps (:class:`StampGate`), whether a message runs a cycle,
+    and logs why not (throttled). While admitted joint states are older than ``timeout``,
+    ``on_timeout()`` is called every ``period``; the timer runs on ``clock`` (give it the
+    steady clock: a paused sim clock must not hide a stop). A timeout sets
+    :attr:`need_resync`, which the node clears once it has resynchronised, and lets the next
+    stamp start a new time base.
+
+    :meth:`waited_too_long` tells, when the cycle is about to run, whether the state waited in
+    this node longer than ``max_wait`` since its receipt (the node's steady clock: no clock of
+    the sender's is involved). A node that was held up (stopped, or starved on a busy machine)
+    may run a state that waited for its reference meanwhile; a real-time simulator has stepped
+    past it, and an answer to it would be applied now, as if it were current.
+
+    With ``max_wait`` set, :meth:`admit` also skips a state that reached this node more than
+    ``max_wait`` later than the joint states usually do: its receipt on the node's clock minus its
+    stamp, against the smallest such offset of the last :data:`DELIVERY_WINDOW` states (a constant
+    offset between the sender's clock and this node's cancels). A node held up (stopped, or
+    starved) finds the states sent meanwhile queued in its transport: they reach its callback one
+    by one after it goes on, the oldest first, each looking new to it, and each reports rates the
+    simulator has since changed.
+    """
+
+    def __init__(self, node, timeout, period, clock, on_timeout, action, topic='joint_states', max_wait=0.0):
+        self._node = node
+        self.max_wait = float(max_wait)
+        self._clock = clock
+        self._on_timeout = on_timeout
+        self._action = action
+        self._topic = topic
+        self.freshness = Freshness(timeout)
+        self._period = float(period)
+        self.stamps = StampGate(period, max_jump=self._max_jump(timeout))
+        self.skipped = 0
+        self.need_resync = True
+        self._offsets = deque(maxlen=DELIVERY_WINDOW)   # receipt − stamp [ns] of the last joint states
+        self.timer = node.create_timer(period, self._check, clock=clock)
+
+    def _max_jump(self, timeout):
+        return max(float(timeout), 4.0 * self._period)
+
+    def set_timeout(self, timeout):
+        """A new timeout [s] (a parameter set at run time): for the age and for the stamp jump."""
+        self.freshness.timeout = float(timeout)
+        self.stamps.max_jump = self._max_jump(timeout)
+
+    def waited_too_long(self, received_ns):
+        """True (logged, throttled, and counted as skipped) when a joint state received at
+        ``received_ns`` (``time.monotonic_ns()`` in its callback) waited longer than ``max_wait``."""
+        if self.max_wait <= 0.0:
+            return False
+        wait = (time.monotonic_ns() - received_ns) * 1e-9
+        if wait <= self.max_wait:
+            return False
+        self.skipped += 1
+        self._node.get_logger().warn(
+            f'/{self._topic} waited {wait:.3g} s in this node, beyond max_state_wait {self.max_wait:g} s (the node '
+            'was held up): cycle skipped', throttle_duration_sec=1.0)
+        return True
+
+    def mark(self):
+        """A joint state arrived now."""
+        self.freshness.mark(seconds(self._clock))
+
+    def late(self, stamp):
+        """How much later [s] than the usual delivery the joint state stamped ``stamp`` reached this
+        node now (0 when it is the earliest of the window, or unstamped: a zero stamp tells no time)."""
+        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        if ns == 0:
+            return 0.0
+        offset = self._node.get_clock().now().nanoseconds - ns
+        self._offsets.append(offset)
+        return (offset - min(self._offsets)) * 1e-9
+
+    def admit(self, stamp):
+        """True when the joint state stamped ``stamp`` runs a cycle (it is then marked fresh)."""
+        logger = self._node.get_logger()
+        late = self.late(stamp) if self.max_wait > 0.0 else 0.0
+        if late > self.max_wait:
+            self.skipped += 1
+            logger.warn(f'/{self._topic} arrived {late:.3g} s later than the usual delivery, beyond max_state_wait '
+                        f'{self.max_wait:g} s (it was queued while this node was held up): cycle skipped',
+                        throttle_duration_sec=1.0)
+            return False
+        reason = self.stamps.admit(stamp)
+        if reason:
+            self.skipped += 1
+            publishers = self._node.count_publishers(self._topic)
+            logger.warn(f'/{self._topic} {reason}; {publishers} publisher(s) on it: cycle skipped',
+                        throttle_duration_sec=1.0)
+            return False
+        self.mark()
+        mismatch = self.stamps.period_mismatch()
+        if mismatch:
+            logger.warn(mismatch, throttle_duration_sec=10.0)
+        return True
+
+    def resync(self, *outputs):
+        """True when the node restarts from the measured state this cycle.
+
+        That is after a timeout (and at start-up), and also while any of ``outputs`` (the
+        command publishers) has no matched subscription yet: commands that nobody receives
+        must not advance the controller's state, or the first one that arrives would jump.
+        """
+        if not all(pub.get_subscription_count() > 0 for pub in outputs):
+            return True
+        due = self.need_resync
+        self.need_resync = False
+        return due
+
+    def _check(self):
+        age = self.freshness.age(seconds(self._clock))
+        if not self.freshness.timeout < age < math.inf:
+            return
+        if not self.need_resync:
+            self._node.get_logger().warn(f'no /{self._topic} for {self.freshness.timeout} s: {self._action}')
+            self.need_resync = True
+        self.stamps.restart()
+        self._offsets.clear()
+        self._on_timeout()

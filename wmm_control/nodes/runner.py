@@ -1,0 +1,146 @@
+"""A node's process: main() (:func:`run_node`), its executor, signals, and a guard on ``/clock``."""
+
+import atexit
+import os
+import signal
+import threading
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+# rclpy.init's RCLError (a command line it cannot take) has no public home in rclpy.
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.signals import SignalHandlerOptions
+from rclpy.time_source import TimeSource
+
+from wmm_control.errors import WmmError
+
+RCLError = _rclpy.RCLError
+
+__all__ = ['run_node', 'default_executor', 'guard_clock', 'FASTDDS_TRANSPORTS']
+
+
+def default_executor():
+    """rclpy's events executor (several times faster per message in Jazzy), else single-threaded."""
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:
+        return SingleThreadedExecutor()
+    return EventsExecutor()
+
+
+def guard_clock(node):
+    """Make ``node`` drop the ``/clock`` messages rclpy's time source cannot take, with a warning.
+
+    With ``use_sim_time``, rclpy's own time source turns each ``/clock`` message into a time
+    point, and raises inside its callback for a negative time (``ValueError: Seconds value must
+    not be negative``), which would end the node. A ``/clock`` stamp is at most 2³¹ − 1 s, a
+    time rclpy takes, so a negative one is the only such message. It is dropped before rclpy
+    sees it, logged through ``node``'s logger (throttled): the ROS clock keeps its last time.
+    ``use_sim_time`` set at run time makes a new subscription, guarded in turn.
+    """
+    def guard(callback):
+        def guarded(msg):
+            if msg.clock.sec < 0:
+                node.get_logger().warn(
+                    f'ignored a /clock message at {msg.clock.sec} s {msg.clock.nanosec} ns: a negative time, '
+                    f'which rclpy cannot take; the ROS clock keeps its last time '
+                    f'({node.count_publishers("/clock")} publisher(s) on /clock)', throttle_duration_sec=1.0)
+                return
+            callback(msg)
+        return guarded
+
+    def guard_all(_params=()):
+        # rclpy offers no hook on its time source's /clock subscription: find it, wrap its callback.
+        for sub in node.subscriptions:
+            if isinstance(getattr(sub.callback, '__self__', None), TimeSource):
+                sub.callback = guard(sub.callback)
+
+    guard_all()
+    node.add_post_set_parameters_callback(guard_all)
+
+
+#: Fast DDS transports of the executables, unless the environment names others: UDP alone.
+#: With its shared-memory transport too (Fast DDS's default), a peer killed (SIGKILL) or
+#: stopped (SIGSTOP) at the wrong moment stalled the surviving processes' traffic for 0.2 to 2 s
+#: (measured, see docs/robustness.md), which fired their watchdogs; over UDP it never did.
+FASTDDS_TRANSPORTS = 'UDPv4'
+
+
+def run_node(node_factory, args=None, executor_factory=default_executor):
+    """Standard main(): init, build the node, spin until Ctrl-C, SIGTERM or shutdown, clean up.
+
+    A configuration error at start-up (the command line's included) is logged and gives exit
+    code 2. Ctrl-C and SIGTERM end the spin loop between callbacks: rclpy's own handlers shut
+    the context down at once, in the middle of a callback, whose next publish then fails
+    ("publisher's context is invalid", a traceback on the way out). Further ones during the
+    teardown are only noted (``ros2 launch`` sends SIGINT twice); the previous handlers come
+    back once the context is shut down, and from the interpreter's exit on both signals are
+    ignored (:func:`_ignore_stop_signals_at_exit`). The process uses Fast DDS's UDP transport
+    alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS`` is set.
+    """
+    os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', FASTDDS_TRANSPORTS)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as exc:        # the command line: a --params-file that cannot be read, a bad rule
+        rclpy.logging.get_logger('wmm_control').fatal(f'cannot start: {exc}')
+        return 2
+    stop = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():     # where Python delivers signals
+        previous = {sig: signal.signal(sig, lambda signum, _frame: stop.append(signum))
+                    for sig in (signal.SIGINT, signal.SIGTERM)}
+    _ignore_stop_signals_at_exit()
+    node = executor = None
+    try:
+        node = node_factory()
+        executor = executor_factory()
+        executor.add_node(node)
+        # spin_once in a loop rather than spin(): it returns to check the stop request.
+        while rclpy.ok() and not stop:
+            executor.spin_once(timeout_sec=0.1)
+    except ExternalShutdownException:
+        pass
+    except WmmError as exc:
+        logger = node.get_logger() if node is not None else rclpy.logging.get_logger('wmm_control')
+        logger.fatal(f'{type(exc).__name__}: {exc}')
+        return 2
+    finally:
+        # The stop handler stays in place until the node and the context are gone: a second
+        # Ctrl-C or SIGTERM during the teardown (``ros2 launch`` sends SIGINT twice) is only
+        # noted, instead of raising KeyboardInterrupt inside rclpy (an abort).
+        # The executor goes first, here: left to the garbage collector after the handlers are back,
+        # the events executor ran pending callbacks from its destructor, where a signal then raised
+        # KeyboardInterrupt inside rclpy (an abort under ``ros2 launch``).
+        try:
+            if executor is not None:
+                executor.shutdown()
+                del executor
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+    return 0
+
+
+_EXIT_GUARD: list[bool] = []
+
+
+def _ignore_stop_signals_at_exit():
+    """From the interpreter's exit on, ignore SIGINT and SIGTERM (registered once, by :func:`run_node`).
+
+    After ``main()`` returns, the interpreter's finalization (the middleware's destructors) takes
+    a few tenths of a second, during which Python resets SIGINT to the system default: a second
+    Ctrl-C then killed the process (exit -2) although the node had stopped cleanly. Python keeps
+    an ignored signal ignored through its finalization.
+    """
+    if _EXIT_GUARD or threading.current_thread() is not threading.main_thread():
+        return
+    _EXIT_GUARD.append(True)
+
+    def ignore():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
+
+    atexit.register(ignore)
