@@ -31,7 +31,7 @@ from types import SimpleNamespace
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))            # run from a source checkout
 
-from wmm_control.nodes.common import load_defaults  # noqa: E402
+from wmm_control.nodes.parameters import load_defaults  # noqa: E402
 from wmm_control.resolvers import METHODS  # noqa: E402
 
 #: The pages that hold the tables (the viewer's is on its own page).
