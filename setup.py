@@ -26,7 +26,10 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
         *config_data_files(),
-        ('share/' + PACKAGE + '/launch', sorted(str(p.relative_to(HERE)) for p in (HERE / 'launch').glob('*.launch.py'))),
+        (
+            'share/' + PACKAGE + '/launch',
+            sorted(str(p.relative_to(HERE)) for p in (HERE / 'launch').glob('*.launch.py')),
+        ),
     ],
     install_requires=['setuptools', 'numpy', 'pyyaml'],
     zip_safe=True,

@@ -27,8 +27,7 @@ def bench(model, full, rng):
     cfg = model.config
     lo = np.maximum(cfg.arm.position_lower, -np.pi)
     hi = np.minimum(cfg.arm.position_upper, np.pi)
-    states = [(rng.uniform(-1, 1, 3), rng.uniform(lo, hi), rng.normal(size=3), rng.normal(size=7))
-              for _ in range(N)]
+    states = [(rng.uniform(-1, 1, 3), rng.uniform(lo, hi), rng.normal(size=3), rng.normal(size=7)) for _ in range(N)]
     times = []
     for base, q, vb, dq in states:
         t0 = time.perf_counter()

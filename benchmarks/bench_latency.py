@@ -45,10 +45,22 @@ from wmm_control.robot_config import load_robot
 
 BIN = Path(sys.executable).parent
 SYSTEMS = {
-    'A': {'robot': 'steerable', 'base': 'swmr_controller', 'groups': ('arm', 'steer', 'drive'),
-          'resolver': [], 'goal': (12.0, 3.0, 1.0), 'quat': (0.5 ** 0.5, 0.0, 0.0, 0.5 ** 0.5)},
-    'B': {'robot': 'mecanum', 'base': 'mecanum_controller', 'groups': ('arm', 'wheel'),
-          'resolver': [], 'goal': (3.0, 1.0, 0.45), 'quat': (0.0, 0.5 ** 0.5, 0.0, 0.5 ** 0.5)},   # amp: B's default
+    'A': {
+        'robot': 'steerable',
+        'base': 'swmr_controller',
+        'groups': ('arm', 'steer', 'drive'),
+        'resolver': [],
+        'goal': (12.0, 3.0, 1.0),
+        'quat': (0.5**0.5, 0.0, 0.0, 0.5**0.5),
+    },
+    'B': {
+        'robot': 'mecanum',
+        'base': 'mecanum_controller',
+        'groups': ('arm', 'wheel'),
+        'resolver': [],
+        'goal': (3.0, 1.0, 0.45),
+        'quat': (0.0, 0.5**0.5, 0.0, 0.5**0.5),
+    },  # amp: B's default
 }
 
 
@@ -58,12 +70,13 @@ def answer(groups):
     node = Node('latency_answer')
     sizes = {'arm': 7, 'steer': 4, 'drive': 4, 'wheel': 4}
     pubs = {g: node.create_publisher(Float64MultiArray, f'{g}_controller/commands', 10) for g in groups}
-    node.create_subscription(JointState, 'joint_states',
-                             lambda m: [pubs[g].publish(float_array(np.zeros(sizes[g]))) for g in groups], 10)
+    node.create_subscription(
+        JointState, 'joint_states', lambda m: [pubs[g].publish(float_array(np.zeros(sizes[g]))) for g in groups], 10
+    )
     executor = default_executor()
     executor.add_node(node)
     try:
-        with contextlib.suppress(KeyboardInterrupt):       # SIGINT is how the benchmark stops it
+        with contextlib.suppress(KeyboardInterrupt):  # SIGINT is how the benchmark stops it
             while rclpy.ok():
                 executor.spin_once(timeout_sec=0.1)
     finally:
@@ -76,17 +89,22 @@ class Probe(Node):
 
     def __init__(self, context, groups):
         super().__init__('latency_probe', context=context)
-        self.states = []                  # (arrival, stamp)
+        self.states = []  # (arrival, stamp)
         self.stamped = {'base/reference': {}, 'base/feasible_twist': {}}
         self.commands = {g: [] for g in groups}
         self.moving = False
         self.create_subscription(JointState, 'joint_states', self._on_state, 50)
         for topic, arrivals in self.stamped.items():
-            self.create_subscription(TwistStamped, topic, lambda m, a=arrivals: a.setdefault(
-                _key(m), time.perf_counter()), 50)
+            self.create_subscription(
+                TwistStamped, topic, lambda m, a=arrivals: a.setdefault(_key(m), time.perf_counter()), 50
+            )
         for group, arrivals in self.commands.items():
-            self.create_subscription(Float64MultiArray, f'{group}_controller/commands',
-                                     lambda m, a=arrivals: a.append(time.perf_counter()), 50)
+            self.create_subscription(
+                Float64MultiArray,
+                f'{group}_controller/commands',
+                lambda m, a=arrivals: a.append(time.perf_counter()),
+                50,
+            )
         self.create_subscription(Odometry, 'ground_truth/odom', self._on_truth, 10)
         self.goal = self.create_publisher(PoseStamped, 'goal_pose', 10)
 
@@ -98,8 +116,13 @@ class Probe(Node):
 
     def latencies(self, start):
         """Per stage, the latency [s] of every cycle whose joint state arrived after ``start``."""
-        out = {'base/reference': [], 'base/feasible_twist': [], 'arm command': [], 'base commands': [],
-               'whole chain': []}
+        out = {
+            'base/reference': [],
+            'base/feasible_twist': [],
+            'arm command': [],
+            'base commands': [],
+            'whole chain': [],
+        }
         arrivals = [t for t, _ in self.states] + [np.inf]
         for i, (t0, key) in enumerate(self.states):
             if t0 < start:
@@ -132,12 +155,13 @@ def measure(system, seconds, trivial, domain):
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
     robot = ['--ros-args', '-p', f'robot:={system["robot"]}']
     if trivial:
-        commands = [[str(BIN / 'wmm_sim')] + robot,
-                    [sys.executable, __file__, '--answer', ','.join(system['groups'])]]
+        commands = [[str(BIN / 'wmm_sim')] + robot, [sys.executable, __file__, '--answer', ','.join(system['groups'])]]
     else:
-        commands = [[str(BIN / 'wmm_sim')] + robot,
-                    [str(BIN / system['base'])],
-                    [str(BIN / 'redundancy_resolver')] + robot + system['resolver']]
+        commands = [
+            [str(BIN / 'wmm_sim')] + robot,
+            [str(BIN / system['base'])],
+            [str(BIN / 'redundancy_resolver')] + robot + system['resolver'],
+        ]
     procs = [subprocess.Popen(c, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for c in commands]
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)

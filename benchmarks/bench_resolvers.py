@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run from a source checkout
-sys.path.insert(0, str(Path(__file__).resolve().parent))       # for bench_swmr
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # for bench_swmr
 
 from wmm_control.experiments.scenario import load_scenario  # noqa: E402
 from wmm_control.resolvers import make_resolver  # noqa: E402
@@ -34,15 +34,18 @@ from wmm_control.resolvers import make_resolver  # noqa: E402
 SCENARIO = 'sorour_table2'
 PROFILED_RUN = 'task_sharing_compensation'
 RESULT_TAG = 'RESULT '
-METHODS = (('pinv', 'pinv', {}),
-           ('task_sharing', 'task_sharing', {'compensation': False}),
-           ('task_sharing + compensate', 'task_sharing', {'compensation': True}))
+METHODS = (
+    ('pinv', 'pinv', {}),
+    ('task_sharing', 'task_sharing', {'compensation': False}),
+    ('task_sharing + compensate', 'task_sharing', {'compensation': True}),
+)
 
 
 def record_cycles(scenario):
     """(state, target, feasible twist) of every period of a closed-loop task-sharing run."""
     from sim_bridge.closed_loop import ClosedLoop
     from sim_bridge.world import SimWorld
+
     cycles = []
     with SimWorld(scenario.robot) as world:
         loop = ClosedLoop(world, make_resolver('task_sharing', scenario.robot))
@@ -80,15 +83,19 @@ def record_circle(radius=0.25, seconds=40.0):
     from sim_bridge.closed_loop import ClosedLoop
     from sim_bridge.world import SimWorld
     from wmm_control.resolvers import PoseTarget
+
     cycles, w = [], np.pi / 20.0
     with SimWorld('mecanum') as world:
         loop = ClosedLoop(world, make_resolver('amp', 'mecanum', **CIRCLE))
         x0, r0 = loop.state().ee_position.copy(), loop.state().ee_rotation.copy()
         for k in range(int(round(seconds / world.dt))):
             t = k * world.dt
-            target = PoseTarget(x0 + radius * np.array([1 - np.cos(w * t), -np.sin(w * t), 0.0]), r0,
-                                velocity=radius * w * np.array([np.sin(w * t), -np.cos(w * t), 0, 0, 0, 0]),
-                                acceleration=radius * w * w * np.array([np.cos(w * t), np.sin(w * t), 0, 0, 0, 0]))
+            target = PoseTarget(
+                x0 + radius * np.array([1 - np.cos(w * t), -np.sin(w * t), 0.0]),
+                r0,
+                velocity=radius * w * np.array([np.sin(w * t), -np.cos(w * t), 0, 0, 0, 0]),
+                acceleration=radius * w * w * np.array([np.cos(w * t), np.sin(w * t), 0, 0, 0, 0]),
+            )
             state = loop.state()
             loop.step(target)
             cycles.append((state, target, None))
@@ -96,12 +103,21 @@ def record_circle(radius=0.25, seconds=40.0):
 
 
 def report_resolvers(scenario):
-    report_methods(f'{scenario.name} replayed (robot {scenario.robot})', scenario.robot, record_cycles(scenario),
-                   METHODS, 'task sharing median <= 0.5x pink median; p99 <= 3x own median')
+    report_methods(
+        f'{scenario.name} replayed (robot {scenario.robot})',
+        scenario.robot,
+        record_cycles(scenario),
+        METHODS,
+        'task sharing median <= 0.5x pink median; p99 <= 3x own median',
+    )
     circle = record_circle()
-    report_methods("Xing's R = 0.25 m circle replayed (robot mecanum)", 'mecanum', circle,
-                   (('amp', 'amp', CIRCLE), ('traditional', 'traditional', CIRCLE)),
-                   'AMP median <= 1.0x pink median')
+    report_methods(
+        "Xing's R = 0.25 m circle replayed (robot mecanum)",
+        'mecanum',
+        circle,
+        (('amp', 'amp', CIRCLE), ('traditional', 'traditional', CIRCLE)),
+        'AMP median <= 1.0x pink median',
+    )
     report_amp_floor(circle)
 
 
@@ -117,8 +133,9 @@ def report_amp_floor(cycles):
 
     def free_sns(jac, xdd, drift, lower, upper, active, held, rcond=1e-6):
         act = np.asarray(active, dtype=bool)
-        return sns.SnsResult(np.zeros(jac.shape[1]), 1.0, act, np.zeros_like(act),
-                             np.zeros((int(act.sum()), jac.shape[0])))
+        return sns.SnsResult(
+            np.zeros(jac.shape[1]), 1.0, act, np.zeros_like(act), np.zeros((int(act.sum()), jac.shape[0]))
+        )
 
     zeros = (np.zeros(7), np.zeros((7, 7)))
     full = np.median(time_resolver(make_resolver('amp', 'mecanum', **CIRCLE), cycles))
@@ -126,13 +143,16 @@ def report_amp_floor(cycles):
         no_h = np.median(time_resolver(make_resolver('amp', 'mecanum', **CIRCLE), cycles))
         with mock.patch.object(amp, 'sns_accelerations', free_sns):
             floor = np.median(time_resolver(make_resolver('amp', 'mecanum', **CIRCLE), cycles))
-    print(f'  amp median {full:.1f} µs; with ∇H, ∇²H free {no_h:.1f} µs; with SNS free too {floor:.1f} µs '
-          '(the rest of the cycle)')
+    print(
+        f'  amp median {full:.1f} µs; with ∇H, ∇²H free {no_h:.1f} µs; with SNS free too {floor:.1f} µs '
+        '(the rest of the cycle)'
+    )
 
 
 def report_methods(title, robot, cycles, methods, targets):
     print(f'Resolver cycle time, {len(cycles)} recorded cycles of {title}:')
     from bench_swmr import bench_pink
+
     pink_us = bench_pink(len(cycles), robot)
     pink_med = np.median(pink_us) if pink_us is not None else None
     print(f'  {"method":<28}{"median µs":>10}{"p99 µs":>9}{"p99/med":>9}{"med/pink":>10}')
@@ -152,29 +172,44 @@ def experiment_only(engine):
     """Run the whole experiment in this process; print its figures as one JSON line."""
     import resource
     from wmm_control.cli.experiment import run_experiment
+
     start = time.perf_counter()
     logs, summary = run_experiment(load_scenario(SCENARIO), engine=engine, show_progress=False)
     wall = time.perf_counter() - start
     sim = sum(len(log) * 0.025 for log in logs.values())
-    print(RESULT_TAG + json.dumps({
-        'engine': engine, 'sim_s': sim, 'wall_s': wall,
-        'runs': {name: [run['sim_to_wall_ratio'], run['periods'], run['resolver_cycle_median_us']]
-                 for name, run in summary['runs'].items()},
-        'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}), flush=True)
+    print(
+        RESULT_TAG
+        + json.dumps(
+            {
+                'engine': engine,
+                'sim_s': sim,
+                'wall_s': wall,
+                'runs': {
+                    name: [run['sim_to_wall_ratio'], run['periods'], run['resolver_cycle_median_us']]
+                    for name, run in summary['runs'].items()
+                },
+                'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+            }
+        ),
+        flush=True,
+    )
 
 
 def report_experiment():
     print(f'\nWhole {SCENARIO} experiment, each engine in a fresh process:')
     for engine in ('nodes', 'direct'):
-        out = subprocess.run([sys.executable, __file__, '--experiment-only', engine],
-                             capture_output=True, text=True, check=False)
+        out = subprocess.run(
+            [sys.executable, __file__, '--experiment-only', engine], capture_output=True, text=True, check=False
+        )
         line = next((ln for ln in out.stdout.splitlines() if ln.startswith(RESULT_TAG)), None)
         if line is None:
             print(f'  engine {engine}: failed (exit {out.returncode})\n{out.stderr[-2000:]}')
             continue
-        r = json.loads(line[len(RESULT_TAG):])
-        print(f'  engine {engine:<7} {r["sim_s"]:.0f} sim s in {r["wall_s"]:.1f} s wall: '
-              f'{r["sim_s"] / r["wall_s"]:.1f}x (target >= 40x); peak RSS {r["peak_rss_mb"]:.0f} MB (target <= 400 MB)')
+        r = json.loads(line[len(RESULT_TAG) :])
+        print(
+            f'  engine {engine:<7} {r["sim_s"]:.0f} sim s in {r["wall_s"]:.1f} s wall: '
+            f'{r["sim_s"] / r["wall_s"]:.1f}x (target >= 40x); peak RSS {r["peak_rss_mb"]:.0f} MB (target <= 400 MB)'
+        )
         print(f'    {"run":<38}{"sim/wall":>9}{"wall ms/period":>16}{"periods":>9}{"resolver median µs":>20}')
         for name, (ratio, periods, resolver_us) in r['runs'].items():
             print(f'    {name:<38}{ratio:8.1f}x{25.0 / ratio:>16.2f}{periods:>9}{resolver_us:>20.1f}')
@@ -187,21 +222,26 @@ def _where(key):
 
 def report_profile(top):
     from wmm_control.experiments.ros_run import run_with_nodes
+
     scenario = load_scenario(SCENARIO)
     run = next(r for r in scenario.runs if r['name'] == PROFILED_RUN)
     profiler = cProfile.Profile()
     profiler.enable()
     log = run_with_nodes(scenario, run)
     profiler.disable()
-    stats = pstats.Stats(profiler).stats   # {key: (primitive calls, calls, own, cumulative, callers)}
+    stats = pstats.Stats(profiler).stats  # {key: (primitive calls, calls, own, cumulative, callers)}
     total = max(v[3] for v in stats.values())
-    print(f'\nProfile of one ROS-pipeline run ({PROFILED_RUN}, {len(log)} periods, '
-          f'{log.wall_time_s:.1f} s wall under the profiler):')
+    print(
+        f'\nProfile of one ROS-pipeline run ({PROFILED_RUN}, {len(log)} periods, '
+        f'{log.wall_time_s:.1f} s wall under the profiler):'
+    )
     for title, col in (('cumulative', 3), ('own', 2)):
         print(f'  {f"top {top} by {title} time":<62}{"calls":>9}{"own s":>8}{"own %":>7}{"cum s":>8}{"cum %":>7}')
         for key, v in sorted(stats.items(), key=lambda kv: -kv[1][col])[:top]:
-            print(f'    {_where(key)[:60]:<60}{v[1]:>9}{v[2]:>8.2f}{100 * v[2] / total:>7.1f}'
-                  f'{v[3]:>8.2f}{100 * v[3] / total:>7.1f}')
+            print(
+                f'    {_where(key)[:60]:<60}{v[1]:>9}{v[2]:>8.2f}{100 * v[2] / total:>7.1f}'
+                f'{v[3]:>8.2f}{100 * v[3] / total:>7.1f}'
+            )
 
 
 def main():

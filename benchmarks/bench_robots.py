@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))                 # run from a source checkout
-sys.path.insert(0, str(ROOT / 'test'))        # the URDF factory of the tests
+sys.path.insert(0, str(ROOT))  # run from a source checkout
+sys.path.insert(0, str(ROOT / 'test'))  # the URDF factory of the tests
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_swmr import bench_pink  # noqa: E402
@@ -90,8 +90,12 @@ def per_robot(cycles):
         cells = [_fmt(time_method(cfg, m, states)) for m in METHODS]
         pink = bench_pink(cycles, name)
         pink_cell = _fmt(pink) if pink is not None else 'not installed'
-        print(f'| {name} | {cfg.arm.n} | {cfg.base_type} | ' + ' | '.join(cells)
-              + f' | {_fmt(time_base(cfg, states))} | {pink_cell} |', flush=True)
+        print(
+            f'| {name} | {cfg.arm.n} | {cfg.base_type} | '
+            + ' | '.join(cells)
+            + f' | {_fmt(time_base(cfg, states))} | {pink_cell} |',
+            flush=True,
+        )
 
 
 def made_up(tmp, base, **kwargs):
@@ -110,8 +114,11 @@ def growth(cycles):
         for n in (6, 7, 8):
             cfg = made_up(tmp, 'mecanum', arm_joints=n)
             states = record(cfg, cycles)
-            print(f'| {n} | {np.median(time_method(cfg, "task_sharing", states)):.1f} | '
-                  f'{np.median(time_method(cfg, "amp", states)):.1f} |', flush=True)
+            print(
+                f'| {n} | {np.median(time_method(cfg, "task_sharing", states)):.1f} | '
+                f'{np.median(time_method(cfg, "amp", states)):.1f} |',
+                flush=True,
+            )
         print('\n## Growth with the steerable modules N: median / p99 of the base controller [µs]\n')
         print('| N | swmr_controller |')
         print('|---|---|')

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))                 # run from a source checkout
+sys.path.insert(0, str(ROOT))  # run from a source checkout
 
 from wmm_control.kinematics import KinematicModel  # noqa: E402
 from wmm_control.resolvers.safety import SafetyStage  # noqa: E402
@@ -50,11 +50,16 @@ def main(argv=None):
             model.update(robot.start.base_pose, q)
             jacobian = model.arm_jacobian_base()
             t0 = time.perf_counter()
-            out = stage.filter(q, np.clip(command, -arm.velocity, arm.velocity), -arm.velocity, arm.velocity,
-                               base_pose=robot.start.base_pose, task_jacobian=jacobian)
+            out = stage.filter(
+                q,
+                np.clip(command, -arm.velocity, arm.velocity),
+                -arm.velocity,
+                arm.velocity,
+                base_pose=robot.start.base_pose,
+                task_jacobian=jacobian,
+            )
             (solved if out.changed else passed).append(time.perf_counter() - t0)
-        print(f'{name:12s} {len(stage.collision.pairs):4d} pairs   passed: {_figures(passed)}   '
-              f'QP: {_figures(solved)}')
+        print(f'{name:12s} {len(stage.collision.pairs):4d} pairs   passed: {_figures(passed)}   QP: {_figures(solved)}')
 
 
 if __name__ == '__main__':

@@ -21,7 +21,7 @@ def _commands(robot, k):
     s = np.sin(0.05 * k)
     arm = 0.3 * s * np.array([1.0, -0.8, 0.6, 0.5, -1.0, 0.7, 0.9])
     if robot == 'A':
-        steer = np.full(4, 0.2 * s) if (k // 40) % 2 else np.zeros(4)   # steer half of the time
+        steer = np.full(4, 0.2 * s) if (k // 40) % 2 else np.zeros(4)  # steer half of the time
         return {'arm': arm, 'steer': steer, 'drive': np.array([4.0, 4.5, 4.0, 4.5]) + s}
     return {'arm': arm, 'wheel': np.array([3.0, -2.0, 2.5, -1.5]) * (1.0 + 0.2 * s)}
 
@@ -66,12 +66,16 @@ def main():
         ('B', 'physics', None, max(args.steps // 5, 100)),
     ]
     print('SimWorld step cost, dt = 25 ms, substeps = 10 (µs; cycle = commands + step + all reads)')
-    print(f'{"robot":5} {"mode":9} {"slip":4} {"steps":>5} {"step med":>9} {"step p99":>9} '
-          f'{"cycle med":>9} {"cycle p99":>9} {"x realtime":>10}')
+    print(
+        f'{"robot":5} {"mode":9} {"slip":4} {"steps":>5} {"step med":>9} {"step p99":>9} '
+        f'{"cycle med":>9} {"cycle p99":>9} {"x realtime":>10}'
+    )
     for robot, mode, slip, steps in configs:
         sm, sp, cm, cp, dt = bench(robot, mode, steps, slip)
-        print(f'{robot:5} {mode:9} {"on" if slip else "off":4} {steps:5d} {sm:9.1f} {sp:9.1f} '
-              f'{cm:9.1f} {cp:9.1f} {dt * 1e6 / cm:10.0f}')
+        print(
+            f'{robot:5} {mode:9} {"on" if slip else "off":4} {steps:5d} {sm:9.1f} {sp:9.1f} '
+            f'{cm:9.1f} {cp:9.1f} {dt * 1e6 / cm:10.0f}'
+        )
 
 
 if __name__ == '__main__':

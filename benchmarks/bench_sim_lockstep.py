@@ -24,8 +24,9 @@ SIM_SECONDS = 65.0
 class Answerer(Node):
     def __init__(self, context, groups):
         super().__init__('answerer', context=context)
-        self.pubs = {g: (self.create_publisher(Float64MultiArray, f'/{g}_controller/commands', 10), n)
-                     for g, n in groups.items()}
+        self.pubs = {
+            g: (self.create_publisher(Float64MultiArray, f'/{g}_controller/commands', 10), n) for g, n in groups.items()
+        }
         self.last_t = 0.0
         self.create_subscription(JointState, '/joint_states', self.on_state, 10)
 
@@ -40,9 +41,14 @@ class Answerer(Node):
 def run(robot, base_mode, executor_cls):
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
-    sim = SimNode(context=ctx, parameter_overrides=[
-        Parameter('timing', value='lockstep'), Parameter('robot', value=robot),
-        Parameter('base_mode', value=base_mode)])
+    sim = SimNode(
+        context=ctx,
+        parameter_overrides=[
+            Parameter('timing', value='lockstep'),
+            Parameter('robot', value=robot),
+            Parameter('base_mode', value=base_mode),
+        ],
+    )
     groups = {g: len(j) for g, j in sim.world.command_groups.items()}
     ans = Answerer(ctx, groups)
     ex = executor_cls(context=ctx)
@@ -61,8 +67,12 @@ def run(robot, base_mode, executor_cls):
 
 def main():
     print(f'{"robot":<10} {"base":<10} {"executor":<16} {"sim/wall":>9} {"wall s":>8}')
-    for robot, base_mode in (('steerable', 'kinematic'), ('mecanum', 'kinematic'),
-                             ('steerable', 'physics'), ('mecanum', 'physics')):
+    for robot, base_mode in (
+        ('steerable', 'kinematic'),
+        ('mecanum', 'kinematic'),
+        ('steerable', 'physics'),
+        ('mecanum', 'physics'),
+    ):
         for name, cls in (('SingleThreaded', SingleThreadedExecutor), ('Events', EventsExecutor)):
             ratio, wall = run(robot, base_mode, cls)
             print(f'{robot:<10} {base_mode:<10} {name:<16} {ratio:>8.1f}x {wall:>8.2f}')

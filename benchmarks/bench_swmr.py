@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run from a source checkout
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
 from wmm_control.base import OsqpIcrSolver, SteerableGeometry, SwmrController, SwmrParams  # noqa: E402
 from wmm_control.base.icr import wedge_rows  # noqa: E402
@@ -44,19 +44,19 @@ def reference(k, dt):
     phase = int(t // 2.0) % 8
     s = np.sin(0.7 * t)
     if phase == 0:
-        return np.array([0.5, 0.0, 0.25 * s])                     # arcs left/right
+        return np.array([0.5, 0.0, 0.25 * s])  # arcs left/right
     if phase == 1:
         return np.array([0.4 * np.cos(t), 0.4 * np.sin(t), 0.0])  # rotating translation
     if phase == 2:
-        return np.array([0.0, 0.0, 0.6 * s])                      # spin
+        return np.array([0.0, 0.0, 0.6 * s])  # spin
     if phase == 3:
-        return np.array([-0.4, 0.2, 0.3])                         # reversal-ish arc
+        return np.array([-0.4, 0.2, 0.3])  # reversal-ish arc
     if phase == 4:
-        return np.zeros(3)                                        # stop
+        return np.zeros(3)  # stop
     if phase == 5:
         return np.array([0.3, -0.3, -0.4 * s])
     if phase == 6:
-        return np.array([0.3 * s, -0.24 * 0.3, 0.3])              # ICR sweeping past the hips
+        return np.array([0.3 * s, -0.24 * 0.3, 0.3])  # ICR sweeping past the hips
     return np.array([0.6, 0.1, 0.0])
 
 
@@ -68,7 +68,7 @@ def controller():
 def time_steps(ctrl, cycles):
     """Step times [µs], OSQP solve times [µs] of the cycles that call it, status counts."""
     dt = ctrl.params.dt
-    for k in range(50):                                  # warm-up (imports, caches)
+    for k in range(50):  # warm-up (imports, caches)
         ctrl.step(reference(k, dt))
     ctrl.reset(np.zeros(ctrl.geometry.n_wheels))
     step_us, solve_us, statuses = [], [], {}
@@ -95,6 +95,7 @@ def time_parts(ctrl, cycles):
                 return fn(*args, **kwargs)
             finally:
                 spent[name] += time.perf_counter() - t0
+
         return wrapper
 
     for name in PARTS:
@@ -169,23 +170,31 @@ def main():
     med, p99 = np.median(step_us), np.percentile(step_us, 99)
     print(f'SwmrController.step over {args.cycles} cycles (dt = {ctrl.params.dt} s):')
     print(f'  step   median {med:7.1f} us   p99 {p99:7.1f} us   max {step_us.max():7.1f} us')
-    print(f'  OSQP   median {np.median(solve_us):7.1f} us   p99 {np.percentile(solve_us, 99):7.1f} us   '
-          f'over the {len(solve_us)} cycles that call it ({len(solve_us) / args.cycles:.0%})')
+    print(
+        f'  OSQP   median {np.median(solve_us):7.1f} us   p99 {np.percentile(solve_us, 99):7.1f} us   '
+        f'over the {len(solve_us)} cycles that call it ({len(solve_us) / args.cycles:.0%})'
+    )
     print('  qp status counts:', ', '.join(f'{k}: {v}' for k, v in sorted(statuses.items())))
     parts = time_parts(controller(), args.cycles)
-    print('  per cycle, median / mean [us]: ' + ', '.join(
-        f'{name.strip("_")} {m:.1f} / {a:.1f}' for name, (m, a) in parts.items()))
+    print(
+        '  per cycle, median / mean [us]: '
+        + ', '.join(f'{name.strip("_")} {m:.1f} / {a:.1f}' for name, (m, a) in parts.items())
+    )
     floor, n_qp = time_floor(args.cycles)
-    print(f'  floor, a stripped cycle over the {n_qp} OSQP calls, median [us]: ' + ', '.join(
-        f'{name} {m:.1f}' for name, m in floor.items()))
+    print(
+        f'  floor, a stripped cycle over the {n_qp} OSQP calls, median [us]: '
+        + ', '.join(f'{name} {m:.1f}' for name, m in floor.items())
+    )
     pink_us = bench_pink(args.cycles)
     if pink_us is None:
         print('pink not installed (pip install pin-pink quadprog): comparison skipped')
         return
     pmed = np.median(pink_us)
     print(f'pink solve_ik (quadprog), robot A: median {pmed:7.1f} us   p99 {np.percentile(pink_us, 99):7.1f} us')
-    print(f'  ratio: our median / pink median = {med / pmed:.2f} (target <= 0.5); '
-          f'our p99 / our median = {p99 / med:.2f} (target <= 3)')
+    print(
+        f'  ratio: our median / pink median = {med / pmed:.2f} (target <= 0.5); '
+        f'our p99 / our median = {p99 / med:.2f} (target <= 3)'
+    )
 
 
 def bench_pink(cycles, robot='steerable'):
@@ -196,6 +205,7 @@ def bench_pink(cycles, robot='steerable'):
     except ImportError:
         return None
     from wmm_control.kinematics import KinematicModel
+
     km = KinematicModel(robot)
     q0, _ = km.configuration(np.zeros(3), km.config.start.arm)
     conf = pink.Configuration(km.model, km.model.createData(), q0)

@@ -1,6 +1,6 @@
 """Robot B ('mecanum'): wmm_sim, its base controller and redundancy_resolver (viewer:=true adds wmm_viewer).
 
-    ros2 launch wmm_control robot_b.launch.py [use_sim_time:=true] [viewer:=true]
+ros2 launch wmm_control robot_b.launch.py [use_sim_time:=true] [viewer:=true]
 """
 
 from wmm_control.launching import robot_launch_description

@@ -49,6 +49,7 @@ case "$job" in
     exec "$VENV/bin/python" -m wmm_control.cli.experiment "$@" ;;
   test)
     "$VENV/bin/ruff" check .            # lint (ruff.toml)
+    "$VENV/bin/ruff" format --check .   # format (ruff.toml)
     "$VENV/bin/mypy" wmm_control sim_bridge   # types (setup.cfg [mypy])
     exec "$VENV/bin/python" -m pytest test -q "$@" ;;
   bench)

@@ -17,8 +17,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / 'test'))   # the fault matrix and its ROS harness
-sys.path.insert(0, str(ROOT))            # run from a source checkout
+sys.path.insert(0, str(ROOT / 'test'))  # the fault matrix and its ROS harness
+sys.path.insert(0, str(ROOT))  # run from a source checkout
 
 import fault_matrix  # noqa: E402
 
@@ -39,8 +39,11 @@ def main(argv=None):
     if columns:
         columns = [c for c in fault_matrix.RIGS if any(c.startswith(n.strip()) for n in columns)]
     t0 = time.monotonic()
-    results = fault_matrix.run_matrix(kinds, columns, progress=lambda k, c, cell: print(
-        f'  {c:<40} {k:<36} {cell.outcome}', file=sys.stderr, flush=True))
+    results = fault_matrix.run_matrix(
+        kinds,
+        columns,
+        progress=lambda k, c, cell: print(f'  {c:<40} {k:<36} {cell.outcome}', file=sys.stderr, flush=True),
+    )
     print(fault_matrix.format_table(results))
     bad = {key: cell for key, cell in results.items() if not cell.ok}
     if args.reasons or bad:
@@ -49,8 +52,9 @@ def main(argv=None):
             if cell.detail and (args.reasons or not cell.ok):
                 print(f'- {kind} / {column}: {cell.outcome}: {cell.detail}')
     cells = [c for c in results.values() if c.outcome != 'n/a']
-    print(f'\n{len(cells)} cells run ({len(fault_matrix.KINDS)} kinds), {len(bad)} failed, '
-          f'{time.monotonic() - t0:.0f} s')
+    print(
+        f'\n{len(cells)} cells run ({len(fault_matrix.KINDS)} kinds), {len(bad)} failed, {time.monotonic() - t0:.0f} s'
+    )
     return 1 if bad else 0
 
 

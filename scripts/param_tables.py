@@ -29,7 +29,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))            # run from a source checkout
+sys.path.insert(0, str(ROOT))  # run from a source checkout
 
 from wmm_control.nodes.parameters import load_defaults  # noqa: E402
 from wmm_control.resolvers import METHODS  # noqa: E402
@@ -103,8 +103,10 @@ def node_table(exe, specs):
         default, home = _default(exe, spec, {**defaults, **values})
         values[spec.name] = default
         shown = f'`{_value(default)}`' + (f' ({home})' if home else '')
-        lines.append(f'| `{spec.name}` | {_cell(shown)} | {_range(spec, default)} | '
-                     f'{"yes" if spec.read_only else "no"} | {_cell(spec.description)} |')
+        lines.append(
+            f'| `{spec.name}` | {_cell(shown)} | {_range(spec, default)} | '
+            f'{"yes" if spec.read_only else "no"} | {_cell(spec.description)} |'
+        )
     return '\n'.join(lines) + '\n'
 
 
@@ -141,8 +143,10 @@ def render(texts, generated):
     missing = sorted(set(generated) - set(seen))
     twice = sorted({n for n in seen if seen.count(n) > 1})
     if missing or twice:
-        raise SystemExit(f'param_tables.py: tables without a block: {missing}; blocks written twice: {twice} '
-                         '(a block is <!-- params:NAME --> ... <!-- /params -->)')
+        raise SystemExit(
+            f'param_tables.py: tables without a block: {missing}; blocks written twice: {twice} '
+            '(a block is <!-- params:NAME --> ... <!-- /params -->)'
+        )
     return out
 
 
@@ -166,11 +170,14 @@ def main(argv=None):
             path.write_text(new[path])
             print(f'wrote {rel}')
         else:
-            sys.stdout.writelines(difflib.unified_diff(old[path].splitlines(True), new[path].splitlines(True),
-                                                       rel, rel + ' (generated)'))
+            sys.stdout.writelines(
+                difflib.unified_diff(old[path].splitlines(True), new[path].splitlines(True), rel, rel + ' (generated)')
+            )
     if args.check and stale:
-        print('the parameter tables differ from the declarations; run python scripts/param_tables.py --write',
-              file=sys.stderr)
+        print(
+            'the parameter tables differ from the declarations; run python scripts/param_tables.py --write',
+            file=sys.stderr,
+        )
         return 1
     return 0
 

@@ -9,7 +9,13 @@ from sim_bridge.slip import SlipModel, SlipParams
 from sim_bridge.world import BASE_MODES, CommandResult, SimWorld, se2_step
 
 __all__ = [
-    'SimWorld', 'CommandResult', 'BASE_MODES', 'se2_step',
-    'SlipParams', 'SlipModel',
-    'render_png', 'render_rgb', 'VIEWS',
+    'SimWorld',
+    'CommandResult',
+    'BASE_MODES',
+    'se2_step',
+    'SlipParams',
+    'SlipModel',
+    'render_png',
+    'render_rgb',
+    'VIEWS',
 ]

@@ -97,8 +97,14 @@ class ClosedLoop:
         _, q, qd = w.joint_state()
         if self.feedback == 'ground_truth':
             pos, quat = w.ee_pose()
-            return RobotState(w.base_pose(), w.base_twist(), q[self._arm], qd[self._arm],
-                              ee_position=pos, ee_rotation=matrix_from_quaternion(quat))
+            return RobotState(
+                w.base_pose(),
+                w.base_twist(),
+                q[self._arm],
+                qd[self._arm],
+                ee_position=pos,
+                ee_rotation=matrix_from_quaternion(quat),
+            )
         return RobotState(w.odom_pose(), w.odom_twist(), q[self._arm], qd[self._arm])
 
     def step(self, target):
@@ -118,7 +124,14 @@ class ClosedLoop:
             w.set_command(group, rates)
         w.set_command('arm', result.command.arm_velocity)
         w.step()
-        return CycleRecord(t=t, base_pose=pose, q_arm=state.q_arm, q=q_all.copy(), ee_position=ee_pos,
-                           ee_rotation=matrix_from_quaternion(ee_quat), command=result.command,
-                           feasible_twist=np.asarray(result.base.feasible_twist, dtype=float),
-                           base_velocity=w.base_twist())
+        return CycleRecord(
+            t=t,
+            base_pose=pose,
+            q_arm=state.q_arm,
+            q=q_all.copy(),
+            ee_position=ee_pos,
+            ee_rotation=matrix_from_quaternion(ee_quat),
+            command=result.command,
+            feasible_twist=np.asarray(result.base.feasible_twist, dtype=float),
+            base_velocity=w.base_twist(),
+        )

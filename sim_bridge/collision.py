@@ -43,14 +43,26 @@ def add_obstacle(obstacle, cid, visual=True):
         kind, collision, drawing = p.GEOM_BOX, {'halfExtents': [0.5 * v for v in size]}, None
     elif obstacle.shape == 'sphere':
         kind, collision, drawing = p.GEOM_SPHERE, {'radius': size[0]}, None
-    else:            # PyBullet names a cylinder's length "height" in one call and "length" in the other
-        kind, collision, drawing = p.GEOM_CYLINDER, {'radius': size[0], 'height': size[1]}, \
-            {'radius': size[0], 'length': size[1]}
+    else:  # PyBullet names a cylinder's length "height" in one call and "length" in the other
+        kind, collision, drawing = (
+            p.GEOM_CYLINDER,
+            {'radius': size[0], 'height': size[1]},
+            {'radius': size[0], 'length': size[1]},
+        )
     shape = p.createCollisionShape(kind, **collision, physicsClientId=cid)
-    vis = (p.createVisualShape(kind, **(drawing or collision), rgbaColor=OBSTACLE_RGBA, physicsClientId=cid)
-           if visual else -1)
-    return p.createMultiBody(0.0, shape, vis, basePosition=obstacle.position.tolist(),
-                             baseOrientation=_quaternion(obstacle.rotation), physicsClientId=cid)
+    vis = (
+        p.createVisualShape(kind, **(drawing or collision), rgbaColor=OBSTACLE_RGBA, physicsClientId=cid)
+        if visual
+        else -1
+    )
+    return p.createMultiBody(
+        0.0,
+        shape,
+        vis,
+        basePosition=obstacle.position.tolist(),
+        baseOrientation=_quaternion(obstacle.rotation),
+        physicsClientId=cid,
+    )
 
 
 def _quaternion(rotation):
@@ -76,8 +88,7 @@ class SelfCollisionChecker(OwnedClient):
         cid = self._cid
         self._body = p.loadURDF(str(self.robot.urdf_path), useFixedBase=True, physicsClientId=cid)
         plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
-        self._ground = p.createMultiBody(0.0, plane, basePosition=[0.0, 0.0, self.robot.ground_z],
-                                         physicsClientId=cid)
+        self._ground = p.createMultiBody(0.0, plane, basePosition=[0.0, 0.0, self.robot.ground_z], physicsClientId=cid)
         names, parents, joint_of = {}, {}, {}
         for j in range(p.getNumJoints(self._body, physicsClientId=cid)):
             info = p.getJointInfo(self._body, j, physicsClientId=cid)
@@ -87,7 +98,7 @@ class SelfCollisionChecker(OwnedClient):
         self.link_names = names
         self._arm = [joint_of[n] for n in self.robot.arm.joints]
         moving = set(self._arm)
-        for j in sorted(names):                 # descendants of an arm joint move too
+        for j in sorted(names):  # descendants of an arm joint move too
             if parents[j] in moving:
                 moving.add(j)
         shaped = {j for j in names if p.getCollisionShapeData(self._body, j, physicsClientId=cid)}
@@ -95,7 +106,8 @@ class SelfCollisionChecker(OwnedClient):
         body = sorted(shaped - moving)
         pairs = [(a, b) for a in self._moving for b in body]
         pairs += list(itertools.combinations(self._moving, 2))
-        def near(a, b):           # b is a's parent link
+
+        def near(a, b):  # b is a's parent link
             return parents[a] == b
 
         pairs = [(a, b) for a, b in pairs if not (near(a, b) or near(b, a))]
@@ -109,8 +121,9 @@ class SelfCollisionChecker(OwnedClient):
         """Obstacles around the robot (fixed at the origin) as they are around the base at
         ``base_pose`` (x, y, θ) in the world."""
         for body, local in zip(self._obstacles, around_base(self.obstacles, base_pose)):
-            p.resetBasePositionAndOrientation(body, local.translation.tolist(), _quaternion(local.rotation),
-                                              physicsClientId=self._cid)
+            p.resetBasePositionAndOrientation(
+                body, local.translation.tolist(), _quaternion(local.rotation), physicsClientId=self._cid
+            )
 
     def _set(self, q_arm):
         for j, q in zip(self._arm, q_arm):
@@ -120,8 +133,14 @@ class SelfCollisionChecker(OwnedClient):
         """Distance between links ``a`` and ``b`` (of ``body_b``, default the robot), or
         ``bound`` when they are farther apart than that."""
         bound = self.margin if bound is None else bound
-        pts = p.getClosestPoints(self._body, self._body if body_b is None else body_b, bound, linkIndexA=a,
-                                 linkIndexB=b, physicsClientId=self._cid)
+        pts = p.getClosestPoints(
+            self._body,
+            self._body if body_b is None else body_b,
+            bound,
+            linkIndexA=a,
+            linkIndexB=b,
+            physicsClientId=self._cid,
+        )
         return min((pt[8] for pt in pts), default=bound)
 
     def collisions(self, q_arm, base_pose=None):
@@ -133,15 +152,24 @@ class SelfCollisionChecker(OwnedClient):
             empty when clear.
         """
         self._set(q_arm)
-        out = [(self.link_names[a], self.link_names[b], d) for a, b in self._pairs
-               if (d := self._distance(a, b)) < self.margin]
-        out += [(self.link_names[a], 'floor', d) for a in self._moving
-                if (d := self._distance(a, -1, self._ground)) < self.margin]
+        out = [
+            (self.link_names[a], self.link_names[b], d)
+            for a, b in self._pairs
+            if (d := self._distance(a, b)) < self.margin
+        ]
+        out += [
+            (self.link_names[a], 'floor', d)
+            for a in self._moving
+            if (d := self._distance(a, -1, self._ground)) < self.margin
+        ]
         if self._obstacles:
             if base_pose is None:
                 raise ValueError('SelfCollisionChecker: the base pose is needed to place the obstacles')
             self._place_obstacles(base_pose)
             for body, obstacle in zip(self._obstacles, self.obstacles):
-                out += [(self.link_names.get(a, 'base_link'), obstacle.name, d) for a in self._links
-                        if (d := self._distance(a, -1, body)) < self.margin]
+                out += [
+                    (self.link_names.get(a, 'base_link'), obstacle.name, d)
+                    for a in self._links
+                    if (d := self._distance(a, -1, body)) < self.margin
+                ]
         return out

@@ -78,6 +78,7 @@ from wmm_control.nodes.runner import guard_clock, run_node
 
 __all__ = ['SimNode', 'main', 'wait_groups']
 
+
 def _robot_start(field):
     """Default of a start-state parameter: the robot YAML's ``start:`` entry (its one home)."""
     return lambda values: [float(v) for v in getattr(load_robot(values.robot).start, field)]
@@ -85,35 +86,76 @@ def _robot_start(field):
 
 PARAMS = (
     robot_param('The robot to simulate.'),
-    Param('base_mode', 'kinematic: rolling model + seeded slip; physics: PyBullet wheel contact.',
-          choices=BASE_MODES, read_only=True),
-    Param('timing', 'realtime: wall-clock steps; lockstep: step when the commands answer the state.',
-          choices=('realtime', 'lockstep'), read_only=True),
-    Param('period', 'Control period [s]; default: the robot YAML\'s period.', lo=1e-4, hi=1.0, read_only=True,
-          default_from=robot_period),
+    Param(
+        'base_mode',
+        'kinematic: rolling model + seeded slip; physics: PyBullet wheel contact.',
+        choices=BASE_MODES,
+        read_only=True,
+    ),
+    Param(
+        'timing',
+        'realtime: wall-clock steps; lockstep: step when the commands answer the state.',
+        choices=('realtime', 'lockstep'),
+        read_only=True,
+    ),
+    Param(
+        'period',
+        'Control period [s]; default: the robot YAML\'s period.',
+        lo=1e-4,
+        hi=1.0,
+        read_only=True,
+        default_from=robot_period,
+    ),
     Param('substeps', 'Physics steps per period [-].', lo=1, hi=1000, read_only=True),
-    Param('command_timeout', 'Command age [s] (receiver clock) after which a group is zeroed.',
-          lo=1e-3, hi=10.0),
+    Param('command_timeout', 'Command age [s] (receiver clock) after which a group is zeroed.', lo=1e-3, hi=10.0),
     Param('lockstep_groups', 'Comma-separated command groups lockstep waits for, or "all".'),
-    Param('lockstep_timeout', 'Wall time [s] lockstep waits for commands before stepping anyway.',
-          lo=1e-3, hi=60.0),
-    Param('publish_clock', 'Publish the sim time on clock (relative: /clock in the root namespace, '
-          '<namespace>/clock in one) in realtime mode too; lockstep always does.', read_only=True),
+    Param('lockstep_timeout', 'Wall time [s] lockstep waits for commands before stepping anyway.', lo=1e-3, hi=60.0),
+    Param(
+        'publish_clock',
+        'Publish the sim time on clock (relative: /clock in the root namespace, '
+        '<namespace>/clock in one) in realtime mode too; lockstep always does.',
+        read_only=True,
+    ),
     Param('diagnostics_period', 'Simulated time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
-    Param('slip_gain', 'Slip fraction per unit rim speed [1/(m/s)], kinematic mode.', lo=0.0, hi=10.0,
-          read_only=True),
-    Param('slip_drift', 'Base-frame twist bias (vx, vy, ω) [m/s, m/s, rad/s] while moving.', lo=-10.0, hi=10.0,
-          size=(3,), read_only=True),
-    Param('slip_noise', 'Std of the base twist noise (vx, vy, ω) [m/s, m/s, rad/s].', lo=0.0, hi=10.0, size=(3,),
-          read_only=True),
+    Param('slip_gain', 'Slip fraction per unit rim speed [1/(m/s)], kinematic mode.', lo=0.0, hi=10.0, read_only=True),
+    Param(
+        'slip_drift',
+        'Base-frame twist bias (vx, vy, ω) [m/s, m/s, rad/s] while moving.',
+        lo=-10.0,
+        hi=10.0,
+        size=(3,),
+        read_only=True,
+    ),
+    Param(
+        'slip_noise',
+        'Std of the base twist noise (vx, vy, ω) [m/s, m/s, rad/s].',
+        lo=0.0,
+        hi=10.0,
+        size=(3,),
+        read_only=True,
+    ),
     Param('seed', 'Seed of the slip noise.', lo=0, hi=2**31 - 1, read_only=True),
-    Param('start_base_pose', 'Start base pose (x, y, θ) [m, m, rad]; default: the robot YAML\'s start.',
-          lo=-1e4, hi=1e4, size=(3,), read_only=True, default_from=_robot_start('base_pose')),
-    Param('start_arm', 'Start arm joints [rad or m] (one per arm joint); default: the robot YAML\'s start.',
-          lo=-2 * math.pi, hi=2 * math.pi, read_only=True, default_from=_robot_start('arm')),
+    Param(
+        'start_base_pose',
+        'Start base pose (x, y, θ) [m, m, rad]; default: the robot YAML\'s start.',
+        lo=-1e4,
+        hi=1e4,
+        size=(3,),
+        read_only=True,
+        default_from=_robot_start('base_pose'),
+    ),
+    Param(
+        'start_arm',
+        'Start arm joints [rad or m] (one per arm joint); default: the robot YAML\'s start.',
+        lo=-2 * math.pi,
+        hi=2 * math.pi,
+        read_only=True,
+        default_from=_robot_start('arm'),
+    ),
     Param('publish_tf', 'Publish /tf and /tf_static (needs tf2_msgs, which has no PyPI wheel).', read_only=True),
-    Param('frame_prefix', 'Prefix of the robot\'s frames in TF and odometry (e.g. r1/); world has none.',
-          read_only=True),
+    Param(
+        'frame_prefix', 'Prefix of the robot\'s frames in TF and odometry (e.g. r1/); world has none.', read_only=True
+    ),
     Param('gui', 'Open the PyBullet GUI.', read_only=True),
     Param('obstacles', OBSTACLE_PARAM_HELP, read_only=True),
 )
@@ -148,19 +190,37 @@ class SimNode(Node):
         guard_clock(self)
         self.world = None
         self.p = declare_parameters(
-            self, 'wmm_sim.yaml', PARAMS,
-            on_change={'command_timeout': self._set_command_timeout,
-                       'lockstep_timeout': self._set_lockstep_timeout,
-                       'lockstep_groups': self._set_wait_groups},
-            check=lambda v: wait_groups(v.lockstep_groups, self.world.command_groups)[1] if self.world else '')
+            self,
+            'wmm_sim.yaml',
+            PARAMS,
+            on_change={
+                'command_timeout': self._set_command_timeout,
+                'lockstep_timeout': self._set_lockstep_timeout,
+                'lockstep_groups': self._set_wait_groups,
+            },
+            check=lambda v: wait_groups(v.lockstep_groups, self.world.command_groups)[1] if self.world else '',
+        )
         slip = SlipParams(gain=self.p.slip_gain, drift=tuple(self.p.slip_drift), noise_std=tuple(self.p.slip_noise))
         self.obstacles = ObstacleSet(self.p.obstacles, 'world')
         self.world = SimWorld(
-            robot=self.p.robot, base_mode=self.p.base_mode, dt=self.p.period, substeps=self.p.substeps,
-            slip=slip, seed=self.p.seed, gui=self.p.gui,
-            start_base_pose=self.p.start_base_pose, start_arm=self.p.start_arm, obstacles=self.obstacles.obstacles)
-        self.contact = {'clearance_m': math.inf, 'closest_link': '', 'closest_obstacle': '', 'contact_periods': 0,
-                        'deepest_contact_m': 0.0}
+            robot=self.p.robot,
+            base_mode=self.p.base_mode,
+            dt=self.p.period,
+            substeps=self.p.substeps,
+            slip=slip,
+            seed=self.p.seed,
+            gui=self.p.gui,
+            start_base_pose=self.p.start_base_pose,
+            start_arm=self.p.start_arm,
+            obstacles=self.obstacles.obstacles,
+        )
+        self.contact = {
+            'clearance_m': math.inf,
+            'closest_link': '',
+            'closest_obstacle': '',
+            'contact_periods': 0,
+            'deepest_contact_m': 0.0,
+        }
         reason = valid_frame_prefix(self.p.frame_prefix)
         if reason:
             raise ConfigError(reason)
@@ -172,9 +232,12 @@ class SimNode(Node):
             raise ConfigError(reason)
         self.fresh = {g: Freshness(self.p.command_timeout) for g in groups}
         self.timed_out = {g: True for g in groups}
-        self.subs = [self.create_subscription(Float64MultiArray, f'{g}_controller/commands',
-                                              lambda msg, g=g: self._on_command(g, msg), COMMAND_QOS)
-                     for g in groups]
+        self.subs = [
+            self.create_subscription(
+                Float64MultiArray, f'{g}_controller/commands', lambda msg, g=g: self._on_command(g, msg), COMMAND_QOS
+            )
+            for g in groups
+        ]
         self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
         self.pub_joints = self.create_publisher(JointState, 'joint_states', STATE_PUB_QOS)
         self.pub_ee = self.create_publisher(PoseStamped, 'ee_pose', STATE_PUB_QOS)
@@ -202,13 +265,13 @@ class SimNode(Node):
             # Wall-clock poll: start once every awaited controller is connected, and step
             # anyway when the commands do not come within lockstep_timeout.
             self._started = False
-            self.poll = self.create_timer(_poll_period(self.p.lockstep_timeout), self._lockstep_poll,
-                                          clock=steady)
+            self.poll = self.create_timer(_poll_period(self.p.lockstep_timeout), self._lockstep_poll, clock=steady)
         else:
             self.timer = self.create_timer(self.p.period, self._realtime_tick, clock=steady)
         self.get_logger().info(
             f'simulating {self.world.robot.name} ({self.p.base_mode} base, {self.p.timing}, '
-            f'period {self.p.period} s); command groups {sorted(groups)}; {describe(self.obstacles.obstacles)}')
+            f'period {self.p.period} s); command groups {sorted(groups)}; {describe(self.obstacles.obstacles)}'
+        )
 
     def _on_obstacles(self, msg):
         if self.obstacles.take(msg, self.get_logger()):
@@ -223,8 +286,9 @@ class SimNode(Node):
         if distance < 0.0:
             self.contact['contact_periods'] += 1
             self.contact['deepest_contact_m'] = max(self.contact['deepest_contact_m'], -distance)
-            self.get_logger().error(f'{link} is {-distance * 1e3:.1f} mm into obstacle {obstacle!r}',
-                                    throttle_duration_sec=1.0)
+            self.get_logger().error(
+                f'{link} is {-distance * 1e3:.1f} mm into obstacle {obstacle!r}', throttle_duration_sec=1.0
+            )
 
     def _set_command_timeout(self, timeout):
         for fresh in self.fresh.values():
@@ -263,8 +327,9 @@ class SimNode(Node):
             self.get_logger().warn(f'rejected {group} command: {result.reason}', throttle_duration_sec=1.0)
             return
         if result.clamped:
-            self.get_logger().warn(f'{group} command clamped to the velocity limits '
-                                   f'({result.clamped} entries)', throttle_duration_sec=1.0)
+            self.get_logger().warn(
+                f'{group} command clamped to the velocity limits ({result.clamped} entries)', throttle_duration_sec=1.0
+            )
         self.fresh[group].mark(self.now_s())
         if self.timed_out[group]:
             self.timed_out[group] = False
@@ -279,8 +344,10 @@ class SimNode(Node):
             if not fresh.fresh(now) and not self.timed_out[group]:
                 self.world.zero_command(group)
                 self.timed_out[group] = True
-                self.get_logger().warn(f'{group} command timed out (age {fresh.age(now):.3f} s > '
-                                       f'{fresh.timeout} s): zero velocity', throttle_duration_sec=1.0)
+                self.get_logger().warn(
+                    f'{group} command timed out (age {fresh.age(now):.3f} s > {fresh.timeout} s): zero velocity',
+                    throttle_duration_sec=1.0,
+                )
 
     # ------------------------------------------------------------------ stepping
     def _step_world(self):
@@ -290,8 +357,9 @@ class SimNode(Node):
         self.world.step()
         self._check_obstacles()
         twist = self.world.odom_twist()
-        self.odom_covariance.update(theta, twist, *self.world.slip.twist_error(twist, self.world.rim_speed),
-                                    self.world.dt)
+        self.odom_covariance.update(
+            theta, twist, *self.world.slip.twist_error(twist, self.world.rim_speed), self.world.dt
+        )
 
     def _realtime_tick(self):
         self._step_world()
@@ -307,8 +375,10 @@ class SimNode(Node):
             return
         if self._waiting_since is not None and time.monotonic() - self._waiting_since > self.p.lockstep_timeout:
             missing = sorted(self.wait_groups - self._arrived)
-            self.get_logger().warn(f'lockstep: no command from {missing} within {self.p.lockstep_timeout} s; '
-                                   'stepping anyway', throttle_duration_sec=5.0)
+            self.get_logger().warn(
+                f'lockstep: no command from {missing} within {self.p.lockstep_timeout} s; stepping anyway',
+                throttle_duration_sec=5.0,
+            )
             self._advance()
 
     def _advance(self):
@@ -335,8 +405,17 @@ class SimNode(Node):
         set_pose(ee.pose, ee_pos, ee_quat)
         self.pub_ee.publish(ee)
         odom_pose, true_pose = self.world.odom_pose(), self.world.base_pose()
-        self.pub_odom.publish(_odometry(stamp, self._odom_frame, self._base_frame, odom_pose, self.world.odom_twist(),
-                                        self.odom_covariance.pose, self.odom_covariance.twist))
+        self.pub_odom.publish(
+            _odometry(
+                stamp,
+                self._odom_frame,
+                self._base_frame,
+                odom_pose,
+                self.world.odom_twist(),
+                self.odom_covariance.pose,
+                self.odom_covariance.twist,
+            )
+        )
         self.pub_truth.publish(_odometry(stamp, 'world', self._base_frame, true_pose, self.world.base_twist()))
         if self.frames.publishing_tf:
             self.frames.publish(stamp, dict(zip(names, pos.tolist())), odom_pose, true_pose)
@@ -358,19 +437,44 @@ class SimNode(Node):
             stale = self.timed_out[group]
             level = 'warn' if stale or counts['clamped'] or counts['rejected'] else 'ok'
             message = 'no fresh command (zero velocity)' if stale else 'commanded'
-            statuses.append(node_status(
-                self, f'{group} commands', self.world.robot.name, level, message,
-                {**counts, 'command_age_s': self.fresh[group].age(self.now_s())}))
-        statuses.append(node_status(
-            self, 'simulation', self.world.robot.name, 'ok', f'{self.p.timing}, {self.p.base_mode}',
-            {'sim_time_s': self.world.time, 'steps': self._steps,
-             'real_time_factor': self.world.time / wall if wall > 0 else 0.0}))
+            statuses.append(
+                node_status(
+                    self,
+                    f'{group} commands',
+                    self.world.robot.name,
+                    level,
+                    message,
+                    {**counts, 'command_age_s': self.fresh[group].age(self.now_s())},
+                )
+            )
+        statuses.append(
+            node_status(
+                self,
+                'simulation',
+                self.world.robot.name,
+                'ok',
+                f'{self.p.timing}, {self.p.base_mode}',
+                {
+                    'sim_time_s': self.world.time,
+                    'steps': self._steps,
+                    'real_time_factor': self.world.time / wall if wall > 0 else 0.0,
+                },
+            )
+        )
         if self.world.obstacles:
             touching = self.contact['clearance_m'] < 0.0
-            statuses.append(node_status(
-                self, 'obstacles', self.world.robot.name, 'error' if touching else 'ok',
-                f'{self.contact["closest_link"]} in contact with {self.contact["closest_obstacle"]}' if touching
-                else f'clear ({len(self.world.obstacles)} obstacles)', self.contact))
+            statuses.append(
+                node_status(
+                    self,
+                    'obstacles',
+                    self.world.robot.name,
+                    'error' if touching else 'ok',
+                    f'{self.contact["closest_link"]} in contact with {self.contact["closest_obstacle"]}'
+                    if touching
+                    else f'clear ({len(self.world.obstacles)} obstacles)',
+                    self.contact,
+                )
+            )
         return diagnostic_array(stamp, statuses)
 
 

@@ -30,9 +30,9 @@ VIEWS = {
     'side': (180.0, -8.0),
     'front': (90.0, -8.0),
 }
-_DISTANCE = 2.8       # camera distance from the target [m]
-_TARGET_UP = 0.55     # target height above the floor [m]
-_FOV = 50.0           # vertical field of view [deg]
+_DISTANCE = 2.8  # camera distance from the target [m]
+_TARGET_UP = 0.55  # target height above the floor [m]
+_FOV = 50.0  # vertical field of view [deg]
 
 
 def render_rgb(world, view='iso', width=640, height=480, distance=_DISTANCE):
@@ -64,11 +64,20 @@ def render_rgb(world, view='iso', width=640, height=480, distance=_DISTANCE):
     x, y, th = world.base_pose()
     yaw, pitch = VIEWS[view]
     target = [float(x), float(y), world.robot.ground_z + _TARGET_UP]
-    view_m = p.computeViewMatrixFromYawPitchRoll(target, distance, math.degrees(th) + yaw, pitch, 0.0, 2,
-                                                 physicsClientId=cid)
+    view_m = p.computeViewMatrixFromYawPitchRoll(
+        target, distance, math.degrees(th) + yaw, pitch, 0.0, 2, physicsClientId=cid
+    )
     proj_m = p.computeProjectionMatrixFOV(_FOV, width / height, 0.05, 50.0, physicsClientId=cid)
-    img = p.getCameraImage(width, height, view_m, proj_m, shadow=0, lightDirection=[1.0, 1.0, 2.0],
-                           renderer=p.ER_TINY_RENDERER, physicsClientId=cid)
+    img = p.getCameraImage(
+        width,
+        height,
+        view_m,
+        proj_m,
+        shadow=0,
+        lightDirection=[1.0, 1.0, 2.0],
+        renderer=p.ER_TINY_RENDERER,
+        physicsClientId=cid,
+    )
     rgba = np.reshape(np.asarray(img[2], dtype=np.uint8), (height, width, 4))
     return np.ascontiguousarray(rgba[:, :, :3])
 
@@ -84,8 +93,12 @@ def write_png(path, rgb):
     def chunk(tag, data):
         return struct.pack('>I', len(data)) + tag + data + struct.pack('>I', zlib.crc32(tag + data) & 0xFFFFFFFF)
 
-    png = (b'\x89PNG\r\n\x1a\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', w, h, 8, 2, 0, 0, 0))
-           + chunk(b'IDAT', zlib.compress(raw, 6)) + chunk(b'IEND', b''))
+    png = (
+        b'\x89PNG\r\n\x1a\n'
+        + chunk(b'IHDR', struct.pack('>IIBBBBB', w, h, 8, 2, 0, 0, 0))
+        + chunk(b'IDAT', zlib.compress(raw, 6))
+        + chunk(b'IEND', b'')
+    )
     path = Path(path)
     path.write_bytes(png)
     return path

@@ -184,9 +184,7 @@ class OdometryCovariance:
         twist error's mean and variance (:meth:`SlipModel.twist_error`); ``dt`` [s]."""
         vx, vy, _ = (float(v) for v in twist)
         c, s = math.cos(theta), math.sin(theta)
-        f = np.array([[1.0, 0.0, -(vx * s + vy * c) * dt],
-                      [0.0, 1.0, (vx * c - vy * s) * dt],
-                      [0.0, 0.0, 1.0]])
+        f = np.array([[1.0, 0.0, -(vx * s + vy * c) * dt], [0.0, 1.0, (vx * c - vy * s) * dt], [0.0, 0.0, 1.0]])
         g = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         self._mean = f @ self._mean + g @ np.asarray(error_mean) * dt
         self._random = f @ self._random @ f.T + (g * np.asarray(error_variance)) @ g.T * dt * dt

@@ -99,11 +99,11 @@ __all__ = ['SimWorld', 'CommandResult', 'se2_step', 'BASE_MODES', 'CLAMP_TOLERAN
 CLAMP_TOLERANCE = 1e-12
 
 BASE_MODES = ('kinematic', 'physics')
-GRAVITY = 9.81              # [m/s²]
-WHEEL_FRICTION = 0.9        # Coulomb coefficient of wheel–floor contact [-]
-ARM_FORCE_FACTOR = 20.0     # arm velocity-motor force = factor × URDF effort (physics mode)
-SETTLE_TIME = 0.25          # [s] of zero-command physics before t = 0 (physics mode)
-_SMALL_ANGLE = 1e-6         # [rad] below this the SE(2) exponential uses its Taylor series
+GRAVITY = 9.81  # [m/s²]
+WHEEL_FRICTION = 0.9  # Coulomb coefficient of wheel–floor contact [-]
+ARM_FORCE_FACTOR = 20.0  # arm velocity-motor force = factor × URDF effort (physics mode)
+SETTLE_TIME = 0.25  # [s] of zero-command physics before t = 0 (physics mode)
+_SMALL_ANGLE = 1e-6  # [rad] below this the SE(2) exponential uses its Taylor series
 # Mecanum roller axes (base frame, unit) per wheel fl, fr, rl, rr; reproduce Xing eq. 16.
 _ROLLER_AXES = ((1.0, -1.0), (1.0, 1.0), (1.0, 1.0), (1.0, -1.0))
 
@@ -138,8 +138,8 @@ def se2_step(pose, twist, dt):
     a = w * dt
     if abs(a) < _SMALL_ANGLE:
         a2 = a * a
-        s = 1.0 - a2 / 6.0               # sin(a)/a
-        c = a * (0.5 - a2 / 24.0)        # (1 − cos a)/a
+        s = 1.0 - a2 / 6.0  # sin(a)/a
+        c = a * (0.5 - a2 / 24.0)  # (1 − cos a)/a
     else:
         s = math.sin(a) / a
         c = (1.0 - math.cos(a)) / a
@@ -186,8 +186,19 @@ class SimWorld(OwnedClient):
             physics mode, or a joint or link of the robot description missing from the URDF.
     """
 
-    def __init__(self, robot='steerable', base_mode='kinematic', dt=0.025, substeps=10,
-                 slip=None, seed=0, gui=False, start_base_pose=None, start_arm=None, obstacles=()):
+    def __init__(
+        self,
+        robot='steerable',
+        base_mode='kinematic',
+        dt=0.025,
+        substeps=10,
+        slip=None,
+        seed=0,
+        gui=False,
+        start_base_pose=None,
+        start_arm=None,
+        obstacles=(),
+    ):
         self.robot = robot if isinstance(robot, RobotConfig) else load_robot(robot)
         if base_mode not in BASE_MODES:
             raise ConfigError(f'base_mode: expected one of {BASE_MODES}, got {base_mode!r}')
@@ -203,17 +214,23 @@ class SimWorld(OwnedClient):
         self._h = dt / self.substeps
         self._slip = SlipModel(slip, seed)
         if base_mode == 'physics' and not self._slip.off:
-            raise ConfigError('slip: the slip model applies to base_mode "kinematic" only; '
-                              'in "physics" mode slip comes from the wheel contact')
+            raise ConfigError(
+                'slip: the slip model applies to base_mode "kinematic" only; '
+                'in "physics" mode slip comes from the wheel contact'
+            )
         self._steerable = self.robot.steerable is not None
-        self._geom = (SteerableGeometry.from_config(self.robot.steerable) if self._steerable
-                      else wheel_kinematics(self.robot))
+        self._geom = (
+            SteerableGeometry.from_config(self.robot.steerable) if self._steerable else wheel_kinematics(self.robot)
+        )
 
         cfg = self.robot
         if self._steerable:
             s = cfg.steerable
-            self.command_groups = {'arm': tuple(cfg.arm.joints), 'steer': tuple(s.steer_joints),
-                                   'drive': tuple(s.drive_joints)}
+            self.command_groups = {
+                'arm': tuple(cfg.arm.joints),
+                'steer': tuple(s.steer_joints),
+                'drive': tuple(s.drive_joints),
+            }
             self._r_wheel = s.wheel_radius
         else:
             wheels = cfg.mecanum or cfg.differential
@@ -226,8 +243,7 @@ class SimWorld(OwnedClient):
             self._slices[g] = slice(start, start + len(names))
             start += len(names)
         self._n = start
-        self.counters = {g: {'clamped': 0, 'rejected': 0, 'position_limited': 0}
-                         for g in self.command_groups}
+        self.counters = {g: {'clamped': 0, 'rejected': 0, 'position_limited': 0} for g in self.command_groups}
         self._cmd = np.zeros(self._n)
 
         base0 = cfg.start.base_pose if start_base_pose is None else start_base_pose
@@ -241,7 +257,7 @@ class SimWorld(OwnedClient):
         self._odom = self._pose
         self._twist = (0.0, 0.0, 0.0)
         self._odom_twist = (0.0, 0.0, 0.0)
-        self.rim_speed = 0.0          # [m/s] mean absolute rim speed of the last period (kinematic mode)
+        self.rim_speed = 0.0  # [m/s] mean absolute rim speed of the last period (kinematic mode)
         self._twist_cache = None
         self.obstacles = ()
         self._obstacle_ids = []
@@ -269,20 +285,27 @@ class SimWorld(OwnedClient):
         cid, cfg = self._cid, self.robot
         p.resetSimulation(physicsClientId=cid)
         p.setGravity(0.0, 0.0, -GRAVITY, physicsClientId=cid)
-        p.setPhysicsEngineParameter(fixedTimeStep=self._h, numSubSteps=0, deterministicOverlappingPairs=1,
-                                    physicsClientId=cid)
+        p.setPhysicsEngineParameter(
+            fixedTimeStep=self._h, numSubSteps=0, deterministicOverlappingPairs=1, physicsClientId=cid
+        )
         # Floor: an infinite collision plane at ground_z, drawn as a large thin box.
         plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
-        vis = p.createVisualShape(p.GEOM_BOX, halfExtents=[15.0, 15.0, 0.005],
-                                  visualFramePosition=[0.0, 0.0, -0.005],
-                                  rgbaColor=[0.82, 0.84, 0.80, 1.0], physicsClientId=cid)
-        self.ground_id = p.createMultiBody(0.0, plane, vis, basePosition=[0.0, 0.0, cfg.ground_z],
-                                           physicsClientId=cid)
+        vis = p.createVisualShape(
+            p.GEOM_BOX,
+            halfExtents=[15.0, 15.0, 0.005],
+            visualFramePosition=[0.0, 0.0, -0.005],
+            rgbaColor=[0.82, 0.84, 0.80, 1.0],
+            physicsClientId=cid,
+        )
+        self.ground_id = p.createMultiBody(0.0, plane, vis, basePosition=[0.0, 0.0, cfg.ground_z], physicsClientId=cid)
         # Implicit cylinders: by default PyBullet turns a URDF cylinder into a convex hull, a
         # polygonal wheel that rolls on its corners (see the module docstring, physics mode).
-        self.body_id = p.loadURDF(str(cfg.urdf_path), basePosition=[0.0, 0.0, 0.0],
-                                  flags=p.URDF_USE_INERTIA_FROM_FILE | p.URDF_USE_IMPLICIT_CYLINDER,
-                                  physicsClientId=cid)
+        self.body_id = p.loadURDF(
+            str(cfg.urdf_path),
+            basePosition=[0.0, 0.0, 0.0],
+            flags=p.URDF_USE_INERTIA_FROM_FILE | p.URDF_USE_IMPLICIT_CYLINDER,
+            physicsClientId=cid,
+        )
         body = self.body_id
 
         joints, links = {}, {}
@@ -292,7 +315,7 @@ class SimWorld(OwnedClient):
             name = info[1].decode()
             joints[name] = j
             links[info[12].decode()] = j
-            urdf_vel[name] = (float(info[11]), float(info[10]))      # max velocity, max force
+            urdf_vel[name] = (float(info[11]), float(info[10]))  # max velocity, max force
         missing = [n for n in self.joint_names if n not in joints]
         if missing:
             raise ConfigError(f'{cfg.urdf_path.name}: joints {missing} not found; URDF has {sorted(joints)}')
@@ -302,8 +325,9 @@ class SimWorld(OwnedClient):
         self._idx = [joints[n] for n in self.joint_names]
         yaml_vel = cfg.joint_velocity_limits
         # URDF <limit velocity> is authoritative; the YAML value covers a URDF without one.
-        self.velocity_limits = np.array([urdf_vel[n][0] if urdf_vel[n][0] > 0.0 else yaml_vel[n]
-                                         for n in self.joint_names])
+        self.velocity_limits = np.array(
+            [urdf_vel[n][0] if urdf_vel[n][0] > 0.0 else yaml_vel[n] for n in self.joint_names]
+        )
         efforts = np.array([urdf_vel[n][1] for n in self.joint_names])
         self._lower = np.full(self._n, -np.inf)
         self._upper = np.full(self._n, np.inf)
@@ -316,8 +340,7 @@ class SimWorld(OwnedClient):
         # base_link <-> PyBullet base (inertial/COM) frame.
         dyn = p.getDynamicsInfo(body, -1, physicsClientId=cid)
         self._com_local = pin.XYZQUATToSE3(np.array([*dyn[3], *dyn[4]]))
-        self._com_identity = (max(abs(v) for v in dyn[3]) < 1e-12
-                              and abs(abs(dyn[4][3]) - 1.0) < 1e-12)
+        self._com_identity = max(abs(v) for v in dyn[3]) < 1e-12 and abs(abs(dyn[4][3]) - 1.0) < 1e-12
         self._com_inv = p.invertTransform(dyn[3], dyn[4])
 
         if self._steerable:
@@ -328,8 +351,9 @@ class SimWorld(OwnedClient):
 
         if self.base_mode == 'kinematic':
             # Nothing is simulated dynamically: switch the default motors off.
-            p.setJointMotorControlArray(body, self._idx, p.VELOCITY_CONTROL, forces=[0.0] * self._n,
-                                        physicsClientId=cid)
+            p.setJointMotorControlArray(
+                body, self._idx, p.VELOCITY_CONTROL, forces=[0.0] * self._n, physicsClientId=cid
+            )
             self._place()
         else:
             self._setup_physics(efforts)
@@ -370,24 +394,34 @@ class SimWorld(OwnedClient):
         for j in range(p.getNumJoints(body, physicsClientId=cid)):
             # passive casters (links named *caster*) roll freely: no friction
             if 'caster' in p.getJointInfo(body, j, physicsClientId=cid)[12].decode():
-                p.changeDynamics(body, j, lateralFriction=0.0, rollingFriction=0.0, spinningFriction=0.0,
-                                 physicsClientId=cid)
+                p.changeDynamics(
+                    body, j, lateralFriction=0.0, rollingFriction=0.0, spinningFriction=0.0, physicsClientId=cid
+                )
         for link in self._wheel_links:
-            p.changeDynamics(body, link, lateralFriction=0.0 if tyre else WHEEL_FRICTION,
-                             rollingFriction=0.0, spinningFriction=0.0, physicsClientId=cid)
+            p.changeDynamics(
+                body,
+                link,
+                lateralFriction=0.0 if tyre else WHEEL_FRICTION,
+                rollingFriction=0.0,
+                spinningFriction=0.0,
+                physicsClientId=cid,
+            )
         for j in range(-1, p.getNumJoints(body, physicsClientId=cid)):
             p.changeDynamics(body, j, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
         if tyre:
-            mass = sum(p.getDynamicsInfo(body, j, physicsClientId=cid)[0]
-                       for j in range(-1, p.getNumJoints(body, physicsClientId=cid)))
+            mass = sum(
+                p.getDynamicsInfo(body, j, physicsClientId=cid)[0]
+                for j in range(-1, p.getNumJoints(body, physicsClientId=cid))
+            )
             # Regularised Coulomb: damping c with 4 c h / m = 0.25 keeps the explicit step stable.
             self._tyre_c = 0.25 * mass / (4.0 * self._h)
             self._roller = [(ax / math.sqrt(2.0), ay / math.sqrt(2.0)) for ax, ay in _ROLLER_AXES]
             self._normal = [0.0] * 4
         self._place()
         zero = [0.0] * self._n
-        p.setJointMotorControlArray(body, self._idx, p.VELOCITY_CONTROL, targetVelocities=zero,
-                                    forces=self._forces, physicsClientId=cid)
+        p.setJointMotorControlArray(
+            body, self._idx, p.VELOCITY_CONTROL, targetVelocities=zero, forces=self._forces, physicsClientId=cid
+        )
         for _ in range(int(round(SETTLE_TIME / self._h))):
             self._physics_substep(np.zeros(self._n), odometry=False)
         self._read_physics()
@@ -409,9 +443,13 @@ class SimWorld(OwnedClient):
         """Write the kinematic state (base pose, joint positions and rates) into PyBullet."""
         pos, orn = self._com_pose(self._pose)
         p.resetBasePositionAndOrientation(self.body_id, pos, orn, physicsClientId=self._cid)
-        p.resetJointStatesMultiDof(self.body_id, self._idx, [[v] for v in self._q.tolist()],
-                                   targetVelocities=[[v] for v in self._qd.tolist()],
-                                   physicsClientId=self._cid)
+        p.resetJointStatesMultiDof(
+            self.body_id,
+            self._idx,
+            [[v] for v in self._q.tolist()],
+            targetVelocities=[[v] for v in self._qd.tolist()],
+            physicsClientId=self._cid,
+        )
 
     def _base_link_pose(self):
         pos, orn = p.getBasePositionAndOrientation(self.body_id, physicsClientId=self._cid)
@@ -560,7 +598,7 @@ class SimWorld(OwnedClient):
 
     def _physics_substep(self, vel, odometry=True):
         cid, body = self._cid, self.body_id
-        if self.robot.mecanum is not None:      # the roller tyre model of Mecanum wheels
+        if self.robot.mecanum is not None:  # the roller tyre model of Mecanum wheels
             self._apply_tyre_forces()
         p.stepSimulation(physicsClientId=cid)
         if odometry:
@@ -577,8 +615,14 @@ class SimWorld(OwnedClient):
 
     def _physics_step(self):
         vel = self._cmd.tolist()
-        p.setJointMotorControlArray(self.body_id, self._idx, p.VELOCITY_CONTROL, targetVelocities=vel,
-                                    forces=self._forces, physicsClientId=self._cid)
+        p.setJointMotorControlArray(
+            self.body_id,
+            self._idx,
+            p.VELOCITY_CONTROL,
+            targetVelocities=vel,
+            forces=self._forces,
+            physicsClientId=self._cid,
+        )
         for _ in range(self.substeps):
             self._physics_substep(vel)
         self._read_physics()
@@ -595,9 +639,11 @@ class SimWorld(OwnedClient):
         rot = p.getMatrixFromQuaternion(orn)
         xb = (rot[0], rot[3], rot[6])
         yb = (rot[1], rot[4], rot[7])
-        states = p.getJointStates(body, [self._idx[i] for i in range(self._slices['wheel'].start,
-                                                                     self._slices['wheel'].stop)],
-                                  physicsClientId=cid)
+        states = p.getJointStates(
+            body,
+            [self._idx[i] for i in range(self._slices['wheel'].start, self._slices['wheel'].stop)],
+            physicsClientId=cid,
+        )
         links = p.getLinkStates(body, self._wheel_links, physicsClientId=cid)
         r = self._r_wheel
         for i in range(4):
@@ -654,12 +700,10 @@ class SimWorld(OwnedClient):
         Returns:
             (position [m] shape (3,), quaternion (x, y, z, w) shape (4,)).
         """
-        st = p.getLinkState(self.body_id, self._ee_link, computeForwardKinematics=1,
-                            physicsClientId=self._cid)
+        st = p.getLinkState(self.body_id, self._ee_link, computeForwardKinematics=1, physicsClientId=self._cid)
         return np.array(st[4]), np.array(st[5])
 
     @property
     def client_id(self):
         """The PyBullet physics client id of this world (-1 once closed)."""
         return self._cid
-

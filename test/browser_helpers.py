@@ -20,10 +20,20 @@ import numpy as np
 
 __all__ = ['chromium_path', 'Browser']
 
-_FLAGS = ('--headless=new', '--enable-unsafe-swiftshader', '--use-angle=swiftshader', '--no-sandbox',
-          '--no-first-run', '--no-default-browser-check', '--disable-background-networking',
-          '--disable-component-update', '--disable-sync', '--disable-extensions', '--mute-audio',
-          '--remote-debugging-port=0')
+_FLAGS = (
+    '--headless=new',
+    '--enable-unsafe-swiftshader',
+    '--use-angle=swiftshader',
+    '--no-sandbox',
+    '--no-first-run',
+    '--no-default-browser-check',
+    '--disable-background-networking',
+    '--disable-component-update',
+    '--disable-sync',
+    '--disable-extensions',
+    '--mute-audio',
+    '--remote-debugging-port=0',
+)
 
 
 def chromium_path() -> str | None:
@@ -43,9 +53,12 @@ class Browser:
 
         self.width, self.height = width, height
         self._profile = tempfile.mkdtemp(prefix='wmm-chromium-')
-        self.proc = subprocess.Popen([executable, *_FLAGS, f'--user-data-dir={self._profile}',
-                                      f'--window-size={width},{height}', 'about:blank'],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen(
+            [executable, *_FLAGS, f'--user-data-dir={self._profile}', f'--window-size={width},{height}', 'about:blank'],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         self.log = []
         found = threading.Event()
         url = []
@@ -68,8 +81,11 @@ class Browser:
         target = self.call('Target.createTarget', {'url': 'about:blank'})['targetId']
         self.session = self.call('Target.attachToTarget', {'targetId': target, 'flatten': True})['sessionId']
         self.call('Page.enable', session=True)
-        self.call('Emulation.setDeviceMetricsOverride', {'width': width, 'height': height, 'deviceScaleFactor': 1,
-                                                         'mobile': False}, session=True)
+        self.call(
+            'Emulation.setDeviceMetricsOverride',
+            {'width': width, 'height': height, 'deviceScaleFactor': 1, 'mobile': False},
+            session=True,
+        )
 
     def call(self, method: str, params: dict | None = None, session: bool = False, timeout: float = 60.0) -> dict:
         """Send one command and wait for its answer (events that come meanwhile are kept)."""
@@ -114,12 +130,11 @@ class Browser:
     def drag(self, start: tuple[float, float], end: tuple[float, float], steps: int = 12, pause: float = 0.03) -> None:
         """Press the left button at ``start``, move to ``end`` in ``steps``, release there."""
         self.mouse('mouseMoved', *start)
-        time.sleep(0.2)                         # the page's hover state (a gizmo highlights)
+        time.sleep(0.2)  # the page's hover state (a gizmo highlights)
         self.mouse('mousePressed', *start, buttons=1)
         for k in range(1, steps + 1):
             t = k / steps
-            self.mouse('mouseMoved', start[0] + t * (end[0] - start[0]), start[1] + t * (end[1] - start[1]),
-                       buttons=1)
+            self.mouse('mouseMoved', start[0] + t * (end[0] - start[0]), start[1] + t * (end[1] - start[1]), buttons=1)
             time.sleep(pause)
         self.mouse('mouseReleased', *end)
 

@@ -25,6 +25,7 @@ def mecanum_model():
 def ros():
     """An isolated rclpy context with an executor (:class:`ros_helpers.RosHarness`), closed after the test."""
     from ros_helpers import RosHarness
+
     harness = RosHarness()
     yield harness
     harness.close()

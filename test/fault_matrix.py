@@ -49,13 +49,13 @@ from wmm_control.robot_config import load_robot
 
 __all__ = ['KINDS', 'RIGS', 'FAILURES', 'run_cell', 'run_matrix', 'format_table']
 
-PERIOD = load_robot('steerable').period   # [s] the robots' control period (robot YAML; both 0.025 s)
-T0 = 100.0                # [s] stamp of the first nominal cycle
+PERIOD = load_robot('steerable').period  # [s] the robots' control period (robot YAML; both 0.025 s)
+T0 = 100.0  # [s] stamp of the first nominal cycle
 WARMUP = 5
 REPEATS = 4
 RECOVERY = 4
-CYCLE_WAIT = 0.05         # [s] wall time a cycle's answer is awaited (rejected input gives none)
-ALIVE_WAIT = 3.0          # [s] wall time the answer to nominal input is awaited after the injection
+CYCLE_WAIT = 0.05  # [s] wall time a cycle's answer is awaited (rejected input gives none)
+ALIVE_WAIT = 3.0  # [s] wall time the answer to nominal input is awaited after the injection
 FAILURES = ('CRASH', 'NaN', 'LIMIT', 'DEAD', 'SILENT', 'FLOOD', 'ACCEPTED', 'WRONG')
 
 
@@ -74,8 +74,9 @@ def _pose(xyz, rot, frame='world', stamp=None):
     if stamp is not None:
         msg.header.stamp = stamp
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in xyz)
-    msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z, msg.pose.orientation.w = \
-        (float(v) for v in quaternion_from_matrix(rot))
+    msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z, msg.pose.orientation.w = (
+        float(v) for v in quaternion_from_matrix(rot)
+    )
     return msg
 
 
@@ -84,6 +85,7 @@ class Crash(Exception):
 
 
 # ------------------------------------------------------------------------------------ rigs
+
 
 class Rig:
     """One node under test, fed and watched by a probe node, on a :class:`~ros_helpers.RosHarness`
@@ -104,8 +106,8 @@ class Rig:
         self.k = 0
         self.mutate = None
         self.logs = []
-        self.bad = []            # (failure, text)
-        self.records = []        # (topic, values) of every output, in order
+        self.bad = []  # (failure, text)
+        self.records = []  # (topic, values) of every output, in order
         self._pubs = {}
         self.probe.create_subscription(Log, '/rosout', self._on_log, ROSOUT_QOS)
         self._watch_outputs()
@@ -122,6 +124,7 @@ class Rig:
 
     def watch(self, topic, msg_type, values, limit=None, what=''):
         """Record ``values(msg)`` of every message on ``topic``; flag NaN/inf and |v| > ``limit``."""
+
         def callback(msg):
             v = np.asarray(values(msg), dtype=float)
             self.records.append((topic, v))
@@ -131,16 +134,26 @@ class Rig:
                 lim = limit(msg) if callable(limit) else limit
                 over = np.abs(v) > np.asarray(lim) * (1 + 1e-9) + 1e-12
                 if np.any(over):
-                    self.bad.append(('LIMIT', f'{topic}{what}: {v[over].tolist()} beyond {np.broadcast_to(lim, v.shape)[over].tolist()}'))
+                    self.bad.append(
+                        (
+                            'LIMIT',
+                            f'{topic}{what}: {v[over].tolist()} beyond {np.broadcast_to(lim, v.shape)[over].tolist()}',
+                        )
+                    )
+
         self.probe.create_subscription(msg_type, topic, callback, 10)
 
     def watch_diagnostics(self):
         def callback(msg):
             for status in msg.status:
                 for kv in status.values:
-                    if kv.value.strip('[]').strip().lower() in ('nan', '-nan') or 'nan,' in kv.value.lower() \
-                            or ', nan' in kv.value.lower():
+                    if (
+                        kv.value.strip('[]').strip().lower() in ('nan', '-nan')
+                        or 'nan,' in kv.value.lower()
+                        or ', nan' in kv.value.lower()
+                    ):
                         self.bad.append(('NaN', f'/diagnostics {status.name}: {kv.key} = {kv.value}'))
+
         self.probe.create_subscription(DiagnosticArray, '/diagnostics', callback, 10)
 
     def spin_until(self, predicate, timeout):
@@ -152,7 +165,7 @@ class Rig:
     # ---------------------------------------------------------------- life cycle
     def start(self, overrides=()):
         self.node = self.ros.add(self.make_node([Parameter(k, value=v) for k, v in dict(overrides).items()]))
-        self.spin_until(lambda: False, 0.05)      # discovery within the context
+        self.spin_until(lambda: False, 0.05)  # discovery within the context
         for _ in range(WARMUP):
             self.step()
 
@@ -160,7 +173,7 @@ class Rig:
         world = getattr(self.node, 'world', None)
         self.ros.close()
         if world is not None:
-            world.close()       # now, not whenever the garbage collector gets to it
+            world.close()  # now, not whenever the garbage collector gets to it
 
     def step(self, mutate=None, wait=CYCLE_WAIT):
         """One cycle of nominal messages (``mutate(rig, msgs) -> msgs`` first); True when it was answered."""
@@ -169,7 +182,7 @@ class Rig:
         if mutate is not None:
             msgs = mutate(self, msgs)
         for topic, msg in msgs:
-            if topic is None:                 # PAUSE: spin for ``msg`` seconds
+            if topic is None:  # PAUSE: spin for ``msg`` seconds
                 self.spin_until(lambda: False, msg)
             else:
                 self.publish(topic, msg)
@@ -203,8 +216,9 @@ class SimRig(Rig):
         self.groups = dict(world.command_groups)
         self.limits = dict(zip(world.joint_names, world.velocity_limits))
         cfg = world.robot
-        self.arm_bounds = dict(zip(cfg.arm.joints, np.maximum(np.abs(cfg.arm.position_lower),
-                                                             np.abs(cfg.arm.position_upper))))
+        self.arm_bounds = dict(
+            zip(cfg.arm.joints, np.maximum(np.abs(cfg.arm.position_lower), np.abs(cfg.arm.position_upper)))
+        )
         world.close()
         self.column = f'wmm_sim ({"A" if load_robot(robot).steerable else "B"})'
         self._states = 0
@@ -212,24 +226,41 @@ class SimRig(Rig):
         self.probe.create_subscription(JointState, '/joint_states', self._on_state, 10)
 
     def make_node(self, overrides):
-        return SimNode(context=self.context, parameter_overrides=[
-            Parameter('robot', value=self.robot), Parameter('timing', value='lockstep'),
-            Parameter('lockstep_timeout', value=CYCLE_WAIT), Parameter('diagnostics_period', value=PERIOD),
-            *overrides])
+        return SimNode(
+            context=self.context,
+            parameter_overrides=[
+                Parameter('robot', value=self.robot),
+                Parameter('timing', value='lockstep'),
+                Parameter('lockstep_timeout', value=CYCLE_WAIT),
+                Parameter('diagnostics_period', value=PERIOD),
+                *overrides,
+            ],
+        )
 
     def _watch_outputs(self):
         def joint_values(msg):
             return list(msg.velocity) + [p for n, p in zip(msg.name, msg.position) if n in self.arm_bounds]
 
         def joint_limits(msg):
-            return [self.limits.get(n, np.inf) for n in msg.name] + \
-                [self.arm_bounds[n] for n in msg.name if n in self.arm_bounds]
+            return [self.limits.get(n, np.inf) for n in msg.name] + [
+                self.arm_bounds[n] for n in msg.name if n in self.arm_bounds
+            ]
+
         self.watch('/joint_states', JointState, joint_values, joint_limits, ' (velocities, arm positions)')
         for topic in ('/odom', '/ground_truth/odom'):
-            self.watch(topic, Odometry, lambda m: [m.pose.pose.position.x, m.pose.pose.position.y,
-                                                   m.pose.pose.orientation.z, m.pose.pose.orientation.w,
-                                                   m.twist.twist.linear.x, m.twist.twist.linear.y,
-                                                   m.twist.twist.angular.z])
+            self.watch(
+                topic,
+                Odometry,
+                lambda m: [
+                    m.pose.pose.position.x,
+                    m.pose.pose.position.y,
+                    m.pose.pose.orientation.z,
+                    m.pose.pose.orientation.w,
+                    m.twist.twist.linear.x,
+                    m.twist.twist.linear.y,
+                    m.twist.twist.angular.z,
+                ],
+            )
         self.watch('/ee_pose', PoseStamped, lambda m: [m.pose.position.x, m.pose.position.y, m.pose.position.z])
         self.watch_diagnostics()
 
@@ -237,7 +268,7 @@ class SimRig(Rig):
         return self._states
 
     def nominal(self, k):
-        return []         # the commands answer the states (see _on_state)
+        return []  # the commands answer the states (see _on_state)
 
     def step(self, mutate=None, wait=CYCLE_WAIT):
         self.mutate = mutate
@@ -291,8 +322,9 @@ class PlantRig(Rig):
             self.q[n] = float(np.clip(self.q[n], lo[i], hi[i]))
         vx, vy, w = self.base_twist
         th = self.base_pose[2]
-        self.base_pose += PERIOD * np.array([vx * math.cos(th) - vy * math.sin(th),
-                                             vx * math.sin(th) + vy * math.cos(th), w])
+        self.base_pose += PERIOD * np.array(
+            [vx * math.cos(th) - vy * math.sin(th), vx * math.sin(th) + vy * math.cos(th), w]
+        )
 
     def joint_state(self, k):
         js = JointState()
@@ -311,14 +343,18 @@ class BaseControllerRig(PlantRig):
     def __init__(self, robot):
         super().__init__(robot)
         self.column = 'swmr_controller' if self.config.steerable else 'mecanum_controller'
-        self.own_joints = list(self.config.steerable.steer_joints if self.config.steerable
-                               else self.config.mecanum.wheel_joints)
+        self.own_joints = list(
+            self.config.steerable.steer_joints if self.config.steerable else self.config.mecanum.wheel_joints
+        )
         self.reference = np.array([0.4, 0.15, 0.3]) * np.asarray(self.config.base.velocity)
         self._feasible = 0
 
     def make_node(self, overrides):
-        return BaseControllerNode(self.config.base_type, context=self.context, parameter_overrides=[
-            Parameter('diagnostics_period', value=PERIOD), *overrides])
+        return BaseControllerNode(
+            self.config.base_type,
+            context=self.context,
+            parameter_overrides=[Parameter('diagnostics_period', value=PERIOD), *overrides],
+        )
 
     def _watch_outputs(self):
         cfg = self.config
@@ -327,17 +363,24 @@ class BaseControllerRig(PlantRig):
             s = cfg.steerable
             self.watch('/steer_controller/commands', Float64MultiArray, lambda m: m.data, s.steer_rate_limit)
             self.watch('/drive_controller/commands', Float64MultiArray, lambda m: m.data, s.drive_rate_limit)
-            self.probe.create_subscription(Float64MultiArray, '/steer_controller/commands',
-                                           lambda m: self.set_rates(s.steer_joints, m.data), 10)
-            self.probe.create_subscription(Float64MultiArray, '/drive_controller/commands',
-                                           lambda m: self.set_rates(s.drive_joints, m.data), 10)
+            self.probe.create_subscription(
+                Float64MultiArray, '/steer_controller/commands', lambda m: self.set_rates(s.steer_joints, m.data), 10
+            )
+            self.probe.create_subscription(
+                Float64MultiArray, '/drive_controller/commands', lambda m: self.set_rates(s.drive_joints, m.data), 10
+            )
         else:
             wheels = cfg.mecanum.wheel_joints
             self.watch('/wheel_controller/commands', Float64MultiArray, lambda m: m.data, cfg.mecanum.wheel_rate_limit)
-            self.probe.create_subscription(Float64MultiArray, '/wheel_controller/commands',
-                                           lambda m: self.set_rates(wheels, m.data), 10)
-        self.watch('/base/feasible_twist', TwistStamped,
-                   lambda m: [m.twist.linear.x, m.twist.linear.y, m.twist.angular.z], vmax)
+            self.probe.create_subscription(
+                Float64MultiArray, '/wheel_controller/commands', lambda m: self.set_rates(wheels, m.data), 10
+            )
+        self.watch(
+            '/base/feasible_twist',
+            TwistStamped,
+            lambda m: [m.twist.linear.x, m.twist.linear.y, m.twist.angular.z],
+            vmax,
+        )
         self.probe.create_subscription(TwistStamped, '/base/feasible_twist', self._on_feasible, 10)
         self.watch_diagnostics()
 
@@ -349,8 +392,10 @@ class BaseControllerRig(PlantRig):
 
     def nominal(self, k):
         self.integrate()
-        return [('/base/reference', twist_stamped(self.stamp(k), 'base_link', self.reference)),
-                ('/joint_states', self.joint_state(k))]
+        return [
+            ('/base/reference', twist_stamped(self.stamp(k), 'base_link', self.reference)),
+            ('/joint_states', self.joint_state(k)),
+        ]
 
 
 class ResolverRig(PlantRig):
@@ -367,22 +412,34 @@ class ResolverRig(PlantRig):
         model.update(self.base_pose, np.array([self.q[n] for n in self.config.arm.joints]))
         pos, self.goal_rotation = model.ee_placement_world()
         self.goal = pos + np.array([0.3, 0.1, -0.05])
-        self.feasible_twist = None      # set by a kind: the probe's answer instead of the reference itself
+        self.feasible_twist = None  # set by a kind: the probe's answer instead of the reference itself
         self._arm = 0
 
     def make_node(self, overrides):
-        return RedundancyResolverNode(context=self.context, parameter_overrides=[
-            Parameter('robot', value=self.config.name), Parameter('method', value=self.method),
-            Parameter('diagnostics_period', value=PERIOD), Parameter('stall_time', value=0.5),
-            # The probe answers every reference at once: on a loaded machine the compensation must
-            # not be dropped for a late answer, nor the odometry go stale, or the twin runs differ.
-            Parameter('compensation_timeout', value=0.5), Parameter('state_timeout', value=1.0), *overrides])
+        return RedundancyResolverNode(
+            context=self.context,
+            parameter_overrides=[
+                Parameter('robot', value=self.config.name),
+                Parameter('method', value=self.method),
+                Parameter('diagnostics_period', value=PERIOD),
+                Parameter('stall_time', value=0.5),
+                # The probe answers every reference at once: on a loaded machine the compensation must
+                # not be dropped for a late answer, nor the odometry go stale, or the twin runs differ.
+                Parameter('compensation_timeout', value=0.5),
+                Parameter('state_timeout', value=1.0),
+                *overrides,
+            ],
+        )
 
     def _watch_outputs(self):
         cfg = self.config
         self.watch('/arm_controller/commands', Float64MultiArray, lambda m: m.data, cfg.arm.velocity)
-        self.watch('/base/reference', TwistStamped, lambda m: [m.twist.linear.x, m.twist.linear.y, m.twist.angular.z],
-                   np.asarray(cfg.base.velocity))
+        self.watch(
+            '/base/reference',
+            TwistStamped,
+            lambda m: [m.twist.linear.x, m.twist.linear.y, m.twist.angular.z],
+            np.asarray(cfg.base.velocity),
+        )
         self.probe.create_subscription(Float64MultiArray, '/arm_controller/commands', self._on_arm, 10)
         self.probe.create_subscription(TwistStamped, '/base/reference', self._on_reference, 10)
         self.watch_diagnostics()
@@ -408,8 +465,9 @@ class ResolverRig(PlantRig):
         x, y, th = self.base_pose
         msg.pose.pose.position.x, msg.pose.pose.position.y = float(x), float(y)
         msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(th / 2), math.cos(th / 2)
-        msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z = \
-            (float(v) for v in self.base_twist)
+        msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z = (
+            float(v) for v in self.base_twist
+        )
         return msg
 
     def nominal(self, k):
@@ -433,20 +491,32 @@ class SequencerRig(Rig):
         super().__init__()
 
     def make_node(self, overrides):
-        return GoalSequencerNode(context=self.context, parameter_overrides=[
-            Parameter('use_sim_time', value=True), Parameter('republish_period', value=PERIOD / 2), *overrides])
+        return GoalSequencerNode(
+            context=self.context,
+            parameter_overrides=[
+                Parameter('use_sim_time', value=True),
+                Parameter('republish_period', value=PERIOD / 2),
+                *overrides,
+            ],
+        )
 
     def _watch_outputs(self):
         def values(m):
             q = m.pose.orientation
-            return [m.pose.position.x, m.pose.position.y, m.pose.position.z, math.sqrt(q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2)]
+            return [
+                m.pose.position.x,
+                m.pose.position.y,
+                m.pose.position.z,
+                math.sqrt(q.x**2 + q.y**2 + q.z**2 + q.w**2),
+            ]
+
         self.watch('/goal_pose', PoseStamped, values)
         self.probe.create_subscription(PoseStamped, '/goal_pose', self._on_goal, 10)
 
     def _on_goal(self, msg):
         self._goals += 1
         q = msg.pose.orientation
-        if abs(math.sqrt(q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2) - 1.0) > 1e-6:
+        if abs(math.sqrt(q.x**2 + q.y**2 + q.z**2 + q.w**2) - 1.0) > 1e-6:
             self.bad.append(('LIMIT', f'/goal_pose quaternion not unit: {[q.x, q.y, q.z, q.w]}'))
 
     def _cycle_count(self):
@@ -470,25 +540,31 @@ RIGS = {
 
 # ----------------------------------------------------------------------------------- kinds
 
+
 def _on(topic, change):
     """A mutator applying ``change(msg)`` to every message of ``topic`` in the cycle."""
+
     def mutate(rig, msgs):
         for t, m in msgs:
             if t.lstrip('/') == topic.lstrip('/'):
                 change(m)
         return msgs
+
     return mutate
 
 
 def _add(make):
     """A mutator adding ``make(rig)`` = ``(topic, msg)`` to the cycle (before its joint state)."""
+
     def mutate(rig, msgs):
         return [make(rig)] + msgs
+
     return mutate
 
 
 def _command(group_of, values):
     """Sim: the command of one group replaced by ``values`` (a list, or ``f(n)`` of the group size)."""
+
     def mutate(rig, msgs):
         group = group_of(rig)
         out = []
@@ -498,6 +574,7 @@ def _command(group_of, values):
                 m = float_array(values(n) if callable(values) else values)
             out.append((t, m))
         return out
+
     return mutate
 
 
@@ -511,6 +588,7 @@ def _last_group(rig):
 
 def _set_joint(field, value, which=0):
     """Joint state: ``field`` ('position'/'velocity') of the node's ``which``-th own joint set to ``value``."""
+
     def change(js):
         rig_joint = change.joints[which]
         values = list(getattr(js, field))
@@ -520,11 +598,13 @@ def _set_joint(field, value, which=0):
     def mutate(rig, msgs):
         change.joints = rig.own_joints if rig.family == 'base' else list(rig.config.arm.joints)
         return _on('joint_states', change)(rig, msgs)
+
     return mutate
 
 
 def _js(edit):
     """Joint state rebuilt by ``edit(rig, names, positions, velocities) -> (names, positions, velocities)``."""
+
     def mutate(rig, msgs):
         own = rig.own_joints if rig.family == 'base' else list(rig.config.arm.joints)
         for t, m in msgs:
@@ -532,6 +612,7 @@ def _js(edit):
                 names, pos, vel = edit(own, list(m.name), list(m.position), list(m.velocity))
                 m.name, m.position, m.velocity = names, [float(v) for v in pos], [float(v) for v in vel]
         return msgs
+
     return mutate
 
 
@@ -552,17 +633,19 @@ def _duplicated(own, names, pos, vel):
 
 def _missing(own, names, pos, vel):
     i = names.index(own[-1])
-    return names[:i] + names[i + 1:], pos[:i] + pos[i + 1:], vel[:i] + vel[i + 1:]
+    return names[:i] + names[i + 1 :], pos[:i] + pos[i + 1 :], vel[:i] + vel[i + 1 :]
 
 
 def _stamp(shift=None, value=None):
     """Joint state (or /clock) stamp set to ``value`` or moved by ``shift`` seconds."""
+
     def change(msg):
         if hasattr(msg, 'clock'):
             t = msg.clock.sec + msg.clock.nanosec * 1e-9
             msg.clock = _time(value if value is not None else t + shift)
         else:
             msg.header.stamp = _time(value if value is not None else _stamp_s(msg) + shift)
+
     return change
 
 
@@ -594,6 +677,7 @@ def _goal(position, quat=None, frame='world'):
             o = msg.pose.orientation
             o.x, o.y, o.z, o.w = quat
         return ('/goal_pose', msg)
+
     return _add(make)
 
 
@@ -609,6 +693,7 @@ def _set_odom_quaternion(x, y, z, w):
     def change(m):
         o = m.pose.pose.orientation
         o.x, o.y, o.z, o.w = x, y, z, w
+
     return change
 
 
@@ -627,6 +712,7 @@ def _feasible(value):
     def mutate(rig, msgs):
         rig.feasible_twist = np.asarray(value, dtype=float)
         return msgs
+
     return mutate
 
 
@@ -638,6 +724,7 @@ def _set_reference(**fields):
             else:
                 part, axis = name.split('_')
                 setattr(getattr(m.twist, part), axis, value)
+
     return _on('base/reference', change)
 
 
@@ -685,131 +772,311 @@ def _param_values_wrong_type(descriptor, value):
 
 
 KINDS = [
-    Kind('NaN field', {
-        'sim': ('rejected', 'arm command [NaN, ...]', _command(lambda r: 'arm', lambda n: [math.nan] * n)),
-        'base': ('rejected', '/base/reference linear.x = NaN', _set_reference(linear_x=math.nan)),
-        'resolver': ('rejected', '/goal_pose position.x = NaN', _goal([math.nan, 0.0, 1.0])),
-    }),
-    Kind('+inf field', {
-        'sim': ('rejected', 'steer/wheel command [inf, ...]', _command(_base_group, lambda n: [math.inf] * n)),
-        'base': ('rejected', '/base/reference angular.z = inf', _set_reference(angular_z=math.inf)),
-        'resolver': ('rejected', '/odom position.x = inf', _odom(lambda m: setattr(m.pose.pose.position, 'x', math.inf))),
-    }),
-    Kind('-inf measured value', {
-        'sim': ('rejected', 'drive/wheel command [-inf, ...]', _command(_last_group, lambda n: [-math.inf] * n)),
-        'base': ('rejected', '/joint_states position of a steer/wheel joint = -inf', _set_joint('position', -math.inf)),
-        'resolver': ('rejected', '/joint_states velocity of arm joint 1 = -inf', _set_joint('velocity', -math.inf)),
-    }),
-    Kind('finite absurd value (1e308)', {
-        'sim': ('corrected', 'arm command [1e308, ...] (clamped)', _command(lambda r: 'arm', lambda n: [1e308] * n)),
-        'base': ('corrected', '/base/reference linear.x = 1e308 (scaled)', _set_reference(linear_x=1e308)),
-        'resolver': ('rejected', '/goal_pose position.x = 1e308', _goal([1e308, 0.0, 1.0])),
-    }),
-    Kind('measured rate 1e308', {
-        'base': ('rejected', '/joint_states velocity of a steer/wheel joint = 1e308', _set_joint('velocity', 1e308)),
-        'resolver': ('rejected', '/joint_states velocity of arm joint 1 = 1e308', _set_joint('velocity', 1e308)),
-    }),
-    Kind('joint position 1e308', {
-        'base': ('rejected', '/joint_states position of a steer/wheel joint = 1e308', _set_joint('position', 1e308)),
-        'resolver': ('rejected', '/joint_states position of arm joint 1 = 1e308', _set_joint('position', 1e308)),
-    }),
-    Kind('odometry twist 1e308', {
-        'resolver': ('rejected', '/odom twist linear.x = 1e308',
-                     _odom(lambda m: setattr(m.twist.twist.linear, 'x', 1e308))),
-    }),
-    Kind('zero quaternion (goal)', {
-        'resolver': ('rejected', '/goal_pose orientation (0, 0, 0, 0)', _goal_near((0, 0, 0), quat=(0.0, 0.0, 0.0, 0.0))),
-    }),
-    Kind('zero quaternion (odometry)', {
-        'resolver': ('rejected', '/odom orientation (0, 0, 0, 0)', _odom(_set_odom_quaternion(0.0, 0.0, 0.0, 0.0))),
-    }),
-    Kind('non-unit quaternion (goal)', {
-        'resolver': ('corrected', '/goal_pose orientation of norm 2 (normalised)',
-                     _goal_near((0, 0, 0), quat=(0.0, 0.0, 0.0, 2.0))),
-    }),
-    Kind('non-unit quaternion (odometry)', {
-        'resolver': ('corrected', '/odom orientation of norm 3 (normalised)',
-                     _odom(_set_odom_quaternion(0.0, 0.0, 0.0, 3.0))),
-    }),
-    Kind('unknown frame_id', {
-        'base': ('rejected', "/base/reference frame 'map'", _set_reference(frame_id='map')),
-        'resolver': ('rejected', "/goal_pose frame 'map'", _goal_near((0, 0, 0), frame='map')),
-    }),
-    Kind('empty frame_id', {
-        'base': ('corrected', "/base/reference frame '' (taken as base_link)", _set_reference(frame_id='')),
-        'resolver': ('rejected', "/goal_pose frame ''", _goal_near((0, 0, 0), frame='')),
-    }),
-    Kind('JointState empty', {
-        f: ('rejected', '/joint_states without names or values', _js(lambda own, n, p, v: ([], [], [])))
-        for f in ('base', 'resolver')}),
-    Kind('JointState short', {
-        f: ('rejected', '/joint_states with one position fewer than names', _js(lambda own, n, p, v: (n, p[:-1], v)))
-        for f in ('base', 'resolver')}),
-    Kind('JointState mismatched velocities', {
-        f: ('rejected', '/joint_states with 2 velocities for all its names', _js(lambda own, n, p, v: (n, p, v[:2])))
-        for f in ('base', 'resolver')}),
-    Kind('JointState missing a joint', {
-        f: ('rejected', "/joint_states without one of the node's joints", _js(_missing)) for f in ('base', 'resolver')}),
-    Kind('JointState reordered', {
-        f: ('by name', '/joint_states with every name in reverse order', _js(_reversed)) for f in ('base', 'resolver')}),
-    Kind('JointState duplicated name', {
-        f: ('rejected', "/joint_states naming one of the node's joints twice (other value)", _js(_duplicated))
-        for f in ('base', 'resolver')}),
-    Kind('JointState unrelated names', {
-        f: ('rejected', "/joint_states of joints 'foo', 'bar' only",
-            _js(lambda own, n, p, v: (['foo', 'bar'], [0.0, 1.0], [0.0, 0.0]))) for f in ('base', 'resolver')}),
-    Kind('JointState same length, other order', {
-        f: ('by name', "/joint_states of the node's own joints only, in another order", _js(_own_shuffled))
-        for f in ('base', 'resolver')}),
-    Kind('command too short', {
-        'sim': ('rejected', 'arm command of 6 values', _command(lambda r: 'arm', [0.1] * 6))}),
-    Kind('command too long', {
-        'sim': ('rejected', 'arm command of 8 values', _command(lambda r: 'arm', [0.1] * 8))}),
-    Kind('command empty', {
-        'sim': ('rejected', 'steer/wheel command []', _command(_base_group, []))}),
-    Kind('goal out of reach', {
-        'resolver': ('rejected', '/goal_pose 5 m above the floor', _goal(lambda rig: [rig.goal[0], rig.goal[1], 5.0]))}),
-    Kind('goal below the floor', {
-        'resolver': ('rejected', '/goal_pose 0.5 m below the floor',
-                     _goal(lambda rig: [rig.goal[0], rig.goal[1], rig.config.ground_z - 0.5]))}),
-    Kind('goal 100 m away', {
-        'resolver': ('rejected', '/goal_pose 100 m ahead (beyond max_goal_distance, 50 m)', _goal_near((100.0, 0, 0)))}),
-    Kind("goal inside the robot's body", {
-        'resolver': ('rejected', '/goal_pose inside the chassis', _add(_inside_body))}),
-    Kind('trajectory without points', {
-        'resolver': ('rejected', '/ee_reference with no point', _add(_empty_reference))}),
-    Kind('feasible twist 1e308', {
-        'resolver': lambda rig: ('rejected', '/base/feasible_twist (1e308, 0, 0) for the cycle',
-                                 _feasible([1e308, 0.0, 0.0])) if rig.compensated else None}),
-    Kind('zero stamp', {
-        'base': ('skipped', '/joint_states stamped 0 amid stamped ones', _on('joint_states', _stamp(value=0.0))),
-        'resolver': ('skipped', '/joint_states stamped 0 amid stamped ones', _on('joint_states', _stamp(value=0.0))),
-        'sequencer': ('restarts', '/clock back to 0', _on('clock', _stamp(value=0.0))),
-    }),
-    Kind('backwards stamp', {
-        'base': ('skipped', '/joint_states stamped 1 s before the last', _on('joint_states', _stamp(shift=-1.0))),
-        'resolver': ('skipped', '/joint_states stamped 1 s before the last', _on('joint_states', _stamp(shift=-1.0))),
-        'sequencer': ('restarts', '/clock 1 s back', _on('clock', _stamp(shift=-1.0))),
-    }),
-    Kind('far-future stamp', {
-        'base': ('skipped', '/joint_states stamped 1e6 s ahead', _on('joint_states', _stamp(shift=1e6))),
-        'resolver': ('skipped', '/joint_states stamped 1e6 s ahead', _on('joint_states', _stamp(shift=1e6))),
-        'sequencer': ('restarts', '/clock 1e6 s ahead, then back', _on('clock', _stamp(shift=1e6))),
-    }),
-    Kind('negative /clock', {
-        **{f: ('rejected', '/clock at -5 s (use_sim_time)', _add(_clock(-5))) for f in ('sim', 'base', 'resolver')},
-        'sequencer': ('rejected', '/clock at -5 s instead of the next time', _on('clock', _stamp(value=-5.0)))},
-        start=(('use_sim_time', True),)),
-    Kind('/clock at its largest time', {
-        **{f: ('accepted', '/clock at 2^31 - 1 s (use_sim_time)', _add(_clock(2 ** 31 - 1)))
-           for f in ('sim', 'base', 'resolver')},
-        'sequencer': ('restarts', '/clock at 2^31 - 1 s instead of the next time, then back',
-                      _on('clock', _stamp(value=2 ** 31 - 1)))},
-        start=(('use_sim_time', True),)),
-    Kind('duplicated message', {
-        'base': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
-        'resolver': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
-    }),
+    Kind(
+        'NaN field',
+        {
+            'sim': ('rejected', 'arm command [NaN, ...]', _command(lambda r: 'arm', lambda n: [math.nan] * n)),
+            'base': ('rejected', '/base/reference linear.x = NaN', _set_reference(linear_x=math.nan)),
+            'resolver': ('rejected', '/goal_pose position.x = NaN', _goal([math.nan, 0.0, 1.0])),
+        },
+    ),
+    Kind(
+        '+inf field',
+        {
+            'sim': ('rejected', 'steer/wheel command [inf, ...]', _command(_base_group, lambda n: [math.inf] * n)),
+            'base': ('rejected', '/base/reference angular.z = inf', _set_reference(angular_z=math.inf)),
+            'resolver': (
+                'rejected',
+                '/odom position.x = inf',
+                _odom(lambda m: setattr(m.pose.pose.position, 'x', math.inf)),
+            ),
+        },
+    ),
+    Kind(
+        '-inf measured value',
+        {
+            'sim': ('rejected', 'drive/wheel command [-inf, ...]', _command(_last_group, lambda n: [-math.inf] * n)),
+            'base': (
+                'rejected',
+                '/joint_states position of a steer/wheel joint = -inf',
+                _set_joint('position', -math.inf),
+            ),
+            'resolver': ('rejected', '/joint_states velocity of arm joint 1 = -inf', _set_joint('velocity', -math.inf)),
+        },
+    ),
+    Kind(
+        'finite absurd value (1e308)',
+        {
+            'sim': (
+                'corrected',
+                'arm command [1e308, ...] (clamped)',
+                _command(lambda r: 'arm', lambda n: [1e308] * n),
+            ),
+            'base': ('corrected', '/base/reference linear.x = 1e308 (scaled)', _set_reference(linear_x=1e308)),
+            'resolver': ('rejected', '/goal_pose position.x = 1e308', _goal([1e308, 0.0, 1.0])),
+        },
+    ),
+    Kind(
+        'measured rate 1e308',
+        {
+            'base': (
+                'rejected',
+                '/joint_states velocity of a steer/wheel joint = 1e308',
+                _set_joint('velocity', 1e308),
+            ),
+            'resolver': ('rejected', '/joint_states velocity of arm joint 1 = 1e308', _set_joint('velocity', 1e308)),
+        },
+    ),
+    Kind(
+        'joint position 1e308',
+        {
+            'base': (
+                'rejected',
+                '/joint_states position of a steer/wheel joint = 1e308',
+                _set_joint('position', 1e308),
+            ),
+            'resolver': ('rejected', '/joint_states position of arm joint 1 = 1e308', _set_joint('position', 1e308)),
+        },
+    ),
+    Kind(
+        'odometry twist 1e308',
+        {
+            'resolver': (
+                'rejected',
+                '/odom twist linear.x = 1e308',
+                _odom(lambda m: setattr(m.twist.twist.linear, 'x', 1e308)),
+            ),
+        },
+    ),
+    Kind(
+        'zero quaternion (goal)',
+        {
+            'resolver': (
+                'rejected',
+                '/goal_pose orientation (0, 0, 0, 0)',
+                _goal_near((0, 0, 0), quat=(0.0, 0.0, 0.0, 0.0)),
+            ),
+        },
+    ),
+    Kind(
+        'zero quaternion (odometry)',
+        {
+            'resolver': ('rejected', '/odom orientation (0, 0, 0, 0)', _odom(_set_odom_quaternion(0.0, 0.0, 0.0, 0.0))),
+        },
+    ),
+    Kind(
+        'non-unit quaternion (goal)',
+        {
+            'resolver': (
+                'corrected',
+                '/goal_pose orientation of norm 2 (normalised)',
+                _goal_near((0, 0, 0), quat=(0.0, 0.0, 0.0, 2.0)),
+            ),
+        },
+    ),
+    Kind(
+        'non-unit quaternion (odometry)',
+        {
+            'resolver': (
+                'corrected',
+                '/odom orientation of norm 3 (normalised)',
+                _odom(_set_odom_quaternion(0.0, 0.0, 0.0, 3.0)),
+            ),
+        },
+    ),
+    Kind(
+        'unknown frame_id',
+        {
+            'base': ('rejected', "/base/reference frame 'map'", _set_reference(frame_id='map')),
+            'resolver': ('rejected', "/goal_pose frame 'map'", _goal_near((0, 0, 0), frame='map')),
+        },
+    ),
+    Kind(
+        'empty frame_id',
+        {
+            'base': ('corrected', "/base/reference frame '' (taken as base_link)", _set_reference(frame_id='')),
+            'resolver': ('rejected', "/goal_pose frame ''", _goal_near((0, 0, 0), frame='')),
+        },
+    ),
+    Kind(
+        'JointState empty',
+        {
+            f: ('rejected', '/joint_states without names or values', _js(lambda own, n, p, v: ([], [], [])))
+            for f in ('base', 'resolver')
+        },
+    ),
+    Kind(
+        'JointState short',
+        {
+            f: (
+                'rejected',
+                '/joint_states with one position fewer than names',
+                _js(lambda own, n, p, v: (n, p[:-1], v)),
+            )
+            for f in ('base', 'resolver')
+        },
+    ),
+    Kind(
+        'JointState mismatched velocities',
+        {
+            f: (
+                'rejected',
+                '/joint_states with 2 velocities for all its names',
+                _js(lambda own, n, p, v: (n, p, v[:2])),
+            )
+            for f in ('base', 'resolver')
+        },
+    ),
+    Kind(
+        'JointState missing a joint',
+        {
+            f: ('rejected', "/joint_states without one of the node's joints", _js(_missing))
+            for f in ('base', 'resolver')
+        },
+    ),
+    Kind(
+        'JointState reordered',
+        {
+            f: ('by name', '/joint_states with every name in reverse order', _js(_reversed))
+            for f in ('base', 'resolver')
+        },
+    ),
+    Kind(
+        'JointState duplicated name',
+        {
+            f: ('rejected', "/joint_states naming one of the node's joints twice (other value)", _js(_duplicated))
+            for f in ('base', 'resolver')
+        },
+    ),
+    Kind(
+        'JointState unrelated names',
+        {
+            f: (
+                'rejected',
+                "/joint_states of joints 'foo', 'bar' only",
+                _js(lambda own, n, p, v: (['foo', 'bar'], [0.0, 1.0], [0.0, 0.0])),
+            )
+            for f in ('base', 'resolver')
+        },
+    ),
+    Kind(
+        'JointState same length, other order',
+        {
+            f: ('by name', "/joint_states of the node's own joints only, in another order", _js(_own_shuffled))
+            for f in ('base', 'resolver')
+        },
+    ),
+    Kind('command too short', {'sim': ('rejected', 'arm command of 6 values', _command(lambda r: 'arm', [0.1] * 6))}),
+    Kind('command too long', {'sim': ('rejected', 'arm command of 8 values', _command(lambda r: 'arm', [0.1] * 8))}),
+    Kind('command empty', {'sim': ('rejected', 'steer/wheel command []', _command(_base_group, []))}),
+    Kind(
+        'goal out of reach',
+        {
+            'resolver': (
+                'rejected',
+                '/goal_pose 5 m above the floor',
+                _goal(lambda rig: [rig.goal[0], rig.goal[1], 5.0]),
+            )
+        },
+    ),
+    Kind(
+        'goal below the floor',
+        {
+            'resolver': (
+                'rejected',
+                '/goal_pose 0.5 m below the floor',
+                _goal(lambda rig: [rig.goal[0], rig.goal[1], rig.config.ground_z - 0.5]),
+            )
+        },
+    ),
+    Kind(
+        'goal 100 m away',
+        {
+            'resolver': (
+                'rejected',
+                '/goal_pose 100 m ahead (beyond max_goal_distance, 50 m)',
+                _goal_near((100.0, 0, 0)),
+            )
+        },
+    ),
+    Kind(
+        "goal inside the robot's body", {'resolver': ('rejected', '/goal_pose inside the chassis', _add(_inside_body))}
+    ),
+    Kind(
+        'trajectory without points', {'resolver': ('rejected', '/ee_reference with no point', _add(_empty_reference))}
+    ),
+    Kind(
+        'feasible twist 1e308',
+        {
+            'resolver': lambda rig: (
+                ('rejected', '/base/feasible_twist (1e308, 0, 0) for the cycle', _feasible([1e308, 0.0, 0.0]))
+                if rig.compensated
+                else None
+            )
+        },
+    ),
+    Kind(
+        'zero stamp',
+        {
+            'base': ('skipped', '/joint_states stamped 0 amid stamped ones', _on('joint_states', _stamp(value=0.0))),
+            'resolver': (
+                'skipped',
+                '/joint_states stamped 0 amid stamped ones',
+                _on('joint_states', _stamp(value=0.0)),
+            ),
+            'sequencer': ('restarts', '/clock back to 0', _on('clock', _stamp(value=0.0))),
+        },
+    ),
+    Kind(
+        'backwards stamp',
+        {
+            'base': ('skipped', '/joint_states stamped 1 s before the last', _on('joint_states', _stamp(shift=-1.0))),
+            'resolver': (
+                'skipped',
+                '/joint_states stamped 1 s before the last',
+                _on('joint_states', _stamp(shift=-1.0)),
+            ),
+            'sequencer': ('restarts', '/clock 1 s back', _on('clock', _stamp(shift=-1.0))),
+        },
+    ),
+    Kind(
+        'far-future stamp',
+        {
+            'base': ('skipped', '/joint_states stamped 1e6 s ahead', _on('joint_states', _stamp(shift=1e6))),
+            'resolver': ('skipped', '/joint_states stamped 1e6 s ahead', _on('joint_states', _stamp(shift=1e6))),
+            'sequencer': ('restarts', '/clock 1e6 s ahead, then back', _on('clock', _stamp(shift=1e6))),
+        },
+    ),
+    Kind(
+        'negative /clock',
+        {
+            **{f: ('rejected', '/clock at -5 s (use_sim_time)', _add(_clock(-5))) for f in ('sim', 'base', 'resolver')},
+            'sequencer': ('rejected', '/clock at -5 s instead of the next time', _on('clock', _stamp(value=-5.0))),
+        },
+        start=(('use_sim_time', True),),
+    ),
+    Kind(
+        '/clock at its largest time',
+        {
+            **{
+                f: ('accepted', '/clock at 2^31 - 1 s (use_sim_time)', _add(_clock(2**31 - 1)))
+                for f in ('sim', 'base', 'resolver')
+            },
+            'sequencer': (
+                'restarts',
+                '/clock at 2^31 - 1 s instead of the next time, then back',
+                _on('clock', _stamp(value=2**31 - 1)),
+            ),
+        },
+        start=(('use_sim_time', True),),
+    ),
+    Kind(
+        'duplicated message',
+        {
+            'base': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
+            'resolver': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
+        },
+    ),
     Kind('out-of-range parameter', {}, param=_param_values_out_of_range),
     Kind('non-finite parameter', {}, param=_param_values_non_finite),
     Kind('parameter of the wrong type', {}, param=_param_values_wrong_type),
@@ -817,6 +1084,7 @@ KINDS = [
 
 
 # ----------------------------------------------------------------------------------- cells
+
 
 @dataclass
 class Cell:
@@ -922,7 +1190,8 @@ def run_cell(rig_factory, kind):
                 twin.close()
             same = len(reference) == len(outputs) and all(
                 t1 == t2 and v1.shape == v2.shape and np.allclose(v1, v2, rtol=0, atol=1e-12)
-                for (t1, v1), (t2, v2) in zip(reference, outputs))
+                for (t1, v1), (t2, v2) in zip(reference, outputs)
+            )
             if not same:
                 return Cell('WRONG', f'{what}: the commands differ from those of the nominal layout')
             return Cell('by name', what + (f' (warned: {warnings[0]})' if warnings else ''))

@@ -82,8 +82,7 @@ class ScriptedController(Node):
     def __init__(self, context, groups, script, name='scripted_controller'):
         super().__init__(name, context=context)
         self.script = script
-        self.pubs = {g: self.create_publisher(Float64MultiArray, f'/{g}_controller/commands', 10)
-                     for g in groups}
+        self.pubs = {g: self.create_publisher(Float64MultiArray, f'/{g}_controller/commands', 10) for g in groups}
         self.joint_states, self.ee_poses, self.odom, self.truth, self.diagnostics = [], [], [], [], []
         self.create_subscription(JointState, '/joint_states', self._on_joints, 10)
         self.create_subscription(PoseStamped, '/ee_pose', self.ee_poses.append, 10)

@@ -5,8 +5,7 @@ import pytest
 
 from sim_bridge.closed_loop import ClosedLoop
 from sim_bridge.world import SimWorld
-from wmm_control.resolvers import (
-    AmpParams, AmpResolver, PoseTarget, RobotState, TraditionalResolver, make_resolver)
+from wmm_control.resolvers import AmpParams, AmpResolver, PoseTarget, RobotState, TraditionalResolver, make_resolver
 from wmm_control.resolvers.setpoint_trajectory import SetpointTrajectory
 from wmm_control.resolvers.sns import sns_accelerations
 
@@ -17,8 +16,9 @@ W = np.pi / 20.0
 def test_sns_saturates_a_joint_and_gives_its_share_to_the_others():
     jac = np.array([[1.0, 1.0, 1.0]])
     lo, hi = np.array([-1.0, -1.0, -1.0]), np.array([0.5, 1.0, 1.0])
-    qdd, alpha, active, saturated, _ = sns_accelerations(jac, np.array([2.5]), np.zeros(1), lo, hi,
-                                                         np.ones(3, bool), np.zeros(3))
+    qdd, alpha, active, saturated, _ = sns_accelerations(
+        jac, np.array([2.5]), np.zeros(1), lo, hi, np.ones(3, bool), np.zeros(3)
+    )
     np.testing.assert_allclose(qdd, [0.5, 1.0, 1.0])
     assert alpha == 1.0 and saturated.tolist() == [True, False, False]
 
@@ -34,8 +34,15 @@ def test_sns_scales_an_infeasible_task():
 
 def test_sns_keeps_held_joints_at_their_given_acceleration():
     jac = np.array([[1.0, 1.0, 1.0]])
-    qdd, alpha, *_ = sns_accelerations(jac, np.array([1.0]), np.zeros(1), -np.ones(3), np.ones(3),
-                                       np.array([False, True, True]), np.array([-0.4, 0.0, 0.0]))
+    qdd, alpha, *_ = sns_accelerations(
+        jac,
+        np.array([1.0]),
+        np.zeros(1),
+        -np.ones(3),
+        np.ones(3),
+        np.array([False, True, True]),
+        np.array([-0.4, 0.0, 0.0]),
+    )
     assert qdd[0] == -0.4 and alpha == 1.0
     np.testing.assert_allclose(jac @ qdd, [1.0])
 
@@ -62,7 +69,7 @@ def test_tertiary_projector_is_the_printed_one(rows):
         np.testing.assert_allclose(q_t, p_a @ q_a, atol=1e-10)
         np.testing.assert_allclose(jac @ q_t, 0.0, atol=1e-10)
         assert np.all(q_t[~active] == 0.0)
-        assert (np.linalg.norm(q_t) > 0.1) == (active.sum() > rows)     # else no null space is left
+        assert (np.linalg.norm(q_t) > 0.1) == (active.sum() > rows)  # else no null space is left
 
 
 def test_setpoint_trajectory_is_smooth_and_within_its_limits():
@@ -120,7 +127,7 @@ def test_beyond_reach_the_base_helps_only_part_of_the_time_and_the_circle_is_tra
     active = [np.any(c.base_twist) for _, c, _, _ in big_circle]
     assert 0.05 < np.mean(active) < 0.5
     first = active.index(True) * DT
-    assert 5.0 < first < 8.0            # the paper's base starts at 6.40 s
+    assert 5.0 < first < 8.0  # the paper's base starts at 6.40 s
     assert max(e for e, _, _, _ in big_circle[40:]) < 2e-3
 
 
@@ -133,7 +140,7 @@ def test_no_limit_of_table_1_is_passed(big_circle):
     assert np.all(np.abs(dq) <= arm.velocity + 1e-9)
     assert np.all(np.abs(np.diff(dq, axis=0)) <= arm.acceleration * DT + 1e-9)
     vb = np.array([r[1].base_twist for r in big_circle])
-    assert np.all(np.abs(vb) <= base.velocity * np.sqrt(2.0) + 1e-9)   # world-frame limits, seen in the base frame
+    assert np.all(np.abs(vb) <= base.velocity * np.sqrt(2.0) + 1e-9)  # world-frame limits, seen in the base frame
     assert np.all(np.isfinite(dq)) and np.all(np.isfinite(vb))
 
 
@@ -141,8 +148,11 @@ def test_the_base_stops_within_its_braking_time_after_deactivation(big_circle):
     robot = make_resolver('amp', 'mecanum').model.config
     modes = [r[1].diagnostics.mode for r in big_circle]
     vb = [r[1].base_twist for r in big_circle]
-    stops = [k for k in range(1, len(modes)) if modes[k - 1].startswith('base active')
-             and not modes[k].startswith('base active')]
+    stops = [
+        k
+        for k in range(1, len(modes))
+        if modes[k - 1].startswith('base active') and not modes[k].startswith('base active')
+    ]
     assert stops
     for k in stops:
         v0 = np.abs(vb[k - 1])
@@ -206,7 +216,7 @@ def test_traditional_with_a_joint_on_its_limit_does_not_coast():
     target = PoseTarget(pos, rot, velocity=0.2 * push, acceleration=1.0 * push)
     cmd = resolver.step(state, target)
     assert cmd.diagnostics.position_error < 1e-9 and cmd.diagnostics.orientation_error < 1e-9
-    assert cmd.arm_velocity[1] <= 0.0                                       # the joint stays on its limit
+    assert cmd.arm_velocity[1] <= 0.0  # the joint stays on its limit
     assert cmd.diagnostics.limit_scale > 0.5
-    assert not np.allclose(cmd.base_twist, state.base_twist, atol=1e-6)    # the base follows the task
+    assert not np.allclose(cmd.base_twist, state.base_twist, atol=1e-6)  # the base follows the task
     assert np.linalg.norm(cmd.arm_velocity) > 1e-3

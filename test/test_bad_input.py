@@ -68,8 +68,9 @@ def test_use_sim_time_set_at_run_time_is_guarded_too(ros):
     node = ros.add(MecanumControllerNode(context=ros.context))
     probe = ros.probe('clock_probe')
     warnings = []
-    probe.create_subscription(Log, '/rosout', lambda m: warnings.append(m.msg) if m.level >= Log.WARN else None,
-                              ROSOUT_QOS)
+    probe.create_subscription(
+        Log, '/rosout', lambda m: warnings.append(m.msg) if m.level >= Log.WARN else None, ROSOUT_QOS
+    )
     pub = probe.create_publisher(Clock, '/clock', 10)
     assert node.set_parameters([Parameter('use_sim_time', value=True)])[0].successful
     assert ros.spin_until(lambda: pub.get_subscription_count() > 0)

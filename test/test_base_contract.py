@@ -5,7 +5,14 @@ import numpy as np
 import pytest
 
 from wmm_control.base import (
-    BaseCommand, BaseController, SteerableBase, SwmrController, WheelBase, WheelController, make_base_controller)
+    BaseCommand,
+    BaseController,
+    SteerableBase,
+    SwmrController,
+    WheelBase,
+    WheelController,
+    make_base_controller,
+)
 from wmm_control.cycle import Cycle, CycleResult
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
@@ -27,7 +34,7 @@ def wheel_twist(base, command, before):
     c = base.controller
     if isinstance(base, SteerableBase):
         steer, drive = command.rates['steer'], command.rates['drive']
-        mid = before['steer'] + 0.5 * c.params.dt * steer     # the steer angles in the middle of the period
+        mid = before['steer'] + 0.5 * c.params.dt * steer  # the steer angles in the middle of the period
         return c.geometry.twist_from_wheels(mid, steer, drive)
     return c.kinematics.twist_from_wheels(command.rates['wheel'])
 
@@ -59,7 +66,7 @@ def test_every_family_meets_the_contract_with_the_simulators_groups(robot):
     assert set(base.required_groups) <= set(base.command_groups)
     assert set(base.rate_limits) == set(base.command_groups)
     np.testing.assert_array_equal(base.velocity_limit, robot.base.velocity)
-    assert base.resync_from_rates is (robot.steerable is None)     # the steerable base re-reads its angles
+    assert base.resync_from_rates is (robot.steerable is None)  # the steerable base re-reads its angles
 
 
 def test_rates_per_group_are_finite_and_realise_the_feasible_twist(robot):
@@ -80,8 +87,8 @@ def test_rates_per_group_are_finite_and_realise_the_feasible_twist(robot):
     assert moving > 300
     followed = commands[-1][0].feasible_twist
     if robot.differential is not None:
-        ref = ref * np.array([1.0, 0.0, 1.0])                 # no sideways motion
-    np.testing.assert_allclose(followed, ref, atol=2e-3)      # reached within the limits
+        ref = ref * np.array([1.0, 0.0, 1.0])  # no sideways motion
+    np.testing.assert_allclose(followed, ref, atol=2e-3)  # reached within the limits
 
 
 def test_a_reference_beyond_the_limits_is_scaled_into_them_direction_kept(robot):
@@ -93,7 +100,7 @@ def test_a_reference_beyond_the_limits_is_scaled_into_them_direction_kept(robot)
         assert np.all(np.isfinite(command.feasible_twist))
         assert np.all(np.abs(command.feasible_twist) <= limit + 1e-9)
     last = commands[-1][0].feasible_twist
-    assert last[0] > 0.5 * limit[0]                            # driven at its limits, along the reference
+    assert last[0] > 0.5 * limit[0]  # driven at its limits, along the reference
     assert abs(last[1]) < 1e-6 and abs(last[2]) < 1e-6
 
 
@@ -105,7 +112,7 @@ def test_no_reference_brakes_the_base_to_rest(robot):
     positions = {g: np.zeros(len(j)) for g, j in base.command_groups.items()}
     speeds = [abs(base.step(None, positions).feasible_twist[0]) for _ in range(400)]
     assert speeds[-1] == pytest.approx(0.0, abs=1e-9)
-    assert all(b <= a + 1e-9 for a, b in zip(speeds, speeds[1:]))      # monotone braking
+    assert all(b <= a + 1e-9 for a, b in zip(speeds, speeds[1:]))  # monotone braking
 
 
 def test_the_adapters_give_the_wrapped_controllers_numbers_exactly():
@@ -122,7 +129,7 @@ def test_the_adapters_give_the_wrapped_controllers_numbers_exactly():
         np.testing.assert_array_equal(got.rates['steer'], want.beta_dot_ref)
         np.testing.assert_array_equal(got.rates['drive'], want.phi_dot_ref)
         np.testing.assert_array_equal(got.feasible_twist, want.twist_executed)
-        beta = beta + 0.025 * want.beta_dot_ref + rng.normal(0.0, 1e-4, 4)   # a steering that lags a little
+        beta = beta + 0.025 * want.beta_dot_ref + rng.normal(0.0, 1e-4, 4)  # a steering that lags a little
     robot = load_robot('mecanum')
     base = make_base_controller(robot, robot.period)
     twin = WheelController.from_robot_config(robot, robot.period)
@@ -152,8 +159,9 @@ def test_reset_starts_at_rest_or_goes_on_from_the_measured_rates():
     steer, drive = np.full(4, 0.2), np.full(4, 3.0)
     base.reset({'steer': np.zeros(4)}, {'steer': steer, 'drive': drive})
     np.testing.assert_array_equal(base.controller.beta_dot, steer)
-    np.testing.assert_allclose(base.controller.twist,
-                               base.controller.geometry.twist_from_wheels(np.zeros(4), steer, drive))
+    np.testing.assert_allclose(
+        base.controller.twist, base.controller.geometry.twist_from_wheels(np.zeros(4), steer, drive)
+    )
     assert base.controller.twist[0] > 0.1
 
 
@@ -167,6 +175,7 @@ def test_the_factory_takes_the_steerable_gains_and_nothing_for_wheels():
 
 
 # ---------------------------------------------------------------- the cycle
+
 
 def state_of(robot, k):
     q = np.asarray(robot.start.arm, dtype=float) + 0.01 * k
@@ -195,6 +204,6 @@ def test_the_cycle_step_is_plan_then_base_then_finish(name, method):
         np.testing.assert_array_equal(result.base.feasible_twist, answer.feasible_twist)
         for g in positions:
             np.testing.assert_array_equal(result.base.rates[g], answer.rates[g])
-        assert phased.finish(planned, None) is planned                 # no answer: left as it is
+        assert phased.finish(planned, None) is planned  # no answer: left as it is
         compensated += not np.array_equal(final.arm_velocity, planned.arm_velocity)
     assert compensated > 0 if chained.resolver.uses_compensation else compensated == 0

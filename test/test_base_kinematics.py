@@ -51,7 +51,7 @@ def test_steerable_inverse_then_forward_recovers_the_twist():
     for _ in range(50):
         twist = rng.normal(size=3)
         icr = np.array([-twist[1], twist[0]]) / twist[2]
-        beta = geom.steer_angles_for_icr(icr) + np.pi * rng.integers(0, 2, 4)   # either twin
+        beta = geom.steer_angles_for_icr(icr) + np.pi * rng.integers(0, 2, 4)  # either twin
         beta_dot = rng.normal(size=4)
         phi = geom.wheel_rates(beta, beta_dot, twist)
         np.testing.assert_allclose(geom.slip_rows(beta) @ twist, 0.0, atol=1e-12)
@@ -97,12 +97,13 @@ def test_rolling_model_fit_of_disagreeing_wheels_is_the_least_squares_twist():
 def test_icr_of_disagreeing_wheels_minimises_the_side_slip():
     """Icr.from_steer_angles is the smallest right singular vector of the no-side-slip rows."""
     from wmm_control.base import Icr
+
     geom = SteerableGeometry(HIPS, 0.09, 0.045)
     rng = np.random.default_rng(9)
     for _ in range(200):
         beta = geom.steer_angles_for_icr(rng.uniform(-2, 2, 2)) + rng.normal(0.0, 0.3, 4)
         _, g = _rows_by_hand(beta)
-        t = np.linalg.svd(g)[2][-1]                       # (vx, vy, ω), ℓ = 1
+        t = np.linalg.svd(g)[2][-1]  # (vx, vy, ω), ℓ = 1
         icr = Icr.from_steer_angles(geom, beta)
         twist = icr.twist_direction
         assert abs(abs(twist @ t) - 1.0) < 1e-9
@@ -113,6 +114,7 @@ def test_a_restart_goes_on_from_the_measured_state_within_the_steer_rate_limit()
     measured, the steerable one from steer rates within its limit (an encoder glitch of 3 rad/s
     is not followed) and the twist that fits them and the drive rates."""
     from wmm_control.base import WheelController, MecanumKinematics, SteerableGeometry, SwmrController, SwmrParams
+
     robot = load_robot('steerable')
     geometry = SteerableGeometry.from_config(robot.steerable)
     swmr = SwmrController(geometry, SwmrParams.from_robot_config(robot))

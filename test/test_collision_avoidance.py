@@ -36,7 +36,7 @@ def test_the_distance_rates_are_the_derivatives_of_the_distances(name):
         pairs, _, _ = model.within(q, 0.15)
         for pair in pairs:
             if pair.distance < 0.005:
-                continue            # touching: the nearest points may jump between features
+                continue  # touching: the nearest points may jump between features
             qd = rng.normal(size=q.size)
             h = 1e-5
             d = {}
@@ -107,6 +107,7 @@ def test_robot_a_wrist_bends_all_the_way_clear_of_its_forearm():
 
 # ---------------------------------------------------------------- the stage alone
 
+
 def _approach(name='mecanum'):
     """A configuration near the body and an arm command that drives the nearest pair into it."""
     robot = load_robot(name)
@@ -124,7 +125,7 @@ def test_a_command_into_the_body_is_changed_to_meet_every_damper_within_the_box(
     robot, model, q, command = _approach()
     params = SafetyParams()
     stage = SafetyStage(model, params)
-    lower, upper = -robot.arm.velocity, robot.arm.velocity     # the velocity limits' box
+    lower, upper = -robot.arm.velocity, robot.arm.velocity  # the velocity limits' box
     command = np.clip(command, lower, upper)
     out = stage.filter(q, command, lower, upper)
     assert out.changed and out.active >= 1
@@ -133,8 +134,10 @@ def test_a_command_into_the_body_is_changed_to_meet_every_damper_within_the_box(
     d_i, d_s, xi = params.collision_influence, params.collision_safety, params.collision_gain
     for pair in pairs:
         d = pair.distance
-        allowed = min(xi * (d - d_s) / (d_i - d_s) if d < d_i else np.inf,
-                      np.sqrt(2 * params.collision_braking * max(d - d_s, 0.0)))
+        allowed = min(
+            xi * (d - d_s) / (d_i - d_s) if d < d_i else np.inf,
+            np.sqrt(2 * params.collision_braking * max(d - d_s, 0.0)),
+        )
         assert pair.rate_jacobian @ out.command >= -allowed - 1e-6, pair.links
     # the nearest command that does so: it still moves (the dampers allow an approach at this distance)
     assert np.linalg.norm(out.command) > 0.0
@@ -165,6 +168,7 @@ def test_bad_damper_parameters_are_refused():
 
 
 # ---------------------------------------------------------------- closed loop
+
 
 @pytest.mark.parametrize('index', [2, 3])
 def test_goals_that_drove_robot_b_into_its_chassis_are_met_without_contact(index):

@@ -8,8 +8,20 @@ from nav_msgs.msg import Odometry
 
 from wmm_control.kinematics.orientation import matrix_from_rpy
 from wmm_control.nodes.conversions import (
-    float_array, odometry_pose, odometry_values, planar_twist, pose_rotation, pose_values, set_planar_pose,
-    set_planar_twist, set_pose, set_rotation, set_twist, twist_stamped, twist_values)
+    float_array,
+    odometry_pose,
+    odometry_values,
+    planar_twist,
+    pose_rotation,
+    pose_values,
+    set_planar_pose,
+    set_planar_twist,
+    set_pose,
+    set_rotation,
+    set_twist,
+    twist_stamped,
+    twist_values,
+)
 
 
 def test_a_pose_and_a_transform_round_trip():

@@ -21,15 +21,24 @@ def _script(name):
 def test_parameter_tables_match_the_declarations(capsys):
     param_tables = _script('param_tables')
     code = param_tables.main(['--check'])
-    assert code == 0, ('the parameter tables differ from the declarations; run python scripts/param_tables.py '
-                       '--write\n' + capsys.readouterr().out)
+    assert code == 0, (
+        'the parameter tables differ from the declarations; run python scripts/param_tables.py '
+        '--write\n' + capsys.readouterr().out
+    )
 
 
 def test_every_node_with_parameters_has_a_table():
     param_tables = _script('param_tables')
     params = param_tables.node_params()
-    assert set(params) >= {'wmm_sim', 'swmr_controller', 'mecanum_controller', 'differential_controller',
-                           'redundancy_resolver', 'goal_sequencer', 'wmm_viewer'}
+    assert set(params) >= {
+        'wmm_sim',
+        'swmr_controller',
+        'mecanum_controller',
+        'differential_controller',
+        'redundancy_resolver',
+        'goal_sequencer',
+        'wmm_viewer',
+    }
     text = ''.join(path.read_text() for path in param_tables.DOCS)
     for exe, specs in params.items():
         assert f'<!-- params:{exe} -->' in text

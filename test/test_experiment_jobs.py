@@ -8,8 +8,16 @@ import pytest
 from wmm_control.cli.experiment import main as experiment_main
 
 #: metrics.json keys that measure the machine, not the run
-TIMING = {'wall_time_s', 'sim_to_wall_ratio', 'resolver_cycle_median_us', 'experiment_wall_time_s',
-          'experiment_sim_to_wall_ratio', 'peak_memory_mb', 'jobs', 'recording'}
+TIMING = {
+    'wall_time_s',
+    'sim_to_wall_ratio',
+    'resolver_cycle_median_us',
+    'experiment_wall_time_s',
+    'experiment_sim_to_wall_ratio',
+    'peak_memory_mb',
+    'jobs',
+    'recording',
+}
 
 NODES_SCENARIO = """scenario:
   name: two_runs

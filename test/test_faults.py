@@ -46,9 +46,9 @@ BIN = Path(sys.executable).parent
 COMMAND_TIMEOUT = load_defaults('wmm_sim.yaml', 'wmm_sim')['command_timeout']
 STATE_TIMEOUT = load_defaults('redundancy_resolver.yaml', 'redundancy_resolver')['state_timeout']
 SWMR = load_defaults('swmr_controller.yaml', 'swmr_controller')
-BASE_ACCEL_LIMIT = np.asarray(load_robot('steerable').base.acceleration)   # the robot YAML's
+BASE_ACCEL_LIMIT = np.asarray(load_robot('steerable').base.acceleration)  # the robot YAML's
 ROBOT = load_robot('steerable')
-PERIOD = ROBOT.period         # every node's default
+PERIOD = ROBOT.period  # every node's default
 #: A node's own scheduling on a loaded 2-core machine, on top of the figures the design gives
 #: (a timeout plus the periods in which it is noticed and acted upon), when judged by the
 #: stamps the nodes give their messages; and with the delivery to this process, when judged
@@ -69,30 +69,53 @@ class Record(Node):
         super().__init__('fault_recorder', context=context)
         self.topics = {}
         self.stamps = {}
-        for topic in ('arm_controller/commands', 'steer_controller/commands', 'drive_controller/commands',
-                      'wheel_controller/commands'):
+        for topic in (
+            'arm_controller/commands',
+            'steer_controller/commands',
+            'drive_controller/commands',
+            'wheel_controller/commands',
+        ):
             self._record(Float64MultiArray, topic, lambda m: np.array(m.data))
         for topic in ('base/reference', 'base/feasible_twist'):
-            self._record(TwistStamped, topic, lambda m: np.array([m.twist.linear.x, m.twist.linear.y,
-                                                                  m.twist.angular.z]))
-        self._record(Odometry, 'ground_truth/odom', lambda m: np.array(
-            [m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.angular.z]))
+            self._record(
+                TwistStamped, topic, lambda m: np.array([m.twist.linear.x, m.twist.linear.y, m.twist.angular.z])
+            )
+        self._record(
+            Odometry,
+            'ground_truth/odom',
+            lambda m: np.array([m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.angular.z]),
+        )
         arm = list(ROBOT.arm.joints)
-        self._record(JointState, 'joint_states', lambda m: np.array(
-            [dict(zip(m.name, m.velocity))[j] for j in arm]))
+        self._record(JointState, 'joint_states', lambda m: np.array([dict(zip(m.name, m.velocity))[j] for j in arm]))
         # Per joint-state stamp: whether its base joints report rest (the rates applied over its period).
         self.base_at_rest = {}
-        self.create_subscription(JointState, 'joint_states', lambda m: self.base_at_rest.__setitem__(
-            _seconds(m.header.stamp), not any(v for n, v in zip(m.name, m.velocity) if n not in arm)), 50)
+        self.create_subscription(
+            JointState,
+            'joint_states',
+            lambda m: self.base_at_rest.__setitem__(
+                _seconds(m.header.stamp), not any(v for n, v in zip(m.name, m.velocity) if n not in arm)
+            ),
+            50,
+        )
         self.logs = []
-        self.create_subscription(Log, '/rosout', lambda m: self.logs.append((time.monotonic(), m.name, m.msg)),
-                                 QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                                            reliability=ReliabilityPolicy.RELIABLE))
+        self.create_subscription(
+            Log,
+            '/rosout',
+            lambda m: self.logs.append((time.monotonic(), m.name, m.msg)),
+            QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE),
+        )
         self.goal = self.create_publisher(PoseStamped, 'goal_pose', 10)
         self.diagnostics = []
-        self.create_subscription(DiagnosticArray, '/diagnostics', lambda m: self.diagnostics.extend(
-            (time.monotonic(), {kv.key: kv.value for kv in s.values}) for s in m.status
-            if s.name == '/redundancy_resolver'), 50)
+        self.create_subscription(
+            DiagnosticArray,
+            '/diagnostics',
+            lambda m: self.diagnostics.extend(
+                (time.monotonic(), {kv.key: kv.value for kv in s.values})
+                for s in m.status
+                if s.name == '/redundancy_resolver'
+            ),
+            50,
+        )
 
     def _record(self, msg_type, topic, values):
         series = self.topics.setdefault(topic, [])
@@ -102,6 +125,7 @@ class Record(Node):
             series.append((time.monotonic(), values(msg)))
             if hasattr(msg, 'header'):
                 stamps.append(_seconds(msg.header.stamp))
+
         self.create_subscription(msg_type, topic, callback, 50)
 
     def series(self, topic, start=-np.inf, end=np.inf):
@@ -114,7 +138,7 @@ class Record(Node):
         keep = [i for i, (t, _) in enumerate(rows) if start <= t < end and (not stamps or stamps[i] > newest)]
         return np.array([rows[i][0] for i in keep]), np.array([rows[i][1] for i in keep])
 
-    def publish_goal(self, goal=GOAL, quaternion=(0.5 ** 0.5, 0.0, 0.0, 0.5 ** 0.5)):
+    def publish_goal(self, goal=GOAL, quaternion=(0.5**0.5, 0.0, 0.0, 0.5**0.5)):
         """The goal: position ``goal``, orientation ``quaternion`` (x, y, z, w); by default robot A's
         far goal, RPY (π/2, 0, 0) as at the start."""
         msg = PoseStamped()
@@ -138,13 +162,14 @@ class System:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.rec)
         self.events = {}
-        self.wall = {}            # the system clock at each event: the nodes' stamps in real time
+        self.wall = {}  # the system clock at each event: the nodes' stamps in real time
 
     def start(self, name, *params):
         """Start the executable ``name`` with ``params`` (``'robot:=mecanum'``, ...)."""
         args = ['--ros-args', *(a for p in params for a in ('-p', p))] if params else []
-        self.procs[name] = subprocess.Popen([str(BIN / name), *args], env=self.env, stdout=subprocess.PIPE,
-                                            stderr=subprocess.STDOUT, text=True)
+        self.procs[name] = subprocess.Popen(
+            [str(BIN / name), *args], env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
 
     def signal(self, name, sig):
         self.events[(name, sig)] = time.monotonic()
@@ -172,12 +197,16 @@ class System:
     def drive_to_goal(self, speed, command_topic, *goal):
         """Send the goal (``goal``: :meth:`Record.publish_goal`'s arguments) until the base is under
         way faster than ``speed`` and this recorder hears every process (discovery may take a while)."""
+
         def moving():
             if self.rec.count_subscribers('goal_pose'):
                 self.rec.publish_goal(*goal)
-            heard = all(len(self.rec.topics[t]) > 20 for t in (
-                command_topic, 'arm_controller/commands', 'base/feasible_twist', 'base/reference'))
+            heard = all(
+                len(self.rec.topics[t]) > 20
+                for t in (command_topic, 'arm_controller/commands', 'base/feasible_twist', 'base/reference')
+            )
             return self.base_speed() > speed and heard
+
         assert self.spin(120.0, moving), 'the robot never started for the goal'
 
     def kill_restart_and_stall(self, controller, speed, command_topic):
@@ -194,8 +223,9 @@ class System:
         self.spin(1.0)
         self.events['base restarted'] = restarted = time.monotonic()
         self.start(controller)
-        assert self.spin(60.0, lambda: self.base_speed() > speed and len(self.rec.series(
-            command_topic, restarted)[0]) > 10), 'the base did not resume'
+        assert self.spin(
+            60.0, lambda: self.base_speed() > speed and len(self.rec.series(command_topic, restarted)[0]) > 10
+        ), 'the base did not resume'
         self.spin(1.0)
         self.set_parameter(controller, 'joint_state_timeout', 10.0)
         self.signal(controller, signal.SIGSTOP)
@@ -243,6 +273,7 @@ def _run(scenario):
 @pytest.fixture(scope='module')
 def run():
     """The faults of robot A in turn."""
+
     def scenario(system):
         for name in ('wmm_sim', 'swmr_controller', 'redundancy_resolver'):
             system.start(name)
@@ -257,6 +288,7 @@ def run():
         system.spin(1.0)
         system.signal('redundancy_resolver', signal.SIGKILL)
         system.spin(2.0)
+
     return _run(scenario)
 
 
@@ -287,12 +319,17 @@ def _starts_from_rest(run, after, end, topics, sent_after=-np.inf, factor=2.0, l
     stopped simulator delivers what it sent before, late."""
     step = np.asarray(limit) * PERIOD
     for topic in topics:
-        twist = np.array([v for (t, v), s in zip(run.rec.topics[topic], run.rec.stamps[topic])
-                          if after <= t < end and s > sent_after])
+        twist = np.array(
+            [
+                v
+                for (t, v), s in zip(run.rec.topics[topic], run.rec.stamps[topic])
+                if after <= t < end and s > sent_after
+            ]
+        )
         moving = np.flatnonzero(np.any(np.abs(twist) > 1e-9, axis=1))
         assert len(moving) > 10, f'{topic}: the base moves again'
         assert np.all(np.abs(twist[moving[0]]) <= factor * step + 1e-12), (topic, np.abs(twist[moving[0]]) / step)
-        jumps = np.abs(np.diff(twist[moving[0]:], axis=0))
+        jumps = np.abs(np.diff(twist[moving[0] :], axis=0))
         assert np.all(jumps <= factor * step + 1e-12), (topic, jumps.max(axis=0) / step)
 
 
@@ -313,8 +350,9 @@ def test_a_killed_base_controller_stops_the_base_within_the_command_timeout(run)
     assert periods <= COMMAND_PERIODS, periods
     # Meanwhile the resolver goes on without its feasible twist, and says so (throttled, once a second)
     # and counts it on /diagnostics.
-    dropped = [m for t, name, m in rec.logs if name == 'redundancy_resolver' and t > killed
-               and 'without compensation' in m]
+    dropped = [
+        m for t, name, m in rec.logs if name == 'redundancy_resolver' and t > killed and 'without compensation' in m
+    ]
     assert dropped
     counts = [(t, int(v['compensation_dropped'])) for t, v in rec.diagnostics if 'compensation_dropped' in v]
     before = max(n for t, n in counts if t < killed)
@@ -330,8 +368,13 @@ def test_a_restarted_base_controller_drives_the_base_again(run):
 def test_a_restarted_base_controller_resumes_within_the_acceleration_limits(run):
     """Judged on the true twist: this recorder may discover the new process's publishers only
     after its first commands."""
-    _starts_from_rest(run, run.events['base restarted'], run.events[('swmr_controller', signal.SIGSTOP)],
-                      ['ground_truth/odom'], factor=RESUME_FACTOR)
+    _starts_from_rest(
+        run,
+        run.events['base restarted'],
+        run.events[('swmr_controller', signal.SIGSTOP)],
+        ['ground_truth/odom'],
+        factor=RESUME_FACTOR,
+    )
 
 
 def _answers_from_rest_after_the_stall(run, controller, limit):
@@ -345,20 +388,25 @@ def _answers_from_rest_after_the_stall(run, controller, limit):
     stalled, resumed = run.events[(controller, signal.SIGSTOP)], run.events[(controller, signal.SIGCONT)]
     periods, _ = _moving_periods(run.rec, 'ground_truth/odom', stalled + 0.05)
     assert periods <= COMMAND_PERIODS + 2, 'the simulator stopped the base during the stall'
-    answers = sorted((s, tuple(v)) for (t, v), s in zip(run.rec.topics['base/feasible_twist'],
-                                                         run.rec.stamps['base/feasible_twist'])
-                     if resumed <= t < run.events['stall over'] and s > run.wall[(controller, signal.SIGSTOP)])
+    answers = sorted(
+        (s, tuple(v))
+        for (t, v), s in zip(run.rec.topics['base/feasible_twist'], run.rec.stamps['base/feasible_twist'])
+        if resumed <= t < run.events['stall over'] and s > run.wall[(controller, signal.SIGSTOP)]
+    )
     first = next((i for i, (s, _) in enumerate(answers) if run.rec.base_at_rest.get(s)), None)
-    assert first is not None, [(s - run.wall[(controller, signal.SIGSTOP)], run.rec.base_at_rest.get(s), v)
-                               for s, v in answers[:15]]
+    assert first is not None, [
+        (s - run.wall[(controller, signal.SIGSTOP)], run.rec.base_at_rest.get(s), v) for s, v in answers[:15]
+    ]
     twist = np.array([v for _, v in answers[first:]])
     step = np.asarray(limit) * PERIOD
     assert len(twist) > 10
     assert np.all(np.abs(twist[0]) <= RESUME_FACTOR * step + 1e-12), np.abs(twist[0]) / step
     jumps = np.abs(np.diff(twist, axis=0))
     worst = int(np.argmax(jumps.max(axis=1) / step.max()))
-    context = [(answers[first + k][0], twist[k].round(5).tolist(), run.rec.base_at_rest.get(answers[first + k][0]))
-               for k in range(max(worst - 2, 0), min(worst + 3, len(twist)))]
+    context = [
+        (answers[first + k][0], twist[k].round(5).tolist(), run.rec.base_at_rest.get(answers[first + k][0]))
+        for k in range(max(worst - 2, 0), min(worst + 3, len(twist)))
+    ]
     assert np.all(jumps <= RESUME_FACTOR * step + 1e-12), (jumps.max(axis=0) / step, context)
     assert [m for t, name, m in run.rec.logs if name == controller and t > resumed and 'not applied' in m]
     _starts_from_rest(run, resumed, run.events['stall over'], ['ground_truth/odom'], factor=RESUME_FACTOR, limit=limit)
@@ -373,21 +421,25 @@ def test_a_stopped_simulator_gives_a_zero_base_reference_within_two_periods_of_t
     decides, the joint states by the simulator's (both the system clock, in real time)."""
     rec, stopped, resumed = run.rec, run.events[('wmm_sim', signal.SIGSTOP)], run.events[('wmm_sim', signal.SIGCONT)]
     last_state = max(s for (t, _), s in zip(rec.topics['joint_states'], rec.stamps['joint_states']) if t < resumed)
-    zeros = [s for (t, v), s in zip(rec.topics['base/reference'], rec.stamps['base/reference'])
-             if stopped <= t < resumed and not np.any(v)]
+    zeros = [
+        s
+        for (t, v), s in zip(rec.topics['base/reference'], rec.stamps['base/reference'])
+        if stopped <= t < resumed and not np.any(v)
+    ]
     assert zeros, 'no zero reference while the simulator was stopped'
     assert min(zeros) - last_state <= STATE_TIMEOUT + 2 * PERIOD + SCHEDULING, min(zeros) - last_state
 
 
-@pytest.mark.parametrize('topic', ['base/reference', 'arm_controller/commands', 'steer_controller/commands',
-                                   'drive_controller/commands'])
+@pytest.mark.parametrize(
+    'topic', ['base/reference', 'arm_controller/commands', 'steer_controller/commands', 'drive_controller/commands']
+)
 def test_a_stopped_simulator_gives_zero_commands_until_it_returns(run, topic):
     rec, stopped = run.rec, run.events[('wmm_sim', signal.SIGSTOP)]
     _, values = rec.series(topic, stopped - 0.5, stopped)
     assert np.any(values), 'the robot was moving'
     t_zero = _first(*rec.series(topic), _is_zero, stopped)
     timeout = STATE_TIMEOUT if topic.startswith(('base/', 'arm')) else SWMR['joint_state_timeout']
-    assert t_zero - stopped <= timeout + 2 * PERIOD + DELIVERY, (t_zero - stopped)
+    assert t_zero - stopped <= timeout + 2 * PERIOD + DELIVERY, t_zero - stopped
     # Zero until the simulator comes back.
     _, held = rec.series(topic, t_zero, run.events[('wmm_sim', signal.SIGCONT)])
     assert not np.any(held)
@@ -396,8 +448,13 @@ def test_a_stopped_simulator_gives_zero_commands_until_it_returns(run, topic):
 def test_after_the_simulator_returns_the_controllers_resync_without_a_jump(run):
     rec, resumed = run.rec, run.events[('wmm_sim', signal.SIGCONT)]
     end = run.events[('redundancy_resolver', signal.SIGKILL)]
-    _starts_from_rest(run, resumed, end, ['base/feasible_twist', 'ground_truth/odom'],
-                      sent_after=run.wall[('wmm_sim', signal.SIGCONT)])
+    _starts_from_rest(
+        run,
+        resumed,
+        end,
+        ['base/feasible_twist', 'ground_truth/odom'],
+        sent_after=run.wall[('wmm_sim', signal.SIGCONT)],
+    )
     # The arm restarts from rest within its acceleration limits.
     _, arm = rec.series('arm_controller/commands', resumed, end)
     assert np.any(arm)
@@ -415,16 +472,24 @@ def test_a_killed_resolver_stops_arm_and_base_by_their_timeouts(run):
     # counted in the controller's answers (one per joint state; on a busy machine an answer may
     # come a period late, and the simulator holds the last command meanwhile). The reference and
     # the answers carry the stamps of the joint states they answer.
-    last_reference = max(s for (t, _), s in zip(rec.topics['base/reference'], rec.stamps['base/reference'])
-                         if t < killed)
-    answers = sorted((s, t, v) for (t, v), s in zip(rec.topics['base/feasible_twist'],
-                                                    rec.stamps['base/feasible_twist']) if s > last_reference)
+    last_reference = max(
+        s for (t, _), s in zip(rec.topics['base/reference'], rec.stamps['base/reference']) if t < killed
+    )
+    answers = sorted(
+        (s, t, v)
+        for (t, v), s in zip(rec.topics['base/feasible_twist'], rec.stamps['base/feasible_twist'])
+        if s > last_reference
+    )
     stop = next(i for i, (_, _, v) in enumerate(answers) if not np.any(v))
     braking = float(np.max(np.max(np.abs([v for _, _, v in answers[:stop]]), axis=0) / BASE_ACCEL_LIMIT))
     # (+2: the reference's delivery and the period in which its age is noticed; +1: the zero answer)
     bound = np.ceil(SWMR['reference_timeout'] / PERIOD) + 2 + np.ceil(braking / PERIOD - 1e-9) + 1
-    assert stop <= bound, (stop, bound, killed, [(round(s, 3), round(t, 3), np.round(v, 3).tolist())
-                                                 for s, t, v in answers[:stop + 1]])
+    assert stop <= bound, (
+        stop,
+        bound,
+        killed,
+        [(round(s, 3), round(t, 3), np.round(v, 3).tolist()) for s, t, v in answers[: stop + 1]],
+    )
     # The simulator applies the zero answer: at rest within a period or two of receiving it.
     periods, _ = _moving_periods(rec, 'ground_truth/odom', answers[stop][1])
     assert periods <= 3, periods
@@ -438,27 +503,35 @@ def test_no_process_failed(run):
 # ---------------------------------------------------------------- robot B
 
 ROBOT_B = load_robot('mecanum')
-GOAL_B = (6.0, 1.0, 0.49)                       # far ahead, at the start's height
-QUAT_B = (0.0, 0.5 ** 0.5, 0.0, 0.5 ** 0.5)     # Ry(π/2), as at the start
-SPEED_B = 0.05                                  # [m/s] under way (the base accelerates at 0.025 m/s²)
+GOAL_B = (6.0, 1.0, 0.49)  # far ahead, at the start's height
+QUAT_B = (0.0, 0.5**0.5, 0.0, 0.5**0.5)  # Ry(π/2), as at the start
+SPEED_B = 0.05  # [m/s] under way (the base accelerates at 0.025 m/s²)
 
 
 @pytest.fixture(scope='module')
 def run_b():
     """Robot B (Mecanum base, AMP): its base controller killed and started again, then stalled
     (SIGSTOP) longer than the simulator's command timeout, as robot A's above."""
+
     def scenario(system):
         system.start('wmm_sim', 'robot:=mecanum')
         system.start('mecanum_controller')
         system.start('redundancy_resolver', 'robot:=mecanum', 'method:=amp')
         system.drive_to_goal(SPEED_B, 'wheel_controller/commands', GOAL_B, QUAT_B)
         system.kill_restart_and_stall('mecanum_controller', SPEED_B, 'wheel_controller/commands')
+
     return _run(scenario)
 
 
 def test_robot_b_restarted_base_controller_resumes_within_the_acceleration_limits(run_b):
-    _starts_from_rest(run_b, run_b.events['base restarted'], run_b.events[('mecanum_controller', signal.SIGSTOP)],
-                      ['ground_truth/odom'], factor=RESUME_FACTOR, limit=ROBOT_B.base.acceleration)
+    _starts_from_rest(
+        run_b,
+        run_b.events['base restarted'],
+        run_b.events[('mecanum_controller', signal.SIGSTOP)],
+        ['ground_truth/odom'],
+        factor=RESUME_FACTOR,
+        limit=ROBOT_B.base.acceleration,
+    )
 
 
 def test_robot_b_stalled_base_controller_answers_from_rest_within_the_acceleration_limits(run_b):

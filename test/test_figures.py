@@ -35,8 +35,9 @@ def experiment(tmp_path_factory, steerable_model):
     for label, (method, params) in RUNS.items():
         with SimWorld('steerable') as world:
             logs[label] = run_scenario(world, make_resolver(method, **params), scenario, label=label)
-        metrics[label] = goal_metrics(logs[label], scenario, steerable_model, 0.25,
-                                      steerable_model.config.arm.dexterous, world.dt)
+        metrics[label] = goal_metrics(
+            logs[label], scenario, steerable_model, 0.25, steerable_model.config.arm.dexterous, world.dt
+        )
     return logs, metrics, scenario
 
 
@@ -58,8 +59,7 @@ def test_error_norm_follows_the_goal_in_force(experiment):
     for gi, goal in enumerate(scenario.goals):
         rows = log.goal == gi
         assert np.any(rows)
-        np.testing.assert_allclose(err[rows], pose_error_norm(goal.pose, log.ee_position[rows],
-                                                              log.ee_rotation[rows]))
+        np.testing.assert_allclose(err[rows], pose_error_norm(goal.pose, log.ee_position[rows], log.ee_rotation[rows]))
 
 
 def test_fig6_prints_the_areas_it_is_given(experiment):
@@ -72,7 +72,7 @@ def test_fig6_prints_the_areas_it_is_given(experiment):
         texts = texts_of(fig)
         assert '123.46' in texts
         assert f"{metrics['pinv'][1]['area']:.2f}" in texts
-        assert len(texts) == 2 * len(scenario.goals) - 1        # the None area is left out
+        assert len(texts) == 2 * len(scenario.goals) - 1  # the None area is left out
         assert [ax.get_xlabel() for ax in fig.axes] == ['', 'time [s]']
     finally:
         figures.plt.close(fig)
@@ -85,7 +85,7 @@ def test_stacked_figures_grow_with_the_runs(experiment, tmp_path):
     zoom = figures.plot_zoom_and_psi(logs, metrics, scenario, tmp_path / 'zoom.png')
     (w1, h1), (w2, h2), (wz, hz) = png_size(one), png_size(two), png_size(zoom)
     assert w1 == w2 == wz and h2 > h1
-    assert hz == h2                               # one task-sharing run + the ψ panel
+    assert hz == h2  # one task-sharing run + the ψ panel
 
 
 def test_zoom_defaults_to_the_task_sharing_runs(experiment):
@@ -125,8 +125,14 @@ def test_write_figures_and_goal_pictures(experiment, steerable_model, tmp_path):
     logs, metrics, scenario = experiment
     paths = figures.write_figures(logs, metrics, scenario, steerable_model, tmp_path, render_label='task_sharing')
     names = [p.name for p in paths]
-    assert names == ['fig6_error_norm.png', 'fig7_zoom_psi.png', 'top_view.png', 'goal_1.png', 'goal_2.png',
-                     'goals_task_sharing.png']
+    assert names == [
+        'fig6_error_norm.png',
+        'fig7_zoom_psi.png',
+        'top_view.png',
+        'goal_1.png',
+        'goal_2.png',
+        'goals_task_sharing.png',
+    ]
     assert all(p.stat().st_size > 1000 for p in paths)
     assert png_size(paths[3]) == png_size(paths[4]) == figures.PICTURE_SIZE
     width, height = png_size(paths[5])

@@ -11,7 +11,13 @@ import pytest
 from urdf_factory import write_urdf
 from wmm_control.errors import ConfigError, NonFiniteError
 from wmm_control.kinematics.frames import (
-    FrameTransform, JointTransforms, compose, planar_transform, quaternion_from_matrix, world_to_odom)
+    FrameTransform,
+    JointTransforms,
+    compose,
+    planar_transform,
+    quaternion_from_matrix,
+    world_to_odom,
+)
 from wmm_control.robot_config import load_robot, robot_names
 
 
@@ -23,8 +29,8 @@ def _pinocchio_link_poses(urdf, positions):
     for joint_id in range(1, model.njoints):
         joint = model.joints[joint_id]
         value = positions.get(model.names[joint_id], 0.0)
-        if joint.nq == 2:          # continuous: cos, sin
-            q[joint.idx_q:joint.idx_q + 2] = math.cos(value), math.sin(value)
+        if joint.nq == 2:  # continuous: cos, sin
+            q[joint.idx_q : joint.idx_q + 2] = math.cos(value), math.sin(value)
         else:
             q[joint.idx_q] = value
     pin.framesForwardKinematics(model, data, q)
@@ -34,10 +40,12 @@ def _pinocchio_link_poses(urdf, positions):
 def _urdfs(tmp_path_factory):
     shipped = [load_robot(name).urdf_path for name in robot_names()]
     work = tmp_path_factory.mktemp('urdfs')
-    made = [write_urdf(work / 'three.urdf', 'steerable', modules=3, arm_joints=6),
-            write_urdf(work / 'six_lift.urdf', 'steerable', modules=6, arm_joints=7, prismatic_lift=True),
-            write_urdf(work / 'diff.urdf', 'differential', arm_joints=7),
-            write_urdf(work / 'mecanum.urdf', 'mecanum', arm_joints=6)]
+    made = [
+        write_urdf(work / 'three.urdf', 'steerable', modules=3, arm_joints=6),
+        write_urdf(work / 'six_lift.urdf', 'steerable', modules=6, arm_joints=7, prismatic_lift=True),
+        write_urdf(work / 'diff.urdf', 'differential', arm_joints=7),
+        write_urdf(work / 'mecanum.urdf', 'mecanum', arm_joints=6),
+    ]
     return shipped + made
 
 
@@ -66,7 +74,7 @@ def test_fixed_joints_are_static_and_moving_ones_follow_the_joint_state():
     robot = load_robot('steerable')
     frames = JointTransforms(robot.urdf_path)
     fixed_children = {tf.child for tf in frames.fixed}
-    assert robot.ee_frame in fixed_children                   # the tool is a fixed joint: static
+    assert robot.ee_frame in fixed_children  # the tool is a fixed joint: static
     assert set(robot.arm.joints) | set(robot.wheel_joints) <= set(frames.moving_joints)
     half = frames.moving({robot.arm.joints[0]: 0.5})
     assert [tf.child for tf in half] == [next(t.child for t in frames.moving({robot.arm.joints[0]: 0.0}))]
@@ -85,20 +93,32 @@ def test_a_mimic_joint_follows_its_leader_with_multiplier_and_offset(tmp_path):
         '<axis xyz="0 2 0"/><limit lower="0" upper="0.04" effort="1" velocity="1"/></joint>'
         '<joint name="finger_mirror" type="prismatic"><parent link="base"/><child link="right"/>'
         '<origin xyz="0 0 0.1"/><axis xyz="0 1 0"/><mimic joint="finger" multiplier="-1" offset="0.01"/>'
-        '<limit lower="-0.04" upper="0" effort="1" velocity="1"/></joint></robot>')
+        '<limit lower="-0.04" upper="0" effort="1" velocity="1"/></joint></robot>'
+    )
     frames = JointTransforms(path)
     poses = frames.link_poses({'finger': 0.03})
-    np.testing.assert_allclose(poses['left'].translation, [0.0, 0.03, 0.0], atol=1e-12)   # axis normalised
+    np.testing.assert_allclose(poses['left'].translation, [0.0, 0.03, 0.0], atol=1e-12)  # axis normalised
     np.testing.assert_allclose(poses['right'].translation, [0.0, -0.02, 0.1], atol=1e-12)
     bad = tmp_path / 'bad.urdf'
-    bad.write_text('<robot name="b"><link name="a"/><link name="b"/><joint name="j" type="revolute">'
-                   '<parent link="a"/><child link="b"/><axis xyz="0 0 0"/></joint></robot>')
+    bad.write_text(
+        '<robot name="b"><link name="a"/><link name="b"/><joint name="j" type="revolute">'
+        '<parent link="a"/><child link="b"/><axis xyz="0 0 0"/></joint></robot>'
+    )
     with pytest.raises(ConfigError, match='zero axis'):
         JointTransforms(bad)
 
 
-@pytest.mark.parametrize('angle, axis', [(0.0, (0, 0, 1)), (math.pi, (1, 0, 0)), (math.pi, (0, 1, 0)),
-                                         (math.pi, (0, 0, 1)), (2.5, (1, 2, 3)), (-3.1, (-1, 0.5, 0.2))])
+@pytest.mark.parametrize(
+    'angle, axis',
+    [
+        (0.0, (0, 0, 1)),
+        (math.pi, (1, 0, 0)),
+        (math.pi, (0, 1, 0)),
+        (math.pi, (0, 0, 1)),
+        (2.5, (1, 2, 3)),
+        (-3.1, (-1, 0.5, 0.2)),
+    ],
+)
 def test_quaternion_from_matrix_round_trips(angle, axis):
     axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
     rot = pin.AngleAxis(angle, axis).toRotationMatrix()
@@ -110,8 +130,9 @@ def test_quaternion_from_matrix_round_trips(angle, axis):
 
 def test_world_to_odom_puts_the_base_at_its_true_pose():
     true_pose, odom_pose = (2.0, -1.0, 0.7), (1.8, -0.7, 0.5)
-    world_base = compose(world_to_odom('world', 'odom', true_pose, odom_pose),
-                         planar_transform('odom', 'base_link', odom_pose))
+    world_base = compose(
+        world_to_odom('world', 'odom', true_pose, odom_pose), planar_transform('odom', 'base_link', odom_pose)
+    )
     expected = planar_transform('world', 'base_link', true_pose)
     assert (world_base.parent, world_base.child) == ('world', 'base_link')
     np.testing.assert_allclose(world_base.matrix(), expected.matrix(), atol=1e-12)

@@ -40,16 +40,17 @@ def _time(t):
 
 # ---------------------------------------------------------------- the gate alone
 
+
 def test_the_gate_admits_each_new_instant_once():
     gate = StampGate(DT, max_jump=0.2)
     assert gate.admit(_time(10.0)) == ''
-    assert 'not after' in gate.admit(_time(10.0))          # the same instant again
-    assert 'not after' in gate.admit(_time(9.0))           # backwards
-    assert 'not after' in gate.admit(_time(0.0))           # a zero stamp amid stamped ones
+    assert 'not after' in gate.admit(_time(10.0))  # the same instant again
+    assert 'not after' in gate.admit(_time(9.0))  # backwards
+    assert 'not after' in gate.admit(_time(0.0))  # a zero stamp amid stamped ones
     assert 'far-future' in gate.admit(_time(1e6))
-    assert gate.admit(_time(10.025)) == ''                 # the stream goes on from the last cycle
-    assert gate.admit(_time(10.1)) == ''                   # a gap of three periods: one cycle
-    gate.restart()                                         # the sender was silent: a new time base
+    assert gate.admit(_time(10.025)) == ''  # the stream goes on from the last cycle
+    assert gate.admit(_time(10.1)) == ''  # a gap of three periods: one cycle
+    gate.restart()  # the sender was silent: a new time base
     assert gate.admit(_time(0.5)) == ''
 
 
@@ -66,11 +67,12 @@ def test_the_gate_measures_the_senders_period_and_reports_a_mismatch():
     assert 'every 0.05 s' in gate.period_mismatch() and 'period is 0.025 s' in gate.period_mismatch()
     same = StampGate(DT, max_jump=0.2)
     for k in range(30):
-        same.admit(_time(1.0 + DT * k + (0.001 if k % 2 else 0.0)))   # jitter of 1 ms
+        same.admit(_time(1.0 + DT * k + (0.001 if k % 2 else 0.0)))  # jitter of 1 ms
     assert same.period_mismatch() == ''
 
 
 # ---------------------------------------------------------------- in a system
+
 
 class Probe(Node):
     """Records the controller's feasible twists, diagnostics and warnings; publishes joint states."""
@@ -79,11 +81,15 @@ class Probe(Node):
         super().__init__('timing_probe', context=context)
         self.feasible, self.diag, self.warnings = [], [], []
         self.create_subscription(TwistStamped, '/base/feasible_twist', self.feasible.append, 50)
-        self.wheels = []           # listened to, as the simulator does: a controller unheard stays at rest
+        self.wheels = []  # listened to, as the simulator does: a controller unheard stays at rest
         self.create_subscription(Float64MultiArray, '/wheel_controller/commands', self.wheels.append, 50)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
-        self.create_subscription(Log, '/rosout', self._on_log, QoSProfile(
-            depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE))
+        self.create_subscription(
+            Log,
+            '/rosout',
+            self._on_log,
+            QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE),
+        )
         self.pub_js = self.create_publisher(JointState, '/joint_states', 50)
         self.pub_ref = self.create_publisher(TwistStamped, '/base/reference', 50)
 
@@ -128,25 +134,29 @@ def test_a_second_publisher_replaying_the_simulators_states_runs_no_second_cycle
     pub = echo.create_publisher(JointState, '/joint_states', 10)
     states, echoed = {}, set()
 
-    def keep(msg):                   # its own copies come back to it: each stamp is echoed once
+    def keep(msg):  # its own copies come back to it: each stamp is echoed once
         states.setdefault(stamp_s(msg), msg)
 
-    def echo_answered(twist):        # the controller keeps only the newest state: a copy sent at
-        msg = states.pop(stamp_s(twist), None)     # once would replace the original, unseen
+    def echo_answered(twist):  # the controller keeps only the newest state: a copy sent at
+        msg = states.pop(stamp_s(twist), None)  # once would replace the original, unseen
         if msg is not None and stamp_s(twist) not in echoed:
             echoed.add(stamp_s(twist))
             pub.publish(msg)
+
     echo.create_subscription(JointState, '/joint_states', keep, 10)
     echo.create_subscription(TwistStamped, '/base/feasible_twist', echo_answered, 10)
-    node = ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
-        diagnostics_period=1e-9)))
+    node = ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(diagnostics_period=1e-9)))
     ros.add(SimNode(context=ros.context, parameter_overrides=overrides(robot='mecanum', timing='realtime')))
     reference = echo.create_publisher(TwistStamped, '/base/reference', 10)
-    echo.create_subscription(JointState, '/joint_states',
-                             lambda m: reference.publish(twist_stamped(m.header.stamp, 'base_link', (0.2, 0.1, 0.5))), 10)
+    echo.create_subscription(
+        JointState,
+        '/joint_states',
+        lambda m: reference.publish(twist_stamped(m.header.stamp, 'base_link', (0.2, 0.1, 0.5))),
+        10,
+    )
     # Until 70 copies were seen (the echo's discovery may take a moment on a loaded machine).
     assert ros.spin_until(lambda: len(probe.feasible) >= 80 and node.watchdog.skipped >= 70, timeout=60.0)
-    assert node.watchdog.skipped <= len(probe.feasible) + 1     # one copy per stamp, no storm
+    assert node.watchdog.skipped <= len(probe.feasible) + 1  # one copy per stamp, no storm
     # Every stamp runs exactly one cycle.
     counts = probe.per_stamp()
     assert set(counts.values()) == {1}, {t: n for t, n in counts.items() if n != 1}
@@ -164,15 +174,19 @@ def test_a_backlog_is_skipped_to_the_newest_state_and_a_gap_runs_only_one_period
     spins) answers the newest state, one period from its last answer, and none of the states
     queued before it; a gap of five periods after it still moves the twist by one period."""
     probe = ros.add(Probe(ros.context))
-    ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
-        reference_wait=0.0, reference_timeout=10.0, joint_state_timeout=10.0)))
+    ros.add(
+        MecanumControllerNode(
+            context=ros.context,
+            parameter_overrides=overrides(reference_wait=0.0, reference_timeout=10.0, joint_state_timeout=10.0),
+        )
+    )
     ros.spin_for(0.2)
     probe.pub_ref.publish(twist_stamped(_time(0.0), 'base_link', (0.2, 0.0, 0.0)))
     ros.spin_for(0.05)
-    probe.state(4.975)                   # one state answered: the controller is under way
+    probe.state(4.975)  # one state answered: the controller is under way
     assert ros.spin_until(lambda: len(probe.feasible) == 1, timeout=5.0)
     backlog = 8
-    for k in range(backlog):             # published while the controller does not spin
+    for k in range(backlog):  # published while the controller does not spin
         probe.state(5.0 + k * DT)
     newest = 5.0 + (backlog - 1) * DT
     assert ros.spin_until(lambda: any(stamp_s(m) == pytest.approx(newest) for m in probe.feasible), timeout=5.0)
@@ -181,7 +195,7 @@ def test_a_backlog_is_skipped_to_the_newest_state_and_a_gap_runs_only_one_period
     # The subscription keeps only the newest state: at most one older one can have slipped in
     # (taken while the backlog was still being delivered).
     assert answered <= 2, [stamp_s(m) for m in probe.feasible]
-    probe.state(newest + 6 * DT)         # five periods missing
+    probe.state(newest + 6 * DT)  # five periods missing
     assert ros.spin_until(lambda: len(probe.feasible) == answered + 2, timeout=5.0)
     ros.spin_for(0.1)
     vx = [twist_of(m)[0] for m in probe.feasible]
@@ -197,8 +211,14 @@ def test_a_state_that_waited_longer_than_max_state_wait_runs_no_cycle(ros, max_w
     controller, as it would while the node is held up: beyond ``max_state_wait`` its cycle is
     skipped (logged, counted); with no limit it runs with the latest reference."""
     probe = ros.add(Probe(ros.context))
-    node = ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
-        reference_wait=0.3, reference_timeout=10.0, joint_state_timeout=10.0, max_state_wait=max_wait)))
+    node = ros.add(
+        MecanumControllerNode(
+            context=ros.context,
+            parameter_overrides=overrides(
+                reference_wait=0.3, reference_timeout=10.0, joint_state_timeout=10.0, max_state_wait=max_wait
+            ),
+        )
+    )
     ros.spin_for(0.2)
     probe.pub_ref.publish(twist_stamped(_time(0.0), 'base_link', (0.2, 0.0, 0.0)))
     ros.spin_for(0.05)
@@ -219,12 +239,18 @@ def test_answers_that_were_not_applied_move_the_base_one_period_from_the_rates_a
     starts from the rates applied, so the last one is one period of acceleration from them;
     unchecked, from the controller's own last command, one period further per answer."""
     probe = ros.add(Probe(ros.context))
-    ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
-        reference_wait=0.0, reference_timeout=10.0, joint_state_timeout=10.0, applied_rate_tolerance=tolerance)))
+    ros.add(
+        MecanumControllerNode(
+            context=ros.context,
+            parameter_overrides=overrides(
+                reference_wait=0.0, reference_timeout=10.0, joint_state_timeout=10.0, applied_rate_tolerance=tolerance
+            ),
+        )
+    )
     ros.spin_for(0.2)
     probe.pub_ref.publish(twist_stamped(_time(0.0), 'base_link', (0.2, 0.0, 0.0)))
     ros.spin_for(0.05)
-    for k in range(10):                  # nominal periods: each state reports the command it followed
+    for k in range(10):  # nominal periods: each state reports the command it followed
         applied = list(probe.wheels[-1].data) if probe.wheels else [0.0] * 4
         probe.state(5.0 + k * DT, applied)
         assert ros.spin_until(lambda k=k: len(probe.feasible) > k, timeout=5.0)
@@ -232,7 +258,7 @@ def test_answers_that_were_not_applied_move_the_base_one_period_from_the_rates_a
     applied = list(probe.wheels[-1].data)
     before = len(probe.feasible)
     unapplied = 5
-    for k in range(unapplied):           # each answered before the next, none applied
+    for k in range(unapplied):  # each answered before the next, none applied
         probe.state(5.0 + (10 + k) * DT, applied)
         assert ros.spin_until(lambda k=k: len(probe.feasible) > before + k, timeout=5.0)
     vx_applied = MecanumKinematics.from_config(ROBOT.mecanum).twist_from_wheels(np.array(applied))[0]
@@ -246,10 +272,18 @@ def test_answers_that_were_not_applied_move_the_base_one_period_from_the_rates_a
 
 def test_a_simulator_period_that_disagrees_with_the_controllers_is_reported(ros):
     probe = ros.add(Probe(ros.context))
-    ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
-        diagnostics_period=1e-9, **LOCKSTEP_WAITS['mecanum_controller'])))
-    ros.add(SimNode(context=ros.context, parameter_overrides=overrides(
-        robot='mecanum', timing='lockstep', lockstep_groups='wheel', period=0.05)))
+    ros.add(
+        MecanumControllerNode(
+            context=ros.context,
+            parameter_overrides=overrides(diagnostics_period=1e-9, **LOCKSTEP_WAITS['mecanum_controller']),
+        )
+    )
+    ros.add(
+        SimNode(
+            context=ros.context,
+            parameter_overrides=overrides(robot='mecanum', timing='lockstep', lockstep_groups='wheel', period=0.05),
+        )
+    )
     assert ros.spin_until(lambda: any('every 0.05 s' in w for w in probe.warnings), timeout=60.0)
     assert any("this node's period is 0.025 s" in w for w in probe.warnings)
     measured = float(probe.diag[-1]['measured_period_s'])

@@ -26,8 +26,9 @@ def _launch_available():
     return True
 
 
-pytestmark = pytest.mark.skipif(not _launch_available(),
-                                reason='the ros2 command line and ros2 launch are not installed in this venv')
+pytestmark = pytest.mark.skipif(
+    not _launch_available(), reason='the ros2 command line and ros2 launch are not installed in this venv'
+)
 
 from test_packaging import install_tree, installed_env  # noqa: E402,F401  (the colcon install tree fixture)
 
@@ -37,6 +38,7 @@ def _goal(robot):
     state), same orientation."""
     from wmm_control.kinematics import KinematicModel
     from wmm_control.kinematics.frames import quaternion_from_matrix
+
     model = KinematicModel(robot)
     start = model.config.start
     model.update(np.asarray(start.base_pose, dtype=float), np.asarray(start.arm, dtype=float))
@@ -47,8 +49,14 @@ def _goal(robot):
 def _launch(install, domain, args):
     env = dict(installed_env(install), ROS_DOMAIN_ID=str(domain))
     env['PATH'] = os.pathsep.join([str(ROS2.parent), env.get('PATH', '')])
-    return subprocess.Popen([str(ROS2), 'launch', 'wmm_control', *args], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    return subprocess.Popen(
+        [str(ROS2), 'launch', 'wmm_control', *args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
 
 
 def _interrupt(proc):
@@ -71,14 +79,19 @@ def _reach(domain, goals, use_sim_time, timeout=150.0):
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
-    node = rclpy.create_node('launch_test', context=context, parameter_overrides=[
-        Parameter('use_sim_time', value=False)])
+    node = rclpy.create_node(
+        'launch_test', context=context, parameter_overrides=[Parameter('use_sim_time', value=False)]
+    )
     executor = rclpy.executors.SingleThreadedExecutor(context=context)
     executor.add_node(node)
     ee, pubs, msgs = {}, {}, {}
     for ns, (position, quat) in goals.items():
-        node.create_subscription(PoseStamped, f'{ns}/ee_pose', lambda m, ns=ns: ee.__setitem__(ns, np.array([
-            m.pose.position.x, m.pose.position.y, m.pose.position.z])), 10)
+        node.create_subscription(
+            PoseStamped,
+            f'{ns}/ee_pose',
+            lambda m, ns=ns: ee.__setitem__(ns, np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z])),
+            10,
+        )
         pubs[ns] = node.create_publisher(PoseStamped, f'{ns}/goal_pose', 10)
         msg = PoseStamped()
         msg.header.frame_id = 'world'
@@ -93,7 +106,7 @@ def _reach(domain, goals, use_sim_time, timeout=150.0):
             executor.spin_once(timeout_sec=0.05)
             for ns, pub in pubs.items():
                 if node.count_subscribers(f'{ns}/goal_pose') and int(time.monotonic() * 2) % 2 == 0:
-                    pub.publish(msgs[ns])        # again and again: the resolver may join late
+                    pub.publish(msgs[ns])  # again and again: the resolver may join late
                 if ns in ee and np.linalg.norm(ee[ns] - goals[ns][0]) < 0.01:
                     reached.add(ns)
     finally:
@@ -113,7 +126,12 @@ CASES = [
 
 @pytest.mark.parametrize('launch_file, args, robots, nodes', CASES, ids=[c[0] + ' ' + ' '.join(c[1]) for c in CASES])
 def test_the_launch_file_brings_up_a_system_that_reaches_a_goal_and_stops_cleanly_on_ctrl_c(
-        install_tree, launch_file, args, robots, nodes):  # noqa: F811
+    install_tree,  # noqa: F811
+    launch_file,
+    args,
+    robots,
+    nodes,
+):
     assert (install_tree / 'share' / 'wmm_control' / 'launch' / launch_file).is_file()
     domain = 1 + (os.getpid() + hash(launch_file)) % 100
     proc = _launch(install_tree, domain, [launch_file, *args, 'viewer:=false'])

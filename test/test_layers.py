@@ -29,18 +29,19 @@ LAYERS = {
     'wmm_control.kinematics': 'core',
     'wmm_control.base': 'core',
     'wmm_control.resolvers': 'core',
-    'wmm_control.cycle': 'core',                    # one control period: resolver, base, compensation
-    'wmm_control.viewer': 'core',                   # the browser viewer's scene, panel and drag, ROS-free
+    'wmm_control.cycle': 'core',  # one control period: resolver, base, compensation
+    'wmm_control.viewer': 'core',  # the browser viewer's scene, panel and drag, ROS-free
     # the scenario file format (goals, trajectories), ROS-free: the goal_sequencer node plays it
     'wmm_control.experiments.scenario': 'core',
     'wmm_control.experiments.trajectories': 'core',
     'sim_bridge': 'simulator',
-    'sim_bridge.node': 'nodes',                     # wmm_sim, the simulator's ROS node
+    'sim_bridge.node': 'nodes',  # wmm_sim, the simulator's ROS node
     'wmm_control.nodes': 'nodes',
-    'wmm_control.launching': 'nodes',               # the nodes the launch files start
+    'wmm_control.launching': 'nodes',  # the nodes the launch files start
     'wmm_control.experiments': 'experiments',
     'wmm_control.cli': 'cli',
 }
+
 
 def _modules():
     """``{dotted name: path}`` of every module of the packages."""
@@ -68,8 +69,9 @@ def layer_of(module):
 def imports(module, source):
     """``[(line, imported module)]``: every import of one of the packages in ``source``, at any
     depth (module level, functions, classes), relative ones resolved."""
-    package = module.split('.') if module in MODULES and MODULES[module].name == '__init__.py' \
-        else module.split('.')[:-1]
+    package = (
+        module.split('.') if module in MODULES and MODULES[module].name == '__init__.py' else module.split('.')[:-1]
+    )
     out = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
@@ -77,7 +79,7 @@ def imports(module, source):
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ''
             if node.level:
-                base = '.'.join(package[:len(package) - node.level + 1] + ([base] if base else []))
+                base = '.'.join(package[: len(package) - node.level + 1] + ([base] if base else []))
             for alias in node.names:
                 full = f'{base}.{alias.name}'
                 out.append((node.lineno, full if full in MODULES else base))
@@ -101,14 +103,19 @@ def test_every_module_has_a_layer():
 @pytest.mark.parametrize('module', sorted(MODULES))
 def test_no_module_imports_a_higher_layer(module):
     found = upward(module, MODULES[module].read_text())
-    assert not found, (f'{module} ({layer_of(module)}) imports from higher layers: '
-                       + ', '.join(f'line {line}: {name} ({layer_of(name)})' for line, name in found))
+    assert not found, f'{module} ({layer_of(module)}) imports from higher layers: ' + ', '.join(
+        f'line {line}: {name} ({layer_of(name)})' for line, name in found
+    )
 
 
 def test_an_upward_import_inside_a_function_is_found():
-    source = ('from wmm_control.errors import ConfigError\n\n\n'
-              'def f():\n    from wmm_control.nodes.parameters import load_defaults\n    return load_defaults\n\n\n'
-              'class C:\n    def g(self):\n        from ..cli import experiment\n        return experiment\n')
-    assert upward('wmm_control.kinematics.model', source) == [(5, 'wmm_control.nodes.parameters'),
-                                                             (11, 'wmm_control.cli.experiment')]
+    source = (
+        'from wmm_control.errors import ConfigError\n\n\n'
+        'def f():\n    from wmm_control.nodes.parameters import load_defaults\n    return load_defaults\n\n\n'
+        'class C:\n    def g(self):\n        from ..cli import experiment\n        return experiment\n'
+    )
+    assert upward('wmm_control.kinematics.model', source) == [
+        (5, 'wmm_control.nodes.parameters'),
+        (11, 'wmm_control.cli.experiment'),
+    ]
     assert upward('wmm_control.cli.experiment', source) == []

@@ -20,21 +20,80 @@ from wmm_control.robot_config import load_robot
 SIM_GROUP = {'clamped', 'rejected', 'position_limited', 'command_age_s'}
 DIAGNOSTIC_KEYS = {
     '/wmm_sim: simulation': {'sim_time_s', 'steps', 'real_time_factor'},
-    '/swmr_controller': {'status', 'route', 'qp_status', 'icr_next_xy', 'icr_at_infinity', 'active_constraints',
-                        'solve_time_us', 'beta_ref', 'feasible_twist', 'reference', 'reference_age_s',
-                        'references_rejected', 'cycles', 'joint_states_rejected', 'stale_cycles',
-                        'joint_states_skipped', 'commands_not_applied', 'measured_period_s'},
-    '/mecanum_controller': {'status', 'velocity_scale', 'accel_scale', 'reference', 'reference_dropped', 'reference_limited',
-                           'feasible_twist', 'wheel_rates', 'wheel_rate_ratio', 'reference_age_s',
-                           'references_rejected', 'cycles', 'joint_states_rejected', 'stale_cycles',
-                           'commands_not_applied', 'joint_states_skipped', 'measured_period_s'},
+    '/swmr_controller': {
+        'status',
+        'route',
+        'qp_status',
+        'icr_next_xy',
+        'icr_at_infinity',
+        'active_constraints',
+        'solve_time_us',
+        'beta_ref',
+        'feasible_twist',
+        'reference',
+        'reference_age_s',
+        'references_rejected',
+        'cycles',
+        'joint_states_rejected',
+        'stale_cycles',
+        'joint_states_skipped',
+        'commands_not_applied',
+        'measured_period_s',
+    },
+    '/mecanum_controller': {
+        'status',
+        'velocity_scale',
+        'accel_scale',
+        'reference',
+        'reference_dropped',
+        'reference_limited',
+        'feasible_twist',
+        'wheel_rates',
+        'wheel_rate_ratio',
+        'reference_age_s',
+        'references_rejected',
+        'cycles',
+        'joint_states_rejected',
+        'stale_cycles',
+        'commands_not_applied',
+        'joint_states_skipped',
+        'measured_period_s',
+    },
 }
-RESOLVER_ALWAYS = {'cycles', 'goals', 'goals_rejected', 'compensation_dropped', 'stale_cycles',
-                   'joint_states_skipped', 'measured_period_s', 'obstacles'}
-RESOLVER_GOAL = {'method', 'mode', 'psi', 'position_error_m', 'orientation_error_rad', 'limit_scale', 'accel_scale',
-                 'null_scale', 'compensation_scale', 'compensated', 'limited', 'sigma_min', 'cycle_time_us', 'reference_time_left_s',
-                 'clearance_m', 'closest_pair', 'collision_constraints', 'collision_changed',
-                 'goal_reached', 'goal_stalled', 'arm_command', 'base_reference'}
+RESOLVER_ALWAYS = {
+    'cycles',
+    'goals',
+    'goals_rejected',
+    'compensation_dropped',
+    'stale_cycles',
+    'joint_states_skipped',
+    'measured_period_s',
+    'obstacles',
+}
+RESOLVER_GOAL = {
+    'method',
+    'mode',
+    'psi',
+    'position_error_m',
+    'orientation_error_rad',
+    'limit_scale',
+    'accel_scale',
+    'null_scale',
+    'compensation_scale',
+    'compensated',
+    'limited',
+    'sigma_min',
+    'cycle_time_us',
+    'reference_time_left_s',
+    'clearance_m',
+    'closest_pair',
+    'collision_constraints',
+    'collision_changed',
+    'goal_reached',
+    'goal_stalled',
+    'arm_command',
+    'base_reference',
+}
 
 
 class Listener(Node):
@@ -49,18 +108,39 @@ class Listener(Node):
 def test_diagnostics_keys_are_the_documented_ones(ros, robot):
     config = load_robot(robot)
     listener = ros.add(Listener(ros.context))
-    resolver = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-        robot=robot, method='task_sharing' if robot == 'steerable' else 'amp', diagnostics_period=0.05,
-        **LOCKSTEP_WAITS['redundancy_resolver'])))
+    resolver = ros.add(
+        RedundancyResolverNode(
+            context=ros.context,
+            parameter_overrides=overrides(
+                robot=robot,
+                method='task_sharing' if robot == 'steerable' else 'amp',
+                diagnostics_period=0.05,
+                **LOCKSTEP_WAITS['redundancy_resolver'],
+            ),
+        )
+    )
     if robot == 'steerable':
-        ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(
-            diagnostics_period=0.05, **LOCKSTEP_WAITS['swmr_controller'])))
+        ros.add(
+            SwmrControllerNode(
+                context=ros.context,
+                parameter_overrides=overrides(diagnostics_period=0.05, **LOCKSTEP_WAITS['swmr_controller']),
+            )
+        )
     else:
-        ros.add(MecanumControllerNode(context=ros.context, parameter_overrides=overrides(
-            robot=robot, diagnostics_period=0.05, **LOCKSTEP_WAITS['mecanum_controller'])))
-    sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(
-        robot=robot, timing='lockstep', diagnostics_period=0.05)))
-    assert ros.spin_until(lambda: sim.world.time >= 0.3, timeout=30.0)       # no goal yet
+        ros.add(
+            MecanumControllerNode(
+                context=ros.context,
+                parameter_overrides=overrides(
+                    robot=robot, diagnostics_period=0.05, **LOCKSTEP_WAITS['mecanum_controller']
+                ),
+            )
+        )
+    sim = ros.add(
+        SimNode(
+            context=ros.context, parameter_overrides=overrides(robot=robot, timing='lockstep', diagnostics_period=0.05)
+        )
+    )
+    assert ros.spin_until(lambda: sim.world.time >= 0.3, timeout=30.0)  # no goal yet
     goal = PoseStamped()
     goal.header.frame_id = 'world'
     x, y, z = config.start.ee_pose[:3] + np.array([0.05, 0.0, 0.0])
@@ -76,8 +156,11 @@ def test_diagnostics_keys_are_the_documented_ones(ros, robot):
     groups = sim.world.command_groups
     expected = dict(DIAGNOSTIC_KEYS, **{f'/wmm_sim: {g} commands': SIM_GROUP for g in groups})
     base = '/swmr_controller' if robot == 'steerable' else '/mecanum_controller'
-    expected = {k: v for k, v in expected.items() if k != ('/mecanum_controller' if base == '/swmr_controller'
-                                                           else '/swmr_controller')}
+    expected = {
+        k: v
+        for k, v in expected.items()
+        if k != ('/mecanum_controller' if base == '/swmr_controller' else '/swmr_controller')
+    }
     assert set(seen) == set(expected) | {'/redundancy_resolver'}
     for name, keys in expected.items():
         assert all(k == keys for k in seen[name]), (name, [k ^ keys for k in seen[name]])
@@ -102,10 +185,15 @@ def test_qos_sensor_data_and_commands(ros):
     ros.spin_for(0.5)
     assert _reliability(probe, '/joint_states', True) == {'wmm_sim': ReliabilityPolicy.RELIABLE}
     subs = _reliability(probe, '/joint_states', False)
-    assert subs == {'swmr_controller': ReliabilityPolicy.BEST_EFFORT,
-                    'redundancy_resolver': ReliabilityPolicy.BEST_EFFORT}
+    assert subs == {
+        'swmr_controller': ReliabilityPolicy.BEST_EFFORT,
+        'redundancy_resolver': ReliabilityPolicy.BEST_EFFORT,
+    }
     assert _reliability(probe, '/odom', False) == {'redundancy_resolver': ReliabilityPolicy.BEST_EFFORT}
-    for topic, node in (('/arm_controller/commands', 'redundancy_resolver'), ('/base/reference', 'redundancy_resolver'),
-                        ('/steer_controller/commands', 'swmr_controller')):
+    for topic, node in (
+        ('/arm_controller/commands', 'redundancy_resolver'),
+        ('/base/reference', 'redundancy_resolver'),
+        ('/steer_controller/commands', 'swmr_controller'),
+    ):
         assert _reliability(probe, topic, True) == {node: ReliabilityPolicy.RELIABLE}
     assert set(_reliability(probe, '/arm_controller/commands', False).values()) == {ReliabilityPolicy.RELIABLE}

@@ -24,18 +24,26 @@ from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.resolvers.safety import SafetyStage
 from wmm_control.robot_config import load_robot
 
-BALLS = parse_obstacles([{'name': 'ball', 'shape': 'sphere', 'size': [0.15], 'pose': [0.7, 0.5, 1.1]},
-                         {'name': 'low', 'shape': 'sphere', 'size': [0.2], 'pose': [0.9, -0.3, 0.2]}], 'test')
+BALLS = parse_obstacles(
+    [
+        {'name': 'ball', 'shape': 'sphere', 'size': [0.15], 'pose': [0.7, 0.5, 1.1]},
+        {'name': 'low', 'shape': 'sphere', 'size': [0.2], 'pose': [0.9, -0.3, 0.2]},
+    ],
+    'test',
+)
 
 
-@pytest.mark.parametrize('entry, message', [
-    ({'shape': 'cone', 'size': [1.0], 'pose': [0, 0, 0]}, 'shape must be one of'),
-    ({'shape': 'box', 'size': [1.0, 1.0], 'pose': [0, 0, 0]}, 'takes 3 size entries'),
-    ({'shape': 'sphere', 'size': [0.0], 'pose': [0, 0, 0]}, 'finite and > 0'),
-    ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0]}, 'expected 3 or 6 numbers'),
-    ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0, float('nan')]}, 'finite'),
-    ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0, 0], 'colour': 'red'}, 'unknown keys'),
-])
+@pytest.mark.parametrize(
+    'entry, message',
+    [
+        ({'shape': 'cone', 'size': [1.0], 'pose': [0, 0, 0]}, 'shape must be one of'),
+        ({'shape': 'box', 'size': [1.0, 1.0], 'pose': [0, 0, 0]}, 'takes 3 size entries'),
+        ({'shape': 'sphere', 'size': [0.0], 'pose': [0, 0, 0]}, 'finite and > 0'),
+        ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0]}, 'expected 3 or 6 numbers'),
+        ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0, float('nan')]}, 'finite'),
+        ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0, 0], 'colour': 'red'}, 'unknown keys'),
+    ],
+)
 def test_a_bad_obstacle_entry_is_refused_with_its_reason(entry, message):
     with pytest.raises(ConfigError, match=message):
         parse_obstacles([entry], 'test.yaml')
@@ -45,20 +53,26 @@ def test_obstacle_files_are_checked(tmp_path):
     with pytest.raises(ConfigError, match='not found'):
         load_obstacles(tmp_path / 'missing.yaml')
     twice = tmp_path / 'twice.yaml'
-    twice.write_text('obstacles:\n  - {name: a, shape: sphere, size: [0.1], pose: [0, 0, 0]}\n'
-                     '  - {name: a, shape: sphere, size: [0.1], pose: [1, 0, 0]}\n')
+    twice.write_text(
+        'obstacles:\n  - {name: a, shape: sphere, size: [0.1], pose: [0, 0, 0]}\n'
+        '  - {name: a, shape: sphere, size: [0.1], pose: [1, 0, 0]}\n'
+    )
     with pytest.raises(ConfigError, match='used twice'):
         load_obstacles(twice)
     assert [o.name for o in load_obstacles('table_pillar')] == ['table', 'pillar']
 
 
 def test_signed_distances_of_the_three_shapes():
-    box, ball, post = parse_obstacles([
-        {'shape': 'box', 'size': [2.0, 1.0, 0.5], 'pose': [1.0, 0.0, 0.0, 0.0, 0.0, np.pi / 2]},
-        {'shape': 'sphere', 'size': [0.5], 'pose': [0.0, 0.0, 1.0]},
-        {'shape': 'cylinder', 'size': [0.1, 2.0], 'pose': [0.0, 2.0, 1.0]}], 'test')
-    assert box.signed_distance([1.0, 0.0, 0.0]) == pytest.approx(-0.25)          # the centre: 0.25 to the top
-    assert box.signed_distance([1.0, 1.5, 0.0]) == pytest.approx(0.5)            # turned: its x is the world's y
+    box, ball, post = parse_obstacles(
+        [
+            {'shape': 'box', 'size': [2.0, 1.0, 0.5], 'pose': [1.0, 0.0, 0.0, 0.0, 0.0, np.pi / 2]},
+            {'shape': 'sphere', 'size': [0.5], 'pose': [0.0, 0.0, 1.0]},
+            {'shape': 'cylinder', 'size': [0.1, 2.0], 'pose': [0.0, 2.0, 1.0]},
+        ],
+        'test',
+    )
+    assert box.signed_distance([1.0, 0.0, 0.0]) == pytest.approx(-0.25)  # the centre: 0.25 to the top
+    assert box.signed_distance([1.0, 1.5, 0.0]) == pytest.approx(0.5)  # turned: its x is the world's y
     assert ball.signed_distance([0.0, 0.0, 2.0]) == pytest.approx(0.5)
     assert post.signed_distance([0.0, 2.05, 1.5]) == pytest.approx(-0.05)
     assert post.signed_distance([0.0, 2.0, 2.5]) == pytest.approx(0.5)
@@ -78,7 +92,7 @@ def test_obstacle_distances_agree_with_the_simulator_and_their_rates_are_their_d
             truth = {(a, b): d for a, b, d in checker.collisions(q, base) if b in ('ball', 'low')}
             mine = [p for p in pairs if p.links[1] in ('ball', 'low')]
             assert mine, 'some link within 1 m of an obstacle'
-            nearest = {}                      # a link may have several shapes: PyBullet's is the nearest
+            nearest = {}  # a link may have several shapes: PyBullet's is the nearest
             for pair in mine:
                 nearest[pair.links] = min(nearest.get(pair.links, np.inf), pair.distance)
             for links, distance in nearest.items():
@@ -96,22 +110,26 @@ def test_obstacle_distances_agree_with_the_simulator_and_their_rates_are_their_d
 
 
 def test_a_base_driving_at_an_obstacle_is_slowed_to_what_it_can_brake():
-    robot = load_robot('mecanum')        # its base brakes at 0.025 m/s²: 1.25 m from full speed
-    pillar = parse_obstacles([{'name': 'pillar', 'shape': 'cylinder', 'size': [0.1, 2.0], 'pose': [0.9, 0.0, 0.0]}],
-                             'test')
+    robot = load_robot('mecanum')  # its base brakes at 0.025 m/s²: 1.25 m from full speed
+    pillar = parse_obstacles(
+        [{'name': 'pillar', 'shape': 'cylinder', 'size': [0.1, 2.0], 'pose': [0.9, 0.0, 0.0]}], 'test'
+    )
     stage = SafetyStage.for_robot(robot)
     stage.set_obstacles(pillar)
-    assert stage.obstacle_lookahead == pytest.approx(0.02 + 0.25 ** 2 / (2 * 0.025))
+    assert stage.obstacle_lookahead == pytest.approx(0.02 + 0.25**2 / (2 * 0.025))
     q = np.array(robot.start.arm)
     n = q.size
-    command = np.concatenate(([0.25, 0.0, 0.0], np.zeros(n)))          # full speed ahead, the arm still
+    command = np.concatenate(([0.25, 0.0, 0.0], np.zeros(n)))  # full speed ahead, the arm still
     box = np.concatenate((robot.base.velocity, robot.arm.velocity))
     out = stage.filter(q, command, -box, box, base_pose=np.zeros(3), base_axes=(0, 1, 2))
     assert out.changed
     # the base's front is about half a metre from the pillar: braking at 0.025 m/s² stops from
     # √(2 · 0.025 · (d − d_s)) ≈ 0.15 m/s at most (the arm, nearer, can pull back faster)
-    nearest = min(p.distance for p in stage.collision.within(q, 2.0, np.zeros(3))[0]
-                  if 'pillar' in p.links and not p.rate_jacobian.any())
+    nearest = min(
+        p.distance
+        for p in stage.collision.within(q, 2.0, np.zeros(3))[0]
+        if 'pillar' in p.links and not p.rate_jacobian.any()
+    )
     assert 0.4 < nearest < 0.6
     assert 0.0 < out.command[0] <= np.sqrt(2 * 0.025 * (nearest - 0.02)) + 1e-6
     away = stage.filter(q, -command, -box, box, base_pose=np.zeros(3), base_axes=(0, 1, 2))
@@ -127,8 +145,9 @@ def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own
     lagged, or its wheels swept round while it changed its ICR), it is sent a twist on its own
     path, slower, whatever the method asked."""
     robot = load_robot('steerable')
-    table = parse_obstacles([{'name': 'table', 'shape': 'box', 'size': [0.5, 1.2, 0.8], 'pose': [0.9, 0.0, 0.0]}],
-                            'test')
+    table = parse_obstacles(
+        [{'name': 'table', 'shape': 'box', 'size': [0.5, 1.2, 0.8], 'pose': [0.9, 0.0, 0.0]}], 'test'
+    )
     stage = SafetyStage.for_robot(robot)
     stage.set_obstacles(table)
     assert stage.base_lag == pytest.approx(0.5)
@@ -138,11 +157,12 @@ def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own
     pose = np.zeros(3)
     near = min(p.distance for p in stage.collision.within(q, 2.0, pose)[0] if p.base_jacobian.any())
     assert 0.2 < near < 0.4
-    allowed = 0.5 * (np.sqrt(0.25 + 2 * (near - 0.02) / 0.5) - 0.5)       # after the lag
-    assert allowed < np.sqrt(2 * 0.5 * (near - 0.02)) - 0.1                # well below the rows without it
-    command = np.concatenate(([0.6, 0.0, 0.0], np.zeros(q.size)))          # the method's: at the table
-    slow = stage.filter(q, command, -box, box, base_pose=pose, base_axes=(0, 1, 2),
-                        base_velocity=np.array([0.05, 0.0, 0.0]))
+    allowed = 0.5 * (np.sqrt(0.25 + 2 * (near - 0.02) / 0.5) - 0.5)  # after the lag
+    assert allowed < np.sqrt(2 * 0.5 * (near - 0.02)) - 0.1  # well below the rows without it
+    command = np.concatenate(([0.6, 0.0, 0.0], np.zeros(q.size)))  # the method's: at the table
+    slow = stage.filter(
+        q, command, -box, box, base_pose=pose, base_axes=(0, 1, 2), base_velocity=np.array([0.05, 0.0, 0.0])
+    )
     assert slow.changed and 0.0 < slow.command[0] <= allowed + 1e-6
     # measured at 0.5 m/s, sideways and turning (not the method's direction): the base is sent a
     # twist along its own, slower, while the method asked for the table at 0.6 m/s
@@ -154,8 +174,9 @@ def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own
     np.testing.assert_allclose(base, scale * measured, atol=1e-12)
     assert scale < 0.7
     # without a lag (a wheeled base) the same call only holds the reference to its rows
-    wheeled = SafetyStage(stage.collision, stage.params, robot.arm.acceleration, robot.base.velocity,
-                          robot.base.acceleration)
+    wheeled = SafetyStage(
+        stage.collision, stage.params, robot.arm.acceleration, robot.base.velocity, robot.base.acceleration
+    )
     plain = wheeled.filter(q, command, -box, box, base_pose=pose, base_axes=(0, 1, 2), base_velocity=measured)
     assert plain.command[0] > allowed and abs(plain.command[1]) < 0.05
 
@@ -166,17 +187,21 @@ def test_a_slow_braking_base_is_not_let_on_at_an_obstacle_because_its_turn_swing
     distance's rate within the row for the moment; the stage must brake the linear approach
     anyway, as hard as the base's acceleration box allows."""
     robot = load_robot('mecanum')
-    pillar = parse_obstacles([{'name': 'pillar', 'shape': 'cylinder', 'size': [0.06, 3.0],
-                               'pose': [0.65, -0.4, 0.0]}], 'test')
+    pillar = parse_obstacles(
+        [{'name': 'pillar', 'shape': 'cylinder', 'size': [0.06, 3.0], 'pose': [0.65, -0.4, 0.0]}], 'test'
+    )
     stage = SafetyStage.for_robot(robot)
     stage.set_obstacles(pillar)
     q, pose = np.array(robot.start.arm), np.zeros(3)
-    twist = np.array([0.185, 0.1, -0.3])                                    # the base's twist now
+    twist = np.array([0.185, 0.1, -0.3])  # the base's twist now
     step = np.asarray(robot.base.acceleration) * robot.period
     arm = np.asarray(robot.arm.velocity)
     lower, upper = np.concatenate((twist - step, -arm)), np.concatenate((twist + step, arm))
-    body = [p for p in stage.collision.within(q, stage.obstacle_lookahead, pose)[0]
-            if p.base_jacobian.any() and not p.rate_jacobian.any()]                # chassis and wheels
+    body = [
+        p
+        for p in stage.collision.within(q, stage.obstacle_lookahead, pose)[0]
+        if p.base_jacobian.any() and not p.rate_jacobian.any()
+    ]  # chassis and wheels
     near = min(body, key=lambda p: p.distance)
     j = near.base_jacobian
     slowest = float(np.min(robot.base.acceleration[:2]))
@@ -197,8 +222,15 @@ def test_a_goal_inside_an_obstacle_is_impossible():
     assert workspace.impossible([1.5, 0.0, 0.9], None, table) == ''
 
 
-def _marker(kind, action=Marker.ADD, frame='world', marker_id=0, scale=(0.2, 0.2, 0.2), position=(1.0, 0.0, 0.5),
-            quat=(0.0, 0.0, 0.0, 1.0)):
+def _marker(
+    kind,
+    action=Marker.ADD,
+    frame='world',
+    marker_id=0,
+    scale=(0.2, 0.2, 0.2),
+    position=(1.0, 0.0, 0.5),
+    quat=(0.0, 0.0, 0.0, 1.0),
+):
     m = Marker()
     m.header.frame_id = frame
     m.ns, m.id, m.type, m.action = 'test', marker_id, kind, action
@@ -211,12 +243,19 @@ def _marker(kind, action=Marker.ADD, frame='world', marker_id=0, scale=(0.2, 0.2
 def test_markers_add_replace_and_delete_obstacles_and_bad_ones_are_rejected():
     obstacles = ObstacleSet('table_pillar', 'world')
     fixed = len(obstacles.obstacles)
-    changed, errors = obstacles.apply(MarkerArray(markers=[
-        _marker(Marker.CUBE, scale=(0.4, 0.6, 0.8)), _marker(Marker.SPHERE, marker_id=1),
-        _marker(Marker.CYLINDER, marker_id=2, scale=(0.3, 0.3, 1.0)),
-        _marker(Marker.ARROW, marker_id=3), _marker(Marker.CUBE, marker_id=4, frame='map'),
-        _marker(Marker.CUBE, marker_id=5, quat=(0.0, 0.0, 0.0, 0.0)),
-        _marker(Marker.SPHERE, marker_id=6, scale=(float('nan'), 0.1, 0.1))]))
+    changed, errors = obstacles.apply(
+        MarkerArray(
+            markers=[
+                _marker(Marker.CUBE, scale=(0.4, 0.6, 0.8)),
+                _marker(Marker.SPHERE, marker_id=1),
+                _marker(Marker.CYLINDER, marker_id=2, scale=(0.3, 0.3, 1.0)),
+                _marker(Marker.ARROW, marker_id=3),
+                _marker(Marker.CUBE, marker_id=4, frame='map'),
+                _marker(Marker.CUBE, marker_id=5, quat=(0.0, 0.0, 0.0, 0.0)),
+                _marker(Marker.SPHERE, marker_id=6, scale=(float('nan'), 0.1, 0.1)),
+            ]
+        )
+    )
     assert changed and len(obstacles.obstacles) == fixed + 3
     assert len(errors) == 4 and 'not an obstacle' in errors[0] and "'map'" in errors[1]
     box, ball, post = obstacles.obstacles[fixed:]
@@ -231,19 +270,29 @@ def test_markers_add_replace_and_delete_obstacles_and_bad_ones_are_rejected():
 def test_the_nodes_take_obstacles_live_reject_goals_inside_them_and_the_simulator_reports_contact():
     ros = RosHarness()
     try:
-        resolver = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-            diagnostics_period=1e-9)))
+        resolver = ros.add(
+            RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(diagnostics_period=1e-9))
+        )
         sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(diagnostics_period=0.05)))
         driver = ros.add(Node('obstacle_driver', context=ros.context))
         pub = driver.create_publisher(MarkerArray, '/obstacles', 10)
         goals = driver.create_publisher(PoseStamped, '/goal_pose', 10)
         reports = []
-        driver.create_subscription(DiagnosticArray, '/diagnostics', lambda m: reports.extend(
-            {kv.key: kv.value for kv in s.values} | {'level': s.level} for s in m.status if s.name.endswith('obstacles')), 10)
+        driver.create_subscription(
+            DiagnosticArray,
+            '/diagnostics',
+            lambda m: reports.extend(
+                {kv.key: kv.value for kv in s.values} | {'level': s.level}
+                for s in m.status
+                if s.name.endswith('obstacles')
+            ),
+            10,
+        )
         # a box over the robot's arm: the simulator reports the contact
         pub.publish(MarkerArray(markers=[_marker(Marker.CUBE, scale=(0.3, 0.3, 0.3), position=(0.6, 0.0, 1.0))]))
-        assert ros.spin_until(lambda: len(resolver.obstacles.obstacles) == 1 and len(sim.world.obstacles) == 1
-                              and reports, timeout=20.0)
+        assert ros.spin_until(
+            lambda: len(resolver.obstacles.obstacles) == 1 and len(sim.world.obstacles) == 1 and reports, timeout=20.0
+        )
         assert ros.spin_until(lambda: any(r['contact_periods'] != '0' for r in reports), timeout=20.0)
         last = reports[-1]
         assert float(last['clearance_m']) < 0.0 and last['closest_obstacle'] == 'test/0' and last['level'] == b'\x02'

@@ -33,9 +33,23 @@ def install_tree(tmp_path_factory):
         pytest.fail(f'colcon not found next to {sys.executable}: run the README set-up')
     work = tmp_path_factory.mktemp('colcon')
     result = subprocess.run(
-        [str(COLCON), '--log-base', str(work / 'log'), 'build', '--base-paths', str(REPO),
-         '--build-base', str(work / 'build'), '--install-base', str(work / 'install')],
-        cwd=work, capture_output=True, text=True, timeout=600)
+        [
+            str(COLCON),
+            '--log-base',
+            str(work / 'log'),
+            'build',
+            '--base-paths',
+            str(REPO),
+            '--build-base',
+            str(work / 'build'),
+            '--install-base',
+            str(work / 'install'),
+        ],
+        cwd=work,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert result.returncode == 0, result.stdout + result.stderr
     return work / 'install' / 'wmm_control'
 
@@ -66,7 +80,9 @@ def test_every_console_script_is_installed_under_lib_and_starts(install_tree):
         assert exe.is_file() and os.access(exe, os.X_OK), exe
         if name == 'wmm_experiment':
             out = subprocess.run([str(exe), '--help'], env=env, capture_output=True, text=True, timeout=120)
-            assert out.returncode == 0 and "sorour_table2" in out.stdout and "matrix_circle_0.25_b" in out.stdout, out.stderr
+            assert out.returncode == 0 and "sorour_table2" in out.stdout and "matrix_circle_0.25_b" in out.stdout, (
+                out.stderr
+            )
             continue
         if name == 'wmm_randomized':
             out = subprocess.run([str(exe), '--help'], env=env, capture_output=True, text=True, timeout=120)
@@ -74,16 +90,18 @@ def test_every_console_script_is_installed_under_lib_and_starts(install_tree):
             continue
         if name == 'wmm_robot':
             # the installed share directory holds every shipped robot: check one of each new family
-            out = subprocess.run([str(exe), 'check', 'panda_diff'], env=env, capture_output=True, text=True,
-                                 timeout=120)
+            out = subprocess.run(
+                [str(exe), 'check', 'panda_diff'], env=env, capture_output=True, text=True, timeout=120
+            )
             assert out.returncode == 0 and 'differential wheels' in out.stdout, out.stderr
             continue
         if name == 'wmm_model':
             out = subprocess.run([str(exe), '--robot', 'B'], env=env, capture_output=True, text=True, timeout=120)
             assert out.returncode == 0, out.stderr
             # The installed copy reads its robot files from the installed share directory.
-            assert f'urdf: {install_tree / "share" / "wmm_control" / "config" / "robots" / "mecanum.urdf"}' \
-                in out.stdout
+            assert (
+                f'urdf: {install_tree / "share" / "wmm_control" / "config" / "robots" / "mecanum.urdf"}' in out.stdout
+            )
             continue
         # A node: it must come up and keep running until interrupted, then exit cleanly.
         proc = subprocess.Popen([str(exe)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -100,8 +118,9 @@ def test_every_console_script_is_installed_under_lib_and_starts(install_tree):
 
 def test_wmm_model_reports_a_clear_error_for_an_unknown_robot(install_tree):
     exe = install_tree / 'lib' / 'wmm_control' / 'wmm_model'
-    out = subprocess.run([str(exe), '--robot', 'C'], env=installed_env(install_tree),
-                         capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [str(exe), '--robot', 'C'], env=installed_env(install_tree), capture_output=True, text=True, timeout=120
+    )
     assert out.returncode == 2
     assert "unknown robot 'C'" in out.stderr
 
@@ -119,16 +138,24 @@ def _stop(proc):
 
 
 ROBOT_A = {'wmm_sim': [], 'swmr_controller': [], 'redundancy_resolver': []}
-ROBOT_B = {'wmm_sim': ['--ros-args', '-p', 'robot:=mecanum'], 'mecanum_controller': [],
-           'redundancy_resolver': ['--ros-args', '-p', 'robot:=mecanum']}      # amp: robot B's default
+ROBOT_B = {
+    'wmm_sim': ['--ros-args', '-p', 'robot:=mecanum'],
+    'mecanum_controller': [],
+    'redundancy_resolver': ['--ros-args', '-p', 'robot:=mecanum'],
+}  # amp: robot B's default
 
 
-ROBOT_UR = {'wmm_sim': ['--ros-args', '-p', 'robot:=ur_mecanum'],
-            'mecanum_controller': ['--ros-args', '-p', 'robot:=ur_mecanum'],
-            'redundancy_resolver': ['--ros-args', '-p', 'robot:=ur_mecanum']}
-ROBOT_PANDA = {'wmm_sim': ['--ros-args', '-p', 'robot:=panda_diff'], 'differential_controller': [],
-               'redundancy_resolver': ['--ros-args', '-p', 'robot:=panda_diff']}
-NEAR, FAR = (0.1, 0.05, -0.05), (1.5, -1.0, 0.0)     # offsets from the start: in reach, and one for the base
+ROBOT_UR = {
+    'wmm_sim': ['--ros-args', '-p', 'robot:=ur_mecanum'],
+    'mecanum_controller': ['--ros-args', '-p', 'robot:=ur_mecanum'],
+    'redundancy_resolver': ['--ros-args', '-p', 'robot:=ur_mecanum'],
+}
+ROBOT_PANDA = {
+    'wmm_sim': ['--ros-args', '-p', 'robot:=panda_diff'],
+    'differential_controller': [],
+    'redundancy_resolver': ['--ros-args', '-p', 'robot:=panda_diff'],
+}
+NEAR, FAR = (0.1, 0.05, -0.05), (1.5, -1.0, 0.0)  # offsets from the start: in reach, and one for the base
 
 
 def _run_system(install_tree, system, goals):
@@ -143,18 +170,40 @@ def _run_system(install_tree, system, goals):
 
     domain = 100 + os.getpid() % 100
     env = dict(installed_env(install_tree), ROS_DOMAIN_ID=str(domain))
-    procs = {name: subprocess.Popen([str(install_tree / 'lib' / 'wmm_control' / name)] + args, env=env,
-                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-             for name, args in system.items()}
+    procs = {
+        name: subprocess.Popen(
+            [str(install_tree / 'lib' / 'wmm_control' / name)] + args,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for name, args in system.items()
+    }
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('goal_test', context=context)
     executor = rclpy.executors.SingleThreadedExecutor(context=context)
     executor.add_node(node)
     ee = []
-    node.create_subscription(PoseStamped, '/ee_pose', lambda m: ee.append(np.array([
-        m.pose.position.x, m.pose.position.y, m.pose.position.z,
-        m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w])), 10)
+    node.create_subscription(
+        PoseStamped,
+        '/ee_pose',
+        lambda m: ee.append(
+            np.array(
+                [
+                    m.pose.position.x,
+                    m.pose.position.y,
+                    m.pose.position.z,
+                    m.pose.orientation.x,
+                    m.pose.orientation.y,
+                    m.pose.orientation.z,
+                    m.pose.orientation.w,
+                ]
+            )
+        ),
+        10,
+    )
     pub = node.create_publisher(PoseStamped, '/goal_pose', 10)
     reached_at = []
     try:
@@ -179,9 +228,11 @@ def _run_system(install_tree, system, goals):
             while time.monotonic() < end and not reached:
                 executor.spin_once(timeout_sec=0.05)
                 if node.count_subscribers('/goal_pose') and int(time.monotonic() * 2) % 2 == 0:
-                    pub.publish(msg)         # published again and again: the resolver may join late
+                    pub.publish(msg)  # published again and again: the resolver may join late
                 # within 1 cm, and 0.05 rad of the orientation (|<q, q_goal>| = cos(angle / 2))
-                reached = bool(ee) and np.linalg.norm(ee[-1][:3] - goal) < 0.01 and abs(ee[-1][3:] @ quat) > math.cos(0.025)
+                reached = (
+                    bool(ee) and np.linalg.norm(ee[-1][:3] - goal) < 0.01 and abs(ee[-1][3:] @ quat) > math.cos(0.025)
+                )
             reached_at.append(ee[-1] if reached else None)
             if not reached:
                 break
@@ -196,9 +247,14 @@ def _run_system(install_tree, system, goals):
 
 
 # Goals: position, orientation quaternion (x, y, z, w); robot B's tool keeps pointing along world x.
-@pytest.mark.parametrize('system, goal, quat', [(ROBOT_A, (2.0, 1.0, 1.0), (0.0, 0.0, 0.0, 1.0)),
-                                                (ROBOT_B, (0.75, 0.1, 0.45), (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5)))],
-                         ids=['robot A, task sharing', 'robot B, amp'])
+@pytest.mark.parametrize(
+    'system, goal, quat',
+    [
+        (ROBOT_A, (2.0, 1.0, 1.0), (0.0, 0.0, 0.0, 1.0)),
+        (ROBOT_B, (0.75, 0.1, 0.45), (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5))),
+    ],
+    ids=['robot A, task sharing', 'robot B, amp'],
+)
 def test_three_installed_executables_take_the_end_effector_to_a_published_goal(install_tree, system, goal, quat):
     """The simulator, the base controller and redundancy_resolver, each its own process started
     as ``ros2 run`` does, on a private domain: a goal published from this process is reached

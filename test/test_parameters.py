@@ -41,15 +41,22 @@ NODES = {
     'wmm_sim_b': (SimNode, sim_node.PARAMS, dict(robot='mecanum', slip_noise=[0.001, 0.002, 0.003])),
     'swmr_controller': (SwmrControllerNode, swmr_controller.PARAMS, dict(kp=3.0, reference_timeout=0.3)),
     'mecanum_controller': (MecanumControllerNode, mecanum_controller.PARAMS, dict(reference_timeout=0.4)),
-    'redundancy_resolver': (RedundancyResolverNode, redundancy_resolver.PARAMS,
-                            dict(method='amp', goal_tolerance=[0.02, 0.03], lambda_p=2.5)),
+    'redundancy_resolver': (
+        RedundancyResolverNode,
+        redundancy_resolver.PARAMS,
+        dict(method='amp', goal_tolerance=[0.02, 0.03], lambda_p=2.5),
+    ),
     'goal_sequencer': (GoalSequencerNode, goal_sequencer.PARAMS, dict(republish_period=2.0)),
-    'wmm_viewer': (ViewerNode, viewer.PARAMS, dict(host='127.0.0.1', port=18300, robot='mecanum',
-                                                   drag_publish_period=1.5)),
+    'wmm_viewer': (
+        ViewerNode,
+        viewer.PARAMS,
+        dict(host='127.0.0.1', port=18300, robot='mecanum', drag_publish_period=1.5),
+    ),
 }
 
 
 # ---------------------------------------------------------------- the parameter services, as ros2cli calls them
+
 
 def call(ros, client, request, timeout=10.0):
     assert client.wait_for_service(timeout_sec=timeout), client.srv_name
@@ -60,11 +67,15 @@ def call(ros, client, request, timeout=10.0):
 
 def dump(ros, caller, node_name):
     """What ``ros2 param dump <node_name>`` prints, as a dict (ListParameters + GetParameters)."""
-    listed = call(ros, caller.create_client(ListParameters, f'{node_name}/list_parameters'),
-                  ListParameters.Request(depth=ListParameters.Request.DEPTH_RECURSIVE))
+    listed = call(
+        ros,
+        caller.create_client(ListParameters, f'{node_name}/list_parameters'),
+        ListParameters.Request(depth=ListParameters.Request.DEPTH_RECURSIVE),
+    )
     names = sorted(listed.result.names)
-    got = call(ros, caller.create_client(GetParameters, f'{node_name}/get_parameters'),
-               GetParameters.Request(names=names))
+    got = call(
+        ros, caller.create_client(GetParameters, f'{node_name}/get_parameters'), GetParameters.Request(names=names)
+    )
     assert len(got.values) == len(names), f'{node_name}: get_parameters answered {len(got.values)} of {len(names)}'
     params = {}
     for name, value in zip(names, got.values):
@@ -90,6 +101,7 @@ def plain(value):
 
 # ---------------------------------------------------------------- declarations
 
+
 @pytest.mark.parametrize('key', sorted(NODES))
 def test_every_parameter_is_described_and_every_numeric_one_has_a_range(ros, key):
     cls, specs, params = NODES[key]
@@ -98,9 +110,14 @@ def test_every_parameter_is_described_and_every_numeric_one_has_a_range(ros, key
         desc = node.describe_parameter(spec.name)
         value = node.get_parameter(spec.name).value
         assert desc.description, spec.name
-        numeric = isinstance(value, (int, float)) and not isinstance(value, bool) or (
-            isinstance(value, (list, tuple)) or hasattr(value, 'tolist')) and not isinstance(value, str) and \
-            len(value) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        numeric = (
+            isinstance(value, (int, float))
+            and not isinstance(value, bool)
+            or (isinstance(value, (list, tuple)) or hasattr(value, 'tolist'))
+            and not isinstance(value, str)
+            and len(value)
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        )
         if numeric:
             assert desc.floating_point_range or desc.integer_range, f'{key}: {spec.name} has no range'
         else:
@@ -108,6 +125,7 @@ def test_every_parameter_is_described_and_every_numeric_one_has_a_range(ros, key
 
 
 # ---------------------------------------------------------------- ros2 param dump, then --params-file
+
 
 @pytest.mark.parametrize('key', sorted(NODES))
 def test_the_dump_lists_every_parameter_and_loads_back(ros, key, tmp_path):
@@ -184,6 +202,7 @@ def test_an_invalid_or_read_only_set_is_refused_with_a_reason(ros, key, name, va
 
 # ---------------------------------------------------------------- live changes take effect
 
+
 class BaseDriver(Node):
     """Publishes joint states (zero positions) and base references; records the feasible twists."""
 
@@ -224,23 +243,31 @@ def run_cycles(ros, driver, seconds):
         ros.spin_for(0.025)
 
 
-@pytest.mark.parametrize('cls,robot,twist', [(SwmrControllerNode, 'steerable', (0.3, 0.0, 0.0)),
-                                              (MecanumControllerNode, 'mecanum', (0.0, 0.0, 0.3))],
-                         ids=['swmr_controller', 'mecanum_controller'])
+@pytest.mark.parametrize(
+    'cls,robot,twist',
+    [(SwmrControllerNode, 'steerable', (0.3, 0.0, 0.0)), (MecanumControllerNode, 'mecanum', (0.0, 0.0, 0.3))],
+    ids=['swmr_controller', 'mecanum_controller'],
+)
 def test_a_shorter_reference_timeout_set_at_run_time_brakes_the_base(ros, cls, robot, twist):
-    node = ros.add(cls(context=ros.context, parameter_overrides=overrides(
-        robot=robot, reference_timeout=30.0, reference_wait=0.0, joint_state_timeout=30.0)))
+    node = ros.add(
+        cls(
+            context=ros.context,
+            parameter_overrides=overrides(
+                robot=robot, reference_timeout=30.0, reference_wait=0.0, joint_state_timeout=30.0
+            ),
+        )
+    )
     driver = ros.add(BaseDriver(ros.context, load_robot(robot).wheel_joints))
     caller = ros.add(Node('param_cli', context=ros.context))
     ros.spin_for(0.3)
     driver.reference(twist)
     run_cycles(ros, driver, 0.6)
-    run_cycles(ros, driver, 0.6)             # no new reference for 0.6 s: still fresh at 30 s
+    run_cycles(ros, driver, 0.6)  # no new reference for 0.6 s: still fresh at 30 s
     moving = driver.speed()
     assert moving > 0.1
     result = set_parameter(ros, caller, node.get_fully_qualified_name(), 'reference_timeout', 0.1)
     assert result.successful, result.reason
-    run_cycles(ros, driver, 1.0)             # now stale: braked to rest within |v|/a (0.3 s at most)
+    run_cycles(ros, driver, 1.0)  # now stale: braked to rest within |v|/a (0.3 s at most)
     assert driver.speed() < 1e-9
     assert node.p.reference_timeout == 0.1
 
@@ -252,11 +279,11 @@ def test_a_shorter_command_timeout_set_at_run_time_zeroes_a_stale_command(ros):
     ros.spin_for(0.3)
     pub.publish(Float64MultiArray(data=[0.2, 0, 0, 0, 0, 0, 0]))
     ros.spin_for(0.5)
-    assert sim.world.command[0] == pytest.approx(0.2)     # held: younger than 10 s
+    assert sim.world.command[0] == pytest.approx(0.2)  # held: younger than 10 s
     result = set_parameter(ros, caller, sim.get_fully_qualified_name(), 'command_timeout', 0.1)
     assert result.successful, result.reason
     ros.spin_for(0.3)
-    assert sim.world.command[0] == 0.0                      # older than 0.1 s: zeroed
+    assert sim.world.command[0] == 0.0  # older than 0.1 s: zeroed
 
 
 def test_a_shorter_lockstep_timeout_set_at_run_time_steps_the_sim(ros):
@@ -271,24 +298,29 @@ def test_a_shorter_lockstep_timeout_set_at_run_time_steps_the_sim(ros):
 
 
 def test_lockstep_groups_set_at_run_time_change_what_the_sim_waits_for(ros):
-    sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(
-        timing='lockstep', lockstep_timeout=60.0, lockstep_groups='arm')))
+    sim = ros.add(
+        SimNode(
+            context=ros.context,
+            parameter_overrides=overrides(timing='lockstep', lockstep_timeout=60.0, lockstep_groups='arm'),
+        )
+    )
     caller = ros.add(Node('param_cli', context=ros.context))
     pub = caller.create_publisher(Float64MultiArray, '/arm_controller/commands', 10)
     assert ros.spin_until(lambda: sim._started, timeout=5.0)
     ros.spin_for(0.2)
     t0 = sim.world.time
     pub.publish(Float64MultiArray(data=[0.0] * 7))
-    assert ros.spin_until(lambda: sim.world.time > t0, timeout=5.0)      # the arm alone steps it
+    assert ros.spin_until(lambda: sim.world.time > t0, timeout=5.0)  # the arm alone steps it
     result = set_parameter(ros, caller, sim.get_fully_qualified_name(), 'lockstep_groups', 'arm,steer')
     assert result.successful, result.reason
     t1 = sim.world.time
     pub.publish(Float64MultiArray(data=[0.0] * 7))
     ros.spin_for(0.5)
-    assert sim.world.time == t1                                          # now it waits for steer too
+    assert sim.world.time == t1  # now it waits for steer too
 
 
 # ---------------------------------------------------------------- one home for every default
+
 
 def _leaves(tree, prefix=''):
     if isinstance(tree, dict):
@@ -298,10 +330,14 @@ def _leaves(tree, prefix=''):
         yield prefix[:-1], tree
 
 
-NODE_YAMLS = {'wmm_sim.yaml': sim_node.PARAMS, 'swmr_controller.yaml': swmr_controller.PARAMS,
-              'mecanum_controller.yaml': mecanum_controller.PARAMS,
-              'redundancy_resolver.yaml': redundancy_resolver.PARAMS, 'goal_sequencer.yaml': goal_sequencer.PARAMS,
-              'wmm_viewer.yaml': viewer.PARAMS}
+NODE_YAMLS = {
+    'wmm_sim.yaml': sim_node.PARAMS,
+    'swmr_controller.yaml': swmr_controller.PARAMS,
+    'mecanum_controller.yaml': mecanum_controller.PARAMS,
+    'redundancy_resolver.yaml': redundancy_resolver.PARAMS,
+    'goal_sequencer.yaml': goal_sequencer.PARAMS,
+    'wmm_viewer.yaml': viewer.PARAMS,
+}
 
 
 @pytest.mark.parametrize('yaml_name', sorted(NODE_YAMLS))
@@ -325,8 +361,12 @@ def test_the_control_period_has_one_home_the_robot_yaml(ros):
     # robot's (a node YAML that wrote it too would repeat a robot-YAML key, above), and a node
     # still takes its own when given one.
     with_period = [yaml_name for yaml_name, specs in NODE_YAMLS.items() if any(s.name == 'period' for s in specs)]
-    assert sorted(with_period) == ['mecanum_controller.yaml', 'redundancy_resolver.yaml', 'swmr_controller.yaml',
-                                   'wmm_sim.yaml']
+    assert sorted(with_period) == [
+        'mecanum_controller.yaml',
+        'redundancy_resolver.yaml',
+        'swmr_controller.yaml',
+        'wmm_sim.yaml',
+    ]
     for yaml_name in with_period:
         assert next(s for s in NODE_YAMLS[yaml_name] if s.name == 'period').default_from is robot_period
     for robot in ('steerable', 'mecanum'):
@@ -351,11 +391,24 @@ def test_method_tuning_has_its_home_in_the_resolver_classes():
 
 def test_no_robot_limit_has_a_default_in_code():
     # The base controllers' parameter classes take every limit from the robot YAML.
-    limits = {'steer_rate_limit', 'steer_accel_limit', 'drive_rate_limit', 'drive_accel_limit',
-              'base_velocity_limit', 'base_accel_limit', 'velocity_limit', 'accel_limit', 'wheel_rate_limit'}
+    limits = {
+        'steer_rate_limit',
+        'steer_accel_limit',
+        'drive_rate_limit',
+        'drive_accel_limit',
+        'base_velocity_limit',
+        'base_accel_limit',
+        'velocity_limit',
+        'accel_limit',
+        'wheel_rate_limit',
+    }
     for cls in (SwmrParams, WheelParams):
-        with_default = [f.name for f in dataclasses.fields(cls) if f.name in limits and (
-            f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING)]
+        with_default = [
+            f.name
+            for f in dataclasses.fields(cls)
+            if f.name in limits
+            and (f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING)
+        ]
         assert not with_default, f'{cls.__name__}: {with_default} have defaults in code'
 
 
@@ -377,39 +430,48 @@ def test_goal_tolerance_stall_time_and_min_progress_ratio_set_at_run_time_judge_
     ``rows: position``, r = 3) judges the position alone: its orientation is free, never a reason
     to report a stall."""
     from types import SimpleNamespace
-    node = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-        robot='mecanum', method='amp', rows='position')))
+
+    node = ros.add(
+        RedundancyResolverNode(
+            context=ros.context, parameter_overrides=overrides(robot='mecanum', method='amp', rows='position')
+        )
+    )
     caller = ros.add(Node('param_cli', context=ros.context))
-    near = SimpleNamespace(position_error=0.004, orientation_error=0.5)   # 4 mm, orientation far off
+    near = SimpleNamespace(position_error=0.004, orientation_error=0.5)  # 4 mm, orientation far off
     node.progress.update(near)
-    assert node.progress.reached                                           # orientation free at r = 3
+    assert node.progress.reached  # orientation free at r = 3
     assert set_parameter(ros, caller, node.get_fully_qualified_name(), 'goal_tolerance', [0.002, 0.02]).successful
     node.progress.start()
     node.progress.update(near)
-    assert not node.progress.reached                                      # 4 mm > the new 2 mm
+    assert not node.progress.reached  # 4 mm > the new 2 mm
     assert set_parameter(ros, caller, node.get_fully_qualified_name(), 'stall_time', 0.1).successful
-    for _ in range(6):                                                    # 6 periods, 0.15 s, no progress
+    for _ in range(6):  # 6 periods, 0.15 s, no progress
         node.progress.update(near)
     assert node.progress.stalled
-    node.progress.start()                                                 # 1.25 % closer each period:
-    for k in range(12):                                                   # 5 % per stall_time, under 10 %
-        node.progress.update(SimpleNamespace(position_error=0.5 * 0.9875 ** k, orientation_error=0.001))
+    node.progress.start()  # 1.25 % closer each period:
+    for k in range(12):  # 5 % per stall_time, under 10 %
+        node.progress.update(SimpleNamespace(position_error=0.5 * 0.9875**k, orientation_error=0.001))
     assert node.progress.stalled
     assert set_parameter(ros, caller, node.get_fully_qualified_name(), 'min_progress_ratio', 0.02).successful
-    node.progress.update(SimpleNamespace(position_error=0.5 * 0.9875 ** 12, orientation_error=0.001))
-    assert not node.progress.stalled                                      # 5 % is progress now
-    full = ros.add(RedundancyResolverNode(context=ros.context, cli_args=['--ros-args', '-r', '__node:=full'],
-                                          parameter_overrides=overrides(robot='mecanum')))    # amp, rows full: the defaults
+    node.progress.update(SimpleNamespace(position_error=0.5 * 0.9875**12, orientation_error=0.001))
+    assert not node.progress.stalled  # 5 % is progress now
+    full = ros.add(
+        RedundancyResolverNode(
+            context=ros.context,
+            cli_args=['--ros-args', '-r', '__node:=full'],
+            parameter_overrides=overrides(robot='mecanum'),
+        )
+    )  # amp, rows full: the defaults
     full.progress.update(near)
-    assert not full.progress.reached                                      # r = 6: 0.5 rad is not reached
-
+    assert not full.progress.reached  # r = 6: 0.5 rad is not reached
 
 
 def test_an_integer_for_a_double_parameter_is_taken_as_that_double_at_start_up_and_at_run_time(ros):
     """``-p stall_time:=5`` and ``ros2 param set /redundancy_resolver stall_time 5`` (an integer):
     taken as 5.0; still checked against the range; an integer parameter stays an integer."""
-    node = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-        stall_time=5, goal_tolerance=[1, 1])))
+    node = ros.add(
+        RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(stall_time=5, goal_tolerance=[1, 1]))
+    )
     assert node.p.stall_time == 5.0 and isinstance(node.p.stall_time, float)
     assert node.get_parameter('stall_time').type_ == Parameter.Type.DOUBLE
     assert node.p.goal_tolerance == [1.0, 1.0] and node.progress.tolerance == (1.0, 1.0)

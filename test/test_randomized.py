@@ -12,7 +12,14 @@ import pytest
 
 from sim_bridge.collision import SelfCollisionChecker
 from wmm_control.experiments.randomized import (
-    ARM_MARGIN, METHOD_RUNS, ROBOTS, RandomGoal, run_goal, sample_goals, summarize)
+    ARM_MARGIN,
+    METHOD_RUNS,
+    ROBOTS,
+    RandomGoal,
+    run_goal,
+    sample_goals,
+    summarize,
+)
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import matrix_from_rpy
 from wmm_control.resolvers import ResolverDiagnostics
@@ -55,7 +62,7 @@ def test_the_draw_rejects_an_arm_folded_into_the_body_or_the_floor():
         assert ('arm_link_7', 'chassis_link') in folded
         floor = {(a, b) for a, b, _ in checker.collisions([0.0, 2.1, 0.0, 1.2, 0.0, 0.0, 0.0])}
         assert ('arm_link_7', 'floor') in floor
-        assert checker.collisions([0.0, 2.1, 0.0, 0.0, 0.0, 0.0, 0.0]) == []     # over the floor, clear
+        assert checker.collisions([0.0, 2.1, 0.0, 0.0, 0.0, 0.0, 0.0]) == []  # over the floor, clear
     # the draw does meet such configurations, and draws again
     assert max(g.draws for g in sample_goals('mecanum', 30, seed=0)) > 1
 
@@ -80,17 +87,29 @@ def test_every_method_converges_within_every_limit(subset, method):
 
 
 def _diag(position, orientation):
-    return ResolverDiagnostics(method='m', mode='x', psi=1.0, position_error=position, orientation_error=orientation,
-                               limit_scale=1.0, accel_scale=1.0, null_scale=1.0, compensation_scale=1.0, limited=(),
-                               sigma_min=1.0, compensated=False, cycle_time_s=0.0)
+    return ResolverDiagnostics(
+        method='m',
+        mode='x',
+        psi=1.0,
+        position_error=position,
+        orientation_error=orientation,
+        limit_scale=1.0,
+        accel_scale=1.0,
+        null_scale=1.0,
+        compensation_scale=1.0,
+        limited=(),
+        sigma_min=1.0,
+        compensated=False,
+        cycle_time_s=0.0,
+    )
 
 
 def test_progress_in_orientation_alone_is_not_a_stall():
     progress = GoalProgress((0.01, 0.02), stall_time=1.0, period=0.1)
-    for k in range(30):                         # position held at 5 mm, orientation still converging
+    for k in range(30):  # position held at 5 mm, orientation still converging
         progress.update(_diag(0.005, 0.5 - 0.01 * k))
     assert not progress.stalled and not progress.reached
-    for _ in range(11):                         # then nothing improves for 1.1 s
+    for _ in range(11):  # then nothing improves for 1.1 s
         progress.update(_diag(0.005, 0.21))
     assert progress.stalled
     progress.update(_diag(0.005, 0.01))
@@ -99,7 +118,7 @@ def test_progress_in_orientation_alone_is_not_a_stall():
 
 def test_drifting_away_while_turning_is_a_stall():
     progress = GoalProgress((0.01, 0.02), stall_time=1.0, period=0.1)
-    for k in range(12):                         # the orientation improves, the position gets worse
+    for k in range(12):  # the orientation improves, the position gets worse
         progress.update(_diag(0.2 + 0.05 * k, 1.0 - 0.05 * k))
     assert progress.stalled
 
@@ -136,12 +155,13 @@ def test_a_slow_oscillation_around_the_goal_is_reported():
 def test_swinging_through_the_goal_and_away_again_is_reported():
     """Swings of 30 s that pass 15 % closer to the goal each time, then 0.5 m away: each pass
     improves the best error by more than 10 %, never what the end effector stays within."""
+
     def swings(t):
         return 0.02 * 0.85 ** round(t / 30.0) + 0.25 * (1.0 - np.cos(2.0 * np.pi * t / 30.0))
 
     progress = GoalProgress((0.01, 0.02), stall_time=3.0, period=0.025)
     stalled = _errors(progress, swings, lambda t: 0.01, 90.0)
-    assert progress.stalled and swings(90.0) < 0.015                    # at its closest pass yet
+    assert progress.stalled and swings(90.0) < 0.015  # at its closest pass yet
     assert all(any(abs(t - u) < 0.02 for u in stalled) for t in (59.0, 60.0, 61.0, 89.0))
 
 
@@ -157,24 +177,26 @@ def test_a_steady_approach_is_never_reported(start):
     """Converging at the pose controller's pace; along a set-point trajectory that starts with zero
     velocity and acceleration (the acceleration-level methods: 2 m in 37.5 s, a quintic); behind a
     base that accelerates at 0.025 m/s² to 0.25 m/s (robot B) over 2 m: never stalled on the way."""
+
     def quintic(t, length=2.0, duration=37.5):
         tau = min(t / duration, 1.0)
-        return 0.002 + length * (1.0 - tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau * tau))
+        return 0.002 + length * (1.0 - tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau))
 
     def slow_base(t, length=2.0, accel=0.025, speed=0.25):
         ramp = speed / accel
         run = 0.5 * accel * t * t if t < ramp else 0.5 * speed * ramp + speed * (t - ramp)
         return max(0.002, length - run)
 
-    position = {'exponential': lambda t: 0.002 + 1.5 * np.exp(-1.7 * t), 'quintic': quintic,
-                'slow_base': slow_base}[start]
+    position = {'exponential': lambda t: 0.002 + 1.5 * np.exp(-1.7 * t), 'quintic': quintic, 'slow_base': slow_base}[
+        start
+    ]
     progress = GoalProgress((0.01, 0.02), stall_time=3.0, period=0.025)
     assert _errors(progress, position, lambda t: min(1.0, position(t)), 40.0) == []
     assert progress.reached
 
 
 def test_a_goal_out_of_reach_is_reported_not_converged():
-    pose = np.array([0.7, 0.0, 3.0, np.pi / 2, 0.0, 0.0])        # 3 m high: no configuration reaches it
+    pose = np.array([0.7, 0.0, 3.0, np.pi / 2, 0.0, 0.0])  # 3 m high: no configuration reaches it
     r = run_goal('steerable', 'pinv', RandomGoal(0, np.zeros(3), np.zeros(7), pose, 1), duration=15.0)
     assert r['outcome'] == 'reported', r
     assert r['final_position_error_m'] > 1.0
@@ -193,10 +215,29 @@ def test_the_nodes_report_the_outcome_on_diagnostics():
 
 def test_the_cli_runs_the_goals_it_is_given(tmp_path, capsys):
     from wmm_control.cli.randomized import main
+
     out = tmp_path / 'runs.json'
-    assert main(['--robots', 'steerable', '--methods', 'pinv', '--goals', '3', '--seed', str(SUBSET_SEED),
-                 '--indices', '1', '--out', str(out)]) == 0
+    assert (
+        main(
+            [
+                '--robots',
+                'steerable',
+                '--methods',
+                'pinv',
+                '--goals',
+                '3',
+                '--seed',
+                str(SUBSET_SEED),
+                '--indices',
+                '1',
+                '--out',
+                str(out),
+            ]
+        )
+        == 0
+    )
     import json
+
     runs = json.loads(out.read_text())['runs']
     assert [(r['robot'], r['method'], r['goal']) for r in runs] == [('steerable', 'pinv', 1)]
     assert main(['--goals', '3', '--indices', '3']) == 2
@@ -206,18 +247,34 @@ def test_the_cli_runs_the_goals_it_is_given(tmp_path, capsys):
 def test_runs_in_parallel_give_the_serial_results_and_records(tmp_path):
     import json
     from wmm_control.cli.randomized import main
-    common = ['--robots', 'steerable', '--methods', 'pinv,amp', '--goals', '3', '--seed', str(SUBSET_SEED),
-              '--indices', '0,1']
+
+    common = [
+        '--robots',
+        'steerable',
+        '--methods',
+        'pinv,amp',
+        '--goals',
+        '3',
+        '--seed',
+        str(SUBSET_SEED),
+        '--indices',
+        '0,1',
+    ]
     assert main([*common, '--out', str(tmp_path / 'serial.json')]) == 0
     assert main([*common, '--jobs', '2', '--record', str(tmp_path / 'runs'), '--out', str(tmp_path / 'jobs.json')]) == 0
     serial, jobs = (json.loads((tmp_path / f'{n}.json').read_text())['runs'] for n in ('serial', 'jobs'))
     key = [(r['method'], r['goal'], r['outcome']) for r in serial]
     assert key == [(r['method'], r['goal'], r['outcome']) for r in jobs] and len(key) == 4
     for a, b in zip(serial, jobs):
-        assert a['time_s'] == b['time_s'] and a['final_position_error_m'] == pytest.approx(b['final_position_error_m'],
-                                                                                         abs=1e-9)
+        assert a['time_s'] == b['time_s'] and a['final_position_error_m'] == pytest.approx(
+            b['final_position_error_m'], abs=1e-9
+        )
     assert sorted(p.name for p in (tmp_path / 'runs').iterdir()) == [
-        'steerable_amp_0.npz', 'steerable_amp_1.npz', 'steerable_pinv_0.npz', 'steerable_pinv_1.npz']
+        'steerable_amp_0.npz',
+        'steerable_amp_1.npz',
+        'steerable_pinv_0.npz',
+        'steerable_pinv_1.npz',
+    ]
     assert main([*common, '--jobs', '0']) == 2
 
 
@@ -225,14 +282,16 @@ def test_no_stall_while_the_set_point_trajectory_still_runs():
     """An acceleration-level method's goal becomes a trajectory: while it runs the end effector
     may lag and draw away from the goal (robot A's amp did so for 2.5 s on a far goal); that is
     no stall, until a whole stall_time after the trajectory ends."""
+
     def run(time_left):
         progress = GoalProgress((0.01, 0.02), stall_time=1.0, period=0.1)
         stalled = []
-        for k in range(40):                     # 4 s drawing away from the goal, no progress
+        for k in range(40):  # 4 s drawing away from the goal, no progress
             diag = dataclasses.replace(_diag(1.0 + 0.001 * k, 0.0), reference_time_left=max(time_left - 0.1 * k, 0.0))
             progress.update(diag)
             stalled.append(progress.stalled)
         return stalled
-    assert run(0.0).index(True) == 10           # no trajectory: stalled after one stall_time
-    moving = run(2.0)                           # the trajectory's last cycle is the 20th (1.9 s)
+
+    assert run(0.0).index(True) == 10  # no trajectory: stalled after one stall_time
+    moving = run(2.0)  # the trajectory's last cycle is the 20th (1.9 s)
     assert not any(moving[:30]) and all(moving[30:])

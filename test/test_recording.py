@@ -25,9 +25,23 @@ SCENARIO = """scenario:
       - {{name: ts, method: task_sharing, feedback: ground_truth}}
 """
 
-TOPICS = {'/joint_states', '/ee_pose', '/odom', '/ground_truth/odom', '/clock', '/arm_controller/commands',
-          '/steer_controller/commands', '/drive_controller/commands', '/base/reference', '/base/feasible_twist',
-          '/diagnostics', '/goal_pose', '/robot_description', '/rosout', '/parameter_events'}
+TOPICS = {
+    '/joint_states',
+    '/ee_pose',
+    '/odom',
+    '/ground_truth/odom',
+    '/clock',
+    '/arm_controller/commands',
+    '/steer_controller/commands',
+    '/drive_controller/commands',
+    '/base/reference',
+    '/base/feasible_twist',
+    '/diagnostics',
+    '/goal_pose',
+    '/robot_description',
+    '/rosout',
+    '/parameter_events',
+}
 
 
 def _stamp(msg):
@@ -58,8 +72,10 @@ def test_a_run_is_recorded_with_every_topic_and_reads_back(tmp_path):
     periods = round(duration / 0.025)
     # the state at 0 and after each period until the run ends (the last one may still be in flight)
     assert periods <= counts['/joint_states'] <= periods + 2
-    assert counts['/ee_pose'] == counts['/odom'] == counts['/clock'] and \
-        0 <= counts['/ee_pose'] - counts['/joint_states'] <= 1          # the joint states go out last
+    assert (
+        counts['/ee_pose'] == counts['/odom'] == counts['/clock']
+        and 0 <= counts['/ee_pose'] - counts['/joint_states'] <= 1
+    )  # the joint states go out last
     assert counts['/robot_description'] == 1 and '<robot' in description
     assert counts['/arm_controller/commands'] >= periods and counts['/diagnostics'] >= periods
     stamps = [_stamp(m) for m in joint_states]
@@ -76,7 +92,7 @@ def test_wmm_experiment_writes_a_recording_beside_metrics_json(tmp_path):
     path = tmp_path / 'recorded.yaml'
     path.write_text(SCENARIO.format(duration=0.5))
     out = tmp_path / 'out'
-    for _ in range(2):           # a second run into the same folder replaces the recording
+    for _ in range(2):  # a second run into the same folder replaces the recording
         assert experiment_main(['--scenario', str(path), '--out', str(out), '--no-figures']) == 0
     metrics = json.loads((out / 'metrics.json').read_text())
     assert metrics['runs']['ts']['recording'] == str(bag_path(out, 'ts'))

@@ -10,13 +10,31 @@ from wmm_control.experiments.report import PAPER, provenance, write_report
 
 def test_the_page_has_the_intro_where_it_came_from_and_every_run(tmp_path, capfd):
     scenario = tmp_path / 'two_runs.yaml'
-    scenario.write_text(NODES_SCENARIO.replace('  robot: steerable', '  description: one goal, 1 s\n  robot: steerable'))
+    scenario.write_text(
+        NODES_SCENARIO.replace('  robot: steerable', '  description: one goal, 1 s\n  robot: steerable')
+    )
     page = tmp_path / 'docs' / 'results.md'
     page.parent.mkdir()
     intro = '# Results\n\nProse about the experiments, | kept | as written.\n'
     (page.parent / 'results_intro.md').write_text(intro)
-    assert experiment_main(['--scenario', str(scenario), '--engine', 'direct', '--jobs', '1', '--no-figures',
-                            '--out', str(tmp_path / 'out'), '--report', str(page)]) == 0
+    assert (
+        experiment_main(
+            [
+                '--scenario',
+                str(scenario),
+                '--engine',
+                'direct',
+                '--jobs',
+                '1',
+                '--no-figures',
+                '--out',
+                str(tmp_path / 'out'),
+                '--report',
+                str(page),
+            ]
+        )
+        == 0
+    )
     capfd.readouterr()
     text = page.read_text()
     assert text.startswith(intro)
@@ -28,14 +46,31 @@ def test_the_page_has_the_intro_where_it_came_from_and_every_run(tmp_path, capfd
     for name, run in metrics['runs'].items():
         row = next(line for line in text.splitlines() if line.startswith(f'| `{name}` | `{run["method"]}` |'))
         assert f'| {run["total_area"]:.2f} |' in row
-        assert row.count('/') == len(run['goals'])       # area / final error, one cell per goal
+        assert row.count('/') == len(run['goals'])  # area / final error, one cell per goal
     assert '| `area` |' in text and '| `base_rms` |' not in text
 
 
 def test_a_trajectory_run_has_the_papers_values_beside_ours(tmp_path, capfd):
     page = tmp_path / 'r.md'
-    assert experiment_main(['xing_pose', '--engine', 'direct', '--runs', 'amp', '--jobs', '1', '--no-figures',
-                            '--out', str(tmp_path / 'out'), '--report', str(page)]) == 0
+    assert (
+        experiment_main(
+            [
+                'xing_pose',
+                '--engine',
+                'direct',
+                '--runs',
+                'amp',
+                '--jobs',
+                '1',
+                '--no-figures',
+                '--out',
+                str(tmp_path / 'out'),
+                '--report',
+                str(page),
+            ]
+        )
+        == 0
+    )
     capfd.readouterr()
     text = page.read_text()
     header = next(line for line in text.splitlines() if line.startswith('| run | method | base RMS'))
@@ -51,9 +86,16 @@ def test_figures_outside_the_pages_folder_are_copied_beside_it(tmp_path):
     figure.parent.mkdir()
     figure.write_bytes(b'png')
     (tmp_path / 'out' / 'goal_1.png').write_bytes(b'png')
-    summary = {'scenario': 'two_goals', 'description': 'd', 'robot': 'steerable', 'engine': 'direct',
-               'timing': 'direct (no ROS)', 'simulator': {}, 'runs': {},
-               'figures': [str(figure), str(tmp_path / 'out' / 'goal_1.png')]}
+    summary = {
+        'scenario': 'two_goals',
+        'description': 'd',
+        'robot': 'steerable',
+        'engine': 'direct',
+        'timing': 'direct (no ROS)',
+        'simulator': {},
+        'runs': {},
+        'figures': [str(figure), str(tmp_path / 'out' / 'goal_1.png')],
+    }
     page = write_report(tmp_path / 'docs' / 'results.md', [summary])
     assert (tmp_path / 'docs' / 'figures' / 'two_goals' / 'fig6_error_norm.png').read_bytes() == b'png'
     text = page.read_text()

@@ -42,7 +42,9 @@ class Driver(Node):
         super().__init__('test_driver', context=context)
         self.pub_goal = self.create_publisher(PoseStamped, '/goal_pose', 10)
         self.arm, self.refs, self.feasible, self.diag, self.ee = [], [], [], [], []
-        self.create_subscription(Float64MultiArray, '/arm_controller/commands', lambda m: self.arm.append(list(m.data)), 10)
+        self.create_subscription(
+            Float64MultiArray, '/arm_controller/commands', lambda m: self.arm.append(list(m.data)), 10
+        )
         self.create_subscription(TwistStamped, '/base/reference', self.refs.append, 10)
         self.create_subscription(TwistStamped, '/base/feasible_twist', self.feasible.append, 10)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
@@ -59,8 +61,9 @@ class Driver(Node):
         msg = PoseStamped()
         msg.header.frame_id = frame
         msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in xyz)
-        (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
-         msg.pose.orientation.w) = (float(v) for v in quat)
+        (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z, msg.pose.orientation.w) = (
+            float(v) for v in quat
+        )
         self.pub_goal.publish(msg)
 
     def ee_position(self):
@@ -76,8 +79,14 @@ def system():
     ros = RosHarness()
     driver = ros.add(Driver(ros.context))
     # the lockstep waits, but the node's own state timeout: a test here stops the joint states
-    ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-        diagnostics_period=1e-9, **dict(LOCKSTEP_WAITS['redundancy_resolver'], state_timeout=0.2))))
+    ros.add(
+        RedundancyResolverNode(
+            context=ros.context,
+            parameter_overrides=overrides(
+                diagnostics_period=1e-9, **dict(LOCKSTEP_WAITS['redundancy_resolver'], state_timeout=0.2)
+            ),
+        )
+    )
     ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller'])))
     sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep')))
     yield ros, driver, sim
@@ -97,7 +106,7 @@ def test_a_goal_on_the_topic_is_reached_and_held(system):
     driver.goal(goal, (0.0, 0.0, 0.0, 1.0))
     run_until(ros, driver, 10.0)
     assert np.linalg.norm(driver.ee_position() - goal) < 0.01
-    run_until(ros, driver, 20.0)      # the null-space pull settles the posture
+    run_until(ros, driver, 20.0)  # the null-space pull settles the posture
     held = np.array(driver.arm[-40:])
     assert np.all(np.isfinite(held)) and np.max(np.abs(held)) < 0.01, 'at the goal the robot holds still'
     level, message, values = driver.diag[-1]
@@ -106,12 +115,15 @@ def test_a_goal_on_the_topic_is_reached_and_held(system):
     assert len(reached) == 1, f'the goal reached is logged once: {reached}'
 
 
-@pytest.mark.parametrize('frame, xyz, quat, reason', [
-    ('map', (1.0, 0.0, 1.0), (0, 0, 0, 1), 'frame'),
-    ('world', (float('nan'), 0.0, 1.0), (0, 0, 0, 1), 'non-finite'),
-    ('world', (1.0, 0.0, 1.0), (0, 0, 0, 0), 'zero quaternion'),
-    ('world', (1e300, 0.0, 1.0), (0, 0, 0, 1), 'max_goal_distance'),
-])
+@pytest.mark.parametrize(
+    'frame, xyz, quat, reason',
+    [
+        ('map', (1.0, 0.0, 1.0), (0, 0, 0, 1), 'frame'),
+        ('world', (float('nan'), 0.0, 1.0), (0, 0, 0, 1), 'non-finite'),
+        ('world', (1.0, 0.0, 1.0), (0, 0, 0, 0), 'zero quaternion'),
+        ('world', (1e300, 0.0, 1.0), (0, 0, 0, 1), 'max_goal_distance'),
+    ],
+)
 def test_a_bad_goal_is_rejected_and_the_robot_holds(system, frame, xyz, quat, reason):
     ros, driver, _ = system
     driver.goal((1.5, 0.3, 1.0), (0.0, 0.0, 0.0, 1.0))
@@ -146,8 +158,11 @@ def test_an_unreachable_goal_is_pursued_within_limits_and_reported(system):
     assert np.all(np.isfinite(arm)) and np.all(np.abs(arm) <= 3.6)
     level, message, values = driver.diag[-1]
     assert values['goal_stalled'] == 'True' and 'not reached' in message
-    stalls = [m for name, lvl, m in driver.logs if name == 'redundancy_resolver' and lvl == Log.WARN
-              and m.startswith('goal not reached')]
+    stalls = [
+        m
+        for name, lvl, m in driver.logs
+        if name == 'redundancy_resolver' and lvl == Log.WARN and m.startswith('goal not reached')
+    ]
     assert len(stalls) == 1, f'the stall is logged once: {stalls}'
 
 
@@ -156,7 +171,7 @@ def test_stale_joint_states_give_zero_commands(system):
     driver.goal((1.6, 0.4, 1.0))
     run_until(ros, driver, 1.0)
     assert np.max(np.abs(driver.arm[-1])) > 0.0
-    ros.executor.remove_node(sim)            # the robot stops reporting
+    ros.executor.remove_node(sim)  # the robot stops reporting
     n = len(driver.arm)
     ros.spin_for(0.6)
     assert len(driver.arm) > n and np.allclose(driver.arm[-1], 0.0)
@@ -174,9 +189,13 @@ def test_the_node_chain_equals_the_direct_loop(tmp_path):
     sc = load_scenario(str(path))
     nodes = run_with_nodes(sc, sc.runs[0])
     from sim_bridge.slip import SlipParams
+
     sim = sc.sim
-    world = SimWorld('steerable', slip=SlipParams(sim['slip_gain'], tuple(sim['slip_drift']), tuple(sim['slip_noise'])),
-                     seed=sim['seed'])
+    world = SimWorld(
+        'steerable',
+        slip=SlipParams(sim['slip_gain'], tuple(sim['slip_drift']), tuple(sim['slip_noise'])),
+        seed=sim['seed'],
+    )
     direct = run_scenario(world, make_resolver('task_sharing'), sc)
     world.close()
     n = len(nodes)
@@ -196,8 +215,9 @@ def test_goal_sequencer_plays_the_scenario_on_sim_time():
         goals = []
         driver.create_subscription(PoseStamped, '/goal_pose', goals.append, 10)
         ros.add(GoalSequencerNode(context=ros.context, parameter_overrides=overrides(use_sim_time=True)))
-        sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep',
-                                                                                 lockstep_timeout=0.001)))
+        sim = ros.add(
+            SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep', lockstep_timeout=0.001))
+        )
         assert ros.spin_until(lambda: sim.world.time >= 21.0, timeout=60.0)
         xs = [(stamp_s(g), g.pose.position.y) for g in goals]
         first_switch = next(t for t, y in xs if abs(y - 1.3) < 1e-9)
@@ -216,10 +236,15 @@ def test_the_goal_is_reached_with_wheel_contact_physics():
     ros = RosHarness()
     try:
         driver = ros.add(Driver(ros.context))
-        ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-            ee_feedback=feedback, **LOCKSTEP_WAITS['redundancy_resolver'])))
-        ros.add(SwmrControllerNode(context=ros.context,
-                                   parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller'])))
+        ros.add(
+            RedundancyResolverNode(
+                context=ros.context,
+                parameter_overrides=overrides(ee_feedback=feedback, **LOCKSTEP_WAITS['redundancy_resolver']),
+            )
+        )
+        ros.add(
+            SwmrControllerNode(context=ros.context, parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller']))
+        )
         ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep', base_mode='physics')))
         goal = np.array([1.8, 0.6, 1.0])
         driver.goal(goal)
@@ -237,9 +262,12 @@ def test_garbage_on_every_input_never_gives_a_non_finite_or_over_limit_command(s
     """NaN, inf and finite but absurd values on every topic the resolver reads."""
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import JointState
+
     ros, driver, _ = system
-    pubs = {t: driver.create_publisher(m, t, 10) for t, m in (('/odom', Odometry), ('/joint_states', JointState),
-                                                               ('/base/feasible_twist', TwistStamped))}
+    pubs = {
+        t: driver.create_publisher(m, t, 10)
+        for t, m in (('/odom', Odometry), ('/joint_states', JointState), ('/base/feasible_twist', TwistStamped))
+    }
     driver.goal((1.5, 0.3, 1.0))
     run_until(ros, driver, 0.5)
     for value in (float('nan'), float('inf'), 1e308, -1e300):
@@ -270,17 +298,29 @@ def test_amp_tracks_a_trajectory_on_ee_reference_with_the_base_still():
     over topics AMP tracks it with the arm alone (the base reference stays exactly zero)."""
     from trajectory_msgs.msg import MultiDOFJointTrajectory
     from wmm_control.experiments.trajectories import make_trajectory
+
     ros = RosHarness()
     try:
         driver = ros.add(Driver(ros.context))
         refs = []
         driver.create_subscription(MultiDOFJointTrajectory, '/ee_reference', refs.append, 10)
-        ros.add(GoalSequencerNode(context=ros.context, parameter_overrides=overrides(
-            scenario='xing_circle_0.10', use_sim_time=True)))
-        ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-            robot='mecanum', method='amp', ee_feedback='ground_truth')))
-        ros.add(SimNode(context=ros.context, parameter_overrides=overrides(
-            robot='mecanum', timing='lockstep', lockstep_groups='arm')))
+        ros.add(
+            GoalSequencerNode(
+                context=ros.context, parameter_overrides=overrides(scenario='xing_circle_0.10', use_sim_time=True)
+            )
+        )
+        ros.add(
+            RedundancyResolverNode(
+                context=ros.context,
+                parameter_overrides=overrides(robot='mecanum', method='amp', ee_feedback='ground_truth'),
+            )
+        )
+        ros.add(
+            SimNode(
+                context=ros.context,
+                parameter_overrides=overrides(robot='mecanum', timing='lockstep', lockstep_groups='arm'),
+            )
+        )
         run_until(ros, driver, 8.0)
         assert len(refs) > 300
         bases = np.array([(r.twist.linear.x, r.twist.linear.y, r.twist.angular.z) for r in driver.refs])
@@ -288,11 +328,19 @@ def test_amp_tracks_a_trajectory_on_ee_reference_with_the_base_still():
         start = driver.ee[0]
         p, q = start.pose.position, start.pose.orientation
         import pinocchio as pin
-        circle = make_trajectory({'kind': 'circle', 'radius': 0.1}, np.array([p.x, p.y, p.z]),
-                                 pin.Quaternion(q.w, q.x, q.y, q.z).toRotationMatrix())
-        errors = [np.linalg.norm(circle(stamp_s(m) - 0.025).position
-                                 - np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z]))
-                  for m in driver.ee[40:]]
+
+        circle = make_trajectory(
+            {'kind': 'circle', 'radius': 0.1},
+            np.array([p.x, p.y, p.z]),
+            pin.Quaternion(q.w, q.x, q.y, q.z).toRotationMatrix(),
+        )
+        errors = [
+            np.linalg.norm(
+                circle(stamp_s(m) - 0.025).position
+                - np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z])
+            )
+            for m in driver.ee[40:]
+        ]
         assert max(errors) < 2e-3 and np.linalg.norm(driver.ee_position() - np.array([p.x, p.y, p.z])) > 0.05
     finally:
         ros.close()
@@ -307,10 +355,20 @@ def test_two_robots_side_by_side_in_their_own_namespaces():
         for ns in goals:
             args = ['--ros-args', '-r', f'__ns:=/{ns}']
             drivers[ns] = ros.add(NamespacedDriver(ros.context, ns))
-            ros.add(RedundancyResolverNode(context=ros.context, cli_args=args, parameter_overrides=overrides(
-                **LOCKSTEP_WAITS['redundancy_resolver'])))
-            ros.add(SwmrControllerNode(context=ros.context, cli_args=args,
-                                       parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller'])))
+            ros.add(
+                RedundancyResolverNode(
+                    context=ros.context,
+                    cli_args=args,
+                    parameter_overrides=overrides(**LOCKSTEP_WAITS['redundancy_resolver']),
+                )
+            )
+            ros.add(
+                SwmrControllerNode(
+                    context=ros.context,
+                    cli_args=args,
+                    parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller']),
+                )
+            )
             ros.add(SimNode(context=ros.context, cli_args=args, parameter_overrides=overrides(timing='lockstep')))
         drivers['r1'].goal(goals['r1'])
         assert ros.spin_until(lambda: all(d.sim_time() >= 10.0 for d in drivers.values()), timeout=90.0)
@@ -350,8 +408,9 @@ def test_a_measured_quaternion_of_any_scale_is_the_rotation_it_names(scale):
     overflows) or 1e-3: the same rotation, never the identity that an overflowed norm gave."""
     ros = RosHarness()
     try:
-        node = ros.add(RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(
-            ee_feedback='ground_truth')))
+        node = ros.add(
+            RedundancyResolverNode(context=ros.context, parameter_overrides=overrides(ee_feedback='ground_truth'))
+        )
         pub = ros.add(Node('ee_source', context=ros.context)).create_publisher(PoseStamped, '/ee_pose', 10)
         msg = PoseStamped()
         msg.header.frame_id = 'world'
@@ -389,6 +448,7 @@ def test_markers_show_the_goal_the_trail_and_the_footprint(system):
     """~/markers: the goal's arrow at the goal, the trail ending at the end effector, the base's
     footprint (closed, on the floor, around the base); every number finite."""
     from visualization_msgs.msg import Marker, MarkerArray
+
     ros, driver, sim = system
     arrays = []
     driver.create_subscription(MarkerArray, '/redundancy_resolver/markers', arrays.append, 10)
@@ -416,6 +476,11 @@ def test_markers_show_the_goal_the_trail_and_the_footprint(system):
     assert np.linalg.norm(centre - base[:2]) < 0.3
     for array in arrays:
         for m in array.markers:
-            values = [m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w,
-                      *(v for p in m.points for v in (p.x, p.y, p.z))]
+            values = [
+                m.pose.position.x,
+                m.pose.position.y,
+                m.pose.position.z,
+                m.pose.orientation.w,
+                *(v for p in m.points for v in (p.x, p.y, p.z)),
+            ]
             assert np.all(np.isfinite(values)), m.ns

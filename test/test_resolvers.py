@@ -10,8 +10,15 @@ from sim_bridge.world import SimWorld
 from wmm_control.errors import ConfigError, NonFiniteError, ShapeError
 from wmm_control.kinematics.orientation import rpy_from_matrix
 from wmm_control.resolvers import (
-    CommandLimits, PinvResolver, PoseTarget, RobotState, TaskSharingParams, TaskSharingResolver,
-    make_resolver, psi_of_error)
+    CommandLimits,
+    PinvResolver,
+    PoseTarget,
+    RobotState,
+    TaskSharingParams,
+    TaskSharingResolver,
+    make_resolver,
+    psi_of_error,
+)
 
 DT = 0.025
 
@@ -95,7 +102,7 @@ def test_pinv_follows_the_minimum_norm_direction(steerable_model, robot):
     expected = np.linalg.pinv(jac) @ p_ref
     cos = np.dot(u, expected) / (np.linalg.norm(u) * np.linalg.norm(expected))
     assert cos > 1.0 - 1e-6
-    assert cmd.diagnostics.accel_scale < 1.0   # from rest: the acceleration limit scales it
+    assert cmd.diagnostics.accel_scale < 1.0  # from rest: the acceleration limit scales it
 
 
 def test_compensation_term_gives_the_arm_the_base_deficit(steerable_model, robot):
@@ -106,7 +113,7 @@ def test_compensation_term_gives_the_arm_the_base_deficit(steerable_model, robot
     ref, feasible = np.array([0.4, 0.1, 0.2]), np.array([0.1, 0.0, 0.05])
     term = res.compensation_term(ref, feasible)
     jac = res._jac
-    np.testing.assert_allclose(jac[:, 3:] @ term, jac[:, :3] @ (ref - feasible), atol=1e-4)   # ρ = 0.001
+    np.testing.assert_allclose(jac[:, 3:] @ term, jac[:, :3] @ (ref - feasible), atol=1e-4)  # ρ = 0.001
     assert np.allclose(res.compensation_term(ref, ref), 0.0)
 
 
@@ -130,10 +137,16 @@ def test_psi_rate_limits_the_switch(steerable_model, robot):
     assert res.step(state, near).diagnostics.mode == 'fine_manipulation'
 
 
-@pytest.mark.parametrize('bad', [
-    dict(r_fm=1.0, r_mm=0.5), dict(orientation_error='quaternion'), dict(lambda_p=-1.0),
-    dict(rho=float('nan')), dict(lambda_p='fast'),
-])
+@pytest.mark.parametrize(
+    'bad',
+    [
+        dict(r_fm=1.0, r_mm=0.5),
+        dict(orientation_error='quaternion'),
+        dict(lambda_p=-1.0),
+        dict(rho=float('nan')),
+        dict(lambda_p='fast'),
+    ],
+)
 def test_invalid_parameters_are_rejected(bad):
     with pytest.raises(ConfigError):
         TaskSharingParams(**bad)
@@ -171,24 +184,30 @@ def test_absurd_targets_give_finite_commands_within_limits(steerable_model, robo
 # ---------------------------------------------------------------------- limits
 def _limits(robot):
     inf3 = np.full(3, np.inf)
-    return CommandLimits(np.concatenate((robot.base.velocity, robot.arm.velocity)),
-                         np.concatenate((robot.base.acceleration, robot.arm.acceleration)),
-                         np.concatenate((-inf3, robot.arm.position_lower)),
-                         np.concatenate((inf3, robot.arm.position_upper)), DT)
+    return CommandLimits(
+        np.concatenate((robot.base.velocity, robot.arm.velocity)),
+        np.concatenate((robot.base.acceleration, robot.arm.acceleration)),
+        np.concatenate((-inf3, robot.arm.position_lower)),
+        np.concatenate((inf3, robot.arm.position_upper)),
+        DT,
+    )
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.lists(st.floats(-50, 50), min_size=10, max_size=10),
-       st.lists(st.floats(-5, 5), min_size=10, max_size=10),
-       st.lists(st.floats(-1, 1), min_size=10, max_size=10),
-       st.lists(st.floats(-1, 1), min_size=7, max_size=7))
+@given(
+    st.lists(st.floats(-50, 50), min_size=10, max_size=10),
+    st.lists(st.floats(-5, 5), min_size=10, max_size=10),
+    st.lists(st.floats(-1, 1), min_size=10, max_size=10),
+    st.lists(st.floats(-1, 1), min_size=7, max_size=7),
+)
 def test_limited_command_keeps_every_bound(robot, primary, secondary, prev_frac, pos_frac):
     lim = _limits(robot)
     arm = robot.arm
-    position = np.concatenate((np.zeros(3), arm.position_lower + (np.asarray(pos_frac) + 1) / 2
-                               * (arm.position_upper - arm.position_lower)))
+    position = np.concatenate(
+        (np.zeros(3), arm.position_lower + (np.asarray(pos_frac) + 1) / 2 * (arm.position_upper - arm.position_lower))
+    )
     down, up = lim.braking_rates(position)
-    prev = np.clip(np.asarray(prev_frac) * lim.velocity, -down, up)   # a command that kept its bounds
+    prev = np.clip(np.asarray(prev_frac) * lim.velocity, -down, up)  # a command that kept its bounds
     out = lim.apply(primary, position, prev, secondary=secondary)
     u = out.command
     assert np.all(np.isfinite(u))
@@ -202,7 +221,7 @@ def test_uniform_scaling_keeps_the_direction(robot):
     lim = _limits(robot)
     position = np.concatenate((np.zeros(3), robot.arm.dexterous))
     desired = np.array([5.0, 2.0, 0.5, 1.0, -0.5, 0.3, 0.2, 0.1, 0.0, -0.1])
-    prev = desired * 0.1   # within the acceleration reach of the scaled command
+    prev = desired * 0.1  # within the acceleration reach of the scaled command
     out = lim.apply(desired, position, prev)
     assert out.scale < 1.0
     # the result moves from prev towards scale*desired along a straight line
@@ -226,6 +245,7 @@ def test_braking_rate_is_the_largest_that_stops_in_time(distance, accel):
             total += rate * DT
             rate -= accel * DT
         return total
+
     assert covered(v) <= distance * (1 + 1e-12) + 1e-15
     assert covered(v + 1e-9 + 1e-9 * v) > distance
 
@@ -277,8 +297,7 @@ def test_rotating_the_rpy_error_by_the_base_yaw_breaks_orientation_control(liter
         state = loop.state()
         rpy = rpy_from_matrix(state.ee_rotation) + np.array([0.3, 0.2, 0.0])
         target = PoseTarget(state.ee_position + np.array([0.05, 0.0, 0.0]), pin.rpy.rpyToMatrix(*rpy))
-        errors = [np.linalg.norm(pin.log3(target.rotation @ loop.step(target).ee_rotation.T))
-                  for _ in range(300)]
+        errors = [np.linalg.norm(pin.log3(target.rotation @ loop.step(target).ee_rotation.T)) for _ in range(300)]
     if literal:
         assert max(errors) > 1.0
     else:
@@ -292,10 +311,10 @@ def _reference_apply(lim, primary, position, previous, secondary, previous_secon
     plain formula it must reproduce. Returns (command, secondary share, s_v, s_a, secondary
     scale, limited indices, lower, upper).
     """
+
     def largest_step(start, step, lower, upper):
         with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-            s_each = np.where(step > 0, (upper - start) / step,
-                              np.where(step < 0, (lower - start) / step, np.inf))
+            s_each = np.where(step > 0, (upper - start) / step, np.where(step < 0, (lower - start) / step, np.inf))
         s = float(np.min(s_each))
         if s >= 1.0:
             return 1.0, set()
@@ -303,7 +322,7 @@ def _reference_apply(lim, primary, position, previous, secondary, previous_secon
         return s, set(np.flatnonzero(s_each <= s + 1e-12).tolist())
 
     adt = lim.acceleration * lim.dt
-    down, up = lim.braking_rates(position)     # checked on its own against brute force below
+    down, up = lim.braking_rates(position)  # checked on its own against brute force below
     bad = ~np.isfinite(primary) | ~np.isfinite(secondary)
     primary, secondary = np.where(bad, 0.0, primary), np.where(bad, 0.0, secondary)
     limited = set(np.flatnonzero(bad).tolist())
@@ -329,8 +348,7 @@ def _reference_apply(lim, primary, position, previous, secondary, previous_secon
     command = np.clip(raw, lo, hi)
     limited |= set(np.flatnonzero(forced | (np.abs(command - raw) > 1e-12)).tolist())
     out_s = previous_secondary + s_s * d_s
-    share = (min(1.0, np.linalg.norm(out_s) / max(np.linalg.norm(secondary), 1e-300))
-             if np.any(secondary) else 1.0)
+    share = min(1.0, np.linalg.norm(out_s) / max(np.linalg.norm(secondary), 1e-300)) if np.any(secondary) else 1.0
     return command, out_s, s_v, s_a, share, tuple(sorted(limited)), lo, hi
 
 
@@ -338,18 +356,21 @@ _finite_or_not = st.one_of(st.floats(-50, 50), st.sampled_from([np.nan, np.inf, 
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.lists(_finite_or_not, min_size=10, max_size=10),
-       st.lists(st.floats(-5, 5), min_size=10, max_size=10),
-       st.lists(st.floats(-1.2, 1.2), min_size=10, max_size=10),
-       st.floats(0.0, 1.0),
-       st.lists(st.floats(-0.1, 1.1), min_size=7, max_size=7))
+@given(
+    st.lists(_finite_or_not, min_size=10, max_size=10),
+    st.lists(st.floats(-5, 5), min_size=10, max_size=10),
+    st.lists(st.floats(-1.2, 1.2), min_size=10, max_size=10),
+    st.floats(0.0, 1.0),
+    st.lists(st.floats(-0.1, 1.1), min_size=7, max_size=7),
+)
 def test_limits_equal_the_array_formula(robot, primary, secondary, prev_frac, prev_share, pos_frac):
     """Every output of :meth:`CommandLimits.apply`, bit for bit, also from a previous command
     that broke its bounds (forced entries) and from positions beyond the limits."""
     lim = _limits(robot)
     arm = robot.arm
-    position = np.concatenate((np.zeros(3), arm.position_lower + np.asarray(pos_frac)
-                               * (arm.position_upper - arm.position_lower)))
+    position = np.concatenate(
+        (np.zeros(3), arm.position_lower + np.asarray(pos_frac) * (arm.position_upper - arm.position_lower))
+    )
     prev = np.asarray(prev_frac) * lim.velocity
     prev_s = prev_share * prev
     out = lim.apply(primary, position, prev, secondary=secondary, previous_secondary=prev_s)
@@ -366,13 +387,15 @@ def test_lapack_helpers_equal_numpy_linalg():
     """The direct LAPACK calls of the resolvers give np.linalg's results, rank-deficient cases included."""
     from wmm_control.resolvers.pose_servo import lapack_solve, lapack_svd
     from wmm_control.resolvers.task_sharing import _pinv
+
     rng = np.random.default_rng(7)
     for rows in (6, 7, 9):
         a = rng.normal(size=(rows, 10))
-        a[:, :3] *= rows == 7            # zero base columns, as with ψ = 1
+        a[:, :3] *= rows == 7  # zero base columns, as with ψ = 1
         a[rows - 1] = a[0] * (rows == 9)  # a repeated row
-        np.testing.assert_allclose(lapack_svd(a, compute_uv=False), np.linalg.svd(a, compute_uv=False),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            lapack_svd(a, compute_uv=False), np.linalg.svd(a, compute_uv=False), rtol=0, atol=1e-12
+        )
         np.testing.assert_allclose(_pinv(a, 1e-6), np.linalg.pinv(a, rcond=1e-6), rtol=0, atol=1e-10)
         gram = a @ a.T + 1e-6 * np.eye(rows)
         rhs = rng.normal(size=rows)
@@ -410,9 +433,9 @@ def test_a_joint_held_at_its_limit_gives_its_share_of_the_task_to_the_others(ste
     jac, p_ref, _, _ = plain.task_reference(state, target)
     u_plain = plain.solve_task(jac, p_ref, state.q_arm)
     u_held = held.solve_task(jac, p_ref, state.q_arm)
-    assert u_plain[3 + 1] > 0.0 and u_held[3 + 1] == 0.0       # the joint would pass its limit; held, it rests
+    assert u_plain[3 + 1] > 0.0 and u_held[3 + 1] == 0.0  # the joint would pass its limit; held, it rests
     clipped = u_plain.copy()
-    clipped[3 + 1] = 0.0                                       # what the limits make of the plain solution
+    clipped[3 + 1] = 0.0  # what the limits make of the plain solution
     assert np.linalg.norm(jac @ u_held - p_ref) < 0.2 * np.linalg.norm(jac @ clipped - p_ref)
     # nothing at a limit: the plain solution, to the bit
     free = start_state(robot)
@@ -430,12 +453,12 @@ def test_arm_takeover_keeps_the_end_effector_on_its_way_while_a_slow_base_accele
     takeover = make_resolver('pinv', mecanum_model, orientation_error='log', arm_takeover=True)
     target = offset_target(plain, state, (0.15, 0.1, -0.05))
     jac, p_ref, _, _ = plain.task_reference(state, target)
-    for _ in range(20):                     # 0.5 s from rest, the state held (the commands ramp up)
+    for _ in range(20):  # 0.5 s from rest, the state held (the commands ramp up)
         u_plain = np.concatenate(_command(plain.step(state, target)))
         u_take = np.concatenate(_command(takeover.step(state, target)))
     assert np.all(np.abs(u_take[:3]) <= 20 * robot.base.acceleration * DT + 1e-12)
-    assert np.linalg.norm(jac @ u_plain - p_ref) > 0.9 * np.linalg.norm(p_ref)   # the whole body at the base's pace
-    assert np.linalg.norm(jac @ u_take - p_ref) < 0.05 * np.linalg.norm(p_ref)   # the arm does the rest
+    assert np.linalg.norm(jac @ u_plain - p_ref) > 0.9 * np.linalg.norm(p_ref)  # the whole body at the base's pace
+    assert np.linalg.norm(jac @ u_take - p_ref) < 0.05 * np.linalg.norm(p_ref)  # the arm does the rest
 
 
 def _command(cmd):

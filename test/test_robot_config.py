@@ -31,7 +31,7 @@ def test_limits_come_from_the_urdf_and_the_yaml_overrides_them(tmp_path):
     path.write_text(yaml.safe_dump(raw))
     over = load_robot(path)
     np.testing.assert_allclose(over.arm.velocity, 0.5)
-    np.testing.assert_allclose(over.arm.acceleration, 1.0)      # the default rule: 2 × the velocity limit
+    np.testing.assert_allclose(over.arm.acceleration, 1.0)  # the default rule: 2 × the velocity limit
     assert over.steerable.wheel_radius == 0.1
     np.testing.assert_allclose(over.arm.position_upper, cfg.arm.position_upper)
 

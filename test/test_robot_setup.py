@@ -46,17 +46,21 @@ def _reach(cfg, method, offsets, seconds=40.0, tol=0.01):
         world.close()
 
 
-@pytest.mark.parametrize('base,kwargs', [
-    ('steerable', dict(modules=3)),
-    ('steerable', dict(modules=6)),
-    ('mecanum', dict(arm_joints=8, prismatic_lift=True)),
-    ('differential', dict(arm_joints=6)),
-], ids=['steerable-3', 'steerable-6', 'mecanum-8-prismatic', 'differential-6'])
+@pytest.mark.parametrize(
+    'base,kwargs',
+    [
+        ('steerable', dict(modules=3)),
+        ('steerable', dict(modules=6)),
+        ('mecanum', dict(arm_joints=8, prismatic_lift=True)),
+        ('differential', dict(arm_joints=6)),
+    ],
+    ids=['steerable-3', 'steerable-6', 'mecanum-8-prismatic', 'differential-6'],
+)
 def test_a_robot_made_by_init_from_an_unseen_urdf_reaches_near_and_far_goals(tmp_path, base, kwargs):
     urdf = write_urdf(tmp_path / 'made_up.urdf', base, **kwargs)
     out = tmp_path / 'config' / 'made_up.yaml'
     robot_setup.init_robot(urdf, base, 'arm_base_link', 'tool_link', out)
-    cfg = load_robot(out)                          # no hand edit
+    cfg = load_robot(out)  # no hand edit
     assert cfg.arm.n == kwargs.get('arm_joints', 7)
     if base == 'steerable':
         assert cfg.steerable.n_modules == kwargs['modules']
@@ -70,8 +74,25 @@ def test_a_robot_made_by_init_from_an_unseen_urdf_reaches_near_and_far_goals(tmp
 def test_init_output_is_a_commented_file_check_accepts(tmp_path, capsys):
     urdf = write_urdf(tmp_path / 'r.urdf', 'differential', arm_joints=6)
     out = tmp_path / 'r.yaml'
-    assert robot_setup.main(['init', str(urdf), '--base', 'differential', '--arm-root', 'arm_base_link',
-                             '--tool', 'tool_link', '--out', str(out), '--home', '0,0.3,0.6,0,0.5,0']) == 0
+    assert (
+        robot_setup.main(
+            [
+                'init',
+                str(urdf),
+                '--base',
+                'differential',
+                '--arm-root',
+                'arm_base_link',
+                '--tool',
+                'tool_link',
+                '--out',
+                str(out),
+                '--home',
+                '0,0.3,0.6,0,0.5,0',
+            ]
+        )
+        == 0
+    )
     text = out.read_text()
     assert text.startswith('#') and 'wheel_joints: [wheel_left_joint, wheel_right_joint]' in text
     assert yaml.safe_load(text)['robot']['arm']['dexterous'] == [0, 0.3, 0.6, 0, 0.5, 0]
@@ -84,8 +105,9 @@ def test_init_output_is_a_commented_file_check_accepts(tmp_path, capsys):
 def test_init_chooses_a_home_posture_clear_of_the_body():
     for name in ('steerable', 'mecanum'):
         cfg = load_robot(name)
-        home, sigma = robot_setup._choose_home(robot_setup.UrdfTree(cfg.urdf_path), cfg.arm.root, cfg.arm.tool,
-                                               cfg.base_link, cfg.ground_z)
+        home, sigma = robot_setup._choose_home(
+            robot_setup.UrdfTree(cfg.urdf_path), cfg.arm.root, cfg.arm.tool, cfg.base_link, cfg.ground_z
+        )
         assert CollisionModel(cfg.urdf_path, cfg.arm.joints).closest(home)[0] >= robot_setup.HOME_CLEARANCE
         assert sigma > 0.05
 
@@ -108,35 +130,61 @@ def _edit_urdf(tmp_path, old, new, count=1):
 
 BAD_FILES = {
     'urdf unreadable': (lambda t, r: (t / 'robot.urdf').write_text('<robot><link'), 'URDF unreadable'),
-    'link missing': (lambda t, r: r['arm'].__setitem__('root', 'no_such_link'), "arm root link 'no_such_link' not found"),
+    'link missing': (
+        lambda t, r: r['arm'].__setitem__('root', 'no_such_link'),
+        "arm root link 'no_such_link' not found",
+    ),
     'chain broken': (lambda t, r: r['arm'].__setitem__('root', 'steer_fl_link'), 'chain broken'),
     'fewer than 6 arm joints': (lambda t, r: r['arm'].__setitem__('root', 'arm_link_2'), 'needs at least 6'),
-    'joint without limits': (lambda t, r: _edit_urdf(t, '<limit lower="-2.094395" upper="2.094395" effort="176" '
-                                                        'velocity="1.919862"/>', ''),
-                             "joint 'arm_joint_2' has no <limit lower>"),
-    'wheel joint missing': (lambda t, r: r['steerable']['drive_joints'].__setitem__(2, 'drive_xx_joint'),
-                            "drive joint 'drive_xx_joint' not found"),
-    'zero radius': (lambda t, r: _edit_urdf(t, '<cylinder radius="0.09" length="0.05"/>',
-                                            '<cylinder radius="0" length="0.05"/>', 2), 'radius must be > 0'),
-    'negative radius override': (lambda t, r: r['steerable'].__setitem__('wheel_radius', -0.1),
-                                 'steerable.wheel_radius: must be finite and > 0'),
+    'joint without limits': (
+        lambda t, r: _edit_urdf(t, '<limit lower="-2.094395" upper="2.094395" effort="176" velocity="1.919862"/>', ''),
+        "joint 'arm_joint_2' has no <limit lower>",
+    ),
+    'wheel joint missing': (
+        lambda t, r: r['steerable']['drive_joints'].__setitem__(2, 'drive_xx_joint'),
+        "drive joint 'drive_xx_joint' not found",
+    ),
+    'zero radius': (
+        lambda t, r: _edit_urdf(
+            t, '<cylinder radius="0.09" length="0.05"/>', '<cylinder radius="0" length="0.05"/>', 2
+        ),
+        'radius must be > 0',
+    ),
+    'negative radius override': (
+        lambda t, r: r['steerable'].__setitem__('wheel_radius', -0.1),
+        'steerable.wheel_radius: must be finite and > 0',
+    ),
     'NaN in the YAML': (lambda t, r: r['arm'].__setitem__('acceleration', [float('nan')] * 7), 'arm.acceleration: NaN'),
     'unknown family': (lambda t, r: r.__setitem__('base_type', 'legged'), "unknown base family 'legged'"),
-    'duplicate joint names': (lambda t, r: r['steerable']['drive_joints'].__setitem__(1, 'drive_fl_joint'),
-                              "joint 'drive_fl_joint' is named twice"),
-    'duplicate joint in the URDF': (lambda t, r: _edit_urdf(t, 'name="drive_fr_joint"', 'name="drive_fl_joint"'),
-                                    "duplicate joint name 'drive_fl_joint'"),
-    'mimic joint in the arm': (lambda t, r: _edit_urdf(t, '<joint name="arm_joint_3" type="revolute">',
-                                                       '<joint name="arm_joint_3" type="revolute">'
-                                                       '<mimic joint="arm_joint_2"/>'), 'is a mimic joint'),
-    'start state outside the limits': (lambda t, r: r['start']['arm'].__setitem__(1, 3.0),
-                                       'start.arm: outside the position limits: arm_joint_2 = 3'),
+    'duplicate joint names': (
+        lambda t, r: r['steerable']['drive_joints'].__setitem__(1, 'drive_fl_joint'),
+        "joint 'drive_fl_joint' is named twice",
+    ),
+    'duplicate joint in the URDF': (
+        lambda t, r: _edit_urdf(t, 'name="drive_fr_joint"', 'name="drive_fl_joint"'),
+        "duplicate joint name 'drive_fl_joint'",
+    ),
+    'mimic joint in the arm': (
+        lambda t, r: _edit_urdf(
+            t,
+            '<joint name="arm_joint_3" type="revolute">',
+            '<joint name="arm_joint_3" type="revolute"><mimic joint="arm_joint_2"/>',
+        ),
+        'is a mimic joint',
+    ),
+    'start state outside the limits': (
+        lambda t, r: r['start']['arm'].__setitem__(1, 3.0),
+        'start.arm: outside the position limits: arm_joint_2 = 3',
+    ),
     'dexterous outside the limits': (lambda t, r: r['arm'].__setitem__('dexterous', [9.0] * 7), 'dexterous: outside'),
     'urdf file missing': (lambda t, r: r.__setitem__('urdf', 'nowhere.urdf'), 'urdf: file not found'),
     'sideways limit on a differential base': (
-        lambda t, r: (r.__setitem__('base_type', 'differential'),
-                      r.__setitem__('differential', {'wheel_joints': ['drive_fl_joint', 'drive_fr_joint']})),
-        'wheels must sit on one axle'),
+        lambda t, r: (
+            r.__setitem__('base_type', 'differential'),
+            r.__setitem__('differential', {'wheel_joints': ['drive_fl_joint', 'drive_fr_joint']}),
+        ),
+        'wheels must sit on one axle',
+    ),
 }
 
 
@@ -159,16 +207,32 @@ def test_check_as_a_process_prints_one_line_and_no_traceback(tmp_path):
     raw['robot']['arm']['dexterous'] = [9.0] * 7
     path = tmp_path / 'robot.yaml'
     path.write_text(yaml.safe_dump(raw))
-    proc = subprocess.run([sys.executable, '-m', 'wmm_control.cli.robot_setup', 'check', str(path)],
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, '-m', 'wmm_control.cli.robot_setup', 'check', str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 2
     assert 'Traceback' not in proc.stderr and proc.stderr.strip().count('\n') == 0
 
 
 def test_init_names_what_the_urdf_lacks(tmp_path, capsys):
     urdf = write_urdf(tmp_path / 'r.urdf', 'mecanum')
-    code = robot_setup.main(['init', str(urdf), '--base', 'differential', '--arm-root', 'arm_base_link',
-                             '--tool', 'tool_link', '--out', str(tmp_path / 'r.yaml')])
+    code = robot_setup.main(
+        [
+            'init',
+            str(urdf),
+            '--base',
+            'differential',
+            '--arm-root',
+            'arm_base_link',
+            '--tool',
+            'tool_link',
+            '--out',
+            str(tmp_path / 'r.yaml'),
+        ]
+    )
     assert code == 2
     assert 'found 4 wheel joints' in capsys.readouterr().err
     assert not (tmp_path / 'r.yaml').exists()
@@ -199,8 +263,9 @@ def test_differential_wheel_rates_never_imply_a_sideways_velocity_and_keep_their
 
 def test_differential_controller_follows_the_forward_and_turning_part_of_a_reference():
     kin = DifferentialKinematics(wheel_radius=0.1, track=0.5)
-    ctrl = WheelController(kin, WheelParams(dt=0.025, velocity_limit=(0.6, 0.0, 2.4), accel_limit=(0.6, 0.0, 2.4),
-                                            wheel_rate_limit=12.0))
+    ctrl = WheelController(
+        kin, WheelParams(dt=0.025, velocity_limit=(0.6, 0.0, 2.4), accel_limit=(0.6, 0.0, 2.4), wheel_rate_limit=12.0)
+    )
     for _ in range(200):
         out = ctrl.step([0.3, 0.2, -0.5])
     np.testing.assert_allclose(out.twist, [0.3, 0.0, -0.5], atol=1e-12)
@@ -217,14 +282,14 @@ def test_amp_commands_a_differential_base_along_its_heading_only(tmp_path):
     try:
         loop = ClosedLoop(world, make_resolver('amp', cfg))
         p0, q0 = world.ee_pose()
-        target = PoseTarget(np.asarray(p0) + [0.0, 1.5, 0.0], matrix_from_quaternion(q0))     # straight to the left
+        target = PoseTarget(np.asarray(p0) + [0.0, 1.5, 0.0], matrix_from_quaternion(q0))  # straight to the left
         lateral = []
         for _ in range(1600):
             rec = loop.step(target)
             lateral.append(abs(rec.command.base_twist[1]))
         assert max(lateral) == 0.0
         assert np.linalg.norm(np.asarray(world.ee_pose()[0]) - target.position) < 0.01
-        assert abs(world.base_pose()[2]) > 0.2          # it turned to get there
+        assert abs(world.base_pose()[2]) > 0.2  # it turned to get there
     finally:
         world.close()
 
@@ -241,6 +306,7 @@ def test_manipulability_derivatives_hold_for_a_prismatic_joint_and_a_square_sing
     with a prismatic lift; and a six-joint arm (J_m square) at a wrist singularity gives finite
     derivatives instead of an error (AMP's tertiary objective runs there)."""
     from wmm_control.kinematics import KinematicModel
+
     urdf = write_urdf(tmp_path / 'lift.urdf', 'mecanum', arm_joints=8, prismatic_lift=True)
     robot_setup.init_robot(urdf, 'mecanum', 'arm_base_link', 'tool_link', tmp_path / 'lift.yaml')
     model = KinematicModel(tmp_path / 'lift.yaml')
@@ -261,7 +327,7 @@ def test_manipulability_derivatives_hold_for_a_prismatic_joint_and_a_square_sing
         np.testing.assert_allclose(hess, fd_h, rtol=1e-5, atol=1e-6 * np.abs(fd_h).max())
     ur = KinematicModel('ur_mecanum')
     ur.update(np.zeros(3), [0.0, -1.2, 1.5, -0.3, 1.0, 0.0])
-    ur.update(np.zeros(3), [0.0, -1.2, 1.5, -0.3, 0.0, 0.0])      # q5 = 0: wrist axes 4 and 6 align
+    ur.update(np.zeros(3), [0.0, -1.2, 1.5, -0.3, 0.0, 0.0])  # q5 = 0: wrist axes 4 and 6 align
     assert ur.manipulability('full') < 1e-12
     assert np.all(np.isfinite(ur.manipulability_gradient('full')))
     assert np.all(np.isfinite(ur.manipulability_hessian('full')))
@@ -280,4 +346,4 @@ def test_the_new_robots_reach_a_goal_that_needs_the_base_with_wheel_contact_phys
         for _ in range(1200):
             loop.step(target)
         assert np.linalg.norm(np.asarray(world.ee_pose()[0]) - goal) < 0.01
-        assert np.hypot(*world.base_pose()[:2]) > 0.3          # the base carried it
+        assert np.hypot(*world.base_pose()[:2]) > 0.3  # the base carried it

@@ -17,9 +17,16 @@ from wmm_control.experiments.ros_run import private_domain_id
 from wmm_control.nodes.runner import run_node
 
 
-@pytest.mark.parametrize('module', ['sim_bridge.node', 'wmm_control.nodes.swmr_controller',
-                                    'wmm_control.nodes.mecanum_controller', 'wmm_control.nodes.redundancy_resolver',
-                                    'wmm_control.nodes.goal_sequencer'])
+@pytest.mark.parametrize(
+    'module',
+    [
+        'sim_bridge.node',
+        'wmm_control.nodes.swmr_controller',
+        'wmm_control.nodes.mecanum_controller',
+        'wmm_control.nodes.redundancy_resolver',
+        'wmm_control.nodes.goal_sequencer',
+    ],
+)
 def test_a_params_file_that_cannot_be_read_is_a_clear_error_not_a_traceback(module, tmp_path, capfd):
     main = importlib.import_module(module).main
     assert main(['node', '--ros-args', '--params-file', str(tmp_path / 'missing.yaml')]) == 2
@@ -40,7 +47,7 @@ def test_ctrl_c_in_the_middle_of_a_callback_lets_it_finish_and_exits_cleanly():
 
         def tick():
             os.kill(os.getpid(), signal.SIGINT)
-            time.sleep(0.05)                   # Ctrl-C arrives while the callback runs
+            time.sleep(0.05)  # Ctrl-C arrives while the callback runs
             pub.publish(String(data='after'))
             published.append(rclpy.ok())
 
@@ -49,14 +56,15 @@ def test_ctrl_c_in_the_middle_of_a_callback_lets_it_finish_and_exits_cleanly():
 
     before = signal.getsignal(signal.SIGINT)
     assert run_node(factory, args=['sigint_probe']) == 0
-    assert published == [True]                 # it finished, the context alive; no second cycle
+    assert published == [True]  # it finished, the context alive; no second cycle
     assert signal.getsignal(signal.SIGINT) is before
 
 
-@pytest.mark.parametrize('first, second, gap', [(signal.SIGINT, signal.SIGINT, 0.05),
-                                                (signal.SIGINT, signal.SIGINT, 0.2),
-                                                (signal.SIGTERM, signal.SIGINT, 0.1)],
-                         ids=['SIGINT twice 0.05 s apart', 'SIGINT twice 0.2 s apart', 'SIGTERM then SIGINT'])
+@pytest.mark.parametrize(
+    'first, second, gap',
+    [(signal.SIGINT, signal.SIGINT, 0.05), (signal.SIGINT, signal.SIGINT, 0.2), (signal.SIGTERM, signal.SIGINT, 0.1)],
+    ids=['SIGINT twice 0.05 s apart', 'SIGINT twice 0.2 s apart', 'SIGTERM then SIGINT'],
+)
 def test_a_second_signal_during_teardown_neither_aborts_nor_prints_a_traceback(first, second, gap):
     """``ros2 launch`` answers Ctrl-C with SIGINT to every process, and a second one shortly
     after: the node is then being destroyed, or the interpreter is finalizing. Either used to
@@ -72,10 +80,12 @@ def test_a_second_signal_during_teardown_neither_aborts_nor_prints_a_traceback(f
     reader.start()
     try:
         end = time.monotonic() + 60.0
-        while time.monotonic() < end and proc.poll() is None and not any('waiting for /goal_pose' in ln for ln in lines):
+        while (
+            time.monotonic() < end and proc.poll() is None and not any('waiting for /goal_pose' in ln for ln in lines)
+        ):
             time.sleep(0.05)
         assert proc.poll() is None, ''.join(lines)
-        time.sleep(0.5)                            # spinning
+        time.sleep(0.5)  # spinning
         proc.send_signal(first)
         time.sleep(gap)
         if proc.poll() is None:

@@ -46,8 +46,11 @@ def test_steer_and_drive_commands_move_the_base_and_odometry_equals_truth_withou
 
 
 def test_with_slip_drift_odometry_and_truth_drift_apart_at_the_configured_rate(ros):
-    sim, ctrl = start(ros, lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 2.0)},
-                      slip_drift=[0.0, 0.02, 0.0])
+    sim, ctrl = start(
+        ros,
+        lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 2.0)},
+        slip_drift=[0.0, 0.02, 0.0],
+    )
     assert ros.spin_until(lambda: len(ctrl.truth) >= 41 and len(ctrl.odom) >= 41)
     gap = pose2d(ctrl.truth[40]) - pose2d(ctrl.odom[40])
     np.testing.assert_allclose(gap, [0.0, 0.02 * 40 * 0.025, 0.0], atol=1e-9)
@@ -61,6 +64,7 @@ def test_command_timeout_zeroes_a_group_that_stops_sending(ros):
         if t < 10 * 0.025 - 1e-9:
             cmds['arm'] = np.full(7, 0.2)
         return cmds
+
     sim, ctrl = start(ros, script, lockstep_groups='steer')
     assert ros.spin_until(steps(ctrl, 40))
     vel = np.array([[ctrl.velocities(i)[n] for n in ARM] for i in range(40)])
@@ -89,8 +93,9 @@ def test_bad_commands_are_rejected_and_nothing_moves(ros):
 
 def test_commands_beyond_the_velocity_limit_are_clamped_and_reported(ros):
     limit = load_robot('steerable').arm.velocity
-    sim, ctrl = start(ros, lambda t, js: {'arm': np.full(7, 50.0), 'steer': np.zeros(4), 'drive': np.zeros(4)},
-                      diagnostics_period=0.1)
+    sim, ctrl = start(
+        ros, lambda t, js: {'arm': np.full(7, 50.0), 'steer': np.zeros(4), 'drive': np.zeros(4)}, diagnostics_period=0.1
+    )
     assert ros.spin_until(lambda: len(ctrl.joint_states) >= 10 and len(ctrl.diagnostics) >= 2)
     np.testing.assert_allclose([ctrl.velocities(5)[n] for n in ARM], limit)
     arm_status = [s for s in ctrl.diagnostics[-1].status if s.name == '/wmm_sim: arm commands'][0]
@@ -102,8 +107,9 @@ def test_ee_pose_equals_forward_kinematics_of_published_joint_states_and_true_ba
     model = KinematicModel('steerable')
     rng = np.random.default_rng(3)
     arm_v = rng.uniform(-0.4, 0.4, 7)
-    sim, ctrl = start(ros, lambda t, js: {'arm': arm_v * np.cos(3 * t), 'steer': np.full(4, 0.3),
-                                          'drive': np.full(4, 3.0)})
+    sim, ctrl = start(
+        ros, lambda t, js: {'arm': arm_v * np.cos(3 * t), 'steer': np.full(4, 0.3), 'drive': np.full(4, 3.0)}
+    )
     assert ros.spin_until(lambda: len(ctrl.ee_poses) >= 60 and len(ctrl.truth) >= 60 and len(ctrl.joint_states) >= 60)
     worst = 0.0
     for i in range(0, 60, 5):
@@ -119,12 +125,17 @@ def test_ee_pose_equals_forward_kinematics_of_published_joint_states_and_true_ba
 def _record_run(seed):
     ros = RosHarness()
     try:
-        script = lambda t, js: {'arm': np.full(7, 0.1) * np.sin(t), 'steer': np.full(4, 0.2),  # noqa: E731
-                                'drive': np.full(4, 4.0)}
+
+        def script(t, js):
+            return {'arm': np.full(7, 0.1) * np.sin(t), 'steer': np.full(4, 0.2), 'drive': np.full(4, 4.0)}
+
         sim, ctrl = start(ros, script, slip_gain=0.05, slip_noise=[0.01, 0.01, 0.02], seed=seed)
         assert ros.spin_until(lambda: len(ctrl.odom) >= 50 and len(ctrl.truth) >= 50 and len(ctrl.joint_states) >= 50)
-        return ([tuple(m.position) for m in ctrl.joint_states[:50]],
-                [tuple(pose2d(m)) for m in ctrl.truth[:50]], [tuple(pose2d(m)) for m in ctrl.odom[:50]])
+        return (
+            [tuple(m.position) for m in ctrl.joint_states[:50]],
+            [tuple(pose2d(m)) for m in ctrl.truth[:50]],
+            [tuple(pose2d(m)) for m in ctrl.odom[:50]],
+        )
     finally:
         ros.close()
 
@@ -132,7 +143,7 @@ def _record_run(seed):
 def test_lockstep_runs_are_bit_identical_for_the_same_seed():
     a, b, c = _record_run(7), _record_run(7), _record_run(8)
     assert a == b
-    assert a[1] != c[1]          # the noise really depends on the seed
+    assert a[1] != c[1]  # the noise really depends on the seed
 
 
 def test_invalid_parameters_fail_with_a_clear_error(ros):
@@ -148,16 +159,21 @@ def test_invalid_parameters_fail_with_a_clear_error(ros):
 def test_runs_under_use_sim_time_as_the_time_source(ros, timing):
     # Under use_sim_time the ROS clock advances only with the /clock the simulator itself
     # publishes: timers on it would never fire and the simulator would freeze at t = 0.
-    sim, ctrl = start(ros, lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 2.0)},
-                      timing=timing, use_sim_time=True)
+    sim, ctrl = start(
+        ros,
+        lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 2.0)},
+        timing=timing,
+        use_sim_time=True,
+    )
     assert ros.spin_until(lambda: len(ctrl.joint_states) >= 20 and len(ctrl.truth) >= 20, timeout=10)
     stamps = np.array([stamp_s(m) for m in ctrl.joint_states[:20]])
-    np.testing.assert_allclose(np.diff(stamps), 0.025, atol=1e-9)      # simulated time, one period a step
-    assert pose2d(ctrl.truth[19])[0] > 0.0                              # and the commands act
+    np.testing.assert_allclose(np.diff(stamps), 0.025, atol=1e-9)  # simulated time, one period a step
+    assert pose2d(ctrl.truth[19])[0] > 0.0  # and the commands act
     assert sim.get_clock().now().nanoseconds > 0
 
 
 # ---------------------------------------------------------------- odometry covariance, PyBullet client
+
 
 def _planar(cov):
     full = np.array(cov).reshape(6, 6)
@@ -168,8 +184,14 @@ def test_odometry_covariance_is_the_slip_models_error(ros):
     # Drive straight with slip (gain, drift, noise): the reported covariances must match the
     # errors odometry actually makes against the ground truth.
     noise = [0.01, 0.01, 0.02]
-    sim, ctrl = start(ros, lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 5.0)},
-                      slip_gain=0.05, slip_drift=[0.003, 0.0, 0.002], slip_noise=noise, seed=3)
+    sim, ctrl = start(
+        ros,
+        lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 5.0)},
+        slip_gain=0.05,
+        slip_drift=[0.003, 0.0, 0.002],
+        slip_noise=noise,
+        seed=3,
+    )
     assert ros.spin_until(lambda: len(ctrl.odom) >= 161 and len(ctrl.truth) >= 161)
     odom, truth = ctrl.odom[1:161], ctrl.truth[1:161]
 
@@ -179,21 +201,23 @@ def test_odometry_covariance_is_the_slip_models_error(ros):
     err = np.array([twist(t) - twist(o) for o, t in zip(odom, truth)])
     reported = np.array([np.diag(_planar(o.twist.covariance)) for o in odom])
     # Mean squared twist error per axis vs the mean reported variance: equal within sampling error.
-    np.testing.assert_allclose(np.mean(err ** 2, axis=0), np.mean(reported, axis=0), rtol=0.3)
-    assert np.all(reported[:, :2] > 1e-5)          # not a placeholder: at least noise² + slip²
+    np.testing.assert_allclose(np.mean(err**2, axis=0), np.mean(reported, axis=0), rtol=0.3)
+    assert np.all(reported[:, :2] > 1e-5)  # not a placeholder: at least noise² + slip²
     # The pose: the dead-reckoning error after 4 s against its reported mean squared error.
     o, t = odom[-1], truth[-1]
-    pose_err = np.array([t.pose.pose.position.x - o.pose.pose.position.x,
-                         t.pose.pose.position.y - o.pose.pose.position.y])
+    pose_err = np.array(
+        [t.pose.pose.position.x - o.pose.pose.position.x, t.pose.pose.position.y - o.pose.pose.position.y]
+    )
     cov = _planar(o.pose.covariance)
-    assert cov[0, 0] > cov[1, 1] > 0                 # the slip acts along x, the direction of motion
+    assert cov[0, 0] > cov[1, 1] > 0  # the slip acts along x, the direction of motion
     assert 0.25 < abs(pose_err[0]) / math.sqrt(cov[0, 0]) < 2.0
     assert abs(pose_err[1]) < 3 * math.sqrt(cov[1, 1])
-    np.testing.assert_array_equal(truth[-1].pose.covariance, np.zeros(36))     # ground truth is exact
+    np.testing.assert_array_equal(truth[-1].pose.covariance, np.zeros(36))  # ground truth is exact
 
 
 def test_odometry_covariance_without_slip_is_the_floor(ros):
     from sim_bridge.slip import VARIANCE_FLOOR
+
     sim, ctrl = start(ros, lambda t, js: {'arm': np.zeros(7), 'steer': np.zeros(4), 'drive': np.full(4, 5.0)})
     assert ros.spin_until(lambda: len(ctrl.odom) >= 40)
     np.testing.assert_allclose(np.diag(_planar(ctrl.odom[-1].pose.covariance)), VARIANCE_FLOOR)
@@ -202,6 +226,7 @@ def test_odometry_covariance_without_slip_is_the_floor(ros):
 
 def test_destroying_the_node_closes_its_pybullet_client(ros):
     import pybullet
+
     sim = SimNode(context=ros.context)
     cid = sim.world.client_id
     assert pybullet.isConnected(physicsClientId=cid)
@@ -221,14 +246,29 @@ def test_two_simulators_in_namespaces_each_drive_their_own_clock_and_name_their_
     sims, clocks = {}, {}
     for ns, timing in (('r1', 'realtime'), ('r2', 'lockstep')):
         args = ['--ros-args', '-r', f'__ns:=/{ns}', '-r', f'/clock:=/{ns}/clock']
-        sims[ns] = ros.add(SimNode(context=ros.context, cli_args=args, parameter_overrides=overrides(
-            timing=timing, lockstep_timeout=0.2, publish_clock=True, use_sim_time=True, diagnostics_period=0.1)))
-        clocks[ns] = ros.add(Node('follower', namespace=f'/{ns}', context=ros.context, cli_args=args,
-                                  parameter_overrides=overrides(use_sim_time=True)))
+        sims[ns] = ros.add(
+            SimNode(
+                context=ros.context,
+                cli_args=args,
+                parameter_overrides=overrides(
+                    timing=timing, lockstep_timeout=0.2, publish_clock=True, use_sim_time=True, diagnostics_period=0.1
+                ),
+            )
+        )
+        clocks[ns] = ros.add(
+            Node(
+                'follower',
+                namespace=f'/{ns}',
+                context=ros.context,
+                cli_args=args,
+                parameter_overrides=overrides(use_sim_time=True),
+            )
+        )
     statuses = {}
     probe = ros.add(Node('probe', context=ros.context))
-    probe.create_subscription(DiagnosticArray, '/diagnostics',
-                              lambda m: statuses.update({s.name: s.hardware_id for s in m.status}), 10)
+    probe.create_subscription(
+        DiagnosticArray, '/diagnostics', lambda m: statuses.update({s.name: s.hardware_id for s in m.status}), 10
+    )
 
     def now(ns):
         return clocks[ns].get_clock().now().nanoseconds * 1e-9
@@ -247,20 +287,24 @@ def test_two_simulators_in_namespaces_each_drive_their_own_clock_and_name_their_
 def _chain(transforms, parent, child):
     """The 4×4 pose of ``child`` in ``parent`` from TransformStamped messages (a tree)."""
     from wmm_control.kinematics.frames import FrameTransform
+
     by_child = {m.child_frame_id: m for m in transforms}
     out = np.eye(4)
     frame = child
     while frame != parent:
         m = by_child[frame]
         t, q = m.transform.translation, m.transform.rotation
-        out = FrameTransform(m.header.frame_id, frame, np.array([t.x, t.y, t.z]),
-                             np.array([q.x, q.y, q.z, q.w])).matrix() @ out
+        out = (
+            FrameTransform(m.header.frame_id, frame, np.array([t.x, t.y, t.z]), np.array([q.x, q.y, q.z, q.w])).matrix()
+            @ out
+        )
         frame = m.header.frame_id
     return out
 
 
 def _ee_matrix(msg):
     from wmm_control.kinematics.frames import FrameTransform
+
     p, q = msg.pose.position, msg.pose.orientation
     return FrameTransform('world', 'ee', np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w])).matrix()
 
@@ -279,8 +323,14 @@ def test_robot_description_and_the_tf_tree_place_the_end_effector_where_ee_pose_
     groups = ('arm', 'steer', 'drive') if robot == 'steerable' else ('arm', 'wheel')
     sizes = {'arm': 7, 'steer': 4, 'drive': 4, 'wheel': 4}
     moving = {'arm': 0.2, 'steer': 0.3, 'drive': 4.0, 'wheel': 3.0}
-    sim, ctrl = start(ros, lambda t, js: {g: np.full(sizes[g], moving[g] * (-1) ** i) for i, g in enumerate(groups)},
-                      groups=groups, robot=robot, frame_prefix='r1/', slip_drift=[0.02, -0.01, 0.03])
+    sim, ctrl = start(
+        ros,
+        lambda t, js: {g: np.full(sizes[g], moving[g] * (-1) ** i) for i, g in enumerate(groups)},
+        groups=groups,
+        robot=robot,
+        frame_prefix='r1/',
+        slip_drift=[0.02, -0.01, 0.03],
+    )
     assert ros.spin_until(steps(ctrl, 60))
     late = ros.add(Node('late_listener', context=ros.context))
     texts = []
@@ -291,16 +341,18 @@ def test_robot_description_and_the_tf_tree_place_the_end_effector_where_ee_pose_
     assert not np.allclose(sim.world.odom_pose(), sim.world.base_pose(), atol=1e-3), 'odometry drifted'
     names, pos, _ = sim.world.joint_state()
     stamp = ctrl.ee_poses[-1].header.stamp
-    ee_position, ee_quat = sim.world.ee_pose()          # the state the transforms below are of
+    ee_position, ee_quat = sim.world.ee_pose()  # the state the transforms below are of
     ee = FrameTransform('world', 'ee', np.asarray(ee_position), np.asarray(ee_quat)).matrix()
     tfs = sim.frames.static_transforms(stamp) + sim.frames.dynamic_transforms(
-        stamp, dict(zip(names, pos.tolist())), sim.world.odom_pose(), sim.world.base_pose())
+        stamp, dict(zip(names, pos.tolist())), sim.world.odom_pose(), sim.world.base_pose()
+    )
     assert all(m.child_frame_id.startswith('r1/') for m in tfs)
     assert {m.header.frame_id for m in tfs if not m.header.frame_id.startswith('r1/')} == {'world'}
     assert len({m.child_frame_id for m in tfs}) == len(tfs), 'each frame has one parent'
     np.testing.assert_allclose(_chain(tfs, 'world', 'r1/' + config.ee_frame), ee, atol=1e-6)
-    np.testing.assert_allclose(_chain(tfs, 'world', 'r1/' + config.base_link)[:2, 3], sim.world.base_pose()[:2],
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        _chain(tfs, 'world', 'r1/' + config.base_link)[:2, 3], sim.world.base_pose()[:2], atol=1e-9
+    )
     assert ctrl.odom[-1].header.frame_id == 'r1/odom' and ctrl.odom[-1].child_frame_id == 'r1/' + config.base_link
 
 

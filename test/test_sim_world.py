@@ -75,13 +75,13 @@ def test_constant_arm_velocity_moves_joints_by_v_t(robot):
         _, q0, _ = w.joint_state()
         v = np.array([0.3, -0.2, 0.25, 0.1, -0.4, 0.35, 0.5])
         assert w.set_command('arm', v).accepted
-        run(w, 1.0)                                   # 40 steps
+        run(w, 1.0)  # 40 steps
         names, q, qd = w.joint_state()
         assert names[:7] == w.robot.arm.joints
         np.testing.assert_allclose(q[:7] - q0[:7], v * 1.0, rtol=1e-9)
         np.testing.assert_array_equal(qd[:7], v)
         np.testing.assert_allclose(w.time, 1.0, rtol=1e-12)
-        np.testing.assert_array_equal(w.base_pose(), w.robot.start.base_pose)   # base untouched
+        np.testing.assert_array_equal(w.base_pose(), w.robot.start.base_pose)  # base untouched
 
 
 @pytest.mark.parametrize('robot', ['A', 'B'])
@@ -96,9 +96,9 @@ def test_physics_mode_arm_follows_v_t_within_one_percent(robot):
 
 
 def test_arm_stops_at_position_limit(world_b):
-    upper = world_b.robot.arm.position_upper[1]                  # joint 2: ±2.2 rad
+    upper = world_b.robot.arm.position_upper[1]  # joint 2: ±2.2 rad
     world_b.set_command('arm', [0, 1.5, 0, 0, 0, 0, 0])
-    run(world_b, 2.0)                                            # would reach 0.52 + 3.0
+    run(world_b, 2.0)  # would reach 0.52 + 3.0
     _, q, qd = world_b.joint_state()
     assert q[1] == upper
     assert qd[1] == 0.0
@@ -117,13 +117,12 @@ def test_steering_in_place_with_offset_compensation_keeps_base_still(world_a):
 def test_steer_then_drive_translates_along_the_wheel_heading(world_a):
     alpha = math.pi / 6
     steer_in_place(world_a, [alpha] * 4)
-    v = 0.4                                                       # [m/s]
+    v = 0.4  # [m/s]
     world_a.set_command('drive', [v / R_W] * 4)
     run(world_a, 2.5)
     expected = [v * 2.5 * math.cos(alpha), v * 2.5 * math.sin(alpha), 0.0]
     np.testing.assert_allclose(world_a.base_pose(), expected, atol=1e-9)
-    np.testing.assert_allclose(world_a.base_twist(), [v * math.cos(alpha), v * math.sin(alpha), 0.0],
-                               atol=1e-12)
+    np.testing.assert_allclose(world_a.base_twist(), [v * math.cos(alpha), v * math.sin(alpha), 0.0], atol=1e-12)
 
 
 def test_steer_then_drive_follows_a_circular_arc(world_a):
@@ -168,8 +167,9 @@ def test_se2_step_is_exact_for_constant_twist():
     rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
     np.testing.assert_allclose(one[:2], icr + rot @ (np.array([x, y]) - icr), atol=1e-12)
     # Pure translation (ω = 0) uses the series branch.
-    np.testing.assert_allclose(se2_step((0, 0, math.pi / 2), (1.0, 0.5, 0.0), 2.0), (-1.0, 2.0, math.pi / 2),
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        se2_step((0, 0, math.pi / 2), (1.0, 0.5, 0.0), 2.0), (-1.0, 2.0, math.pi / 2), atol=1e-15
+    )
 
 
 # ----------------------------------------------------------------------------- base, robot B
@@ -204,7 +204,7 @@ def drive_a_pattern(world):
 def test_odometry_equals_truth_bitwise_without_slip(slip):
     with SimWorld('A', slip=slip, start_base_pose=(0.5, -0.2, 0.4)) as w:
         drive_a_pattern(w)
-        assert np.linalg.norm(w.base_pose()[:2] - [0.5, -0.2]) > 0.5          # it did move
+        assert np.linalg.norm(w.base_pose()[:2] - [0.5, -0.2]) > 0.5  # it did move
         np.testing.assert_array_equal(w.odom_pose(), w.base_pose())
         np.testing.assert_array_equal(w.odom_twist(), w.base_twist())
     with SimWorld('B', slip=slip) as w:
@@ -214,7 +214,7 @@ def test_odometry_equals_truth_bitwise_without_slip(slip):
 
 
 def test_slip_drift_separates_odometry_at_the_configured_rate():
-    drift = 0.02                                                   # [m/s] along base x
+    drift = 0.02  # [m/s] along base x
     with SimWorld('A', slip=SlipParams(drift=(drift, 0.0, 0.0)), start_base_pose=(0, 0, 0)) as w:
         v = 0.45
         w.set_command('drive', [v / R_W] * 4)
@@ -229,16 +229,16 @@ def test_slip_drift_separates_odometry_at_the_configured_rate():
 
 
 def test_slip_gain_grows_with_wheel_speed():
-    gain = 0.1                                                     # [1/(m/s)]
+    gain = 0.1  # [1/(m/s)]
     gaps = []
-    for v in (0.2, 0.4):                                           # rim speeds [m/s]
+    for v in (0.2, 0.4):  # rim speeds [m/s]
         with SimWorld('B', slip=SlipParams(gain=gain), start_base_pose=(0, 0, 0)) as w:
-            w.set_command('wheel', [v / R_B] * 4)                  # straight +x at v
+            w.set_command('wheel', [v / R_B] * 4)  # straight +x at v
             run(w, 2.0)
             gap = w.odom_pose()[0] - w.base_pose()[0]
             np.testing.assert_allclose(gap, gain * v * v * 2.0, rtol=1e-9)
             gaps.append(gap)
-    assert gaps[1] > 3.9 * gaps[0]                                 # loss ∝ v², distance ∝ v
+    assert gaps[1] > 3.9 * gaps[0]  # loss ∝ v², distance ∝ v
 
 
 def test_slip_noise_mean_rate_and_seeded_reproducibility():
@@ -247,7 +247,7 @@ def test_slip_noise_mean_rate_and_seeded_reproducibility():
     for seed in (3, 3, 4):
         with SimWorld('B', slip=params, seed=seed, start_base_pose=(0, 0, 0)) as w:
             w.set_command('wheel', [2.0] * 4)
-            run(w, 10.0)                                           # 400 noise draws
+            run(w, 10.0)  # 400 noise draws
             results.append((w.base_pose(), w.odom_pose()))
     np.testing.assert_array_equal(results[0][0], results[1][0])
     assert not np.array_equal(results[0][0], results[2][0])
@@ -266,7 +266,7 @@ def test_runs_are_bit_identical_for_the_same_seed_and_worlds_do_not_interfere():
             w.set_command('steer', [0.1, 0.1, 0.1, 0.1])
             w.set_command('drive', [3.0, 3.0, 3.0, 3.0])
         trace1, trace2 = [], []
-        for _ in range(60):                                        # interleaved stepping
+        for _ in range(60):  # interleaved stepping
             w1.step()
             w2.step()
             for w, tr in ((w1, trace1), (w2, trace2)):
@@ -295,7 +295,7 @@ def test_physics_robot_a_drives_straight_by_wheel_contact():
         w.set_command('drive', [v / R_W] * 4)
         run(w, 2.0)
         x, y, th = w.base_pose()
-        assert abs(x - v * 2.0) < 0.05 * v * 2.0                   # within 5 % of r φ̇ t
+        assert abs(x - v * 2.0) < 0.05 * v * 2.0  # within 5 % of r φ̇ t
         assert abs(y) < 0.03 and abs(th) < 0.03
         assert np.linalg.norm(w.odom_pose()[:2] - [x, y]) < 0.05
 
@@ -333,9 +333,17 @@ def test_bad_commands_are_rejected_and_nothing_moves(robot):
         _, q0, _ = w.joint_state()
         pose0, ee0 = w.base_pose(), w.ee_pose()[0]
         wheel = 'drive' if robot == 'A' else 'wheel'
-        bad = [('arm', [0.1] * 6), ('arm', [0.1] * 8), ('arm', [0.1, math.nan, 0, 0, 0, 0, 0]),
-               ('arm', [0, 0, 0, math.inf, 0, 0, 0]), ('arm', 'fast'), ('arm', [[0.1] * 7]),
-               (wheel, [1.0, 2.0, -math.inf, 0.0]), (wheel, [1.0] * 3), ('gripper', [0.1])]
+        bad = [
+            ('arm', [0.1] * 6),
+            ('arm', [0.1] * 8),
+            ('arm', [0.1, math.nan, 0, 0, 0, 0, 0]),
+            ('arm', [0, 0, 0, math.inf, 0, 0, 0]),
+            ('arm', 'fast'),
+            ('arm', [[0.1] * 7]),
+            (wheel, [1.0, 2.0, -math.inf, 0.0]),
+            (wheel, [1.0] * 3),
+            ('gripper', [0.1]),
+        ]
         for group, values in bad:
             res = w.set_command(group, values)
             assert not res.accepted and res.reason
@@ -356,7 +364,7 @@ def test_bad_commands_are_rejected_and_nothing_moves(robot):
 
 def test_commands_beyond_the_urdf_limits_are_clamped_and_counted(world_a):
     lim = world_a.velocity_limits
-    np.testing.assert_allclose(lim[:7], world_a.robot.arm.velocity)       # = URDF <limit velocity>
+    np.testing.assert_allclose(lim[:7], world_a.robot.arm.velocity)  # = URDF <limit velocity>
     res = world_a.set_command('arm', [10.0, -10.0, 0.1, 0.1, 0.1, 0.1, 0.1])
     assert res.accepted and res.clamped == 2 and 'arm_joint_1' in res.reason
     res = world_a.set_command('drive', [100.0, 1.0, 1.0, 1.0])
@@ -395,10 +403,13 @@ def test_ee_pose_matches_kinematics_core_fk(robot):
             pos_fk, rot_fk = model.ee_placement_world()
             pos, quat = w.ee_pose()
             x, y, z, qw = quat
-            rot = np.array([
-                [1 - 2 * (y * y + z * z), 2 * (x * y - z * qw), 2 * (x * z + y * qw)],
-                [2 * (x * y + z * qw), 1 - 2 * (x * x + z * z), 2 * (y * z - x * qw)],
-                [2 * (x * z - y * qw), 2 * (y * z + x * qw), 1 - 2 * (x * x + y * y)]])
+            rot = np.array(
+                [
+                    [1 - 2 * (y * y + z * z), 2 * (x * y - z * qw), 2 * (x * z + y * qw)],
+                    [2 * (x * y + z * qw), 1 - 2 * (x * x + z * z), 2 * (y * z - x * qw)],
+                    [2 * (x * z - y * qw), 2 * (y * z + x * qw), 1 - 2 * (x * x + y * y)],
+                ]
+            )
             assert np.linalg.norm(pos - pos_fk) < 1e-3
             assert np.linalg.norm(rot.T @ rot_fk - np.eye(3)) < 1e-3
 
@@ -417,8 +428,8 @@ def _png_size_and_pixels(path):
     assert data[:8] == b'\x89PNG\r\n\x1a\n'
     i, idat = 8, b''
     while i < len(data):
-        n = struct.unpack('>I', data[i:i + 4])[0]
-        tag, body = data[i + 4:i + 8], data[i + 8:i + 8 + n]
+        n = struct.unpack('>I', data[i : i + 4])[0]
+        tag, body = data[i + 4 : i + 8], data[i + 8 : i + 8 + n]
         if tag == b'IHDR':
             w, h = struct.unpack('>II', body[:8])
         elif tag == b'IDAT':
@@ -434,7 +445,7 @@ def test_render_png_headless(tmp_path, view, world_a):
     w, h, px = _png_size_and_pixels(out)
     assert (w, h) == (160, 120)
     colours = np.unique(px.reshape(-1, 3), axis=0)
-    assert len(colours) > 20                                       # floor, robot, shading
+    assert len(colours) > 20  # floor, robot, shading
     with pytest.raises(ConfigError):
         render_png(world_a, tmp_path / 'x.png', view='fisheye')
 
@@ -446,7 +457,11 @@ def test_a_base_whose_inertial_frame_is_offset_is_placed_at_its_link_pose(world_
     import pinocchio as pin
     import pybullet as p
     from wmm_control.kinematics.orientation import quaternion_from_yaw
-    local_pos, local_quat = (0.05, -0.02, 0.1), tuple(np.array([0.1, 0.2, 0.05, 0.97]) / np.linalg.norm([0.1, 0.2, 0.05, 0.97]))
+
+    local_pos, local_quat = (
+        (0.05, -0.02, 0.1),
+        tuple(np.array([0.1, 0.2, 0.05, 0.97]) / np.linalg.norm([0.1, 0.2, 0.05, 0.97])),
+    )
     world_b._com_local = pin.XYZQUATToSE3(np.array([*local_pos, *local_quat]))
     world_b._com_inv = p.invertTransform(local_pos, local_quat)
     world_b._com_identity = False

@@ -25,7 +25,7 @@ from wmm_control.robot_config import load_robot
 
 HIPS = np.array([[0.24, 0.19], [0.24, -0.19], [-0.24, 0.19], [-0.24, -0.19]])
 R_W, D = 0.09, 0.045
-ROBOT_A = load_robot('steerable')        # the limits (SwmrParams has no default for them)
+ROBOT_A = load_robot('steerable')  # the limits (SwmrParams has no default for them)
 DT, RATE_MAX, ACC_MAX, DRIVE_MAX = 0.025, 1.0, 2.0, 12.0
 TOL = 1e-6
 
@@ -54,8 +54,10 @@ def assert_limits(outs, beta_dot0=None, beta0=None, twist0=None, accel=None):
     prev_twist = np.zeros(3) if twist0 is None else np.asarray(twist0)
     for k, o in enumerate(outs):
         if accel is not None:
-            assert np.all(np.abs(o.twist_feasible - prev_twist) <= np.asarray(accel) * DT + 1e-12), \
-                (k, (o.twist_feasible - prev_twist) / DT)
+            assert np.all(np.abs(o.twist_feasible - prev_twist) <= np.asarray(accel) * DT + 1e-12), (
+                k,
+                (o.twist_feasible - prev_twist) / DT,
+            )
             prev_twist = o.twist_feasible
         for name in ('beta_ref', 'beta_dot_ref', 'phi_dot_ref', 'twist_feasible'):
             assert np.all(np.isfinite(getattr(o, name))), (k, name)
@@ -84,9 +86,11 @@ bench_reference = _load_bench_reference()
 def robot_a(**overrides):
     """(robot, controller) of robot A's YAML (limits of Sorour Table I)."""
     from wmm_control.robot_config import load_robot
+
     robot = load_robot('steerable')
-    return robot, SwmrController(SteerableGeometry.from_config(robot.steerable),
-                                 SwmrParams.from_robot_config(robot, **overrides))
+    return robot, SwmrController(
+        SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot, **overrides)
+    )
 
 
 def slip_residual(geometry, o):
@@ -101,22 +105,23 @@ def executed_twist(geometry, o):
 
 # ---------------------------------------------------------------- ICR representation
 
+
 def test_icr_of_translation_is_on_the_border_and_antipodes_agree():
-    icr = Icr.from_twist([0.5, 0.0, 0.0], border=20.0)       # moving along x: ICR at ±∞ on y
+    icr = Icr.from_twist([0.5, 0.0, 0.0], border=20.0)  # moving along x: ICR at ±∞ on y
     assert icr.at_infinity
     np.testing.assert_allclose(np.abs(icr.point), [0.0, 20.0], atol=1e-12)
     flipped = icr.with_z(-icr.z)
-    np.testing.assert_allclose(flipped.point, -icr.point)    # opposite border points
+    np.testing.assert_allclose(flipped.point, -icr.point)  # opposite border points
     assert icr.angle_to(flipped) == pytest.approx(0.0, abs=1e-7)
     np.testing.assert_allclose(np.abs(icr.twist_direction), [1.0, 0.0, 0.0], atol=1e-12)
 
 
 def test_icr_of_arc_and_compatible_twist():
-    icr = Icr.from_twist([0.4, 0.0, 0.2])                    # X = -vy/ω = 0, Y = vx/ω = 2
+    icr = Icr.from_twist([0.4, 0.0, 0.2])  # X = -vy/ω = 0, Y = vx/ω = 2
     assert not icr.at_infinity
     np.testing.assert_allclose(icr.point, [0.0, 2.0], atol=1e-12)
     t = icr.twist_direction
-    np.testing.assert_allclose(t / t[2], [2.0, 0.0, 1.0], atol=1e-12)   # ∝ (Y, -X, 1)
+    np.testing.assert_allclose(t / t[2], [2.0, 0.0, 1.0], atol=1e-12)  # ∝ (Y, -X, 1)
     far = Icr.from_point(50.0, 10.0, border=20.0)
     assert far.at_infinity
     np.testing.assert_allclose(far.point, [20.0, 4.0])
@@ -125,7 +130,7 @@ def test_icr_of_arc_and_compatible_twist():
 def test_icr_from_steer_angles_recovers_the_icr(geometry):
     for x, y in [(0.0, 2.0), (1.3, -0.7), (0.24, 0.5), (-3.0, 0.0)]:
         beta = geometry.steer_angles_for_icr((x, y))
-        beta[1] += np.pi                                     # a twin does not change the ICR
+        beta[1] += np.pi  # a twin does not change the ICR
         icr = Icr.from_steer_angles(geometry, beta)
         np.testing.assert_allclose(icr.point, [x, y], atol=1e-9)
     icr = Icr.from_steer_angles(geometry, geometry.steer_angles_for_icr(Icr.from_twist((0.0, 1.0, 0.0))))
@@ -137,12 +142,15 @@ def test_zero_twist_has_no_icr():
         Icr.from_twist([0.0, 0.0, 0.0])
 
 
-@pytest.mark.parametrize('r1, r2, expected', [
-    (2.0, 2.0, 'complementary'),   # R1 R2 = 4 > ℓ² = 1: through straight-line motion
-    (5.0, 0.5, 'complementary'),
-    (0.5, 0.5, 'direct'),          # tight arcs: through the base centre
-    (0.9, 1.0, 'direct'),
-])
+@pytest.mark.parametrize(
+    'r1, r2, expected',
+    [
+        (2.0, 2.0, 'complementary'),  # R1 R2 = 4 > ℓ² = 1: through straight-line motion
+        (5.0, 0.5, 'complementary'),
+        (0.5, 0.5, 'direct'),  # tight arcs: through the base centre
+        (0.9, 1.0, 'direct'),
+    ],
+)
 def test_route_rule_left_arc_to_right_arc(r1, r2, expected):
     left = Icr.from_point(0.0, r1)
     right = Icr.from_point(0.0, -r2)
@@ -154,6 +162,7 @@ def test_route_rule_left_arc_to_right_arc(r1, r2, expected):
 
 # ---------------------------------------------------------------- parameters
 
+
 def test_params_validation():
     with pytest.raises(ConfigError):
         SwmrParams.from_robot_config(ROBOT_A, dt=-0.01)
@@ -162,13 +171,14 @@ def test_params_validation():
     with pytest.raises(ConfigError):
         SwmrParams.from_robot_config(ROBOT_A, base_velocity_limit=(1.0, 1.0))
     with pytest.raises(ConfigError):
-        SwmrParams.from_robot_config(ROBOT_A, icr_gain=100.0)                           # λ dt > 1
+        SwmrParams.from_robot_config(ROBOT_A, icr_gain=100.0)  # λ dt > 1
     with pytest.raises(ConfigError):
-        SwmrParams.from_robot_config(ROBOT_A, steer_rate_limit=40.0)                    # > π/4 per period
+        SwmrParams.from_robot_config(ROBOT_A, steer_rate_limit=40.0)  # > π/4 per period
 
 
 def test_params_from_robot_config():
     from wmm_control.robot_config import load_robot
+
     robot = load_robot('steerable')
     p = SwmrParams.from_robot_config(robot, kp=2.0)
     assert p.steer_rate_limit == robot.steerable.steer_rate_limit
@@ -189,12 +199,16 @@ def test_input_checks(geometry):
         ctrl.reset(np.zeros(3))
 
 
-@pytest.mark.parametrize('huge, bounded', [
-    ((1e308, 0.0, 0.0), (1.0, 0.0, 0.0)),
-    ((0.0, 1e200, 0.0), (0.0, 1.0, 0.0)),
-    ((-1e308, 1e308, 1e308), (-1.0, 1.0, 1.0)),
-    ((3.0, 1.0, 0.0), (1.0, 1.0 / 3.0, 0.0)),            # scaled, not clipped: the ICR is kept
-], ids=['vx-1e308', 'vy-1e200', 'all-1e308', 'vx-3'])
+@pytest.mark.parametrize(
+    'huge, bounded',
+    [
+        ((1e308, 0.0, 0.0), (1.0, 0.0, 0.0)),
+        ((0.0, 1e200, 0.0), (0.0, 1.0, 0.0)),
+        ((-1e308, 1e308, 1e308), (-1.0, 1.0, 1.0)),
+        ((3.0, 1.0, 0.0), (1.0, 1.0 / 3.0, 0.0)),  # scaled, not clipped: the ICR is kept
+    ],
+    ids=['vx-1e308', 'vy-1e200', 'all-1e308', 'vx-3'],
+)
 def test_references_beyond_the_limits_are_scaled_into_them(geometry, huge, bounded):
     ctrl, ref = make(geometry), make(geometry)
     outs = run(ctrl, [huge] * 200)
@@ -206,20 +220,21 @@ def test_references_beyond_the_limits_are_scaled_into_them(geometry, huge, bound
             # agree to far below its tolerance, not bit for bit
             np.testing.assert_allclose(getattr(o, name), getattr(e, name), rtol=0, atol=1e-6)
     assert np.all(np.isfinite(ctrl.twist)) and np.all(np.isfinite(ctrl.phi_dot))
-    moving = outs[-1].twist_executed         # along the reference, at a base or drive-rate limit
-    np.testing.assert_allclose(moving / np.linalg.norm(moving), np.divide(bounded, np.linalg.norm(bounded)),
-                               atol=1e-6)
+    moving = outs[-1].twist_executed  # along the reference, at a base or drive-rate limit
+    np.testing.assert_allclose(moving / np.linalg.norm(moving), np.divide(bounded, np.linalg.norm(bounded)), atol=1e-6)
     assert np.linalg.norm(moving) > 0.99 or np.max(np.abs(outs[-1].phi_dot_ref)) > DRIVE_MAX - 1e-6
     np.testing.assert_allclose(ctrl.build_qp(huge).x_ref, ref.build_qp(bounded).x_ref, atol=1e-12)
 
 
 # ---------------------------------------------------------------- the QP
 
+
 def brute_force_qp(qp):
     """The ICR QP's optimum by enumeration: x_ref, its P-projection on each row, row intersections."""
     a, lb, ub, p, x_ref = qp.A, qp.l, qp.u, qp.P, qp.x_ref
-    rows = [(a[k], lb[k]) for k in range(len(lb)) if lb[k] > -1e20] + \
-        [(a[k], ub[k]) for k in range(len(ub)) if ub[k] < 1e20]
+    rows = [(a[k], lb[k]) for k in range(len(lb)) if lb[k] > -1e20] + [
+        (a[k], ub[k]) for k in range(len(ub)) if ub[k] < 1e20
+    ]
     pinv = np.linalg.inv(p)
     cands = [x_ref] + [x_ref + pinv @ r * (b - r @ x_ref) / (r @ pinv @ r) for r, b in rows]
     for (r1, b1), (r2, b2) in itertools.combinations(rows, 2):
@@ -270,13 +285,14 @@ def test_osqp_finds_the_optimum_along_a_changing_reference():
 def test_wedge_rows_bound_the_steer_change(geometry):
     """An ICR on a wedge line of wheel i asks exactly the edge steer change rate*dt of wheel i."""
     from wmm_control.base.icr import wrap_half_turn
+
     ctrl = make(geometry)
     ctrl.reset(geometry.steer_angles_for_icr((1.0, 1.5)), beta_dot=[0.3, -0.2, 0.1, 0.0])
     qp = ctrl.build_qp([0.3, 0.1, 0.4])
     beta = ctrl.beta
     for i in range(4):
         for k, rate in ((i, qp.rate_lower[i]), (4 + i, qp.rate_upper[i])):
-            x = qp.A[k] * qp.l[k]                             # nearest point of the edge line
+            x = qp.A[k] * qp.l[k]  # nearest point of the edge line
             assert qp.A[k] @ x == pytest.approx(qp.l[k], abs=1e-12)
             icr = qp.icr_of(x)
             v = icr.hip_velocities(HIPS)[i]
@@ -287,7 +303,7 @@ def test_wedge_rows_bound_the_steer_change(geometry):
 def test_feasible_reference_is_returned_without_osqp(geometry):
     """x_ref inside every wedge is the QP's optimum: used as is ('unconstrained'), OSQP agrees."""
     ctrl = make(geometry)
-    run(ctrl, [(0.4, 0.0, 0.2)] * 200)                     # settled on the arc: ICR_ref ≈ ICR_curr
+    run(ctrl, [(0.4, 0.0, 0.2)] * 200)  # settled on the arc: ICR_ref ≈ ICR_curr
     qp = ctrl.build_qp([0.4, 0.0, 0.2])
     assert qp.x_ref_feasible()
     assert np.all(qp.A @ qp.x_ref >= qp.l) and np.all(qp.A @ qp.x_ref <= qp.u)
@@ -300,6 +316,7 @@ def test_feasible_reference_is_returned_without_osqp(geometry):
 
 def test_osqp_is_set_up_once(geometry, monkeypatch):
     import osqp
+
     calls = {'setup': 0}
     orig = osqp.OSQP.setup
 
@@ -309,7 +326,7 @@ def test_osqp_is_set_up_once(geometry, monkeypatch):
 
     monkeypatch.setattr(osqp.OSQP, 'setup', counting)
     ctrl = make(geometry)
-    assert calls['setup'] == 2                               # the QP and its elastic twin
+    assert calls['setup'] == 2  # the QP and its elastic twin
     run(ctrl, [[0.3, 0.2, 0.3]] * 30 + [[0.0, 0.4, -0.2]] * 30)
     assert calls['setup'] == 2
 
@@ -324,7 +341,7 @@ def test_osqp_is_warm_started(geometry):
     cold = solver.last_iterations
     again = solver(qp)
     assert solver.last_iterations < cold
-    assert solver.last_iterations <= 25                       # OSQP checks termination every 25
+    assert solver.last_iterations <= 25  # OSQP checks termination every 25
     np.testing.assert_allclose(again.x, first.x, atol=1e-5)
 
 
@@ -337,8 +354,7 @@ SPEEDS = st.one_of(
 SEGMENT = st.tuples(SPEEDS, SPEEDS, SPEEDS, st.integers(1, 25))
 
 
-@settings(max_examples=1000, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=1000, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(
     segments=st.lists(SEGMENT, min_size=1, max_size=5),
     beta0=st.lists(st.floats(-math.pi, math.pi), min_size=4, max_size=4),
@@ -357,8 +373,7 @@ def test_limits_hold_for_random_reference_sequences(geometry, segments, beta0, r
         assert all(0 <= i < 4 for i in o.active_constraints)
 
 
-@settings(max_examples=400, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=400, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(
     segments=st.lists(SEGMENT, min_size=1, max_size=5),
     icr0=st.tuples(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0)),
@@ -390,20 +405,24 @@ def test_measured_state_resyncs(geometry):
     assert np.max(np.abs(out.beta_dot_ref)) <= ACC_MAX * DT + TOL
     outs = run(ctrl, [(0.4, 0.0, 0.0)] * 200)
     assert_limits(outs, beta_dot0=out.beta_dot_ref, beta0=out.beta_ref)
-    np.testing.assert_allclose(outs[-1].beta_ref, 0.0, atol=1e-3)        # back to straight
+    np.testing.assert_allclose(outs[-1].beta_ref, 0.0, atol=1e-3)  # back to straight
 
 
 # ---------------------------------------------------------------- tracking
 
-@pytest.mark.parametrize('ref', [
-    (0.5, 0.0, 0.0),        # x
-    (0.0, 0.5, 0.0),        # y
-    (0.35, 0.35, 0.0),      # diagonal
-    (-0.3, 0.4, 0.0),
-    (0.0, 0.0, 0.5),        # pure rotation
-    (0.4, 0.0, 0.2),        # arc left
-    (0.3, -0.2, -0.3),      # arc right, sideways
-])
+
+@pytest.mark.parametrize(
+    'ref',
+    [
+        (0.5, 0.0, 0.0),  # x
+        (0.0, 0.5, 0.0),  # y
+        (0.35, 0.35, 0.0),  # diagonal
+        (-0.3, 0.4, 0.0),
+        (0.0, 0.0, 0.5),  # pure rotation
+        (0.4, 0.0, 0.2),  # arc left
+        (0.3, -0.2, -0.3),  # arc right, sideways
+    ],
+)
 def test_executed_twist_converges_to_the_reference(geometry, ref):
     ctrl = make(geometry)
     outs = run(ctrl, [ref] * 300)
@@ -412,7 +431,7 @@ def test_executed_twist_converges_to_the_reference(geometry, ref):
     for o in outs[-20:]:
         tw = executed_twist(geometry, o)
         assert np.linalg.norm(tw - ref) <= 0.01 * np.linalg.norm(ref), (tw, ref)
-        np.testing.assert_allclose(tw, o.twist_feasible, atol=1e-9)   # wheels agree: no slip
+        np.testing.assert_allclose(tw, o.twist_feasible, atol=1e-9)  # wheels agree: no slip
     # Error of the executed twist never grows over the last 150 cycles (monotone convergence).
     errs = [np.linalg.norm(executed_twist(geometry, o) - ref) for o in outs[150:]]
     assert all(b <= a + 1e-9 for a, b in zip(errs, errs[1:]))
@@ -420,9 +439,10 @@ def test_executed_twist_converges_to_the_reference(geometry, ref):
 
 # ---------------------------------------------------------------- route
 
+
 def test_left_arc_to_right_arc_goes_through_straight_motion(geometry):
     ctrl = make(geometry)
-    left, right = (0.5, 0.0, 0.25), (0.5, 0.0, -0.25)      # ICR (0, 2) then (0, -2)
+    left, right = (0.5, 0.0, 0.25), (0.5, 0.0, -0.25)  # ICR (0, 2) then (0, -2)
     run(ctrl, [left] * 200)
     beta_left = ctrl.beta
     outs = run(ctrl, [right] * 200)
@@ -433,7 +453,7 @@ def test_left_arc_to_right_arc_goes_through_straight_motion(geometry):
     assert any(o.icr_next.at_infinity for o in outs)
     assert np.min(np.abs(pts[:, 1])) > 1.9
     speeds = [np.linalg.norm(o.twist_feasible[:2]) for o in outs]
-    assert min(speeds) > 0.4                                 # keeps driving, no spin on the spot
+    assert min(speeds) > 0.4  # keeps driving, no spin on the spot
     # ω changes sign exactly once, while the ICR is beyond the border (straight-line motion).
     w = np.array([o.twist_feasible[2] for o in outs])
     flips = np.flatnonzero(np.sign(w[1:]) != np.sign(w[:-1]))
@@ -447,8 +467,8 @@ def test_left_arc_to_right_arc_goes_through_straight_motion(geometry):
 
 def test_tight_arc_switch_goes_through_the_centre(geometry):
     ctrl = make(geometry)
-    run(ctrl, [(0.1, 0.0, 0.5)] * 200)                       # ICR (0, 0.2)
-    outs = run(ctrl, [(0.1, 0.0, -0.5)] * 300)               # ICR (0, -0.2): R1 R2 < ℓ²
+    run(ctrl, [(0.1, 0.0, 0.5)] * 200)  # ICR (0, 0.2)
+    outs = run(ctrl, [(0.1, 0.0, -0.5)] * 300)  # ICR (0, -0.2): R1 R2 < ℓ²
     assert outs[0].route == 'direct'
     assert not any(o.icr_next.at_infinity for o in outs)
     np.testing.assert_allclose(outs[-1].icr_next.point, [0.0, -0.2], atol=1e-3)
@@ -462,7 +482,7 @@ def test_reversal_keeps_wheel_angles_and_reverses_the_drive(geometry):
     outs = run(ctrl, [-ref] * 200)
     assert_limits(outs, beta_dot0=np.zeros(4), beta0=beta0)
     drift = np.max(np.abs(np.array([o.beta_ref for o in outs]) - beta0))
-    assert drift < 1e-3                                      # no wheel turns by π
+    assert drift < 1e-3  # no wheel turns by π
     np.testing.assert_allclose(outs[-1].phi_dot_ref, -phi0, rtol=1e-3)
     np.testing.assert_allclose(executed_twist(geometry, outs[-1]), -ref, atol=1e-3)
 
@@ -474,15 +494,15 @@ def test_stop_holds_the_steer_angles(geometry):
     outs = run(ctrl, [(0.0, 0.0, 0.0)] * 200)
     assert_limits(outs, beta_dot0=np.zeros(4), beta0=beta0)
     assert all(o.status == 'stopped' and o.route == 'hold' for o in outs)
-    np.testing.assert_allclose(outs[-1].beta_ref, beta0, atol=1e-9)   # wheels not straightened
+    np.testing.assert_allclose(outs[-1].beta_ref, beta0, atol=1e-9)  # wheels not straightened
     assert np.max(np.abs(outs[-1].phi_dot_ref)) < 1e-3
     phi = np.array([np.max(np.abs(o.phi_dot_ref)) for o in outs])
-    assert np.all(np.diff(phi) <= 1e-12)                              # monotone ramp-down
+    assert np.all(np.diff(phi) <= 1e-12)  # monotone ramp-down
 
 
 def test_stop_while_steering_decelerates_within_limits(geometry):
     ctrl = make(geometry)
-    outs = run(ctrl, [(0.0, 0.5, 0.0)] * 20)                 # steering at full rate
+    outs = run(ctrl, [(0.0, 0.5, 0.0)] * 20)  # steering at full rate
     assert np.max(np.abs(ctrl.beta_dot)) > 0.4
     outs2 = run(ctrl, [(0.0, 0.0, 0.0)] * 40)
     assert_limits(outs + outs2)
@@ -490,6 +510,7 @@ def test_stop_while_steering_decelerates_within_limits(geometry):
 
 
 # ---------------------------------------------------------------- singular cases
+
 
 def test_icr_crossing_a_steer_hip(geometry):
     """The straight ICR route X = 0.24 from Y = 1 to Y = -1 crosses the fl and fr hips.
@@ -504,11 +525,17 @@ def test_icr_crossing_a_steer_hip(geometry):
     run(ctrl, [above] * 300)
     beta0 = ctrl.beta
     outs = run(ctrl, [below] * 400)
-    assert_limits(outs, beta_dot0=np.zeros(4), beta0=beta0, twist0=above, accel=SwmrParams.from_robot_config(ROBOT_A).base_accel_limit)
+    assert_limits(
+        outs,
+        beta_dot0=np.zeros(4),
+        beta0=beta0,
+        twist0=above,
+        accel=SwmrParams.from_robot_config(ROBOT_A).base_accel_limit,
+    )
     assert outs[0].route == 'direct'
     pts = np.array([o.icr_next.point for o in outs])
-    assert np.min(np.linalg.norm(pts - HIPS[0], axis=1)) < 0.02            # passes by the fl hip
-    assert np.min(np.linalg.norm(pts - HIPS[1], axis=1)) < 0.02            # and by the fr hip
+    assert np.min(np.linalg.norm(pts - HIPS[0], axis=1)) < 0.02  # passes by the fl hip
+    assert np.min(np.linalg.norm(pts - HIPS[1], axis=1)) < 0.02  # and by the fr hip
     assert all(o.status == 'ok' for o in outs)
     np.testing.assert_allclose(executed_twist(geometry, outs[-1]), below, atol=1e-3)
     betas = np.array([beta0] + [o.beta_ref for o in outs])
@@ -518,9 +545,9 @@ def test_icr_crossing_a_steer_hip(geometry):
     needed = np.sum(np.abs((np.diff(path, axis=0) + np.pi / 2) % np.pi - np.pi / 2), axis=0)
     np.testing.assert_allclose(needed[:2], 0.0, atol=1e-9)
     np.testing.assert_allclose(needed[2:], 2.2234, atol=1e-3)
-    assert np.all(travel[:2] < 0.75), travel                                # fl, fr: no sweep (was π)
+    assert np.all(travel[:2] < 0.75), travel  # fl, fr: no sweep (was π)
     assert travel.sum() <= 1.25 * needed.sum(), (travel, needed)
-    np.testing.assert_allclose((betas[-1] - beta0)[:2], 0.0, atol=1e-3)     # the same heading, not a turn of π
+    np.testing.assert_allclose((betas[-1] - beta0)[:2], 0.0, atol=1e-3)  # the same heading, not a turn of π
 
 
 def test_reference_icr_exactly_on_a_hip(geometry):
@@ -534,15 +561,19 @@ def test_reference_icr_exactly_on_a_hip(geometry):
 
 # ---------------------------------------------------------------- failure
 
-@pytest.mark.parametrize('bad_solver', [
-    lambda problem: QpResult(np.array([np.nan, 0.0]), 'solved'),
-    lambda problem: QpResult(np.array([1e-3, 0.0]), 'unsolved'),
-    lambda problem: (_ for _ in ()).throw(RuntimeError('injected')),
-])
+
+@pytest.mark.parametrize(
+    'bad_solver',
+    [
+        lambda problem: QpResult(np.array([np.nan, 0.0]), 'solved'),
+        lambda problem: QpResult(np.array([1e-3, 0.0]), 'unsolved'),
+        lambda problem: (_ for _ in ()).throw(RuntimeError('injected')),
+    ],
+)
 def test_injected_solver_failure_gives_a_safe_stop(geometry, bad_solver):
     ctrl = make(geometry, drive_accel_limit=20.0)
     good = ctrl.solver
-    warm = run(ctrl, [(0.5, 0.0, 0.0)] * 100 + [(0.0, 0.5, 0.0)] * 10)   # driving and steering
+    warm = run(ctrl, [(0.5, 0.0, 0.0)] * 100 + [(0.0, 0.5, 0.0)] * 10)  # driving and steering
     assert np.max(np.abs(ctrl.beta_dot)) > 0.2
     beta_before, phi_before = ctrl.beta, ctrl.phi_dot
     ctrl.solver = bad_solver
@@ -550,29 +581,31 @@ def test_injected_solver_failure_gives_a_safe_stop(geometry, bad_solver):
     assert_limits(warm + outs)
     assert all(o.status == 'solver_failure' and o.route == 'hold' for o in outs)
     phis = np.array([phi_before] + [o.phi_dot_ref for o in outs])
-    assert np.max(np.abs(np.diff(phis, axis=0))) <= 20.0 * DT + 1e-9      # drive ramp within φ̈_max
+    assert np.max(np.abs(np.diff(phis, axis=0))) <= 20.0 * DT + 1e-9  # drive ramp within φ̈_max
     np.testing.assert_allclose(outs[-1].phi_dot_ref, 0.0, atol=0.0)
     np.testing.assert_allclose(outs[-1].twist_feasible, 0.0, atol=0.0)
-    assert np.all(outs[-1].beta_dot_ref == 0.0)                            # steering held
-    assert np.max(np.abs(outs[-1].beta_ref - beta_before)) < 0.3           # braked, not turned
-    ctrl.solver = good                                                     # recovery
+    assert np.all(outs[-1].beta_dot_ref == 0.0)  # steering held
+    assert np.max(np.abs(outs[-1].beta_ref - beta_before)) < 0.3  # braked, not turned
+    ctrl.solver = good  # recovery
     after = run(ctrl, [(0.0, 0.5, 0.0)] * 300)
     assert after[-1].status == 'ok'
     np.testing.assert_allclose(executed_twist(geometry, after[-1]), [0.0, 0.5, 0.0], atol=5e-3)
 
 
 def test_solver_hook_in_constructor(geometry):
-    ctrl = SwmrController(geometry, SwmrParams.from_robot_config(ROBOT_A),
-                          solver=lambda p: QpResult(np.full(2, np.inf), 'solved'))
-    out = ctrl.step([0.0, 0.3, 0.0])                         # steering needed: the solver is called
+    ctrl = SwmrController(
+        geometry, SwmrParams.from_robot_config(ROBOT_A), solver=lambda p: QpResult(np.full(2, np.inf), 'solved')
+    )
+    out = ctrl.step([0.0, 0.3, 0.0])  # steering needed: the solver is called
     assert isinstance(out, SwmrOutput)
     assert out.status == 'solver_failure' and 'non-finite' in out.qp_status
 
 
 def test_infeasible_qp_falls_back_to_clipping(geometry):
     """A solver reporting infeasibility is not a failure: rates are clipped per wheel."""
-    ctrl = SwmrController(geometry, SwmrParams.from_robot_config(ROBOT_A),
-                          solver=lambda p: QpResult(np.zeros(2), 'primal_infeasible'))
+    ctrl = SwmrController(
+        geometry, SwmrParams.from_robot_config(ROBOT_A), solver=lambda p: QpResult(np.zeros(2), 'primal_infeasible')
+    )
     outs = run(ctrl, [(0.0, 0.5, 0.0)] * 200)
     assert_limits(outs)
     assert all(o.status == 'ok' for o in outs)
@@ -580,6 +613,7 @@ def test_infeasible_qp_falls_back_to_clipping(geometry):
 
 
 # ---------------------------------------------------------------- hand-computed wheel rates
+
 
 def test_hand_computed_wheel_rates(geometry):
     """r_w φ̇_i = f(β_i)·ξ̇ + d β̇_i with f(β) = [cos β, sin β, d − hy cos β + hx sin β].
@@ -599,17 +633,18 @@ def test_hand_computed_wheel_rates(geometry):
     cases = [
         (np.zeros(4), (0.45, 0.0, 0.0), [5.0, 5.0, 5.0, 5.0]),
         (np.full(4, np.pi / 2), (0.0, 0.45, 0.0), [5.0, 5.0, 5.0, 5.0]),
-        (np.array([np.pi / 2, -np.pi / 2, np.pi / 2, -np.pi / 2]), (0.0, 0.45, 0.0),
-         [5.0, -5.0, 5.0, -5.0]),
+        (np.array([np.pi / 2, -np.pi / 2, np.pi / 2, -np.pi / 2]), (0.0, 0.45, 0.0), [5.0, -5.0, 5.0, -5.0]),
         (np.arctan2(HIPS[:, 1], HIPS[:, 0]) - np.pi / 2, (0.0, 0.0, 0.5), [-1.4505809] * 4),
-        (np.arctan2(HIPS[:, 1], HIPS[:, 0]) + np.array([np.pi / 2, -np.pi / 2, -np.pi / 2, -np.pi / 2]),
-         (0.0, 0.0, 0.5), [1.9505809, -1.4505809, -1.4505809, -1.4505809]),
-        (geometry.steer_angles_for_icr((0.0, 2.0)), (0.4, 0.0, 0.2),
-         [4.1574273, 4.9958032, 4.1574273, 4.9958032]),
+        (
+            np.arctan2(HIPS[:, 1], HIPS[:, 0]) + np.array([np.pi / 2, -np.pi / 2, -np.pi / 2, -np.pi / 2]),
+            (0.0, 0.0, 0.5),
+            [1.9505809, -1.4505809, -1.4505809, -1.4505809],
+        ),
+        (geometry.steer_angles_for_icr((0.0, 2.0)), (0.4, 0.0, 0.2), [4.1574273, 4.9958032, 4.1574273, 4.9958032]),
     ]
     for beta, ref, expected in cases:
         ctrl = make(geometry)
-        ctrl.reset(beta, twist=ref)                          # already at the reference
+        ctrl.reset(beta, twist=ref)  # already at the reference
         out = ctrl.step(ref)
         np.testing.assert_allclose(out.beta_dot_ref, 0.0, atol=1e-9)
         np.testing.assert_allclose(out.phi_dot_ref, expected, atol=1e-6)
@@ -628,6 +663,7 @@ def test_a_stale_reference_brakes_at_the_acceleration_limit():
     """brake=True: rest within max |v_i|/a_i + one period, never decelerating beyond the limits."""
     from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
     from wmm_control.robot_config import load_robot
+
     robot = load_robot('steerable')
     ctrl = SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
     for _ in range(400):
@@ -654,6 +690,7 @@ def test_a_stale_reference_brakes_at_the_acceleration_limit():
 def test_measured_steer_rates_beyond_the_limit_never_give_commands_beyond_it():
     from wmm_control.base import SteerableGeometry, SwmrController, SwmrParams
     from wmm_control.robot_config import load_robot
+
     robot = load_robot('steerable')
     ctrl = SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
     limit = ctrl.params.steer_rate_limit
@@ -666,6 +703,7 @@ def test_measured_steer_rates_beyond_the_limit_never_give_commands_beyond_it():
 
 
 # ---------------------------------------------------------------- the QP matters
+
 
 @pytest.mark.parametrize('bypass', [False, True], ids=['osqp', 'qp-bypassed'])
 def test_commanded_wheels_agree_on_one_icr_while_steering(bypass):
@@ -703,11 +741,15 @@ def test_feasible_twist_respects_the_base_acceleration_limit():
         assert ratio <= 1.0 + 1e-9, (name, ratio)
 
 
-@pytest.mark.parametrize('refs', [
-    [(0.4, 0.1, 0.2)] * 1200,
-    [(0.5, 0.0, 0.0)] * 1200,
-    [bench_reference(k, DT) for k in range(2400)],
-], ids=['arc', 'translation', 'benchmark'])
+@pytest.mark.parametrize(
+    'refs',
+    [
+        [(0.4, 0.1, 0.2)] * 1200,
+        [(0.5, 0.0, 0.0)] * 1200,
+        [bench_reference(k, DT) for k in range(2400)],
+    ],
+    ids=['arc', 'translation', 'benchmark'],
+)
 def test_noisy_measured_angles_keep_the_qp_feasible(refs):
     """σ = 2 mrad on the measured steer angles, closed on every cycle (as the node does).
 
@@ -737,4 +779,4 @@ def test_measured_angles_beyond_the_deadband_are_followed():
     band = ctrl.params.measurement_deadband
     start = out.beta_ref - DT * out.beta_dot_ref
     assert start[2] == pytest.approx(lagging[2] - band, abs=0.02)
-    assert out.beta_dot_ref[2] < 0.0                        # steered back towards the others
+    assert out.beta_dot_ref[2] < 0.0  # steered back towards the others

@@ -30,15 +30,22 @@ def ring(n, radius):
 
 
 GEOMETRIES = {
-    2: SteerableGeometry(np.array([[0.3, 0.0], [-0.3, 0.0]]), R_W, D),     # front and back, centre line
-    3: SteerableGeometry(ring(3, 0.3), R_W, D),                           # 120° apart
-    6: SteerableGeometry(ring(6, 0.35), R_W, D),                          # 60° apart
+    2: SteerableGeometry(np.array([[0.3, 0.0], [-0.3, 0.0]]), R_W, D),  # front and back, centre line
+    3: SteerableGeometry(ring(3, 0.3), R_W, D),  # 120° apart
+    6: SteerableGeometry(ring(6, 0.35), R_W, D),  # 60° apart
 }
 
 
 def make(n):
-    params = SwmrParams(steer_rate_limit=RATE_MAX, steer_accel_limit=ACC_MAX, drive_rate_limit=DRIVE_MAX,
-                        drive_accel_limit=20.0, base_velocity_limit=VELOCITY, base_accel_limit=ACCEL, dt=DT)
+    params = SwmrParams(
+        steer_rate_limit=RATE_MAX,
+        steer_accel_limit=ACC_MAX,
+        drive_rate_limit=DRIVE_MAX,
+        drive_accel_limit=20.0,
+        base_velocity_limit=VELOCITY,
+        base_accel_limit=ACCEL,
+        dt=DT,
+    )
     return SwmrController(GEOMETRIES[n], params)
 
 
@@ -102,8 +109,13 @@ def test_commanded_wheels_realise_the_feasible_twist(n, icr0, segments):
     outs = [ctrl.step(seg[:3]) for seg in segments for _ in range(seg[3])]
     check_limits(geometry, outs, beta0, np.zeros(n))
     for k, o in enumerate(outs):
-        np.testing.assert_allclose(geometry.fit_twist(o.beta_ref, o.beta_dot_ref, o.phi_dot_ref),
-                                   o.twist_feasible, rtol=0, atol=2e-3, err_msg=str(k))
+        np.testing.assert_allclose(
+            geometry.fit_twist(o.beta_ref, o.beta_dot_ref, o.phi_dot_ref),
+            o.twist_feasible,
+            rtol=0,
+            atol=2e-3,
+            err_msg=str(k),
+        )
 
 
 SETTLE_S = 6.0
@@ -111,14 +123,18 @@ SETTLE_S = 6.0
 
 
 @pytest.mark.parametrize('n', sorted(GEOMETRIES))
-@pytest.mark.parametrize('ref', [
-    (0.5, 0.0, 0.0),        # x
-    (0.0, 0.5, 0.0),        # y: every wheel steers a quarter turn
-    (-0.3, 0.4, 0.0),
-    (0.0, 0.0, 0.5),        # spin on the spot
-    (0.4, 0.0, 0.2),        # arc left
-    (0.3, -0.2, -0.3),      # arc right, sideways
-], ids=['x', 'y', 'diagonal', 'spin', 'arc-left', 'arc-right'])
+@pytest.mark.parametrize(
+    'ref',
+    [
+        (0.5, 0.0, 0.0),  # x
+        (0.0, 0.5, 0.0),  # y: every wheel steers a quarter turn
+        (-0.3, 0.4, 0.0),
+        (0.0, 0.0, 0.5),  # spin on the spot
+        (0.4, 0.0, 0.2),  # arc left
+        (0.3, -0.2, -0.3),  # arc right, sideways
+    ],
+    ids=['x', 'y', 'diagonal', 'spin', 'arc-left', 'arc-right'],
+)
 def test_a_constant_reference_is_reached_within_the_settling_time(n, ref):
     ctrl = make(n)
     geometry = ctrl.geometry
@@ -129,5 +145,5 @@ def test_a_constant_reference_is_reached_within_the_settling_time(n, ref):
     for o in outs[cycles:]:
         twist = fitted(geometry, o)
         assert np.linalg.norm(twist - ref) <= 0.01 * np.linalg.norm(ref), (twist, ref)
-        np.testing.assert_allclose(twist, o.twist_feasible, atol=1e-9)     # wheels agree: no slip
+        np.testing.assert_allclose(twist, o.twist_feasible, atol=1e-9)  # wheels agree: no slip
         assert o.status == 'ok'

@@ -32,8 +32,9 @@ class ReferencePublisher(ScriptedController):
         self.pub_ref = self.create_publisher(TwistStamped, '/base/reference', 10)
         self.feasible, self.sent, self.steer = {}, [], []
         self.create_subscription(TwistStamped, '/base/feasible_twist', self._on_feasible, 10)
-        self.create_subscription(Float64MultiArray, '/steer_controller/commands',
-                                 lambda m: self.steer.append(list(m.data)), 10)
+        self.create_subscription(
+            Float64MultiArray, '/steer_controller/commands', lambda m: self.steer.append(list(m.data)), 10
+        )
 
     def _on_joints(self, msg):
         super()._on_joints(msg)
@@ -49,12 +50,17 @@ class ReferencePublisher(ScriptedController):
 
     def _on_feasible(self, msg):
         self.feasible[round(stamp_s(msg) / DT)] = np.array(
-            [msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z])
+            [msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z]
+        )
 
 
 def run(ros, ref, seconds, controller_params=None, **sim_params):
-    ros.add(SimNode(context=ros.context, parameter_overrides=overrides(
-        timing='lockstep', lockstep_groups='steer,drive', **sim_params)))
+    ros.add(
+        SimNode(
+            context=ros.context,
+            parameter_overrides=overrides(timing='lockstep', lockstep_groups='steer,drive', **sim_params),
+        )
+    )
     ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(**(controller_params or {}))))
     pub = ros.add(ReferencePublisher(ros.context, ref))
     n = int(round(seconds / DT)) + 1
@@ -75,20 +81,28 @@ def se2_twist(p0, p1, dt):
     return np.array([v[0], v[1], a]) / dt
 
 
-@pytest.mark.parametrize('ref', [
-    (0.4, 0.0, 0.0),        # translation along x
-    (0.0, 0.3, 0.0),        # along y: every wheel turns by π/2
-    (0.3, -0.3, 0.0),       # diagonal
-    (0.0, 0.0, 0.5),        # rotation about the base centre
-    (0.4, 0.0, 0.3),        # arc turning left
-    (-0.2, 0.3, -0.4),      # arc backwards and right
-], ids=['x', 'y', 'diagonal', 'rotation', 'arc-left', 'arc-right-backwards'])
+@pytest.mark.parametrize(
+    'ref',
+    [
+        (0.4, 0.0, 0.0),  # translation along x
+        (0.0, 0.3, 0.0),  # along y: every wheel turns by π/2
+        (0.3, -0.3, 0.0),  # diagonal
+        (0.0, 0.0, 0.5),  # rotation about the base centre
+        (0.4, 0.0, 0.3),  # arc turning left
+        (-0.2, 0.3, -0.4),  # arc backwards and right
+    ],
+    ids=['x', 'y', 'diagonal', 'rotation', 'arc-left', 'arc-right-backwards'],
+)
 def test_reference_twist_is_tracked_within_one_percent(ros, ref):
     # Watchdogs far above a lockstep period, so a loaded machine cannot make the data look stale.
-    pub = run(ros, lambda t: ref, 8.0, controller_params=dict(
-        LOCKSTEP_WAITS['swmr_controller'], reference_timeout=2.0, joint_state_timeout=2.0))
+    pub = run(
+        ros,
+        lambda t: ref,
+        8.0,
+        controller_params=dict(LOCKSTEP_WAITS['swmr_controller'], reference_timeout=2.0, joint_state_timeout=2.0),
+    )
     ref = np.array(ref)
-    for msg in pub.truth[-40:]:             # the last second
+    for msg in pub.truth[-40:]:  # the last second
         twist = np.array([msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z])
         assert np.linalg.norm(twist - ref) <= 0.01 * np.linalg.norm(ref), (twist, ref)
 
@@ -97,6 +111,7 @@ def test_feasible_twist_is_what_the_base_executes_over_the_next_period(ros):
     # A reference that changes direction and curvature, so that the wheels steer throughout.
     def ref(t):
         return (0.4 * np.cos(0.6 * t), 0.3 * np.sin(0.4 * t), 0.4 * np.sin(0.7 * t))
+
     pub = run(ros, ref, 6.0)
     poses = {round(stamp_s(m) / DT): pose2d(m) for m in pub.truth}
     worst, checked = 0.0, 0
@@ -123,8 +138,8 @@ def test_stale_reference_stops_the_base_and_holds_the_wheel_angles(ros):
     assert all(abs(last[f'steer_{m}_joint']) < 1e-9 for m in ('fl', 'fr', 'rl', 'rr'))
     steer_then = [pub.positions(n0)[f'steer_{m}_joint'] for m in ('fl', 'fr', 'rl', 'rr')]
     steer_now = [pub.positions()[f'steer_{m}_joint'] for m in ('fl', 'fr', 'rl', 'rr')]
-    np.testing.assert_allclose(steer_now, steer_then, atol=0.05)   # held, not straightened
-    assert np.ptp(steer_now) > 0.05                                # still set for the arc
+    np.testing.assert_allclose(steer_now, steer_then, atol=0.05)  # held, not straightened
+    assert np.ptp(steer_now) > 0.05  # still set for the arc
 
 
 STEER = [f'steer_{m}_joint' for m in ('fl', 'fr', 'rl', 'rr')]
@@ -140,10 +155,12 @@ class Recorder(Node):
     def __init__(self, context):
         super().__init__('recorder', context=context)
         self.steer, self.drive, self.feasible = [], [], []
-        self.create_subscription(Float64MultiArray, '/steer_controller/commands',
-                                 lambda m: self.steer.append(list(m.data)), 10)
-        self.create_subscription(Float64MultiArray, '/drive_controller/commands',
-                                 lambda m: self.drive.append(list(m.data)), 10)
+        self.create_subscription(
+            Float64MultiArray, '/steer_controller/commands', lambda m: self.steer.append(list(m.data)), 10
+        )
+        self.create_subscription(
+            Float64MultiArray, '/drive_controller/commands', lambda m: self.drive.append(list(m.data)), 10
+        )
         self.create_subscription(TwistStamped, '/base/feasible_twist', self.feasible.append, 10)
         self.pub_js = self.create_publisher(JointState, '/joint_states', 10)
         self.pub_ref = self.create_publisher(TwistStamped, '/base/reference', 10)
@@ -177,8 +194,11 @@ def twist_of(msg):
 def test_joint_state_timeout_commands_zero_rates(ros, use_sim_time):
     # Under use_sim_time with no /clock at all the ROS clock stands still: the watchdog must
     # still see the joint states stop.
-    ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(
-        joint_state_timeout=0.1, use_sim_time=use_sim_time)))
+    ros.add(
+        SwmrControllerNode(
+            context=ros.context, parameter_overrides=overrides(joint_state_timeout=0.1, use_sim_time=use_sim_time)
+        )
+    )
     rec = ros.add(Recorder(ros.context))
     ros.spin_for(0.3)
     for _ in range(40):
@@ -187,7 +207,7 @@ def test_joint_state_timeout_commands_zero_rates(ros, use_sim_time):
     assert ros.spin_until(lambda: len(rec.drive) >= 20)
     assert max(abs(v) for v in rec.drive[-1]) > 0.1
     n = len(rec.drive)
-    ros.spin_for(0.5)                      # joint states stopped
+    ros.spin_for(0.5)  # joint states stopped
     assert len(rec.drive) > n
     assert rec.drive[-1] == [0.0] * 4 and rec.steer[-1] == [0.0] * 4
 
@@ -213,6 +233,7 @@ def test_a_robot_without_a_steerable_base_fails_clearly(ros):
 
 # ---------------------------------------------------------------- the exchange, one per period
 
+
 class DelayedReference(Node):
     """Answers each /joint_states stamped S with a /base/reference stamped S, ``value(k)`` for
     cycle k = S/DT, published ``delay`` steady seconds later (so the controller always has
@@ -225,10 +246,15 @@ class DelayedReference(Node):
         self._stamp = None
         self.pub = self.create_publisher(TwistStamped, '/base/reference', 10)
         self.create_subscription(JointState, '/joint_states', self._on_joints, 10)
-        self.create_subscription(TwistStamped, '/base/feasible_twist',
-                                 lambda m: self.feasible.setdefault(round(stamp_s(m) / DT), []).append(m), 10)
-        self.timer = self.create_timer(delay, self._publish, clock=Clock(clock_type=ClockType.STEADY_TIME),
-                                       autostart=False)
+        self.create_subscription(
+            TwistStamped,
+            '/base/feasible_twist',
+            lambda m: self.feasible.setdefault(round(stamp_s(m) / DT), []).append(m),
+            10,
+        )
+        self.timer = self.create_timer(
+            delay, self._publish, clock=Clock(clock_type=ClockType.STEADY_TIME), autostart=False
+        )
 
     def _on_joints(self, msg):
         self._stamp = msg.header.stamp
@@ -254,17 +280,26 @@ def test_each_feasible_twist_answers_the_reference_of_its_own_cycle(ros, use_sim
     # the reference of k − 1 and fails.
     def value(k):
         return (0.5, 0.0, 0.0) if k % 3 == 1 else (0.0, 0.0, 0.0)
+
     sim_time = overrides(use_sim_time=use_sim_time)
-    ros.add(SimNode(context=ros.context, parameter_overrides=sim_time + overrides(
-        timing='lockstep', lockstep_groups='steer,drive')))
-    ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=sim_time + overrides(reference_wait=0.5, max_state_wait=0.0)))
+    ros.add(
+        SimNode(
+            context=ros.context,
+            parameter_overrides=sim_time + overrides(timing='lockstep', lockstep_groups='steer,drive'),
+        )
+    )
+    ros.add(
+        SwmrControllerNode(
+            context=ros.context, parameter_overrides=sim_time + overrides(reference_wait=0.5, max_state_wait=0.0)
+        )
+    )
     ref = ros.add(DelayedReference(ros.context, value))
     assert ros.spin_until(lambda: len(ref.feasible) >= 60, timeout=60)
     cycles = sorted(ref.feasible)
-    assert cycles == list(range(len(cycles)))                  # one answer per cycle, in order
+    assert cycles == list(range(len(cycles)))  # one answer per cycle, in order
     for k in cycles:
         (answer,) = ref.feasible[k]
-        assert k in ref.sent                                   # stamped as a reference it answers
+        assert k in ref.sent  # stamped as a reference it answers
         speed = np.linalg.norm(twist_of(answer))
         if value(k)[0]:
             assert speed == pytest.approx(0.025, abs=1e-9), k
@@ -273,8 +308,14 @@ def test_each_feasible_twist_answers_the_reference_of_its_own_cycle(ros, use_sim
 
 
 def test_a_joint_state_waits_for_the_reference_of_its_stamp(ros):
-    ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(
-        reference_wait=0.5, reference_timeout=2.0, joint_state_timeout=5.0, max_state_wait=0.0)))
+    ros.add(
+        SwmrControllerNode(
+            context=ros.context,
+            parameter_overrides=overrides(
+                reference_wait=0.5, reference_timeout=2.0, joint_state_timeout=5.0, max_state_wait=0.0
+            ),
+        )
+    )
     rec = ros.add(Recorder(ros.context))
     ros.spin_for(0.2)
 
@@ -323,11 +364,15 @@ def test_a_joint_state_queued_while_the_node_was_held_up_runs_no_cycle(ros):
     """States that arrive one period apart, stamped one period apart, each run a cycle; one that
     arrives 0.4 s later than its stamp says (it waited in the transport while the node was held
     up) runs none, whatever its stamp's clock; the next one on time runs again."""
-    ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(
-        reference_wait=0.0, joint_state_timeout=5.0, max_state_wait=0.1)))
+    ros.add(
+        SwmrControllerNode(
+            context=ros.context,
+            parameter_overrides=overrides(reference_wait=0.0, joint_state_timeout=5.0, max_state_wait=0.1),
+        )
+    )
     rec = ros.add(Recorder(ros.context))
     ros.spin_for(0.2)
-    origin = 1000.0 - time.time()           # the sender's clock: any offset from this one's
+    origin = 1000.0 - time.time()  # the sender's clock: any offset from this one's
     answered = []
 
     def send(stamp):
@@ -341,7 +386,7 @@ def test_a_joint_state_queued_while_the_node_was_held_up_runs_no_cycle(ros):
         ros.spin_for(0.025)
     stamp = time.time() + origin
     ros.spin_for(0.4)
-    send(stamp)                              # stamped 0.4 s before it arrives
+    send(stamp)  # stamped 0.4 s before it arrives
     send(time.time() + origin)
     assert answered == [True] * 8 + [False, True]
 
@@ -349,8 +394,11 @@ def test_a_joint_state_queued_while_the_node_was_held_up_runs_no_cycle(ros):
 def test_joint_states_are_read_by_name(ros):
     # A zero reference holds the steer angles at the measured ones, so the controller's
     # state shows which positions it read as steer angles.
-    node = ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(
-        reference_wait=0.0, joint_state_timeout=5.0)))
+    node = ros.add(
+        SwmrControllerNode(
+            context=ros.context, parameter_overrides=overrides(reference_wait=0.0, joint_state_timeout=5.0)
+        )
+    )
     rec = ros.add(Recorder(ros.context))
     ros.spin_for(0.2)
     stop = (0.0, 0.0, 0.0)
@@ -399,12 +447,13 @@ def test_closing_the_loop_changes_nothing_in_the_kinematic_simulator(ros):
     # the commanded ones, and the commands equal those of the core run open loop.
     def ref(t):
         return (0.4 * np.cos(0.6 * t), 0.3 * np.sin(0.4 * t), 0.4 * np.sin(0.7 * t))
+
     pub = run(ros, ref, 6.0, controller_params={'reference_wait': 0.5})
     node = next(n for n in ros.nodes if isinstance(n, SwmrControllerNode))
     offline = SwmrController(node.controller.geometry, node.controller.params)
     steer = np.array(pub.steer[:200])
     expected = np.array([offline.step(r).beta_dot_ref for r in pub.sent[:200]])
-    assert np.abs(expected).max() > 0.5                          # the wheels really steer
+    assert np.abs(expected).max() > 0.5  # the wheels really steer
     np.testing.assert_allclose(steer, expected, rtol=0, atol=1e-9)
 
 
@@ -416,5 +465,5 @@ def test_huge_finite_references_drive_the_base_at_its_limit(ros, ref):
     assert all(np.all(np.isfinite(v)) for v in pub.steer)
     for msg in pub.truth[-20:]:
         twist = np.array([msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z])
-        assert twist @ direction > 0.9                          # limit 1 m/s, along the reference
+        assert twist @ direction > 0.9  # limit 1 m/s, along the reference
         assert np.linalg.norm(twist - (twist @ direction) * direction) < 1e-3

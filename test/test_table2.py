@@ -65,8 +65,10 @@ def test_in_gross_motion_the_arm_holds_its_dexterous_posture(table2):
 
 def test_compensation_lowers_the_steady_state_error(table2):
     """Fig 7: with compensation the errors at the end of the windows are smaller overall."""
+
     def total(run):
         return sum(g['final_position_error_m'] for g in goals(table2, run))
+
     assert total('task_sharing_compensation') < 0.75 * total('task_sharing')
 
 

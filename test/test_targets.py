@@ -32,8 +32,9 @@ def kinds(events):
 
 
 def diag(position_error, orientation_error=0.0):
-    return SimpleNamespace(position_error=position_error, orientation_error=orientation_error, mode='mobile',
-                           reference_time_left=0.0)
+    return SimpleNamespace(
+        position_error=position_error, orientation_error=orientation_error, mode='mobile', reference_time_left=0.0
+    )
 
 
 def goal(targets, xyz=(1.5, 0.3, 1.0), quat=IDENTITY, frame='world', base=None):
@@ -66,16 +67,19 @@ def test_the_same_goal_again_is_not_restarted(targets):
     assert targets.goals == 2 and targets.progress.cycles == 0
 
 
-@pytest.mark.parametrize('frame, xyz, quat, reason', [
-    ('map', (1.0, 0.0, 1.0), IDENTITY, "frame 'map', expected 'world'"),
-    ('world', (math.nan, 0.0, 1.0), IDENTITY, 'non-finite values [nan, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]'),
-    ('world', (1.0, 0.0, 1.0), (0.0, 0.0, math.inf, 1.0), 'non-finite values'),
-    ('world', (1.0, 0.0, 1.0), (0.0, 0.0, 0.0, 0.0), 'zero quaternion'),
-    ('world', (1.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1e-9), 'zero quaternion'),
-    ('world', (60.0, 0.0, 1.0), IDENTITY, 'is beyond max_goal_distance 50.0 m'),
-    ('world', (1.0, 0.0, -0.1), IDENTITY, 'below the floor'),
-    ('world', (1.0, 0.0, 5.0), IDENTITY, 'above the highest the end effector can reach'),
-])
+@pytest.mark.parametrize(
+    'frame, xyz, quat, reason',
+    [
+        ('map', (1.0, 0.0, 1.0), IDENTITY, "frame 'map', expected 'world'"),
+        ('world', (math.nan, 0.0, 1.0), IDENTITY, 'non-finite values [nan, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]'),
+        ('world', (1.0, 0.0, 1.0), (0.0, 0.0, math.inf, 1.0), 'non-finite values'),
+        ('world', (1.0, 0.0, 1.0), (0.0, 0.0, 0.0, 0.0), 'zero quaternion'),
+        ('world', (1.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1e-9), 'zero quaternion'),
+        ('world', (60.0, 0.0, 1.0), IDENTITY, 'is beyond max_goal_distance 50.0 m'),
+        ('world', (1.0, 0.0, -0.1), IDENTITY, 'below the floor'),
+        ('world', (1.0, 0.0, 5.0), IDENTITY, 'above the highest the end effector can reach'),
+    ],
+)
 def test_a_bad_goal_is_rejected_with_its_reason_and_leaves_no_target(targets, frame, xyz, quat, reason):
     goal(targets)
     events = goal(targets, xyz, quat, frame)
@@ -110,7 +114,7 @@ def test_a_fresh_trajectory_is_followed(targets):
     goal(targets)
     assert kinds(point(targets, 10.0)) == ['tracking']
     assert targets.tracking and targets.progress.cycles == 0
-    for k in range(1, 10):      # points every 0.1 s: each one the target, velocity and all
+    for k in range(1, 10):  # points every 0.1 s: each one the target, velocity and all
         assert point(targets, 10.0 + 0.1 * k, xyz=(1.5 + 0.01 * k, 0.3, 1.0)) == []
         target, events = targets.current(10.0 + 0.1 * k + 0.05)
         assert events == [] and target is targets.target
@@ -137,13 +141,16 @@ def test_a_clock_that_jumps_back_makes_the_trajectory_stale(targets):
     assert kinds(targets.current(9.0)[1]) == ['held']
 
 
-@pytest.mark.parametrize('pose, velocity, reason', [
-    (None, np.zeros(6), 'no point or no transform'),
-    ([1.5, 0.3, math.nan, *IDENTITY], np.zeros(6), 'non-finite values'),
-    ([1.5, 0.3, 1.0, *IDENTITY], [2e3, 0, 0, 0, 0, 0], 'a twist or acceleration beyond 1e3'),
-    ([1.5, 0.3, 1.0, 0.0, 0.0, 0.0, 0.0], np.zeros(6), 'zero quaternion'),
-    ([1.5, 0.3, -1.0, *IDENTITY], np.zeros(6), 'below the floor'),
-])
+@pytest.mark.parametrize(
+    'pose, velocity, reason',
+    [
+        (None, np.zeros(6), 'no point or no transform'),
+        ([1.5, 0.3, math.nan, *IDENTITY], np.zeros(6), 'non-finite values'),
+        ([1.5, 0.3, 1.0, *IDENTITY], [2e3, 0, 0, 0, 0, 0], 'a twist or acceleration beyond 1e3'),
+        ([1.5, 0.3, 1.0, 0.0, 0.0, 0.0, 0.0], np.zeros(6), 'zero quaternion'),
+        ([1.5, 0.3, -1.0, *IDENTITY], np.zeros(6), 'below the floor'),
+    ],
+)
 def test_a_bad_trajectory_point_is_rejected(targets, pose, velocity, reason):
     point(targets, 1.0)
     events = targets.trajectory_point('world', pose, velocity, np.zeros(6), 1.1)
@@ -154,7 +161,7 @@ def test_a_bad_trajectory_point_is_rejected(targets, pose, velocity, reason):
 
 def test_a_goal_is_reached_once_and_a_stall_is_told_once_until_progress(targets):
     goal(targets)
-    events = [targets.judge(diag(0.5 * 0.5 ** k)) for k in range(12)]
+    events = [targets.judge(diag(0.5 * 0.5**k)) for k in range(12)]
     reached = [e for e in sum(events, []) if e.kind == 'reached']
     assert [kinds(e) for e in events].index(['reached']) == 6, '0.5 m halved each cycle is under 1 cm at cycle 6'
     assert [e.message for e in reached] == ['goal reached: 0.0078 m, 0.0000 rad away after 0.70 s (7 cycles)']
@@ -164,7 +171,7 @@ def test_a_goal_is_reached_once_and_a_stall_is_told_once_until_progress(targets)
     message = targets.status(diag(0.3))[1]
     assert targets.status(diag(0.3))[0] == 'warn' and message.startswith('goal not reached: 0.300 m')
     assert 'no progress in 1.0 s (best error down by less than 10 %, 1 mm, 1 mrad)' in message
-    errors = [0.3 * 0.9 ** k for k in range(1, 25)] + [0.3 * 0.9 ** 24] * 40    # approaching, then held
+    errors = [0.3 * 0.9**k for k in range(1, 25)] + [0.3 * 0.9**24] * 40  # approaching, then held
     later = [(targets.progress.stalled, kinds(targets.judge(diag(e)))) for e in errors]
     assert not all(stalled for stalled, _ in later), 'progress clears the stall...'
     assert sum('stalled' in k for _, k in later) == 1, '...and a new stall is told once'
@@ -207,13 +214,28 @@ def inputs():
     return MeasuredInputs('world', 50.0, (1.0, 1.0, 2.0), 10.0)
 
 
-@pytest.mark.parametrize('xy, quat, twist, kind, reason', [
-    ((math.nan, 0.0), IDENTITY, (0.0, 0.0, 0.0), 'odom non-finite', 'rejected /odom with non-finite values [nan, '),
-    ((0.0, 0.0), (0.0, 0.0, math.inf, 1.0), (0.0, 0.0, 0.0), 'odom non-finite', 'non-finite values'),
-    ((0.0, 60.0), IDENTITY, (0.0, 0.0, 0.0), 'odom far', 'rejected /odom at (0, 60): beyond max_goal_distance 50.0 m'),
-    ((0.0, 0.0), IDENTITY, (0.0, 0.0, 25.0), 'odom twist', 'beyond 10 times the base velocity limits'),
-    ((0.0, 0.0), (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 'odom zero quaternion', 'rejected /odom with a zero quaternion'),
-])
+@pytest.mark.parametrize(
+    'xy, quat, twist, kind, reason',
+    [
+        ((math.nan, 0.0), IDENTITY, (0.0, 0.0, 0.0), 'odom non-finite', 'rejected /odom with non-finite values [nan, '),
+        ((0.0, 0.0), (0.0, 0.0, math.inf, 1.0), (0.0, 0.0, 0.0), 'odom non-finite', 'non-finite values'),
+        (
+            (0.0, 60.0),
+            IDENTITY,
+            (0.0, 0.0, 0.0),
+            'odom far',
+            'rejected /odom at (0, 60): beyond max_goal_distance 50.0 m',
+        ),
+        ((0.0, 0.0), IDENTITY, (0.0, 0.0, 25.0), 'odom twist', 'beyond 10 times the base velocity limits'),
+        (
+            (0.0, 0.0),
+            (0.0, 0.0, 0.0, 0.0),
+            (0.0, 0.0, 0.0),
+            'odom zero quaternion',
+            'rejected /odom with a zero quaternion',
+        ),
+    ],
+)
 def test_implausible_odometry_is_rejected_each_reason_apart(inputs, xy, quat, twist, kind, reason):
     odom, events = inputs.odometry(xy, quat, twist)
     assert odom is None and kinds(events) == [kind] and reason in events[0].message

@@ -38,8 +38,9 @@ def test_every_link_frame_agrees_at_random_configurations(bullet, robot):
         base = np.array([rng.uniform(-2, 2), rng.uniform(-2, 2), rng.uniform(-np.pi, np.pi)])
         angles = np.zeros(model.nv)
         angles[:3] = base
-        p.resetBasePositionAndOrientation(body, [base[0], base[1], 0.0],
-                                          p.getQuaternionFromEuler([0, 0, base[2]]), physicsClientId=bullet)
+        p.resetBasePositionAndOrientation(
+            body, [base[0], base[1], 0.0], p.getQuaternionFromEuler([0, 0, base[2]]), physicsClientId=bullet
+        )
         for j, name in movable:
             value = rng.uniform(-2.0, 2.0)
             p.resetJointState(body, j, value, physicsClientId=bullet)

@@ -38,12 +38,12 @@ WIDTH, HEIGHT = 1280, 800
 #: moves the arm, and the brightest channel of its wheels' dark grey once lit.
 ROBOTS = {
     'A': ('steerable', 'wmm_control.nodes.swmr_controller', (2.0, 1.0, 1.0), (0.0, 0.0, 0.0, 1.0), 70),
-    'B': ('mecanum', 'wmm_control.nodes.mecanum_controller', (1.1, 0.3, 0.7),
-          (0.0, 0.5 ** 0.5, 0.0, 0.5 ** 0.5), 95),
+    'B': ('mecanum', 'wmm_control.nodes.mecanum_controller', (1.1, 0.3, 0.7), (0.0, 0.5**0.5, 0.0, 0.5**0.5), 95),
 }
 
-pytestmark = pytest.mark.skipif(chromium_path() is None,
-                                reason='chromium is not installed (apt-get install chromium): browser test skipped')
+pytestmark = pytest.mark.skipif(
+    chromium_path() is None, reason='chromium is not installed (apt-get install chromium): browser test skipped'
+)
 
 
 def free_port() -> int:
@@ -57,8 +57,9 @@ class Process:
 
     def __init__(self, module: str, args: list[str], env: dict) -> None:
         self.name = module
-        self.proc = subprocess.Popen([sys.executable, '-m', module, *args], env=env, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True)
+        self.proc = subprocess.Popen(
+            [sys.executable, '-m', module, *args], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
         self.lines: list[str] = []
         threading.Thread(target=lambda: self.lines.extend(self.proc.stdout), daemon=True).start()
 
@@ -77,7 +78,7 @@ class Process:
 
 # ---------------------------------------------------------------- where things are on the page
 
-FOV = math.radians(75.0)     # the vertical field of view of the page's camera
+FOV = math.radians(75.0)  # the vertical field of view of the page's camera
 
 
 def project(points, camera_position, look_at, width, height, fov=FOV):
@@ -125,7 +126,7 @@ def window_count(mask, x, y, half):
 def densest(mask, around, radius, half=4):
     """The pixel of ``mask`` within ``radius`` of ``around`` with the most ``mask`` pixels about it."""
     ys, xs = np.nonzero(mask)
-    near = (xs - around[0]) ** 2 + (ys - around[1]) ** 2 < radius ** 2
+    near = (xs - around[0]) ** 2 + (ys - around[1]) ** 2 < radius**2
     best, where = 0, None
     for x, y in zip(xs[near], ys[near]):
         n = window_count(mask, x, y, half)
@@ -137,8 +138,8 @@ def densest(mask, around, radius, half=4):
 # ---------------------------------------------------------------- the test
 
 #: Close the page's notices (the client's "Software WebGL rendering detected"): number closed.
-DISMISS_NOTICES = ("[...document.querySelectorAll('[class*=\"Notification-root\"] button')]"
-                   ".map(b => b.click()).length")
+DISMISS_NOTICES = "[...document.querySelectorAll('[class*=\"Notification-root\"] button')].map(b => b.click()).length"
+
 
 @pytest.fixture(params=sorted(ROBOTS), ids=lambda k: f'robot_{k}')
 def system(request):
@@ -155,9 +156,12 @@ def system(request):
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1')
     name, controller, goal, orientation, brightest = ROBOTS[request.param]
     robot = ['--ros-args', '-p', f'robot:={name}']
-    procs = [Process('sim_bridge.node', robot, env), Process(controller, [], env),
-             Process('wmm_control.nodes.redundancy_resolver', robot, env),
-             Process('wmm_control.nodes.viewer', [*robot, '-p', 'host:=127.0.0.1', '-p', f'port:={port}'], env)]
+    procs = [
+        Process('sim_bridge.node', robot, env),
+        Process(controller, [], env),
+        Process('wmm_control.nodes.redundancy_resolver', robot, env),
+        Process('wmm_control.nodes.viewer', [*robot, '-p', 'host:=127.0.0.1', '-p', f'port:={port}'], env),
+    ]
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('viewer_test', context=context)
@@ -176,9 +180,19 @@ def system(request):
 
     spinner = threading.Thread(target=spin, daemon=True)
     spinner.start()
-    state = {'node': node, 'goals': goals, 'joints': joints, 'publisher': publisher, 'procs': procs,
-             'url': f'http://127.0.0.1:{port}', 'robot': name, 'goal': goal, 'orientation': orientation,
-             'brightest': brightest, 'key': request.param}
+    state = {
+        'node': node,
+        'goals': goals,
+        'joints': joints,
+        'publisher': publisher,
+        'procs': procs,
+        'url': f'http://127.0.0.1:{port}',
+        'robot': name,
+        'goal': goal,
+        'orientation': orientation,
+        'brightest': brightest,
+        'key': request.param,
+    }
     try:
         yield state
     finally:
@@ -208,6 +222,7 @@ def arm_positions(msg):
 
 def save(img, path):
     from PIL import Image
+
     Image.fromarray(img).save(path)
 
 
@@ -219,7 +234,9 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
     from wmm_control.viewer.scene import RobotScene
 
     viewer = system['procs'][-1]
-    wait_for(lambda: f'viewer of robot {system["robot"]} at http://' in viewer.output(), 60, 'the viewer\'s URL in its log')
+    wait_for(
+        lambda: f'viewer of robot {system["robot"]} at http://' in viewer.output(), 60, 'the viewer\'s URL in its log'
+    )
     wait_for(lambda: len(system['joints']) > 10, 60, '/joint_states')
 
     # Where the robot is: its start state through the page's camera.
@@ -231,8 +248,13 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
     camera = CAMERA_POSITION + np.array([x0, y0, 0.0]), CAMERA_LOOK_AT + np.array([x0, y0, 0.0])
     pixels = project(poses.positions, *camera, WIDTH, HEIGHT)
     names = [s.name for s in scene.shapes]
-    arm = pixels[[i for i, n in enumerate(names) if n.startswith('arm_link_') and orange(
-        np.array([[scene.shapes[i].color]], dtype=np.uint8))[0, 0]]]
+    arm = pixels[
+        [
+            i
+            for i, n in enumerate(names)
+            if n.startswith('arm_link_') and orange(np.array([[scene.shapes[i].color]], dtype=np.uint8))[0, 0]
+        ]
+    ]
     wheels = pixels[[i for i, n in enumerate(names) if n.startswith('wheel_')]]
     handle = project(poses.ee_position, *camera, WIDTH, HEIGHT)[0]
 
@@ -240,12 +262,18 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
     try:
         browser.navigate(system['url'])
         wait_for(lambda: browser.evaluate(DISMISS_NOTICES) is not None, 60, 'the page')
+
         # 1. The robot drawn where it is, in its colours.
         def robot_drawn():
             img = browser.screenshot()
             hits = sum(window_count(orange(img), x, y, 25) > 20 for x, y in arm)
-            return img if hits >= len(arm) - 1 and sum(window_count(dark(img, system['brightest']), x, y, 20) > 15
-                                                      for x, y in wheels) >= 3 else None
+            return (
+                img
+                if hits >= len(arm) - 1
+                and sum(window_count(dark(img, system['brightest']), x, y, 20) > 15 for x, y in wheels) >= 3
+                else None
+            )
+
         end = time.monotonic() + 120
         img = None
         while img is None and time.monotonic() < end:
@@ -257,7 +285,7 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
         save(img, tmp_path / 'start.png')
         box = np.vstack((pixels, [handle]))
         lo, hi = box.min(axis=0) - 120, box.max(axis=0) + 120
-        ys, xs = np.nonzero(orange(img[:, :WIDTH - 420]))        # the panel (right) has no orange
+        ys, xs = np.nonzero(orange(img[:, : WIDTH - 420]))  # the panel (right) has no orange
         far = (xs < lo[0]) | (xs > hi[0]) | (ys < lo[1]) | (ys > hi[1])
         assert far.sum() < 50, f'{far.sum()} orange pixels far from the robot (screenshot {tmp_path / "start.png"})'
 
@@ -272,17 +300,27 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
         time.sleep(2.0)
         sent = system['goals'][before:]
         # One at the release, and at most one per drag_publish_period (0.5 s) before it; none after.
-        assert 1 <= len(sent) <= 2 + took / 0.5, (f'{len(sent)} goals for a drag of {took:.1f} s:\n'
-                                                  + ''.join(viewer.lines[-30:]))
+        assert 1 <= len(sent) <= 2 + took / 0.5, f'{len(sent)} goals for a drag of {took:.1f} s:\n' + ''.join(
+            viewer.lines[-30:]
+        )
         settled = len(system['goals'])
         time.sleep(2.0)
         assert len(system['goals']) == settled, 'goals still published after the drag ended'
         goal = sent[0]
-        values = [goal.pose.position.x, goal.pose.position.y, goal.pose.position.z, goal.pose.orientation.x,
-                  goal.pose.orientation.y, goal.pose.orientation.z, goal.pose.orientation.w]
+        values = [
+            goal.pose.position.x,
+            goal.pose.position.y,
+            goal.pose.position.z,
+            goal.pose.orientation.x,
+            goal.pose.orientation.y,
+            goal.pose.orientation.z,
+            goal.pose.orientation.w,
+        ]
         assert goal.header.frame_id == 'world' and all(math.isfinite(v) for v in values), goal
-        moved = math.dist(values[:3], poses.ee_position) > 1e-3 or abs(np.dot(values[3:], [
-            *poses.ee_wxyz[1:], poses.ee_wxyz[0]])) < 1.0 - 1e-6
+        moved = (
+            math.dist(values[:3], poses.ee_position) > 1e-3
+            or abs(np.dot(values[3:], [*poses.ee_wxyz[1:], poses.ee_wxyz[0]])) < 1.0 - 1e-6
+        )
         assert moved, f'the dragged goal {values} is the handle\'s start pose'
 
         # 3. Two screenshots while the arm moves to a published goal differ.
@@ -301,7 +339,7 @@ def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goa
         q_second = arm_positions(system['joints'][-1])
         assert np.abs(q_second - q_first).max() > 0.01, 'the arm stood still between the screenshots'
         changed = np.abs(first.astype(int) - second.astype(int)).max(axis=2) > 30
-        assert changed[:, :WIDTH - 420].sum() > 300, f'only {changed.sum()} pixels changed while the arm moved'
+        assert changed[:, : WIDTH - 420].sum() > 300, f'only {changed.sum()} pixels changed while the arm moved'
         if os.environ.get('WMM_UPDATE_FIGURES') == '1' and system['key'] == 'A':
             time.sleep(4.0)
             FIGURE.parent.mkdir(parents=True, exist_ok=True)

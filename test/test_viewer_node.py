@@ -16,8 +16,9 @@ from wmm_control.paths import config_path
 
 
 def viewer(ros, **params):
-    return ros.add(ViewerNode(context=ros.context, parameter_overrides=overrides(host='127.0.0.1', port=18080,
-                                                                                  **params)))
+    return ros.add(
+        ViewerNode(context=ros.context, parameter_overrides=overrides(host='127.0.0.1', port=18080, **params))
+    )
 
 
 def goals_on(ros, topic='/goal_pose'):
@@ -29,6 +30,7 @@ def goals_on(ros, topic='/goal_pose'):
 
 def ros_node(ros, name, namespace=None):
     import rclpy
+
     return rclpy.create_node(name, context=ros.context, namespace=namespace)
 
 
@@ -71,8 +73,8 @@ def test_a_drag_publishes_once_at_release_and_never_a_non_finite_pose(ros):
     for k in range(10):
         event('update', (1.0 + 0.01 * k, 0.5, 0.8), (1, 0, 0, 0))
         ros.spin_for(0.05)
-    assert got == []                                   # shorter than drag_publish_period: nothing yet
-    event('update', (math.nan, 0.5, 0.8), (1, 0, 0, 0))    # a broken update is dropped
+    assert got == []  # shorter than drag_publish_period: nothing yet
+    event('update', (math.nan, 0.5, 0.8), (1, 0, 0, 0))  # a broken update is dropped
     event('end', (1.2, 0.5, 0.8), (0, 0, 0, 2))
     assert ros.spin_until(lambda: got, timeout=5)
     ros.spin_for(0.5)
@@ -88,12 +90,24 @@ def test_a_drag_publishes_once_at_release_and_never_a_non_finite_pose(ros):
 
 
 def test_topic_names_are_relative_to_the_namespace(ros):
-    view = ros.add(ViewerNode(context=ros.context, namespace='/r1', parameter_overrides=overrides(
-        host='127.0.0.1', port=18090, robot='mecanum')))
+    view = ros.add(
+        ViewerNode(
+            context=ros.context,
+            namespace='/r1',
+            parameter_overrides=overrides(host='127.0.0.1', port=18090, robot='mecanum'),
+        )
+    )
     ros.spin_for(0.2)
     topics = {name for name, _ in view.get_topic_names_and_types()}
-    for name in ('/r1/joint_states', '/r1/odom', '/r1/ground_truth/odom', '/r1/goal_pose', '/r1/ee_reference',
-                 '/r1/base/reference', '/diagnostics'):
+    for name in (
+        '/r1/joint_states',
+        '/r1/odom',
+        '/r1/ground_truth/odom',
+        '/r1/goal_pose',
+        '/r1/ee_reference',
+        '/r1/base/reference',
+        '/diagnostics',
+    ):
         assert name in topics, name
     assert view.pub_goal.topic_name == '/r1/goal_pose'
 
@@ -107,9 +121,14 @@ def test_a_robot_yaml_path_and_use_sim_time_without_a_clock(ros):
     assert view.get_clock().now().nanoseconds == 0
 
 
-@pytest.mark.parametrize('params, message', [(dict(robot='C'), "unknown robot 'C'"),
-                                             (dict(robot='/nowhere/robot.yaml'), 'not found'),
-                                             (dict(host=' '), 'host')])
+@pytest.mark.parametrize(
+    'params, message',
+    [
+        (dict(robot='C'), "unknown robot 'C'"),
+        (dict(robot='/nowhere/robot.yaml'), 'not found'),
+        (dict(host=' '), 'host'),
+    ],
+)
 def test_invalid_parameters_fail_with_a_clear_error(ros, params, message):
     with pytest.raises(ConfigError, match=message):
         ViewerNode(context=ros.context, parameter_overrides=overrides(**{'port': 18100, **params}))
@@ -118,12 +137,19 @@ def test_invalid_parameters_fail_with_a_clear_error(ros, params, message):
 def test_two_robots_in_namespaces_the_viewer_of_one_draws_that_robot_only(ros):
     """Robot A in /r1 and robot B in /r2 in one domain, a viewer in /r1: it draws robot A (its
     URDF), and its base follows /r1's simulator, not /r2's."""
-    r1 = ros.add(SimNode(context=ros.context, namespace='/r1', parameter_overrides=overrides(
-        start_base_pose=[1.0, 2.0, 0.3])))
-    ros.add(SimNode(context=ros.context, namespace='/r2', parameter_overrides=overrides(
-        robot='mecanum', start_base_pose=[-3.0, -1.0, -0.5])))
-    view = ros.add(ViewerNode(context=ros.context, namespace='/r1', parameter_overrides=overrides(
-        host='127.0.0.1', port=18081)))
+    r1 = ros.add(
+        SimNode(context=ros.context, namespace='/r1', parameter_overrides=overrides(start_base_pose=[1.0, 2.0, 0.3]))
+    )
+    ros.add(
+        SimNode(
+            context=ros.context,
+            namespace='/r2',
+            parameter_overrides=overrides(robot='mecanum', start_base_pose=[-3.0, -1.0, -0.5]),
+        )
+    )
+    view = ros.add(
+        ViewerNode(context=ros.context, namespace='/r1', parameter_overrides=overrides(host='127.0.0.1', port=18081))
+    )
     assert ros.spin_until(lambda: view.base_source() == 'ground_truth' and view._ee is not None)
     ros.spin_for(0.3)
     assert view.robot.name == 'steerable'

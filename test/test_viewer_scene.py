@@ -37,6 +37,7 @@ URDF = """<robot name="odd">
 @pytest.fixture
 def odd_urdf(tmp_path):
     import trimesh
+
     trimesh.creation.box((0.2, 0.1, 0.05)).export(tmp_path / 'part.stl')
     path = tmp_path / 'odd.urdf'
     path.write_text(URDF)
@@ -55,7 +56,7 @@ def test_every_visual_of_the_urdf_is_a_shape_in_its_colour(robot):
     assert len(scene.shapes) == visuals and not scene.skipped
     assert {s.kind for s in scene.shapes} == {'box', 'cylinder', 'sphere'}
     if robot == 'steerable':
-        assert (255, 115, 0) in {s.color for s in scene.shapes}          # the URDF's orange, 1 0.45 0
+        assert (255, 115, 0) in {s.color for s in scene.shapes}  # the URDF's orange, 1 0.45 0
         chassis = next(s for s in scene.shapes if s.name.startswith('chassis_link') and s.kind == 'box')
         assert chassis.size == pytest.approx((0.6, 0.5, 0.3))
     # Every wheel-side joint is there, and every arm joint.
@@ -77,9 +78,13 @@ def test_the_end_effector_is_where_the_kinematic_model_puts_it(robot):
         pos, rot = model.ee_placement_world()
         assert poses.ee_position == pytest.approx(pos, abs=1e-9)
         w, x, y, z = poses.ee_wxyz
-        expected = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                             [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                             [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+        expected = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+            ]
+        )
         assert expected == pytest.approx(rot, abs=1e-9)
 
 
@@ -91,10 +96,11 @@ def test_wheel_and_steer_joints_move_their_shapes():
     scene.set_joints(['steer_fl_joint', 'drive_fl_joint'], [0.7, 12.0])
     turned = scene.poses((0, 0, 0), (1, 0, 0, 0))
     assert abs(np.dot(still.wxyz[index], turned.wxyz[index])) < 0.99
-    assert scene.joint_positions()['drive_fl_joint'] == pytest.approx(12.0 - 4 * math.pi)    # an angle
+    assert scene.joint_positions()['drive_fl_joint'] == pytest.approx(12.0 - 4 * math.pi)  # an angle
     # Only the wheel's and steer link's shapes moved.
-    moved = {scene.shapes[i].name for i in range(len(scene.shapes))
-             if abs(np.dot(still.wxyz[i], turned.wxyz[i])) < 1 - 1e-12}
+    moved = {
+        scene.shapes[i].name for i in range(len(scene.shapes)) if abs(np.dot(still.wxyz[i], turned.wxyz[i])) < 1 - 1e-12
+    }
     assert moved == {'wheel_fl_link_0', 'steer_fl_link_0'}
 
 
@@ -111,11 +117,15 @@ def test_a_base_pose_moves_and_turns_the_whole_robot():
 def test_any_urdf_mesh_prismatic_continuous_and_a_base_link_that_is_not_the_root(odd_urdf):
     scene = RobotScene(odd_urdf, base_link='body', ee_frame='tip')
     kinds = {s.name.rsplit('_', 1)[0]: s for s in scene.shapes}
-    assert {k: s.kind for k, s in kinds.items()} == {'root': 'mesh', 'body': 'box', 'slider': 'sphere',
-                                                     'wheel': 'cylinder'}
+    assert {k: s.kind for k, s in kinds.items()} == {
+        'root': 'mesh',
+        'body': 'box',
+        'slider': 'sphere',
+        'wheel': 'cylinder',
+    }
     mesh = kinds['root']
     assert mesh.vertices.shape == (8, 3) and mesh.faces.shape == (12, 3)
-    assert np.ptp(mesh.vertices, axis=0) == pytest.approx([0.4, 0.1, 0.05])           # scaled by the URDF
+    assert np.ptp(mesh.vertices, axis=0) == pytest.approx([0.4, 0.1, 0.05])  # scaled by the URDF
     assert kinds['body'].color == (0, 128, 128) and kinds['body'].opacity == pytest.approx(0.6)
     assert kinds['wheel'].size == pytest.approx((0.1, 0.04))
     assert set(scene.joint_names) == {'slide', 'spin'}
@@ -175,14 +185,14 @@ def test_a_drag_publishes_at_release_and_at_most_once_per_period_while_it_goes_o
     drag.start()
     assert drag.due(0.0) is None
     assert drag.update((1, 0, 0), (1, 0, 0, 0), now=0.0)
-    assert drag.due(0.2) is None                                  # not yet a period
+    assert drag.due(0.2) is None  # not yet a period
     drag.update((2, 0, 0), (1, 0, 0, 0), now=0.4)
-    position, wxyz = drag.due(0.5)                                # a period into the drag: the latest
+    position, wxyz = drag.due(0.5)  # a period into the drag: the latest
     assert position.tolist() == [2, 0, 0] and wxyz.tolist() == [1, 0, 0, 0]
-    assert drag.due(0.6) is None                                  # nothing new
+    assert drag.due(0.6) is None  # nothing new
     drag.update((3, 0, 0), (2, 0, 0, 0), now=0.7)
     drag.end((4, 0, 0), (0, 0, 0, 2), now=0.8)
-    position, wxyz = drag.due(0.8)                                # the release: at once
+    position, wxyz = drag.due(0.8)  # the release: at once
     assert position.tolist() == [4, 0, 0] and wxyz.tolist() == [0, 0, 0, 1] and not drag.dragging
     assert drag.due(5.0) is None
     # Not a pose: ignored, nothing to publish.
@@ -195,24 +205,58 @@ def test_a_drag_publishes_at_release_and_at_most_once_per_period_while_it_goes_o
 def test_the_status_panel_shows_what_the_diagnostics_say():
     board = StatusBoard()
     assert 'No /diagnostics' in board.markdown(0.0)
-    board.update(NodeStatus('wmm_sim: arm commands', 1, 'no fresh command (zero velocity)',
-                            {'clamped': '0', 'rejected': '2', 'command_age_s': 'inf'}, received=0.0))
-    board.update(NodeStatus('redundancy_resolver', 0, 'mobile_manipulation', {
-        'method': 'task_sharing', 'mode': 'mobile_manipulation', 'psi': '0.512345678', 'sigma_min': '0.0321',
-        'position_error_m': '0.25', 'orientation_error_rad': '0.1', 'goal_reached': 'False',
-        'goal_stalled': 'False', 'cycle_time_us': '812.5', 'limit_scale': '0.75', 'arm_command': '[0, 0]',
-        'clearance_m': '0.04321', 'closest_pair': 'arm_link_7/chassis_link', 'collision_changed': 'True'},
-        received=9.0))
+    board.update(
+        NodeStatus(
+            'wmm_sim: arm commands',
+            1,
+            'no fresh command (zero velocity)',
+            {'clamped': '0', 'rejected': '2', 'command_age_s': 'inf'},
+            received=0.0,
+        )
+    )
+    board.update(
+        NodeStatus(
+            'redundancy_resolver',
+            0,
+            'mobile_manipulation',
+            {
+                'method': 'task_sharing',
+                'mode': 'mobile_manipulation',
+                'psi': '0.512345678',
+                'sigma_min': '0.0321',
+                'position_error_m': '0.25',
+                'orientation_error_rad': '0.1',
+                'goal_reached': 'False',
+                'goal_stalled': 'False',
+                'cycle_time_us': '812.5',
+                'limit_scale': '0.75',
+                'arm_command': '[0, 0]',
+                'clearance_m': '0.04321',
+                'closest_pair': 'arm_link_7/chassis_link',
+                'collision_changed': 'True',
+            },
+            received=9.0,
+        )
+    )
     board.update(NodeStatus('swmr_controller', 2, 'solver_failure', {'status': 'solver_failure'}, received=9.0))
     text = board.markdown(10.0)
     # The resolver first, then the controller, then the simulator.
     assert text.index('**redundancy_resolver**') < text.index('**swmr_controller**') < text.index('**wmm_sim')
-    for shown in ('| method | task_sharing |', '| ψ (task sharing) | 0.5123 |', '| σ_min | 0.0321 |',
-                  '| position error [m] | 0.25 |', '| goal reached | False |', '| cycle time [µs] | 812.5 |',
-                  '| task scale α / s_v | 0.75 |', '**swmr_controller** — ERROR: solver_failure',
-                  '| clearance [m] | 0.04321 |', '| closest pair | arm_link_7/chassis_link |',
-                  '| avoiding contact | True |',
-                  '| command age [s] | inf |', 'WARN, 10 s old: no fresh command (zero velocity)'):
+    for shown in (
+        '| method | task_sharing |',
+        '| ψ (task sharing) | 0.5123 |',
+        '| σ_min | 0.0321 |',
+        '| position error [m] | 0.25 |',
+        '| goal reached | False |',
+        '| cycle time [µs] | 812.5 |',
+        '| task scale α / s_v | 0.75 |',
+        '**swmr_controller** — ERROR: solver_failure',
+        '| clearance [m] | 0.04321 |',
+        '| closest pair | arm_link_7/chassis_link |',
+        '| avoiding contact | True |',
+        '| command age [s] | inf |',
+        'WARN, 10 s old: no fresh command (zero velocity)',
+    ):
         assert shown in text, shown
     assert 'arm_command' not in text
     # A newer status of the same name replaces the old one.

@@ -10,8 +10,10 @@ from wmm_control.paths import config_path
 
 @pytest.fixture(scope='module')
 def workspaces(steerable_model, mecanum_model):
-    return {'steerable': (steerable_model, Workspace(steerable_model)),
-            'mecanum': (mecanum_model, Workspace(mecanum_model))}
+    return {
+        'steerable': (steerable_model, Workspace(steerable_model)),
+        'mecanum': (mecanum_model, Workspace(mecanum_model)),
+    }
 
 
 @pytest.mark.parametrize('robot', ['steerable', 'mecanum'])
@@ -21,7 +23,9 @@ def test_the_height_bound_is_never_passed_by_any_arm_configuration(workspaces, r
     arm = model.config.arm
     heights = []
     for _ in range(3000):
-        model.update([0.0, 0.0, 0.0], rng.uniform(np.maximum(arm.position_lower, -np.pi), np.minimum(arm.position_upper, np.pi)))
+        model.update(
+            [0.0, 0.0, 0.0], rng.uniform(np.maximum(arm.position_lower, -np.pi), np.minimum(arm.position_upper, np.pi))
+        )
         heights.append(model.ee_placement_world()[0][2])
     # An upper bound, and not a loose one: random postures come within a quarter of the arm's length.
     assert max(heights) <= ws.max_height
@@ -59,6 +63,7 @@ def test_floor_and_height_reasons_name_the_numbers(workspaces):
 
 def test_the_footprint_holds_every_base_box_and_no_more(model):
     from wmm_control.kinematics.workspace import Workspace
+
     workspace = Workspace(model)
     corners = workspace.footprint()
     assert corners.shape == (4, 2) and np.all(np.isfinite(corners))

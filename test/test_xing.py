@@ -71,8 +71,11 @@ def test_without_singularity_avoidance_the_arm_becomes_singular():
 
     def error_near_singularity(log):
         window = (log.t >= 7.0) & (log.t < 11.0)
-        return max(np.linalg.norm(scenario.target(t, reference).position - p)
-                   for t, p in zip(log.t[window], log.ee_position[window]))
+        return max(
+            np.linalg.norm(scenario.target(t, reference).position - p)
+            for t, p in zip(log.t[window], log.ee_position[window])
+        )
+
     assert error_near_singularity(logs['amp_no_avoidance']) > 2 * error_near_singularity(logs['amp_avoidance'])
 
 

@@ -11,42 +11,68 @@ from pathlib import Path
 
 
 def _inertial(mass=1.0):
-    return (f'<inertial><mass value="{mass}"/><origin xyz="0 0 0"/>'
-            '<inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>')
+    return (
+        f'<inertial><mass value="{mass}"/><origin xyz="0 0 0"/>'
+        '<inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>'
+    )
 
 
 def _link(name, geometry='', origin='0 0 0', rpy='0 0 0', mass=1.0):
-    shape = (f'<visual><origin xyz="{origin}" rpy="{rpy}"/><geometry>{geometry}</geometry></visual>'
-             f'<collision><origin xyz="{origin}" rpy="{rpy}"/><geometry>{geometry}</geometry></collision>'
-             if geometry else '')
+    shape = (
+        f'<visual><origin xyz="{origin}" rpy="{rpy}"/><geometry>{geometry}</geometry></visual>'
+        f'<collision><origin xyz="{origin}" rpy="{rpy}"/><geometry>{geometry}</geometry></collision>'
+        if geometry
+        else ''
+    )
     return f'<link name="{name}">{_inertial(mass)}{shape}</link>'
 
 
 def _joint(name, jtype, parent, child, xyz, axis='0 0 1', rpy='0 0 0', limit=''):
-    return (f'<joint name="{name}" type="{jtype}"><parent link="{parent}"/><child link="{child}"/>'
-            f'<origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="{axis}"/>{limit}</joint>')
+    return (
+        f'<joint name="{name}" type="{jtype}"><parent link="{parent}"/><child link="{child}"/>'
+        f'<origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="{axis}"/>{limit}</joint>'
+    )
 
 
 def _wheel(name, parent, xyz, radius, rate):
-    return [_joint(f'{name}_joint', 'continuous', parent, f'{name}_link', xyz, '0 1 0',
-                   limit=f'<limit effort="20" velocity="{rate}"/>'),
-            _link(f'{name}_link', f'<cylinder radius="{radius}" length="0.04"/>', rpy=f'{math.pi / 2} 0 0', mass=0.5)]
+    return [
+        _joint(
+            f'{name}_joint',
+            'continuous',
+            parent,
+            f'{name}_link',
+            xyz,
+            '0 1 0',
+            limit=f'<limit effort="20" velocity="{rate}"/>',
+        ),
+        _link(f'{name}_link', f'<cylinder radius="{radius}" length="0.04"/>', rpy=f'{math.pi / 2} 0 0', mass=0.5),
+    ]
 
 
 def write_urdf(path, base='steerable', modules=4, arm_joints=7, prismatic_lift=False):
     """Write a URDF at ``path``; returns the path. Links: ``base_link`` (on the floor),
     ``arm_base_link`` (the arm root), ``tool_link`` (the tool)."""
     r = 0.08
-    parts = [_link('base_link', mass=0.1),
-             _joint('chassis_joint', 'fixed', 'base_link', 'chassis_link', f'0 0 {r + 0.15}'),
-             _link('chassis_link', '<box size="0.6 0.45 0.2"/>', mass=20.0)]
+    parts = [
+        _link('base_link', mass=0.1),
+        _joint('chassis_joint', 'fixed', 'base_link', 'chassis_link', f'0 0 {r + 0.15}'),
+        _link('chassis_link', '<box size="0.6 0.45 0.2"/>', mass=20.0),
+    ]
     if base == 'steerable':
         for i in range(modules):
             a = 2 * math.pi * (i + 0.5) / modules
             hx, hy = 0.26 * math.cos(a), 0.2 * math.sin(a)
-            parts += [_joint(f'steer_{i}_joint', 'continuous', 'base_link', f'steer_{i}_link', f'{hx:.6f} {hy:.6f} {r}',
-                             limit='<limit effort="20" velocity="1.5"/>'),
-                      _link(f'steer_{i}_link', mass=0.3)]
+            parts += [
+                _joint(
+                    f'steer_{i}_joint',
+                    'continuous',
+                    'base_link',
+                    f'steer_{i}_link',
+                    f'{hx:.6f} {hy:.6f} {r}',
+                    limit='<limit effort="20" velocity="1.5"/>',
+                ),
+                _link(f'steer_{i}_link', mass=0.3),
+            ]
             parts += _wheel(f'drive_{i}', f'steer_{i}_link', '0 -0.03 0', r, 12.0)
     elif base == 'mecanum':
         for tag, x, y in (('fl', 0.22, 0.2), ('fr', 0.22, -0.2), ('rl', -0.22, 0.2), ('rr', -0.22, -0.2)):
@@ -55,25 +81,53 @@ def write_urdf(path, base='steerable', modules=4, arm_joints=7, prismatic_lift=F
         parts += _wheel('wheel_left', 'base_link', f'0 0.24 {r}', r, 12.0)
         parts += _wheel('wheel_right', 'base_link', f'0 -0.24 {r}', r, 12.0)
         for tag, x in (('front', 0.25), ('rear', -0.25)):
-            parts += [_joint(f'caster_{tag}_joint', 'fixed', 'base_link', f'caster_{tag}_link', f'{x} 0 0.04'),
-                      _link(f'caster_{tag}_link', '<sphere radius="0.04"/>', mass=0.2)]
-    parts += [_joint('arm_mount_joint', 'fixed', 'chassis_link', 'arm_base_link', '0.1 0 0.1'),
-              _link('arm_base_link', '<cylinder radius="0.06" length="0.1"/>', origin='0 0 0.05')]
+            parts += [
+                _joint(f'caster_{tag}_joint', 'fixed', 'base_link', f'caster_{tag}_link', f'{x} 0 0.04'),
+                _link(f'caster_{tag}_link', '<sphere radius="0.04"/>', mass=0.2),
+            ]
+    parts += [
+        _joint('arm_mount_joint', 'fixed', 'chassis_link', 'arm_base_link', '0.1 0 0.1'),
+        _link('arm_base_link', '<cylinder radius="0.06" length="0.1"/>', origin='0 0 0.05'),
+    ]
     parent, n = 'arm_base_link', arm_joints
     lengths = [0.15] + [0.32 if k in (1, 3) else 0.12 for k in range(1, n)]
     for k in range(n):
         name = f'arm_joint_{k + 1}'
         child = f'arm_link_{k + 1}'
         if k == 0 and prismatic_lift:
-            parts.append(_joint(name, 'prismatic', parent, child, '0 0 0.1', '0 0 1',
-                                limit='<limit lower="0.0" upper="0.4" effort="100" velocity="0.2"/>'))
+            parts.append(
+                _joint(
+                    name,
+                    'prismatic',
+                    parent,
+                    child,
+                    '0 0 0.1',
+                    '0 0 1',
+                    limit='<limit lower="0.0" upper="0.4" effort="100" velocity="0.2"/>',
+                )
+            )
         else:
             axis = '0 0 1' if (k - int(prismatic_lift)) % 3 == 0 else '0 1 0'
-            parts.append(_joint(name, 'revolute', parent, child, f'0 0 {lengths[k - 1] if k else 0.1}', axis,
-                                limit='<limit lower="-2.6" upper="2.6" effort="50" velocity="1.8"/>'))
+            parts.append(
+                _joint(
+                    name,
+                    'revolute',
+                    parent,
+                    child,
+                    f'0 0 {lengths[k - 1] if k else 0.1}',
+                    axis,
+                    limit='<limit lower="-2.6" upper="2.6" effort="50" velocity="1.8"/>',
+                )
+            )
         length = lengths[k]
-        parts.append(_link(child, f'<cylinder radius="0.035" length="{0.6 * length:.4f}"/>',
-                           origin=f'0 0 {0.5 * length:.4f}', mass=1.0))
+        parts.append(
+            _link(
+                child,
+                f'<cylinder radius="0.035" length="{0.6 * length:.4f}"/>',
+                origin=f'0 0 {0.5 * length:.4f}',
+                mass=1.0,
+            )
+        )
         parent = child
     parts += [_joint('tool_joint', 'fixed', parent, 'tool_link', f'0 0 {lengths[-1]}'), _link('tool_link', mass=0.05)]
     path = Path(path)

@@ -24,12 +24,20 @@ from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import load_obstacles, obstacle_file
 from wmm_control.robot_config import load_robot
 
-__all__ = ['BASE_CONTROLLERS', 'robot_nodes', 'robot_launch_description', 'two_robots_launch_description',
-           'common_arguments']
+__all__ = [
+    'BASE_CONTROLLERS',
+    'robot_nodes',
+    'robot_launch_description',
+    'two_robots_launch_description',
+    'common_arguments',
+]
 
 #: The base controller executable of each base family.
-BASE_CONTROLLERS = {'steerable': 'swmr_controller', 'mecanum': 'mecanum_controller',
-                    'differential': 'differential_controller'}
+BASE_CONTROLLERS = {
+    'steerable': 'swmr_controller',
+    'mecanum': 'mecanum_controller',
+    'differential': 'differential_controller',
+}
 
 
 def _flag(context: LaunchContext, name: str) -> bool:
@@ -41,13 +49,22 @@ def _flag(context: LaunchContext, name: str) -> bool:
 
 def common_arguments() -> list[DeclareLaunchArgument]:
     """``use_sim_time`` and ``viewer``, the arguments of every launch file."""
-    return [DeclareLaunchArgument('use_sim_time', default_value='false',
-                                  description='Every node on the simulator\'s clock (true or false).'),
-            DeclareLaunchArgument('viewer', default_value='false',
-                                  description='Also start wmm_viewer, the browser view (true or false).'),
-            DeclareLaunchArgument('obstacles', default_value='', description=(
+    return [
+        DeclareLaunchArgument(
+            'use_sim_time', default_value='false', description='Every node on the simulator\'s clock (true or false).'
+        ),
+        DeclareLaunchArgument(
+            'viewer', default_value='false', description='Also start wmm_viewer, the browser view (true or false).'
+        ),
+        DeclareLaunchArgument(
+            'obstacles',
+            default_value='',
+            description=(
                 'Obstacle file for the simulator and the resolver: a name in config/obstacles (table_pillar, '
-                'table_reach) or a YAML path; empty for none.'))]
+                'table_reach) or a YAML path; empty for none.'
+            ),
+        ),
+    ]
 
 
 def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool, obstacles: str = '') -> list[Node]:
@@ -65,30 +82,54 @@ def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool, ob
     """
     config = load_robot(robot)
     if obstacles:
-        load_obstacles(obstacles)                   # a bad file fails here, not in two nodes
+        load_obstacles(obstacles)  # a bad file fails here, not in two nodes
         obstacles = str(obstacle_file(obstacles).resolve())
     common = {'robot': str(config.yaml_path), 'use_sim_time': use_sim_time}
     remap = [('/clock', f'/{namespace}/clock')] if namespace else []
-    executables = [('wmm_sim', {'frame_prefix': f'{namespace}/' if namespace else '', 'obstacles': obstacles}),
-                   (BASE_CONTROLLERS[config.base_type], {}), ('redundancy_resolver', {'obstacles': obstacles})]
+    executables = [
+        ('wmm_sim', {'frame_prefix': f'{namespace}/' if namespace else '', 'obstacles': obstacles}),
+        (BASE_CONTROLLERS[config.base_type], {}),
+        ('redundancy_resolver', {'obstacles': obstacles}),
+    ]
     if viewer:
         executables.append(('wmm_viewer', {'obstacles': obstacles}))
-    return [Node(package='wmm_control', executable=exe, namespace=namespace or None, output='screen',
-                 parameters=[dict(common, **extra)], remappings=remap)
-            for exe, extra in executables]
+    return [
+        Node(
+            package='wmm_control',
+            executable=exe,
+            namespace=namespace or None,
+            output='screen',
+            parameters=[dict(common, **extra)],
+            remappings=remap,
+        )
+        for exe, extra in executables
+    ]
 
 
 def robot_launch_description(robot: str | None = None) -> LaunchDescription:
     """One robot's system: ``robot`` fixed, or (None) taken from the ``robot:=`` argument."""
     arguments = common_arguments()
     if robot is None:
-        arguments.insert(0, DeclareLaunchArgument('robot', default_value='steerable', description=(
-            'A shipped robot (steerable, mecanum, ur_mecanum, panda_diff; A, B) or a robot YAML path.')))
+        arguments.insert(
+            0,
+            DeclareLaunchArgument(
+                'robot',
+                default_value='steerable',
+                description=(
+                    'A shipped robot (steerable, mecanum, ur_mecanum, panda_diff; A, B) or a robot YAML path.'
+                ),
+            ),
+        )
 
     def nodes(context: LaunchContext) -> list[Node]:
         name = robot if robot is not None else LaunchConfiguration('robot').perform(context)
-        return robot_nodes(name, '', _flag(context, 'use_sim_time'), _flag(context, 'viewer'),
-                           LaunchConfiguration('obstacles').perform(context).strip())
+        return robot_nodes(
+            name,
+            '',
+            _flag(context, 'use_sim_time'),
+            _flag(context, 'viewer'),
+            LaunchConfiguration('obstacles').perform(context).strip(),
+        )
 
     return LaunchDescription([*arguments, OpaqueFunction(function=nodes)])
 
@@ -96,14 +137,18 @@ def robot_launch_description(robot: str | None = None) -> LaunchDescription:
 def two_robots_launch_description() -> LaunchDescription:
     """Two robots in namespaces ``/r1`` and ``/r2`` (``robot1:=``, ``robot2:=``); the viewer
     (``viewer:=true``) shows ``/r1``."""
-    arguments = [DeclareLaunchArgument('robot1', default_value='steerable', description='The robot in /r1.'),
-                 DeclareLaunchArgument('robot2', default_value='mecanum', description='The robot in /r2.'),
-                 *common_arguments()]
+    arguments = [
+        DeclareLaunchArgument('robot1', default_value='steerable', description='The robot in /r1.'),
+        DeclareLaunchArgument('robot2', default_value='mecanum', description='The robot in /r2.'),
+        *common_arguments(),
+    ]
 
     def nodes(context: LaunchContext) -> list[Node]:
         sim_time, viewer = _flag(context, 'use_sim_time'), _flag(context, 'viewer')
         obstacles = LaunchConfiguration('obstacles').perform(context).strip()
-        return [*robot_nodes(LaunchConfiguration('robot1').perform(context), 'r1', sim_time, viewer, obstacles),
-                *robot_nodes(LaunchConfiguration('robot2').perform(context), 'r2', sim_time, False, obstacles)]
+        return [
+            *robot_nodes(LaunchConfiguration('robot1').perform(context), 'r1', sim_time, viewer, obstacles),
+            *robot_nodes(LaunchConfiguration('robot2').perform(context), 'r2', sim_time, False, obstacles),
+        ]
 
     return LaunchDescription([*arguments, OpaqueFunction(function=nodes)])

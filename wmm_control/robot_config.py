@@ -41,9 +41,20 @@ from wmm_control.paths import config_path
 from wmm_control.urdf import MOVING_TYPES, UrdfTree
 
 __all__ = [
-    'ArmConfig', 'BaseLimits', 'StartState', 'SteerableConfig', 'MecanumConfig',
-    'DifferentialConfig', 'RobotConfig', 'load_robot', 'robot_names', 'BASE_FAMILIES',
-    'ALIASES', 'MIN_ARM_JOINTS', 'DEFAULT_ACCEL_PER_VELOCITY', 'read_yaml_section',
+    'ArmConfig',
+    'BaseLimits',
+    'StartState',
+    'SteerableConfig',
+    'MecanumConfig',
+    'DifferentialConfig',
+    'RobotConfig',
+    'load_robot',
+    'robot_names',
+    'BASE_FAMILIES',
+    'ALIASES',
+    'MIN_ARM_JOINTS',
+    'DEFAULT_ACCEL_PER_VELOCITY',
+    'read_yaml_section',
     'resolve_robot_yaml',
 ]
 
@@ -55,6 +66,7 @@ MIN_ARM_JOINTS = 6
 DEFAULT_ACCEL_PER_VELOCITY = 2.0
 #: [m] the wheel axle of a differential base may miss base_link's origin by this much.
 _AXLE_TOL = 1e-3
+
 
 def _vec(raw, key, size, where):
     try:
@@ -258,7 +270,7 @@ class RobotConfig:
         if self.steerable is not None:
             return self.steerable.steer_joints + self.steerable.drive_joints
         wheels = self.mecanum or self.differential
-        assert wheels is not None       # one base geometry is always set (load_robot)
+        assert wheels is not None  # one base geometry is always set (load_robot)
         return wheels.wheel_joints
 
     @property
@@ -293,16 +305,21 @@ def _parse_arm(raw, tree, where_top):
     chain = [j for j in tree.chain(root, tool) if j.type != 'fixed']
     for j in chain:
         if j.mimic is not None:
-            raise ConfigError(f'{tree.path.name}: arm joint {j.name!r} is a mimic joint (of {j.mimic!r}): '
-                              'an arm joint must be actuated on its own')
+            raise ConfigError(
+                f'{tree.path.name}: arm joint {j.name!r} is a mimic joint (of {j.mimic!r}): '
+                'an arm joint must be actuated on its own'
+            )
         if j.type not in MOVING_TYPES:
-            raise ConfigError(f'{tree.path.name}: arm joint {j.name!r} has type {j.type!r}: '
-                              f'an arm joint must be one of {MOVING_TYPES}')
+            raise ConfigError(
+                f'{tree.path.name}: arm joint {j.name!r} has type {j.type!r}: '
+                f'an arm joint must be one of {MOVING_TYPES}'
+            )
     names = tuple(j.name for j in chain)
     n = len(names)
     if n < MIN_ARM_JOINTS:
-        raise ConfigError(f'{w}: the chain {root!r} → {tool!r} has {n} joints {list(names)}; '
-                          f'an arm needs at least {MIN_ARM_JOINTS}')
+        raise ConfigError(
+            f'{w}: the chain {root!r} → {tool!r} has {n} joints {list(names)}; an arm needs at least {MIN_ARM_JOINTS}'
+        )
     if arm.get('joints') is not None and tuple(arm.get('joints')) != names:
         raise ConfigError(f'{w}.joints: {arm.get("joints")!r} is not the URDF chain {root!r} → {tool!r}: {list(names)}')
 
@@ -313,30 +330,44 @@ def _parse_arm(raw, tree, where_top):
     lower = _optional_vec(arm, 'position_lower', n, w, urdf_limit('lower'))
     upper = _optional_vec(arm, 'position_upper', n, w, urdf_limit('upper'))
     velocity = _optional_vec(arm, 'velocity', n, w, urdf_limit('velocity'))
-    for key, val, what in (('position_lower', lower, 'lower'), ('position_upper', upper, 'upper'),
-                           ('velocity', velocity, 'velocity')):
+    for key, val, what in (
+        ('position_lower', lower, 'lower'),
+        ('position_upper', upper, 'upper'),
+        ('velocity', velocity, 'velocity'),
+    ):
         if val is None:
             missing = [j.name for j in chain if getattr(j, what) is None]
-            raise ConfigError(f'{w}: joint {missing[0]!r} has no <limit {what}> in the URDF and '
-                              f'arm.{key} does not override it')
+            raise ConfigError(
+                f'{w}: joint {missing[0]!r} has no <limit {what}> in the URDF and arm.{key} does not override it'
+            )
     if np.any(lower >= upper):
         raise ConfigError(f'{w}: position_lower must be below position_upper: {lower.tolist()} vs {upper.tolist()}')
     velocity = _positive(velocity, 'velocity', w)
-    acceleration = _positive(_optional_vec(arm, 'acceleration', n, w, DEFAULT_ACCEL_PER_VELOCITY * velocity),
-                             'acceleration', w)
+    acceleration = _positive(
+        _optional_vec(arm, 'acceleration', n, w, DEFAULT_ACCEL_PER_VELOCITY * velocity), 'acceleration', w
+    )
     dex = _vec(arm, 'dexterous', n, w)
     _within(dex, lower, upper, f'{w}.dexterous', names)
-    return ArmConfig(joints=names, types=tuple(j.type for j in chain), root=root, tool=tool,
-                     position_lower=lower, position_upper=upper, velocity=velocity,
-                     acceleration=acceleration, dexterous=dex)
+    return ArmConfig(
+        joints=names,
+        types=tuple(j.type for j in chain),
+        root=root,
+        tool=tool,
+        position_lower=lower,
+        position_upper=upper,
+        velocity=velocity,
+        acceleration=acceleration,
+        dexterous=dex,
+    )
 
 
 def _within(values, lower, upper, item, names):
     bad = np.flatnonzero((values < lower) | (values > upper))
     if bad.size:
         i = int(bad[0])
-        raise ConfigError(f'{item}: outside the position limits: {names[i]} = {values[i]:.6g} not in '
-                          f'[{lower[i]:.6g}, {upper[i]:.6g}]')
+        raise ConfigError(
+            f'{item}: outside the position limits: {names[i]} = {values[i]:.6g} not in [{lower[i]:.6g}, {upper[i]:.6g}]'
+        )
 
 
 def _parse_start(raw, arm):
@@ -346,8 +377,12 @@ def _parse_start(raw, arm):
     _within(q, arm.position_lower, arm.position_upper, f'{w}.arm', arm.joints)
     ee_pose = _optional_vec(st, 'ee_pose', 6, w, None)
     tol = _optional_vec(st, 'ee_tolerance', 2, w, None)
-    return StartState(base_pose=_vec(st, 'base_pose', 3, w), arm=q, ee_pose=ee_pose,
-                      ee_tolerance=None if tol is None else (float(tol[0]), float(tol[1])))
+    return StartState(
+        base_pose=_vec(st, 'base_pose', 3, w),
+        arm=q,
+        ee_pose=ee_pose,
+        ee_tolerance=None if tol is None else (float(tol[0]), float(tol[1])),
+    )
 
 
 def _wheel_radius(tree, name, role):
@@ -387,10 +422,14 @@ def _parse_steerable(raw, tree, base_link):
         raise ConfigError(f'{w}.hips: expected shape ({len(steer)}, 2), one per steer joint, got {hips.shape}')
     radius, drive_v = _common_wheel_values(tree, drive, 'drive joint')
     offset = _one({round(-tree.joint(n).xyz[1], 9) for n in drive})
-    steer_rate = _optional_scalar(s, 'steer_rate_limit', w, _one({_urdf_velocity(tree, n, 'steer joint') for n in steer}))
+    steer_rate = _optional_scalar(
+        s, 'steer_rate_limit', w, _one({_urdf_velocity(tree, n, 'steer joint') for n in steer})
+    )
     drive_rate = _optional_scalar(s, 'drive_rate_limit', w, drive_v)
     return SteerableConfig(
-        steer_joints=steer, drive_joints=drive, hips=hips,
+        steer_joints=steer,
+        drive_joints=drive,
+        hips=hips,
         wheel_radius=_optional_scalar(s, 'wheel_radius', w, radius),
         wheel_offset=_optional_scalar(s, 'wheel_offset', w, offset, positive=False),
         steer_rate_limit=steer_rate,
@@ -407,8 +446,7 @@ def _one(values):
 
 def _common_wheel_values(tree, names, role):
     """(radius, velocity limit) the URDF gives every wheel joint ``names``, None where they differ."""
-    return (_one({_wheel_radius(tree, n, role) for n in names}),
-            _one({_urdf_velocity(tree, n, role) for n in names}))
+    return (_one({_wheel_radius(tree, n, role) for n in names}), _one({_urdf_velocity(tree, n, role) for n in names}))
 
 
 def _parse_mecanum(raw, tree, base_link):
@@ -432,8 +470,10 @@ def _parse_differential(raw, tree, base_link):
     names = _joint_names(d, 'wheel_joints', w, size=2)
     origins = _wheel_origins(tree, base_link, names, 'wheel joint')
     if np.any(np.abs(origins[:, 0]) > _AXLE_TOL) or origins[0, 1] <= origins[1, 1]:
-        raise ConfigError(f'{w}.wheel_joints: the left and right wheels must sit on one axle through '
-                          f'{base_link} (x = 0, left at +y); the URDF puts them at {origins.round(4).tolist()}')
+        raise ConfigError(
+            f'{w}.wheel_joints: the left and right wheels must sit on one axle through '
+            f'{base_link} (x = 0, left at +y); the URDF puts them at {origins.round(4).tolist()}'
+        )
     radius, rate = _common_wheel_values(tree, names, 'wheel joint')
     return DifferentialConfig(
         wheel_joints=names,
@@ -454,8 +494,9 @@ def _parse_base_limits(raw, base_type):
     for key, arr in (('velocity', vel), ('acceleration', acc)):
         _positive(arr[list(axes)], key, 'base')
         if base_type == 'differential' and arr[1] != 0.0:
-            raise ConfigError(f'base.{key}: a differential base cannot move sideways: its vy entry '
-                              f'must be 0, got {arr.tolist()}')
+            raise ConfigError(
+                f'base.{key}: a differential base cannot move sideways: its vy entry must be 0, got {arr.tolist()}'
+            )
     return BaseLimits(velocity=vel, acceleration=acc)
 
 
@@ -512,8 +553,8 @@ def resolve_robot_yaml(robot):
     if path.suffix in ('.yaml', '.yml'):
         return path
     raise ConfigError(
-        f'unknown robot {robot!r}: use one of {robot_names()}, an alias A/B, '
-        f'or a path to a robot YAML file')
+        f'unknown robot {robot!r}: use one of {robot_names()}, an alias A/B, or a path to a robot YAML file'
+    )
 
 
 def load_robot(robot='steerable'):

@@ -39,9 +39,13 @@ def rotation_rpy(rpy: np.ndarray) -> np.ndarray:
     cr, sr = math.cos(rpy[0]), math.sin(rpy[0])
     cp, sp = math.cos(rpy[1]), math.sin(rpy[1])
     cy, sy = math.cos(rpy[2]), math.sin(rpy[2])
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
 
 
 @dataclass(frozen=True)
@@ -92,7 +96,7 @@ class UrdfTree:
         self.name = root.get('name', self.path.stem)
         self.links: dict[str, ET.Element] = {}
         for link in root.findall('link'):
-            name = cast(str, link.get('name'))      # None only for a nameless <link> (not a valid URDF)
+            name = cast(str, link.get('name'))  # None only for a nameless <link> (not a valid URDF)
             if name in self.links:
                 raise ConfigError(f'{self.path}: link {name!r} is defined twice')
             self.links[name] = link
@@ -137,17 +141,29 @@ class UrdfTree:
             lower, upper = -math.inf, math.inf
         # None only for a <parent>/<child> without a link attribute (not a valid URDF)
         parent_link, child_link = cast(str, parent.get('link')), cast(str, child.get('link'))
-        return UrdfJoint(name=name, type=jtype, parent=parent_link, child=child_link,
-                         xyz=xyz, rpy=rpy, axis=axis, lower=lower, upper=upper, velocity=velocity,
-                         mimic=mimic.get('joint') if mimic is not None else None,
-                         mimic_multiplier=multiplier, mimic_offset=offset)
+        return UrdfJoint(
+            name=name,
+            type=jtype,
+            parent=parent_link,
+            child=child_link,
+            xyz=xyz,
+            rpy=rpy,
+            axis=axis,
+            lower=lower,
+            upper=upper,
+            velocity=velocity,
+            mimic=mimic.get('joint') if mimic is not None else None,
+            mimic_multiplier=multiplier,
+            mimic_offset=offset,
+        )
 
     # ------------------------------------------------------------------ structure
     def require_link(self, name: str, role: str) -> None:
         """Raise a ConfigError naming ``role`` unless ``name`` is a link of the URDF."""
         if name not in self.links:
-            raise ConfigError(f'{self.path.name}: {role} link {name!r} not found '
-                              f'(links: {", ".join(sorted(self.links))})')
+            raise ConfigError(
+                f'{self.path.name}: {role} link {name!r} not found (links: {", ".join(sorted(self.links))})'
+            )
 
     def joint(self, name: str, role: str = 'joint') -> UrdfJoint:
         """The joint ``name``; a ConfigError naming ``role`` if the URDF has none."""
@@ -169,8 +185,10 @@ class UrdfTree:
         while link != root:
             joint = self._by_child.get(link)
             if joint is None:
-                raise ConfigError(f'{self.path.name}: chain broken: {roles[1]} link {tip!r} does not '
-                                  f'descend from {roles[0]} link {root!r}')
+                raise ConfigError(
+                    f'{self.path.name}: chain broken: {roles[1]} link {tip!r} does not '
+                    f'descend from {roles[0]} link {root!r}'
+                )
             joints.append(joint)
             link = joint.parent
         return joints[::-1]

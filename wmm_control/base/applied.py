@@ -26,6 +26,8 @@ def unapplied_command(measured, commanded, tolerance):
     worst = float(np.max(np.abs(np.asarray(measured, dtype=float) - np.asarray(commanded, dtype=float))))
     if worst <= tolerance:
         return ''
-    return (f'the rates measured differ from the last command by up to {worst:.3g} rad/s (more than '
-            f'{tolerance:g}): it was not applied as sent (lost, late, superseded, or zeroed by the '
-            'actuator\'s command timeout)')
+    return (
+        f'the rates measured differ from the last command by up to {worst:.3g} rad/s (more than '
+        f'{tolerance:g}): it was not applied as sent (lost, late, superseded, or zeroed by the '
+        'actuator\'s command timeout)'
+    )

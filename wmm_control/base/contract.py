@@ -141,14 +141,22 @@ class SteerableBase:
 
     def diagnostic_values(self, command):
         out = command.detail
-        return {'route': out.route, 'qp_status': out.qp_status, 'icr_next_xy': out.icr_next.point,
-                'icr_at_infinity': out.icr_next.at_infinity, 'active_constraints': list(out.active_constraints),
-                'solve_time_us': out.solve_time_s * 1e6, 'beta_ref': out.beta_ref}
+        return {
+            'route': out.route,
+            'qp_status': out.qp_status,
+            'icr_next_xy': out.icr_next.point,
+            'icr_at_infinity': out.icr_next.at_infinity,
+            'active_constraints': list(out.active_constraints),
+            'solve_time_us': out.solve_time_s * 1e6,
+            'beta_ref': out.beta_ref,
+        }
 
     def describe(self):
         p = self.controller.params
-        return (f'{self.controller.geometry.n_wheels} modules, t_s {p.dt} s, β̇ ≤ {p.steer_rate_limit} rad/s, '
-                f'β̈ ≤ {p.steer_accel_limit} rad/s²')
+        return (
+            f'{self.controller.geometry.n_wheels} modules, t_s {p.dt} s, β̇ ≤ {p.steer_rate_limit} rad/s, '
+            f'β̈ ≤ {p.steer_accel_limit} rad/s²'
+        )
 
 
 class WheelBase:
@@ -187,15 +195,21 @@ class WheelBase:
 
     def diagnostic_values(self, command):
         out = command.detail
-        return {'velocity_scale': out.velocity_scale, 'accel_scale': out.accel_scale,
-                'reference_dropped': out.dropped, 'reference_limited': out.reference,
-                'wheel_rates': out.wheel_rates,
-                'wheel_rate_ratio': float(np.max(np.abs(out.wheel_rates))) / self.controller.params.wheel_rate_limit}
+        return {
+            'velocity_scale': out.velocity_scale,
+            'accel_scale': out.accel_scale,
+            'reference_dropped': out.dropped,
+            'reference_limited': out.reference,
+            'wheel_rates': out.wheel_rates,
+            'wheel_rate_ratio': float(np.max(np.abs(out.wheel_rates))) / self.controller.params.wheel_rate_limit,
+        }
 
     def describe(self):
         p = self.controller.params
-        return (f't_s {p.dt} s, |v| ≤ {list(p.velocity_limit)}, |a| ≤ {list(p.accel_limit)}, '
-                f'wheels ≤ {p.wheel_rate_limit} rad/s')
+        return (
+            f't_s {p.dt} s, |v| ≤ {list(p.velocity_limit)}, |a| ≤ {list(p.accel_limit)}, '
+            f'wheels ≤ {p.wheel_rate_limit} rad/s'
+        )
 
 
 def make_base_controller(robot, dt, **overrides):

@@ -120,8 +120,9 @@ class Icr:
         object.__setattr__(self, 'z', z / n)
 
     @classmethod
-    def from_point(cls, x: float, y: float, scale: float = DEFAULT_ICR_SCALE,
-                   border: float = DEFAULT_ICR_BORDER) -> 'Icr':
+    def from_point(
+        cls, x: float, y: float, scale: float = DEFAULT_ICR_SCALE, border: float = DEFAULT_ICR_BORDER
+    ) -> 'Icr':
         """A finite ICR at (x, y) [m] in the base frame."""
         return cls(np.array([x, y, scale], dtype=float), scale, border)
 
@@ -136,8 +137,9 @@ class Icr:
         return cls(np.array([-t[1], t[0], scale * t[2]]), scale, border)
 
     @classmethod
-    def from_steer_angles(cls, geometry, beta, scale: float = DEFAULT_ICR_SCALE,
-                          border: float = DEFAULT_ICR_BORDER, like=None) -> 'Icr':
+    def from_steer_angles(
+        cls, geometry, beta, scale: float = DEFAULT_ICR_SCALE, border: float = DEFAULT_ICR_BORDER, like=None
+    ) -> 'Icr':
         """The ICR that best fits steer angles β (least squares over the no-side-slip rows).
 
         Exact when the wheels agree on one ICR; for disagreeing wheels it is the twist
@@ -264,7 +266,7 @@ def icr_of_headings(slip_rows: np.ndarray, scale: float, like=None) -> np.ndarra
         The unit homogeneous ICR ``z ∝ (−vy, vx, ℓω)``. Shape (3,).
     """
     (s00, s01, s02), (_, s11, s12), (_, _, s22) = (slip_rows.T @ slip_rows).tolist()
-    s02, s12, s22 = s02 / scale, s12 / scale, s22 / (scale * scale)     # the rows' third entry over ℓ
+    s02, s12, s22 = s02 / scale, s12 / scale, s22 / (scale * scale)  # the rows' third entry over ℓ
     q = (s00 + s11 + s22) / 3.0
     off = s01 * s01 + s02 * s02 + s12 * s12
     pp = math.sqrt(((s00 - q) ** 2 + (s11 - q) ** 2 + (s22 - q) ** 2 + 2.0 * off) / 6.0)
@@ -294,8 +296,9 @@ def icr_of_headings(slip_rows: np.ndarray, scale: float, like=None) -> np.ndarra
     return z
 
 
-def wedge_rows(headings: np.ndarray, sides: np.ndarray, maps: np.ndarray, zc: np.ndarray,
-               basis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def wedge_rows(
+    headings: np.ndarray, sides: np.ndarray, maps: np.ndarray, zc: np.ndarray, basis: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Steer-limit lines of the ICR QP, all at once, in the chart ``z = zc + E x``.
 
     Row k bounds the heading of the wheel whose hip velocity map is ``maps[k]``

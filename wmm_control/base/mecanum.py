@@ -40,11 +40,17 @@ class MecanumKinematics:
             if not (np.isfinite(val) and val > 0):
                 raise ConfigError(f'{name} must be finite and > 0, got {val}')
         k = self.d1 + self.d2
-        jv = self.wheel_radius / 4.0 * np.array([
-            [1.0, 1.0, 1.0, 1.0],
-            [-1.0, 1.0, 1.0, -1.0],
-            [-1.0 / k, 1.0 / k, -1.0 / k, 1.0 / k],
-        ])
+        jv = (
+            self.wheel_radius
+            / 4.0
+            * np.array(
+                [
+                    [1.0, 1.0, 1.0, 1.0],
+                    [-1.0, 1.0, 1.0, -1.0],
+                    [-1.0 / k, 1.0 / k, -1.0 / k, 1.0 / k],
+                ]
+            )
+        )
         object.__setattr__(self, '_jv', jv)
         # J_V has full row rank; its right inverse is exact: J_V @ J_V⁺ = I₃.
         object.__setattr__(self, '_jv_pinv', np.linalg.pinv(jv))

@@ -53,8 +53,9 @@ class SteerableGeometry:
         hips = hips.copy()
         hips.flags.writeable = False
         object.__setattr__(self, 'hips', hips)
-        object.__setattr__(self, '_hip_sums', (float(hips[:, 0].sum()), float(hips[:, 1].sum()),
-                                               float((hips * hips).sum())))
+        object.__setattr__(
+            self, '_hip_sums', (float(hips[:, 0].sum()), float(hips[:, 1].sum()), float((hips * hips).sum()))
+        )
 
     @classmethod
     def from_config(cls, steerable_config) -> 'SteerableGeometry':
@@ -156,8 +157,9 @@ class SteerableGeometry:
         Returns:
             Base twists (vx, vy, ω) [m/s, m/s, rad/s]. Shape (S, 3).
         """
-        return self.fit_twist(np.asarray(beta_sets, dtype=float), np.asarray(beta_dot, dtype=float),
-                              np.asarray(phi_dot, dtype=float))
+        return self.fit_twist(
+            np.asarray(beta_sets, dtype=float), np.asarray(beta_dot, dtype=float), np.asarray(phi_dot, dtype=float)
+        )
 
     def fit_twist(self, beta: np.ndarray, beta_dot: np.ndarray, phi_dot: np.ndarray) -> np.ndarray:
         """The least-squares twist of :meth:`twist_from_wheels`, without input checks.
@@ -185,7 +187,7 @@ class SteerableGeometry:
         w = np.empty(c.shape + (3,))
         w[..., 0], w[..., 1], w[..., 2] = c, s, self.hips[:, 0] * s - self.hips[:, 1] * c
         rhs = self.wheel_radius * phi_dot - d * beta_dot
-        sums = np.array((np.ones(n), rhs)) @ w            # (..., 2, 3): Σ(c, s, q) and Σ ρ (c, s, q)
+        sums = np.array((np.ones(n), rhs)) @ w  # (..., 2, 3): Σ(c, s, q) and Σ ρ (c, s, q)
         sum_hx, sum_hy, sum_h2 = self._hip_sums
         n02 = d * sums[..., 0, 0] - sum_hy
         n12 = d * sums[..., 0, 1] + sum_hx
@@ -195,7 +197,7 @@ class SteerableGeometry:
         # Cramer's rule for [[N, 0, n02], [0, N, n12], [n02, n12, n22]] (det = N · det_2)
         det_2 = n * n22 - n12 * n12 - n02 * n02
         if np.all(np.abs(det_2) > 1e-12 * n * np.maximum(n22, 1.0)):
-            w2 = (n * b2 - n02 * b0 - n12 * b1) / det_2     # ω
+            w2 = (n * b2 - n02 * b0 - n12 * b1) / det_2  # ω
             return np.array(((b0 - n02 * w2) / n, (b1 - n12 * w2) / n, w2)).T
         a = self._rows(beta, rolling=True, slip=True)
         rhs2 = np.concatenate((rhs, np.zeros(n)))
@@ -235,7 +237,7 @@ class SteerableGeometry:
         """
         if isinstance(icr, Icr):
             z, scale = icr.z, icr.scale
-        else:            # (X, Y, 1) as it is: v_i = (Y − hy_i, hx_i − X) without round-off
+        else:  # (X, Y, 1) as it is: v_i = (Y − hy_i, hx_i − X) without round-off
             z, scale = np.array((float(icr[0]), float(icr[1]), 1.0)), 1.0
         v = self.hip_velocity_map(scale) @ z
         vx, vy = v[:, 0], v[:, 1]

@@ -91,12 +91,12 @@ from wmm_control.errors import ConfigError, ShapeError
 
 __all__ = ['SwmrParams', 'SwmrOutput', 'IcrQp', 'QpResult', 'OsqpIcrSolver', 'SwmrController']
 
-_INF = 1e30            # OSQP's infinity
-_ROW_TOL = 1e-6        # a normalised wedge row within this of its bound counts as active
-_RATE_TOL = 1e-9       # [rad/s] a steer rate clipped by more than this counts as active
-_ANGLE_TOL = 1e-12     # [rad] a steer change below this is round-off
-_FEAS_TOL = 1e-9       # a normalised row violated by at most this counts as satisfied
-_HIP_TOL = 1e-9        # a hip velocity below this: the ICR sits on the hip
+_INF = 1e30  # OSQP's infinity
+_ROW_TOL = 1e-6  # a normalised wedge row within this of its bound counts as active
+_RATE_TOL = 1e-9  # [rad/s] a steer rate clipped by more than this counts as active
+_ANGLE_TOL = 1e-12  # [rad] a steer change below this is round-off
+_FEAS_TOL = 1e-9  # a normalised row violated by at most this counts as satisfied
+_HIP_TOL = 1e-9  # a hip velocity below this: the ICR sits on the hip
 ELASTIC_WEIGHT = 1e4
 _BOX_ROWS = np.eye(2)
 _ZERO2 = np.zeros(2)
@@ -192,8 +192,8 @@ class SwmrParams:
             raise ConfigError(f'SwmrParams: kp*dt = {self.kp * self.dt} must be <= 1')
         if self.steer_rate_limit * self.dt >= np.pi / 4:
             raise ConfigError(
-                f'SwmrParams: steer_rate_limit*dt = {self.steer_rate_limit * self.dt} rad per period '
-                'must be < pi/4')
+                f'SwmrParams: steer_rate_limit*dt = {self.steer_rate_limit * self.dt} rad per period must be < pi/4'
+            )
         if self.max_icr_step >= np.pi / 2:
             raise ConfigError(f'SwmrParams.max_icr_step must be < pi/2, got {self.max_icr_step}')
 
@@ -354,8 +354,11 @@ _USED = ('solved', 'solved_inaccurate', 'elastic')
 _SOLVED = ('solved', 'solved_inaccurate', 'unconstrained', 'not_solved')
 _CLIPPED = ('primal_infeasible', 'max_iter_reached')
 _OSQP_ACCEPTED = (SolverStatus.OSQP_SOLVED, SolverStatus.OSQP_SOLVED_INACCURATE)
-_OSQP_ELASTIC = (SolverStatus.OSQP_PRIMAL_INFEASIBLE, SolverStatus.OSQP_PRIMAL_INFEASIBLE_INACCURATE,
-                 SolverStatus.OSQP_MAX_ITER_REACHED)
+_OSQP_ELASTIC = (
+    SolverStatus.OSQP_PRIMAL_INFEASIBLE,
+    SolverStatus.OSQP_PRIMAL_INFEASIBLE_INACCURATE,
+    SolverStatus.OSQP_MAX_ITER_REACHED,
+)
 
 
 _STATUS = {status.value: status for status in SolverStatus}
@@ -385,15 +388,16 @@ class OsqpIcrSolver:
     def __init__(self, n_rows: int, eps: float = 1e-6, max_iter: int = 4000):
         self.n_rows = m = int(n_rows)
         self.last_iterations = 0
-        settings = dict(verbose=False, polishing=False, warm_starting=True, eps_abs=eps, eps_rel=eps,
-                        max_iter=int(max_iter))
+        settings = dict(
+            verbose=False, polishing=False, warm_starting=True, eps_abs=eps, eps_rel=eps, max_iter=int(max_iter)
+        )
         self._osqp = self._setup(np.eye(2), m, settings)
         # The elastic rows are normalised already; OSQP's Ruiz scaling, fighting the heavy weight
         # on s, would multiply its iteration count by ~15 (median ~2000, often max_iter).
         self._elastic = self._setup(np.diag([1.0, 1.0, ELASTIC_WEIGHT]), m + 1, dict(settings, scaling=0))
         self._elastic_a = np.zeros((m + 1, 3))
-        self._elastic_a[:m - 2, 2] = 1.0        # every wedge row relaxed by s (the box rows are not)
-        self._elastic_a[m, 2] = 1.0             # s ≥ 0
+        self._elastic_a[: m - 2, 2] = 1.0  # every wedge row relaxed by s (the box rows are not)
+        self._elastic_a[m, 2] = 1.0  # s ≥ 0
 
     @staticmethod
     def _setup(p_dense: np.ndarray, m: int, settings: dict) -> osqp.OSQP:
@@ -401,17 +405,17 @@ class OsqpIcrSolver:
         # (placeholder values are non-zero so none is dropped); its values change each cycle.
         n = p_dense.shape[0]
         p = sparse.triu(sparse.csc_matrix(p_dense), format='csc')
-        a = sparse.csc_matrix((np.ones(n * m), np.tile(np.arange(m), n), np.arange(0, n * m + 1, m)),
-                              shape=(m, n))
+        a = sparse.csc_matrix((np.ones(n * m), np.tile(np.arange(m), n), np.arange(0, n * m + 1, m)), shape=(m, n))
         solver = osqp.OSQP()
         solver.setup(p, np.zeros(n), a, -np.full(m, _INF), np.full(m, _INF), **settings)
         return solver
 
-    def _run(self, solver: osqp.OSQP, q: np.ndarray, a: np.ndarray, lb: np.ndarray,
-             ub: np.ndarray) -> tuple[np.ndarray, SolverStatus]:
+    def _run(
+        self, solver: osqp.OSQP, q: np.ndarray, a: np.ndarray, lb: np.ndarray, ub: np.ndarray
+    ) -> tuple[np.ndarray, SolverStatus]:
         """Update ``solver``'s q, A's values (``a`` dense, stored column-major), l, u and solve."""
         solver.update(q=q, l=lb, u=ub, Ax=a.ravel(order='F'))
-        res = solver.solve(raise_error=False)    # the status is handled here
+        res = solver.solve(raise_error=False)  # the status is handled here
         self.last_iterations = int(res.info.iter)
         return np.array(res.x, dtype=float), _STATUS[res.info.status_val]
 
@@ -498,19 +502,19 @@ class _QpAnswer(NamedTuple):
     """The steering controller's QP answer for one period."""
 
     x: np.ndarray | None  # ICR_next in chart coordinates, Shape (2,); None when the solver failed
-    status: str           # the qp_status of :class:`SwmrOutput`
-    solve_time: float     # [s]
+    status: str  # the qp_status of :class:`SwmrOutput`
+    solve_time: float  # [s]
 
 
 class _Steering(NamedTuple):
     """The steering controller's result for one period."""
 
-    beta: np.ndarray      # β_ref [rad], Shape (N,)
-    rate: np.ndarray      # β̇_ref [rad/s], Shape (N,)
-    icr_next: Icr         # ICR of β_ref
-    active: set           # wheels whose rate limit or wedge binds
+    beta: np.ndarray  # β_ref [rad], Shape (N,)
+    rate: np.ndarray  # β̇_ref [rad/s], Shape (N,)
+    icr_next: Icr  # ICR of β_ref
+    active: set  # wheels whose rate limit or wedge binds
     qp_status: str
-    solve_time: float     # [s]
+    solve_time: float  # [s]
 
 
 class SwmrController:
@@ -536,7 +540,8 @@ class SwmrController:
         if steer_term >= p.drive_rate_limit:
             raise ConfigError(
                 f'd*steer_rate_limit/r_w = {steer_term} rad/s leaves no drive rate below '
-                f'drive_rate_limit = {p.drive_rate_limit}')
+                f'drive_rate_limit = {p.drive_rate_limit}'
+            )
         self.n_rows = 2 * n + 2
         self.solver = solver if solver is not None else OsqpIcrSolver(self.n_rows, p.eps, p.max_iter)
         self._icr_proto = Icr(np.array([0.0, 0.0, 1.0]), p.icr_scale, p.icr_border)
@@ -545,12 +550,12 @@ class SwmrController:
         self._turn_budget = min(p.base_accel_limit) * p.dt
         self._velocity_limit = np.array(p.base_velocity_limit)
         self._accel_limit = np.array(p.base_accel_limit)
-        self._accel_step = self._accel_limit * p.dt                   # |Δξ̇| per period
+        self._accel_step = self._accel_limit * p.dt  # |Δξ̇| per period
         # per hip: its velocity map z ↦ v (also per wedge row: wheel i's at rows i, N + i) and
         # its unit homogeneous point (the route test)
         self._hip_map = geometry.hip_velocity_map(p.icr_scale)
         self._row_maps = np.concatenate((self._hip_map, self._hip_map))
-        self._hip_rows = np.concatenate((self._hip_map[:, 0], self._hip_map[:, 1]))   # (2N, 3): vx rows, vy rows
+        self._hip_rows = np.concatenate((self._hip_map[:, 0], self._hip_map[:, 1]))  # (2N, 3): vx rows, vy rows
         points = np.column_stack((geometry.hips, np.full(n, p.icr_scale)))
         self._hip_points = points / np.linalg.norm(points, axis=1)[:, None]
         self.reset(np.zeros(n))
@@ -615,7 +620,8 @@ class SwmrController:
     def _icr_of(self, beta: np.ndarray, like=None) -> Icr:
         """ICR of steer angles β (Shape (N,)): :func:`icr_of_headings`, on the hemisphere of ``like``."""
         return self._icr_proto._with_z_unchecked(
-            icr_of_headings(self.geometry.slip_rows(beta), self.params.icr_scale, like))
+            icr_of_headings(self.geometry.slip_rows(beta), self.params.icr_scale, like)
+        )
 
     def _rate_interval(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-period steer-rate interval [rad/s]: |β̇| ≤ β̇_max and |β̇ − β̇_prev| ≤ β̈_max dt.
@@ -629,7 +635,7 @@ class SwmrController:
         rate = self._beta_dot
         lower, upper = np.maximum(rate - dv, -vmax), np.minimum(rate + dv, vmax)
         beyond = lower > upper
-        if beyond.any():   # a resynced (measured) rate beyond β̇_max + β̈_max dt: brake as hard as β̈_max allows
+        if beyond.any():  # a resynced (measured) rate beyond β̇_max + β̈_max dt: brake as hard as β̈_max allows
             brake = rate - np.copysign(dv, rate)
             lower, upper = np.where(beyond, brake, lower), np.where(beyond, brake, upper)
         return lower, upper
@@ -668,10 +674,10 @@ class SwmrController:
         elif not np.array_equal(meas, self._beta):
             z_cmd = self._icr.z
             z_meas = icr_of_headings(self.geometry.slip_rows(meas), p.icr_scale, z_cmd)
-            v = self._hip_rows @ np.array((z_meas, z_cmd)).T         # (2N, 2): hip velocities, vx then vy
+            v = self._hip_rows @ np.array((z_meas, z_cmd)).T  # (2N, 2): hip velocities, vx then vy
             heading = np.arctan2(v[n:], v[:n])
-            on_hip = np.hypot(v[n:], v[:n]).min(axis=1) < _HIP_TOL   # any angle fits
-            own = wrap_half_turn(self._beta - heading[:, 1])          # the command's disagreement
+            on_hip = np.hypot(v[n:], v[:n]).min(axis=1) < _HIP_TOL  # any angle fits
+            own = wrap_half_turn(self._beta - heading[:, 1])  # the command's disagreement
             extra = wrap_half_turn(meas - heading[:, 0] - own)
             start = meas - extra + np.copysign(np.maximum(np.abs(extra) - band, 0.0), extra)
             self._beta = np.where(on_hip, meas, start)
@@ -715,7 +721,7 @@ class SwmrController:
             vx, vy, wz = ref.tolist()
             zt, route = choose_route(zc, (-vy, vx, p.icr_scale * wz))
             # ICR_ref: a fraction λ dt of the arc ICR_curr → ICR*, along the great circle.
-            d0, d1 = (zt @ basis).tolist()              # the arc's direction in the chart
+            d0, d1 = (zt @ basis).tolist()  # the arc's direction in the chart
             dn = math.hypot(d0, d1)
             if dn > 1e-12:
                 theta = math.atan2(dn, float(zc @ zt))
@@ -727,9 +733,21 @@ class SwmrController:
         # wheel i's rows i, N + i: its extreme headings this period, on the sides +σ_i and −σ_i
         headings = np.concatenate((self._beta + dt * lower, self._beta + dt * upper))
         rows, bounds = wedge_rows(headings, np.concatenate((sides, -sides)), self._row_maps, zc, basis)
-        return IcrQp(x_ref=x_ref, rows=rows, lower=bounds, mirrored=mirror, box=math.tan(step), basis=basis,
-                     icr_curr=self._icr, target_z=zt, rate_lower=lower, rate_upper=upper, sides=sides,
-                     route=route, stopped=stopped)
+        return IcrQp(
+            x_ref=x_ref,
+            rows=rows,
+            lower=bounds,
+            mirrored=mirror,
+            box=math.tan(step),
+            basis=basis,
+            icr_curr=self._icr,
+            target_z=zt,
+            rate_lower=lower,
+            rate_upper=upper,
+            sides=sides,
+            route=route,
+            stopped=stopped,
+        )
 
     def _route_passes_a_hip(self, zc: np.ndarray, zt: np.ndarray) -> bool:
         """True when the great-circle route ICR_curr → ICR* passes within ``route_hip_distance`` of a hip.
@@ -738,7 +756,7 @@ class SwmrController:
         """
         c0, c1, c2 = zc.tolist()
         t0, t1, t2 = zt.tolist()
-        normal = (c1 * t2 - c2 * t1, c2 * t0 - c0 * t2, c0 * t1 - c1 * t0)   # zc × zt
+        normal = (c1 * t2 - c2 * t1, c2 * t0 - c0 * t2, c0 * t1 - c1 * t0)  # zc × zt
         sin_theta = math.hypot(*normal)
         if sin_theta < 1e-12:
             return False
@@ -779,17 +797,18 @@ class SwmrController:
             Shape (N,).
         """
         n = self.geometry.n_wheels
-        v = self._hip_rows @ np.array((zc, zr, zt)).T      # (2N, 3): vx then vy of each hip at ICR_curr, _ref, *
-        along = np.cos(self._beta)[:, None] * v[:n] + np.sin(self._beta)[:, None] * v[n:]     # (N, 3)
+        v = self._hip_rows @ np.array((zc, zr, zt)).T  # (2N, 3): vx then vy of each hip at ICR_curr, _ref, *
+        along = np.cos(self._beta)[:, None] * v[:n] + np.sin(self._beta)[:, None] * v[n:]  # (N, 3)
         sign = np.where(along > 0.0, 1.0, -1.0)
         decided = np.abs(along) > _HIP_TOL
         sides = sign[:, 0]
-        if not decided[:, 0].all():       # ICR_curr on a hip: ICR_ref decides, then ICR*, else +1
-            sides = np.where(decided[:, 0], sides,
-                             np.where(decided[:, 1], sign[:, 1], np.where(decided[:, 2], sign[:, 2], 1.0)))
+        if not decided[:, 0].all():  # ICR_curr on a hip: ICR_ref decides, then ICR*, else +1
+            sides = np.where(
+                decided[:, 0], sides, np.where(decided[:, 1], sign[:, 1], np.where(decided[:, 2], sign[:, 2], 1.0))
+            )
         if mirror:
             vc, step = v[:, 0], v[:, 1] - v[:, 0]
-            closer = vc * vc - step * step                   # per hip: |v_c|² − |v_r − v_c|², x then y
+            closer = vc * vc - step * step  # per hip: |v_c|² − |v_r − v_c|², x then y
             near = (closer[:n] + closer[n:] <= 0.0) & decided[:, 1]
             if near.any():
                 sides = np.where(near, sign[:, 1], sides)
@@ -871,7 +890,7 @@ class SwmrController:
             binding = problem.rows @ answer.x - problem.lower <= _ROW_TOL
             active.update((np.flatnonzero(binding) % self.geometry.n_wheels).tolist())
         beta_new = beta + dt * rate
-        if clipped or hold:            # the wheels' own ICR (they may disagree)
+        if clipped or hold:  # the wheels' own ICR (they may disagree)
             icr = self._icr_of(beta_new, like=icr.z)
         return _Steering(beta_new, rate, icr, active, qp_status, answer.solve_time)
 
@@ -881,8 +900,8 @@ class SwmrController:
         p = self.params
         dt, twist = p.dt, self._twist
         if stopped and (np.abs(twist) <= self._accel_step).all():
-            return np.zeros(3)             # the last step to rest, within the limits
-        if brake:                          # full braking along the twist, scaled to the limits
+            return np.zeros(3)  # the last step to rest, within the limits
+        if brake:  # full braking along the twist, scaled to the limits
             acc = -twist
             k_max = 1.0 / dt
         else:
@@ -899,7 +918,7 @@ class SwmrController:
             ``(twist, phi_dot)``, Shapes (3,), (N,).
         """
         g = self.geometry
-        direction = steer.icr_next.twist_direction                 # ∝ (Y, −X, 1)
+        direction = steer.icr_next.twist_direction  # ∝ (Y, −X, 1)
         rows = g.rolling_rows(steer.beta)
         # the drive rates are affine in the size s of the twist s · direction: φ̇ = s a + b
         steering = g.drive_rates(rows, steer.rate, _ZERO3)
@@ -932,9 +951,9 @@ class SwmrController:
         size, toward = np.abs(per_speed), steering * np.sign(per_speed)
         up = float((size / (drive_limit - toward)).max())
         down = float((size / (drive_limit + toward)).max())
-        for c, vmax in zip(direction, p.base_velocity_limit):      # and |s c_k| ≤ V_k
+        for c, vmax in zip(direction, p.base_velocity_limit):  # and |s c_k| ≤ V_k
             up, down = max(up, abs(c) / vmax), max(down, abs(c) / vmax)
-        lo, hi = -1.0 / down, 1.0 / up                               # c is a unit vector: up, down > 0
+        lo, hi = -1.0 / down, 1.0 / up  # c is a unit vector: up, down > 0
         # acceleration: |s c_k − v_k| ≤ r_k
         twist, accel = self._twist.tolist(), self._accel_step.tolist()
         alo, ahi = lo, hi
@@ -954,8 +973,7 @@ class SwmrController:
         for c, v, r in zip(direction, twist, accel):
             lines += ((c / r, -v / r), (-c / r, v / r))
         best, best_ratio = 0.0, math.inf
-        candidates = [lo, hi] + [(o2 - o1) / (k1 - k2) for k1, o1 in lines for k2, o2 in lines
-                                 if k1 > 0.0 > k2]
+        candidates = [lo, hi] + [(o2 - o1) / (k1 - k2) for k1, o1 in lines for k2, o2 in lines if k1 > 0.0 > k2]
         for s in candidates:
             s = min(max(s, lo), hi)
             ratio = max(k * s + o for k, o in lines)
@@ -1000,23 +1018,31 @@ class SwmrController:
         twist, phi_dot = self._feasible_twist(init, steer)
         return self._commit(problem, steer, twist, phi_dot)
 
-    def _commit(self, problem: IcrQp, steer: _Steering, twist: np.ndarray, phi_dot: np.ndarray,
-                status: str | None = None) -> SwmrOutput:
+    def _commit(
+        self, problem: IcrQp, steer: _Steering, twist: np.ndarray, phi_dot: np.ndarray, status: str | None = None
+    ) -> SwmrOutput:
         """Store the new state and return it as a :class:`SwmrOutput`."""
         self._beta, self._beta_dot, self._twist, self._phi_dot = steer.beta, steer.rate, twist, phi_dot
         self._icr = steer.icr_next
         executed = twist
-        if steer.rate.any():     # the rolling model at the mid-period steer angles
-            executed = self.geometry.fit_twist(steer.beta - (0.5 * self.params.dt) * steer.rate, steer.rate,
-                                               phi_dot)
+        if steer.rate.any():  # the rolling model at the mid-period steer angles
+            executed = self.geometry.fit_twist(steer.beta - (0.5 * self.params.dt) * steer.rate, steer.rate, phi_dot)
         if status is None:
             status = 'stopped' if problem.stopped else 'ok'
         return SwmrOutput(
-            beta_ref=steer.beta.copy(), beta_dot_ref=steer.rate.copy(), phi_dot_ref=phi_dot.copy(),
-            twist_feasible=twist.copy(), twist_executed=executed.copy(), icr_next=steer.icr_next,
-            icr_ref=problem.icr_ref, route=problem.route if status != 'solver_failure' else 'hold',
-            active_constraints=sorted(steer.active), solve_time_s=steer.solve_time, status=status,
-            qp_status=steer.qp_status)
+            beta_ref=steer.beta.copy(),
+            beta_dot_ref=steer.rate.copy(),
+            phi_dot_ref=phi_dot.copy(),
+            twist_feasible=twist.copy(),
+            twist_executed=executed.copy(),
+            icr_next=steer.icr_next,
+            icr_ref=problem.icr_ref,
+            route=problem.route if status != 'solver_failure' else 'hold',
+            active_constraints=sorted(steer.active),
+            solve_time_s=steer.solve_time,
+            status=status,
+            qp_status=steer.qp_status,
+        )
 
     def _safe_stop(self, problem: IcrQp, answer: _QpAnswer) -> SwmrOutput:
         """Solver failure: steer rates braked to zero within β̈_max, drive ramped down within φ̈_max."""
@@ -1025,8 +1051,9 @@ class SwmrController:
         beta_new = self._beta + p.dt * rate
         peak = float(np.abs(self._phi_dot).max())
         k = max(0.0, 1.0 - p.drive_accel_limit * p.dt / peak) if peak > 0 else 0.0
-        steer = _Steering(beta_new, rate, self._icr_of(beta_new, like=self._icr.z), set(), answer.status,
-                          answer.solve_time or 0.0)
+        steer = _Steering(
+            beta_new, rate, self._icr_of(beta_new, like=self._icr.z), set(), answer.status, answer.solve_time or 0.0
+        )
         return self._commit(problem, steer, k * self._twist, k * self._phi_dot, status='solver_failure')
 
     def _bounded_reference(self, twist_ref) -> np.ndarray:
@@ -1050,4 +1077,3 @@ class SwmrController:
             return ref
         s = float((limits[beyond] / size[beyond]).min())
         return np.clip(ref * s, -limits, limits)
-

@@ -49,6 +49,7 @@ def wheel_kinematics(robot):
         return DifferentialKinematics.from_config(robot.differential)
     raise ConfigError(f'robot {robot.name!r} has a {robot.base_type} base, not a Mecanum or differential one')
 
+
 # A change exceeding the acceleration limit by at most this fraction is taken whole:
 # it only absorbs the round-off of repeated scaling, so braking ends on an exact zero.
 _SNAP = 1e-9
@@ -60,8 +61,10 @@ def _limit_vector(value, size, name):
     except (TypeError, ValueError) as exc:
         raise ConfigError(f'WheelParams.{name}: expected {size} numbers, got {value!r}') from exc
     if arr.shape != (size,) or not np.all(np.isfinite(arr)) or np.any(arr < 0.0) or not np.any(arr > 0.0):
-        raise ConfigError(f'WheelParams.{name}: expected {size} finite values ≥ 0 (0: an axis the base '
-                          f'cannot follow), got {np.ravel(arr).tolist()}')
+        raise ConfigError(
+            f'WheelParams.{name}: expected {size} finite values ≥ 0 (0: an axis the base '
+            f'cannot follow), got {np.ravel(arr).tolist()}'
+        )
     return tuple(float(v) for v in arr)
 
 
@@ -86,8 +89,11 @@ class WheelParams:
     def __post_init__(self):
         for name in ('dt', 'wheel_rate_limit'):
             val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, float, np.floating, np.integer)) \
-                    or not (math.isfinite(val) and val > 0):
+            if (
+                isinstance(val, bool)
+                or not isinstance(val, (int, float, np.floating, np.integer))
+                or not (math.isfinite(val) and val > 0)
+            ):
                 raise ConfigError(f'WheelParams.{name} must be a finite number > 0, got {val!r}')
             object.__setattr__(self, name, float(val))
         for name in ('velocity_limit', 'accel_limit'):
@@ -102,10 +108,16 @@ class WheelParams:
         """
         wheels = getattr(robot, 'mecanum', None) or getattr(robot, 'differential', None)
         if wheels is None:
-            raise ConfigError(f'robot {getattr(robot, "name", robot)!r} has a {getattr(robot, "base_type", "?")} '
-                              'base: this controller drives Mecanum and differential bases')
-        return cls(dt=dt, velocity_limit=robot.base.velocity, accel_limit=robot.base.acceleration,
-                   wheel_rate_limit=wheels.wheel_rate_limit)
+            raise ConfigError(
+                f'robot {getattr(robot, "name", robot)!r} has a {getattr(robot, "base_type", "?")} '
+                'base: this controller drives Mecanum and differential bases'
+            )
+        return cls(
+            dt=dt,
+            velocity_limit=robot.base.velocity,
+            accel_limit=robot.base.acceleration,
+            wheel_rate_limit=wheels.wheel_rate_limit,
+        )
 
 
 @dataclass(frozen=True)
@@ -156,7 +168,9 @@ class WheelController:
         self._vmax = np.where(followed, np.array(params.velocity_limit), np.inf)
         self._dv_max = np.where(followed, np.array(params.accel_limit) * params.dt, np.inf)
         if np.any(np.array(params.velocity_limit)[followed] <= 0.0):
-            raise ConfigError(f'WheelParams.velocity_limit: zero on an axis the base can follow: {params.velocity_limit}')
+            raise ConfigError(
+                f'WheelParams.velocity_limit: zero on an axis the base can follow: {params.velocity_limit}'
+            )
         self._twist = np.zeros(3)
 
     @classmethod
@@ -200,10 +214,12 @@ class WheelController:
         peak = float(np.max(np.abs(ref)))
         if peak == 0.0:
             return ref, 1.0
-        unit = ref / peak                       # largest entry ±1: nothing below overflows
+        unit = ref / peak  # largest entry ±1: nothing below overflows
         # Limit use per unit of ``peak`` (≥ 1/max(velocity_limit) > 0, as one |unit| entry is 1).
-        use = max(float(np.max(np.abs(unit) / self._vmax)),
-                  float(np.max(np.abs(self._inverse @ unit))) / self.params.wheel_rate_limit)
+        use = max(
+            float(np.max(np.abs(unit) / self._vmax)),
+            float(np.max(np.abs(self._inverse @ unit))) / self.params.wheel_rate_limit,
+        )
         room = 1.0 / use
         if peak <= room:
             return ref, 1.0
@@ -219,7 +235,7 @@ class WheelController:
         peak = float(np.max(np.abs(ref)))
         if peak == 0.0:
             return ref.copy(), np.zeros(3)
-        followed = peak * (self._followable @ (ref / peak))       # no overflow for any finite size
+        followed = peak * (self._followable @ (ref / peak))  # no overflow for any finite size
         return followed, ref - followed
 
     def step(self, reference):
@@ -252,6 +268,12 @@ class WheelController:
             accel_scale = 1.0 / need
             self._twist = self._twist + accel_scale * change
         wheels = self.kinematics.wheel_rates(self._twist)
-        return WheelOutput(wheel_rates=wheels, twist=self.kinematics.twist_from_wheels(wheels),
-                           reference=target, velocity_scale=scale, accel_scale=accel_scale, status=status,
-                           dropped=dropped)
+        return WheelOutput(
+            wheel_rates=wheels,
+            twist=self.kinematics.twist_from_wheels(wheels),
+            reference=target,
+            velocity_scale=scale,
+            accel_scale=accel_scale,
+            status=status,
+            dropped=dropped,
+        )

@@ -42,18 +42,39 @@ from wmm_control.errors import WmmError
 from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
 from wmm_control.experiments.report import write_report
 from wmm_control.experiments.metrics import (
-    METRIC_KEYS, TRAJECTORY_METRIC_KEYS, goal_metrics, run_limit_report, trajectory_metrics)
+    METRIC_KEYS,
+    TRAJECTORY_METRIC_KEYS,
+    goal_metrics,
+    run_limit_report,
+    trajectory_metrics,
+)
 from wmm_control.experiments.ros_run import private_domain_id, run_with_nodes
 from wmm_control.experiments.scenario import load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers import TaskSharingParams, make_resolver
 
-__all__ = ['main', 'run_experiment', 'simulate', 'summarize_runs', 'RunJob', 'format_table', 'format_matrix',
-           'MAIN_JOB', 'MATRIX']
+__all__ = [
+    'main',
+    'run_experiment',
+    'simulate',
+    'summarize_runs',
+    'RunJob',
+    'format_table',
+    'format_matrix',
+    'MAIN_JOB',
+    'MATRIX',
+]
 
 #: The scenarios of ``wmm_experiment all``, the main job (docs/results.md): both papers' experiments.
-MAIN_JOB = ('sorour_table2', 'xing_circle_0.10', 'xing_circle_0.25', 'xing_pose', 'xing_singularity',
-            'matrix_circle_0.25_a', 'matrix_circle_0.25_b')
+MAIN_JOB = (
+    'sorour_table2',
+    'xing_circle_0.10',
+    'xing_circle_0.25',
+    'xing_pose',
+    'xing_singularity',
+    'matrix_circle_0.25_a',
+    'matrix_circle_0.25_b',
+)
 #: The scenarios of the one table no paper has: one circle, both robots, all four methods.
 MATRIX = ('matrix_circle_0.25_a', 'matrix_circle_0.25_b')
 #: The control period of the runs [s].
@@ -62,14 +83,28 @@ DT = 0.025
 
 def _run_direct(scenario, run, progress):
     sim = dict(scenario.sim or {})
-    slip = SlipParams(gain=float(sim.get('slip_gain', 0.0)), drift=tuple(sim.get('slip_drift', (0.0,) * 3)),
-                      noise_std=tuple(sim.get('slip_noise', (0.0,) * 3)))
+    slip = SlipParams(
+        gain=float(sim.get('slip_gain', 0.0)),
+        drift=tuple(sim.get('slip_drift', (0.0,) * 3)),
+        noise_std=tuple(sim.get('slip_noise', (0.0,) * 3)),
+    )
     params = resolver_parameters(run)
     resolver = make_resolver(run['method'], scenario.robot, **params)
-    with SimWorld(scenario.robot, base_mode=sim.get('base_mode', 'kinematic'), substeps=sim.get('substeps', 10),
-                  slip=slip, seed=int(sim.get('seed', 0))) as world:
-        return run_scenario(world, resolver, scenario, feedback=run.get('feedback', 'ground_truth'),
-                            label=run['name'], progress=lambda n: progress(n * world.dt))
+    with SimWorld(
+        scenario.robot,
+        base_mode=sim.get('base_mode', 'kinematic'),
+        substeps=sim.get('substeps', 10),
+        slip=slip,
+        seed=int(sim.get('seed', 0)),
+    ) as world:
+        return run_scenario(
+            world,
+            resolver,
+            scenario,
+            feedback=run.get('feedback', 'ground_truth'),
+            label=run['name'],
+            progress=lambda n: progress(n * world.dt),
+        )
 
 
 def bag_path(out, run_name):
@@ -95,17 +130,30 @@ class RunJob:
 def simulate(job):
     """Simulate one run: ``(its frozen RunLog, the peak memory of this process [MB])``."""
     scenario, run = job.scenario, job.run
-    with tqdm(total=scenario.duration, desc=run['name'], unit='sim s', disable=job.progress != 'bar',
-              bar_format='{desc:<36} {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s [{elapsed}]') as bar:
+    with tqdm(
+        total=scenario.duration,
+        desc=run['name'],
+        unit='sim s',
+        disable=job.progress != 'bar',
+        bar_format='{desc:<36} {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s [{elapsed}]',
+    ) as bar:
         if job.engine == 'nodes':
-            log = run_with_nodes(scenario, run, progress=bar.update, domain_id=job.domain_id,
-                                 bag_path=None if job.bag_dir is None else bag_path(job.bag_dir, run['name']),
-                                 view_port=job.view_port)
+            log = run_with_nodes(
+                scenario,
+                run,
+                progress=bar.update,
+                domain_id=job.domain_id,
+                bag_path=None if job.bag_dir is None else bag_path(job.bag_dir, run['name']),
+                view_port=job.view_port,
+            )
         else:
             log = _run_direct(scenario, run, bar.update)
     if job.progress == 'line':
-        print(f'  {scenario.name} / {run["name"]}: {len(log) * DT:.0f} sim s in {log.wall_time_s:.0f} s',
-              file=sys.stderr, flush=True)
+        print(
+            f'  {scenario.name} / {run["name"]}: {len(log) * DT:.0f} sim s in {log.wall_time_s:.0f} s',
+            file=sys.stderr,
+            flush=True,
+        )
     return log, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
@@ -137,8 +185,18 @@ def _jobs_of(scenario, selected, engine, bag_dir, view_port, progress, workers, 
     numbers the jobs across scenarios)."""
     if workers == 1:
         return [RunJob(scenario, run, engine, bag_dir, view_port, progress) for run in selected]
-    return [RunJob(scenario, run, engine, bag_dir, view_port, 'line' if progress != 'none' else 'none',
-                   private_domain_id(offset=1 + first + i)) for i, run in enumerate(selected)]
+    return [
+        RunJob(
+            scenario,
+            run,
+            engine,
+            bag_dir,
+            view_port,
+            'line' if progress != 'none' else 'none',
+            private_domain_id(offset=1 + first + i),
+        )
+        for i, run in enumerate(selected)
+    ]
 
 
 def summarize_runs(scenario, selected, logs, engine='nodes', bag_dir=None):
@@ -151,9 +209,11 @@ def summarize_runs(scenario, selected, logs, engine='nodes', bag_dir=None):
     for run in selected:
         log = logs[run['name']]
         entry = {
-            'method': run['method'], 'feedback': run.get('feedback', 'ground_truth'),
+            'method': run['method'],
+            'feedback': run.get('feedback', 'ground_truth'),
             'parameters': resolver_parameters(run),
-            'periods': len(log), 'wall_time_s': log.wall_time_s,
+            'periods': len(log),
+            'wall_time_s': log.wall_time_s,
             'sim_to_wall_ratio': float(log.t[-1] + dt) / log.wall_time_s if log.wall_time_s > 0 else None,
             'resolver_cycle_median_us': float(np.median(log.cycle_time_s) * 1e6),
             'limits_exceeded': run_limit_report(log, robot, dt, tol=1e-6),
@@ -171,8 +231,11 @@ def summarize_runs(scenario, selected, logs, engine='nodes', bag_dir=None):
             entry.update(_goal_summary(log, scenario, model, run, dt))
         summary_runs[run['name']] = entry
     summary = {
-        'scenario': scenario.name, 'description': scenario.description, 'robot': robot.name,
-        'engine': engine, 'timing': 'lockstep' if engine == 'nodes' else 'direct (no ROS)',
+        'scenario': scenario.name,
+        'description': scenario.description,
+        'robot': robot.name,
+        'engine': engine,
+        'timing': 'lockstep' if engine == 'nodes' else 'direct (no ROS)',
         'simulator': dict(scenario.sim or {}, base_mode=(scenario.sim or {}).get('base_mode', 'kinematic')),
         'goal_windows_s': [[g.t, g.end] for g in scenario.goals],
         'trajectory': scenario.trajectory,
@@ -184,13 +247,17 @@ def summarize_runs(scenario, selected, logs, engine='nodes', bag_dir=None):
 
 def _goal_summary(log, scenario, model, run, dt):
     """Per-goal metrics of a run of a goals scenario, with its totals."""
-    goals = goal_metrics(log, scenario, model, run.get('r_fm', TaskSharingParams().r_fm),
-                         model.config.arm.dexterous, dt)
+    goals = goal_metrics(
+        log, scenario, model, run.get('r_fm', TaskSharingParams().r_fm), model.config.arm.dexterous, dt
+    )
     if not (run['method'] == 'task_sharing' and run.get('compensation', True)):
         for g in goals:
             g['compensation_dropped'] = None
-    return {'total_area': float(sum(g.get('area', 0.0) for g in goals)),
-            'all_goals_reached': all(g.get('reached', False) for g in goals), 'goals': goals}
+    return {
+        'total_area': float(sum(g.get('area', 0.0) for g in goals)),
+        'all_goals_reached': all(g.get('reached', False) for g in goals),
+        'goals': goals,
+    }
 
 
 def _f(value, fmt):
@@ -199,35 +266,45 @@ def _f(value, fmt):
 
 def format_tracking_table(summary):
     """Xing et al. Tables 2–3 style: commanded base velocity RMS and active time, end-effector errors."""
-    head = (f'{"run":<34}{"base RMS vx, vy [cm/s], ω [°/s]":>32}{"base active [s]":>17}{"max err x, y, xy [mm]":>24}'
-            f'{"rot y [rad]":>12}{"σ_min":>7}')
+    head = (
+        f'{"run":<34}{"base RMS vx, vy [cm/s], ω [°/s]":>32}{"base active [s]":>17}{"max err x, y, xy [mm]":>24}'
+        f'{"rot y [rad]":>12}{"σ_min":>7}'
+    )
     lines = [head, '-' * len(head)]
     for name, run in summary['runs'].items():
         m = run['tracking']
         rms = m['base_rms']
         lim = run['limits_exceeded']
-        lines.append(f'{name:<34}{rms[0] * 100:>12.2f}{rms[1] * 100:>9.2f}{np.degrees(rms[2]):>11.3f}'
-                     f'{m["base_active_any_s"]:>17.2f}{m["max_error_x_m"] * 1e3:>10.2f}{m["max_error_y_m"] * 1e3:>7.2f}'
-                     f'{m["max_error_xy_m"] * 1e3:>7.2f}{m["max_rotation_error_y_rad"]:>12.4f}{m["sigma_min_min"]:>7.3f}')
-        lines.append(f'{"":<5}{"no limit passed" if not any(lim.values()) else f"LIMITS PASSED: {lim}"}; '
-                     f'first base command at {_f(m["first_base_activation_s"], ".2f")} s; '
-                     f'sim/wall {run["sim_to_wall_ratio"]:.1f}x')
+        lines.append(
+            f'{name:<34}{rms[0] * 100:>12.2f}{rms[1] * 100:>9.2f}{np.degrees(rms[2]):>11.3f}'
+            f'{m["base_active_any_s"]:>17.2f}{m["max_error_x_m"] * 1e3:>10.2f}{m["max_error_y_m"] * 1e3:>7.2f}'
+            f'{m["max_error_xy_m"] * 1e3:>7.2f}{m["max_rotation_error_y_rad"]:>12.4f}{m["sigma_min_min"]:>7.3f}'
+        )
+        lines.append(
+            f'{"":<5}{"no limit passed" if not any(lim.values()) else f"LIMITS PASSED: {lim}"}; '
+            f'first base command at {_f(m["first_base_activation_s"], ".2f")} s; '
+            f'sim/wall {run["sim_to_wall_ratio"]:.1f}x'
+        )
     return '\n'.join(lines)
 
 
 def format_matrix(summaries):
     """One table over scenarios of trajectories: per robot and method, base active time and RMS,
     largest end-effector error, joint-limit margin, resolver cycle time."""
-    head = (f'{"robot":<11}{"method":<14}{"base active [s]":>16}{"base RMS vx, vy [cm/s], ω [°/s]":>33}'
-            f'{"max err xy [mm]":>16}{"joint margin [rad]":>19}{"cycle [µs]":>11}')
+    head = (
+        f'{"robot":<11}{"method":<14}{"base active [s]":>16}{"base RMS vx, vy [cm/s], ω [°/s]":>33}'
+        f'{"max err xy [mm]":>16}{"joint margin [rad]":>19}{"cycle [µs]":>11}'
+    )
     lines = [head, '-' * len(head)]
     for summary in summaries:
         for name, run in summary['runs'].items():
             m = run['tracking']
             rms = m['base_rms']
-            lines.append(f'{summary["robot"]:<11}{name:<14}{m["base_active_any_s"]:>16.2f}{rms[0] * 100:>13.2f}'
-                         f'{rms[1] * 100:>9.2f}{np.degrees(rms[2]):>11.3f}{m["max_error_xy_m"] * 1e3:>16.1f}'
-                         f'{_f(m["joint_limit_margin_rad"], ".3f"):>19}{run["resolver_cycle_median_us"]:>11.0f}')
+            lines.append(
+                f'{summary["robot"]:<11}{name:<14}{m["base_active_any_s"]:>16.2f}{rms[0] * 100:>13.2f}'
+                f'{rms[1] * 100:>9.2f}{np.degrees(rms[2]):>11.3f}{m["max_error_xy_m"] * 1e3:>16.1f}'
+                f'{_f(m["joint_limit_margin_rad"], ".3f"):>19}{run["resolver_cycle_median_us"]:>11.0f}'
+            )
     return '\n'.join(lines)
 
 
@@ -241,15 +318,19 @@ def format_table(summary):
     lines += [head, units, '-' * len(head)]
     for name, run in summary['runs'].items():
         for g in run['goals']:
-            lines.append(f'{name if g["goal"] == 1 else "":<36}{g["goal"]:>5}{_f(g.get("area"), "8.3f")}'
-                         f'{_f(g.get("final_position_error_m", 0) * 1e3, "10.2f")}'
-                         f'{_f(g.get("final_orientation_error_rad"), "9.4f")}{_f(g.get("time_to_rfm_s"), "8.2f")}'
-                         f'{_f(g.get("footprint_m"), "8.3f")}{_f(g.get("base_path_m"), "7.2f")}')
+            lines.append(
+                f'{name if g["goal"] == 1 else "":<36}{g["goal"]:>5}{_f(g.get("area"), "8.3f")}'
+                f'{_f(g.get("final_position_error_m", 0) * 1e3, "10.2f")}'
+                f'{_f(g.get("final_orientation_error_rad"), "9.4f")}{_f(g.get("time_to_rfm_s"), "8.2f")}'
+                f'{_f(g.get("footprint_m"), "8.3f")}{_f(g.get("base_path_m"), "7.2f")}'
+            )
         lim = run['limits_exceeded']
         within = 'no limit passed' if not any(lim.values()) else f'LIMITS PASSED: {lim}'
-        lines.append(f'{"":<5}total area {run["total_area"]:.3f} m·s; all goals reached (<1 cm, <0.02 rad): '
-                     f'{"yes" if run["all_goals_reached"] else "no"}; {within}; '
-                     f'sim/wall {run["sim_to_wall_ratio"]:.1f}x')
+        lines.append(
+            f'{"":<5}total area {run["total_area"]:.3f} m·s; all goals reached (<1 cm, <0.02 rad): '
+            f'{"yes" if run["all_goals_reached"] else "no"}; {within}; '
+            f'sim/wall {run["sim_to_wall_ratio"]:.1f}x'
+        )
     return '\n'.join(lines)
 
 
@@ -257,6 +338,7 @@ def _figures(scenario, logs, summary, out):
     """The figures of a run: Sorour's Figs 5–7 for goals, Xing's for a trajectory."""
     # matplotlib is paid for only when figures are written (not by --help nor --no-figures)
     from wmm_control.experiments.figures import write_figures, write_tracking_figures
+
     plotted = {r['name']: logs[r['name']] for r in scenario.runs if r['name'] in logs and r.get('plot', True)}
     if not plotted:
         return []
@@ -265,8 +347,13 @@ def _figures(scenario, logs, summary, out):
         return write_tracking_figures(plotted, scenario, model, out)
     render = next((n for n in plotted if 'compensation' in n), next(iter(plotted)))
     metrics = {n: summary['runs'][n]['goals'] for n in plotted}
-    zoom = [r['name'] for r in scenario.runs if r['name'] in plotted and r['method'] == 'task_sharing'
-            and r.get('feedback', 'ground_truth') == 'ground_truth'] or None
+    zoom = [
+        r['name']
+        for r in scenario.runs
+        if r['name'] in plotted
+        and r['method'] == 'task_sharing'
+        and r.get('feedback', 'ground_truth') == 'ground_truth'
+    ] or None
     return write_figures(plotted, metrics, scenario, model, out, render_label=render, zoom_labels=zoom)
 
 
@@ -286,13 +373,17 @@ def _prepare(scenario, args, out):
 
 def _header(scenario, args):
     sim = scenario.sim or {}
-    engine = ('all nodes in one process over topics, wmm_sim in lockstep' if args.engine == 'nodes'
-              else 'no ROS (direct)')
-    print(f'\n{scenario.name}: {scenario.description}\n'
-          f'robot {scenario.robot}; {engine}; {sim.get("base_mode", "kinematic")} base; slip gain '
-          f'{sim.get("slip_gain", 0.0)}, drift {sim.get("slip_drift", [0, 0, 0])}, noise '
-          f'{sim.get("slip_noise", [0, 0, 0])}, seed {sim.get("seed", 0)}; end-effector error measured on the '
-          'ground truth', flush=True)
+    engine = (
+        'all nodes in one process over topics, wmm_sim in lockstep' if args.engine == 'nodes' else 'no ROS (direct)'
+    )
+    print(
+        f'\n{scenario.name}: {scenario.description}\n'
+        f'robot {scenario.robot}; {engine}; {sim.get("base_mode", "kinematic")} base; slip gain '
+        f'{sim.get("slip_gain", 0.0)}, drift {sim.get("slip_drift", [0, 0, 0])}, noise '
+        f'{sim.get("slip_noise", [0, 0, 0])}, seed {sim.get("seed", 0)}; end-effector error measured on the '
+        'ground truth',
+        flush=True,
+    )
 
 
 def _write(scenario, selected, logs, args, out, elapsed, peak_mb):
@@ -307,8 +398,10 @@ def _write(scenario, selected, logs, args, out, elapsed, peak_mb):
         summary['figures'] = [str(p) for p in _figures(scenario, logs, summary, out)]
     (out / 'metrics.json').write_text(json.dumps(summary, indent=2, default=float) + '\n')
     print(format_table(summary))
-    print(f'{total_sim:.0f} simulated s in {elapsed:.1f} s wall ({total_sim / elapsed:.1f}x), peak memory '
-          f'{summary["peak_memory_mb"]:.0f} MB; wrote {out / "metrics.json"}')
+    print(
+        f'{total_sim:.0f} simulated s in {elapsed:.1f} s wall ({total_sim / elapsed:.1f}x), peak memory '
+        f'{summary["peak_memory_mb"]:.0f} MB; wrote {out / "metrics.json"}'
+    )
     return summary
 
 
@@ -317,15 +410,23 @@ def _run_all(plans, args):
     at once, and write each scenario's results in the order of ``plans``; its summaries."""
     todo = []
     for scenario, selected, out in plans:
-        todo += _jobs_of(scenario, selected, args.engine, out, args.view_port if args.view else None, 'bar',
-                          args.jobs, first=len(todo))
+        todo += _jobs_of(
+            scenario,
+            selected,
+            args.engine,
+            out,
+            args.view_port if args.view else None,
+            'bar',
+            args.jobs,
+            first=len(todo),
+        )
     results = run_jobs(simulate, todo, args.jobs)
     summaries = []
     start = time.perf_counter()
     try:
         for scenario, selected, out in plans:
             _header(scenario, args)
-            if args.jobs == 1:      # one after the other: the scenario's own time
+            if args.jobs == 1:  # one after the other: the scenario's own time
                 start = time.perf_counter()
             logs, peak_mb = {}, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
             for run in selected:
@@ -333,7 +434,7 @@ def _run_all(plans, args):
                 peak_mb = max(peak_mb, worker_mb)
             summaries.append(_write(scenario, selected, logs, args, out, time.perf_counter() - start, peak_mb))
             del logs
-            gc.collect()         # the runs' logs and figures are done with: keep the peak memory down
+            gc.collect()  # the runs' logs and figures are done with: keep the peak memory down
     finally:
         results.close()
     return summaries
@@ -341,25 +442,43 @@ def _run_all(plans, args):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='wmm_experiment', description=__doc__.split('\n\n')[0])
-    parser.add_argument('name', nargs='?', default='all',
-                        help='scenario name in config/scenarios, or "all": ' + ', '.join(MAIN_JOB) + ' (default: %(default)s)')
+    parser.add_argument(
+        'name',
+        nargs='?',
+        default='all',
+        help='scenario name in config/scenarios, or "all": ' + ', '.join(MAIN_JOB) + ' (default: %(default)s)',
+    )
     parser.add_argument('--scenario', help='path to a scenario file (instead of a name)')
     parser.add_argument('--out', default='experiment_output', help='output directory (default: %(default)s)')
     parser.add_argument('--runs', help='comma-separated run names (default: all of the scenario)')
-    parser.add_argument('--engine', choices=('nodes', 'direct'), default='nodes',
-                        help='nodes: every node in one process over topics; direct: no ROS (default: nodes)')
+    parser.add_argument(
+        '--engine',
+        choices=('nodes', 'direct'),
+        default='nodes',
+        help='nodes: every node in one process over topics; direct: no ROS (default: nodes)',
+    )
     parser.add_argument('--seed', type=int, help="seed of the simulator's slip noise (default: the scenario's)")
     parser.add_argument('--no-figures', action='store_true', help='skip the plots and renders')
-    parser.add_argument('--jobs', type=jobs_argument, metavar='N',
-                        help='runs at once, each in a process of its own; 1: one after the other in this process '
-                             f'(default: one per core, {default_jobs()} here; 1 with --view)')
-    parser.add_argument('--view', action='store_true',
-                        help='show each run live in the browser (wmm_viewer; engine nodes): open the URL it logs')
+    parser.add_argument(
+        '--jobs',
+        type=jobs_argument,
+        metavar='N',
+        help='runs at once, each in a process of its own; 1: one after the other in this process '
+        f'(default: one per core, {default_jobs()} here; 1 with --view)',
+    )
+    parser.add_argument(
+        '--view',
+        action='store_true',
+        help='show each run live in the browser (wmm_viewer; engine nodes): open the URL it logs',
+    )
     parser.add_argument('--view-port', type=int, default=8080, help='HTTP port of --view (default: %(default)s)')
-    parser.add_argument('--report', metavar='PAGE',
-                        help='also write the tables of the run as a Markdown page, after the text of '
-                             '<PAGE stem>_intro.md if that file exists (figures outside its folder are copied '
-                             'to <folder>/figures/<scenario>/)')
+    parser.add_argument(
+        '--report',
+        metavar='PAGE',
+        help='also write the tables of the run as a Markdown page, after the text of '
+        '<PAGE stem>_intro.md if that file exists (figures outside its folder are copied '
+        'to <folder>/figures/<scenario>/)',
+    )
     args = parser.parse_args(argv)
     if args.view and args.engine != 'nodes':
         parser.error('--view shows the nodes engine: drop --engine direct')

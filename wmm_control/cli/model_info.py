@@ -15,50 +15,66 @@ __all__ = ['main', 'describe']
 
 
 def _fmt(values, digits=4):
-    return '[' + ', '.join(f'{v: .{digits}f}' if np.isfinite(v) else (' inf' if v > 0 else '-inf')
-                           for v in values) + ']'
+    return (
+        '[' + ', '.join(f'{v: .{digits}f}' if np.isfinite(v) else (' inf' if v > 0 else '-inf') for v in values) + ']'
+    )
 
 
 def describe(model, base_pose, q_arm):
     """Text report of a robot and one state of it."""
     cfg = model.config
     model.update(base_pose, q_arm)
-    lines = [f'robot: {cfg.name} ({cfg.base_type} base, {cfg.arm.n} arm joints) - {cfg.description}',
-             f'urdf: {cfg.urdf_path}',
-             f'end-effector frame: {model.ee_frame}', '',
-             f'{"arm joint":<16}{"lower":>9}{"upper":>9}{"vel":>8}{"acc":>8}   [rad, rad/s, rad/s²]']
+    lines = [
+        f'robot: {cfg.name} ({cfg.base_type} base, {cfg.arm.n} arm joints) - {cfg.description}',
+        f'urdf: {cfg.urdf_path}',
+        f'end-effector frame: {model.ee_frame}',
+        '',
+        f'{"arm joint":<16}{"lower":>9}{"upper":>9}{"vel":>8}{"acc":>8}   [rad, rad/s, rad/s²]',
+    ]
     a = cfg.arm
     for i, name in enumerate(a.joints):
-        lines.append(f'{name:<16}{a.position_lower[i]:>9.3f}{a.position_upper[i]:>9.3f}'
-                     f'{a.velocity[i]:>8.3f}{a.acceleration[i]:>8.3f}')
+        lines.append(
+            f'{name:<16}{a.position_lower[i]:>9.3f}{a.position_upper[i]:>9.3f}'
+            f'{a.velocity[i]:>8.3f}{a.acceleration[i]:>8.3f}'
+        )
     lines.append(f'base velocity limits (vx, vy, ω): {_fmt(cfg.base.velocity, 3)}')
     lines.append(f'base acceleration limits:         {_fmt(cfg.base.acceleration, 3)}')
     if cfg.steerable is not None:
         s = cfg.steerable
-        lines.append(f'steerable modules ({s.n_modules}): hips {s.hips.tolist()}, r_w {s.wheel_radius} m, '
-                     f'd {s.wheel_offset} m, steer ≤ {s.steer_rate_limit} rad/s, ≤ {s.steer_accel_limit} rad/s², '
-                     f'drive ≤ {s.drive_rate_limit} rad/s')
+        lines.append(
+            f'steerable modules ({s.n_modules}): hips {s.hips.tolist()}, r_w {s.wheel_radius} m, '
+            f'd {s.wheel_offset} m, steer ≤ {s.steer_rate_limit} rad/s, ≤ {s.steer_accel_limit} rad/s², '
+            f'drive ≤ {s.drive_rate_limit} rad/s'
+        )
     elif cfg.differential is not None:
         d = cfg.differential
-        lines.append(f'differential wheels {list(d.wheel_joints)}: r {d.wheel_radius} m, track {d.track} m, '
-                     f'≤ {d.wheel_rate_limit} rad/s (no sideways motion)')
+        lines.append(
+            f'differential wheels {list(d.wheel_joints)}: r {d.wheel_radius} m, track {d.track} m, '
+            f'≤ {d.wheel_rate_limit} rad/s (no sideways motion)'
+        )
     else:
         m = cfg.mecanum
-        lines.append(f'mecanum wheels: R {m.wheel_radius} m, d1 {m.d1} m, d2 {m.d2} m, '
-                     f'≤ {m.wheel_rate_limit} rad/s')
+        lines.append(f'mecanum wheels: R {m.wheel_radius} m, d1 {m.d1} m, d2 {m.d2} m, ≤ {m.wheel_rate_limit} rad/s')
     pose_w = model.ee_pose_world()
-    lines += ['', f'base pose (x, y, θ):      {_fmt(base_pose)}',
-              f'arm joints:               {_fmt(q_arm)}',
-              f'EE pose world (xyz, RPY): {_fmt(pose_w)}',
-              f'EE pose base  (xyz, RPY): {_fmt(model.ee_pose_base())}']
-    if cfg.start.ee_pose is not None and np.allclose(q_arm, cfg.start.arm) \
-            and np.allclose(base_pose, cfg.start.base_pose):
+    lines += [
+        '',
+        f'base pose (x, y, θ):      {_fmt(base_pose)}',
+        f'arm joints:               {_fmt(q_arm)}',
+        f'EE pose world (xyz, RPY): {_fmt(pose_w)}',
+        f'EE pose base  (xyz, RPY): {_fmt(model.ee_pose_base())}',
+    ]
+    if (
+        cfg.start.ee_pose is not None
+        and np.allclose(q_arm, cfg.start.arm)
+        and np.allclose(base_pose, cfg.start.base_pose)
+    ):
         err = np.linalg.norm(pose_w[:3] - cfg.start.ee_pose[:3])
         lines.append(f"paper's start EE pose:    {_fmt(cfg.start.ee_pose)}  (position error {err * 1e3:.3f} mm)")
-    lines += [f'manipulability det(J_m J_mᵀ), position rows: {model.manipulability("position"):.6f}',
-              f'manipulability det(J_m J_mᵀ), all six rows:  {model.manipulability("full"):.3e}',
-              f'σ_min(J_m) position rows: {model.sigma_min("position"):.4f}, '
-              f'all six rows: {model.sigma_min("full"):.4f}']
+    lines += [
+        f'manipulability det(J_m J_mᵀ), position rows: {model.manipulability("position"):.6f}',
+        f'manipulability det(J_m J_mᵀ), all six rows:  {model.manipulability("full"):.3e}',
+        f'σ_min(J_m) position rows: {model.sigma_min("position"):.4f}, all six rows: {model.sigma_min("full"):.4f}',
+    ]
     return '\n'.join(lines)
 
 

@@ -41,15 +41,21 @@ def _f(value, fmt):
 
 def format_summary(table):
     """The summary of :func:`~wmm_control.experiments.randomized.summarize` as a Markdown table."""
-    lines = ['| robot | method | runs | converged | reported | failed | worst error [mm / rad] '
-             '| time to converge, median / max [s] | largest use of a limit | closest joint to a limit [rad] |',
-             '|---|---|---|---|---|---|---|---|---|---|']
+    lines = [
+        '| robot | method | runs | converged | reported | failed | worst error [mm / rad] '
+        '| time to converge, median / max [s] | largest use of a limit | closest joint to a limit [rad] |',
+        '|---|---|---|---|---|---|---|---|---|---|',
+    ]
     for (robot, method), s in table.items():
-        err = (f'{_f(s["worst_position_error_m"] and s["worst_position_error_m"] * 1e3, ".1f")} / '
-               f'{_f(s["worst_orientation_error_rad"], ".3f")}')
-        lines.append(f'| {robot} | {method} | {s["runs"]} | {s["converged"]} | {s["reported"]} | {s["failed"]} '
-                     f'| {err} | {_f(s["median_time_s"], ".1f")} / {_f(s["max_time_s"], ".1f")} '
-                     f'| {s["limit_use_max"]:.3f} | {s["position_margin_min_rad"]:.3f} |')
+        err = (
+            f'{_f(s["worst_position_error_m"] and s["worst_position_error_m"] * 1e3, ".1f")} / '
+            f'{_f(s["worst_orientation_error_rad"], ".3f")}'
+        )
+        lines.append(
+            f'| {robot} | {method} | {s["runs"]} | {s["converged"]} | {s["reported"]} | {s["failed"]} '
+            f'| {err} | {_f(s["median_time_s"], ".1f")} / {_f(s["max_time_s"], ".1f")} '
+            f'| {s["limit_use_max"]:.3f} | {s["position_margin_min_rad"]:.3f} |'
+        )
     return '\n'.join(lines)
 
 
@@ -95,20 +101,34 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog='wmm_randomized', description=__doc__.split('\n\n')[0])
     parser.add_argument('--goals', type=int, default=100, help='goals per robot (default: %(default)s)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the draw (default: %(default)s)')
-    parser.add_argument('--robots', default=','.join(robot_names()),
-                        help='comma-separated (default: every shipped robot, %(default)s)')
+    parser.add_argument(
+        '--robots', default=','.join(robot_names()), help='comma-separated (default: every shipped robot, %(default)s)'
+    )
     parser.add_argument('--methods', default=','.join(METHOD_RUNS), help='comma-separated (default: %(default)s)')
-    parser.add_argument('--indices', default='',
-                        help='comma-separated goal indices of the draw to run, e.g. 24,29 (default: all)')
-    parser.add_argument('--engine', choices=('direct', 'nodes'), default='direct',
-                        help='direct: the core objects without ROS; nodes: every node in this process over '
-                             'topics (default: %(default)s)')
-    parser.add_argument('--param', action='append', default=[], metavar='NAME=VALUE',
-                        help='a resolver parameter for every run, e.g. orientation_error=log (repeatable)')
-    parser.add_argument('--obstacles', default='',
-                        help='obstacle file: a name in config/obstacles (e.g. table_pillar) or a YAML path')
+    parser.add_argument(
+        '--indices', default='', help='comma-separated goal indices of the draw to run, e.g. 24,29 (default: all)'
+    )
+    parser.add_argument(
+        '--engine',
+        choices=('direct', 'nodes'),
+        default='direct',
+        help='direct: the core objects without ROS; nodes: every node in this process over '
+        'topics (default: %(default)s)',
+    )
+    parser.add_argument(
+        '--param',
+        action='append',
+        default=[],
+        metavar='NAME=VALUE',
+        help='a resolver parameter for every run, e.g. orientation_error=log (repeatable)',
+    )
+    parser.add_argument(
+        '--obstacles', default='', help='obstacle file: a name in config/obstacles (e.g. table_pillar) or a YAML path'
+    )
     parser.add_argument('--record', metavar='DIR', help='write each run to DIR/<robot>_<method>_<goal>.npz')
-    parser.add_argument('--jobs', type=int, default=1, help='runs at once, in separate processes (default: %(default)s)')
+    parser.add_argument(
+        '--jobs', type=int, default=1, help='runs at once, in separate processes (default: %(default)s)'
+    )
     parser.add_argument('--out', help='write every run as JSON to this file')
     args = parser.parse_args(argv)
     from tqdm import tqdm
@@ -118,14 +138,23 @@ def main(argv=None):
     try:
         unknown = sorted(set(methods) - set(METHOD_RUNS))
         if unknown or args.goals < 1:
-            raise WmmError(f'--methods: unknown {unknown}, expected some of {list(METHOD_RUNS)}' if unknown
-                           else f'--goals must be >= 1, got {args.goals}')
+            raise WmmError(
+                f'--methods: unknown {unknown}, expected some of {list(METHOD_RUNS)}'
+                if unknown
+                else f'--goals must be >= 1, got {args.goals}'
+            )
         if args.jobs < 1:
             raise WmmError(f'--jobs must be >= 1, got {args.jobs}')
         params = dict(_param(text) for text in args.param)
         indices = _indices(args.indices, args.goals)
-        draws = {r: [g for g in sample_goals(r, args.goals, seed=args.seed, obstacles=args.obstacles)
-                     if indices is None or g.index in indices] for r in robots}
+        draws = {
+            r: [
+                g
+                for g in sample_goals(r, args.goals, seed=args.seed, obstacles=args.obstacles)
+                if indices is None or g.index in indices
+            ]
+            for r in robots
+        }
         jobs = [(robot, method, goal) for robot in robots for method in methods for goal in draws[robot]]
         options = dict(engine=args.engine, params=params, obstacles=args.obstacles, record=args.record)
         with tqdm(total=len(jobs), unit='run', file=sys.stderr) as bar:
@@ -142,8 +171,17 @@ def main(argv=None):
         print(f'FAILED: {r["robot"]} {r["method"]} goal {r["goal"]}: {r["why"]}')
     if args.out:
         with open(args.out, 'w') as fh:
-            json.dump({'seed': args.seed, 'goals': args.goals, 'engine': args.engine, 'runs': results,
-                       'summary': [dict(robot=r, method=m, **s) for (r, m), s in table.items()]}, fh, indent=1)
+            json.dump(
+                {
+                    'seed': args.seed,
+                    'goals': args.goals,
+                    'engine': args.engine,
+                    'runs': results,
+                    'summary': [dict(robot=r, method=m, **s) for (r, m), s in table.items()],
+                },
+                fh,
+                indent=1,
+            )
     return 1 if failed else 0
 
 

@@ -50,8 +50,8 @@ from wmm_control.urdf import UrdfTree
 __all__ = ['main', 'init_robot', 'detect_wheels']
 
 HOME_DRAWS = 400
-HOME_CLEARANCE = 0.03     # [m] from the body and between arm links
-TOOL_ABOVE_FLOOR = 0.10   # [m]
+HOME_CLEARANCE = 0.03  # [m] from the body and between arm links
+TOOL_ABOVE_FLOOR = 0.10  # [m]
 DEFAULT_PERIOD = 0.025
 
 
@@ -70,30 +70,44 @@ def detect_wheels(tree, family, base_link, arm_joints):
         WmmError: the URDF does not hold what the family needs.
     """
     arm = set(arm_joints)
-    spinning = [j for j in tree.joints.values() if j.name not in arm and j.type in ('continuous', 'revolute')
-                and j.mimic is None]
+    spinning = [
+        j
+        for j in tree.joints.values()
+        if j.name not in arm and j.type in ('continuous', 'revolute') and j.mimic is None
+    ]
 
     def position(joint):
         return tree.placement(joint.child, base_link)[1]
 
     if family == 'steerable':
-        steer = [j for j in spinning if _axis_is(j, 2)
-                 and any(c.type == 'continuous' and _axis_is(c, 1) for c in tree.children(j.child))]
-        drive = [next(c for c in tree.children(j.child) if c.type == 'continuous' and _axis_is(c, 1))
-                 for j in steer]
+        steer = [
+            j
+            for j in spinning
+            if _axis_is(j, 2) and any(c.type == 'continuous' and _axis_is(c, 1) for c in tree.children(j.child))
+        ]
+        drive = [next(c for c in tree.children(j.child) if c.type == 'continuous' and _axis_is(c, 1)) for j in steer]
         if len(steer) < 2:
-            raise WmmError(f'{tree.path.name}: found {len(steer)} steer + drive modules (a joint about z '
-                           'with a continuous joint about y below it); a steerable base needs 2 or more: '
-                           'name them with --steer-joints and --drive-joints')
+            raise WmmError(
+                f'{tree.path.name}: found {len(steer)} steer + drive modules (a joint about z '
+                'with a continuous joint about y below it); a steerable base needs 2 or more: '
+                'name them with --steer-joints and --drive-joints'
+            )
         return {'steer_joints': [j.name for j in steer], 'drive_joints': [j.name for j in drive]}
-    wheels = [j for j in spinning if j.type == 'continuous' and _axis_is(j, 1)
-              and tree.wheel_radius(j.child) is not None and not any(_axis_is(a, 2) for a in tree.ancestors(j.child)
-                                                                   if a.type != 'fixed')]
+    wheels = [
+        j
+        for j in spinning
+        if j.type == 'continuous'
+        and _axis_is(j, 1)
+        and tree.wheel_radius(j.child) is not None
+        and not any(_axis_is(a, 2) for a in tree.ancestors(j.child) if a.type != 'fixed')
+    ]
     want = 4 if family == 'mecanum' else 2
     if len(wheels) != want:
-        raise WmmError(f'{tree.path.name}: found {len(wheels)} wheel joints (continuous, about y, a collision '
-                       f'cylinder on the link) {[j.name for j in wheels]}; a {family} base needs {want}: '
-                       'name them with --wheel-joints')
+        raise WmmError(
+            f'{tree.path.name}: found {len(wheels)} wheel joints (continuous, about y, a collision '
+            f'cylinder on the link) {[j.name for j in wheels]}; a {family} base needs {want}: '
+            'name them with --wheel-joints'
+        )
     if family == 'mecanum':
         wheels.sort(key=lambda j: (-round(position(j)[0], 6), -round(position(j)[1], 6)))
     else:
@@ -126,8 +140,10 @@ def _base_limits(cfg_wheels, family, tree, base_link):
 def _floor_height(tree, wheels, base_link):
     """z of the floor in ``base_link`` [m]: the lowest wheel's centre less its radius."""
     names = wheels.get('drive_joints') or wheels['wheel_joints']
-    return min(tree.placement(tree.joint(n).child, base_link)[1][2] - (tree.wheel_radius(tree.joint(n).child) or 0.0)
-               for n in names)
+    return min(
+        tree.placement(tree.joint(n).child, base_link)[1][2] - (tree.wheel_radius(tree.joint(n).child) or 0.0)
+        for n in names
+    )
 
 
 def _choose_home(tree, arm_root, tool, base_link, ground, seed=0):
@@ -154,8 +170,10 @@ def _choose_home(tree, arm_root, tool, base_link, ground, seed=0):
             continue
         best, best_sigma = q, sigma
     if best is None:
-        raise WmmError(f'{tree.path.name}: no posture of {HOME_DRAWS} draws keeps the arm {HOME_CLEARANCE} m clear '
-                       'of the body with the tool above the floor: give one with --home')
+        raise WmmError(
+            f'{tree.path.name}: no posture of {HOME_DRAWS} draws keeps the arm {HOME_CLEARANCE} m clear '
+            'of the body with the tool above the floor: give one with --home'
+        )
     return best, best_sigma
 
 
@@ -167,8 +185,21 @@ def _fmt_list(values):
     return '[' + ', '.join(f'{v:.6g}' for v in values) + ']'
 
 
-def init_robot(urdf, family, arm_root, tool, out, home=None, wheel_joints=None, steer_joints=None,
-               drive_joints=None, base_link=None, name=None, method='task_sharing', period=DEFAULT_PERIOD):
+def init_robot(
+    urdf,
+    family,
+    arm_root,
+    tool,
+    out,
+    home=None,
+    wheel_joints=None,
+    steer_joints=None,
+    drive_joints=None,
+    base_link=None,
+    name=None,
+    method='task_sharing',
+    period=DEFAULT_PERIOD,
+):
     """Write a robot YAML for ``urdf`` at ``out`` (see the module docstring); returns its text.
 
     Raises:
@@ -186,11 +217,16 @@ def init_robot(urdf, family, arm_root, tool, out, home=None, wheel_joints=None, 
     tree.require_link(base_link, 'base')
     chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
     if len(chain) < MIN_ARM_JOINTS:
-        raise WmmError(f'{urdf.name}: the chain {arm_root!r} → {tool!r} has {len(chain)} joints; '
-                       f'an arm needs at least {MIN_ARM_JOINTS}')
+        raise WmmError(
+            f'{urdf.name}: the chain {arm_root!r} → {tool!r} has {len(chain)} joints; '
+            f'an arm needs at least {MIN_ARM_JOINTS}'
+        )
     if wheel_joints or steer_joints:
-        wheels = ({'steer_joints': steer_joints, 'drive_joints': drive_joints} if family == 'steerable'
-                  else {'wheel_joints': wheel_joints})
+        wheels = (
+            {'steer_joints': steer_joints, 'drive_joints': drive_joints}
+            if family == 'steerable'
+            else {'wheel_joints': wheel_joints}
+        )
         if family == 'steerable' and not (steer_joints and drive_joints):
             raise WmmError('a steerable base needs both --steer-joints and --drive-joints')
     else:
@@ -203,8 +239,10 @@ def init_robot(urdf, family, arm_root, tool, out, home=None, wheel_joints=None, 
         home_rule = 'given with --home'
     else:
         q_home, sigma = _choose_home(tree, arm_root, tool, base_link, _floor_height(tree, wheels, base_link))
-        home_rule = (f'the best of {HOME_DRAWS} seeded draws (σ_min {sigma:.3f}): arm {HOME_CLEARANCE} m clear '
-                     f'of the body and itself, tool ≥ {TOOL_ABOVE_FLOOR} m above the floor')
+        home_rule = (
+            f'the best of {HOME_DRAWS} seeded draws (σ_min {sigma:.3f}): arm {HOME_CLEARANCE} m clear '
+            f'of the body and itself, tool ≥ {TOOL_ABOVE_FLOOR} m above the floor'
+        )
     ground = _floor_height(tree, wheels, base_link)
     rel = Path(_relative(urdf, out.parent))
     lines = [
@@ -291,10 +329,20 @@ def main(argv=None):
                 home = [float(v) for v in args.home.split(',')]
             except ValueError:
                 raise WmmError(f'--home: not a comma-separated list of numbers: {args.home!r}') from None
-        init_robot(args.urdf, args.base, args.arm_root, args.tool, args.out, home=home,
-                   wheel_joints=_names(args.wheel_joints), steer_joints=_names(args.steer_joints),
-                   drive_joints=_names(args.drive_joints), base_link=args.base_link, name=args.name,
-                   method=args.method)
+        init_robot(
+            args.urdf,
+            args.base,
+            args.arm_root,
+            args.tool,
+            args.out,
+            home=home,
+            wheel_joints=_names(args.wheel_joints),
+            steer_joints=_names(args.steer_joints),
+            drive_joints=_names(args.drive_joints),
+            base_link=args.base_link,
+            name=args.name,
+            method=args.method,
+        )
         print(f'wrote {args.out}; check it with: wmm_robot check {args.out}')
         return 0
     except WmmError as exc:

@@ -40,8 +40,19 @@ def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', p
         gi = scenario.goal_index(world.time)
         rec = loop.step(scenario.target(world.time, reference))
         cmd = rec.command
-        log.append(rec.t, gi, rec.ee_position, rec.ee_rotation, rec.base_pose, rec.q_arm, cmd.arm_velocity,
-                   cmd.base_twist, rec.feasible_twist, cmd.diagnostics, q=rec.q)
+        log.append(
+            rec.t,
+            gi,
+            rec.ee_position,
+            rec.ee_rotation,
+            rec.base_pose,
+            rec.q_arm,
+            cmd.arm_velocity,
+            cmd.base_twist,
+            rec.feasible_twist,
+            cmd.diagnostics,
+            q=rec.q,
+        )
         if progress is not None:
             progress(1)
         if until is not None and until(cmd.diagnostics):

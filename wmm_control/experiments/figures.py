@@ -27,9 +27,23 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 from matplotlib.transforms import blended_transform_factory  # noqa: E402
 
-__all__ = ['tracking_figure', 'write_tracking_figures', 'error_norm', 'arm_reach', 'error_norm_figure', 'zoom_psi_figure', 'top_view_figure',
-           'plot_error_norms', 'plot_zoom_and_psi', 'plot_top_view', 'render_goal_pictures',
-           'write_figures', 'BASE_SIZE', 'FOOTPRINT_PERIOD_S', 'PICTURE_SIZE']
+__all__ = [
+    'tracking_figure',
+    'write_tracking_figures',
+    'error_norm',
+    'arm_reach',
+    'error_norm_figure',
+    'zoom_psi_figure',
+    'top_view_figure',
+    'plot_error_norms',
+    'plot_zoom_and_psi',
+    'plot_top_view',
+    'render_goal_pictures',
+    'write_figures',
+    'BASE_SIZE',
+    'FOOTPRINT_PERIOD_S',
+    'PICTURE_SIZE',
+]
 
 #: Base rectangle drawn in the top view: length along the base x axis, width [m].
 BASE_SIZE = (0.6, 0.5)
@@ -83,8 +97,9 @@ def arm_reach(log, model, rows):
 
 def _stacked_axes(n_panels, title):
     """A figure of ``n_panels`` stacked axes sharing the time axis."""
-    fig, axes = plt.subplots(n_panels, 1, sharex=True, squeeze=False, figsize=(9, 1.2 + 2.1 * n_panels),
-                             layout='constrained', dpi=_DPI)
+    fig, axes = plt.subplots(
+        n_panels, 1, sharex=True, squeeze=False, figsize=(9, 1.2 + 2.1 * n_panels), layout='constrained', dpi=_DPI
+    )
     fig.suptitle(title)
     axes = axes[:, 0]
     axes[-1].set_xlabel(_TIME_LABEL)
@@ -132,8 +147,16 @@ def error_norm_figure(logs, metrics, scenario):
         at_top = blended_transform_factory(ax.transData, ax.transAxes)
         for goal, goal_metrics in zip(scenario.goals, metrics.get(label, ())):
             if goal_metrics.get('area') is not None:
-                ax.text(0.5 * (goal.t + goal.end), 0.96, f"{goal_metrics['area']:.2f}", transform=at_top,
-                        ha='center', va='top', fontsize=9, color='tab:red')
+                ax.text(
+                    0.5 * (goal.t + goal.end),
+                    0.96,
+                    f"{goal_metrics['area']:.2f}",
+                    transform=at_top,
+                    ha='center',
+                    va='top',
+                    fontsize=9,
+                    color='tab:red',
+                )
     axes[0].legend(loc='center right', fontsize=8)
     return fig
 
@@ -198,8 +221,7 @@ def _goal_marks(ax, scenario):
     xy = np.array(list(numbers))
     ax.plot(xy[:, 0], xy[:, 1], 'r*', markersize=9, label='goals')
     for (x, y), names in numbers.items():
-        ax.annotate(','.join(names), (x, y), textcoords='offset points', xytext=(5, 3), fontsize=8,
-                    color='tab:red')
+        ax.annotate(','.join(names), (x, y), textcoords='offset points', xytext=(5, 3), fontsize=8, color='tab:red')
 
 
 def _top_view_panel(ax, label, log, scenario, model):
@@ -210,18 +232,32 @@ def _top_view_panel(ax, label, log, scenario, model):
         pts = points[k]
         alpha = 0.9 - 0.7 * j / max(1, len(rows) - 1)
         first = j == 0
-        ax.plot(*_base_outline(log.base_pose[k]).T, color='tab:gray', alpha=alpha, linewidth=1.0,
-                label='base (goal 1, every 2 s)' if first else None)
-        ax.plot(pts[:, 0], pts[:, 1], '-o', color='tab:orange', alpha=alpha, linewidth=1.2, markersize=2,
-                label='arm (goal 1, every 2 s)' if first else None)
+        ax.plot(
+            *_base_outline(log.base_pose[k]).T,
+            color='tab:gray',
+            alpha=alpha,
+            linewidth=1.0,
+            label='base (goal 1, every 2 s)' if first else None,
+        )
+        ax.plot(
+            pts[:, 0],
+            pts[:, 1],
+            '-o',
+            color='tab:orange',
+            alpha=alpha,
+            linewidth=1.2,
+            markersize=2,
+            label='arm (goal 1, every 2 s)' if first else None,
+        )
     ax.plot(log.base_pose[:, 0], log.base_pose[:, 1], color='tab:blue', linewidth=1.3, label='base path')
     ax.plot(log.ee_position[:, 0], log.ee_position[:, 1], color='tab:green', linewidth=1.3, label='EE path')
     _goal_marks(ax, scenario)
     ax.set_aspect('equal', adjustable='datalim')
     ax.set_xlabel('x [m]')
     ax.set_ylabel('y [m]')
-    ax.set_title(f'{_run_title(label, log)}\nlargest arm footprint {float(np.max(reach, initial=0.0)):.2f} m',
-                 fontsize=10)
+    ax.set_title(
+        f'{_run_title(label, log)}\nlargest arm footprint {float(np.max(reach, initial=0.0)):.2f} m', fontsize=10
+    )
     ax.grid(alpha=0.3)
 
 
@@ -239,8 +275,9 @@ def top_view_figure(logs, scenario, model):
     Returns:
         The open :class:`matplotlib.figure.Figure`.
     """
-    fig, axes = plt.subplots(1, len(logs), squeeze=False, figsize=(1.0 + 4.6 * len(logs), 5.2),
-                             layout='constrained', dpi=_DPI)
+    fig, axes = plt.subplots(
+        1, len(logs), squeeze=False, figsize=(1.0 + 4.6 * len(logs), 5.2), layout='constrained', dpi=_DPI
+    )
     fig.suptitle('Top view: paths and robot footprint on the way to goal 1')
     for ax, (label, log) in zip(axes[0], logs.items()):
         _top_view_panel(ax, label, log, scenario, model)
@@ -305,8 +342,9 @@ def render_goal_pictures(logs, scenario, out_dir, label, view='iso'):
             rgb = render_rgb(world, view, *PICTURE_SIZE)
         paths.append(write_png(out_dir / f'goal_{gi + 1}.png', rgb))
         shots.append((f'goal {gi + 1}, t = {log.t[k]:.2f} s', rgb))
-    fig, axes = plt.subplots(1, len(shots), squeeze=False, figsize=(3.2 * len(shots), 2.9),
-                             layout='constrained', dpi=_DPI)
+    fig, axes = plt.subplots(
+        1, len(shots), squeeze=False, figsize=(3.2 * len(shots), 2.9), layout='constrained', dpi=_DPI
+    )
     fig.suptitle(f'{_run_title(label, log)}: robot at the end of each goal window ({view} view)')
     for ax, (title, rgb) in zip(axes[0], shots):
         ax.imshow(rgb)
@@ -333,9 +371,11 @@ def write_figures(logs, metrics, scenario, model, out_dir, render_label=None, zo
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = [plot_error_norms(logs, metrics, scenario, out_dir / 'fig6_error_norm.png'),
-             plot_zoom_and_psi(logs, metrics, scenario, out_dir / 'fig7_zoom_psi.png', labels=zoom_labels),
-             plot_top_view(logs, scenario, model, out_dir / 'top_view.png')]
+    paths = [
+        plot_error_norms(logs, metrics, scenario, out_dir / 'fig6_error_norm.png'),
+        plot_zoom_and_psi(logs, metrics, scenario, out_dir / 'fig7_zoom_psi.png', labels=zoom_labels),
+        plot_top_view(logs, scenario, model, out_dir / 'top_view.png'),
+    ]
     if render_label is not None:
         paths += render_goal_pictures(logs, scenario, out_dir, render_label)
     return paths

@@ -46,6 +46,7 @@ def run_jobs(fn, jobs, workers):
         for job in jobs:
             yield fn(job)
         return
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)),
-                             mp_context=multiprocessing.get_context('forkserver')) as pool:
+    with ProcessPoolExecutor(
+        max_workers=min(workers, len(jobs)), mp_context=multiprocessing.get_context('forkserver')
+    ) as pool:
         yield from pool.map(fn, jobs)

@@ -11,33 +11,38 @@ import pinocchio as pin
 
 from wmm_control.kinematics.orientation import rpy_from_matrix, wrap_angle
 
-__all__ = ['RunLog', 'goal_metrics', 'trajectory_metrics', 'run_limit_report', 'pose_error_norm', 'METRIC_KEYS',
-           'TRAJECTORY_METRIC_KEYS']
+__all__ = [
+    'RunLog',
+    'goal_metrics',
+    'trajectory_metrics',
+    'run_limit_report',
+    'pose_error_norm',
+    'METRIC_KEYS',
+    'TRAJECTORY_METRIC_KEYS',
+]
 
 #: Per-goal keys of :func:`goal_metrics` and what they mean (documented in docs/results.md).
 METRIC_KEYS = {
     'area': 'area under the pose-error norm ‖e_p‖ (eq 12, position [m] and wrapped RPY [rad]) '
-            'over the goal window [m·s] (the numbers of Sorour Fig 6)',
+    'over the goal window [m·s] (the numbers of Sorour Fig 6)',
     'final_position_error_m': 'position error at the end of the window, ground truth [m]',
     'final_orientation_error_rad': 'rotation angle between the final and the goal orientation [rad]',
     'reached': 'final errors below 1 cm and 0.02 rad',
     'time_to_rfm_s': 'time from the goal start until the position error first enters r_fm [s] '
-                     '(0 when it starts inside; null when it never does)',
+    '(0 when it starts inside; null when it never does)',
     'base_path_m': 'length of the base path in the window [m]',
     'base_path_fine_m': 'length of the base path while ψ = 1 (fine manipulation) [m]',
-    'footprint_m': 'largest horizontal distance of any arm joint or the end effector from the base '
-                   'centre [m]',
+    'footprint_m': 'largest horizontal distance of any arm joint or the end effector from the base centre [m]',
     'max_switch_jump_rad_s': 'largest change of an arm joint velocity command at a mode switch [rad/s] '
-                             '(null when the mode never switches)',
-    'max_switch_jump_base': 'largest change of a base twist reference component at a mode switch '
-                            '[m/s or rad/s]',
+    '(null when the mode never switches)',
+    'max_switch_jump_base': 'largest change of a base twist reference component at a mode switch [m/s or rad/s]',
     'psi_min': 'smallest ψ in the window',
     'psi_max': 'largest ψ in the window',
     'dex_deviation_psi0_rad': 'while ψ = 0: largest |q_a − q_a,dex| (any joint) once the arm has come '
-                              'within 0.05 rad of q_a,dex [rad] (null: no such phase)',
+    'within 0.05 rad of q_a,dex [rad] (null: no such phase)',
     'dex_deviation_psi0_start_rad': 'largest |q_a − q_a,dex| at the start of the ψ = 0 phases [rad]',
     'compensation_dropped': 'periods whose arm command went out without the eq (14) term '
-                            '(the base controller did not answer in time)',
+    '(the base controller did not answer in time)',
 }
 
 
@@ -54,10 +59,29 @@ class RunLog:
     simulator's joints, the arm's first; NaN rows where a period's were not recorded).
     """
 
-    COLUMNS = ('t', 'goal', 'ee_position', 'ee_rotation', 'base_pose', 'q_arm', 'arm_command',
-               'base_reference', 'feasible_twist', 'psi', 'mode', 'limit_scale', 'accel_scale',
-               'null_scale', 'compensation_scale', 'compensated', 'cycle_time_s', 'sigma_min', 'clearance',
-               'collision_changed', 'q')
+    COLUMNS = (
+        't',
+        'goal',
+        'ee_position',
+        'ee_rotation',
+        'base_pose',
+        'q_arm',
+        'arm_command',
+        'base_reference',
+        'feasible_twist',
+        'psi',
+        'mode',
+        'limit_scale',
+        'accel_scale',
+        'null_scale',
+        'compensation_scale',
+        'compensated',
+        'cycle_time_s',
+        'sigma_min',
+        'clearance',
+        'collision_changed',
+        'q',
+    )
 
     def __init__(self, method='', label='', joint_names=()):
         self.method = method
@@ -65,13 +89,25 @@ class RunLog:
         self.joint_names = tuple(joint_names)
         self.rows = {c: [] for c in self.COLUMNS}
         self.wall_time_s = 0.0
-        self.sim_counters = None     # the simulator's command counters per group (clamped, rejected, ...)
-        self.final_status = None     # nodes engine: the resolver's last /diagnostics key-values (str)
-        self.first_stall_s = None    # nodes engine: the first time /diagnostics reported goal_stalled [s]
+        self.sim_counters = None  # the simulator's command counters per group (clamped, rejected, ...)
+        self.final_status = None  # nodes engine: the resolver's last /diagnostics key-values (str)
+        self.first_stall_s = None  # nodes engine: the first time /diagnostics reported goal_stalled [s]
         self.frozen = False
 
-    def append(self, t, goal, ee_position, ee_rotation, base_pose, q_arm, arm_command, base_reference,
-               feasible_twist, diagnostics, q=None):
+    def append(
+        self,
+        t,
+        goal,
+        ee_position,
+        ee_rotation,
+        base_pose,
+        q_arm,
+        arm_command,
+        base_reference,
+        feasible_twist,
+        diagnostics,
+        q=None,
+    ):
         """Add one period: the state at its start, the commands sent, and the resolver's
         :class:`~wmm_control.resolvers.ResolverDiagnostics`. ``feasible_twist`` may be None;
         ``q`` (every joint of ``joint_names``) too."""
@@ -85,8 +121,9 @@ class RunLog:
         r['q_arm'].append(np.asarray(q_arm, dtype=float))
         r['arm_command'].append(np.asarray(arm_command, dtype=float))
         r['base_reference'].append(np.asarray(base_reference, dtype=float))
-        r['feasible_twist'].append(np.asarray(feasible_twist if feasible_twist is not None else np.full(3, np.nan),
-                                              dtype=float))
+        r['feasible_twist'].append(
+            np.asarray(feasible_twist if feasible_twist is not None else np.full(3, np.nan), dtype=float)
+        )
         r['psi'].append(d.psi)
         r['mode'].append(d.mode)
         r['limit_scale'].append(d.limit_scale)
@@ -172,27 +209,33 @@ def goal_metrics(log, scenario, model, r_fm, q_dex, dt):
         modes = [log.mode[k] for k in idx]
         switches = [j for j in range(1, len(idx)) if modes[j] != modes[j - 1]]
         arm_jump = [float(np.max(np.abs(log.arm_command[idx[j]] - log.arm_command[idx[j - 1]]))) for j in switches]
-        base_jump = [float(np.max(np.abs(log.base_reference[idx[j]] - log.base_reference[idx[j - 1]])))
-                     for j in switches]
+        base_jump = [
+            float(np.max(np.abs(log.base_reference[idx[j]] - log.base_reference[idx[j - 1]]))) for j in switches
+        ]
         dev_after, dev_start = _dex_deviation(log, idx, q_dex)
-        out.append({
-            'goal': gi + 1, 'start_s': goal.t, 'end_s': goal.end, 'cycles': int(idx.size),
-            'area': float(np.sum(err) * dt),
-            'final_position_error_m': final_pos,
-            'final_orientation_error_rad': final_ori,
-            'reached': bool(final_pos < 0.01 and final_ori < 0.02),
-            'time_to_rfm_s': max(0.0, float(log.t[idx[inside[0]]] - goal.t)) if inside.size else None,
-            'base_path_m': float(np.sum(steps)),
-            'base_path_fine_m': float(np.sum(steps[fine])),
-            'footprint_m': footprint,
-            'max_switch_jump_rad_s': max(arm_jump) if arm_jump else None,
-            'max_switch_jump_base': max(base_jump) if base_jump else None,
-            'psi_min': float(np.min(log.psi[idx])),
-            'psi_max': float(np.max(log.psi[idx])),
-            'dex_deviation_psi0_rad': dev_after,
-            'dex_deviation_psi0_start_rad': dev_start,
-            'compensation_dropped': int(np.count_nonzero(~log.compensated[idx])),
-        })
+        out.append(
+            {
+                'goal': gi + 1,
+                'start_s': goal.t,
+                'end_s': goal.end,
+                'cycles': int(idx.size),
+                'area': float(np.sum(err) * dt),
+                'final_position_error_m': final_pos,
+                'final_orientation_error_rad': final_ori,
+                'reached': bool(final_pos < 0.01 and final_ori < 0.02),
+                'time_to_rfm_s': max(0.0, float(log.t[idx[inside[0]]] - goal.t)) if inside.size else None,
+                'base_path_m': float(np.sum(steps)),
+                'base_path_fine_m': float(np.sum(steps[fine])),
+                'footprint_m': footprint,
+                'max_switch_jump_rad_s': max(arm_jump) if arm_jump else None,
+                'max_switch_jump_base': max(base_jump) if base_jump else None,
+                'psi_min': float(np.min(log.psi[idx])),
+                'psi_max': float(np.max(log.psi[idx])),
+                'dex_deviation_psi0_rad': dev_after,
+                'dex_deviation_psi0_start_rad': dev_start,
+                'compensation_dropped': int(np.count_nonzero(~log.compensated[idx])),
+            }
+        )
     return out
 
 
@@ -233,11 +276,11 @@ TRAJECTORY_METRIC_KEYS = {
     'sigma_min_min': 'smallest σ_min of the arm Jacobian (the task rows) over the run',
     'first_base_activation_s': 'time of the first non-zero base command [s] (null: never)',
     'joint_limit_margin_rad': 'smallest distance of an arm joint to a position limit over the run [rad] '
-                              '(joints without limits left out)',
+    '(joints without limits left out)',
     'base_integral_error_m': "Xing's integral of the base's kinematic error, |x| and |y| [m]: the mean, "
-                             'over the time the base is commanded (first to last non-zero command), of the '
-                             'distance between the path its commands describe and its true path (null: the '
-                             'base never moved)',
+    'over the time the base is commanded (first to last non-zero command), of the '
+    'distance between the path its commands describe and its true path (null: the '
+    'base never moved)',
 }
 
 
@@ -312,8 +355,15 @@ def run_limit_report(log, robot, dt, tol=1e-9):
     vel = float(max(0.0, np.max(np.abs(log.arm_command) - arm.velocity)))
     acc = float(max(0.0, np.max(np.abs(np.diff(log.arm_command, axis=0, prepend=0.0)) - arm.acceleration * dt)))
     bvel = float(max(0.0, np.max(np.abs(log.base_reference) - robot.base.velocity)))
-    bacc = float(max(0.0, np.max(np.abs(np.diff(log.base_reference, axis=0, prepend=0.0)) - robot.base.acceleration * dt)))
+    bacc = float(
+        max(0.0, np.max(np.abs(np.diff(log.base_reference, axis=0, prepend=0.0)) - robot.base.acceleration * dt))
+    )
     bad = int(np.count_nonzero(~np.isfinite(log.arm_command)) + np.count_nonzero(~np.isfinite(log.base_reference)))
-    return {'arm_position': pos if pos > tol else 0.0, 'arm_velocity': vel if vel > tol else 0.0,
-            'arm_acceleration': acc if acc > tol else 0.0, 'base_velocity': bvel if bvel > tol else 0.0,
-            'base_acceleration': bacc if bacc > tol else 0.0, 'non_finite': bad}
+    return {
+        'arm_position': pos if pos > tol else 0.0,
+        'arm_velocity': vel if vel > tol else 0.0,
+        'arm_acceleration': acc if acc > tol else 0.0,
+        'base_velocity': bvel if bvel > tol else 0.0,
+        'base_acceleration': bacc if bacc > tol else 0.0,
+        'non_finite': bad,
+    }

@@ -68,9 +68,23 @@ from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.progress import GoalProgress
 from wmm_control.robot_config import load_robot
 
-__all__ = ['RandomGoal', 'sample_goals', 'run_goal', 'summarize', 'ROBOTS', 'METHOD_RUNS', 'ROBOT_RUNS', 'DURATION_S',
-           'ARM_MARGIN', 'COLLISION_MARGIN', 'CONTACT_DEPTH', 'SETTLE_S', 'goal_settings', 'run_contact',
-           'write_record']
+__all__ = [
+    'RandomGoal',
+    'sample_goals',
+    'run_goal',
+    'summarize',
+    'ROBOTS',
+    'METHOD_RUNS',
+    'ROBOT_RUNS',
+    'DURATION_S',
+    'ARM_MARGIN',
+    'COLLISION_MARGIN',
+    'CONTACT_DEPTH',
+    'SETTLE_S',
+    'goal_settings',
+    'run_contact',
+    'write_record',
+]
 
 #: The robots, by name.
 ROBOTS = ('steerable', 'mecanum')
@@ -132,8 +146,11 @@ def goal_settings():
     node, from its defaults (``config/redundancy_resolver.yaml``): (position [m], orientation
     [rad]), [s] and [-]."""
     defaults = load_defaults('redundancy_resolver.yaml', 'redundancy_resolver')
-    return (tuple(float(v) for v in defaults['goal_tolerance']), float(defaults['stall_time']),
-            float(defaults['min_progress_ratio']))
+    return (
+        tuple(float(v) for v in defaults['goal_tolerance']),
+        float(defaults['stall_time']),
+        float(defaults['min_progress_ratio']),
+    )
 
 
 def _arm_box(arm):
@@ -178,10 +195,19 @@ def sample_goals(robot, count, seed=0, base_radius=1.0, obstacles=''):
 
 
 def _scenario(robot, goal, duration, obstacles):
-    return Scenario(name=f'random_{robot.name}_{goal.index}', description='random reachable goal', robot=robot.name,
-                    frame='world', duration=duration, goals=(Goal(0.0, duration, goal.pose),), path=None,
-                    sim={'base_mode': 'kinematic'}, runs=(), obstacles_file=obstacles,
-                    obstacles=load_obstacles(obstacles))
+    return Scenario(
+        name=f'random_{robot.name}_{goal.index}',
+        description='random reachable goal',
+        robot=robot.name,
+        frame='world',
+        duration=duration,
+        goals=(Goal(0.0, duration, goal.pose),),
+        path=None,
+        sim={'base_mode': 'kinematic'},
+        runs=(),
+        obstacles_file=obstacles,
+        obstacles=load_obstacles(obstacles),
+    )
 
 
 def _run_direct(robot, run, goal, duration, obstacles):
@@ -207,10 +233,20 @@ def _run_direct(robot, run, goal, duration, obstacles):
 def _run_nodes(robot, run, goal, duration, obstacles):
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / 'goal.yaml'
-        path.write_text(yaml.safe_dump({'scenario': {
-            'name': f'random_{robot.name}_{goal.index}', 'robot': robot.name, 'frame': 'world', 'duration': duration,
-            'goals': [{'t': 0.0, 'pose': [float(v) for v in goal.pose]}],
-            'obstacles': str(obstacle_file(obstacles).resolve()) if obstacles else ''}}))
+        path.write_text(
+            yaml.safe_dump(
+                {
+                    'scenario': {
+                        'name': f'random_{robot.name}_{goal.index}',
+                        'robot': robot.name,
+                        'frame': 'world',
+                        'duration': duration,
+                        'goals': [{'t': 0.0, 'pose': [float(v) for v in goal.pose]}],
+                        'obstacles': str(obstacle_file(obstacles).resolve()) if obstacles else '',
+                    }
+                }
+            )
+        )
         scenario = load_scenario(path)
         entry = dict(run, name=run['method'], feedback='ground_truth')
         log = run_with_nodes(scenario, entry)
@@ -229,8 +265,9 @@ def _limit_use(log, robot, dt):
         'arm_velocity': float(np.max(np.abs(arm_cmd) / arm.velocity)),
         'arm_acceleration': float(np.max(np.abs(np.diff(arm_cmd, axis=0, prepend=0.0)) / (arm.acceleration * dt))),
         'base_velocity': float(np.max(np.abs(base_ref) / base.velocity[axes])),
-        'base_acceleration': float(np.max(np.abs(np.diff(base_ref, axis=0, prepend=0.0))
-                                          / (base.acceleration[axes] * dt))),
+        'base_acceleration': float(
+            np.max(np.abs(np.diff(base_ref, axis=0, prepend=0.0)) / (base.acceleration[axes] * dt))
+        ),
     }
     margin = np.minimum(log.q_arm - arm.position_lower, arm.position_upper - log.q_arm)
     finite = np.isfinite(margin)
@@ -304,20 +341,38 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None, o
         why.append(f'neither reached nor ever reported stalled in {duration:g} s')
     if why:
         outcome = 'failed'
-    return {'robot': cfg.name, 'method': method, 'goal': goal.index, 'outcome': outcome,
-            'time_s': float(log.t[-1] + dt), 'time_to_reach_s': float(log.t[inside[0]]) if inside.size else None,
-            'final_position_error_m': float(pos_err[-1]), 'final_orientation_error_rad': float(ori_err[-1]),
-            'first_stall_s': status['first_stall_s'], 'limits_exceeded': exceeded,
-            'contact_depth_m': depth, 'contact_pair': pair,
-            'limit_use': _limit_use(log, cfg, dt), 'sim_clamped': int(clamped), 'why': '; '.join(why)}
+    return {
+        'robot': cfg.name,
+        'method': method,
+        'goal': goal.index,
+        'outcome': outcome,
+        'time_s': float(log.t[-1] + dt),
+        'time_to_reach_s': float(log.t[inside[0]]) if inside.size else None,
+        'final_position_error_m': float(pos_err[-1]),
+        'final_orientation_error_rad': float(ori_err[-1]),
+        'first_stall_s': status['first_stall_s'],
+        'limits_exceeded': exceeded,
+        'contact_depth_m': depth,
+        'contact_pair': pair,
+        'limit_use': _limit_use(log, cfg, dt),
+        'sim_clamped': int(clamped),
+        'why': '; '.join(why),
+    }
 
 
 def write_record(path, log, goal_pose, obstacles=''):
     """Write the run ``log`` to ``path`` (``.npz``, the module docstring says what it holds)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     text = obstacle_file(obstacles).read_text() if obstacles else ''
-    np.savez_compressed(path, t=log.t, base_pose=log.base_pose, joint_names=np.array(log.joint_names, dtype=str),
-                        q=log.q, goal_pose=np.asarray(goal_pose, dtype=float), obstacles=np.array(text))
+    np.savez_compressed(
+        path,
+        t=log.t,
+        base_pose=log.base_pose,
+        joint_names=np.array(log.joint_names, dtype=str),
+        q=log.q,
+        goal_pose=np.asarray(goal_pose, dtype=float),
+        obstacles=np.array(text),
+    )
 
 
 def _angle(rot):
@@ -343,7 +398,8 @@ def summarize(results):
         times = [r['time_to_reach_s'] for r in conv]
         use = [max(v for k, v in r['limit_use'].items() if k != 'arm_position_margin_rad') for r in rows]
         table[key] = {
-            'runs': len(rows), 'converged': len(conv),
+            'runs': len(rows),
+            'converged': len(conv),
             'reported': sum(r['outcome'] == 'reported' for r in rows),
             'failed': sum(r['outcome'] == 'failed' for r in rows),
             'worst_position_error_m': max((r['final_position_error_m'] for r in conv), default=None),

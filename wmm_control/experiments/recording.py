@@ -50,8 +50,7 @@ class BagRecorder(Node):
     """
 
     def __init__(self, context: Context, path: str | Path) -> None:
-        super().__init__('experiment_bag', context=context,
-                         parameter_overrides=[Parameter('use_sim_time', value=True)])
+        super().__init__('experiment_bag', context=context, parameter_overrides=[Parameter('use_sim_time', value=True)])
         self.path = Path(path)
         if self.path.exists():
             raise ConfigError(f'recording {self.path}: it exists already')

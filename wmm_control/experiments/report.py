@@ -25,24 +25,49 @@ __all__ = ['PAPER', 'provenance', 'render_report', 'write_report']
 PAPER = {
     'xing_circle_0.10': {
         'amp': {'table': 'Xing Table 2', 'base_active_any_s': 0.0, 'max_error_xy_m': 4.5e-3},
-        'traditional': {'table': 'Xing Table 2', 'base_active_any_s': 80.0, 'max_error_x_m': 9.1e-3,
-                        'max_error_y_m': 18.9e-3, 'max_error_xy_m': 19.1e-3},
+        'traditional': {
+            'table': 'Xing Table 2',
+            'base_active_any_s': 80.0,
+            'max_error_x_m': 9.1e-3,
+            'max_error_y_m': 18.9e-3,
+            'max_error_xy_m': 19.1e-3,
+        },
     },
     'xing_circle_0.25': {
-        'amp': {'table': 'Xing Table 2', 'base_active_any_s': 12.08, 'first_base_activation_s': 6.40,
-                'max_error_x_m': 24.4e-3, 'max_error_y_m': 18.2e-3, 'max_error_xy_m': 27.8e-3,
-                'base_integral_error_m': [0.81e-2, 0.37e-2]},
-        'traditional': {'table': 'Xing Table 2', 'base_active_any_s': 80.0, 'max_error_x_m': 66.5e-3,
-                        'max_error_y_m': 27.2e-3, 'max_error_xy_m': 69.7e-3,
-                        'base_integral_error_m': [2.81e-2, 1.12e-2]},
+        'amp': {
+            'table': 'Xing Table 2',
+            'base_active_any_s': 12.08,
+            'first_base_activation_s': 6.40,
+            'max_error_x_m': 24.4e-3,
+            'max_error_y_m': 18.2e-3,
+            'max_error_xy_m': 27.8e-3,
+            'base_integral_error_m': [0.81e-2, 0.37e-2],
+        },
+        'traditional': {
+            'table': 'Xing Table 2',
+            'base_active_any_s': 80.0,
+            'max_error_x_m': 66.5e-3,
+            'max_error_y_m': 27.2e-3,
+            'max_error_xy_m': 69.7e-3,
+            'base_integral_error_m': [2.81e-2, 1.12e-2],
+        },
     },
     'xing_pose': {
-        'amp': {'table': 'Xing Table 3', 'base_active_any_s': 18.48, 'first_base_activation_s': 3.1,
-                'base_rms': [0.67e-2, 0.044e-2, math.radians(0.08)], 'max_error_x_m': 15.8e-3,
-                'max_rotation_error_y_rad': math.radians(2.32)},
-        'traditional': {'table': 'Xing Table 3', 'base_active_any_s': 40.0,
-                        'base_rms': [1.18e-2, 0.082e-2, math.radians(0.13)], 'max_error_x_m': 23.1e-3,
-                        'max_rotation_error_y_rad': math.radians(4.58)},
+        'amp': {
+            'table': 'Xing Table 3',
+            'base_active_any_s': 18.48,
+            'first_base_activation_s': 3.1,
+            'base_rms': [0.67e-2, 0.044e-2, math.radians(0.08)],
+            'max_error_x_m': 15.8e-3,
+            'max_rotation_error_y_rad': math.radians(2.32),
+        },
+        'traditional': {
+            'table': 'Xing Table 3',
+            'base_active_any_s': 40.0,
+            'base_rms': [1.18e-2, 0.082e-2, math.radians(0.13)],
+            'max_error_x_m': 23.1e-3,
+            'max_rotation_error_y_rad': math.radians(4.58),
+        },
     },
 }
 
@@ -55,8 +80,17 @@ def provenance(root=None):
     source tree) or 'unknown', today's date (UTC), and the platform with its CPU count."""
     root = Path(root) if root is not None else Path(__file__).resolve().parents[2]
     try:
-        commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=root, capture_output=True,
-                                text=True, timeout=10, check=True).stdout.strip() or 'unknown'
+        commit = (
+            subprocess.run(
+                ['git', 'rev-parse', '--short', 'HEAD'],
+                cwd=root,
+                capture_output=True,
+                text=True,
+                timeout=10,
+                check=True,
+            ).stdout.strip()
+            or 'unknown'
+        )
     except (OSError, subprocess.SubprocessError):
         commit = 'unknown'
     date = datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d')
@@ -79,44 +113,62 @@ def _rms(rms):
 
 def _settings(summary):
     sim = summary.get('simulator') or {}
-    slip = (f'slip gain {sim.get("slip_gain", 0.0)}, drift {sim.get("slip_drift", [0, 0, 0])}, '
-            f'noise {sim.get("slip_noise", [0, 0, 0])}, seed {sim.get("seed", 0)}')
+    slip = (
+        f'slip gain {sim.get("slip_gain", 0.0)}, drift {sim.get("slip_drift", [0, 0, 0])}, '
+        f'noise {sim.get("slip_noise", [0, 0, 0])}, seed {sim.get("seed", 0)}'
+    )
     wall = summary.get('experiment_wall_time_s')
     timing = 'no ROS' if summary['engine'] == 'direct' else summary['timing']
-    return (f'Robot `{summary["robot"]}`; engine `{summary["engine"]}` ({timing}); '
-            f'{sim.get("base_mode", "kinematic")} base, {slip}'
-            + (f'; {wall:.0f} s wall with {summary.get("jobs", 1)} job(s)' if wall is not None else '') + '.')
+    return (
+        f'Robot `{summary["robot"]}`; engine `{summary["engine"]}` ({timing}); '
+        f'{sim.get("base_mode", "kinematic")} base, {slip}'
+        + (f'; {wall:.0f} s wall with {summary.get("jobs", 1)} job(s)' if wall is not None else '')
+        + '.'
+    )
 
 
 def _goals_section(summary):
     runs = summary['runs']
     n = max((len(run['goals']) for run in runs.values()), default=0)
-    lines = ['Area under ‖e_p‖ per goal [m·s] / final position error [mm] (ground truth, end of each '
-             "goal's window):", '',
-             '| run | method | feedback | ' + ' | '.join(f'goal {i + 1}' for i in range(n))
-             + ' | total area | all reached (< 1 cm, < 0.02 rad) | limits passed |',
-             '|---|---|---|' + '---|' * n + '---|---|---|']
+    lines = [
+        'Area under ‖e_p‖ per goal [m·s] / final position error [mm] (ground truth, end of each goal\'s window):',
+        '',
+        '| run | method | feedback | '
+        + ' | '.join(f'goal {i + 1}' for i in range(n))
+        + ' | total area | all reached (< 1 cm, < 0.02 rad) | limits passed |',
+        '|---|---|---|' + '---|' * n + '---|---|---|',
+    ]
     for name, run in runs.items():
-        cells = [f'{_f(g.get("area"), ".2f")} / {_f(g.get("final_position_error_m"), ".1f", 1e3)}'
-                 for g in run['goals']]
+        cells = [
+            f'{_f(g.get("area"), ".2f")} / {_f(g.get("final_position_error_m"), ".1f", 1e3)}' for g in run['goals']
+        ]
         cells += [''] * (n - len(cells))
-        lines.append(f'| `{name}` | `{run["method"]}` | {run["feedback"]} | ' + ' | '.join(cells)
-                     + f' | {run["total_area"]:.2f} | {"yes" if run["all_goals_reached"] else "no"}'
-                     f' | {_limits(run)} |')
-    lines += ['', 'Per goal (keys of `metrics.json`, below):', '',
-              '| run | goal | footprint [m] | t → r_fm [s] | base path, ψ = 1 [m] | base path [m] | '
-              'arm-rate jump at a switch [rad/s] | ψ range | q_dex distance with ψ = 0, settled / at start [rad] | '
-              'final orientation error [rad] |',
-              '|---|---|---|---|---|---|---|---|---|---|']
+        lines.append(
+            f'| `{name}` | `{run["method"]}` | {run["feedback"]} | '
+            + ' | '.join(cells)
+            + f' | {run["total_area"]:.2f} | {"yes" if run["all_goals_reached"] else "no"}'
+            f' | {_limits(run)} |'
+        )
+    lines += [
+        '',
+        'Per goal (keys of `metrics.json`, below):',
+        '',
+        '| run | goal | footprint [m] | t → r_fm [s] | base path, ψ = 1 [m] | base path [m] | '
+        'arm-rate jump at a switch [rad/s] | ψ range | q_dex distance with ψ = 0, settled / at start [rad] | '
+        'final orientation error [rad] |',
+        '|---|---|---|---|---|---|---|---|---|---|',
+    ]
     for name, run in runs.items():
         for g in run['goals']:
-            lines.append(f'| `{name}` | {g["goal"]} | {_f(g.get("footprint_m"), ".2f")} | '
-                         f'{_f(g.get("time_to_rfm_s"), ".2f")} | {_f(g.get("base_path_fine_m"), ".2f")} | '
-                         f'{_f(g.get("base_path_m"), ".2f")} | {_f(g.get("max_switch_jump_rad_s"), ".2f")} | '
-                         f'{_f(g.get("psi_min"), ".2g")}–{_f(g.get("psi_max"), ".2g")} | '
-                         f'{_f(g.get("dex_deviation_psi0_rad"), ".2f")} / '
-                         f'{_f(g.get("dex_deviation_psi0_start_rad"), ".2f")} | '
-                         f'{_f(g.get("final_orientation_error_rad"), ".4f")} |')
+            lines.append(
+                f'| `{name}` | {g["goal"]} | {_f(g.get("footprint_m"), ".2f")} | '
+                f'{_f(g.get("time_to_rfm_s"), ".2f")} | {_f(g.get("base_path_fine_m"), ".2f")} | '
+                f'{_f(g.get("base_path_m"), ".2f")} | {_f(g.get("max_switch_jump_rad_s"), ".2f")} | '
+                f'{_f(g.get("psi_min"), ".2g")}–{_f(g.get("psi_max"), ".2g")} | '
+                f'{_f(g.get("dex_deviation_psi0_rad"), ".2f")} / '
+                f'{_f(g.get("dex_deviation_psi0_start_rad"), ".2f")} | '
+                f'{_f(g.get("final_orientation_error_rad"), ".4f")} |'
+            )
     return lines
 
 
@@ -133,8 +185,13 @@ def _paper_text(values):
         parts.append(f'RMS {_rms(values["base_rms"])}')
     errors = [(axis, values[f'max_error_{axis}_m']) for axis in ('x', 'y', 'xy') if f'max_error_{axis}_m' in values]
     if errors:
-        parts.append('max error ' + ' / '.join(a for a, _ in errors) + ' '
-                     + ' / '.join(f'{v * 1e3:.1f}' for _, v in errors) + ' mm')
+        parts.append(
+            'max error '
+            + ' / '.join(a for a, _ in errors)
+            + ' '
+            + ' / '.join(f'{v * 1e3:.1f}' for _, v in errors)
+            + ' mm'
+        )
     if 'max_rotation_error_y_rad' in values:
         parts.append(f'rotation about y {values["max_rotation_error_y_rad"]:.3f} rad')
     if 'base_integral_error_m' in values:
@@ -145,48 +202,61 @@ def _paper_text(values):
 
 def _tracking_section(summary):
     paper = PAPER.get(summary['scenario'], {})
-    lines = ['Commanded base velocity (RMS vx / vy [cm/s] / ω [°/s]; time any component is non-zero [s]; '
-             'first non-zero command [s]), largest end-effector error against the reference (ground truth) '
-             "and Xing's integral of the base's kinematic error:", '',
-             '| run | method | base RMS | base active [s] | first base command [s] | max error x / y / xy [mm] | '
-             'rotation about y [rad] | σ_min | base integral error x / y [cm] | closest joint to a limit [rad] | '
-             'limits passed |' + (' paper |' if paper else ''),
-             '|---|---|---|---|---|---|---|---|---|---|---|' + ('---|' if paper else '')]
+    lines = [
+        'Commanded base velocity (RMS vx / vy [cm/s] / ω [°/s]; time any component is non-zero [s]; '
+        'first non-zero command [s]), largest end-effector error against the reference (ground truth) '
+        "and Xing's integral of the base's kinematic error:",
+        '',
+        '| run | method | base RMS | base active [s] | first base command [s] | max error x / y / xy [mm] | '
+        'rotation about y [rad] | σ_min | base integral error x / y [cm] | closest joint to a limit [rad] | '
+        'limits passed |' + (' paper |' if paper else ''),
+        '|---|---|---|---|---|---|---|---|---|---|---|' + ('---|' if paper else ''),
+    ]
     for name, run in summary['runs'].items():
         m = run['tracking']
         integral = m.get('base_integral_error_m')
         integral_text = '—' if integral is None else f'{integral[0] * 100:.2f} / {integral[1] * 100:.2f}'
-        lines.append(f'| `{name}` | `{run["method"]}` | {_rms(m["base_rms"])} | {m["base_active_any_s"]:.2f} | '
-                     f'{_f(m.get("first_base_activation_s"), ".2f")} | {m["max_error_x_m"] * 1e3:.1f} / '
-                     f'{m["max_error_y_m"] * 1e3:.1f} / {m["max_error_xy_m"] * 1e3:.1f} | '
-                     f'{m["max_rotation_error_y_rad"]:.3f} | {m["sigma_min_min"]:.3f} | {integral_text} | '
-                     f'{_f(m.get("joint_limit_margin_rad"), ".2f")} | {_limits(run)} |'
-                     + (f' {_paper_text(paper.get(name))} |' if paper else ''))
+        lines.append(
+            f'| `{name}` | `{run["method"]}` | {_rms(m["base_rms"])} | {m["base_active_any_s"]:.2f} | '
+            f'{_f(m.get("first_base_activation_s"), ".2f")} | {m["max_error_x_m"] * 1e3:.1f} / '
+            f'{m["max_error_y_m"] * 1e3:.1f} / {m["max_error_xy_m"] * 1e3:.1f} | '
+            f'{m["max_rotation_error_y_rad"]:.3f} | {m["sigma_min_min"]:.3f} | {integral_text} | '
+            f'{_f(m.get("joint_limit_margin_rad"), ".2f")} | {_limits(run)} |'
+            + (f' {_paper_text(paper.get(name))} |' if paper else '')
+        )
     return lines
 
 
 def _matrix_section(summaries):
-    lines = ['## The R = 0.25 m circle on both robots with all four methods', '',
-             '| robot | method | base active [s] | base RMS vx / vy [cm/s], ω [°/s] | max x-y error [mm] | '
-             'closest joint to a limit [rad] | resolver cycle, median [µs] |',
-             '|---|---|---|---|---|---|---|']
+    lines = [
+        '## The R = 0.25 m circle on both robots with all four methods',
+        '',
+        '| robot | method | base active [s] | base RMS vx / vy [cm/s], ω [°/s] | max x-y error [mm] | '
+        'closest joint to a limit [rad] | resolver cycle, median [µs] |',
+        '|---|---|---|---|---|---|---|',
+    ]
     for summary in summaries:
         for i, (name, run) in enumerate(summary['runs'].items()):
             m = run['tracking']
             robot = f'`{summary["robot"]}`' if i == 0 else ''
-            lines.append(f'| {robot} | `{name}` | {m["base_active_any_s"]:.1f} | '
-                         f'{_rms(m["base_rms"])} | {m["max_error_xy_m"] * 1e3:.1f} | '
-                         f'{_f(m.get("joint_limit_margin_rad"), ".2f")} | {run["resolver_cycle_median_us"]:.0f} |')
+            lines.append(
+                f'| {robot} | `{name}` | {m["base_active_any_s"]:.1f} | '
+                f'{_rms(m["base_rms"])} | {m["max_error_xy_m"] * 1e3:.1f} | '
+                f'{_f(m.get("joint_limit_margin_rad"), ".2f")} | {run["resolver_cycle_median_us"]:.0f} |'
+            )
     return lines
 
 
 def _figures(summary, figure_links):
-    return [f'![{summary["scenario"]}: {Path(link).stem}]({link})' for link in figure_links.get(summary['scenario'], ())]
+    return [
+        f'![{summary["scenario"]}: {Path(link).stem}]({link})' for link in figure_links.get(summary['scenario'], ())
+    ]
 
 
 def _keys_section(keys, title):
     return [f'**{title}**', '', '| key | meaning |', '|---|---|'] + [
-        f'| `{key}` | {text.replace("|", chr(92) + "|")} |' for key, text in keys.items()]
+        f'| `{key}` | {text.replace("|", chr(92) + "|")} |' for key, text in keys.items()
+    ]
 
 
 def render_report(summaries, preamble='', provenance_line=None, figure_links=None):

@@ -122,24 +122,45 @@ class Recorder(Node):
                 continue
             f = {k: _value(v) for k, v in d.items() if k not in ('limited', 'arm_command', 'base_reference')}
             diag = ResolverDiagnostics(
-                method=f['method'], mode=f['mode'], psi=f['psi'], position_error=f['position_error_m'],
-                orientation_error=f['orientation_error_rad'], limit_scale=f['limit_scale'],
-                accel_scale=f['accel_scale'], null_scale=f['null_scale'],
+                method=f['method'],
+                mode=f['mode'],
+                psi=f['psi'],
+                position_error=f['position_error_m'],
+                orientation_error=f['orientation_error_rad'],
+                limit_scale=f['limit_scale'],
+                accel_scale=f['accel_scale'],
+                null_scale=f['null_scale'],
                 compensation_scale=f['compensation_scale'],
-                limited=tuple(int(v) for v in _vector(d.get('limited', '[]'))), sigma_min=f['sigma_min'],
-                compensated=bool(f['compensated']), cycle_time_s=f['cycle_time_us'] * 1e-6,
-                reference_time_left=f['reference_time_left_s'], clearance=float(f['clearance_m']),
-                closest_pair=str(f['closest_pair']), collision_constraints=int(f['collision_constraints']),
-                collision_changed=bool(f['collision_changed']))
-            self.log.append(row['t'], self.scenario.goal_index(row['t']), row['ee'][0], row['ee'][1], row['base'],
-                            row['q_arm'], _vector(d['arm_command']), _vector(d['base_reference']),
-                            row.get('feasible'), diag, q=row['q'])
+                limited=tuple(int(v) for v in _vector(d.get('limited', '[]'))),
+                sigma_min=f['sigma_min'],
+                compensated=bool(f['compensated']),
+                cycle_time_s=f['cycle_time_us'] * 1e-6,
+                reference_time_left=f['reference_time_left_s'],
+                clearance=float(f['clearance_m']),
+                closest_pair=str(f['closest_pair']),
+                collision_constraints=int(f['collision_constraints']),
+                collision_changed=bool(f['collision_changed']),
+            )
+            self.log.append(
+                row['t'],
+                self.scenario.goal_index(row['t']),
+                row['ee'][0],
+                row['ee'][1],
+                row['base'],
+                row['q_arm'],
+                _vector(d['arm_command']),
+                _vector(d['base_reference']),
+                row.get('feasible'),
+                diag,
+                q=row['q'],
+            )
         self._rows.clear()
 
 
 def _executor(context):
     try:
         from rclpy.experimental import EventsExecutor
+
         return EventsExecutor(context=context)
     except ImportError:
         return SingleThreadedExecutor(context=context)
@@ -150,14 +171,28 @@ def _executor(context):
 #: waits: the timeouts measured on the wall clock are far beyond any wait. The run does not
 #: depend on timing, also when other processes (the runs of ``wmm_experiment --jobs``) take the
 #: cores.
-LOCKSTEP_WAITS = {'redundancy_resolver': {'compensation_timeout': 1.0, 'state_timeout': 30.0},
-                  'swmr_controller': {'reference_wait': 1.0, 'max_state_wait': 0.0, 'joint_state_timeout': 30.0,
-                                      'reference_timeout': 30.0},
-                  'mecanum_controller': {'reference_wait': 1.0, 'max_state_wait': 0.0, 'joint_state_timeout': 30.0,
-                                         'reference_timeout': 30.0},
-                  'differential_controller': {'reference_wait': 1.0, 'max_state_wait': 0.0,
-                                              'joint_state_timeout': 30.0, 'reference_timeout': 30.0},
-                  'wmm_sim': {'command_timeout': 10.0, 'lockstep_timeout': 10.0}}
+LOCKSTEP_WAITS = {
+    'redundancy_resolver': {'compensation_timeout': 1.0, 'state_timeout': 30.0},
+    'swmr_controller': {
+        'reference_wait': 1.0,
+        'max_state_wait': 0.0,
+        'joint_state_timeout': 30.0,
+        'reference_timeout': 30.0,
+    },
+    'mecanum_controller': {
+        'reference_wait': 1.0,
+        'max_state_wait': 0.0,
+        'joint_state_timeout': 30.0,
+        'reference_timeout': 30.0,
+    },
+    'differential_controller': {
+        'reference_wait': 1.0,
+        'max_state_wait': 0.0,
+        'joint_state_timeout': 30.0,
+        'reference_timeout': 30.0,
+    },
+    'wmm_sim': {'command_timeout': 10.0, 'lockstep_timeout': 10.0},
+}
 
 
 def private_domain_id(offset=0):
@@ -194,11 +229,17 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         raise ConfigError(f'run {run.get("name")}: feedback must be ground_truth or odometry, got {feedback!r}')
     resolver_params = dict(resolver_parameters(run), method=run['method'])
     # No ~/markers: they are for rviz, on a steady-clock timer, and would not repeat from run to run.
-    resolver_params.update(robot=str(robot.yaml_path), ee_feedback=feedback, diagnostics_period=1e-9,
-                           markers_period=0.0,
-                           **LOCKSTEP_WAITS['redundancy_resolver'])
+    resolver_params.update(
+        robot=str(robot.yaml_path),
+        ee_feedback=feedback,
+        diagnostics_period=1e-9,
+        markers_period=0.0,
+        **LOCKSTEP_WAITS['redundancy_resolver'],
+    )
     sim_params = dict(scenario.sim or {})
-    sim_params.update(robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0, **LOCKSTEP_WAITS['wmm_sim'])
+    sim_params.update(
+        robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0, **LOCKSTEP_WAITS['wmm_sim']
+    )
     if scenario.obstacles_file:
         sim_params['obstacles'] = resolver_params['obstacles'] = scenario.obstacles_file
     for key in ('slip_drift', 'slip_noise'):
@@ -217,12 +258,23 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     executor = _executor(context)
     try:
         remap = ['--ros-args', '-r', '/odom:=/ground_truth/odom'] if feedback == 'ground_truth' else []
-        nodes.append(GoalSequencerNode(context=context, parameter_overrides=params(
-            {'scenario': str(scenario.path), 'use_sim_time': True})))
-        nodes.append(RedundancyResolverNode(context=context, cli_args=remap,
-                                            parameter_overrides=params(resolver_params)))
-        nodes.append(BaseControllerNode(robot.base_type, context=context, parameter_overrides=params(
-            dict(LOCKSTEP_WAITS[NODE_NAMES[robot.base_type]], robot=str(robot.yaml_path)))))
+        nodes.append(
+            GoalSequencerNode(
+                context=context, parameter_overrides=params({'scenario': str(scenario.path), 'use_sim_time': True})
+            )
+        )
+        nodes.append(
+            RedundancyResolverNode(context=context, cli_args=remap, parameter_overrides=params(resolver_params))
+        )
+        nodes.append(
+            BaseControllerNode(
+                robot.base_type,
+                context=context,
+                parameter_overrides=params(
+                    dict(LOCKSTEP_WAITS[NODE_NAMES[robot.base_type]], robot=str(robot.yaml_path))
+                ),
+            )
+        )
         recorder = Recorder(context, robot, scenario, log)
         nodes.append(recorder)
         sim = SimNode(context=context, parameter_overrides=params(sim_params))
@@ -235,8 +287,12 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         if view_port is not None:
             # viser (the browser viewer) is imported only by runs that show themselves live
             from wmm_control.nodes.viewer import ViewerNode
-            nodes.append(ViewerNode(context=context, parameter_overrides=params(
-                {'robot': str(robot.yaml_path), 'port': int(view_port)})))
+
+            nodes.append(
+                ViewerNode(
+                    context=context, parameter_overrides=params({'robot': str(robot.yaml_path), 'port': int(view_port)})
+                )
+            )
         for node in nodes:
             executor.add_node(node)
         limit = wall_timeout if wall_timeout is not None else 10.0 * scenario.duration + 30.0
@@ -248,15 +304,16 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
                 progress(recorder.last_t - reported)
                 reported = recorder.last_t
             if time.perf_counter() - start > limit:
-                raise ConfigError(f'run {run["name"]}: no progress after {limit:.0f} s wall time '
-                                  f'(sim time {recorder.last_t:.3f} s)')
+                raise ConfigError(
+                    f'run {run["name"]}: no progress after {limit:.0f} s wall time (sim time {recorder.last_t:.3f} s)'
+                )
         recorder.flush()
         if bag is not None:
             bag.close()
         log.wall_time_s = time.perf_counter() - start
         log.final_status = recorder.final_status
         log.first_stall_s = recorder.first_stall_s
-        log.sim_counters = {g: dict(c) for g, c in sim.world.counters.items()}   # what /diagnostics reports
+        log.sim_counters = {g: dict(c) for g, c in sim.world.counters.items()}  # what /diagnostics reports
     finally:
         for node in nodes:
             executor.remove_node(node)

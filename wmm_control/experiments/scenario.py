@@ -50,10 +50,13 @@ RUN_KEYS = ('name', 'method', 'feedback', 'plot')
 DEFAULT_RUNS = (
     {'name': 'pinv', 'method': 'pinv', 'feedback': 'ground_truth'},
     {'name': 'task_sharing', 'method': 'task_sharing', 'compensation': False, 'feedback': 'ground_truth'},
-    {'name': 'task_sharing_compensation', 'method': 'task_sharing', 'compensation': True,
-     'feedback': 'ground_truth'},
-    {'name': 'task_sharing_compensation_odometry', 'method': 'task_sharing', 'compensation': True,
-     'feedback': 'odometry'},
+    {'name': 'task_sharing_compensation', 'method': 'task_sharing', 'compensation': True, 'feedback': 'ground_truth'},
+    {
+        'name': 'task_sharing_compensation_odometry',
+        'method': 'task_sharing',
+        'compensation': True,
+        'feedback': 'odometry',
+    },
 )
 
 _PI_EXPR = re.compile(r'^\s*([+-]?\d*\.?\d*)\s*\*?\s*pi\s*(?:/\s*(\d+\.?\d*))?\s*$')
@@ -156,15 +159,23 @@ def load_scenario(name_or_path):
         raise ConfigError(f'{where}.obstacles: expected the name or path of an obstacle file, got {obstacles_file!r}')
     if obstacles_file.endswith(('.yaml', '.yml')) and not Path(obstacles_file).is_absolute():
         obstacles_file = str(path.parent / obstacles_file)
-    common = dict(name=str(raw.get('name', path.stem)), description=str(raw.get('description', '')),
-                  robot=str(raw.get('robot', 'steerable')), frame=str(raw.get('frame', 'world')),
-                  duration=duration, path=path, sim=sim, runs=runs, obstacles_file=obstacles_file,
-                  obstacles=load_obstacles(obstacles_file))
+    common = dict(
+        name=str(raw.get('name', path.stem)),
+        description=str(raw.get('description', '')),
+        robot=str(raw.get('robot', 'steerable')),
+        frame=str(raw.get('frame', 'world')),
+        duration=duration,
+        path=path,
+        sim=sim,
+        runs=runs,
+        obstacles_file=obstacles_file,
+        obstacles=load_obstacles(obstacles_file),
+    )
     if 'trajectory' in raw:
         if 'goals' in raw:
             raise ConfigError(f'{where}: give goals or a trajectory, not both')
         spec = raw['trajectory']
-        make_trajectory(spec, np.zeros(3), np.eye(3))        # checks the entry
+        make_trajectory(spec, np.zeros(3), np.eye(3))  # checks the entry
         return Scenario(goals=(), trajectory=dict(spec), **common)
     return Scenario(goals=_goals(raw.get('goals'), duration, where), **common)
 
@@ -183,8 +194,7 @@ def _goals(goals_raw, duration, where):
         starts.append(_number(g['t'], f'{w}.t'))
         poses.append(np.array([_number(v, f'{w}.pose[{k}]') for k, v in enumerate(pose)]))
     if any(b <= a for a, b in zip(starts, starts[1:])) or starts[0] < 0 or starts[-1] >= duration:
-        raise ConfigError(f'{where}.goals: start times must increase, from >= 0 to below the duration, '
-                          f'got {starts}')
+        raise ConfigError(f'{where}.goals: start times must increase, from >= 0 to below the duration, got {starts}')
     ends = starts[1:] + [duration]
     return tuple(Goal(t, e, p) for t, e, p in zip(starts, ends, poses))
 

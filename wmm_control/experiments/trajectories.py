@@ -27,9 +27,13 @@ _Y = np.array([0.0, 1.0, 0.0])
 def _circle(x0, r0, radius):
     def at(t):
         c, s = math.cos(OMEGA * t), math.sin(OMEGA * t)
-        return PoseTarget(x0 + radius * np.array([1.0 - c, -s, 0.0]), r0,
-                          velocity=radius * OMEGA * np.array([s, -c, 0.0, 0.0, 0.0, 0.0]),
-                          acceleration=radius * OMEGA ** 2 * np.array([c, s, 0.0, 0.0, 0.0, 0.0]))
+        return PoseTarget(
+            x0 + radius * np.array([1.0 - c, -s, 0.0]),
+            r0,
+            velocity=radius * OMEGA * np.array([s, -c, 0.0, 0.0, 0.0, 0.0]),
+            acceleration=radius * OMEGA**2 * np.array([c, s, 0.0, 0.0, 0.0, 0.0]),
+        )
+
     return at
 
 
@@ -38,8 +42,9 @@ def _pose(x0, r0, amplitude=0.15, angle=math.pi / 4):
         c, s = math.cos(OMEGA * t), math.sin(OMEGA * t)
         rot = pin.exp3(angle * s * _Y) @ r0
         vel = np.concatenate((amplitude * OMEGA * c * np.array([1.0, 0.0, 0.0]), angle * OMEGA * c * _Y))
-        acc = np.concatenate((-amplitude * OMEGA ** 2 * s * np.array([1.0, 0.0, 0.0]), -angle * OMEGA ** 2 * s * _Y))
+        acc = np.concatenate((-amplitude * OMEGA**2 * s * np.array([1.0, 0.0, 0.0]), -angle * OMEGA**2 * s * _Y))
         return PoseTarget(x0 + amplitude * s * np.array([1.0, 0.0, 0.0]), rot, velocity=vel, acceleration=acc)
+
     return at
 
 

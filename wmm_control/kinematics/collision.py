@@ -98,8 +98,7 @@ class CollisionModel:
         state's contacts left out."""
         return cls(robot.urdf_path, robot.arm.joints, robot.ground_z, robot.start.arm, margin, obstacles)
 
-    def __init__(self, urdf_path, arm_joints, ground_z=None, start_arm=None, margin: float = 0.02,
-                 obstacles=()):
+    def __init__(self, urdf_path, arm_joints, ground_z=None, start_arm=None, margin: float = 0.02, obstacles=()):
         path = str(urdf_path)
         try:
             self.model = pin.buildModelFromUrdf(path)
@@ -115,13 +114,13 @@ class CollisionModel:
         self._continuous = [model.joints[j].nq == 2 for j in arm_ids]
         self._idx_v = np.array([model.joints[j].idx_v for j in arm_ids])
         moving_joints = set(arm_ids)
-        for j in range(1, model.njoints):              # joints below an arm joint move with it
+        for j in range(1, model.njoints):  # joints below an arm joint move with it
             if model.parents[j] in moving_joints:
                 moving_joints.add(j)
         link_of = [model.frames[g.parentFrame].name for g in self.geom.geometryObjects]
         moving = [g.parentJoint in moving_joints for g in self.geom.geometryObjects]
 
-        def near(a, b):                                # b is a's parent link
+        def near(a, b):  # b is a's parent link
             return parent_link.get(a) == b
 
         pairs = []
@@ -132,22 +131,24 @@ class CollisionModel:
                     pairs.append((a, b))
         self._world_fixed = set()
         if ground_z is not None:
-            floor = pin.GeometryObject(FLOOR, 0, 0, pin.SE3(np.eye(3), np.array([0.0, 0.0, float(ground_z)])),
-                                       _halfspace())
+            floor = pin.GeometryObject(
+                FLOOR, 0, 0, pin.SE3(np.eye(3), np.array([0.0, 0.0, float(ground_z)])), _halfspace()
+            )
             floor_id = self.geom.addGeometryObject(floor)
             self._world_fixed.add(floor_id)
             link_of.append(FLOOR)
             pairs += [(a, floor_id) for a in range(len(moving)) if moving[a]]
         self._link_of = link_of
-        self._n_robot = len(moving)          # geometry objects of the robot's own links
+        self._n_robot = len(moving)  # geometry objects of the robot's own links
         self.data = model.createData()
         for a, b in pairs:
             self.geom.addCollisionPair(pin.CollisionPair(a, b))
         self.geom_data = pin.GeometryData(self.geom)
         start = self._distances(self._configuration(np.zeros(self.n_arm) if start_arm is None else start_arm))
         keep = [k for k, d in enumerate(start) if d >= margin]
-        self.excluded_at_start = [(link_of[pairs[k][0]], link_of[pairs[k][1]]) for k in range(len(pairs))
-                                  if k not in set(keep)]
+        self.excluded_at_start = [
+            (link_of[pairs[k][0]], link_of[pairs[k][1]]) for k in range(len(pairs)) if k not in set(keep)
+        ]
         self.geom.removeAllCollisionPairs()
         for k in keep:
             self.geom.addCollisionPair(pin.CollisionPair(*pairs[k]))
@@ -166,8 +167,9 @@ class CollisionModel:
         link_of = list(self._robot_link_of)
         self._obstacle_ids = []
         for obstacle in obstacles:
-            gid = geom.addGeometryObject(pin.GeometryObject(obstacle.name, 0, 0, obstacle.placement,
-                                                            obstacle.geometry()))
+            gid = geom.addGeometryObject(
+                pin.GeometryObject(obstacle.name, 0, 0, obstacle.placement, obstacle.geometry())
+            )
             self._obstacle_ids.append(gid)
             link_of.append(obstacle.name)
             for a in range(self._n_robot):
@@ -239,8 +241,9 @@ class CollisionModel:
         k = int(np.argmin(dists))
         return float(dists[k]), self._pair_links[k]
 
-    def within(self, q_arm, influence: float, base_pose=None) -> tuple[list[PairDistance], float,
-                                                                       tuple[str, str] | None]:
+    def within(
+        self, q_arm, influence: float, base_pose=None
+    ) -> tuple[list[PairDistance], float, tuple[str, str] | None]:
         """The pairs closer than ``influence`` [m] at ``q_arm`` (and base pose ``base_pose`` (x,
         y, θ), needed with obstacles), each with its rate Jacobians, and the closest pair's
         distance and names (``inf, None`` when no pair is checked)."""
@@ -257,26 +260,33 @@ class CollisionModel:
             return [], *closest
         results = self.geom_data.distanceResults
         points, normals = np.empty((2, near.size, 3)), np.empty((near.size, 3))
-        for i, k in enumerate(near.tolist()):          # each pair's nearest points, on a and on b
+        for i, k in enumerate(near.tolist()):  # each pair's nearest points, on a and on b
             result = results[k]
             points[0, i], points[1, i] = result.getNearestPoint1(), result.getNearestPoint2()
-            normals[i] = result.normal                  # coal's: from the first shape to the second
+            normals[i] = result.normal  # coal's: from the first shape to the second
         # ḋ = n · (v_b − v_a); a point p fixed to a joint moves at v = v₀ + ω × p, (v₀, ω) the
         # joint's spatial velocity in the root frame, so n · v = n · v₀ + (p × n) · ω
         pin.computeJointJacobians(model, data, q)
-        twists = data.J[:, self._idx_v]                 # (v₀, ω) per arm joint rate
+        twists = data.J[:, self._idx_v]  # (v₀, ω) per arm joint rate
         along = normals @ twists[:3] + np.cross(points, normals) @ twists[3:]
-        along *= self._moved_by[self._pair_joints[near].T]   # only the arm joints that move p
+        along *= self._moved_by[self._pair_joints[near].T]  # only the arm joints that move p
         rates = along[1] - along[0]
         # the base's twist (vx, vy, ω) moves a point p of the robot at (vx − ω p_y, vy + ω p_x, 0):
         # n · v = n_x vx + n_y vy + (p × n)_z ω; the floor and the obstacles stay put
-        sides = np.stack([np.column_stack((normals[:, 0], normals[:, 1],
-                                           points[i, :, 0] * normals[:, 1] - points[i, :, 1] * normals[:, 0]))
-                          for i in (0, 1)])
+        sides = np.stack(
+            [
+                np.column_stack(
+                    (normals[:, 0], normals[:, 1], points[i, :, 0] * normals[:, 1] - points[i, :, 1] * normals[:, 0])
+                )
+                for i in (0, 1)
+            ]
+        )
         sides *= self._pair_on_robot[near].T[:, :, None]
         base = (sides[1] - sides[0]) * self._pair_base_moves[near, None]
-        out = [PairDistance(float(dists[k]), self._pair_links[k], self._pair_shapes[k], j, b)
-               for k, j, b in zip(near.tolist(), rates, base)]
+        out = [
+            PairDistance(float(dists[k]), self._pair_links[k], self._pair_shapes[k], j, b)
+            for k, j, b in zip(near.tolist(), rates, base)
+        ]
         return out, *closest
 
 

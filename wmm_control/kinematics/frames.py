@@ -25,11 +25,21 @@ import numpy as np
 
 from wmm_control.errors import ConfigError, NonFiniteError
 from wmm_control.kinematics.orientation import (
-    quaternion_from_axis_angle, quaternion_from_matrix, quaternion_from_yaw, quaternion_multiply)
+    quaternion_from_axis_angle,
+    quaternion_from_matrix,
+    quaternion_from_yaw,
+    quaternion_multiply,
+)
 from wmm_control.urdf import UrdfJoint, UrdfTree, rotation_rpy
 
-__all__ = ['FrameTransform', 'JointTransforms', 'planar_transform', 'world_to_odom', 'quaternion_from_matrix',
-           'compose']
+__all__ = [
+    'FrameTransform',
+    'JointTransforms',
+    'planar_transform',
+    'world_to_odom',
+    'quaternion_from_matrix',
+    'compose',
+]
 
 
 @dataclass(frozen=True)
@@ -45,9 +55,11 @@ class FrameTransform:
         """The 4×4 homogeneous matrix of the transform."""
         x, y, z, w = self.quaternion
         out = np.eye(4)
-        out[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                       [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                       [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+        out[:3, :3] = [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
         out[:3, 3] = self.translation
         return out
 
@@ -59,8 +71,9 @@ def compose(first: FrameTransform, second: FrameTransform) -> FrameTransform:
         raise ValueError(f'cannot compose {first.parent}→{first.child} with {second.parent}→{second.child}')
     rot = first.matrix()[:3, :3]
     quat = quaternion_multiply(first.quaternion, second.quaternion)
-    return FrameTransform(first.parent, second.child, first.translation + rot @ second.translation,
-                          quat / np.linalg.norm(quat))
+    return FrameTransform(
+        first.parent, second.child, first.translation + rot @ second.translation, quat / np.linalg.norm(quat)
+    )
 
 
 def planar_transform(parent: str, child: str, pose) -> FrameTransform:
@@ -117,8 +130,9 @@ class JointTransforms:
                 moving[joint.name] = (joint, rot, quat, joint.axis / norm)
         for name, (joint, *_rest) in moving.items():
             if joint.mimic is not None and joint.mimic not in moving:
-                raise ConfigError(f'{tree.path.name}: joint {name!r} mimics {joint.mimic!r}, which is not a '
-                                  'moving joint of the URDF')
+                raise ConfigError(
+                    f'{tree.path.name}: joint {name!r} mimics {joint.mimic!r}, which is not a moving joint of the URDF'
+                )
         #: The fixed joints' transforms (constant: ``/tf_static``).
         self.fixed: tuple[FrameTransform, ...] = tuple(fixed)
         self._moving = moving
@@ -148,8 +162,14 @@ class JointTransforms:
             if joint.type == 'prismatic':
                 out.append(FrameTransform(joint.parent, joint.child, joint.xyz + rot @ (axis * q), quat))
             else:
-                out.append(FrameTransform(joint.parent, joint.child, joint.xyz.copy(),
-                                          quaternion_multiply(quat, quaternion_from_axis_angle(axis, q))))
+                out.append(
+                    FrameTransform(
+                        joint.parent,
+                        joint.child,
+                        joint.xyz.copy(),
+                        quaternion_multiply(quat, quaternion_from_axis_angle(axis, q)),
+                    )
+                )
         return out
 
     def link_poses(self, positions: Mapping[str, float]) -> dict[str, FrameTransform]:

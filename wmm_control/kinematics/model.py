@@ -41,11 +41,11 @@ N_BASE = 3
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _ROWS = {'position': slice(0, 3), 'full': slice(0, 6)}
 _EYE = {3: np.eye(3), 6: np.eye(6)}
-_PIVOT_ID = {3: np.arange(3), 6: np.arange(6)}    # dgesv's pivots when no rows swap
+_PIVOT_ID = {3: np.arange(3), 6: np.arange(6)}  # dgesv's pivots when no rows swap
 # (w @ _SKEW).reshape(3, 3) is the cross-product matrix [w]×, row by row: (−ε_abc w_c)_ab.
-_SKEW = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0],
-                  [0, 0, 1, 0, 0, 0, -1, 0, 0],
-                  [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float)
+_SKEW = np.array(
+    [[0, 0, 0, 0, 0, -1, 0, 1, 0], [0, 0, 1, 0, 0, 0, -1, 0, 0], [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float
+)
 
 
 def build_pinocchio_model(urdf_path):
@@ -79,7 +79,7 @@ def angles_to_pin_q(model, joint_angles):
             q[iq] = np.cos(joint_angles[iv])
             q[iq + 1] = np.sin(joint_angles[iv])
         else:
-            q[iq:iq + joint.nq] = joint_angles[iv:iv + joint.nv]
+            q[iq : iq + joint.nq] = joint_angles[iv : iv + joint.nv]
     return q
 
 
@@ -98,8 +98,9 @@ class KinematicModel:
 
     def __init__(self, robot='steerable', ee_frame=None):
         self.config = robot if isinstance(robot, RobotConfig) else load_robot(robot)
-        self._build(self.config.urdf_path, self.config.arm.joints, ee_frame or self.config.ee_frame,
-                    self.config.base_link)
+        self._build(
+            self.config.urdf_path, self.config.arm.joints, ee_frame or self.config.ee_frame, self.config.base_link
+        )
 
     @classmethod
     def from_urdf(cls, urdf_path, arm_joints, ee_frame, base_link='base_link'):
@@ -120,14 +121,14 @@ class KinematicModel:
         missing = [n for n in arm_names if not self.full_model.existJointName(n)]
         if missing:
             raise ConfigError(f'arm joints {missing} are not in {Path(urdf_path).name}')
-        locked = [self.full_model.getJointId(n) for n in self.full_model.names[1:]
-                  if n not in arm_names and n != 'root_joint']
+        locked = [
+            self.full_model.getJointId(n) for n in self.full_model.names[1:] if n not in arm_names and n != 'root_joint'
+        ]
         self.model = pin.buildReducedModel(self.full_model, locked, pin.neutral(self.full_model))
         self.data = self.model.createData()
         names = list(self.model.names[2:])
         if names != list(arm_names):
-            raise ConfigError(f'arm joints must form one chain in the order {list(arm_names)}, '
-                              f'the URDF gives {names}')
+            raise ConfigError(f'arm joints must form one chain in the order {list(arm_names)}, the URDF gives {names}')
         for jid in range(2, self.model.njoints):
             if self.model.joints[jid].nv != 1:
                 raise ConfigError(f'arm joint {self.model.names[jid]} is not a 1-DOF joint')
@@ -149,7 +150,7 @@ class KinematicModel:
         self._valid = False
         self._jac = np.zeros((6, self.nv))
         self._manip_cache = {}
-        self._upper = np.triu(np.ones((self.n_arm, self.n_arm)))          # [k ≤ i]
+        self._upper = np.triu(np.ones((self.n_arm, self.n_arm)))  # [k ≤ i]
         self._strict_upper = np.triu(np.ones((self.n_arm, self.n_arm)), 1)
         self._sym_weight = 2.0 * self._strict_upper + np.eye(self.n_arm)
 
@@ -405,7 +406,7 @@ class KinematicModel:
             return cached
         nr = _rows(rows).stop
         n = self.n_arm
-        jac = self._jac[:, N_BASE:]                       # (6, n): v rows, then w rows
+        jac = self._jac[:, N_BASE:]  # (6, n): v rows, then w rows
         jm = jac[:nr]
         v, w = jac[:3], jac[3:]
         wt = w.T
@@ -424,12 +425,12 @@ class KinematicModel:
             h = -h
         p = minv @ jm
         # ∂J_m/∂q_k as dj[k] (nr, n); z[k, :, i] = w_k × v_i (and × w_i for all six rows).
-        skew = (wt @ _SKEW).reshape(n, 3, 3)              # [w_k]×
-        upper = self._upper[:, None, :]                   # [k ≤ i]
+        skew = (wt @ _SKEW).reshape(n, 3, 3)  # [w_k]×
+        upper = self._upper[:, None, :]  # [k ≤ i]
         if nr == 3:
             z = skew @ v
             dj = np.where(upper > 0, z, z.transpose(2, 1, 0))
-            outer = p.T[:, :, None] * v.T[:, None, :]     # a_i v_iᵀ
+            outer = p.T[:, :, None] * v.T[:, None, :]  # a_i v_iᵀ
         else:
             z = skew[:, None] @ jac.reshape(2, 3, n)
             dj = np.empty((n, 2, 3, n))
@@ -439,14 +440,14 @@ class KinematicModel:
             outer = p.reshape(2, 3, n).transpose(2, 1, 0) @ jac.reshape(2, 3, n).transpose(2, 0, 1)
         djf = dj.reshape(n, -1)
         g = 2.0 * (djf @ p.ravel())
-        y = minv @ dj                                     # M⁻¹ ∂J_k
-        half_b = y.reshape(n, -1) @ djf.T                # B / 2
-        mdm = y @ jm.T + p @ dj.transpose(0, 2, 1)        # M⁻¹ ∂M_k
+        y = minv @ dj  # M⁻¹ ∂J_k
+        half_b = y.reshape(n, -1) @ djf.T  # B / 2
+        mdm = y @ jm.T + p @ dj.transpose(0, 2, 1)  # M⁻¹ ∂M_k
         c = mdm.reshape(n, -1) @ mdm.transpose(0, 2, 1).reshape(n, -1).T
         # A, upper triangle (l ≤ k) of A / 2, terms in the order of the docstring.
         s_k = outer[::-1].cumsum(0)[::-1]
         a_v = p[:3]
-        aw = a_v.T[:, :, None] * wt[:, None, :]           # a_i w_iᵀ
+        aw = a_v.T[:, :, None] * wt[:, None, :]  # a_i w_iᵀ
         r_l = aw.cumsum(0) - aw
         c_l = r_l.trace(axis1=1, axis2=2)
         ww = wt @ w
@@ -454,7 +455,7 @@ class KinematicModel:
         half += (wt @ v) * (c_l - c_l[:, None])
         half += (wt[:, None, :] @ r_l)[:, 0, :] @ v
         half -= ww @ ((a_v.T @ v) * self._strict_upper)
-        half *= self._sym_weight                          # 2 above the diagonal, 1 on it
+        half *= self._sym_weight  # 2 above the diagonal, 1 on it
         # T = that weighted triangle + (B − C) / 2: ∇²H = H (g gᵀ + T + Tᵀ), symmetric to the bit.
         half += half_b
         c *= 0.5
@@ -471,7 +472,7 @@ def _checked(value, size, name):
     """Fast path of :func:`as_finite_vector` for the per-cycle update."""
     arr = np.asarray(value, dtype=float)
     if arr.shape != (size,) or not np.isfinite(arr).all():
-        return as_finite_vector(arr, size, name)   # raises the detailed error
+        return as_finite_vector(arr, size, name)  # raises the detailed error
     return arr
 
 

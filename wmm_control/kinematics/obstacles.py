@@ -36,7 +36,15 @@ from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
 from wmm_control.robot_config import read_yaml
 
-__all__ = ['Obstacle', 'SHAPES', 'around_base', 'load_goal_region', 'load_obstacles', 'obstacle_file', 'parse_obstacles']
+__all__ = [
+    'Obstacle',
+    'SHAPES',
+    'around_base',
+    'load_goal_region',
+    'load_obstacles',
+    'obstacle_file',
+    'parse_obstacles',
+]
 
 #: The shapes an obstacle may have, with the number of ``size`` entries of each.
 SHAPES = {'box': 3, 'sphere': 1, 'cylinder': 2}
@@ -64,11 +72,13 @@ class Obstacle:
         if self.shape not in SHAPES:
             raise ConfigError(f'obstacle {self.name!r}: shape must be one of {sorted(SHAPES)}, got {self.shape!r}')
         if len(self.size) != SHAPES[self.shape]:
-            raise ConfigError(f'obstacle {self.name!r}: a {self.shape} takes {SHAPES[self.shape]} size entries, '
-                              f'got {list(self.size)}')
+            raise ConfigError(
+                f'obstacle {self.name!r}: a {self.shape} takes {SHAPES[self.shape]} size entries, got {list(self.size)}'
+            )
         if not all(math.isfinite(v) and v > 0.0 for v in self.size):
-            raise ConfigError(f'obstacle {self.name!r}: every size entry must be finite and > 0 [m], '
-                              f'got {list(self.size)}')
+            raise ConfigError(
+                f'obstacle {self.name!r}: every size entry must be finite and > 0 [m], got {list(self.size)}'
+            )
         position = np.asarray(self.position, dtype=float)
         rotation = np.asarray(self.rotation, dtype=float)
         if position.shape != (3,) or not np.all(np.isfinite(position)):
@@ -151,8 +161,7 @@ def parse_obstacles(entries, where: str) -> tuple[Obstacle, ...]:
 
 
 def _numbers(value, sizes, where):
-    if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                              for v in value):
+    if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
         raise ConfigError(f'{where}: expected a list of numbers, got {value!r}')
     if sizes is not None and len(value) not in sizes:
         raise ConfigError(f'{where}: expected {" or ".join(map(str, sizes))} numbers, got {len(value)}')

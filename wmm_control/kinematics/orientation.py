@@ -13,9 +13,19 @@ import pinocchio as pin
 from wmm_control.checks import as_finite_vector
 
 __all__ = [
-    'wrap_angle', 'rpy_from_matrix', 'matrix_from_rpy', 'omega_rpy', 'rpy_rate_map',
-    'pose_error_rpy', 'pose_error_log', 'quaternion_from_matrix', 'matrix_from_quaternion',
-    'quaternion_multiply', 'quaternion_from_axis_angle', 'quaternion_from_yaw', 'yaw_from_quaternion',
+    'wrap_angle',
+    'rpy_from_matrix',
+    'matrix_from_rpy',
+    'omega_rpy',
+    'rpy_rate_map',
+    'pose_error_rpy',
+    'pose_error_log',
+    'quaternion_from_matrix',
+    'matrix_from_quaternion',
+    'quaternion_multiply',
+    'quaternion_from_axis_angle',
+    'quaternion_from_yaw',
+    'yaw_from_quaternion',
     'unit_quaternion',
 ]
 
@@ -93,7 +103,8 @@ def pose_error_log(desired_pos, desired_rot, current_pos, current_rot):
     """
     err = np.empty(6)
     err[:3] = as_finite_vector(desired_pos, 3, 'desired position') - as_finite_vector(
-        current_pos, 3, 'current position')
+        current_pos, 3, 'current position'
+    )
     err[3:] = pin.log3(np.asarray(desired_rot, dtype=float) @ np.asarray(current_rot, dtype=float).T)
     return err
 

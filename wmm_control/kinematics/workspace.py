@@ -18,7 +18,7 @@ import pinocchio as pin
 
 __all__ = ['Workspace']
 
-_ROOT_JOINT = 1           # the planar base joint of the kinematic model
+_ROOT_JOINT = 1  # the planar base joint of the kinematic model
 
 
 def _half_extents(geometry):

@@ -71,7 +71,13 @@ from wmm_control.nodes.conversions import float_array, twist_stamped
 from wmm_control.nodes.diagnostics import diagnostic_array, node_status
 from wmm_control.nodes.inputs import BaseReference, JointSelector, JointStateWatchdog
 from wmm_control.nodes.parameters import (
-    Param, declare_parameters, max_state_wait_param, require_base, robot_param, robot_period)
+    Param,
+    declare_parameters,
+    max_state_wait_param,
+    require_base,
+    robot_param,
+    robot_period,
+)
 from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
 from wmm_control.nodes.runner import guard_clock
 from wmm_control.nodes.stamps import StampedExchange, seconds
@@ -80,36 +86,64 @@ from wmm_control.robot_config import load_robot
 __all__ = ['BaseControllerNode', 'NODE_NAMES', 'STEERABLE_PARAMS', 'WHEEL_PARAMS']
 
 #: The node (and executable) name of each base family.
-NODE_NAMES = {'steerable': 'swmr_controller', 'mecanum': 'mecanum_controller',
-              'differential': 'differential_controller'}
+NODE_NAMES = {
+    'steerable': 'swmr_controller',
+    'mecanum': 'mecanum_controller',
+    'differential': 'differential_controller',
+}
 
 #: The steerable controller's gains (Sorour Table I), its only parameters of its own.
-GAINS = (Param('kp', 'Gain K_p of the twist controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
-         Param('icr_gain', 'Gain λ of the ICR P-controller [1/s].', lo=1e-3, hi=40.0, read_only=True))
+GAINS = (
+    Param('kp', 'Gain K_p of the twist controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
+    Param('icr_gain', 'Gain λ of the ICR P-controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
+)
 
 
 def _params(robot_help, gains=()):
     return (
         robot_param(robot_help),
-        Param('period', 'Control period t_s [s]; default: the robot YAML\'s period.', lo=1e-3, hi=1.0,
-              read_only=True, default_from=robot_period),
+        Param(
+            'period',
+            'Control period t_s [s]; default: the robot YAML\'s period.',
+            lo=1e-3,
+            hi=1.0,
+            read_only=True,
+            default_from=robot_period,
+        ),
         *gains,
         Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
-        Param('reference_timeout', 'Reference age [s] (this node\'s clock at receipt) after which the base brakes '
-              'to rest.', lo=1e-3, hi=60.0),
-        Param('reference_wait', 'Steady time [s] a joint state waits for its reference.', lo=0.0, hi=1.0, read_only=True),
-        Param('joint_state_timeout', 'Joint-state age [s] (steady clock) after which zero rates are commanded.',
-              lo=1e-3, hi=60.0),
+        Param(
+            'reference_timeout',
+            'Reference age [s] (this node\'s clock at receipt) after which the base brakes to rest.',
+            lo=1e-3,
+            hi=60.0,
+        ),
+        Param(
+            'reference_wait', 'Steady time [s] a joint state waits for its reference.', lo=0.0, hi=1.0, read_only=True
+        ),
+        Param(
+            'joint_state_timeout',
+            'Joint-state age [s] (steady clock) after which zero rates are commanded.',
+            lo=1e-3,
+            hi=60.0,
+        ),
         max_state_wait_param(),
-        Param('applied_rate_tolerance', 'Largest difference [rad/s] between the rates of a joint state and the '
-              'last command under which that command counts as applied; beyond it the controller restarts from '
-              'the measured state. 0: never.', lo=0.0, hi=100.0, read_only=True),
+        Param(
+            'applied_rate_tolerance',
+            'Largest difference [rad/s] between the rates of a joint state and the '
+            'last command under which that command counts as applied; beyond it the controller restarts from '
+            'the measured state. 0: never.',
+            lo=0.0,
+            hi=100.0,
+            read_only=True,
+        ),
         Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
     )
 
 
-STEERABLE_PARAMS = _params('A robot with a steerable base (A, Sorour). Geometry, joints and limits come from its '
-                           'YAML.', GAINS)
+STEERABLE_PARAMS = _params(
+    'A robot with a steerable base (A, Sorour). Geometry, joints and limits come from its YAML.', GAINS
+)
 WHEEL_PARAMS = _params('A robot with a Mecanum or differential base. Geometry and limits come from its description.')
 
 
@@ -127,10 +161,16 @@ class BaseControllerNode(Node):
         guard_clock(self)
         self.family = family
         specs = STEERABLE_PARAMS if family == 'steerable' else WHEEL_PARAMS
-        p = declare_parameters(self, f'{name}.yaml', specs, on_change={
-            'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
-            'joint_state_timeout': lambda v: self.watchdog.set_timeout(v),
-            'max_state_wait': lambda v: setattr(self.watchdog, 'max_wait', float(v))})
+        p = declare_parameters(
+            self,
+            f'{name}.yaml',
+            specs,
+            on_change={
+                'reference_timeout': lambda v: setattr(self.reference.freshness, 'timeout', v),
+                'joint_state_timeout': lambda v: self.watchdog.set_timeout(v),
+                'max_state_wait': lambda v: setattr(self.watchdog, 'max_wait', float(v)),
+            },
+        )
         self.p = p
         robot = load_robot(p.robot)
         require_base(robot, (family,), name)
@@ -138,24 +178,36 @@ class BaseControllerNode(Node):
         self.base = make_base_controller(robot, p.period, **gains)
         self.controller = self.base.controller
         self.groups = tuple(self.base.command_groups)
-        self.selectors = {g: JointSelector(joints, velocity_limits=self.base.rate_limits[g])
-                          for g, joints in self.base.command_groups.items()}
+        self.selectors = {
+            g: JointSelector(joints, velocity_limits=self.base.rate_limits[g])
+            for g, joints in self.base.command_groups.items()
+        }
         self.reference = BaseReference(self, p.base_frame, p.reference_timeout, self.base.velocity_limit)
         self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0, 'commands_not_applied': 0}
-        self._last = None            # the last command's rates, all groups in a row
+        self._last = None  # the last command's rates, all groups in a row
         self._next_diag = 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.pub_commands = {g: self.create_publisher(Float64MultiArray, f'{g}_controller/commands', COMMAND_QOS)
-                             for g in self.groups}
+        self.pub_commands = {
+            g: self.create_publisher(Float64MultiArray, f'{g}_controller/commands', COMMAND_QOS) for g in self.groups
+        }
         self.pub_feasible = self.create_publisher(TwistStamped, 'base/feasible_twist', COMMAND_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         # One cycle per joint state, run with the reference of the same stamp (see the module doc).
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
-        then = 'restart from the measured wheel rates' if self.base.resync_from_rates else \
-            'resync from the measured angles'
-        self.watchdog = JointStateWatchdog(self, p.joint_state_timeout, p.period, steady, self._zero_rates,
-                                           f'zero {" and ".join(self.groups)} rates; will {then}',
-                                           max_wait=p.max_state_wait)
+        then = (
+            'restart from the measured wheel rates'
+            if self.base.resync_from_rates
+            else 'resync from the measured angles'
+        )
+        self.watchdog = JointStateWatchdog(
+            self,
+            p.joint_state_timeout,
+            p.period,
+            steady,
+            self._zero_rates,
+            f'zero {" and ".join(self.groups)} rates; will {then}',
+            max_wait=p.max_state_wait,
+        )
         self.create_subscription(TwistStamped, 'base/reference', self._on_reference, COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         self.get_logger().info(f'{family} base controller, robot {robot.name}: {self.base.describe()}')
@@ -175,8 +227,7 @@ class BaseControllerNode(Node):
             if q is None:
                 if group in self.base.required_groups:
                     self.counters['joint_states_rejected'] += 1
-                    self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped',
-                                           throttle_duration_sec=1.0)
+                    self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped', throttle_duration_sec=1.0)
                     return None
                 rates = None
                 continue
@@ -209,13 +260,16 @@ class BaseControllerNode(Node):
             self.counters['stale_cycles'] += 1
         command = self.base.step(reference, positions)
         if command.status == 'solver_failure':
-            self.get_logger().error(f'ICR QP failed ({command.detail.qp_status}): steering held, drive ramping down',
-                                    throttle_duration_sec=1.0)
+            self.get_logger().error(
+                f'ICR QP failed ({command.detail.qp_status}): steering held, drive ramping down',
+                throttle_duration_sec=1.0,
+            )
         out = {g: command.rates[g] for g in self.groups}
         twist = command.feasible_twist
-        if not all(np.all(np.isfinite(v)) for v in (twist, *out.values())):   # cannot happen: never publish it
-            self.get_logger().error(f'non-finite command {[v.tolist() for v in out.values()]}: zero rates',
-                                    throttle_duration_sec=1.0)
+        if not all(np.all(np.isfinite(v)) for v in (twist, *out.values())):  # cannot happen: never publish it
+            self.get_logger().error(
+                f'non-finite command {[v.tolist() for v in out.values()]}: zero rates', throttle_duration_sec=1.0
+            )
             self.base.reset(positions)
             out, twist = {g: np.zeros(len(v)) for g, v in out.items()}, np.zeros(3)
         self.counters['cycles'] += 1
@@ -230,12 +284,15 @@ class BaseControllerNode(Node):
 
     def _restart_unless_applied(self, positions, rates):
         """Restart from the measured state when the rates applied are not the last command's."""
-        why = unapplied_command(np.concatenate([rates[g] for g in self.groups]), self._last,
-                                self.p.applied_rate_tolerance)
+        why = unapplied_command(
+            np.concatenate([rates[g] for g in self.groups]), self._last, self.p.applied_rate_tolerance
+        )
         if why:
             self.counters['commands_not_applied'] += 1
-            self.get_logger().warn(f'last {"/".join(self.groups)} command: {why}; restarting from the measured state',
-                                   throttle_duration_sec=1.0)
+            self.get_logger().warn(
+                f'last {"/".join(self.groups)} command: {why}; restarting from the measured state',
+                throttle_duration_sec=1.0,
+            )
             self.base.reset(positions, rates)
 
     def _zero_rates(self):
@@ -245,10 +302,16 @@ class BaseControllerNode(Node):
     def _diagnostics(self, stamp, command, twist, now):
         ref = self.reference
         status = command.status
-        level = ('error' if status == 'solver_failure'
-                 else 'warn' if status == 'braking' and np.any(ref.value) else 'ok')
-        values = {'status': status, **self.base.diagnostic_values(command), 'feasible_twist': twist,
-                  'reference': ref.value, 'reference_age_s': ref.freshness.age(now),
-                  'references_rejected': ref.rejected, 'joint_states_skipped': self.watchdog.skipped,
-                  'measured_period_s': self.watchdog.stamps.measured_period, **self.counters}
+        level = 'error' if status == 'solver_failure' else 'warn' if status == 'braking' and np.any(ref.value) else 'ok'
+        values = {
+            'status': status,
+            **self.base.diagnostic_values(command),
+            'feasible_twist': twist,
+            'reference': ref.value,
+            'reference_age_s': ref.freshness.age(now),
+            'references_rejected': ref.rejected,
+            'joint_states_skipped': self.watchdog.skipped,
+            'measured_period_s': self.watchdog.stamps.measured_period,
+            **self.counters,
+        }
         return diagnostic_array(stamp, [node_status(self, '', f'{self.family} base', level, status, values)])

@@ -14,9 +14,22 @@ from geometry_msgs.msg import TwistStamped
 from std_msgs.msg import Float64MultiArray
 
 __all__ = [
-    'pose_values', 'set_pose', 'set_quaternion', 'set_rotation', 'pose_rotation', 'odometry_values',
-    'odometry_pose', 'set_planar_pose', 'twist_values', 'set_twist', 'planar_twist', 'set_planar_twist', 'twist_stamped', 'float_array',
-    'parse_command', 'parse_base_reference',
+    'pose_values',
+    'set_pose',
+    'set_quaternion',
+    'set_rotation',
+    'pose_rotation',
+    'odometry_values',
+    'odometry_pose',
+    'set_planar_pose',
+    'twist_values',
+    'set_twist',
+    'planar_twist',
+    'set_planar_twist',
+    'twist_stamped',
+    'float_array',
+    'parse_command',
+    'parse_base_reference',
 ]
 
 
@@ -31,6 +44,7 @@ def pose_rotation(pose) -> tuple[np.ndarray, np.ndarray]:
     """(position (3,), rotation (3, 3)) of a ``geometry_msgs/Pose`` or ``Transform`` (the
     quaternion normalised)."""
     from wmm_control.kinematics.orientation import matrix_from_quaternion
+
     values = pose_values(pose)
     return values[:3], matrix_from_quaternion(values[3:])
 
@@ -43,6 +57,7 @@ def set_quaternion(orientation, quat) -> None:
 def set_rotation(orientation, rotation) -> None:
     """Write the quaternion of a rotation matrix into a ``geometry_msgs/Quaternion``."""
     from wmm_control.kinematics.orientation import quaternion_from_matrix
+
     set_quaternion(orientation, quaternion_from_matrix(rotation))
 
 
@@ -66,6 +81,7 @@ def odometry_values(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def odometry_pose(msg) -> tuple[np.ndarray, np.ndarray]:
     """(planar pose (x, y, θ), planar twist (vx, vy, ω)) of a ``nav_msgs/Odometry``."""
     from wmm_control.kinematics.orientation import yaw_from_quaternion
+
     xy, quat, twist = odometry_values(msg)
     return np.array([xy[0], xy[1], yaw_from_quaternion(quat)]), twist
 
@@ -73,20 +89,23 @@ def odometry_pose(msg) -> tuple[np.ndarray, np.ndarray]:
 def set_planar_pose(pose, planar) -> None:
     """Write a planar pose (x, y, θ) into a ``geometry_msgs/Pose`` (z = 0)."""
     from wmm_control.kinematics.orientation import quaternion_from_yaw
+
     x, y, th = (float(v) for v in planar)
     set_pose(pose, (x, y, 0.0), quaternion_from_yaw(th))
 
 
 def twist_values(twist) -> np.ndarray:
     """(linear, angular) of a ``geometry_msgs/Twist`` (or ``Accel``). Shape (6,)."""
-    return np.array([twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y,
-                     twist.angular.z], dtype=float)
+    return np.array(
+        [twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z], dtype=float
+    )
 
 
 def set_twist(twist, values) -> None:
     """Write (linear, angular) into a ``geometry_msgs/Twist`` (or ``Accel``)."""
-    (twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y,
-     twist.angular.z) = (float(v) for v in values)
+    (twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z) = (
+        float(v) for v in values
+    )
 
 
 def planar_twist(twist) -> np.ndarray:

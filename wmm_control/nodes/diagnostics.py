@@ -10,8 +10,7 @@ __all__ = ['diagnostic_status', 'node_status', 'diagnostic_array']
 def diagnostic_status(name, hardware_id, level, message, values):
     """A ``DiagnosticStatus``; ``level`` is 'ok', 'warn' or 'error'; values become KeyValues."""
     status = DiagnosticStatus()
-    status.level = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
-                    'error': DiagnosticStatus.ERROR}[level]
+    status.level = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN, 'error': DiagnosticStatus.ERROR}[level]
     status.name = name
     status.hardware_id = hardware_id
     status.message = message
@@ -19,8 +18,9 @@ def diagnostic_status(name, hardware_id, level, message, values):
     return status
 
 
-def node_status(node: 'rclpy.node.Node', part: str, robot_name: str, level: str, message: str,
-                values: dict) -> DiagnosticStatus:
+def node_status(
+    node: 'rclpy.node.Node', part: str, robot_name: str, level: str, message: str, values: dict
+) -> DiagnosticStatus:
     """A ``DiagnosticStatus`` of ``node`` that says which node sent it.
 
     Its name is the node's fully qualified name, followed by ``: <part>`` when ``part`` is
@@ -36,8 +36,7 @@ def _kv(value):
     if isinstance(value, float):
         return f'{value:.9g}'
     if isinstance(value, (list, tuple, np.ndarray)):
-        return '[' + ', '.join(_kv(float(v)) if isinstance(v, (float, np.floating)) else str(v)
-                               for v in value) + ']'
+        return '[' + ', '.join(_kv(float(v)) if isinstance(v, (float, np.floating)) else str(v) for v in value) + ']'
     return str(value)
 
 

@@ -40,13 +40,11 @@ from wmm_control.nodes.runner import guard_clock, run_node
 
 __all__ = ['GoalSequencerNode', 'main']
 
-MAX_CLOCK_STEP = 10.0     # [s] a larger step of the clock between two checks is reported
+MAX_CLOCK_STEP = 10.0  # [s] a larger step of the clock between two checks is reported
 
 PARAMS = (
-    Param('scenario', 'Scenario name (config/scenarios/<name>.yaml) or a path to a scenario file.',
-          read_only=True),
-    Param('republish_period', 'Time [s] between re-publications of the goal in force; 0 = never.',
-          lo=0.0, hi=3600.0),
+    Param('scenario', 'Scenario name (config/scenarios/<name>.yaml) or a path to a scenario file.', read_only=True),
+    Param('republish_period', 'Time [s] between re-publications of the goal in force; 0 = never.', lo=0.0, hi=3600.0),
 )
 
 
@@ -106,45 +104,60 @@ class GoalSequencerNode(Node):
         if self._sim_time:
             self.create_subscription(ClockMsg, '/clock', self._on_clock, CLOCK_QOS)
         self.create_timer(0.01, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        what = (f'trajectory {self.scenario.trajectory} on /ee_reference' if self._trajectory is not None
-                else f'{len(self.scenario.goals)} goals on /goal_pose')
-        self.get_logger().info(f'scenario {self.scenario.name}: {what} over {self.scenario.duration} s '
-                               f'({"sim" if self._sim_time else "wall"} time)')
+        what = (
+            f'trajectory {self.scenario.trajectory} on /ee_reference'
+            if self._trajectory is not None
+            else f'{len(self.scenario.goals)} goals on /goal_pose'
+        )
+        self.get_logger().info(
+            f'scenario {self.scenario.name}: {what} over {self.scenario.duration} s '
+            f'({"sim" if self._sim_time else "wall"} time)'
+        )
 
     def _on_clock(self, msg):
         if msg.clock.sec < 0:
-            return              # not a time: dropped and logged (guard_clock)
+            return  # not a time: dropped and logged (guard_clock)
         self._check(msg.clock.sec + msg.clock.nanosec * 1e-9, msg.clock)
 
     def _tick(self):
         if self._sim_time:
-            return             # on sim time every /clock message drives the timeline
+            return  # on sim time every /clock message drives the timeline
         now = self.get_clock().now()
         self._check(now.nanoseconds * 1e-9, now.to_msg())
 
     def _check(self, t, stamp):
         if self._last_t is not None and t < self._last_t:
-            self.get_logger().warn(f'clock went back from {self._last_t:.6g} s to {t:.6g} s (simulator restarted?): '
-                                   'the scenario starts again', throttle_duration_sec=1.0)
+            self.get_logger().warn(
+                f'clock went back from {self._last_t:.6g} s to {t:.6g} s (simulator restarted?): '
+                'the scenario starts again',
+                throttle_duration_sec=1.0,
+            )
             self._t0, self._index, self._last_pub = None, -1, -math.inf
         elif self._last_t is not None and t - self._last_t > MAX_CLOCK_STEP:
-            self.get_logger().warn(f'clock jumped {t - self._last_t:.6g} s ahead in one step: the scenario '
-                                   'skips to that time', throttle_duration_sec=1.0)
+            self.get_logger().warn(
+                f'clock jumped {t - self._last_t:.6g} s ahead in one step: the scenario skips to that time',
+                throttle_duration_sec=1.0,
+            )
         self._last_t = t
         if self._t0 is None:
             self._t0 = t
         elapsed = t - self._t0
         if self._trajectory is not None:
-            self.pub_ref.publish(reference_message(self._trajectory(min(elapsed, self.scenario.duration)),
-                                                   self.scenario.frame, stamp, elapsed))
+            self.pub_ref.publish(
+                reference_message(
+                    self._trajectory(min(elapsed, self.scenario.duration)), self.scenario.frame, stamp, elapsed
+                )
+            )
             self.published += 1
             return
         index = self.scenario.goal_index(elapsed)
         period = self.p.republish_period
         if index != self._index or (period > 0 and t - self._last_pub >= period):
             if index != self._index:
-                self.get_logger().info(f'goal {index + 1}/{len(self.scenario.goals)} at t = {elapsed:.3f} s: '
-                                       f'{self.scenario.goals[index].pose.round(4).tolist()}')
+                self.get_logger().info(
+                    f'goal {index + 1}/{len(self.scenario.goals)} at t = {elapsed:.3f} s: '
+                    f'{self.scenario.goals[index].pose.round(4).tolist()}'
+                )
             self._index = index
             self._last_pub = t
             self.pub.publish(goal_message(self.scenario.goals[index], self.scenario.frame, stamp))

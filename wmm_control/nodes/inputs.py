@@ -27,18 +27,26 @@ class JointSelector:
     """
 
     PLAUSIBLE_FACTOR = 10.0
-    POSITION_MARGIN = 0.5       # [rad]
-    MAX_POSITION = 1e9          # [rad] no joint angle is larger (a wheel at 12 rad/s needs 2.6 years)
+    POSITION_MARGIN = 0.5  # [rad]
+    MAX_POSITION = 1e9  # [rad] no joint angle is larger (a wheel at 12 rad/s needs 2.6 years)
 
     def __init__(self, joints, cache_size=16, velocity_limits=None, position_limits=None):
         self.joints = tuple(joints)
         self._cache = {}
         self._cache_size = cache_size
-        self._max_rate = None if velocity_limits is None else \
-            self.PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), len(self.joints))
-        self._bounds = None if position_limits is None else (
-            np.asarray(position_limits[0], dtype=float) - self.POSITION_MARGIN,
-            np.asarray(position_limits[1], dtype=float) + self.POSITION_MARGIN)
+        self._max_rate = (
+            None
+            if velocity_limits is None
+            else self.PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), len(self.joints))
+        )
+        self._bounds = (
+            None
+            if position_limits is None
+            else (
+                np.asarray(position_limits[0], dtype=float) - self.POSITION_MARGIN,
+                np.asarray(position_limits[1], dtype=float) + self.POSITION_MARGIN,
+            )
+        )
 
     def _layout(self, names):
         where = {}
@@ -87,14 +95,16 @@ class JointSelector:
             return None, None, f'with non-finite values: positions {q.tolist()}, velocities {dq.tolist()}'
         if self._max_rate is not None and np.any(np.abs(dq) > self._max_rate):
             bad = [self.joints[i] for i in np.flatnonzero(np.abs(dq) > self._max_rate)]
-            return None, None, (f'with rates of {bad} beyond {self.PLAUSIBLE_FACTOR:g} times their limits '
-                                f'(a measurement glitch?)')
+            return (
+                None,
+                None,
+                (f'with rates of {bad} beyond {self.PLAUSIBLE_FACTOR:g} times their limits (a measurement glitch?)'),
+            )
         if np.any(np.abs(q) > self.MAX_POSITION):
             return None, None, f'with positions beyond {self.MAX_POSITION:g} rad: not joint angles'
         if self._bounds is not None and (np.any(q < self._bounds[0]) or np.any(q > self._bounds[1])):
             bad = [self.joints[i] for i in np.flatnonzero((q < self._bounds[0]) | (q > self._bounds[1]))]
-            return None, None, (f'with positions of {bad} more than {self.POSITION_MARGIN} rad beyond '
-                                'their limits')
+            return None, None, (f'with positions of {bad} more than {self.POSITION_MARGIN} rad beyond their limits')
         return q, dq, ''
 
 
@@ -131,8 +141,11 @@ class BaseReference:
         if reason:
             logger.warn(f'/base/reference: {reason}', throttle_duration_sec=10.0)
         if self._limit is not None and np.any(np.abs(ref) > self._limit):
-            logger.warn(f'/base/reference {ref.tolist()} is beyond the velocity limits {self._limit.tolist()}: '
-                        'scaled into them', throttle_duration_sec=1.0)
+            logger.warn(
+                f'/base/reference {ref.tolist()} is beyond the velocity limits {self._limit.tolist()}: '
+                'scaled into them',
+                throttle_duration_sec=1.0,
+            )
         self.value = ref
         self.freshness.mark(seconds(self._node.get_clock()))
         self._stale_logged = False
@@ -189,7 +202,7 @@ class JointStateWatchdog:
         self.stamps = StampGate(period, max_jump=self._max_jump(timeout))
         self.skipped = 0
         self.need_resync = True
-        self._offsets = deque(maxlen=DELIVERY_WINDOW)   # receipt − stamp [ns] of the last joint states
+        self._offsets = deque(maxlen=DELIVERY_WINDOW)  # receipt − stamp [ns] of the last joint states
         self.timer = node.create_timer(period, self._check, clock=clock)
 
     def _max_jump(self, timeout):
@@ -211,7 +224,9 @@ class JointStateWatchdog:
         self.skipped += 1
         self._node.get_logger().warn(
             f'/{self._topic} waited {wait:.3g} s in this node, beyond max_state_wait {self.max_wait:g} s (the node '
-            'was held up): cycle skipped', throttle_duration_sec=1.0)
+            'was held up): cycle skipped',
+            throttle_duration_sec=1.0,
+        )
         return True
 
     def mark(self):
@@ -234,16 +249,19 @@ class JointStateWatchdog:
         late = self.late(stamp) if self.max_wait > 0.0 else 0.0
         if late > self.max_wait:
             self.skipped += 1
-            logger.warn(f'/{self._topic} arrived {late:.3g} s later than the usual delivery, beyond max_state_wait '
-                        f'{self.max_wait:g} s (it was queued while this node was held up): cycle skipped',
-                        throttle_duration_sec=1.0)
+            logger.warn(
+                f'/{self._topic} arrived {late:.3g} s later than the usual delivery, beyond max_state_wait '
+                f'{self.max_wait:g} s (it was queued while this node was held up): cycle skipped',
+                throttle_duration_sec=1.0,
+            )
             return False
         reason = self.stamps.admit(stamp)
         if reason:
             self.skipped += 1
             publishers = self._node.count_publishers(self._topic)
-            logger.warn(f'/{self._topic} {reason}; {publishers} publisher(s) on it: cycle skipped',
-                        throttle_duration_sec=1.0)
+            logger.warn(
+                f'/{self._topic} {reason}; {publishers} publisher(s) on it: cycle skipped', throttle_duration_sec=1.0
+            )
             return False
         self.mark()
         mismatch = self.stamps.period_mismatch()

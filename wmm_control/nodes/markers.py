@@ -29,8 +29,12 @@ __all__ = ['MarkerSet', 'MARKER_NAMESPACES']
 
 MARKER_NAMESPACES = ('goal', 'reference', 'ee_trail', 'base_footprint')
 
-_COLOURS = {'goal': (1.0, 0.0, 1.0), 'reference': (0.55, 0.2, 0.9), 'ee_trail': (0.1, 0.4, 1.0),
-            'base_footprint': (0.1, 0.7, 0.2)}
+_COLOURS = {
+    'goal': (1.0, 0.0, 1.0),
+    'reference': (0.55, 0.2, 0.9),
+    'ee_trail': (0.1, 0.4, 1.0),
+    'base_footprint': (0.1, 0.7, 0.2),
+}
 
 
 def _marker(stamp: Time, frame: str, namespace: str, kind: int) -> Marker:

@@ -28,8 +28,10 @@ from wmm_control.nodes.conversions import pose_values
 __all__ = ['ObstacleSet', 'obstacle_from_marker', 'describe', 'OBSTACLE_PARAM_HELP']
 
 #: The ``obstacles`` parameter's description (the resolver's and the simulator's).
-OBSTACLE_PARAM_HELP = ('Obstacle file: a name in config/obstacles or a YAML path ("" for none); /obstacles '
-                       '(visualization_msgs/MarkerArray) adds and removes obstacles live.')
+OBSTACLE_PARAM_HELP = (
+    'Obstacle file: a name in config/obstacles or a YAML path ("" for none); /obstacles '
+    '(visualization_msgs/MarkerArray) adds and removes obstacles live.'
+)
 
 
 def obstacle_from_marker(marker, frame: str) -> Obstacle:
@@ -87,7 +89,7 @@ class ObstacleSet:
                 self.live.clear()
             elif marker.action == Marker.DELETE:
                 self.live.pop(name, None)
-            elif marker.action == Marker.ADD:      # (MODIFY is the same value)
+            elif marker.action == Marker.ADD:  # (MODIFY is the same value)
                 try:
                     self.live[name] = obstacle_from_marker(marker, self.frame)
                 except ConfigError as exc:
@@ -109,8 +111,12 @@ class ObstacleSet:
 
 
 def _same(a: Obstacle, b: Obstacle) -> bool:
-    return (a.shape == b.shape and a.size == b.size and np.array_equal(a.position, b.position)
-            and np.array_equal(a.rotation, b.rotation))
+    return (
+        a.shape == b.shape
+        and a.size == b.size
+        and np.array_equal(a.position, b.position)
+        and np.array_equal(a.rotation, b.rotation)
+    )
 
 
 def describe(obstacles) -> str:
@@ -118,4 +124,3 @@ def describe(obstacles) -> str:
     if not obstacles:
         return 'no obstacles'
     return f'{len(obstacles)} obstacles: ' + ', '.join(f'{o.name} ({o.shape})' for o in obstacles)
-

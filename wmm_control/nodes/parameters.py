@@ -24,8 +24,15 @@ from wmm_control.paths import config_path
 from wmm_control.robot_config import load_robot, robot_names
 
 __all__ = [
-    'Param', 'declare_parameters', 'load_defaults', 'robot_method', 'robot_param', 'robot_period', 'require_base',
-    'parameter_error', 'max_state_wait_param',
+    'Param',
+    'declare_parameters',
+    'load_defaults',
+    'robot_method',
+    'robot_param',
+    'robot_period',
+    'require_base',
+    'parameter_error',
+    'max_state_wait_param',
 ]
 
 
@@ -57,25 +64,34 @@ def robot_param(description=''):
     """The ``robot`` parameter every node has: a shipped robot's name, an alias A/B, or a path to
     a robot YAML file (validated when the node loads it: an unknown name or a bad file stops the
     start-up with a message naming the file and the item)."""
-    return Param('robot', (description + ' ' if description else '') +
-                 f'A robot name ({", ".join(robot_names())}; aliases A, B) or a path to a robot YAML file.',
-                 read_only=True)
+    return Param(
+        'robot',
+        (description + ' ' if description else '')
+        + f'A robot name ({", ".join(robot_names())}; aliases A, B) or a path to a robot YAML file.',
+        read_only=True,
+    )
 
 
 def max_state_wait_param():
     """The ``max_state_wait`` parameter of every node that answers ``/joint_states``."""
-    return Param('max_state_wait', 'Longest time [s] a joint state may wait in this node (from its receipt to its '
-                 'cycle, steady clock) and still run a cycle: one that waited longer (the node was held up, and a '
-                 'real-time simulator has stepped past it) runs none; nor does one that reached this node that much '
-                 'later than joint states usually do (it was queued in the transport while the node was held up). '
-                 '0: no limit (lockstep).', lo=0.0, hi=60.0)
+    return Param(
+        'max_state_wait',
+        'Longest time [s] a joint state may wait in this node (from its receipt to its '
+        'cycle, steady clock) and still run a cycle: one that waited longer (the node was held up, and a '
+        'real-time simulator has stepped past it) runs none; nor does one that reached this node that much '
+        'later than joint states usually do (it was queued in the transport while the node was held up). '
+        '0: no limit (lockstep).',
+        lo=0.0,
+        hi=60.0,
+    )
 
 
 def require_base(robot, families, node_name):
     """Raise a ConfigError unless ``robot``'s base is one of ``families`` (this node drives those)."""
     if robot.base_type not in families:
-        raise ConfigError(f'robot {robot.name!r} has a {robot.base_type} base; {node_name} drives '
-                          f'{" and ".join(families)} bases')
+        raise ConfigError(
+            f'robot {robot.name!r} has a {robot.base_type} base; {node_name} drives {" and ".join(families)} bases'
+        )
 
 
 def robot_period(values):
@@ -124,8 +140,9 @@ def _descriptor(spec, default):
         if isinstance(first, int):
             desc.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi), step=0)]
         else:
-            desc.floating_point_range = [FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi),
-                                                            step=0.0)]
+            desc.floating_point_range = [
+                FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi), step=0.0)
+            ]
     elif spec.lo is not None or spec.hi is not None:
         raise ConfigError(f'parameter {spec.name}: a range needs a numeric default, got {default!r}')
     constraints = []
@@ -198,8 +215,10 @@ def declare_parameters(node, yaml_name, specs, on_change=None, check=None):
     for spec in specs:
         if spec.default_from is not None:
             if spec.name in defaults:
-                raise ConfigError(f'config/{yaml_name}: {spec.name!r} has its default elsewhere (one home '
-                                  'for every default): remove it from this file')
+                raise ConfigError(
+                    f'config/{yaml_name}: {spec.name!r} has its default elsewhere (one home '
+                    'for every default): remove it from this file'
+                )
             default = spec.default_from(SimpleNamespace(**values))
         elif spec.name not in defaults:
             raise ConfigError(f'config/{yaml_name}: no default for parameter {spec.name!r}')
@@ -212,8 +231,7 @@ def declare_parameters(node, yaml_name, specs, on_change=None, check=None):
         _integer_override_as_double(node, spec.name, default)
         try:
             value = _plain(node.declare_parameter(spec.name, default, _descriptor(spec, default)).value)
-        except (rclpy.exceptions.InvalidParameterValueException,
-                rclpy.exceptions.InvalidParameterTypeException) as exc:
+        except (rclpy.exceptions.InvalidParameterValueException, rclpy.exceptions.InvalidParameterTypeException) as exc:
             raise ConfigError(f'parameter {spec.name}: {exc}') from exc
         reason = parameter_error(spec, value)
         if reason:
@@ -261,7 +279,7 @@ def _watch(node, namespace, specs, on_change, check):
         for prm in params:
             spec = specs.get(prm.name)
             if spec is None:
-                continue            # use_sim_time and the like: rclpy's
+                continue  # use_sim_time and the like: rclpy's
             reason = parameter_error(spec, prm.value)
             if reason:
                 return SetParametersResult(successful=False, reason=f'{prm.name}: {reason}')

@@ -84,7 +84,13 @@ from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
 from wmm_control.nodes.runner import guard_clock, run_node
 from wmm_control.nodes.stamps import stamp_key
 from wmm_control.nodes.conversions import (
-    float_array, odometry_values, planar_twist, pose_values, twist_stamped, twist_values)
+    float_array,
+    odometry_values,
+    planar_twist,
+    pose_values,
+    twist_stamped,
+    twist_values,
+)
 from wmm_control.nodes.markers import MarkerSet
 from wmm_control.nodes.obstacle_topic import ObstacleSet, describe
 from wmm_control.nodes.redundancy_resolver_params import PARAMS
@@ -108,25 +114,41 @@ class RedundancyResolverNode(Node):
     def __init__(self, **kwargs):
         super().__init__('redundancy_resolver', **kwargs)
         guard_clock(self)
-        p = self.p = declare_parameters(self, 'redundancy_resolver.yaml', PARAMS, on_change={
-            'state_timeout': self._set_state_timeout,
-            'max_goal_distance': self._set_max_goal_distance,
-            'goal_tolerance': lambda v: setattr(self.progress, 'tolerance', self.targets.tolerance(v)),
-            'stall_time': lambda v: setattr(self.progress, 'stall_time', float(v)),
-            'min_progress_ratio': lambda v: setattr(self.progress, 'min_progress_ratio', float(v))})
+        p = self.p = declare_parameters(
+            self,
+            'redundancy_resolver.yaml',
+            PARAMS,
+            on_change={
+                'state_timeout': self._set_state_timeout,
+                'max_goal_distance': self._set_max_goal_distance,
+                'goal_tolerance': lambda v: setattr(self.progress, 'tolerance', self.targets.tolerance(v)),
+                'stall_time': lambda v: setattr(self.progress, 'stall_time', float(v)),
+                'min_progress_ratio': lambda v: setattr(self.progress, 'min_progress_ratio', float(v)),
+            },
+        )
         self.model = KinematicModel(p.robot)
         names = [n for n in method_parameters(p.method) if n != 'dt' and hasattr(p, n)]
         self.resolver = make_resolver(p.method, self.model, dt=p.period, **{n: getattr(p, n) for n in names})
         arm = self.model.config.arm
         self.arm_joints = arm.joints
-        self.arm = JointSelector(arm.joints, velocity_limits=arm.velocity,
-                                 position_limits=(arm.position_lower, arm.position_upper))
+        self.arm = JointSelector(
+            arm.joints, velocity_limits=arm.velocity, position_limits=(arm.position_lower, arm.position_upper)
+        )
         self.workspace = Workspace(self.model)
-        self.targets = TargetManager(self.workspace, p.world_frame, p.max_goal_distance, p.state_timeout,
-                                     p.goal_tolerance, p.stall_time, p.period, p.min_progress_ratio,
-                                     position_only=getattr(self.resolver.params, 'rows', 'full') == 'position')
-        self.inputs = MeasuredInputs(p.world_frame, p.max_goal_distance, self.model.config.base.velocity,
-                                     JointSelector.PLAUSIBLE_FACTOR)
+        self.targets = TargetManager(
+            self.workspace,
+            p.world_frame,
+            p.max_goal_distance,
+            p.state_timeout,
+            p.goal_tolerance,
+            p.stall_time,
+            p.period,
+            p.min_progress_ratio,
+            position_only=getattr(self.resolver.params, 'rows', 'full') == 'position',
+        )
+        self.inputs = MeasuredInputs(
+            p.world_frame, p.max_goal_distance, self.model.config.base.velocity, JointSelector.PLAUSIBLE_FACTOR
+        )
         self.exchange = CompensationExchange(self.resolver)
         self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
         self._set_obstacles()
@@ -134,7 +156,7 @@ class RedundancyResolverNode(Node):
         self.fresh = {k: Freshness(p.state_timeout) for k in ('odom', 'ee_pose')}
         self._odom = self._ee = self._wait = self._last = self._last_state = None
         self._next_diag = 0.0
-        self._logged = {}           # the last time each kind of warning was logged
+        self._logged = {}  # the last time each kind of warning was logged
         self._cycles = self._stale_cycles = 0
         self.pub_arm = self.create_publisher(Float64MultiArray, 'arm_controller/commands', COMMAND_QOS)
         self.pub_base = self.create_publisher(TwistStamped, 'base/reference', COMMAND_QOS)
@@ -148,11 +170,16 @@ class RedundancyResolverNode(Node):
             self.create_subscription(PoseStamped, 'ee_pose', self._on_ee_pose, STATE_SUB_QOS)
         if self.resolver.uses_compensation:
             self.create_subscription(TwistStamped, 'base/feasible_twist', self._on_feasible, COMMAND_QOS)
-            self._wait = (self.create_timer(p.compensation_timeout, self._compensation_timeout, clock=self._steady,
-                                            autostart=False) if p.compensation_timeout > 0 else None)
+            self._wait = (
+                self.create_timer(
+                    p.compensation_timeout, self._compensation_timeout, clock=self._steady, autostart=False
+                )
+                if p.compensation_timeout > 0
+                else None
+            )
         if p.markers_period > 0:
             self._markers = MarkerSet(p.world_frame, self.workspace.footprint(), self.workspace.floor_z)
-            self._marker_model = KinematicModel(p.robot)     # the trail's FK, apart from the resolver's model
+            self._marker_model = KinematicModel(p.robot)  # the trail's FK, apart from the resolver's model
             self._trail = Trail(max_points=2000, min_step=0.005)
             self.pub_markers = self.create_publisher(MarkerArray, '~/markers', COMMAND_QOS)
             self.create_timer(p.markers_period, self._publish_markers, clock=self._steady)
@@ -160,7 +187,8 @@ class RedundancyResolverNode(Node):
         self.get_logger().info(
             f'{p.method} on robot {self.model.config.name}: t_s {p.period} s, EE feedback {p.ee_feedback}, '
             f'compensation {"on" if self.resolver.uses_compensation else "off"}, {describe(self.obstacles.obstacles)}; '
-            f'waiting for /goal_pose (frame {p.world_frame!r})')
+            f'waiting for /goal_pose (frame {p.world_frame!r})'
+        )
 
     @property
     def target(self):
@@ -175,8 +203,13 @@ class RedundancyResolverNode(Node):
     @property
     def counters(self):
         """The counts reported on /diagnostics."""
-        return {'cycles': self._cycles, 'goals': self.targets.goals, 'goals_rejected': self.targets.rejected,
-                'compensation_dropped': self.exchange.dropped, 'stale_cycles': self._stale_cycles}
+        return {
+            'cycles': self._cycles,
+            'goals': self.targets.goals,
+            'goals_rejected': self.targets.rejected,
+            'compensation_dropped': self.exchange.dropped,
+            'stale_cycles': self._stale_cycles,
+        }
 
     def _set_state_timeout(self, timeout):
         for fresh in (*self.fresh.values(), self.targets.reference):
@@ -251,18 +284,22 @@ class RedundancyResolverNode(Node):
             ee = self._ee
         (pose, twist), (q, dq) = self._odom, arm
         self._last_state = (pose, q, ee)
-        return RobotState(pose, twist, q, dq, ee_position=None if ee is None else ee[0],
-                          ee_rotation=None if ee is None else ee[1]), ''
+        return RobotState(
+            pose, twist, q, dq, ee_position=None if ee is None else ee[0], ee_rotation=None if ee is None else ee[1]
+        ), ''
 
     def _on_joint_states(self, msg):
         q, dq, reason = self.arm.read(msg)
         if q is None:
-            self.get_logger().warn(f'rejected /joint_states {reason}: no cycle (the watchdog stops the robot '
-                                   'when no valid one comes within state_timeout)', throttle_duration_sec=1.0)
+            self.get_logger().warn(
+                f'rejected /joint_states {reason}: no cycle (the watchdog stops the robot '
+                'when no valid one comes within state_timeout)',
+                throttle_duration_sec=1.0,
+            )
             return
         if not self.watchdog.admit(msg.header.stamp):
             return
-        if self.exchange.pending:        # the last cycle's feasible twist never came
+        if self.exchange.pending:  # the last cycle's feasible twist never came
             self._finish(None)
         stamp = msg.header.stamp
         state, reason = self._state((q, dq))
@@ -308,8 +345,10 @@ class RedundancyResolverNode(Node):
         if self._wait is not None:
             self._wait.cancel()
         if feasible is None:
-            self.get_logger().warn('no /base/feasible_twist for this cycle in time: arm command without '
-                                   'compensation', throttle_duration_sec=1.0)
+            self.get_logger().warn(
+                'no /base/feasible_twist for this cycle in time: arm command without compensation',
+                throttle_duration_sec=1.0,
+            )
         self._publish_arm(*self.exchange.finish(feasible))
 
     # ------------------------------------------------------------------ outputs
@@ -344,28 +383,53 @@ class RedundancyResolverNode(Node):
         target = self.targets.target
         pose = None if target is None else (target.position, target.rotation)
         tracking = self.targets.tracking
-        self.pub_markers.publish(self._markers.build(self.get_clock().now().to_msg(), None if tracking else pose,
-                                                     pose if tracking else None, self._trail.points, base))
+        self.pub_markers.publish(
+            self._markers.build(
+                self.get_clock().now().to_msg(),
+                None if tracking else pose,
+                pose if tracking else None,
+                self._trail.points,
+                base,
+            )
+        )
 
     def _diagnostics(self, stamp):
         """Status of the cycle stamped ``stamp`` (the joint state it answers)."""
-        values = dict(self.counters, joint_states_skipped=self.watchdog.skipped,
-                      measured_period_s=self.watchdog.stamps.measured_period,
-                      obstacles=len(self.obstacles.obstacles))
+        values = dict(
+            self.counters,
+            joint_states_skipped=self.watchdog.skipped,
+            measured_period_s=self.watchdog.stamps.measured_period,
+            obstacles=len(self.obstacles.obstacles),
+        )
         level, message = 'ok', 'no goal'
         if self._last is not None and self.targets.target is not None:
             d = self._last.diagnostics
-            values.update({
-                'method': d.method, 'mode': d.mode, 'psi': d.psi, 'position_error_m': d.position_error,
-                'orientation_error_rad': d.orientation_error, 'limit_scale': d.limit_scale,
-                'accel_scale': d.accel_scale, 'null_scale': d.null_scale,
-                'compensation_scale': d.compensation_scale, 'compensated': d.compensated,
-                'limited': list(d.limited), 'sigma_min': d.sigma_min, 'cycle_time_us': d.cycle_time_s * 1e6,
-                'reference_time_left_s': d.reference_time_left,
-                'clearance_m': d.clearance, 'closest_pair': d.closest_pair,
-                'collision_constraints': d.collision_constraints, 'collision_changed': d.collision_changed,
-                'goal_reached': self.progress.reached, 'goal_stalled': self.progress.stalled,
-                'arm_command': self._last.arm_velocity, 'base_reference': self._last.base_twist})
+            values.update(
+                {
+                    'method': d.method,
+                    'mode': d.mode,
+                    'psi': d.psi,
+                    'position_error_m': d.position_error,
+                    'orientation_error_rad': d.orientation_error,
+                    'limit_scale': d.limit_scale,
+                    'accel_scale': d.accel_scale,
+                    'null_scale': d.null_scale,
+                    'compensation_scale': d.compensation_scale,
+                    'compensated': d.compensated,
+                    'limited': list(d.limited),
+                    'sigma_min': d.sigma_min,
+                    'cycle_time_us': d.cycle_time_s * 1e6,
+                    'reference_time_left_s': d.reference_time_left,
+                    'clearance_m': d.clearance,
+                    'closest_pair': d.closest_pair,
+                    'collision_constraints': d.collision_constraints,
+                    'collision_changed': d.collision_changed,
+                    'goal_reached': self.progress.reached,
+                    'goal_stalled': self.progress.stalled,
+                    'arm_command': self._last.arm_velocity,
+                    'base_reference': self._last.base_twist,
+                }
+            )
             level, message = self.targets.status(d)
         return diagnostic_array(stamp, [node_status(self, '', self.model.config.name, level, message, values)])
 

@@ -28,21 +28,31 @@ from wmm_control.robot_config import RobotConfig
 
 try:
     from tf2_msgs.msg import TFMessage
+
     TF_UNAVAILABLE = ''
-except ImportError as _exc:          # pip-only install: tf2_msgs has no PyPI wheel
+except ImportError as _exc:  # pip-only install: tf2_msgs has no PyPI wheel
     TFMessage = None
-    TF_UNAVAILABLE = (f'cannot import tf2_msgs ({_exc}); it has no PyPI wheel (a ROS 2 Jazzy install has it: '
-                      'ros-jazzy-tf2-msgs)')
+    TF_UNAVAILABLE = (
+        f'cannot import tf2_msgs ({_exc}); it has no PyPI wheel (a ROS 2 Jazzy install has it: ros-jazzy-tf2-msgs)'
+    )
 
 __all__ = ['RobotFrames', 'DESCRIPTION_QOS', 'TF_UNAVAILABLE', 'transform_stamped', 'valid_frame_prefix']
 
 #: ``robot_description`` and ``/tf_static``: reliable, transient local, keep last 1 (what
 #: robot_state_publisher and tf2's static broadcaster offer: a late subscriber gets the last one).
-DESCRIPTION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DESCRIPTION_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 #: ``/tf``: tf2's dynamic broadcaster's (reliable, keep last 100, volatile).
-TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                    durability=DurabilityPolicy.VOLATILE)
+TF_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 
 
 def valid_frame_prefix(prefix: str) -> str:
@@ -74,8 +84,15 @@ class RobotFrames:
         publish_tf: False publishes ``robot_description`` alone.
     """
 
-    def __init__(self, node: Node, robot: RobotConfig, frame_prefix: str = '', world_frame: str = 'world',
-                 odom_frame: str = 'odom', publish_tf: bool = True) -> None:
+    def __init__(
+        self,
+        node: Node,
+        robot: RobotConfig,
+        frame_prefix: str = '',
+        world_frame: str = 'world',
+        odom_frame: str = 'odom',
+        publish_tf: bool = True,
+    ) -> None:
         self.joints = JointTransforms(robot.urdf_path)
         self.prefix = frame_prefix
         self.world_frame = world_frame
@@ -100,14 +117,18 @@ class RobotFrames:
 
     def _stamped(self, stamp: Time, transforms: Iterable[FrameTransform]) -> list[TransformStamped]:
         p = self.prefix
-        return [transform_stamped(stamp, tf, tf.parent if tf.parent == self.world_frame else p + tf.parent, p + tf.child)
-                for tf in transforms]
+        return [
+            transform_stamped(stamp, tf, tf.parent if tf.parent == self.world_frame else p + tf.parent, p + tf.child)
+            for tf in transforms
+        ]
 
     def static_transforms(self, stamp: Time) -> list[TransformStamped]:
         """The fixed joints' transforms (``/tf_static``)."""
         return self._stamped(stamp, self.joints.fixed)
 
-    def dynamic_transforms(self, stamp: Time, positions: Mapping[str, float], odom_pose, true_pose) -> list[TransformStamped]:
+    def dynamic_transforms(
+        self, stamp: Time, positions: Mapping[str, float], odom_pose, true_pose
+    ) -> list[TransformStamped]:
         """world → odom, odom → base_link and every moving joint's transform (``/tf``).
 
         Args:
@@ -115,8 +136,10 @@ class RobotFrames:
             odom_pose: the base's (x, y, θ) in odom (dead reckoning).
             true_pose: the base's (x, y, θ) in the world.
         """
-        base = [world_to_odom(self.world_frame, self.odom_frame, true_pose, odom_pose),
-                planar_transform(self.odom_frame, self.base_link, odom_pose)]
+        base = [
+            world_to_odom(self.world_frame, self.odom_frame, true_pose, odom_pose),
+            planar_transform(self.odom_frame, self.base_link, odom_pose),
+        ]
         return self._stamped(stamp, (*base, *self.joints.moving(positions)))
 
     def publish(self, stamp: Time, positions: Mapping[str, float], odom_pose, true_pose) -> None:

@@ -7,6 +7,7 @@ import threading
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
 # rclpy.init's RCLError (a command line it cannot take) has no public home in rclpy.
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.signals import SignalHandlerOptions
@@ -38,15 +39,19 @@ def guard_clock(node):
     sees it, logged through ``node``'s logger (throttled): the ROS clock keeps its last time.
     ``use_sim_time`` set at run time makes a new subscription, guarded in turn.
     """
+
     def guard(callback):
         def guarded(msg):
             if msg.clock.sec < 0:
                 node.get_logger().warn(
                     f'ignored a /clock message at {msg.clock.sec} s {msg.clock.nanosec} ns: a negative time, '
                     f'which rclpy cannot take; the ROS clock keeps its last time '
-                    f'({node.count_publishers("/clock")} publisher(s) on /clock)', throttle_duration_sec=1.0)
+                    f'({node.count_publishers("/clock")} publisher(s) on /clock)',
+                    throttle_duration_sec=1.0,
+                )
                 return
             callback(msg)
+
         return guarded
 
     def guard_all(_params=()):
@@ -81,14 +86,16 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
     os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', FASTDDS_TRANSPORTS)
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    except RCLError as exc:        # the command line: a --params-file that cannot be read, a bad rule
+    except RCLError as exc:  # the command line: a --params-file that cannot be read, a bad rule
         rclpy.logging.get_logger('wmm_control').fatal(f'cannot start: {exc}')
         return 2
     stop = []
     previous = {}
-    if threading.current_thread() is threading.main_thread():     # where Python delivers signals
-        previous = {sig: signal.signal(sig, lambda signum, _frame: stop.append(signum))
-                    for sig in (signal.SIGINT, signal.SIGTERM)}
+    if threading.current_thread() is threading.main_thread():  # where Python delivers signals
+        previous = {
+            sig: signal.signal(sig, lambda signum, _frame: stop.append(signum))
+            for sig in (signal.SIGINT, signal.SIGTERM)
+        }
     _ignore_stop_signals_at_exit()
     node = executor = None
     try:

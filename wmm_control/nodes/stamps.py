@@ -51,8 +51,10 @@ class StampGate:
             return ''
         step = (ns - last) * 1e-9
         if step <= 0.0:
-            return (f'stamped {ns * 1e-9:.9g} s, not after the last cycle\'s {last * 1e-9:.9g} s (a second '
-                    'publisher, or an old or re-ordered message)')
+            return (
+                f'stamped {ns * 1e-9:.9g} s, not after the last cycle\'s {last * 1e-9:.9g} s (a second '
+                'publisher, or an old or re-ordered message)'
+            )
         if step > self.max_jump:
             return f'stamped {step:.6g} s after the last cycle\'s, beyond {self.max_jump:g} s (a far-future stamp)'
         self._last = ns
@@ -64,15 +66,17 @@ class StampGate:
         """Median stamp step of the last cycles [s]; 0 before half a window."""
         if len(self._steps) < self._steps.maxlen // 2:
             return 0.0
-        return statistics.median(self._steps)     # as np.median, 15 times faster on a deque
+        return statistics.median(self._steps)  # as np.median, 15 times faster on a deque
 
     def period_mismatch(self):
         """'' or a sentence saying that the sender's period differs from ``period``."""
         measured = self.measured_period
         if measured == 0.0 or abs(measured - self.period) <= 0.1 * self.period:
             return ''
-        return (f'joint states come every {measured:.6g} s by their stamps, but this node\'s period is '
-                f'{self.period:g} s: its rate and acceleration limits act per {self.period:g} s')
+        return (
+            f'joint states come every {measured:.6g} s by their stamps, but this node\'s period is '
+            f'{self.period:g} s: its rate and acceleration limits act per {self.period:g} s'
+        )
 
 
 class StampedExchange:
@@ -93,7 +97,7 @@ class StampedExchange:
 
     def __init__(self, node, wait, run_cycle, clock):
         self._run_cycle = run_cycle
-        self._pending = None            # (stamp, payload) of the state waiting for its reference
+        self._pending = None  # (stamp, payload) of the state waiting for its reference
         self._ref_stamp = None
         self._timer = node.create_timer(wait, self.run_pending, clock=clock, autostart=False) if wait > 0 else None
 
@@ -105,7 +109,7 @@ class StampedExchange:
 
     def state_received(self, stamp, payload):
         """A state stamped ``stamp``: its cycle runs now or once its reference comes."""
-        if self._pending is not None:         # the previous state's reference never came
+        if self._pending is not None:  # the previous state's reference never came
             self.run_pending()
         key = stamp_key(stamp)
         self._pending = (key, payload)

@@ -68,16 +68,31 @@ __all__ = ['ViewerNode', 'main', 'PARAMS']
 PARAMS = (
     robot_param('The robot drawn (its URDF, base link, end-effector frame and floor height).'),
     Param('host', 'Address the HTTP server listens on (0.0.0.0: every interface).', read_only=True),
-    Param('port', 'HTTP port of the viewer; when it is taken, the next free one (logged).', lo=1, hi=65535,
-          read_only=True),
+    Param(
+        'port', 'HTTP port of the viewer; when it is taken, the next free one (logged).', lo=1, hi=65535, read_only=True
+    ),
     Param('world_frame', 'Frame of /goal_pose, /ee_reference and /obstacles.', read_only=True),
     Param('obstacles', OBSTACLE_PARAM_HELP, read_only=True),
-    Param('update_period', 'Steady time [s] between two scene updates sent to the browser.', lo=0.01, hi=1.0,
-          read_only=True),
-    Param('drag_publish_period', 'While the goal handle is dragged, /goal_pose goes out at most this often [s]; '
-          'once more at release.', lo=0.05, hi=60.0),
-    Param('ground_truth_timeout', 'The base pose comes from /ground_truth/odom while its last message is younger '
-          'than this [s] (steady clock, at receipt), else from /odom.', lo=0.01, hi=60.0),
+    Param(
+        'update_period',
+        'Steady time [s] between two scene updates sent to the browser.',
+        lo=0.01,
+        hi=1.0,
+        read_only=True,
+    ),
+    Param(
+        'drag_publish_period',
+        'While the goal handle is dragged, /goal_pose goes out at most this often [s]; once more at release.',
+        lo=0.05,
+        hi=60.0,
+    ),
+    Param(
+        'ground_truth_timeout',
+        'The base pose comes from /ground_truth/odom while its last message is younger '
+        'than this [s] (steady clock, at receipt), else from /odom.',
+        lo=0.01,
+        hi=60.0,
+    ),
     Param('trail_length', 'Points kept on the end-effector and base paths.', lo=2, hi=1_000_000, read_only=True),
     Param('trail_step', 'Distance [m] between two points of a path.', lo=1e-4, hi=10.0, read_only=True),
 )
@@ -117,9 +132,16 @@ class ViewerNode(Node):
         super().__init__('wmm_viewer', **kwargs)
         guard_clock(self)
         self.server: viser.ViserServer | None = None
-        p = self.p = declare_parameters(self, 'wmm_viewer.yaml', PARAMS, check=_check,
-                                        on_change={'drag_publish_period': self._set_drag_period,
-                                                   'ground_truth_timeout': self._set_ground_truth_timeout})
+        p = self.p = declare_parameters(
+            self,
+            'wmm_viewer.yaml',
+            PARAMS,
+            check=_check,
+            on_change={
+                'drag_publish_period': self._set_drag_period,
+                'ground_truth_timeout': self._set_ground_truth_timeout,
+            },
+        )
         self.robot = load_robot(p.robot)
         self.scene = RobotScene(self.robot.urdf_path, self.robot.base_link, self.robot.ee_frame)
         if self.scene.skipped:
@@ -133,10 +155,10 @@ class ViewerNode(Node):
         self.joint_fresh = Freshness(math.inf)
         # (position, wxyz) per source
         self._base: dict[str, tuple[np.ndarray, np.ndarray] | None] = {'ground_truth': None, 'odom': None}
-        self._base_twist: np.ndarray | None = None             # (vx, vy, ω) of /base/reference
+        self._base_twist: np.ndarray | None = None  # (vx, vy, ω) of /base/reference
         self._base_twist_fresh = Freshness(1.0)
-        self._ee: tuple[np.ndarray, np.ndarray] | None = None      # (position, wxyz) last drawn
-        self._goal: tuple[np.ndarray, np.ndarray] | None = None    # (position, wxyz) in force
+        self._ee: tuple[np.ndarray, np.ndarray] | None = None  # (position, wxyz) last drawn
+        self._goal: tuple[np.ndarray, np.ndarray] | None = None  # (position, wxyz) in force
         self._handle_placed = False
         self._hold = threading.Event()
         self._dirty = True
@@ -148,8 +170,9 @@ class ViewerNode(Node):
         self._draw_obstacles()
         self.pub_goal = self.create_publisher(PoseStamped, 'goal_pose', COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
-        self.create_subscription(Odometry, 'ground_truth/odom', lambda m: self._on_base(m, 'ground_truth'),
-                                 STATE_SUB_QOS)
+        self.create_subscription(
+            Odometry, 'ground_truth/odom', lambda m: self._on_base(m, 'ground_truth'), STATE_SUB_QOS
+        )
         self.create_subscription(Odometry, 'odom', lambda m: self._on_base(m, 'odom'), STATE_SUB_QOS)
         self.create_subscription(PoseStamped, 'goal_pose', self._on_goal, COMMAND_QOS)
         self.create_subscription(MultiDOFJointTrajectory, 'ee_reference', self._on_reference, COMMAND_QOS)
@@ -158,14 +181,16 @@ class ViewerNode(Node):
         self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
         self.timer = self.create_timer(p.update_period, self._tick, clock=self._steady)
         self.url = f'http://{p.host}:{server.get_port()}'
-        self.get_logger().info(f'viewer of robot {self.robot.name} at {self.url} ({len(self.scene.shapes)} shapes '
-                               f'from {self.robot.urdf_path.name}); drag the goal handle to publish /goal_pose')
+        self.get_logger().info(
+            f'viewer of robot {self.robot.name} at {self.url} ({len(self.scene.shapes)} shapes '
+            f'from {self.robot.urdf_path.name}); drag the goal handle to publish /goal_pose'
+        )
 
     # ------------------------------------------------------------------ the browser scene
     def _start_server(self) -> viser.ViserServer:
         p = self.p
         try:
-            with contextlib.redirect_stdout(io.StringIO()):     # viser's banner: the node logs the URL
+            with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: the node logs the URL
                 self.server = viser.ViserServer(host=p.host, port=p.port, verbose=False)
         except OSError as exc:
             raise ConfigError(f'cannot serve on {p.host}:{p.port}: {exc}') from exc
@@ -176,27 +201,44 @@ class ViewerNode(Node):
         # From the side (−y), the start pose left of the centre: room for a goal ahead (+x).
         server.initial_camera.look_at = CAMERA_LOOK_AT + np.array([start[0], start[1], 0.0])
         server.initial_camera.position = CAMERA_POSITION + np.array([start[0], start[1], 0.0])
-        server.scene.add_grid('/ground', width=20.0, height=20.0, cell_size=0.5, section_size=1.0,
-                              position=(0.0, 0.0, self.robot.ground_z))
+        server.scene.add_grid(
+            '/ground',
+            width=20.0,
+            height=20.0,
+            cell_size=0.5,
+            section_size=1.0,
+            position=(0.0, 0.0, self.robot.ground_z),
+        )
         self.shape_handles = [self._add_shape(f'/robot/{shape.name}', shape) for shape in self.scene.shapes]
         empty = np.zeros((0, 2, 3))
-        self.ee_path = server.scene.add_line_segments('/paths/end_effector', empty, _EE_TRAIL_COLOR, thickness=4.0,
-                                                      thickness_units='screen')
-        self.base_path = server.scene.add_line_segments('/paths/base', empty, _BASE_TRAIL_COLOR, thickness=4.0,
-                                                        thickness_units='screen')
-        self.base_course = server.scene.add_line_segments('/base_reference', empty, _BASE_REFERENCE_COLOR,
-                                                          thickness=6.0, thickness_units='screen', visible=False)
-        self.goal_frame = server.scene.add_frame('/goal', axes_length=0.15, axes_radius=0.008, origin_radius=0.03,
-                                                 origin_color=_GOAL_COLOR, visible=False)
-        self.reference_frame = server.scene.add_frame('/reference', axes_length=0.1, axes_radius=0.006,
-                                                      origin_radius=0.02, origin_color=_REFERENCE_COLOR,
-                                                      visible=False)
-        self.goal_handle = server.scene.add_transform_controls('/goal_handle', scale=0.35, depth_test=False,
-                                                          position=(0.0, 0.0, 0.0))
+        self.ee_path = server.scene.add_line_segments(
+            '/paths/end_effector', empty, _EE_TRAIL_COLOR, thickness=4.0, thickness_units='screen'
+        )
+        self.base_path = server.scene.add_line_segments(
+            '/paths/base', empty, _BASE_TRAIL_COLOR, thickness=4.0, thickness_units='screen'
+        )
+        self.base_course = server.scene.add_line_segments(
+            '/base_reference', empty, _BASE_REFERENCE_COLOR, thickness=6.0, thickness_units='screen', visible=False
+        )
+        self.goal_frame = server.scene.add_frame(
+            '/goal', axes_length=0.15, axes_radius=0.008, origin_radius=0.03, origin_color=_GOAL_COLOR, visible=False
+        )
+        self.reference_frame = server.scene.add_frame(
+            '/reference',
+            axes_length=0.1,
+            axes_radius=0.006,
+            origin_radius=0.02,
+            origin_color=_REFERENCE_COLOR,
+            visible=False,
+        )
+        self.goal_handle = server.scene.add_transform_controls(
+            '/goal_handle', scale=0.35, depth_test=False, position=(0.0, 0.0, 0.0)
+        )
         self.goal_handle.on_update(self._on_handle)
         with server.gui.add_folder('Goal'):
-            self.hold_button = server.gui.add_button('Hold here', hint='Publish the end effector\'s current pose '
-                                                     'as the goal: the robot stops where it is.')
+            self.hold_button = server.gui.add_button(
+                'Hold here', hint='Publish the end effector\'s current pose as the goal: the robot stops where it is.'
+            )
             self.hold_button.on_click(lambda _event: self._hold.set())
             self.goal_text = server.gui.add_markdown('Drag the handle to send a goal.')
         with server.gui.add_folder('Inputs'):
@@ -206,15 +248,17 @@ class ViewerNode(Node):
         return server
 
     def _add_shape(self, name: str, shape: Shape) -> viser.SceneNodeHandle:
-        assert self.server is not None         # started in __init__, None only once destroyed
+        assert self.server is not None  # started in __init__, None only once destroyed
         scene = self.server.scene
         opacity = None if shape.opacity >= 1.0 else shape.opacity
-        if shape.kind == 'box':         # size (x, y, z)
-            return scene.add_box(name, color=shape.color, dimensions=cast(tuple[float, float, float], shape.size),
-                                 opacity=opacity)
+        if shape.kind == 'box':  # size (x, y, z)
+            return scene.add_box(
+                name, color=shape.color, dimensions=cast(tuple[float, float, float], shape.size), opacity=opacity
+            )
         if shape.kind == 'cylinder':
-            return scene.add_cylinder(name, radius=shape.size[0], height=shape.size[1], color=shape.color,
-                                      opacity=opacity)
+            return scene.add_cylinder(
+                name, radius=shape.size[0], height=shape.size[1], color=shape.color, opacity=opacity
+            )
         if shape.kind == 'sphere':
             return scene.add_icosphere(name, radius=shape.size[0], color=shape.color, opacity=opacity)
         return scene.add_mesh_simple(name, shape.vertices, shape.faces, color=shape.color, opacity=opacity)
@@ -225,8 +269,9 @@ class ViewerNode(Node):
             handle.remove()
         self.obstacle_handles = []
         for obstacle in self.obstacles.obstacles:
-            handle = self._add_shape(f'/obstacles/{obstacle.name}',
-                                     Shape(obstacle.name, obstacle.shape, obstacle.size, _OBSTACLE_COLOR, 1.0))
+            handle = self._add_shape(
+                f'/obstacles/{obstacle.name}', Shape(obstacle.name, obstacle.shape, obstacle.size, _OBSTACLE_COLOR, 1.0)
+            )
             handle.position = obstacle.position
             handle.wxyz = wxyz_from_xyzw(quaternion_from_matrix(obstacle.rotation))
             self.obstacle_handles.append(handle)
@@ -238,7 +283,7 @@ class ViewerNode(Node):
     def destroy_node(self) -> bool:
         """Stop the HTTP server, then destroy the node."""
         if self.server is not None:
-            with contextlib.redirect_stdout(io.StringIO()):     # viser's "Server stopped"
+            with contextlib.redirect_stdout(io.StringIO()):  # viser's "Server stopped"
                 self.server.stop()
             self.server = None
         return super().destroy_node()
@@ -257,8 +302,10 @@ class ViewerNode(Node):
     def _on_joint_states(self, msg: JointState) -> None:
         if len(msg.position) != len(msg.name):
             self.counters['joint_states_rejected'] += 1
-            self.get_logger().warn(f'rejected /joint_states: {len(msg.position)} positions for {len(msg.name)} '
-                                   'names', throttle_duration_sec=5.0)
+            self.get_logger().warn(
+                f'rejected /joint_states: {len(msg.position)} positions for {len(msg.name)} names',
+                throttle_duration_sec=5.0,
+            )
             return
         try:
             unknown = self.scene.set_joints(msg.name, msg.position)
@@ -268,16 +315,18 @@ class ViewerNode(Node):
             return
         if unknown:
             self.counters['unknown_joints'] = len(unknown)
-            self.get_logger().warn(f'/joint_states names joints the URDF lacks (ignored): {unknown}',
-                                   throttle_duration_sec=30.0)
+            self.get_logger().warn(
+                f'/joint_states names joints the URDF lacks (ignored): {unknown}', throttle_duration_sec=30.0
+            )
         self.joint_fresh.mark(self._now())
         self._dirty = True
 
     def _on_base(self, msg: Odometry, source: str) -> None:
         pos, quat = _pose_arrays(msg.pose.pose)
         if quat is None:
-            self.get_logger().warn(f'rejected a base pose from {source}: not finite, or a zero quaternion',
-                                   throttle_duration_sec=5.0)
+            self.get_logger().warn(
+                f'rejected a base pose from {source}: not finite, or a zero quaternion', throttle_duration_sec=5.0
+            )
             return
         self._base[source] = (pos, quat)
         self.fresh[source].mark(self._now())
@@ -294,12 +343,14 @@ class ViewerNode(Node):
 
     def _on_goal(self, msg: PoseStamped) -> None:
         if msg.header.frame_id not in ('', self.p.world_frame):
-            self.get_logger().warn(f'/goal_pose in frame {msg.header.frame_id!r}, not {self.p.world_frame!r}: '
-                                   'not drawn', throttle_duration_sec=5.0)
+            self.get_logger().warn(
+                f'/goal_pose in frame {msg.header.frame_id!r}, not {self.p.world_frame!r}: not drawn',
+                throttle_duration_sec=5.0,
+            )
             return
         pos, quat = _pose_arrays(msg.pose)
         if quat is None:
-            return          # the resolver rejects it too; nothing to draw
+            return  # the resolver rejects it too; nothing to draw
         self._goal = (pos, quat)
         self.goal_frame.position, self.goal_frame.wxyz = pos, quat
         self.goal_frame.visible = True
@@ -326,9 +377,15 @@ class ViewerNode(Node):
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         now = self._now()
         for status in msg.status:
-            self.board.update(NodeStatus(status.name, int.from_bytes(status.level, 'little')
-                                         if isinstance(status.level, bytes) else int(status.level),
-                                         status.message, {kv.key: kv.value for kv in status.values}, now))
+            self.board.update(
+                NodeStatus(
+                    status.name,
+                    int.from_bytes(status.level, 'little') if isinstance(status.level, bytes) else int(status.level),
+                    status.message,
+                    {kv.key: kv.value for kv in status.values},
+                    now,
+                )
+            )
 
     # ------------------------------------------------------------------ the goal handle
     def _on_handle(self, event: viser.TransformControlsEvent) -> None:
@@ -354,8 +411,10 @@ class ViewerNode(Node):
         set_pose(msg.pose, pos, xyzw_from_wxyz(quat))
         self.pub_goal.publish(msg)
         self.counters['goals_sent'] += 1
-        self.get_logger().info(f'goal sent: ({pos[0]:.3f}, {pos[1]:.3f}, {pos[2]:.3f}) m, '
-                               f'quaternion (x, y, z, w) {np.round(xyzw_from_wxyz(quat), 4).tolist()}')
+        self.get_logger().info(
+            f'goal sent: ({pos[0]:.3f}, {pos[1]:.3f}, {pos[2]:.3f}) m, '
+            f'quaternion (x, y, z, w) {np.round(xyzw_from_wxyz(quat), 4).tolist()}'
+        )
         return True
 
     # ------------------------------------------------------------------ the update
@@ -382,7 +441,7 @@ class ViewerNode(Node):
         if source == 'none':
             return np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
         pose = self._base[source]
-        assert pose is not None                 # base_source() names a source with a pose
+        assert pose is not None  # base_source() names a source with a pose
         return pose
 
     def _draw_robot(self) -> None:
@@ -414,7 +473,7 @@ class ViewerNode(Node):
         c, s = math.cos(yaw), math.sin(yaw)
         velocity = np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1], 0.0])
         start = np.array([pos[0], pos[1], self.robot.ground_z + 0.01])
-        self.base_course.points = np.stack((start, start + velocity))[None]    # where it heads in 1 s
+        self.base_course.points = np.stack((start, start + velocity))[None]  # where it heads in 1 s
         self.base_course.visible = True
 
     def _inputs_markdown(self, now: float) -> str:
@@ -422,14 +481,19 @@ class ViewerNode(Node):
             a = fresh.age(now)
             return 'never' if a == math.inf else f'{a:.2f} s ago'
 
-        source = {'ground_truth': 'the simulator\'s ground truth (/ground_truth/odom)', 'odom': 'odometry (/odom)',
-                  'none': 'none yet (drawn at the origin)'}[self.base_source()]
-        return '\n'.join([
-            f'- joint states: {age(self.joint_fresh)}',
-            f'- base pose from {source}',
-            f'- joint states rejected: {self.counters["joint_states_rejected"]}',
-            f'- goals sent: {self.counters["goals_sent"]}',
-        ])
+        source = {
+            'ground_truth': 'the simulator\'s ground truth (/ground_truth/odom)',
+            'odom': 'odometry (/odom)',
+            'none': 'none yet (drawn at the origin)',
+        }[self.base_source()]
+        return '\n'.join(
+            [
+                f'- joint states: {age(self.joint_fresh)}',
+                f'- base pose from {source}',
+                f'- joint states rejected: {self.counters["joint_states_rejected"]}',
+                f'- goals sent: {self.counters["goals_sent"]}',
+            ]
+        )
 
 
 def main(args=None):

@@ -5,12 +5,12 @@
 * :mod:`~wmm_control.resolvers.amp`: adaptive motion planning at acceleration level (Xing eqs 6–15, 23);
 * :mod:`~wmm_control.resolvers.traditional`: J⁺ with manipulability in the null space (Xing §4.3).
 """
+
 from dataclasses import fields
 
 
 from wmm_control.errors import ConfigError
-from wmm_control.resolvers.interface import (
-    PoseTarget, Resolver, ResolverCommand, ResolverDiagnostics, RobotState)
+from wmm_control.resolvers.interface import PoseTarget, Resolver, ResolverCommand, ResolverDiagnostics, RobotState
 from wmm_control.resolvers.limits import CommandLimits, LimitResult
 from wmm_control.resolvers.pinv import PinvParams, PinvResolver
 from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver
@@ -19,16 +19,39 @@ from wmm_control.resolvers.amp import AmpParams, AmpResolver
 from wmm_control.resolvers.traditional import TraditionalParams, TraditionalResolver
 
 __all__ = [
-    'CommandLimits', 'LimitResult', 'PinvParams', 'PinvResolver', 'PoseServoParams', 'PoseServoResolver',
-    'PoseTarget', 'Resolver', 'ResolverCommand', 'ResolverDiagnostics', 'RobotState', 'TaskSharingParams',
-    'TaskSharingResolver', 'psi_of_error', 'METHODS', 'make_resolver', 'method_parameters',
-    'AmpParams', 'AmpResolver', 'TraditionalParams', 'TraditionalResolver',
+    'CommandLimits',
+    'LimitResult',
+    'PinvParams',
+    'PinvResolver',
+    'PoseServoParams',
+    'PoseServoResolver',
+    'PoseTarget',
+    'Resolver',
+    'ResolverCommand',
+    'ResolverDiagnostics',
+    'RobotState',
+    'TaskSharingParams',
+    'TaskSharingResolver',
+    'psi_of_error',
+    'METHODS',
+    'make_resolver',
+    'method_parameters',
+    'AmpParams',
+    'AmpResolver',
+    'TraditionalParams',
+    'TraditionalResolver',
 ]
 
 #: (resolver class, parameters class) by ``method`` name.
-METHODS = {cls.name: (cls, params) for cls, params in (
-    (PinvResolver, PinvParams), (TaskSharingResolver, TaskSharingParams), (AmpResolver, AmpParams),
-    (TraditionalResolver, TraditionalParams))}
+METHODS = {
+    cls.name: (cls, params)
+    for cls, params in (
+        (PinvResolver, PinvParams),
+        (TaskSharingResolver, TaskSharingParams),
+        (AmpResolver, AmpParams),
+        (TraditionalResolver, TraditionalParams),
+    )
+}
 
 
 def method_parameters(method):

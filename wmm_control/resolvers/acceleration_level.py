@@ -116,9 +116,9 @@ class AccelerationResolver(Resolver):
         self.reset()
 
     def reset(self):
-        self._qd = None              # the commanded generalized rates u = (u_b, q̇_m) (the integrator)
+        self._qd = None  # the commanded generalized rates u = (u_b, q̇_m) (the integrator)
         self._last_base = np.zeros(3)  # the last base twist sent (base frame)
-        self._setpoint = None        # (goal key, trajectory, time along it)
+        self._setpoint = None  # (goal key, trajectory, time along it)
 
     # ------------------------------------------------------------------ reference
     def _reference(self, target, pos, rot):
@@ -129,8 +129,9 @@ class AccelerationResolver(Resolver):
         key = (target.position.tobytes(), target.rotation.tobytes())
         if self._setpoint is None or self._setpoint[0] != key:
             p = self.params
-            traj = SetpointTrajectory(pos, rot, target, p.setpoint_speed, p.setpoint_accel,
-                                      p.setpoint_angular_speed, p.setpoint_angular_accel)
+            traj = SetpointTrajectory(
+                pos, rot, target, p.setpoint_speed, p.setpoint_accel, p.setpoint_angular_speed, p.setpoint_angular_accel
+            )
             self._setpoint = [key, traj, 0.0]
         self._setpoint[2] += self.params.dt
         return self._setpoint[1].sample(self._setpoint[2])
@@ -167,7 +168,7 @@ class AccelerationResolver(Resolver):
         ref = self._reference(target, pos, rot)
         jac = model.jacobian_world()
         drift = model.jdot_qdot()
-        if self._unicycle:      # columns J_b T over (v, ω); drift + J_b Ṫ u_b, Ṫ u_b = ω v (−sin θ, cos θ, 0)
+        if self._unicycle:  # columns J_b T over (v, ω); drift + J_b Ṫ u_b, Ṫ u_b = ω v (−sin θ, cos θ, 0)
             drift = drift + jac[:, :2] @ (qd[1] * qd[0] * np.array([-s, c]))
             jac = np.hstack((jac[:, :3] @ to_world, jac[:, 3:]))
         err = np.concatenate((ref.position - pos, pin.log3(ref.rotation @ rot.T)))
@@ -180,12 +181,23 @@ class AccelerationResolver(Resolver):
         sigma = float(lapack_svd(jac[rows, nb:], compute_uv=False)[-1])
         sigma_position = sigma if rows.stop == 3 else float(lapack_svd(jac[:3, nb:], compute_uv=False)[-1])
         target_err = np.concatenate((target.position - pos, pin.log3(target.rotation @ rot.T)))
-        return {'jac': jac[rows], 'xdd': xdd[rows], 'drift': drift[rows], 'qd': qd, 'q_arm': state.q_arm,
-                'box_lower': lo_v, 'box_upper': hi_v, 'lower': (lo_v - qd) / p.dt, 'upper': (hi_v - qd) / p.dt,
-                'brake_lower': (-down - qd) / p.dt, 'brake_upper': (up - qd) / p.dt,
-                'position_error': float(np.linalg.norm(target_err[:3])),
-                'orientation_error': float(np.linalg.norm(target_err[3:])), 'sigma': sigma,
-                'sigma_position': sigma_position}
+        return {
+            'jac': jac[rows],
+            'xdd': xdd[rows],
+            'drift': drift[rows],
+            'qd': qd,
+            'q_arm': state.q_arm,
+            'box_lower': lo_v,
+            'box_upper': hi_v,
+            'lower': (lo_v - qd) / p.dt,
+            'upper': (hi_v - qd) / p.dt,
+            'brake_lower': (-down - qd) / p.dt,
+            'brake_upper': (up - qd) / p.dt,
+            'position_error': float(np.linalg.norm(target_err[:3])),
+            'orientation_error': float(np.linalg.norm(target_err[3:])),
+            'sigma': sigma,
+            'sigma_position': sigma_position,
+        }
 
     def manipulability_acceleration(self, qd):
         """Eq (13): ``q̈_A = [0; γ1 ∇²H q̇_m + γ2 (γ1 ∇H − q̇_m)]``, H over the task's rows. Shape (n_b + n,)."""
@@ -210,18 +222,29 @@ class AccelerationResolver(Resolver):
             qdd = np.nan_to_num(qdd)
         qdd = np.clip(qdd, task['lower'], task['upper'])
         qd = task['qd'] + qdd * self.params.dt
-        qd[np.abs(qd) < 1e-12] = 0.0      # a stop is exact: braking by −q̇/T leaves round-off
+        qd[np.abs(qd) < 1e-12] = 0.0  # a stop is exact: braking by −q̇/T leaves round-off
         nb = self.n_base
         # the safety stage on the rates, within this period's box (q̇_prev ± q̈_max T, ...); the
         # base's are the world frame's (ẋ, ẏ, θ̇), or a differential base's own (v, ω)
-        safety = self.safety.filter(task['q_arm'], qd, task['box_lower'], task['box_upper'],
-                                    base_pose=state.base_pose, base_axes=self.model.config.base_axes,
-                                    base_velocity=state.base_twist, world_rates=not self._unicycle,
-                                    task_jacobian=task['jac'])
+        safety = self.safety.filter(
+            task['q_arm'],
+            qd,
+            task['box_lower'],
+            task['box_upper'],
+            base_pose=state.base_pose,
+            base_axes=self.model.config.base_axes,
+            base_velocity=state.base_twist,
+            world_rates=not self._unicycle,
+            task_jacobian=task['jac'],
+        )
         qd = safety.command.copy()
-        fields.update(clearance=safety.clearance, closest_pair=safety.closest_pair,
-                      collision_constraints=safety.active, collision_changed=safety.changed)
-        if self._unicycle:      # (v, ω) is already the base frame's, within its bounds
+        fields.update(
+            clearance=safety.clearance,
+            closest_pair=safety.closest_pair,
+            collision_constraints=safety.active,
+            collision_changed=safety.changed,
+        )
+        if self._unicycle:  # (v, ω) is already the base frame's, within its bounds
             base = np.array([qd[0], 0.0, qd[1]])
             base[np.abs(base) < 1e-12] = 0.0
             qd[:nb] = base[[0, 2]]
@@ -246,10 +269,18 @@ class AccelerationResolver(Resolver):
     def _command(self, qd, base, task, fields, t0):
         time_left = max(self._setpoint[1].duration - self._setpoint[2], 0.0) if self._setpoint else 0.0
         diag = ResolverDiagnostics(
-            method=self.name, psi=fields.pop('psi', 1.0), position_error=task['position_error'],
-            orientation_error=task['orientation_error'], compensation_scale=1.0, sigma_min=task['sigma'],
-            compensated=False, cycle_time_s=time.perf_counter() - t0, reference_time_left=time_left, **fields)
-        return ResolverCommand(arm_velocity=qd[self.n_base:].copy(), base_twist=base.copy(), diagnostics=diag)
+            method=self.name,
+            psi=fields.pop('psi', 1.0),
+            position_error=task['position_error'],
+            orientation_error=task['orientation_error'],
+            compensation_scale=1.0,
+            sigma_min=task['sigma'],
+            compensated=False,
+            cycle_time_s=time.perf_counter() - t0,
+            reference_time_left=time_left,
+            **fields,
+        )
+        return ResolverCommand(arm_velocity=qd[self.n_base :].copy(), base_twist=base.copy(), diagnostics=diag)
 
     def _tertiary(self, task, qdd, active, active_pinv):
         """Eqs (10)–(11): ``β P_A q̈_A`` with ``P_A = [I − ((I − S) P_N)⁺] P_N``, β keeping the bounds.

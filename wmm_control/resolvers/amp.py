@@ -79,7 +79,7 @@ class AmpResolver(AccelerationResolver):
 
     def reset(self):
         super().reset()
-        self._last_sigma = None      # σ_m of the last period, for the anticipation of the test
+        self._last_sigma = None  # σ_m of the last period, for the anticipation of the test
 
     def _anticipated_sigma(self, sigma):
         """σ_m + τ·min(σ̇_m, 0): where σ_m is heading, τ ahead (``sigma_lookahead``)."""
@@ -100,24 +100,50 @@ class AmpResolver(AccelerationResolver):
         p = self.params
         n = len(task['qd'])
         arm_only = np.ones(n, dtype=bool)
-        arm_only[:self.n_base] = False
+        arm_only[: self.n_base] = False
         sigma = self._anticipated_sigma(task['sigma_position'] if p.sigma_rows == 'position' else task['sigma'])
         singular = p.singularity_avoidance and sigma < p.sigma_min
         reason = 'singularity' if singular else ''
         if not singular:
-            sns = sns_accelerations(task['jac'], task['xdd'], task['drift'], task['lower'], task['upper'], arm_only,
-                                    self._base_stop(task), p.rcond)
+            sns = sns_accelerations(
+                task['jac'],
+                task['xdd'],
+                task['drift'],
+                task['lower'],
+                task['upper'],
+                arm_only,
+                self._base_stop(task),
+                p.rcond,
+            )
             if sns.alpha < 1.0:
                 reason = 'arm out of reach'
         if reason:
-            sns = sns_accelerations(task['jac'], task['xdd'], task['drift'], task['lower'], task['upper'],
-                                    np.ones(n, dtype=bool), np.zeros(n), p.rcond)
+            sns = sns_accelerations(
+                task['jac'],
+                task['xdd'],
+                task['drift'],
+                task['lower'],
+                task['upper'],
+                np.ones(n, dtype=bool),
+                np.zeros(n),
+                p.rcond,
+            )
         qdd, alpha, active, saturated = sns.qdd, sns.alpha, sns.active, sns.saturated
         beta = 1.0
         if p.manipulability and sns.pinv is not None:
             q_t, beta = self._tertiary(task, qdd, active, sns.pinv)
             qdd = qdd + q_t
-        base_on = bool(np.any(active[:self.n_base]))
-        mode = f'base active ({reason})' if base_on else ('base stopping' if np.any(task['qd'][:self.n_base]) else 'arm only')
-        return qdd, {'mode': mode, 'psi': 0.0 if base_on else 1.0, 'limit_scale': alpha, 'accel_scale': 1.0,
-                     'null_scale': beta, 'limited': tuple(int(i) for i in np.flatnonzero(saturated))}
+        base_on = bool(np.any(active[: self.n_base]))
+        mode = (
+            f'base active ({reason})'
+            if base_on
+            else ('base stopping' if np.any(task['qd'][: self.n_base]) else 'arm only')
+        )
+        return qdd, {
+            'mode': mode,
+            'psi': 0.0 if base_on else 1.0,
+            'limit_scale': alpha,
+            'accel_scale': 1.0,
+            'null_scale': beta,
+            'limited': tuple(int(i) for i in np.flatnonzero(saturated)),
+        }

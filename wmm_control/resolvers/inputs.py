@@ -41,11 +41,20 @@ class MeasuredInputs:
         if not np.all(np.isfinite(values)):
             return None, [LogEvent('odom non-finite', f'rejected /odom with non-finite values {values.tolist()}')]
         if max(abs(x), abs(y)) > self.max_distance:
-            return None, [LogEvent('odom far', f'rejected /odom at ({x:.6g}, {y:.6g}): beyond max_goal_distance '
-                                               f'{self.max_distance} m from the origin')]
+            return None, [
+                LogEvent(
+                    'odom far',
+                    f'rejected /odom at ({x:.6g}, {y:.6g}): beyond max_goal_distance '
+                    f'{self.max_distance} m from the origin',
+                )
+            ]
         if np.any(np.abs(twist) > self.plausible_twist):
-            return None, [LogEvent('odom twist', f'rejected /odom with twist {twist.tolist()} beyond '
-                                                 f'{self.factor:g} times the base velocity limits')]
+            return None, [
+                LogEvent(
+                    'odom twist',
+                    f'rejected /odom with twist {twist.tolist()} beyond {self.factor:g} times the base velocity limits',
+                )
+            ]
         unit, events = checked_quaternion(values[2:6], '/odom')
         if unit is None:
             return None, events + [LogEvent('odom zero quaternion', 'rejected /odom with a zero quaternion')]
@@ -59,8 +68,9 @@ class MeasuredInputs:
         values = np.asarray(pose, dtype=float)
         unit, events = checked_quaternion(values[3:], '/ee_pose') if np.all(np.isfinite(values)) else (None, [])
         if unit is None:
-            return None, events + [LogEvent('ee_pose invalid',
-                                            'rejected /ee_pose with non-finite values or a zero quaternion')]
+            return None, events + [
+                LogEvent('ee_pose invalid', 'rejected /ee_pose with non-finite values or a zero quaternion')
+            ]
         return (values[:3], matrix_from_quaternion(unit)), events
 
     def feasible_twist(self, twist) -> tuple[np.ndarray | None, list[LogEvent]]:
@@ -68,5 +78,10 @@ class MeasuredInputs:
         twist = np.asarray(twist, dtype=float)
         if np.all(np.isfinite(twist)) and not np.any(np.abs(twist) > self.plausible_twist):
             return twist, []
-        return None, [LogEvent('feasible twist', f'rejected /base/feasible_twist {twist.tolist()}: non-finite or '
-                                                 f'beyond {self.factor:g} times the base velocity limits')]
+        return None, [
+            LogEvent(
+                'feasible twist',
+                f'rejected /base/feasible_twist {twist.tolist()}: non-finite or '
+                f'beyond {self.factor:g} times the base velocity limits',
+            )
+        ]

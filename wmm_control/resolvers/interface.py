@@ -19,8 +19,7 @@ from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ShapeError
 from wmm_control.kinematics.orientation import matrix_from_rpy
 
-__all__ = ['RobotState', 'PoseTarget', 'ResolverDiagnostics', 'ResolverCommand', 'Resolver',
-           'base_twist_of']
+__all__ = ['RobotState', 'PoseTarget', 'ResolverDiagnostics', 'ResolverCommand', 'Resolver', 'base_twist_of']
 
 
 def base_twist_of(values, axes):
@@ -181,8 +180,11 @@ class ResolverCommand:
 
     def with_arm(self, arm_velocity, **diagnostics):
         """A copy with another arm command and some diagnostics fields replaced."""
-        return replace(self, arm_velocity=np.asarray(arm_velocity, dtype=float),
-                       diagnostics=replace(self.diagnostics, **diagnostics))
+        return replace(
+            self,
+            arm_velocity=np.asarray(arm_velocity, dtype=float),
+            diagnostics=replace(self.diagnostics, **diagnostics),
+        )
 
 
 class Resolver(ABC):

@@ -97,8 +97,7 @@ class CommandLimits:
         self.position_upper = np.asarray(position_upper, dtype=float)
         for name in ('velocity', 'acceleration', 'position_lower', 'position_upper'):
             if getattr(self, name).shape != (n,):
-                raise ConfigError(f'CommandLimits.{name}: expected shape ({n},), '
-                                  f'got {getattr(self, name).shape}')
+                raise ConfigError(f'CommandLimits.{name}: expected shape ({n},), got {getattr(self, name).shape}')
         for name in ('velocity', 'acceleration'):
             v = getattr(self, name)
             if not np.all(np.isfinite(v)) or np.any(v <= 0):
@@ -159,15 +158,23 @@ class CommandLimits:
         """
         arm, axes = robot.arm, list(robot.base_axes)
         inf = np.full(len(axes), np.inf)
-        return cls(velocity=np.concatenate((robot.base.velocity[axes], arm.velocity)),
-                   acceleration=np.concatenate((robot.base.acceleration[axes], arm.acceleration)),
-                   position_lower=np.concatenate((-inf, arm.position_lower)),
-                   position_upper=np.concatenate((inf, arm.position_upper)), dt=dt)
+        return cls(
+            velocity=np.concatenate((robot.base.velocity[axes], arm.velocity)),
+            acceleration=np.concatenate((robot.base.acceleration[axes], arm.acceleration)),
+            position_lower=np.concatenate((-inf, arm.position_lower)),
+            position_upper=np.concatenate((inf, arm.position_upper)),
+            dt=dt,
+        )
 
     def subset(self, index):
         """The limits of some entries only (``index``: a slice or an index array)."""
-        return CommandLimits(self.velocity[index], self.acceleration[index], self.position_lower[index],
-                             self.position_upper[index], self.dt)
+        return CommandLimits(
+            self.velocity[index],
+            self.acceleration[index],
+            self.position_lower[index],
+            self.position_upper[index],
+            self.dt,
+        )
 
     # apply and the helpers below work entry by entry on Python floats: for the n = 7 or 10
     # entries of a command, numpy's overhead per call (about 1 µs per operation, some 60 of
@@ -193,8 +200,11 @@ class CommandLimits:
         """
         n = self.n
         previous = self._floats(previous, 'previous command', finite=True)
-        prev_s = ([0.0] * n if previous_secondary is None
-                  else self._floats(previous_secondary, 'previous secondary', finite=True))
+        prev_s = (
+            [0.0] * n
+            if previous_secondary is None
+            else self._floats(previous_secondary, 'previous secondary', finite=True)
+        )
         primary = self._floats(primary, 'primary')
         secondary = [0.0] * n if secondary is None else self._floats(secondary, 'secondary')
         down, up = self._braking(self._floats(position, 'position'))
@@ -202,7 +212,7 @@ class CommandLimits:
         # 1. braking, joint by joint: the primary part first, the secondary part in the room left
         clipped, sec = [0.0] * n, [0.0] * n
         for i, (p, s, d, u) in enumerate(zip(primary, secondary, down, up)):
-            if not (math.isfinite(p) and math.isfinite(s)):       # a request to stop
+            if not (math.isfinite(p) and math.isfinite(s)):  # a request to stop
                 p = s = primary[i] = secondary[i] = 0.0
                 limited.add(i)
             clipped[i] = c = _clip(p, -d, u)
@@ -237,16 +247,23 @@ class CommandLimits:
             # the norms as np.linalg.norm takes them (sqrt of a BLAS dot), at a third of its cost
             asked = np.array(secondary)
             share = min(1.0, math.sqrt(out_s.dot(out_s)) / max(math.sqrt(asked.dot(asked)), 1e-300))
-        return LimitResult(command=np.array(command), secondary=out_s, scale=s_v, accel_scale=s_a,
-                           secondary_scale=share, limited=tuple(sorted(limited)), lower=np.array(lo),
-                           upper=np.array(hi))
+        return LimitResult(
+            command=np.array(command),
+            secondary=out_s,
+            scale=s_v,
+            accel_scale=s_a,
+            secondary_scale=share,
+            limited=tuple(sorted(limited)),
+            lower=np.array(lo),
+            upper=np.array(hi),
+        )
 
     def _floats(self, value, name, finite=False):
         """``value`` as a list of n floats; :func:`as_finite_vector` / :func:`as_vector` errors otherwise."""
         arr = np.asarray(value, dtype=float)
         out = arr.tolist() if arr.shape == (self.n,) else None
         if out is None or (finite and not all(map(math.isfinite, out))):
-            (as_finite_vector if finite else as_vector)(value, self.n, name)   # raises the detailed error
+            (as_finite_vector if finite else as_vector)(value, self.n, name)  # raises the detailed error
         return out
 
     def _braking(self, position):
@@ -254,7 +271,8 @@ class CommandLimits:
         down, up = [], []
         inv_dt = 1.0 / self.dt
         for x, lower, upper, has_lower, has_upper, half, two_a in zip(
-                position, self._lower, self._upper, self._has_lower, self._has_upper, self._half, self._two_a):
+            position, self._lower, self._upper, self._has_lower, self._has_upper, self._half, self._two_a
+        ):
             # distances to the limits, max(·, 0) letting a NaN position through as np.maximum does
             d_up, d_dn = upper - x, x - lower
             d_up = 0.0 if d_up < 0.0 else d_up
@@ -265,8 +283,7 @@ class CommandLimits:
 
     def _accel_interval(self, previous):
         """``previous ∓ a dt`` (lists)."""
-        return ([u - a for u, a in zip(previous, self._adt_list)],
-                [u + a for u, a in zip(previous, self._adt_list)])
+        return ([u - a for u, a in zip(previous, self._adt_list)], [u + a for u, a in zip(previous, self._adt_list)])
 
     def _box(self, down, up, previous, lower_accel, upper_accel):
         """:meth:`box` from the braking rates and the acceleration interval ``previous ∓ a dt``
@@ -298,7 +315,7 @@ def _braking_rate(distance, half, two_a, inv_dt):
     (``half`` = a dt/2, ``two_a`` = 2a, ``inv_dt`` = 1/dt.)
     """
     if not distance > 0.0:
-        return 0.0 if distance <= 0.0 else distance       # NaN passes through
+        return 0.0 if distance <= 0.0 else distance  # NaN passes through
     adt = 2.0 * half
     n = int((-half + math.sqrt(half * half + two_a * distance)) / adt)
     for _ in range(3):
@@ -323,8 +340,10 @@ def _largest_step(start, step, lower, upper):
 
     ``start`` lies within the bounds. Sequences of floats, all of one length.
     """
-    s_each = [(hi - x) / d if d > 0.0 else (lo - x) / d if d < 0.0 else math.inf
-              for x, d, lo, hi in zip(start, step, lower, upper)]
+    s_each = [
+        (hi - x) / d if d > 0.0 else (lo - x) / d if d < 0.0 else math.inf
+        for x, d, lo, hi in zip(start, step, lower, upper)
+    ]
     s = min(s_each, default=math.inf)
     if s >= 1.0:
         return 1.0, ()

@@ -42,7 +42,7 @@ from wmm_control.resolvers.safety import SafetyParams, SafetyStage
 __all__ = ['PoseServoParams', 'PoseServoResolver', 'damped_pinv_solve', 'singularity_damping', 'ORIENTATION_ERRORS']
 
 ORIENTATION_ERRORS = ('rpy', 'log')
-_H_COLS = (0, 1, 5)          # columns of H J_b of the base twist (vx, vy, ω)
+_H_COLS = (0, 1, 5)  # columns of H J_b of the base twist (vx, vy, ω)
 
 
 @dataclass(frozen=True)
@@ -91,8 +91,7 @@ class PoseServoParams(SafetyParams):
         super().__post_init__()
         _check_fields(self, self._allow_zero)
         if self.orientation_error not in ORIENTATION_ERRORS:
-            raise ConfigError(f'orientation_error must be one of {ORIENTATION_ERRORS}, '
-                              f'got {self.orientation_error!r}')
+            raise ConfigError(f'orientation_error must be one of {ORIENTATION_ERRORS}, got {self.orientation_error!r}')
 
 
 def _check_fields(params, allow_zero=()):
@@ -107,8 +106,10 @@ def _check_fields(params, allow_zero=()):
         if isinstance(val, bool) or not isinstance(val, (int, float)):
             raise ConfigError(f'{type(params).__name__}.{f.name}: expected a number, got {val!r}')
         if not math.isfinite(val) or val < 0 or (val == 0 and f.name not in allow_zero):
-            raise ConfigError(f'{type(params).__name__}.{f.name} must be finite and '
-                              f'{">= 0" if f.name in allow_zero else "> 0"}, got {val}')
+            raise ConfigError(
+                f'{type(params).__name__}.{f.name} must be finite and '
+                f'{">= 0" if f.name in allow_zero else "> 0"}, got {val}'
+            )
 
 
 def singularity_damping(jac, rho, region, max_damping):
@@ -149,7 +150,7 @@ def damped_pinv_solve(jac, rhs, rho, activation=None):
     """
     ja = jac if activation is None else jac * activation
     gram = ja @ jac.T
-    gram.ravel()[::gram.shape[0] + 1] += rho * rho      # the diagonal (a view: gram is a new C array)
+    gram.ravel()[:: gram.shape[0] + 1] += rho * rho  # the diagonal (a view: gram is a new C array)
     out = jac.T @ lapack_solve(gram, rhs)
     return out if activation is None else activation * out
 
@@ -160,6 +161,7 @@ def damped_pinv_solve(jac, rhs, rho, activation=None):
 # svd 9.5 -> 6.3 µs, with U and V 14 -> 9 µs, solve 5.2 -> 1.4 µs. Same routines, same
 # arithmetic: the Table II runs come out identical to the bit. (That matters: the closed loop
 # grows a 1e-14 change of one command to 1e-8 within 150 periods and to O(1) within 400.)
+
 
 def lapack_svd(a, compute_uv=True):
     """``np.linalg.svd(a, full_matrices=False, compute_uv=...)`` of a real matrix.
@@ -219,16 +221,16 @@ class PoseServoResolver(Resolver):
 
     def reset(self):
         n, n_arm = self.n, self.n_arm
-        self._prev = np.zeros(n)           # last nominal command (base reference, arm before eq 14)
-        self._prev_null = np.zeros(n)      # its null-space share
-        self._prev_arm = np.zeros(n_arm)   # last arm command sent
+        self._prev = np.zeros(n)  # last nominal command (base reference, arm before eq 14)
+        self._prev_null = np.zeros(n)  # its null-space share
+        self._prev_arm = np.zeros(n_arm)  # last arm command sent
         self._prev_arm_null = np.zeros(n_arm)
         self._arm_before = (np.zeros(n_arm), np.zeros(n_arm))
-        self._arm_task = np.zeros(n_arm)       # this period's arm command: task part...
-        self._arm_null = np.zeros(n_arm)       # ...and null-space part
+        self._arm_task = np.zeros(n_arm)  # this period's arm command: task part...
+        self._arm_null = np.zeros(n_arm)  # ...and null-space part
         self._q_arm = None
         self._jac = None
-        self._safety = None                    # the safety stage's answer on the last arm command
+        self._safety = None  # the safety stage's answer on the last arm command
         self._base_pose = None
         self._base_velocity = None
         self.arm_damping = self.params.rho
@@ -258,7 +260,7 @@ class PoseServoResolver(Resolver):
         p_ref = np.empty(6)
         e_lin = e_pos
         e_norm = _norm(e_pos)
-        if e_norm > p.max_linear_speed / p.lambda_p:   # an absurdly far goal: keep only its direction
+        if e_norm > p.max_linear_speed / p.lambda_p:  # an absurdly far goal: keep only its direction
             e_lin = e_pos / e_norm * (p.max_linear_speed / p.lambda_p)
         p_ref[:3] = b_r_w @ (p.lambda_p * e_lin + ff[:3])
         if p.orientation_error == 'rpy':
@@ -267,12 +269,12 @@ class PoseServoResolver(Resolver):
             if p.rotate_angular_error:
                 e_ang = b_r_w @ e_ang
             p_ref[3:] = p.lambda_p * e_ang
-            if ff[3:].any():   # (a set-point's zero feedforward adds exactly nothing: skip Ω⁻¹)
+            if ff[3:].any():  # (a set-point's zero feedforward adds exactly nothing: skip Ω⁻¹)
                 p_ref[3:] += rpy_rate_map(model.ee_pose_base()[3:], p.rpy_damping)[3:, 3:] @ (b_r_w @ ff[3:])
         else:
             jac = np.empty((6, self.n))
-            jac[:, :self.n_base] = model.h_matrix()[:, self._base_cols]
-            jac[:, self.n_base:] = model.arm_jacobian_base()
+            jac[:, : self.n_base] = model.h_matrix()[:, self._base_cols]
+            jac[:, self.n_base :] = model.arm_jacobian_base()
             p_ref[3:] = b_r_w @ (p.lambda_p * pin.log3(rot_err) + ff[3:])
         _cap(p_ref[:3], p.max_linear_speed)
         _cap(p_ref[3:], p.max_angular_speed)
@@ -339,19 +341,22 @@ class PoseServoResolver(Resolver):
         active = np.ones(n) if activation is None else np.array(activation, dtype=float)
         fixed = np.zeros(n)
         values = task.tolist()
-        if p.arm_takeover and any(not lower[i] - 1e-12 <= values[i] <= upper[i] + 1e-12
-                                  for i in range(nb)):
+        if p.arm_takeover and any(not lower[i] - 1e-12 <= values[i] <= upper[i] + 1e-12 for i in range(nb)):
             # the base turns towards its share by the largest fraction of the way that every axis
             # can go this period (its direction kept), within its velocity limits; the arm does the rest
-            frac = min([1.0] + [step[i] / abs(values[i] - last[i]) for i in range(nb)
-                                if abs(values[i] - last[i]) > step[i]])
+            frac = min(
+                [1.0] + [step[i] / abs(values[i] - last[i]) for i in range(nb) if abs(values[i] - last[i]) > step[i]]
+            )
             for i in range(nb):
                 fixed[i] = min(max(last[i] + frac * (values[i] - last[i]), lower[i]), upper[i])
                 active[i] = 0.0
             task = fixed + damped_pinv_solve(jac, p_ref - jac @ fixed, self.task_damping(jac, active), active)
         for _ in range(self.n_arm):
-            over = [i for i, x in enumerate(task.tolist())
-                    if active[i] > 0.0 and (x < lower[i] - 1e-12 or x > upper[i] + 1e-12)]
+            over = [
+                i
+                for i, x in enumerate(task.tolist())
+                if active[i] > 0.0 and (x < lower[i] - 1e-12 or x > upper[i] + 1e-12)
+            ]
             if not over:
                 break
             for i in over:
@@ -389,17 +394,27 @@ class PoseServoResolver(Resolver):
         self._base_velocity = state.base_twist
         arm, base = self._finish_arm(self._arm_task, lim)
         p = self.params
-        self.arm_damping, sigma = singularity_damping(jac[:, nb:], p.rho, p.singular_region,
-                                                      p.max_damping)
+        self.arm_damping, sigma = singularity_damping(jac[:, nb:], p.rho, p.singular_region, p.max_damping)
         limited = sorted(set(lim.limited) | {i + nb for i in arm.limited})
         diag = ResolverDiagnostics(
-            method=self.name, mode=mode, psi=float(psi), position_error=_norm(e_pos),
-            orientation_error=angle, limit_scale=lim.scale, accel_scale=lim.accel_scale,
+            method=self.name,
+            mode=mode,
+            psi=float(psi),
+            position_error=_norm(e_pos),
+            orientation_error=angle,
+            limit_scale=lim.scale,
+            accel_scale=lim.accel_scale,
             null_scale=lim.secondary_scale,
-            compensation_scale=1.0, limited=tuple(limited), sigma_min=sigma, compensated=False,
-            cycle_time_s=time.perf_counter() - t0, **self._safety_fields())
-        return ResolverCommand(arm_velocity=arm.command.copy(), base_twist=base_twist_of(base, self.base_axes),
-                               diagnostics=diag)
+            compensation_scale=1.0,
+            limited=tuple(limited),
+            sigma_min=sigma,
+            compensated=False,
+            cycle_time_s=time.perf_counter() - t0,
+            **self._safety_fields(),
+        )
+        return ResolverCommand(
+            arm_velocity=arm.command.copy(), base_twist=base_twist_of(base, self.base_axes), diagnostics=diag
+        )
 
     def _finish_arm(self, arm_task, whole=None, feasible_twist=None):
         """The arm command sent: task part ``arm_task`` plus this period's null-space share,
@@ -412,25 +427,38 @@ class PoseServoResolver(Resolver):
         controller's answer) and only the arm is left to choose.
         """
         before, before_null = self._arm_before
-        arm = self._arm_limits.apply(arm_task, self._q_arm, before, secondary=self._arm_null,
-                                     previous_secondary=before_null)
+        arm = self._arm_limits.apply(
+            arm_task, self._q_arm, before, secondary=self._arm_null, previous_secondary=before_null
+        )
         nb = self.n_base
         if whole is None:
-            self._safety = self.safety.filter(self._q_arm, arm.command, arm.lower, arm.upper,
-                                              base_pose=self._base_pose, base_twist=feasible_twist,
-                                              task_jacobian=self._jac[:, nb:])
+            self._safety = self.safety.filter(
+                self._q_arm,
+                arm.command,
+                arm.lower,
+                arm.upper,
+                base_pose=self._base_pose,
+                base_twist=feasible_twist,
+                task_jacobian=self._jac[:, nb:],
+            )
             base = None
             if self._safety.changed:
                 arm = replace(arm, command=self._safety.command)
         else:
             base = whole.command[:nb]
             self._safety = self.safety.filter(
-                self._q_arm, np.concatenate((base, arm.command)), np.concatenate((whole.lower[:nb], arm.lower)),
-                np.concatenate((whole.upper[:nb], arm.upper)), base_pose=self._base_pose, base_axes=self.base_axes,
-                base_velocity=self._base_velocity, task_jacobian=self._jac)
+                self._q_arm,
+                np.concatenate((base, arm.command)),
+                np.concatenate((whole.lower[:nb], arm.lower)),
+                np.concatenate((whole.upper[:nb], arm.upper)),
+                base_pose=self._base_pose,
+                base_axes=self.base_axes,
+                base_velocity=self._base_velocity,
+                task_jacobian=self._jac,
+            )
             if self._safety.changed:
                 base = self._safety.command[:nb].copy()
-                self._prev[:nb] = base          # the base reference sent: next period's acceleration bound
+                self._prev[:nb] = base  # the base reference sent: next period's acceleration bound
                 arm = replace(arm, command=self._safety.command[nb:])
         self._prev_arm, self._prev_arm_null = arm.command.copy(), arm.secondary.copy()
         return arm if whole is None else (arm, base)
@@ -438,8 +466,12 @@ class PoseServoResolver(Resolver):
     def _safety_fields(self):
         """The safety stage's diagnostics fields of the last arm command."""
         out = self._safety
-        return dict(clearance=out.clearance, closest_pair=out.closest_pair, collision_constraints=out.active,
-                    collision_changed=out.changed)
+        return dict(
+            clearance=out.clearance,
+            closest_pair=out.closest_pair,
+            collision_constraints=out.active,
+            collision_changed=out.changed,
+        )
 
     # ------------------------------------------------------------------ eq (14)
     def compensation_term(self, base_reference, feasible_twist):
@@ -450,8 +482,8 @@ class PoseServoResolver(Resolver):
         """
         jac = self._jac
         gap = np.asarray(base_reference, dtype=float) - np.asarray(feasible_twist, dtype=float)
-        deficit = jac[:, :self.n_base] @ gap[list(self.base_axes)]
-        return damped_pinv_solve(jac[:, self.n_base:], deficit, self.arm_damping)
+        deficit = jac[:, : self.n_base] @ gap[list(self.base_axes)]
+        return damped_pinv_solve(jac[:, self.n_base :], deficit, self.arm_damping)
 
     def _add_compensation(self, command, feasible_twist):
         """``command`` with the eq (14) term added to the nominal arm command, within the arm's bounds.
@@ -465,14 +497,20 @@ class PoseServoResolver(Resolver):
         term = self.compensation_term(command.base_twist, feasible_twist)
         arm = self._finish_arm(self._arm_task + term, feasible_twist=feasible_twist)
         elapsed = command.diagnostics.cycle_time_s + time.perf_counter() - t0
-        return command.with_arm(arm.command.copy(), compensation_scale=arm.scale * arm.accel_scale,
-                                compensated=True, cycle_time_s=elapsed, **self._safety_fields())
+        return command.with_arm(
+            arm.command.copy(),
+            compensation_scale=arm.scale * arm.accel_scale,
+            compensated=True,
+            cycle_time_s=elapsed,
+            **self._safety_fields(),
+        )
 
 
 # The helpers below work on 3-vectors, where a numpy reduction (np.max, np.linalg.norm)
 # costs 1-3 µs of call overhead for a few flops: the largest magnitude is taken on Python
 # floats and the norm as np.linalg.norm takes it (the square root of the dot product), the
 # same values at a fifth of the cost.
+
 
 def _length(vec):
     """``np.linalg.norm`` of a 1-D float array."""
@@ -494,7 +532,7 @@ def _cap(vec, limit):
     """Scale ``vec`` in place to norm ``limit`` when it is longer, keeping its direction."""
     big = _largest_magnitude(vec)
     if big > limit:
-        vec /= big                  # now every entry is in [−1, 1]: no overflow below
+        vec /= big  # now every entry is in [−1, 1]: no overflow below
     norm = _length(vec)
     if norm > limit:
         vec *= limit / norm

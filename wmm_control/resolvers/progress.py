@@ -84,15 +84,15 @@ class GoalProgress:
         self.cycles = 0
         self.reached = False
         self.stalled = False
-        self._best = [math.inf, math.inf]      # best (position, orientation) error of the goal
-        self._held = [math.inf, math.inf]      # held (position, orientation) error of the goal
-        self._block = [0.0, 0.0]               # largest errors of the stride under way
-        self._blocks = deque()                 # ...and of the strides before it, a window's worth
+        self._best = [math.inf, math.inf]  # best (position, orientation) error of the goal
+        self._held = [math.inf, math.inf]  # held (position, orientation) error of the goal
+        self._block = [0.0, 0.0]  # largest errors of the stride under way
+        self._blocks = deque()  # ...and of the strides before it, a window's worth
         self._last_reached = None
-        self._last_moving = None               # the last cycle whose target still moved
+        self._last_moving = None  # the last cycle whose target still moved
         self._gathering_pace = True
-        self._cycles = deque()                 # the cycles sampled, every stride...
-        self._samples = deque()                # ...and (best, held) errors then
+        self._cycles = deque()  # the cycles sampled, every stride...
+        self._samples = deque()  # ...and (best, held) errors then
 
     def _needed(self, value, index):
         return max(self.min_progress[index], self.min_progress_ratio * value)
@@ -152,17 +152,21 @@ class GoalProgress:
         """Whether the goal made progress over the last ``stall_time`` (module docstring)."""
         window = self._window
         if self.cycles <= window:
-            return True                 # not a whole window yet
+            return True  # not a whole window yet
         if any(last is not None and self.cycles - last <= window for last in (self._last_reached, self._last_moving)):
             return True
         best0, held0 = self._at(self.cycles - window)
         if self._gained(best0, self._best) and (
-                self.cycles < 2 * window or self._gained(held0, self._held, window_max[0])):
+            self.cycles < 2 * window or self._gained(held0, self._held, window_max[0])
+        ):
             return True
         if self._gathering_pace:
             best1, _ = self._at(self.cycles - 2 * window)
-            if any(best0[i] - self._best[i] >= self.min_progress[i]
-                   and best0[i] - self._best[i] > best1[i] - best0[i] for i in (0, 1) if math.isfinite(best1[i])):
+            if any(
+                best0[i] - self._best[i] >= self.min_progress[i] and best0[i] - self._best[i] > best1[i] - best0[i]
+                for i in (0, 1)
+                if math.isfinite(best1[i])
+            ):
                 return True
             self._gathering_pace = False
         return False

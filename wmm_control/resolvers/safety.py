@@ -128,17 +128,26 @@ class SafetyParams:
     collision_braking: float = 0.5
 
     def __post_init__(self):
-        for name in ('collision_influence', 'collision_safety', 'collision_gain', 'collision_lookahead',
-                     'collision_braking'):
+        for name in (
+            'collision_influence',
+            'collision_safety',
+            'collision_gain',
+            'collision_lookahead',
+            'collision_braking',
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigError(f'{name} must be finite and > 0, got {value}')
         if self.collision_safety >= self.collision_influence:
-            raise ConfigError(f'collision_safety ({self.collision_safety} m) must be below collision_influence '
-                              f'({self.collision_influence} m)')
+            raise ConfigError(
+                f'collision_safety ({self.collision_safety} m) must be below collision_influence '
+                f'({self.collision_influence} m)'
+            )
         if self.collision_lookahead < self.collision_influence:
-            raise ConfigError(f'collision_lookahead ({self.collision_lookahead} m) must not be below '
-                              f'collision_influence ({self.collision_influence} m)')
+            raise ConfigError(
+                f'collision_lookahead ({self.collision_lookahead} m) must not be below '
+                f'collision_influence ({self.collision_influence} m)'
+            )
 
 
 @dataclass(frozen=True)
@@ -178,24 +187,42 @@ class SafetyStage:
     def for_robot(cls, robot, params: SafetyParams = SafetyParams(), obstacles=()):
         """The stage of a :class:`~wmm_control.robot_config.RobotConfig`: its collision model
         (with ``obstacles``) and its acceleration limits."""
-        return cls(CollisionModel.from_robot(robot, obstacles=obstacles), params, robot.arm.acceleration,
-                   robot.base.velocity, robot.base.acceleration, base_lag(robot))
+        return cls(
+            CollisionModel.from_robot(robot, obstacles=obstacles),
+            params,
+            robot.arm.acceleration,
+            robot.base.velocity,
+            robot.base.acceleration,
+            base_lag(robot),
+        )
 
-    def __init__(self, collision, params: SafetyParams = SafetyParams(), arm_acceleration=None,
-                 base_velocity=None, base_acceleration=None, base_lag=0.0):
+    def __init__(
+        self,
+        collision,
+        params: SafetyParams = SafetyParams(),
+        arm_acceleration=None,
+        base_velocity=None,
+        base_acceleration=None,
+        base_lag=0.0,
+    ):
         self.collision = collision
         self.params = params
         if not (math.isfinite(base_lag) and base_lag >= 0.0):
             raise ConfigError(f'base_lag must be finite and >= 0, got {base_lag}')
         self.base_lag = float(base_lag)
         self._arm_acc = None if arm_acceleration is None else np.asarray(arm_acceleration, dtype=float)
-        self._base_acc = (np.zeros(3) if base_acceleration is None
-                          else np.asarray(base_acceleration, dtype=float))
+        self._base_acc = np.zeros(3) if base_acceleration is None else np.asarray(base_acceleration, dtype=float)
         stopping = 0.0
         if base_velocity is not None and base_acceleration is not None:
             # from full speed, braking as its rows count on: at its limit, and no harder than a_b
-            stopping = max((float(v) * self.base_lag + float(v) ** 2 / (2.0 * min(float(a), params.collision_braking))
-                            for v, a in zip(base_velocity[:2], base_acceleration[:2]) if a > 0.0), default=0.0)
+            stopping = max(
+                (
+                    float(v) * self.base_lag + float(v) ** 2 / (2.0 * min(float(a), params.collision_braking))
+                    for v, a in zip(base_velocity[:2], base_acceleration[:2])
+                    if a > 0.0
+                ),
+                default=0.0,
+            )
         #: [m] how far an obstacle is looked at: the base's stopping distance from full speed
         self.obstacle_lookahead = max(params.collision_lookahead, params.collision_safety + stopping)
 
@@ -203,8 +230,21 @@ class SafetyStage:
         """Keep the robot off ``obstacles`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`) from now on."""
         self.collision.set_obstacles(obstacles)
 
-    def filter(self, q_arm, command, lower, upper, weights=None, *, base_pose=None, base_axes=(),
-               base_twist=None, base_velocity=None, world_rates=False, task_jacobian=None) -> SafetyResult:
+    def filter(
+        self,
+        q_arm,
+        command,
+        lower,
+        upper,
+        weights=None,
+        *,
+        base_pose=None,
+        base_axes=(),
+        base_twist=None,
+        base_velocity=None,
+        world_rates=False,
+        task_jacobian=None,
+    ) -> SafetyResult:
         """The command ``command`` at arm joints ``q_arm``, within the dampers and the box.
 
         Args:
@@ -237,8 +277,8 @@ class SafetyStage:
         label = '/'.join(names) if names else ''
         if not pairs:
             return SafetyResult(command, clearance, label, 0, False)
-        base_full = np.array([pair.base_jacobian for pair in pairs])      # over (vx, vy, ω), base frame
-        moved = base_full.any(axis=1)                                      # pairs with an obstacle
+        base_full = np.array([pair.base_jacobian for pair in pairs])  # over (vx, vy, ω), base frame
+        moved = base_full.any(axis=1)  # pairs with an obstacle
         # the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for world-frame rates
         to_base = _world_to_base(base_pose[2]) if world_rates else np.eye(3)
         rows = np.hstack(((base_full @ to_base)[:, axes], [pair.rate_jacobian for pair in pairs]))
@@ -250,9 +290,10 @@ class SafetyStage:
             bound = bound - np.array([pair.base_jacobian @ np.asarray(base_twist, dtype=float) for pair in pairs])
         elif axes and base_velocity is not None and self.base_lag > 0.0:
             v0 = np.asarray(base_velocity, dtype=float)
-            own = base_full @ v0                                           # the base's approach rates
-            command, lower, upper, overtaking = self._brake_on_path(pairs, rows, bound, axes, command, v0, own,
-                                                                   moved, to_base, lower, upper)
+            own = base_full @ v0  # the base's approach rates
+            command, lower, upper, overtaking = self._brake_on_path(
+                pairs, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
+            )
             rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
         if base_twist is None and self.base_lag == 0.0:
             # a base that tracks its reference: its linear approach must brake on its own (a
@@ -285,10 +326,10 @@ class SafetyStage:
         reference's (a sideways reference drives it on along its wheels' heading for a while, into
         what lies ahead)."""
         norm = float(v0 @ v0)
-        if norm < PATH_SPEED ** 2 or not moved.any():
+        if norm < PATH_SPEED**2 or not moved.any():
             return rows, bound
-        along = (own[moved, None] * v0 / norm) @ to_base                  # j_b v₀ v₀ᵀ / |v₀|²
-        extra = np.hstack((along[:, axes], rows[moved, len(axes):]))
+        along = (own[moved, None] * v0 / norm) @ to_base  # j_b v₀ v₀ᵀ / |v₀|²
+        extra = np.hstack((along[:, axes], rows[moved, len(axes) :]))
         return np.vstack((rows, extra)), np.concatenate((bound, bound[moved]))
 
     def _brake_on_path(self, pairs, rows, bound, axes, command, v0, own, moved, to_base, lower, upper):
@@ -336,8 +377,9 @@ class SafetyStage:
             # its approach to another face, changes under it)
             slowest = float(np.min(self._base_acc[[axes[k] for k in linear]]))
             reach = reach + np.linalg.norm(rows[:, linear], axis=1) * slowest
-        return np.array([self.allowed_approach(pair.distance, braking, lag)
-                         for pair, braking, lag in zip(pairs, reach, lags)])
+        return np.array(
+            [self.allowed_approach(pair.distance, braking, lag) for pair, braking, lag in zip(pairs, reach, lags)]
+        )
 
     def allowed_approach(self, distance: float, deceleration: float = math.inf, lag: float = 0.0) -> float:
         """The fastest a pair ``distance`` [m] apart may approach [m/s] (negative: it must
@@ -354,7 +396,6 @@ class SafetyStage:
         damper = gain * (distance - d_s) if distance < d_i else math.inf
         return min(damper, braking)
 
-
     def _solve(self, command, rows, bound, lower, upper, hessian):
         """The QP of the module docstring over y = (q̇, slack), the dampers ``rows`` ≥ ``bound``.
 
@@ -365,20 +406,20 @@ class SafetyStage:
         (q̇₀, 0), each slack's bound has the multiplier SLACK_COST.
         """
         n, m = command.size, bound.size
-        scale = np.zeros((n + m, n + m))            # L⁻ᵀ: y = y₀ + L⁻ᵀ z
+        scale = np.zeros((n + m, n + m))  # L⁻ᵀ: y = y₀ + L⁻ᵀ z
         scale[:n, :n] = solve_triangular(np.linalg.cholesky(hessian), np.eye(n), lower=True).T
         scale[n:, n:] = np.eye(m) / math.sqrt(SLACK_WEIGHT)
         y0 = np.concatenate((command, np.full(m, -SLACK_COST / SLACK_WEIGHT)))
         # a y ≥ e: the dampers (rows q̇ + slack ≥ bound), slack ≥ 0, q̇ ≥ lower and −q̇ ≥ −upper
         a = np.zeros((2 * m + 2 * n, n + m))
         a[:m, :n] = rows
-        a[:m, n:] = a[m:2 * m, n:] = np.eye(m)
-        a[2 * m:2 * m + n, :n] = np.eye(n)
-        a[2 * m + n:, :n] = -np.eye(n)
+        a[:m, n:] = a[m : 2 * m, n:] = np.eye(m)
+        a[2 * m : 2 * m + n, :n] = np.eye(n)
+        a[2 * m + n :, :n] = -np.eye(n)
         e = np.concatenate((bound, np.zeros(m), lower, -upper))
         try:
             z = _least_distance(a @ scale, e - a @ y0, list(range(m, 2 * m)))
-        except np.linalg.LinAlgError:                   # active constraints dependent through rounding
+        except np.linalg.LinAlgError:  # active constraints dependent through rounding
             z = None
         if z is None:
             # no answer (a box with lower > upper): brake as hard as the box allows
@@ -395,12 +436,12 @@ def _without_turn(rows, bound, axes, base_full, moved, to_base):
     next corner swings in). The arm's pairs keep the turn: the arm brakes its own share fast."""
     if 2 not in axes:
         return rows, bound
-    n = len(moved)                                  # the pairs' own rows come first
-    turning = moved & (base_full[:, 2] != 0.0) & ~rows[:n, len(axes):].any(axis=1)
+    n = len(moved)  # the pairs' own rows come first
+    turning = moved & (base_full[:, 2] != 0.0) & ~rows[:n, len(axes) :].any(axis=1)
     if not turning.any():
         return rows, bound
     linear = base_full[turning] * np.array([1.0, 1.0, 0.0])
-    extra = np.hstack(((linear @ to_base)[:, axes], rows[:n][turning, len(axes):]))
+    extra = np.hstack(((linear @ to_base)[:, axes], rows[:n][turning, len(axes) :]))
     return np.vstack((rows, extra)), np.concatenate((bound, bound[:n][turning]))
 
 
@@ -423,13 +464,13 @@ def _least_distance(normals, rhs, active):
         numpy.linalg.LinAlgError: the active normals became dependent through rounding.
     """
     active = list(active)
-    u = _gram_solve(normals[active], rhs[active])     # the active constraints' multipliers
+    u = _gram_solve(normals[active], rhs[active])  # the active constraints' multipliers
     z = u @ normals[active]
     norms = np.linalg.norm(normals, axis=1)
     adding, u_add = None, 0.0
     for _ in range(20 * len(rhs)):
         if adding is None:
-            gap = (rhs - normals @ z) / norms           # how far z is from meeting each
+            gap = (rhs - normals @ z) / norms  # how far z is from meeting each
             gap[active] = -np.inf
             adding = int(np.argmax(gap))
             if gap[adding] <= LEAST_DISTANCE_TOLERANCE:
@@ -437,17 +478,17 @@ def _least_distance(normals, rhs, active):
                 return _gram_solve(a, rhs[active]) @ a
             u_add = 0.0
         n_add, a = normals[adding], normals[active]
-        r = _gram_solve(a, a @ n_add)                   # n_add's part in the span of the active normals
-        d = n_add - r @ a                               # the rest: moving z along it keeps them met
+        r = _gram_solve(a, a @ n_add)  # n_add's part in the span of the active normals
+        d = n_add - r @ a  # the rest: moving z along it keeps them met
         dd = d @ d
         full = (rhs[adding] - n_add @ z) / dd if dd > 1e-12 * (n_add @ n_add) else np.inf
-        ratios = np.full(r.size, np.inf)                # as u_add rises by t, u falls by t r:
-        np.divide(u, r, out=ratios, where=r > 0)        # the t that takes each to zero
+        ratios = np.full(r.size, np.inf)  # as u_add rises by t, u falls by t r:
+        np.divide(u, r, out=ratios, where=r > 0)  # the t that takes each to zero
         drop = int(np.argmin(ratios)) if r.size else -1
         partial = ratios[drop] if r.size else np.inf
         step = min(full, partial)
         if not np.isfinite(step):
-            return None                                 # n_add in the span, nothing to drop
+            return None  # n_add in the span, nothing to drop
         if np.isfinite(full):
             z = z + step * d
         u = u - step * r

@@ -17,7 +17,7 @@ from wmm_control.resolvers.interface import PoseTarget
 
 __all__ = ['SetpointTrajectory']
 
-_PEAK_SPEED = 1.875               # max of ds/dτ for the quintic
+_PEAK_SPEED = 1.875  # max of ds/dτ for the quintic
 _PEAK_ACCEL = 10.0 / math.sqrt(3)  # max of d²s/dτ² for the quintic (5.7735)
 
 
@@ -31,27 +31,35 @@ class SetpointTrajectory:
         max_angular_speed: peak angular speed [rad/s]; max_angular_accel: [rad/s²].
     """
 
-    def __init__(self, start_position, start_rotation, goal, max_speed, max_accel, max_angular_speed,
-                 max_angular_accel):
+    def __init__(
+        self, start_position, start_rotation, goal, max_speed, max_accel, max_angular_speed, max_angular_accel
+    ):
         self.goal = goal
         self.p0 = np.asarray(start_position, dtype=float).copy()
         self.r0 = np.asarray(start_rotation, dtype=float).copy()
         self.dp = goal.position - self.p0
-        self.rotvec = pin.log3(goal.rotation @ self.r0.T)     # world-frame rotation vector
+        self.rotvec = pin.log3(goal.rotation @ self.r0.T)  # world-frame rotation vector
         d, angle = float(np.linalg.norm(self.dp)), float(np.linalg.norm(self.rotvec))
-        self.duration = max(_PEAK_SPEED * d / max_speed, math.sqrt(_PEAK_ACCEL * d / max_accel),
-                            _PEAK_SPEED * angle / max_angular_speed,
-                            math.sqrt(_PEAK_ACCEL * angle / max_angular_accel), 1e-9)
+        self.duration = max(
+            _PEAK_SPEED * d / max_speed,
+            math.sqrt(_PEAK_ACCEL * d / max_accel),
+            _PEAK_SPEED * angle / max_angular_speed,
+            math.sqrt(_PEAK_ACCEL * angle / max_angular_accel),
+            1e-9,
+        )
 
     def sample(self, t):
         """The reference at time ``t`` [s] since the start: pose, twist and acceleration (world)."""
         tau = min(max(t / self.duration, 0.0), 1.0)
-        s = tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+        s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
         ds = 30.0 * tau * tau * (1.0 - tau) ** 2 / self.duration
-        dds = 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau) / self.duration ** 2
+        dds = 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau) / self.duration**2
         if tau >= 1.0:
             return self.goal
         rot = pin.exp3(s * self.rotvec) @ self.r0
-        return PoseTarget(self.p0 + s * self.dp, rot,
-                          velocity=np.concatenate((ds * self.dp, ds * self.rotvec)),
-                          acceleration=np.concatenate((dds * self.dp, dds * self.rotvec)))
+        return PoseTarget(
+            self.p0 + s * self.dp,
+            rot,
+            velocity=np.concatenate((ds * self.dp, ds * self.rotvec)),
+            acceleration=np.concatenate((dds * self.dp, dds * self.rotvec)),
+        )

@@ -92,7 +92,7 @@ def sns_accelerations(jac, xdd, drift, lower, upper, active, held, rcond=1e-6):
             break
         jp = full_row_rank_pinv(jac[:, cols], rcond)
         if jp is None:
-            break                          # rank(J S) < r: this set cannot do the task
+            break  # rank(J S) < r: this set cannot do the task
         a = q_n.copy()
         a[cols] += jp @ (-drift - jac @ q_n)
         b = np.zeros(n)

@@ -80,15 +80,26 @@ class TargetManager:
         progress: the :class:`GoalProgress` of the target.
     """
 
-    def __init__(self, workspace, world_frame, max_goal_distance, timeout, tolerance, stall_time, period,
-                 min_progress_ratio, position_only=False) -> None:
+    def __init__(
+        self,
+        workspace,
+        world_frame,
+        max_goal_distance,
+        timeout,
+        tolerance,
+        stall_time,
+        period,
+        min_progress_ratio,
+        position_only=False,
+    ) -> None:
         self.workspace = workspace
         self.world_frame = world_frame
         self.max_goal_distance = float(max_goal_distance)
         self.reference = Freshness(timeout)
         self.position_only = position_only
-        self.progress = GoalProgress(self.tolerance(tolerance), stall_time, period,
-                                     min_progress_ratio=min_progress_ratio)
+        self.progress = GoalProgress(
+            self.tolerance(tolerance), stall_time, period, min_progress_ratio=min_progress_ratio
+        )
         self.obstacles = ()
         self.target: PoseTarget | None = None
         self.tracking = False
@@ -122,8 +133,7 @@ class TargetManager:
         if not np.all(np.isfinite(values)):
             return self.reject(f'non-finite values {values.tolist()}')
         if float(np.max(np.abs(values[:3]))) > self.max_goal_distance:
-            return self.reject(f'position {values[:3].tolist()} is beyond max_goal_distance '
-                               f'{self.max_goal_distance} m')
+            return self.reject(f'position {values[:3].tolist()} is beyond max_goal_distance {self.max_goal_distance} m')
         impossible = self.workspace.impossible(values[:3], base, self.obstacles)
         if impossible:
             return self.reject(f'position {values[:3].tolist()}: {impossible}')
@@ -132,14 +142,19 @@ class TargetManager:
             return events + self.reject('zero quaternion')
         key = tuple(np.round(np.concatenate((values[:3], quat)), 9))
         if key == self._goal_key:
-            return events        # the same goal again (a sequencer re-publishing it)
+            return events  # the same goal again (a sequencer re-publishing it)
         self.target = PoseTarget(values[:3], matrix_from_quaternion(quat))
         self._goal_key = key
         self.tracking = False
         self._start()
         self.goals += 1
-        return events + [LogEvent('accepted', f'new goal: position {np.round(values[:3], 4).tolist()}, '
-                                                 f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}')]
+        return events + [
+            LogEvent(
+                'accepted',
+                f'new goal: position {np.round(values[:3], 4).tolist()}, '
+                f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}',
+            )
+        ]
 
     def trajectory_point(self, frame, pose, velocity, acceleration, now, base=None) -> list[LogEvent]:
         """A trajectory point received at ``now`` [s]: ``pose`` as a goal's (None: the message
@@ -151,8 +166,10 @@ class TargetManager:
         pose, vel, acc = (np.asarray(v, dtype=float) for v in (pose, velocity, acceleration))
         if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel)) and np.all(np.isfinite(acc))):
             return self.reject('non-finite values', REFERENCE)
-        if float(np.max(np.abs(pose[:3]))) > self.max_goal_distance or \
-                float(np.max(np.abs(np.concatenate((vel, acc))))) > MAX_REFERENCE_RATE:
+        if (
+            float(np.max(np.abs(pose[:3]))) > self.max_goal_distance
+            or float(np.max(np.abs(np.concatenate((vel, acc))))) > MAX_REFERENCE_RATE
+        ):
             return self.reject('beyond max_goal_distance, or a twist or acceleration beyond 1e3', REFERENCE)
         impossible = self.workspace.impossible(pose[:3], base, self.obstacles)
         if impossible:
@@ -187,29 +204,43 @@ class TargetManager:
         events = []
         pos, ori = diagnostics.position_error, diagnostics.orientation_error
         if self.progress.reached and not self._reached_logged and not self.tracking:
-            events.append(LogEvent('reached', f'goal reached: {pos:.4f} m, {ori:.4f} rad away after '
-                                                 f'{self._cycles * self.progress.period:.2f} s ({self._cycles} cycles)'))
+            events.append(
+                LogEvent(
+                    'reached',
+                    f'goal reached: {pos:.4f} m, {ori:.4f} rad away after '
+                    f'{self._cycles * self.progress.period:.2f} s ({self._cycles} cycles)',
+                )
+            )
             self._reached_logged = True
         if not self.progress.stalled:
             self._stall_logged = False
         elif not self._stall_logged:
-            events.append(LogEvent('stalled', f'goal not reached: {pos:.3f} m, {ori:.3f} rad away, '
-                                                 f'{self.no_progress()} (out of reach, or held by a limit?)'))
+            events.append(
+                LogEvent(
+                    'stalled',
+                    f'goal not reached: {pos:.3f} m, {ori:.3f} rad away, '
+                    f'{self.no_progress()} (out of reach, or held by a limit?)',
+                )
+            )
             self._stall_logged = True
         return events
 
     def status(self, diagnostics) -> tuple[str, str]:
         """(level, message) of the goal, ``diagnostics`` those of the last command."""
         if self.progress.stalled:
-            return 'warn', (f'goal not reached: {diagnostics.position_error:.3f} m, '
-                            f'{diagnostics.orientation_error:.3f} rad; {self.no_progress()} (out of reach?)')
+            return 'warn', (
+                f'goal not reached: {diagnostics.position_error:.3f} m, '
+                f'{diagnostics.orientation_error:.3f} rad; {self.no_progress()} (out of reach?)'
+            )
         return 'ok', 'goal reached' if self.progress.reached else diagnostics.mode
 
     def no_progress(self) -> str:
         """What 'no progress' means with the current settings."""
         floor = self.progress.min_progress
-        return (f'no progress in {self.progress.stall_time} s (best error down by less than '
-                f'{100 * self.progress.min_progress_ratio:g} %, {1e3 * floor[0]:g} mm, {1e3 * floor[1]:g} mrad)')
+        return (
+            f'no progress in {self.progress.stall_time} s (best error down by less than '
+            f'{100 * self.progress.min_progress_ratio:g} %, {1e3 * floor[0]:g} mm, {1e3 * floor[1]:g} mrad)'
+        )
 
     def _start(self) -> None:
         """A new goal or trajectory: progress judged afresh, its reach and stall told anew."""

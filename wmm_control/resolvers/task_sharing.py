@@ -28,8 +28,7 @@ import numpy as np
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
-from wmm_control.resolvers.pose_servo import (
-    PoseServoParams, PoseServoResolver, _norm, lapack_svd)
+from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver, _norm, lapack_svd
 
 __all__ = ['TaskSharingParams', 'TaskSharingResolver', 'MODES', 'psi_of_error']
 
@@ -112,8 +111,8 @@ class TaskSharingResolver(PoseServoResolver):
     def _resolve(self, jac, p_ref, e_pos, state):
         psi, mode = self._share(_norm(e_pos))
         activation = np.empty(self.n)
-        activation[:self.n_base] = 1.0 - psi
-        activation[self.n_base:] = psi
+        activation[: self.n_base] = 1.0 - psi
+        activation[self.n_base :] = psi
         task = self.solve_task(jac, p_ref, state.q_arm, activation)
         return task, self._null_motion(jac, task, state.q_arm), mode, psi
 
@@ -163,7 +162,7 @@ class TaskSharingResolver(PoseServoResolver):
 def _pinv(a, rcond):
     """``np.linalg.pinv(a, rcond)``: the same operations on :func:`lapack_svd`, at half the cost."""
     u, s, vt = lapack_svd(a)
-    sigma = s.tolist()                  # (Python floats: 6 to 13 values, numpy calls cost more)
-    cutoff = rcond * sigma[0]           # LAPACK sorts them: the first is the largest
+    sigma = s.tolist()  # (Python floats: 6 to 13 values, numpy calls cost more)
+    cutoff = rcond * sigma[0]  # LAPACK sorts them: the first is the largest
     s_inv = np.array([1.0 / x if x > cutoff else 0.0 for x in sigma])
     return vt.T @ (s_inv[:, None] * u.T)

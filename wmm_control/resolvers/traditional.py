@@ -39,7 +39,7 @@ class TraditionalResolver(AccelerationResolver):
         qdd = j_pinv @ (task['xdd'] - task['drift'])
         if self.params.manipulability:
             q_a = self.manipulability_acceleration(task['qd'])
-            qdd = qdd + q_a - j_pinv @ (jac @ q_a)          # + (I − J⁺J) q̈_A
+            qdd = qdd + q_a - j_pinv @ (jac @ q_a)  # + (I − J⁺J) q̈_A
         lo, hi = task['lower'], task['upper']
         # position limits joint by joint: a joint resting on its limit would otherwise take the
         # whole body's scale to zero, and with zero accelerations the robot coasts on
@@ -47,5 +47,11 @@ class TraditionalResolver(AccelerationResolver):
         anchor = np.clip(0.0, lo, hi)
         scale, per = task_scale(anchor, qdd - anchor, lo, hi, np.ones(n, dtype=bool))
         limited = tuple(int(i) for i in np.flatnonzero(per <= scale + 1e-12)) if scale < 1.0 else ()
-        return anchor + scale * (qdd - anchor), {'mode': 'whole_body', 'psi': 0.0, 'limit_scale': scale,
-                                                 'accel_scale': 1.0, 'null_scale': 1.0, 'limited': limited}
+        return anchor + scale * (qdd - anchor), {
+            'mode': 'whole_body',
+            'psi': 0.0,
+            'limit_scale': scale,
+            'accel_scale': 1.0,
+            'null_scale': 1.0,
+            'limited': limited,
+        }

@@ -46,18 +46,17 @@ class Shape:
     color: tuple[int, int, int]
     opacity: float
     vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False, compare=False)
-    faces: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int32), repr=False,
-                              compare=False)
+    faces: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int32), repr=False, compare=False)
 
 
 @dataclass(frozen=True)
 class ScenePoses:
     """World poses of every shape (in :attr:`RobotScene.shapes` order) and of the end effector."""
 
-    positions: np.ndarray     # (n, 3)
-    wxyz: np.ndarray          # (n, 4)
-    ee_position: np.ndarray   # (3,)
-    ee_wxyz: np.ndarray       # (4,)
+    positions: np.ndarray  # (n, 3)
+    wxyz: np.ndarray  # (n, 4)
+    ee_position: np.ndarray  # (3,)
+    ee_wxyz: np.ndarray  # (4,)
 
 
 def wxyz_from_xyzw(quat) -> np.ndarray:
@@ -87,8 +86,9 @@ def _se3(position, wxyz) -> pin.SE3:
     quat = unit_wxyz(wxyz)
     pos = np.asarray(position, dtype=float)
     if quat is None or pos.shape != (3,) or not np.all(np.isfinite(pos)):
-        raise NonFiniteError(f'not a pose: position {np.asarray(position).tolist()}, '
-                             f'quaternion (w, x, y, z) {np.asarray(wxyz).tolist()}')
+        raise NonFiniteError(
+            f'not a pose: position {np.asarray(position).tolist()}, quaternion (w, x, y, z) {np.asarray(wxyz).tolist()}'
+        )
     return pin.SE3(matrix_from_quaternion(xyzw_from_wxyz(quat)), pos)
 
 
@@ -104,9 +104,10 @@ def _rgb(color) -> tuple[tuple[int, int, int], float]:
 
 def _mesh_arrays(geometry) -> tuple[np.ndarray, np.ndarray]:
     vertices = np.asarray(geometry.vertices(), dtype=float).reshape(-1, 3)
-    faces = np.array([[tri[0], tri[1], tri[2]] for tri in (geometry.tri_indices(i)
-                                                            for i in range(geometry.num_tris))],
-                     dtype=np.int32).reshape(-1, 3)
+    faces = np.array(
+        [[tri[0], tri[1], tri[2]] for tri in (geometry.tri_indices(i) for i in range(geometry.num_tris))],
+        dtype=np.int32,
+    ).reshape(-1, 3)
     return vertices, faces
 
 
@@ -142,8 +143,13 @@ class RobotScene:
         UnknownFrameError: ``base_link`` or ``ee_frame`` is not in it.
     """
 
-    def __init__(self, urdf_path: str | Path, base_link: str = 'base_link', ee_frame: str = 'ee_link',
-                 package_dirs: tuple[str, ...] = ()) -> None:
+    def __init__(
+        self,
+        urdf_path: str | Path,
+        base_link: str = 'base_link',
+        ee_frame: str = 'ee_link',
+        package_dirs: tuple[str, ...] = (),
+    ) -> None:
         urdf = Path(urdf_path)
         dirs = [str(d) for d in (*package_dirs, urdf.parent, urdf.parent.parent)]
         try:
@@ -180,8 +186,9 @@ class RobotScene:
 
     def _frame(self, name: str) -> int:
         if not self.model.existFrame(name):
-            raise UnknownFrameError(f'frame {name!r} is not in the URDF; its frames: '
-                                    f'{sorted({f.name for f in self.model.frames})}')
+            raise UnknownFrameError(
+                f'frame {name!r} is not in the URDF; its frames: {sorted({f.name for f in self.model.frames})}'
+            )
         return self.model.getFrameId(name)
 
     def set_joints(self, names, positions) -> list[str]:
@@ -259,7 +266,7 @@ class Trail:
             return False
         if len(self._points) and np.linalg.norm(p - self._points[-1]) < self.min_step:
             return False
-        self._points = np.vstack((self._points[-(self.max_points - 1):], p))
+        self._points = np.vstack((self._points[-(self.max_points - 1) :], p))
         return True
 
     def clear(self) -> None:

@@ -73,7 +73,7 @@ class NodeStatus:
     level: int
     message: str
     values: dict[str, str]
-    received: float        # [s] receiver's clock at receipt
+    received: float  # [s] receiver's clock at receipt
 
 
 class StatusBoard:
@@ -98,8 +98,7 @@ class StatusBoard:
             return '*No /diagnostics yet.*'
         sections = []
         # The resolver first, then the base controllers, then the simulator's statuses.
-        order = sorted(self._latest, key=lambda n: (not n.startswith('redundancy_resolver'),
-                                                    'controller' not in n, n))
+        order = sorted(self._latest, key=lambda n: (not n.startswith('redundancy_resolver'), 'controller' not in n, n))
         for name in order:
             status = self._latest[name]
             level = LEVELS.get(status.level, str(status.level))
