@@ -8,6 +8,14 @@ from wmm_control.cli.experiment import main as experiment_main
 from wmm_control.experiments.report import PAPER, provenance, write_report
 
 
+def _report(tmp_path, page, capfd, *args):
+    """The page ``wmm_experiment *args --report page`` writes (direct engine, one job, no figures)."""
+    out = ['--engine', 'direct', '--jobs', '1', '--no-figures', '--out', str(tmp_path / 'out'), '--report', str(page)]
+    assert experiment_main([*args, *out]) == 0
+    capfd.readouterr()
+    return page.read_text()
+
+
 def test_the_page_has_the_intro_where_it_came_from_and_every_run(tmp_path, capfd):
     scenario = tmp_path / 'two_runs.yaml'
     scenario.write_text(
@@ -17,26 +25,7 @@ def test_the_page_has_the_intro_where_it_came_from_and_every_run(tmp_path, capfd
     page.parent.mkdir()
     intro = '# Results\n\nProse about the experiments, | kept | as written.\n'
     (page.parent / 'results_intro.md').write_text(intro)
-    assert (
-        experiment_main(
-            [
-                '--scenario',
-                str(scenario),
-                '--engine',
-                'direct',
-                '--jobs',
-                '1',
-                '--no-figures',
-                '--out',
-                str(tmp_path / 'out'),
-                '--report',
-                str(page),
-            ]
-        )
-        == 0
-    )
-    capfd.readouterr()
-    text = page.read_text()
+    text = _report(tmp_path, page, capfd, '--scenario', str(scenario))
     assert text.startswith(intro)
     commit, date, machine = provenance()
     assert f'commit `{commit}` on {date}, on {machine}' in text
@@ -52,27 +41,7 @@ def test_the_page_has_the_intro_where_it_came_from_and_every_run(tmp_path, capfd
 
 def test_a_trajectory_run_has_the_papers_values_beside_ours(tmp_path, capfd):
     page = tmp_path / 'r.md'
-    assert (
-        experiment_main(
-            [
-                'xing_pose',
-                '--engine',
-                'direct',
-                '--runs',
-                'amp',
-                '--jobs',
-                '1',
-                '--no-figures',
-                '--out',
-                str(tmp_path / 'out'),
-                '--report',
-                str(page),
-            ]
-        )
-        == 0
-    )
-    capfd.readouterr()
-    text = page.read_text()
+    text = _report(tmp_path, page, capfd, 'xing_pose', '--runs', 'amp')
     header = next(line for line in text.splitlines() if line.startswith('| run | method | base RMS'))
     assert header.endswith('| paper |')
     row = next(line for line in text.splitlines() if line.startswith('| `amp` |'))
