@@ -7,6 +7,7 @@ node's is reported (log and ``/diagnostics``).
 """
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -268,6 +269,47 @@ def test_answers_that_were_not_applied_move_the_base_one_period_from_the_rates_a
         assert last == pytest.approx(step, rel=1e-6)
     else:
         assert last == pytest.approx(unapplied * step, rel=1e-6)
+
+
+def test_a_cycle_held_up_past_max_state_wait_publishes_nothing_and_the_next_starts_from_the_measured_rates(ros):
+    """A controller stopped in the middle of a cycle (SIGSTOP, or starved) finishes it after the
+    simulator has moved on: that answer, to a state long gone, is dropped (logged), not applied
+    as current; the next state reports the base zeroed by the simulator's command timeout, and
+    its answer starts from rest, not from the speed before the stall."""
+    probe = ros.add(Probe(ros.context))
+    node = ros.add(
+        MecanumControllerNode(
+            context=ros.context,
+            parameter_overrides=overrides(
+                reference_wait=0.0, reference_timeout=10.0, joint_state_timeout=10.0, max_state_wait=0.1
+            ),
+        )
+    )
+    ros.spin_for(0.2)
+    probe.pub_ref.publish(twist_stamped(_time(0.0), 'base_link', (0.2, 0.0, 0.0)))
+    ros.spin_for(0.05)
+    for k in range(20):  # under way: each state reports the command it followed
+        probe.state(5.0 + k * DT, list(probe.wheels[-1].data) if probe.wheels else [0.0] * 4)
+        assert ros.spin_until(lambda k=k: len(probe.feasible) > k, timeout=5.0)
+    ros.spin_for(0.1)
+    before, commands = len(probe.feasible), len(probe.wheels)
+    step = node.base.step
+
+    def held_up(*args, **kwargs):
+        time.sleep(0.3)
+        return step(*args, **kwargs)
+
+    node.base.step = held_up
+    probe.state(5.0 + 20 * DT, list(probe.wheels[-1].data))
+    assert ros.spin_until(lambda: any('answer dropped' in w for w in probe.warnings), timeout=5.0)
+    node.base.step = step
+    ros.spin_for(0.1)
+    assert len(probe.feasible) == before and len(probe.wheels) == commands  # nothing published
+    probe.state(5.0 + 40 * DT, [0.0] * 4)  # the simulator zeroed the base meanwhile
+    assert ros.spin_until(lambda: len(probe.feasible) > before, timeout=5.0)
+    ros.spin_for(0.1)
+    assert twist_of(probe.feasible[before - 1])[0] > 10 * ROBOT.base.acceleration[0] * DT  # it was under way
+    assert abs(twist_of(probe.feasible[-1])[0]) <= ROBOT.base.acceleration[0] * DT * (1 + 1e-9)
 
 
 def test_a_simulator_period_that_disagrees_with_the_controllers_is_reported(ros):

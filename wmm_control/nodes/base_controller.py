@@ -49,7 +49,9 @@ twice, with positions or velocities not matching its names, non-finite values or
 ten times their limit, runs no cycle. Nor does one whose stamp is not after the last cycle's
 or jumps more than the timeout ahead (:class:`~wmm_control.nodes.stamps.StampGate`: a second
 publisher, a replayed message), nor one that waited in the node longer than
-``max_state_wait`` (:class:`~wmm_control.nodes.inputs.JointStateWatchdog`); a joint-state
+``max_state_wait`` (:class:`~wmm_control.nodes.inputs.JointStateWatchdog`), and a cycle that
+finishes later than that after its state came (the node was held up mid-cycle) publishes
+nothing: the next cycle restarts from the measured state; a joint-state
 period that differs from ``period`` is reported. Every rejection is logged, throttled. Nothing
 non-finite is ever published. Timers run on the steady clock, so the node works under
 ``use_sim_time``.
@@ -185,6 +187,7 @@ class BaseControllerNode(Node):
         self.reference = BaseReference(self, p.base_frame, p.reference_timeout, self.base.velocity_limit)
         self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0, 'commands_not_applied': 0}
         self._last = None  # the last command's rates, all groups in a row
+        self._answer_dropped = False  # the last cycle's answer came too late to publish
         self._next_diag = 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pub_commands = {
@@ -253,8 +256,11 @@ class BaseControllerNode(Node):
         now = seconds(self.get_clock())
         if self.watchdog.resync(*self.pub_commands.values()):
             self.base.reset(positions, rates if self.base.resync_from_rates else None)
+        elif self._answer_dropped:
+            self.base.reset(positions, rates)  # from rest when the state has no rates
         elif rates is not None and self._last is not None:
             self._restart_unless_applied(positions, rates)
+        self._answer_dropped = False
         reference = self.reference.current(now)
         if reference is None:
             self.counters['stale_cycles'] += 1
@@ -272,6 +278,12 @@ class BaseControllerNode(Node):
             )
             self.base.reset(positions)
             out, twist = {g: np.zeros(len(v)) for g, v in out.items()}, np.zeros(3)
+        if self.watchdog.waited_too_long(received, 'answer dropped'):
+            # Held up mid-cycle (stopped, or starved): the world has moved on from this state, and
+            # an answer published now would be applied as if current. The next cycle starts again
+            # from the state it measures.
+            self._answer_dropped = True
+            return
         self.counters['cycles'] += 1
         for group, rates_out in out.items():
             self.pub_commands[group].publish(float_array(rates_out))

@@ -175,11 +175,12 @@ class JointStateWatchdog:
     :attr:`need_resync`, which the node clears once it has resynchronised, and lets the next
     stamp start a new time base.
 
-    :meth:`waited_too_long` tells, when the cycle is about to run, whether the state waited in
-    this node longer than ``max_wait`` since its receipt (the node's steady clock: no clock of
-    the sender's is involved). A node that was held up (stopped, or starved on a busy machine)
-    may run a state that waited for its reference meanwhile; a real-time simulator has stepped
-    past it, and an answer to it would be applied now, as if it were current.
+    :meth:`waited_too_long` tells, when the cycle is about to run and again before it publishes,
+    whether the state waited in this node longer than ``max_wait`` since its receipt (the node's
+    steady clock: no clock of the sender's is involved). A node that was held up (stopped, or
+    starved on a busy machine) may run a state that waited for its reference meanwhile, or be
+    held in the middle of a cycle; a real-time simulator has stepped past that state, and an
+    answer to it would be applied now, as if it were current.
 
     With ``max_wait`` set, :meth:`admit` also skips a state that reached this node more than
     ``max_wait`` later than the joint states usually do: its receipt on the node's clock minus its
@@ -213,9 +214,10 @@ class JointStateWatchdog:
         self.freshness.timeout = float(timeout)
         self.stamps.max_jump = self._max_jump(timeout)
 
-    def waited_too_long(self, received_ns):
-        """True (logged, throttled, and counted as skipped) when a joint state received at
-        ``received_ns`` (``time.monotonic_ns()`` in its callback) waited longer than ``max_wait``."""
+    def waited_too_long(self, received_ns, outcome='cycle skipped'):
+        """True (logged with ``outcome``, throttled, and counted as skipped) when a joint state
+        received at ``received_ns`` (``time.monotonic_ns()`` in its callback) waited longer than
+        ``max_wait``."""
         if self.max_wait <= 0.0:
             return False
         wait = (time.monotonic_ns() - received_ns) * 1e-9
@@ -224,7 +226,7 @@ class JointStateWatchdog:
         self.skipped += 1
         self._node.get_logger().warn(
             f'/{self._topic} waited {wait:.3g} s in this node, beyond max_state_wait {self.max_wait:g} s (the node '
-            'was held up): cycle skipped',
+            f'was held up): {outcome}',
             throttle_duration_sec=1.0,
         )
         return True
