@@ -398,25 +398,30 @@ class SimNode(Node):
         js.name = list(names)
         js.position = pos.tolist()
         js.velocity = vel.tolist()
-        ee_pos, ee_quat = self.world.ee_pose()
-        ee = PoseStamped()
-        ee.header.stamp = stamp
-        ee.header.frame_id = 'world'
-        set_pose(ee.pose, ee_pos, ee_quat)
-        self.pub_ee.publish(ee)
+        # A topic nobody listens to is not built (a subscriber that comes later is matched
+        # within a period or two and gets every message from then on).
+        if _heard(self.pub_ee):
+            ee_pos, ee_quat = self.world.ee_pose()
+            ee = PoseStamped()
+            ee.header.stamp = stamp
+            ee.header.frame_id = 'world'
+            set_pose(ee.pose, ee_pos, ee_quat)
+            self.pub_ee.publish(ee)
         odom_pose, true_pose = self.world.odom_pose(), self.world.base_pose()
-        self.pub_odom.publish(
-            _odometry(
-                stamp,
-                self._odom_frame,
-                self._base_frame,
-                odom_pose,
-                self.world.odom_twist(),
-                self.odom_covariance.pose,
-                self.odom_covariance.twist,
+        if _heard(self.pub_odom):
+            self.pub_odom.publish(
+                _odometry(
+                    stamp,
+                    self._odom_frame,
+                    self._base_frame,
+                    odom_pose,
+                    self.world.odom_twist(),
+                    self.odom_covariance.pose,
+                    self.odom_covariance.twist,
+                )
             )
-        )
-        self.pub_truth.publish(_odometry(stamp, 'world', self._base_frame, true_pose, self.world.base_twist()))
+        if _heard(self.pub_truth):
+            self.pub_truth.publish(_odometry(stamp, 'world', self._base_frame, true_pose, self.world.base_twist()))
         if self.frames.publishing_tf:
             self.frames.publish(stamp, dict(zip(names, pos.tolist())), odom_pose, true_pose)
         if self.now_s() + 1e-9 >= self._next_diag and self.p.diagnostics_period > 0:
@@ -476,6 +481,11 @@ class SimNode(Node):
                 )
             )
         return diagnostic_array(stamp, statuses)
+
+
+def _heard(publisher):
+    """True when ``publisher`` has a matched subscription."""
+    return publisher.get_subscription_count() > 0
 
 
 def _odometry(stamp, frame, child, pose, twist, pose_covariance=None, twist_variance=None):

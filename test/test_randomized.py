@@ -203,7 +203,7 @@ def test_a_goal_out_of_reach_is_reported_not_converged():
     assert all(v == 0 for v in r['limits_exceeded'].values())
 
 
-def test_the_nodes_report_the_outcome_on_diagnostics():
+def test_the_nodes_engine_finds_the_outcome_the_direct_engine_finds():
     goal = sample_goals('steerable', 1, seed=SUBSET_SEED)[0]
     r = run_goal('steerable', 'pinv', goal, engine='nodes', duration=14.0)
     assert r['outcome'] == 'converged', r

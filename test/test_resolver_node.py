@@ -441,7 +441,7 @@ scenario:
 """)
     log = run_with_nodes(load_scenario(path), {'name': 'ts', 'method': 'task_sharing', 'feedback': 'odometry'})
     assert log.first_stall_s is None
-    assert log.final_status['goal_reached'] == 'True'
+    assert log.final_status['goal_reached'] is True
 
 
 def test_markers_show_the_goal_the_trail_and_the_footprint(system):

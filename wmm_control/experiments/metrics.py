@@ -90,8 +90,8 @@ class RunLog:
         self.rows = {c: [] for c in self.COLUMNS}
         self.wall_time_s = 0.0
         self.sim_counters = None  # the simulator's command counters per group (clamped, rejected, ...)
-        self.final_status = None  # nodes engine: the resolver's last /diagnostics key-values (str)
-        self.first_stall_s = None  # nodes engine: the first time /diagnostics reported goal_stalled [s]
+        self.final_status = None  # nodes engine: the goal's state after the resolver's last cycle
+        self.first_stall_s = None  # nodes engine: when the resolver first found the goal stalled [s]
         self.frozen = False
 
     def append(

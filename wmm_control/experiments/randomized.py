@@ -117,9 +117,6 @@ COLLISION_MARGIN = 0.02
 CONTACT_DEPTH = 0.001
 #: A direct run ends once the goal has been held this long [s].
 SETTLE_S = 2.0
-#: Tolerance of the limit checks on the nodes engine, whose commands come back through the
-#: 9 significant digits of /diagnostics [rad/s, m/s].
-NODES_TOLERANCE = 1e-7
 
 
 @dataclass(frozen=True)
@@ -251,7 +248,7 @@ def _run_nodes(robot, run, goal, duration, obstacles):
         entry = dict(run, name=run['method'], feedback='ground_truth')
         log = run_with_nodes(scenario, entry)
     status = log.final_status or {}
-    return log, {'goal_reached': status.get('goal_reached') == 'True', 'first_stall_s': log.first_stall_s}
+    return log, {'goal_reached': status.get('goal_reached', False), 'first_stall_s': log.first_stall_s}
 
 
 def _limit_use(log, robot, dt):
@@ -320,8 +317,7 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None, o
     ori_err = np.array([_angle(target.rotation @ r.T) for r in log.ee_rotation])
     tolerance = goal_settings()[0]
     inside = np.flatnonzero((pos_err <= tolerance[0]) & (ori_err <= tolerance[1]))
-    # the nodes engine reads the commands back from /diagnostics, written with 9 significant digits
-    exceeded = run_limit_report(log, cfg, dt, tol=1e-9 if engine == 'direct' else NODES_TOLERANCE)
+    exceeded = run_limit_report(log, cfg, dt, tol=1e-9)
     clamped = sum(c['clamped'] + c['rejected'] for c in (log.sim_counters or {}).values())
     why = []
     if exceeded['non_finite']:

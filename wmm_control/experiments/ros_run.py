@@ -5,8 +5,8 @@ The run has a ROS domain of its own (:func:`private_domain_id`). The simulator (
 the ``redundancy_resolver`` and the ``goal_sequencer`` run on one executor with a private
 rclpy context, exactly as they run as separate processes. A recorder node listens to the
 topics a user would watch (ground-truth end-effector pose and base pose, joint states,
-commands, feasible twist, the resolver's ``/diagnostics``) and fills a
-:class:`~wmm_control.experiments.metrics.RunLog`, one row per control period.
+feasible twist), takes each resolver cycle from the resolver node (in this process, exact),
+and fills a :class:`~wmm_control.experiments.metrics.RunLog`, one row per control period.
 """
 
 import os
@@ -14,7 +14,6 @@ import time
 
 import numpy as np
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.executors import SingleThreadedExecutor
@@ -31,41 +30,21 @@ from wmm_control.nodes.conversions import odometry_pose, planar_twist, pose_rota
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.base_controller import NODE_NAMES, BaseControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
-from wmm_control.resolvers import ResolverDiagnostics
 from wmm_control.robot_config import load_robot
 
 __all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_WAITS']
 
 
-def _stamp(msg):
-    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-
-
-def _value(text):
-    if text in ('True', 'False'):
-        return text == 'True'
-    try:
-        return float(text)
-    except ValueError:
-        return text
-
-
-def _key(msg):
-    return (msg.header.stamp.sec, msg.header.stamp.nanosec)
-
-
-def _vector(text):
-    return np.array([float(v) for v in str(text).strip('[]').split(',') if v.strip()])
-
-
 class Recorder(Node):
     """Collects, per control period (the stamp of its joint state), the ground truth and the
-    resolver's report of the cycle, and turns them into RunLog rows.
+    resolver's cycle, and turns them into RunLog rows.
 
     Every message it uses carries the stamp of the period it belongs to, so the rows do not
     depend on the order in which the topics are delivered: ``/ee_pose`` and
-    ``/ground_truth/odom`` (the true state), ``/joint_states``, ``/base/feasible_twist``, and
-    the resolver's ``/diagnostics`` (the commands it sent, ψ, mode, scales).
+    ``/ground_truth/odom`` (the true state), ``/joint_states`` and ``/base/feasible_twist``. The
+    resolver's cycle (the commands it sent, ψ, mode, scales, the goal's state) comes from the
+    resolver node in this process (:meth:`observe`, one of its ``cycle_observers``), exact and
+    without a ``/diagnostics`` message every period.
     """
 
     def __init__(self, context, robot, scenario, log):
@@ -82,65 +61,45 @@ class Recorder(Node):
         self.create_subscription(Odometry, '/ground_truth/odom', self._on_base, 10)
         self.create_subscription(JointState, '/joint_states', self._on_joints, 10)
         self.create_subscription(TwistStamped, '/base/feasible_twist', self._on_feasible, 10)
-        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
 
-    def _row(self, msg):
-        return self._rows.setdefault(_key(msg), {'t': _stamp(msg)})
+    def _row(self, stamp):
+        key = (stamp.sec, stamp.nanosec)
+        return self._rows.setdefault(key, {'t': stamp.sec + stamp.nanosec * 1e-9})
 
     def _on_ee(self, msg):
-        self._row(msg)['ee'] = pose_rotation(msg.pose)
+        self._row(msg.header.stamp)['ee'] = pose_rotation(msg.pose)
 
     def _on_base(self, msg):
-        self._row(msg)['base'] = odometry_pose(msg)[0]
+        self._row(msg.header.stamp)['base'] = odometry_pose(msg)[0]
 
     def _on_joints(self, msg):
         if self._index is None:
             names = list(msg.name)
             self._index = [names.index(j) for j in self.arm_joints]
             self.log.joint_names = tuple(names)
-        self._row(msg)['q'] = np.asarray(msg.position, dtype=float)
-        self._row(msg)['q_arm'] = self._row(msg)['q'][self._index]
-        self.last_t = max(self.last_t, _stamp(msg))
+        row = self._row(msg.header.stamp)
+        row['q'] = np.asarray(msg.position, dtype=float)
+        row['q_arm'] = row['q'][self._index]
+        self.last_t = max(self.last_t, row['t'])
 
     def _on_feasible(self, msg):
-        self._row(msg)['feasible'] = planar_twist(msg.twist)
+        self._row(msg.header.stamp)['feasible'] = planar_twist(msg.twist)
 
-    def _on_diag(self, msg):
-        for status in msg.status:
-            if status.name == '/redundancy_resolver':
-                self._row(msg)['diag'] = {kv.key: kv.value for kv in status.values}
-                self.final_status = self._row(msg)['diag']
-                if self.first_stall_s is None and self.final_status.get('goal_stalled') == 'True':
-                    self.first_stall_s = _stamp(msg)
+    def observe(self, stamp, command, reached, stalled):
+        """The resolver's cycle stamped ``stamp`` (see ``RedundancyResolverNode.cycle_observers``)."""
+        row = self._row(stamp)
+        row['command'] = command
+        self.final_status = {'goal_reached': bool(reached), 'goal_stalled': bool(stalled)}
+        if self.first_stall_s is None and stalled:
+            self.first_stall_s = row['t']
 
     def flush(self):
         """Append every complete row (a period in which a goal was pursued), in time order."""
         for key in sorted(self._rows):
             row = self._rows[key]
-            d = row.get('diag')
-            if d is None or 'mode' not in d or not all(k in row for k in ('ee', 'base', 'q_arm')):
+            if not all(k in row for k in ('command', 'ee', 'base', 'q_arm')):
                 continue
-            f = {k: _value(v) for k, v in d.items() if k not in ('limited', 'arm_command', 'base_reference')}
-            diag = ResolverDiagnostics(
-                method=f['method'],
-                mode=f['mode'],
-                psi=f['psi'],
-                position_error=f['position_error_m'],
-                orientation_error=f['orientation_error_rad'],
-                limit_scale=f['limit_scale'],
-                accel_scale=f['accel_scale'],
-                null_scale=f['null_scale'],
-                compensation_scale=f['compensation_scale'],
-                limited=tuple(int(v) for v in _vector(d.get('limited', '[]'))),
-                sigma_min=f['sigma_min'],
-                compensated=bool(f['compensated']),
-                cycle_time_s=f['cycle_time_us'] * 1e-6,
-                reference_time_left=f['reference_time_left_s'],
-                clearance=float(f['clearance_m']),
-                closest_pair=str(f['closest_pair']),
-                collision_constraints=int(f['collision_constraints']),
-                collision_changed=bool(f['collision_changed']),
-            )
+            command = row['command']
             self.log.append(
                 row['t'],
                 self.scenario.goal_index(row['t']),
@@ -148,10 +107,10 @@ class Recorder(Node):
                 row['ee'][1],
                 row['base'],
                 row['q_arm'],
-                _vector(d['arm_command']),
-                _vector(d['base_reference']),
+                command.arm_velocity,
+                command.base_twist,
                 row.get('feasible'),
-                diag,
+                command.diagnostics,
                 q=row['q'],
             )
         self._rows.clear()
@@ -213,7 +172,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
         wall_timeout: give up after this many wall seconds (default: ten times the duration).
         domain_id: ROS domain of the run; default :func:`private_domain_id`.
         bag_path: a rosbag2 folder (MCAP) to record every topic of the run into
-            (:class:`~wmm_control.experiments.recording.BagRecorder`); None records nothing.
+            (:class:`~wmm_control.experiments.recording.BagRecorder`), the resolver's
+            ``/diagnostics`` every period among them; None records nothing.
         view_port: serve the live browser view of the run (``wmm_viewer``) on this HTTP port;
             None: no viewer.
 
@@ -232,10 +192,11 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     resolver_params.update(
         robot=str(robot.yaml_path),
         ee_feedback=feedback,
-        diagnostics_period=1e-9,
         markers_period=0.0,
         **LOCKSTEP_WAITS['redundancy_resolver'],
     )
+    if bag_path is not None:  # the bag gets every cycle's report (ψ, mode, scales) for offline analysis
+        resolver_params['diagnostics_period'] = 1e-9
     sim_params = dict(scenario.sim or {})
     sim_params.update(
         robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0, **LOCKSTEP_WAITS['wmm_sim']
@@ -263,9 +224,8 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
                 context=context, parameter_overrides=params({'scenario': str(scenario.path), 'use_sim_time': True})
             )
         )
-        nodes.append(
-            RedundancyResolverNode(context=context, cli_args=remap, parameter_overrides=params(resolver_params))
-        )
+        resolver = RedundancyResolverNode(context=context, cli_args=remap, parameter_overrides=params(resolver_params))
+        nodes.append(resolver)
         nodes.append(
             BaseControllerNode(
                 robot.base_type,
@@ -276,6 +236,7 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
             )
         )
         recorder = Recorder(context, robot, scenario, log)
+        resolver.cycle_observers.append(recorder.observe)
         nodes.append(recorder)
         sim = SimNode(context=context, parameter_overrides=params(sim_params))
         nodes.append(sim)

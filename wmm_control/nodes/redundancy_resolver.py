@@ -25,7 +25,8 @@ Publishes, every cycle:
   robot YAML's order;
   ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) every ``diagnostics_period``, stamped
   with the joint state of the cycle it reports: method, mode, ψ, errors, limit scales, σ_min,
-  compensation, cycle time, the commands sent, goal status;
+  compensation, cycle time, the commands sent, goal status (code in the same process gets every
+  cycle's exact values from ``cycle_observers`` instead);
   ``~/markers`` (``visualization_msgs/MarkerArray``, frame ``world_frame``) every
   ``markers_period`` of steady time: goal, reference, end-effector trail, base footprint
   (:mod:`wmm_control.nodes.markers`).
@@ -158,6 +159,11 @@ class RedundancyResolverNode(Node):
         self._next_diag = 0.0
         self._logged = {}  # the last time each kind of warning was logged
         self._cycles = self._stale_cycles = 0
+        #: Callables ``observe(stamp, command, reached, stalled)``, each run once a cycle's arm command
+        #: is out (``command``: the :class:`~wmm_control.resolvers.ResolverCommand`; ``reached``,
+        #: ``stalled``: the goal's state): the cycle's exact values for code in this process (an
+        #: experiment's recorder), without a ``/diagnostics`` message every period.
+        self.cycle_observers = []
         self.pub_arm = self.create_publisher(Float64MultiArray, 'arm_controller/commands', COMMAND_QOS)
         self.pub_base = self.create_publisher(TwistStamped, 'base/reference', COMMAND_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
@@ -356,6 +362,8 @@ class RedundancyResolverNode(Node):
         """Publish the arm command of the cycle stamped ``stamp`` (and, when due, its diagnostics)."""
         self.pub_arm.publish(float_array(command.arm_velocity))
         self._last = command
+        for observe in self.cycle_observers:
+            observe(stamp, command, self.progress.reached, self.progress.stalled)
         now = self._now()
         if self.p.diagnostics_period > 0 and now >= self._next_diag:
             self._next_diag = now + self.p.diagnostics_period
