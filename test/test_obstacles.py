@@ -109,6 +109,26 @@ def test_obstacle_distances_agree_with_the_simulator_and_their_rates_are_their_d
                 assert pair.rate_jacobian @ qd + pair.base_jacobian @ twist == pytest.approx(rate, abs=1e-4), key
 
 
+def test_distances_asked_again_follow_new_obstacles_and_a_moved_base():
+    """A method asks for the distances twice a period (eq (14)'s compensation), and the second
+    answer is the first one again: obstacles set meanwhile, or another base pose, are a new
+    question."""
+    model = CollisionModel.from_robot(load_robot('mecanum'))
+    q = np.array(load_robot('mecanum').start.arm)
+    base = np.zeros(3)
+    first = model.within(q, 1.0, base)[0]
+    assert [p.links for p in model.within(q, 1.0, base)[0]] == [p.links for p in first]
+    assert not any('pillar' in p.links for p in first)
+    model.set_obstacles(
+        parse_obstacles([{'name': 'pillar', 'shape': 'cylinder', 'size': [0.1, 2.0], 'pose': [0.9, 0.0, 0.0]}], 't')
+    )
+    near = {p.links: p.distance for p in model.within(q, 1.0, base)[0] if 'pillar' in p.links}
+    assert near
+    moved = {p.links: p.distance for p in model.within(q, 1.0, base + [0.2, 0.0, 0.0])[0] if 'pillar' in p.links}
+    for links, distance in moved.items():
+        assert distance == pytest.approx(near[links] - 0.2, abs=0.05)
+
+
 def test_a_base_driving_at_an_obstacle_is_slowed_to_what_it_can_brake():
     robot = load_robot('mecanum')  # its base brakes at 0.025 m/s²: 1.25 m from full speed
     pillar = parse_obstacles(

@@ -175,6 +175,7 @@ class CollisionModel:
             for a in range(self._n_robot):
                 geom.addCollisionPair(pin.CollisionPair(a, gid))
         self.geom, self._link_of, self.obstacles = geom, link_of, obstacles
+        self._within_memo = (None, None)  # (arguments, answer) of the last within()
         self._fixed = self._world_fixed | set(self._obstacle_ids)
         self.geom_data = pin.GeometryData(geom)
         for request in self.geom_data.distanceRequests:
@@ -249,6 +250,21 @@ class CollisionModel:
         distance and names (``inf, None`` when no pair is checked)."""
         if not self.geom.collisionPairs:
             return [], float('inf'), None
+        # the same question again (a method's second pass in one period: eq (14)'s compensation)
+        # gets the same answer without the distances and Jacobians computed again
+        key = (
+            np.asarray(q_arm, dtype=float).tobytes(),
+            None if base_pose is None else np.asarray(base_pose, dtype=float).tobytes(),
+            float(influence),
+        )
+        if key == self._within_memo[0]:
+            pairs, *closest = self._within_memo[1]
+            return list(pairs), *closest
+        answer = self._within(q_arm, influence, base_pose)
+        self._within_memo = (key, answer)
+        return list(answer[0]), answer[1], answer[2]
+
+    def _within(self, q_arm, influence, base_pose):
         self._place_obstacles(base_pose)
         model, data = self.model, self.data
         q = self._configuration(q_arm)
