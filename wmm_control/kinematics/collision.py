@@ -175,7 +175,7 @@ class CollisionModel:
             for a in range(self._n_robot):
                 geom.addCollisionPair(pin.CollisionPair(a, gid))
         self.geom, self._link_of, self.obstacles = geom, link_of, obstacles
-        self._within_memo = (None, None)  # (arguments, answer) of the last within()
+        self._within_memo: tuple = (None, None)  # (arguments, answer) of the last within()
         self._fixed = self._world_fixed | set(self._obstacle_ids)
         self.geom_data = pin.GeometryData(geom)
         for request in self.geom_data.distanceRequests:
