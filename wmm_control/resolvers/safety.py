@@ -365,8 +365,9 @@ class SafetyStage:
         swings the near point aside for a moment, but does not stop a base that drives at an
         obstacle."""
         lags = np.where(moved, self.base_lag, 0.0)
+        distances = np.array([pair.distance for pair in pairs])
         if self._arm_acc is None:
-            return np.array([self.allowed_approach(pair.distance, lag=lag) for pair, lag in zip(pairs, lags)])
+            return self.allowed_approach(distances, lag=lags)
         nb = len(axes)
         reach = np.abs(rows[:, nb:]) @ self._arm_acc
         linear = [k for k, axis in enumerate(axes) if axis < 2]
@@ -377,24 +378,28 @@ class SafetyStage:
             # its approach to another face, changes under it)
             slowest = float(np.min(self._base_acc[[axes[k] for k in linear]]))
             reach = reach + np.linalg.norm(rows[:, linear], axis=1) * slowest
-        return np.array(
-            [self.allowed_approach(pair.distance, braking, lag) for pair, braking, lag in zip(pairs, reach, lags)]
-        )
+        return self.allowed_approach(distances, reach, lags)
 
-    def allowed_approach(self, distance: float, deceleration: float = math.inf, lag: float = 0.0) -> float:
+    def allowed_approach(self, distance, deceleration=math.inf, lag=0.0):
         """The fastest a pair ``distance`` [m] apart may approach [m/s] (negative: it must
         separate), its distance braking at no more than ``deceleration`` [m/s²] (and
-        ``collision_braking``) after a lag of ``lag`` [s]."""
+        ``collision_braking``) after a lag of ``lag`` [s]. Each argument a number or an array
+        (one entry per pair); the answer is a float for numbers, else an array."""
         p = self.params
         d_i, d_s = p.collision_influence, p.collision_safety
-        a = min(p.collision_braking, deceleration)
-        room = max(distance - d_s, 0.0)
-        braking = a * (math.sqrt(lag * lag + 2.0 * room / a) - lag) if a > 0.0 else 0.0
-        gain = p.collision_gain / (d_i - d_s)
-        if lag > 0.0:
-            gain = min(gain, 1.0 / lag)
-        damper = gain * (distance - d_s) if distance < d_i else math.inf
-        return min(damper, braking)
+        distance, deceleration, lag = np.broadcast_arrays(
+            *(np.asarray(v, dtype=float) for v in (distance, deceleration, lag))
+        )
+        a = np.minimum(p.collision_braking, deceleration)
+        room = np.maximum(distance - d_s, 0.0)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            braking = np.where(a > 0.0, a * (np.sqrt(lag * lag + 2.0 * room / a) - lag), 0.0)
+            gain = np.where(
+                lag > 0.0, np.minimum(p.collision_gain / (d_i - d_s), 1.0 / lag), p.collision_gain / (d_i - d_s)
+            )
+        damper = np.where(distance < d_i, gain * (distance - d_s), math.inf)
+        out = np.minimum(damper, braking)
+        return float(out) if out.ndim == 0 else out
 
     def _solve(self, command, rows, bound, lower, upper, hessian):
         """The QP of the module docstring over y = (q̇, slack), the dampers ``rows`` ≥ ``bound``.
