@@ -106,7 +106,7 @@ def run_node(node_factory, args=None, executor_factory=default_executor):
         while rclpy.ok() and not stop:
             executor.spin_once(timeout_sec=0.1)
     except ExternalShutdownException:
-        pass
+        pass  # the context was shut down from outside (rclpy's own signal handling): a normal stop
     except WmmError as exc:
         logger = node.get_logger() if node is not None else rclpy.logging.get_logger('wmm_control')
         logger.fatal(f'{type(exc).__name__}: {exc}')
