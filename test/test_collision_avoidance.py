@@ -33,18 +33,19 @@ def test_the_distance_rates_are_the_derivatives_of_the_distances(name):
     rng = np.random.default_rng(1)
     checked = 0
     for q in _configurations(robot, 40, seed=2):
-        pairs, _, _ = model.within(q, 0.15)
-        for pair in pairs:
-            if pair.distance < 0.005:
-                continue  # touching: the nearest points may jump between features
+        near, _, _ = model.within(q, 0.15)
+        # touching pairs left out: their nearest points may jump between features
+        for distance, shapes, j in zip(near.distance, near.shapes, near.rate_jacobian):
+            if distance < 0.005:
+                continue
             qd = rng.normal(size=q.size)
             h = 1e-5
             d = {}
             for sign in (1, -1):
-                ds, _, _ = model.within(q + sign * h * qd, 1.0)
-                d[sign] = next(p.distance for p in ds if p.shapes == pair.shapes)
+                there, _, _ = model.within(q + sign * h * qd, 1.0)
+                d[sign] = there.distance[there.shapes.index(shapes)]
             numeric = (d[1] - d[-1]) / (2 * h)
-            assert pair.rate_jacobian @ qd == pytest.approx(numeric, rel=1e-2, abs=1e-4), pair.shapes
+            assert j @ qd == pytest.approx(numeric, rel=1e-2, abs=1e-4), shapes
             checked += 1
     assert checked > 20
 
@@ -86,8 +87,8 @@ def test_links_two_joints_apart_are_checked_and_meet_only_where_the_real_arm_doe
     assert not any(parent.get(a) == b or parent.get(b) == a for a, b in model.pairs)
     met = []
     for q in _configurations(robot, 1000, seed=6):
-        pairs, _, _ = model.within(q, 0.0)
-        met += [(q, p.links) for p in pairs if two_apart(*p.links)]
+        touching, _, _ = model.within(q, 0.0)
+        met += [(q, links) for links in touching.links if two_apart(*links)]
     if name == 'ur_mecanum':
         assert met and all(abs(q[2]) > np.radians(160) for q, _ in met), met[:3]
     else:
@@ -113,10 +114,10 @@ def _approach(name='mecanum'):
     robot = load_robot(name)
     model = CollisionModel.from_robot(robot)
     for q in _configurations(robot, 400, seed=5):
-        pairs, _, _ = model.within(q, 0.06)
-        pairs = [p for p in pairs if 0.03 < p.distance < 0.06]
-        if pairs:
-            j = pairs[0].rate_jacobian
+        near, _, _ = model.within(q, 0.06)
+        beyond = np.flatnonzero(near.distance > 0.03)
+        if beyond.size:
+            j = near.rate_jacobian[beyond[0]]
             return robot, model, q, -0.5 * j / np.linalg.norm(j)
     raise AssertionError('no configuration near the body')
 
@@ -130,15 +131,14 @@ def test_a_command_into_the_body_is_changed_to_meet_every_damper_within_the_box(
     out = stage.filter(q, command, lower, upper)
     assert out.changed and out.active >= 1
     assert np.all(out.command >= lower - 1e-9) and np.all(out.command <= upper + 1e-9)
-    pairs, _, _ = model.within(q, params.collision_lookahead)
+    near, _, _ = model.within(q, params.collision_lookahead)
     d_i, d_s, xi = params.collision_influence, params.collision_safety, params.collision_gain
-    for pair in pairs:
-        d = pair.distance
+    for d, j, links in zip(near.distance, near.rate_jacobian, near.links):
         allowed = min(
             xi * (d - d_s) / (d_i - d_s) if d < d_i else np.inf,
             np.sqrt(2 * params.collision_braking * max(d - d_s, 0.0)),
         )
-        assert pair.rate_jacobian @ out.command >= -allowed - 1e-6, pair.links
+        assert j @ out.command >= -allowed - 1e-6, links
     # the nearest command that does so: it still moves (the dampers allow an approach at this distance)
     assert np.linalg.norm(out.command) > 0.0
 

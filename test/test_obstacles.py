@@ -88,25 +88,27 @@ def test_obstacle_distances_agree_with_the_simulator_and_their_rates_are_their_d
         for _ in range(15):
             q = np.array(robot.start.arm) + rng.uniform(-0.5, 0.5, len(robot.start.arm))
             base = np.array([rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), rng.uniform(-np.pi, np.pi)])
-            pairs, _, _ = model.within(q, 1.0, base)
+            near, _, _ = model.within(q, 1.0, base)
             truth = {(a, b): d for a, b, d in checker.collisions(q, base) if b in ('ball', 'low')}
-            mine = [p for p in pairs if p.links[1] in ('ball', 'low')]
-            assert mine, 'some link within 1 m of an obstacle'
+            mine = near.select([links[1] in ('ball', 'low') for links in near.links])
+            assert len(mine), 'some link within 1 m of an obstacle'
             nearest = {}  # a link may have several shapes: PyBullet's is the nearest
-            for pair in mine:
-                nearest[pair.links] = min(nearest.get(pair.links, np.inf), pair.distance)
+            for links, distance in zip(mine.links, mine.distance):
+                nearest[links] = min(nearest.get(links, np.inf), distance)
             for links, distance in nearest.items():
                 assert distance == pytest.approx(truth[links], abs=2e-3), links
             # ḋ = j q̇ + j_b (vx, vy, ω), the base's twist in its own frame
             qd, twist = rng.normal(size=q.size), rng.normal(size=3)
             c, s = np.cos(base[2]), np.sin(base[2])
             world = np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1], twist[2]])
-            ahead = {(p.links, p.shapes): p.distance for p in model.within(q + h * qd, 2.0, base + h * world)[0]}
-            behind = {(p.links, p.shapes): p.distance for p in model.within(q - h * qd, 2.0, base - h * world)[0]}
-            for pair in mine:
-                key = (pair.links, pair.shapes)
-                rate = (ahead[key] - behind[key]) / (2 * h)
-                assert pair.rate_jacobian @ qd + pair.base_jacobian @ twist == pytest.approx(rate, abs=1e-4), key
+            ahead, behind = (model.within(q + s * h * qd, 2.0, base + s * h * world)[0] for s in (1, -1))
+            for k, shapes in enumerate(mine.shapes):
+                rate = (ahead.distance[ahead.shapes.index(shapes)] - behind.distance[behind.shapes.index(shapes)]) / (
+                    2 * h
+                )
+                assert mine.rate_jacobian[k] @ qd + mine.base_jacobian[k] @ twist == pytest.approx(rate, abs=1e-4), (
+                    shapes
+                )
 
 
 def test_distances_asked_again_follow_new_obstacles_and_a_moved_base():
@@ -117,14 +119,19 @@ def test_distances_asked_again_follow_new_obstacles_and_a_moved_base():
     q = np.array(load_robot('mecanum').start.arm)
     base = np.zeros(3)
     first = model.within(q, 1.0, base)[0]
-    assert [p.links for p in model.within(q, 1.0, base)[0]] == [p.links for p in first]
-    assert not any('pillar' in p.links for p in first)
+    assert model.within(q, 1.0, base)[0].links == first.links
+    assert not any('pillar' in links for links in first.links)
     model.set_obstacles(
         parse_obstacles([{'name': 'pillar', 'shape': 'cylinder', 'size': [0.1, 2.0], 'pose': [0.9, 0.0, 0.0]}], 't')
     )
-    near = {p.links: p.distance for p in model.within(q, 1.0, base)[0] if 'pillar' in p.links}
+
+    def to_pillar(base_pose):
+        near = model.within(q, 1.0, base_pose)[0]
+        return {links: d for links, d in zip(near.links, near.distance) if 'pillar' in links}
+
+    near = to_pillar(base)
     assert near
-    moved = {p.links: p.distance for p in model.within(q, 1.0, base + [0.2, 0.0, 0.0])[0] if 'pillar' in p.links}
+    moved = to_pillar(base + [0.2, 0.0, 0.0])
     for links, distance in moved.items():
         assert distance == pytest.approx(near[links] - 0.2, abs=0.05)
 
@@ -145,10 +152,11 @@ def test_a_base_driving_at_an_obstacle_is_slowed_to_what_it_can_brake():
     assert out.changed
     # the base's front is about half a metre from the pillar: braking at 0.025 m/s² stops from
     # √(2 · 0.025 · (d − d_s)) ≈ 0.15 m/s at most (the arm, nearer, can pull back faster)
+    within, _, _ = stage.collision.within(q, 2.0, np.zeros(3))
     nearest = min(
-        p.distance
-        for p in stage.collision.within(q, 2.0, np.zeros(3))[0]
-        if 'pillar' in p.links and not p.rate_jacobian.any()
+        d
+        for d, links, j in zip(within.distance, within.links, within.rate_jacobian)
+        if 'pillar' in links and not j.any()
     )
     assert 0.4 < nearest < 0.6
     assert 0.0 < out.command[0] <= np.sqrt(2 * 0.025 * (nearest - 0.02)) + 1e-6
@@ -175,7 +183,8 @@ def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own
     q = np.array(robot.start.arm)
     box = np.concatenate((robot.base.velocity, robot.arm.velocity))
     pose = np.zeros(3)
-    near = min(p.distance for p in stage.collision.within(q, 2.0, pose)[0] if p.base_jacobian.any())
+    within, _, _ = stage.collision.within(q, 2.0, pose)
+    near = within.distance[within.base_jacobian.any(axis=1)].min()
     assert 0.2 < near < 0.4
     allowed = 0.5 * (np.sqrt(0.25 + 2 * (near - 0.02) / 0.5) - 0.5)  # after the lag
     assert allowed < np.sqrt(2 * 0.5 * (near - 0.02)) - 0.1  # well below the rows without it
@@ -217,17 +226,14 @@ def test_a_slow_braking_base_is_not_let_on_at_an_obstacle_because_its_turn_swing
     step = np.asarray(robot.base.acceleration) * robot.period
     arm = np.asarray(robot.arm.velocity)
     lower, upper = np.concatenate((twist - step, -arm)), np.concatenate((twist + step, arm))
-    body = [
-        p
-        for p in stage.collision.within(q, stage.obstacle_lookahead, pose)[0]
-        if p.base_jacobian.any() and not p.rate_jacobian.any()
-    ]  # chassis and wheels
-    near = min(body, key=lambda p: p.distance)
-    j = near.base_jacobian
+    within, _, _ = stage.collision.within(q, stage.obstacle_lookahead, pose)
+    body = np.flatnonzero(within.base_jacobian.any(axis=1) & ~within.rate_jacobian.any(axis=1))  # chassis, wheels
+    k = body[np.argmin(within.distance[body])]
+    j, distance = within.base_jacobian[k], within.distance[k]
     slowest = float(np.min(robot.base.acceleration[:2]))
     # the linear approach is beyond what the base can stop from; with the turn, the row holds
-    assert j[:2] @ twist[:2] < -stage.allowed_approach(near.distance, np.linalg.norm(j[:2]) * slowest)
-    assert j @ twist >= -stage.allowed_approach(near.distance, np.linalg.norm(j[:2]) * slowest)
+    assert j[:2] @ twist[:2] < -stage.allowed_approach(distance, np.linalg.norm(j[:2]) * slowest)
+    assert j @ twist >= -stage.allowed_approach(distance, np.linalg.norm(j[:2]) * slowest)
     out = stage.filter(q, np.concatenate((twist, np.zeros(q.size))), lower, upper, base_pose=pose, base_axes=(0, 1, 2))
     assert out.changed
     braked = j[:2] @ out.command[:2] - j[:2] @ twist[:2]

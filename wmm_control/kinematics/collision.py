@@ -47,7 +47,7 @@ from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import Obstacle, around_base
 from wmm_control.urdf import UrdfTree
 
-__all__ = ['CollisionModel', 'PairDistance', 'FLOOR']
+__all__ = ['CollisionModel', 'NearPairs', 'FLOOR']
 
 #: The name of the floor in pair names.
 FLOOR = 'floor'
@@ -56,23 +56,39 @@ GJK_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
-class PairDistance:
-    """One checked pair at one configuration.
+class NearPairs:
+    """The checked pairs closer than some distance, at one configuration: entry ``k`` of each
+    field is one pair. The arrays are read-only.
 
     Attributes:
-        distance: signed distance [m]; negative when the shapes overlap.
-        links: the two link names (``'floor'`` for the floor, an obstacle's name for it).
-        shapes: the two collision shapes' names (a link may have several).
-        rate_jacobian: ``j`` with ``ḋ = j · q̇_arm + j_b · (vx, vy, ω)`` [m/rad or m/m]. Shape (n_arm,).
-        base_jacobian: ``j_b`` [m/m, m/rad]: zero unless one of the two is fixed in the world
-            (an obstacle). Shape (3,).
+        distance: signed distances [m]; negative where the shapes overlap. Shape (m,).
+        links: each pair's two link names (``'floor'`` for the floor, an obstacle's name for it).
+        shapes: each pair's two collision shapes' names (a link may have several).
+        rate_jacobian: rows ``j`` with ``ḋ = j · q̇_arm + j_b · (vx, vy, ω)`` [m/rad or m/m].
+            Shape (m, n_arm).
+        base_jacobian: rows ``j_b`` [m/m, m/rad]: zero unless one of the two is fixed in the
+            world (an obstacle). Shape (m, 3).
     """
 
-    distance: float
-    links: tuple[str, str]
-    shapes: tuple[str, str]
+    distance: np.ndarray
+    links: tuple[tuple[str, str], ...]
+    shapes: tuple[tuple[str, str], ...]
     rate_jacobian: np.ndarray
     base_jacobian: np.ndarray
+
+    def __len__(self) -> int:
+        return self.distance.size
+
+    def select(self, keep) -> NearPairs:
+        """The pairs where the boolean array ``keep`` (shape (m,)) is true."""
+        index = np.flatnonzero(keep)
+        return NearPairs(
+            _frozen(self.distance[index]),
+            tuple(self.links[k] for k in index.tolist()),
+            tuple(self.shapes[k] for k in index.tolist()),
+            _frozen(self.rate_jacobian[index]),
+            _frozen(self.base_jacobian[index]),
+        )
 
 
 class CollisionModel:
@@ -144,6 +160,7 @@ class CollisionModel:
         for a, b in pairs:
             self.geom.addCollisionPair(pin.CollisionPair(a, b))
         self.geom_data = pin.GeometryData(self.geom)
+        self._results = list(self.geom_data.distanceResults)
         start = self._distances(self._configuration(np.zeros(self.n_arm) if start_arm is None else start_arm))
         keep = [k for k, d in enumerate(start) if d >= margin]
         self.excluded_at_start = [
@@ -182,6 +199,9 @@ class CollisionModel:
             # GJK to 1e-9 m: at coal's default (1e-6) the nearest points of curved shapes (the
             # cylinders around the links) are off by degrees, and so is the rate of the distance
             request.gjk_tolerance = GJK_TOLERANCE
+        # each pair's result, looked up once: reading a field through these costs several times
+        # less than through the vector each time (they follow the vector's entries)
+        self._results = list(self.geom_data.distanceResults)
         self._tabulate_pairs()
 
     def _tabulate_pairs(self):
@@ -229,27 +249,23 @@ class CollisionModel:
     def _distances(self, q) -> np.ndarray:
         """Every checked pair's distance at the full configuration ``q``."""
         pin.computeDistances(self.model, self.data, self.geom, self.geom_data, q)
-        return np.array([r.min_distance for r in self.geom_data.distanceResults])
+        return np.array([r.min_distance for r in self._results])
 
     def closest(self, q_arm, base_pose=None) -> tuple[float, tuple[str, str] | None]:
         """``(distance [m], (link a, link b))`` of the closest checked pair at arm joints
         ``q_arm`` (and base pose ``base_pose`` (x, y, θ), needed with obstacles); ``(inf,
         None)`` when no pair is checked."""
-        if not self.geom.collisionPairs:
+        if not self._results:
             return float('inf'), None
         self._place_obstacles(base_pose)
         dists = self._distances(self._configuration(q_arm))
         k = int(np.argmin(dists))
         return float(dists[k]), self._pair_links[k]
 
-    def within(
-        self, q_arm, influence: float, base_pose=None
-    ) -> tuple[list[PairDistance], float, tuple[str, str] | None]:
+    def within(self, q_arm, influence: float, base_pose=None) -> tuple[NearPairs, float, tuple[str, str] | None]:
         """The pairs closer than ``influence`` [m] at ``q_arm`` (and base pose ``base_pose`` (x,
-        y, θ), needed with obstacles), each with its rate Jacobians, and the closest pair's
+        y, θ), needed with obstacles), with their rate Jacobians, and the closest pair's
         distance and names (``inf, None`` when no pair is checked)."""
-        if not self.geom.collisionPairs:
-            return [], float('inf'), None
         # the same question again (a method's second pass in one period: eq (14)'s compensation)
         # gets the same answer without the distances and Jacobians computed again
         key = (
@@ -257,14 +273,14 @@ class CollisionModel:
             None if base_pose is None else np.asarray(base_pose, dtype=float).tobytes(),
             float(influence),
         )
-        if key == self._within_memo[0]:
-            pairs, *closest = self._within_memo[1]
-            return list(pairs), *closest
-        answer = self._within(q_arm, influence, base_pose)
-        self._within_memo = (key, answer)
-        return list(answer[0]), answer[1], answer[2]
+        if key != self._within_memo[0]:
+            self._within_memo = (key, self._within(q_arm, influence, base_pose))
+        return self._within_memo[1]
 
     def _within(self, q_arm, influence, base_pose):
+        n_arm = self.n_arm
+        if not self._results:
+            return _no_pairs(n_arm), float('inf'), None
         self._place_obstacles(base_pose)
         model, data = self.model, self.data
         q = self._configuration(q_arm)
@@ -273,11 +289,10 @@ class CollisionModel:
         closest = (float(dists[k_min]), self._pair_links[k_min])
         near = np.flatnonzero(dists < influence)
         if not near.size:
-            return [], *closest
-        results = self.geom_data.distanceResults
+            return _no_pairs(n_arm), *closest
         points, normals = np.empty((2, near.size, 3)), np.empty((near.size, 3))
         for i, k in enumerate(near.tolist()):  # each pair's nearest points, on a and on b
-            result = results[k]
+            result = self._results[k]
             points[0, i], points[1, i] = result.getNearestPoint1(), result.getNearestPoint2()
             normals[i] = result.normal  # coal's: from the first shape to the second
         # ḋ = n · (v_b − v_a); a point p fixed to a joint moves at v = v₀ + ω × p, (v₀, ω) the
@@ -289,21 +304,30 @@ class CollisionModel:
         rates = along[1] - along[0]
         # the base's twist (vx, vy, ω) moves a point p of the robot at (vx − ω p_y, vy + ω p_x, 0):
         # n · v = n_x vx + n_y vy + (p × n)_z ω; the floor and the obstacles stay put
-        sides = np.stack(
-            [
-                np.column_stack(
-                    (normals[:, 0], normals[:, 1], points[i, :, 0] * normals[:, 1] - points[i, :, 1] * normals[:, 0])
-                )
-                for i in (0, 1)
-            ]
-        )
+        sides = np.empty((2, near.size, 3))
+        sides[:, :, 0] = normals[:, 0]
+        sides[:, :, 1] = normals[:, 1]
+        sides[:, :, 2] = points[:, :, 0] * normals[:, 1] - points[:, :, 1] * normals[:, 0]
         sides *= self._pair_on_robot[near].T[:, :, None]
         base = (sides[1] - sides[0]) * self._pair_base_moves[near, None]
-        out = [
-            PairDistance(float(dists[k]), self._pair_links[k], self._pair_shapes[k], j, b)
-            for k, j, b in zip(near.tolist(), rates, base)
-        ]
-        return out, *closest
+        pairs = NearPairs(
+            _frozen(dists[near]),
+            tuple(self._pair_links[k] for k in near.tolist()),
+            tuple(self._pair_shapes[k] for k in near.tolist()),
+            _frozen(rates),
+            _frozen(base),
+        )
+        return pairs, *closest
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    """``array``, read-only (answers are shared by repeated questions)."""
+    array.setflags(write=False)
+    return array
+
+
+def _no_pairs(n_arm: int) -> NearPairs:
+    return NearPairs(_frozen(np.zeros(0)), (), (), _frozen(np.zeros((0, n_arm))), _frozen(np.zeros((0, 3))))
 
 
 def _cross(a, b):

@@ -271,28 +271,30 @@ class SafetyStage:
         axes = list(base_axes)
         d_b = p.collision_lookahead
         reach = self.obstacle_lookahead if self.collision.obstacles else d_b
-        pairs, clearance, names = self.collision.within(q_arm, reach, base_pose)
+        near, clearance, names = self.collision.within(q_arm, reach, base_pose)
+        moved = near.base_jacobian.any(axis=1)  # pairs with an obstacle
         # a pair the base cannot move is constrained within the arm's look-ahead only
-        pairs = [pair for pair in pairs if pair.distance < d_b or pair.base_jacobian.any()]
+        keep = moved | (near.distance < d_b)
+        if not keep.all():
+            near, moved = near.select(keep), moved[keep]
         label = '/'.join(names) if names else ''
-        if not pairs:
+        if not len(near):
             return SafetyResult(command, clearance, label, 0, False)
-        base_full = np.array([pair.base_jacobian for pair in pairs])  # over (vx, vy, ω), base frame
-        moved = base_full.any(axis=1)  # pairs with an obstacle
+        base_full = near.base_jacobian  # over (vx, vy, ω), base frame
         # the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for world-frame rates
         to_base = _world_to_base(base_pose[2]) if world_rates else np.eye(3)
-        rows = np.hstack(((base_full @ to_base)[:, axes], [pair.rate_jacobian for pair in pairs]))
-        allowed = self._allowed(pairs, rows, axes, moved)
+        rows = np.hstack(((base_full @ to_base)[:, axes], near.rate_jacobian))
+        allowed = self._allowed(near.distance, rows, axes, moved)
         lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
         bound = -allowed
         overtaking = False
         if base_twist is not None:
-            bound = bound - np.array([pair.base_jacobian @ np.asarray(base_twist, dtype=float) for pair in pairs])
+            bound = bound - base_full @ np.asarray(base_twist, dtype=float)
         elif axes and base_velocity is not None and self.base_lag > 0.0:
             v0 = np.asarray(base_velocity, dtype=float)
             own = base_full @ v0  # the base's approach rates
             command, lower, upper, overtaking = self._brake_on_path(
-                pairs, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
+                near.distance, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
             )
             rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
         if base_twist is None and self.base_lag == 0.0:
@@ -301,7 +303,7 @@ class SafetyStage:
             rows, bound = _without_turn(rows, bound, axes, base_full, moved, to_base)
         violated = rows @ command < bound - TOLERANCE
         if not violated.any():
-            return SafetyResult(command, clearance, label, len(pairs), overtaking)
+            return SafetyResult(command, clearance, label, len(near), overtaking)
         weights = np.ones(command.size) if weights is None else np.asarray(weights, dtype=float)
         if task_jacobian is None:
             hessian = np.diag(weights)
@@ -317,7 +319,7 @@ class SafetyStage:
             if not broken.any():
                 break
             use = use | broken
-        return SafetyResult(solved, clearance, label, len(pairs), True)
+        return SafetyResult(solved, clearance, label, len(near), True)
 
     def _along_path(self, rows, bound, axes, v0, own, moved, to_base):
         """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the same row on the
@@ -332,7 +334,7 @@ class SafetyStage:
         extra = np.hstack((along[:, axes], rows[moved, len(axes) :]))
         return np.vstack((rows, extra)), np.concatenate((bound, bound[moved]))
 
-    def _brake_on_path(self, pairs, rows, bound, axes, command, v0, own, moved, to_base, lower, upper):
+    def _brake_on_path(self, distances, rows, bound, axes, command, v0, own, moved, to_base, lower, upper):
         """A lagging base that already approaches a pair faster than allowed (its measured twist
         ``v0``, approach rates ``own`` = j_b v₀, with the arm's share of ``command``) is sent
         ``s v₀`` instead of its reference: the largest ``s`` in [−1, 1] that the pairs allow. That
@@ -349,7 +351,7 @@ class SafetyStage:
         scale = 1.0
         d_s = self.params.collision_safety
         for i in np.flatnonzero(approaching):
-            room = max(pairs[i].distance - d_s, 1e-6)
+            room = max(distances[i] - d_s, 1e-6)
             scale = min(scale, (bound[i] - arm[i]) / own[i], 1.0 + own[i] * self.base_lag / (2.0 * room))
         scale = max(scale, -1.0)
         command, lower, upper = command.copy(), lower.copy(), upper.copy()
@@ -359,13 +361,12 @@ class SafetyStage:
         command[:nb] = lower[:nb] = upper[:nb] = np.clip(target, lower[:nb], upper[:nb])
         return command, lower, upper, True
 
-    def _allowed(self, pairs, rows, axes, moved) -> np.ndarray:
+    def _allowed(self, distances, rows, axes, moved) -> np.ndarray:
         """Each pair's fastest allowed approach [m/s], braking no harder than the command's
         acceleration limits can slow that distance. The base's turn rate is left out: turning
         swings the near point aside for a moment, but does not stop a base that drives at an
         obstacle."""
         lags = np.where(moved, self.base_lag, 0.0)
-        distances = np.array([pair.distance for pair in pairs])
         if self._arm_acc is None:
             return self.allowed_approach(distances, lag=lags)
         nb = len(axes)
