@@ -143,6 +143,17 @@ class SelfCollisionChecker(OwnedClient):
         )
         return min((pt[8] for pt in pts), default=bound)
 
+    def _nearest(self, body_b):
+        """The distance of every robot link closer than ``margin`` to ``body_b`` (the floor, an
+        obstacle), one PyBullet query for all of them: ``{(link, -1): distance}``."""
+        pts = p.getClosestPoints(self._body, body_b, self.margin, physicsClientId=self._cid)
+        out = {}
+        for pt in pts:  # several points per pair where a link has several shapes: the nearest
+            if pt[8] < self.margin:
+                key = (pt[3], pt[4])
+                out[key] = min(out.get(key, pt[8]), pt[8])
+        return out
+
     def collisions(self, q_arm, base_pose=None):
         """The pairs closer than ``margin`` at arm configuration ``q_arm`` [rad] (and, with
         obstacles, base pose ``base_pose`` (x, y, θ) [m, m, rad]).
@@ -152,24 +163,23 @@ class SelfCollisionChecker(OwnedClient):
             empty when clear.
         """
         self._set(q_arm)
+        # pair by pair: one query over the robot's own links would compute every pair of them
         out = [
             (self.link_names[a], self.link_names[b], d)
             for a, b in self._pairs
             if (d := self._distance(a, b)) < self.margin
         ]
-        out += [
-            (self.link_names[a], 'floor', d)
-            for a in self._moving
-            if (d := self._distance(a, -1, self._ground)) < self.margin
-        ]
+        floor = self._nearest(self._ground)
+        out += [(self.link_names[a], 'floor', floor[a, -1]) for a in self._moving if (a, -1) in floor]
         if self._obstacles:
             if base_pose is None:
                 raise ValueError('SelfCollisionChecker: the base pose is needed to place the obstacles')
             self._place_obstacles(base_pose)
             for body, obstacle in zip(self._obstacles, self.obstacles):
+                near = self._nearest(body)
                 out += [
-                    (self.link_names.get(a, 'base_link'), obstacle.name, d)
+                    (self.link_names.get(a, 'base_link'), obstacle.name, near[a, -1])
                     for a in self._links
-                    if (d := self._distance(a, -1, body)) < self.margin
+                    if (a, -1) in near
                 ]
         return out

@@ -43,8 +43,9 @@ def format_summary(table):
     """The summary of :func:`~wmm_control.experiments.randomized.summarize` as a Markdown table."""
     lines = [
         '| robot | method | runs | converged | reported | failed | worst error [mm / rad] '
-        '| time to converge, median / max [s] | largest use of a limit | closest joint to a limit [rad] |',
-        '|---|---|---|---|---|---|---|---|---|---|',
+        '| time to converge, median / max [s] | largest use of a limit | closest joint to a limit [rad] '
+        '| in contact | deepest contact [mm] |',
+        '|---|---|---|---|---|---|---|---|---|---|---|---|',
     ]
     for (robot, method), s in table.items():
         err = (
@@ -54,7 +55,8 @@ def format_summary(table):
         lines.append(
             f'| {robot} | {method} | {s["runs"]} | {s["converged"]} | {s["reported"]} | {s["failed"]} '
             f'| {err} | {_f(s["median_time_s"], ".1f")} / {_f(s["max_time_s"], ".1f")} '
-            f'| {s["limit_use_max"]:.3f} | {s["position_margin_min_rad"]:.3f} |'
+            f'| {s["limit_use_max"]:.3f} | {s["position_margin_min_rad"]:.3f} '
+            f'| {s["in_contact"]} | {s["deepest_contact_m"] * 1e3:.1f} |'
         )
     return '\n'.join(lines)
 
