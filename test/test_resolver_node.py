@@ -1,13 +1,16 @@
 """redundancy_resolver with wmm_sim and swmr_controller, in process: goals on /goal_pose."""
 
 import math
+import time
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
+from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Log
 from rclpy.node import Node
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from ros_helpers import RosHarness, overrides, stamp_s
@@ -19,7 +22,9 @@ from wmm_control.experiments.scenario import load_scenario
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
+from wmm_control.nodes.conversions import set_planar_pose
 from wmm_control.resolvers import make_resolver
+from wmm_control.robot_config import load_robot
 
 GOAL_YAML = """scenario:
   name: one_goal
@@ -484,3 +489,89 @@ def test_markers_show_the_goal_the_trail_and_the_footprint(system):
                 *(v for p in m.points for v in (p.x, p.y, p.z)),
             ]
             assert np.all(np.isfinite(values)), m.ns
+
+
+class HandDriver(Driver):
+    """A :class:`Driver` that is also the robot: joint states and odometry by hand, at rest at the
+    start state, and (when asked) each cycle's feasible twist, ``feasible_delay`` [s] late."""
+
+    def __init__(self, context, robot, feasible_delay=None):
+        super().__init__(context)
+        self.robot = robot
+        self.pub_state = self.create_publisher(JointState, '/joint_states', 10)
+        self.pub_odom = self.create_publisher(Odometry, '/odom', 10)
+        self.pub_feasible = self.create_publisher(TwistStamped, '/base/feasible_twist', 10)
+        self.feasible_delay = feasible_delay
+        self.create_subscription(TwistStamped, '/base/reference', self._answer, 10)
+
+    def _answer(self, msg):
+        if self.feasible_delay is not None:
+            time.sleep(self.feasible_delay)  # the base controller's answer comes late
+            self.pub_feasible.publish(msg)
+
+    def state(self):
+        """Joint states and odometry stamped now (a robot's driver stamps its states with its clock)."""
+        stamp = self.get_clock().now().to_msg()
+        odom = Odometry()
+        odom.header.stamp = stamp
+        odom.header.frame_id = 'world'
+        set_planar_pose(odom.pose.pose, self.robot.start.base_pose)
+        self.pub_odom.publish(odom)
+        msg = JointState()
+        msg.header.stamp = stamp
+        msg.name = list(self.robot.arm.joints)
+        msg.position = [float(v) for v in self.robot.start.arm]
+        msg.velocity = [0.0] * len(msg.name)
+        self.pub_state.publish(msg)
+
+
+@pytest.mark.parametrize('where', ['in the cycle', 'waiting for the feasible twist'])
+def test_a_cycle_held_up_past_max_state_wait_publishes_no_answer(where):
+    """A resolver held up between a joint state and its answer (stopped, or starved, or waiting
+    for a late feasible twist) answers a state the world has left: that answer is dropped
+    (logged), not applied as current, and the next state is answered as usual."""
+    robot = load_robot('steerable')
+    ros = RosHarness()
+    try:
+        in_cycle = where == 'in the cycle'
+        driver = ros.add(HandDriver(ros.context, robot, feasible_delay=None if in_cycle else 0.0))
+        node = ros.add(
+            RedundancyResolverNode(
+                context=ros.context,
+                parameter_overrides=overrides(
+                    method='pinv' if in_cycle else 'task_sharing',
+                    state_timeout=10.0,
+                    max_state_wait=0.1,
+                    compensation_timeout=1.0,
+                ),
+            )
+        )
+        ros.spin_for(0.3)
+        driver.goal((1.2, 0.3, 0.9))
+        ros.spin_for(0.1)
+        for k in range(5):
+            driver.state()
+            assert ros.spin_until(lambda k=k: len(driver.arm) > k, timeout=5.0)
+        ros.spin_for(0.1)
+        arm, refs = len(driver.arm), len(driver.refs)
+        step = node.resolver.step
+
+        def held_up(*args, **kwargs):
+            time.sleep(0.3)
+            return step(*args, **kwargs)
+
+        if in_cycle:
+            node.resolver.step = held_up
+        else:
+            driver.feasible_delay = 0.3
+            refs += 1  # the base reference goes out at once; the arm command waits for its answer
+        driver.state()
+        assert ros.spin_until(lambda: any('answer dropped' in m for _, _, m in driver.logs), timeout=5.0)
+        node.resolver.step, driver.feasible_delay = step, None if in_cycle else 0.0
+        ros.spin_for(0.1)
+        assert (len(driver.arm), len(driver.refs)) == (arm, refs), 'nothing more published for that state'
+        driver.state()
+        assert ros.spin_until(lambda: len(driver.arm) > arm, timeout=5.0), 'the next state is answered'
+        assert np.all(np.isfinite(driver.arm[-1])) and np.any(driver.arm[-1])
+    finally:
+        ros.close()

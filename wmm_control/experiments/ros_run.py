@@ -131,7 +131,7 @@ def _executor(context):
 #: depend on timing, also when other processes (the runs of ``wmm_experiment --jobs``) take the
 #: cores.
 LOCKSTEP_WAITS = {
-    'redundancy_resolver': {'compensation_timeout': 1.0, 'state_timeout': 30.0},
+    'redundancy_resolver': {'compensation_timeout': 1.0, 'state_timeout': 30.0, 'max_state_wait': 0.0},
     'swmr_controller': {
         'reference_wait': 1.0,
         'max_state_wait': 0.0,

@@ -49,7 +49,10 @@ quaternion or a twist beyond ten times the base limits, and joint states lacking
 joint or naming one twice, with non-finite values, rates beyond ten times the limits or
 positions beyond the limits, are rejected. A joint state whose stamp is not after the last
 cycle's, or jumps more than ``state_timeout`` ahead, runs no cycle (a second publisher, a
-replayed message). A goal that stops making progress is logged once. Every command stays
+replayed message). A cycle that finishes more than ``max_state_wait`` after its joint state
+came (the node was held up: stopped, or starved) publishes nothing, and the next starts again
+from the state it measures; a joint state that reached the node that much later than they
+usually do (queued while it was held up) runs none. A goal that stops making progress is logged once. Every command stays
 within the robot's limits (:mod:`wmm_control.resolvers.limits`); a goal out of reach is
 pursued as far as they allow and reported on ``/diagnostics``.
 
@@ -62,6 +65,7 @@ the checks of odometry, end-effector pose and feasible twist in
 """
 
 import math
+import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -125,6 +129,7 @@ class RedundancyResolverNode(Node):
                 'goal_tolerance': lambda v: setattr(self.progress, 'tolerance', self.targets.tolerance(v)),
                 'stall_time': lambda v: setattr(self.progress, 'stall_time', float(v)),
                 'min_progress_ratio': lambda v: setattr(self.progress, 'min_progress_ratio', float(v)),
+                'max_state_wait': lambda v: setattr(self.watchdog, 'max_wait', float(v)),
             },
         )
         self.model = KinematicModel(p.robot)
@@ -156,6 +161,7 @@ class RedundancyResolverNode(Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.fresh = {k: Freshness(p.state_timeout) for k in ('odom', 'ee_pose')}
         self._odom = self._ee = self._wait = self._last = self._last_state = None
+        self._received = 0  # when the joint state of the held arm command came (time.monotonic_ns())
         self._next_diag = 0.0
         self._logged = {}  # the last time each kind of warning was logged
         self._cycles = self._stale_cycles = 0
@@ -189,7 +195,14 @@ class RedundancyResolverNode(Node):
             self._trail = Trail(max_points=2000, min_step=0.005)
             self.pub_markers = self.create_publisher(MarkerArray, '~/markers', COMMAND_QOS)
             self.create_timer(p.markers_period, self._publish_markers, clock=self._steady)
-        self.watchdog = JointStateWatchdog(self, p.state_timeout, p.period, self._steady, self._stop, 'zero commands')
+        self.watchdog = JointStateWatchdog(
+            self, p.state_timeout, p.period, self._steady, self._stop, 'zero commands', max_wait=p.max_state_wait
+        )
+        if 0.0 < p.max_state_wait <= p.compensation_timeout and self.resolver.uses_compensation:
+            self.get_logger().warn(
+                f'max_state_wait {p.max_state_wait:g} s is within compensation_timeout {p.compensation_timeout:g} s: '
+                'an arm command that waits that long for its feasible twist is dropped'
+            )
         self.get_logger().info(
             f'{p.method} on robot {self.model.config.name}: t_s {p.period} s, EE feedback {p.ee_feedback}, '
             f'compensation {"on" if self.resolver.uses_compensation else "off"}, {describe(self.obstacles.obstacles)}; '
@@ -295,6 +308,7 @@ class RedundancyResolverNode(Node):
         ), ''
 
     def _on_joint_states(self, msg):
+        received = time.monotonic_ns()
         q, dq, reason = self.arm.read(msg)
         if q is None:
             self.get_logger().warn(
@@ -324,10 +338,13 @@ class RedundancyResolverNode(Node):
         # Judged now, against the target the command was computed for: a new goal may come in
         # before the arm command goes out (it waits for the feasible twist).
         self._log(self.targets.judge(command.diagnostics))
+        if self._dropped(received):
+            return
         self.pub_base.publish(twist_stamped(stamp, self.p.base_frame, command.base_twist))
         if not self.resolver.uses_compensation:
-            self._publish_arm(command, stamp)
+            self._publish_arm(command, stamp, received)
             return
+        self._received = received
         self.exchange.hold(stamp_key(stamp), command, stamp)
         if self._wait is None:
             self._finish(None)
@@ -355,11 +372,24 @@ class RedundancyResolverNode(Node):
                 'no /base/feasible_twist for this cycle in time: arm command without compensation',
                 throttle_duration_sec=1.0,
             )
-        self._publish_arm(*self.exchange.finish(feasible))
+        self._publish_arm(*self.exchange.finish(feasible), self._received)
 
     # ------------------------------------------------------------------ outputs
-    def _publish_arm(self, command, stamp):
-        """Publish the arm command of the cycle stamped ``stamp`` (and, when due, its diagnostics)."""
+    def _dropped(self, received):
+        """True when the joint state received at ``received`` (``time.monotonic_ns()``) waited
+        beyond ``max_state_wait`` (logged): the node was held up in its cycle (stopped, or
+        starved), the world has moved on from that state, and an answer published now would be
+        applied as if current. The next cycle starts again from the state it measures."""
+        if not self.watchdog.waited_too_long(received, 'answer dropped'):
+            return False
+        self.resolver.reset()
+        return True
+
+    def _publish_arm(self, command, stamp, received):
+        """Publish the arm command of the cycle stamped ``stamp``, its joint state received at
+        ``received`` (and, when due, its diagnostics)."""
+        if self._dropped(received):
+            return
         self.pub_arm.publish(float_array(command.arm_velocity))
         self._last = command
         for observe in self.cycle_observers:

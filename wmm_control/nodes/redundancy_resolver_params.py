@@ -4,7 +4,7 @@ gains and options, with their defaults in the resolver parameter classes."""
 
 import dataclasses
 
-from wmm_control.nodes.parameters import Param, robot_method, robot_param, robot_period
+from wmm_control.nodes.parameters import Param, max_state_wait_param, robot_method, robot_param, robot_period
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP
 from wmm_control.resolvers import METHODS
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
@@ -164,6 +164,7 @@ _SPECS = (
         lo=1e-3,
         hi=60.0,
     ),
+    max_state_wait_param(),
     Param(
         'compensation_timeout',
         'Steady time [s] to wait for the feasible twist of this cycle.',
