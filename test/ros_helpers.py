@@ -3,6 +3,7 @@ and a scripted controller that answers each joint state with commands. The fault
 (:mod:`fault_matrix`) runs each of its cells on a :class:`RosHarness` too."""
 
 import time
+from contextlib import contextmanager
 
 import numpy as np
 import rclpy
@@ -23,6 +24,23 @@ from wmm_control.nodes.conversions import float_array
 #: What a probe subscribes to ``/rosout`` with: every message a node logged, also those logged
 #: before the subscription.
 ROSOUT_QOS = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+
+
+@contextmanager
+def held_up(obj, name, seconds):
+    """Within the block, ``obj.name(...)`` sleeps ``seconds`` before it runs: a node held up in
+    the middle of its cycle (stopped, or starved on a busy machine)."""
+    original = getattr(obj, name)
+
+    def slow(*args, **kwargs):
+        time.sleep(seconds)
+        return original(*args, **kwargs)
+
+    setattr(obj, name, slow)
+    try:
+        yield
+    finally:
+        delattr(obj, name)  # the class's method again
 
 
 def overrides(**params):

@@ -7,7 +7,6 @@ node's is reported (log and ``/diagnostics``).
 """
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -20,7 +19,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ros_helpers import overrides, stamp_s
+from ros_helpers import held_up, overrides, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
@@ -293,16 +292,9 @@ def test_a_cycle_held_up_past_max_state_wait_publishes_nothing_and_the_next_star
         assert ros.spin_until(lambda k=k: len(probe.feasible) > k, timeout=5.0)
     ros.spin_for(0.1)
     before, commands = len(probe.feasible), len(probe.wheels)
-    step = node.base.step
-
-    def held_up(*args, **kwargs):
-        time.sleep(0.3)
-        return step(*args, **kwargs)
-
-    node.base.step = held_up
-    probe.state(5.0 + 20 * DT, list(probe.wheels[-1].data))
-    assert ros.spin_until(lambda: any('answer dropped' in w for w in probe.warnings), timeout=5.0)
-    node.base.step = step
+    with held_up(node.base, 'step', 0.3):
+        probe.state(5.0 + 20 * DT, list(probe.wheels[-1].data))
+        assert ros.spin_until(lambda: any('answer dropped' in w for w in probe.warnings), timeout=5.0)
     ros.spin_for(0.1)
     assert len(probe.feasible) == before and len(probe.wheels) == commands  # nothing published
     probe.state(5.0 + 40 * DT, [0.0] * 4)  # the simulator zeroed the base meanwhile

@@ -1,7 +1,6 @@
 """redundancy_resolver with wmm_sim and swmr_controller, in process: goals on /goal_pose."""
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -13,7 +12,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ros_helpers import RosHarness, overrides, stamp_s
+from ros_helpers import RosHarness, held_up, overrides, stamp_s
 from wmm_control.experiments.direct import run_scenario
 from sim_bridge.node import SimNode
 from sim_bridge.world import SimWorld
@@ -493,21 +492,20 @@ def test_markers_show_the_goal_the_trail_and_the_footprint(system):
 
 class HandDriver(Driver):
     """A :class:`Driver` that is also the robot: joint states and odometry by hand, at rest at the
-    start state, and (when asked) each cycle's feasible twist, ``feasible_delay`` [s] late."""
+    start state, and (``answer_feasible``) each cycle's feasible twist: its reference, as if
+    followed exactly."""
 
-    def __init__(self, context, robot, feasible_delay=None):
+    def __init__(self, context, robot, answer_feasible=False):
         super().__init__(context)
         self.robot = robot
         self.pub_state = self.create_publisher(JointState, '/joint_states', 10)
         self.pub_odom = self.create_publisher(Odometry, '/odom', 10)
         self.pub_feasible = self.create_publisher(TwistStamped, '/base/feasible_twist', 10)
-        self.feasible_delay = feasible_delay
-        self.create_subscription(TwistStamped, '/base/reference', self._answer, 10)
+        if answer_feasible:  # looked up per message: a test may hold the answer up
+            self.create_subscription(TwistStamped, '/base/reference', lambda msg: self.answer(msg), 10)
 
-    def _answer(self, msg):
-        if self.feasible_delay is not None:
-            time.sleep(self.feasible_delay)  # the base controller's answer comes late
-            self.pub_feasible.publish(msg)
+    def answer(self, msg):
+        self.pub_feasible.publish(msg)
 
     def state(self):
         """Joint states and odometry stamped now (a robot's driver stamps its states with its clock)."""
@@ -534,7 +532,7 @@ def test_a_cycle_held_up_past_max_state_wait_publishes_no_answer(where):
     ros = RosHarness()
     try:
         in_cycle = where == 'in the cycle'
-        driver = ros.add(HandDriver(ros.context, robot, feasible_delay=None if in_cycle else 0.0))
+        driver = ros.add(HandDriver(ros.context, robot, answer_feasible=not in_cycle))
         node = ros.add(
             RedundancyResolverNode(
                 context=ros.context,
@@ -554,20 +552,14 @@ def test_a_cycle_held_up_past_max_state_wait_publishes_no_answer(where):
             assert ros.spin_until(lambda k=k: len(driver.arm) > k, timeout=5.0)
         ros.spin_for(0.1)
         arm, refs = len(driver.arm), len(driver.refs)
-        step = node.resolver.step
-
-        def held_up(*args, **kwargs):
-            time.sleep(0.3)
-            return step(*args, **kwargs)
-
         if in_cycle:
-            node.resolver.step = held_up
+            hold = held_up(node.resolver, 'step', 0.3)
         else:
-            driver.feasible_delay = 0.3
+            hold = held_up(driver, 'answer', 0.3)  # the base controller's answer comes late
             refs += 1  # the base reference goes out at once; the arm command waits for its answer
-        driver.state()
-        assert ros.spin_until(lambda: any('answer dropped' in m for _, _, m in driver.logs), timeout=5.0)
-        node.resolver.step, driver.feasible_delay = step, None if in_cycle else 0.0
+        with hold:
+            driver.state()
+            assert ros.spin_until(lambda: any('answer dropped' in m for _, _, m in driver.logs), timeout=5.0)
         ros.spin_for(0.1)
         assert (len(driver.arm), len(driver.refs)) == (arm, refs), 'nothing more published for that state'
         driver.state()
