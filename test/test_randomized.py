@@ -242,6 +242,17 @@ def test_the_cli_runs_the_goals_it_is_given(tmp_path, capsys):
     assert [(r['robot'], r['method'], r['goal']) for r in runs] == [('steerable', 'pinv', 1)]
     assert main(['--goals', '3', '--indices', '3']) == 2
     assert '--indices' in capsys.readouterr().err
+    # an interrupted run resumed: the runs in the file stay (marked here), the others run
+    document = json.loads(out.read_text())
+    document['runs'][0]['time_s'] = -1.0
+    out.write_text(json.dumps(document))
+    common = ['--robots', 'A', '--methods', 'pinv', '--goals', '3', '--out', str(out), '--resume']
+    assert main([*common, '--seed', str(SUBSET_SEED), '--indices', '0,1']) == 0
+    runs = json.loads(out.read_text())['runs']
+    assert [(r['goal'], r['time_s'] == -1.0) for r in runs] == [(1, True), (0, False)]
+    capsys.readouterr()
+    assert main([*common, '--seed', str(SUBSET_SEED + 1)]) == 2
+    assert 'other settings' in capsys.readouterr().err
 
 
 def test_runs_in_parallel_give_the_serial_results_and_records(tmp_path):

@@ -4,7 +4,7 @@ Usage::
 
     wmm_randomized [--goals N] [--seed S] [--robots steerable,mecanum,...] [--methods pinv,...]
                    [--indices I,...] [--engine direct|nodes] [--obstacles FILE] [--record DIR]
-                   [--jobs N] [--out FILE]
+                   [--jobs N] [--out FILE [--resume]]
 
 Draws ``N`` reachable goals per robot (:mod:`wmm_control.experiments.randomized` says what
 reachable means), runs each method to each goal from the robot's start state in lockstep, in
@@ -17,20 +17,23 @@ goals clear of them (in the file's ``goal_region``, if it has one); every period
 is checked on the simulator's geometry. ``--record DIR`` writes each run as
 ``DIR/<robot>_<method>_<goal>.npz`` (:mod:`wmm_control.experiments.randomized` documents the
 arrays). ``--jobs`` runs that many runs at once, in separate processes (the results are the
-same as one at a time). ``--out`` writes every run as JSON.
+same as one at a time). ``--out`` writes every run as JSON, rewritten as each run ends;
+``--resume`` keeps the runs already in that file (from an interrupted run of the same draw,
+engine, obstacles and parameters) and runs only the others.
 The exit status is 1 when a run failed (a limit passed, a non-finite command, or neither
 converged nor reported).
 """
 
 import argparse
 import json
+import os
 import sys
 from functools import partial
 
 from wmm_control.errors import WmmError
 from wmm_control.experiments.jobs import run_jobs
 from wmm_control.experiments.randomized import METHOD_RUNS, run_goal, sample_goals, summarize
-from wmm_control.robot_config import robot_names
+from wmm_control.robot_config import load_robot, robot_names
 
 __all__ = ['main', 'format_summary']
 
@@ -89,14 +92,41 @@ def _run_one(job, options):
     return run_goal(robot, method, goal, **options)
 
 
-def _run_all(jobs, options, workers, bar):
-    """Every run of ``jobs``, in their order, ``workers`` at a time (separate processes)."""
-    results = []
+def _run_all(jobs, options, workers, bar, done=()):
+    """Every run of ``jobs``, in their order, ``workers`` at a time (separate processes), after
+    the runs ``done``; yields the runs so far as each one ends."""
+    results = list(done)
     for job, result in zip(jobs, run_jobs(partial(_run_one, options=options), jobs, workers)):
         bar.set_description(f'{job[0]} {job[1]}')
         results.append(result)
         bar.update(1)
-    return results
+        yield results
+
+
+def _write(path, header, results):
+    """``header`` and the runs ``results`` with their summary as JSON at ``path``, replaced whole
+    (an interrupted write leaves the previous file)."""
+    table = summarize(results)
+    document = dict(header, runs=results, summary=[dict(robot=r, method=m, **s) for (r, m), s in table.items()])
+    tmp = f'{path}.tmp'
+    with open(tmp, 'w') as fh:
+        json.dump(document, fh, indent=1)
+    os.replace(tmp, path)
+
+
+def _resumed(path, header):
+    """The runs of the earlier file ``path`` when it was written with the same ``header``."""
+    try:
+        with open(path) as fh:
+            earlier = json.load(fh)
+    except FileNotFoundError:
+        return []
+    except (OSError, ValueError) as exc:
+        raise WmmError(f'--resume: cannot read {path}: {exc}') from exc
+    differs = {k: (earlier.get(k), v) for k, v in header.items() if earlier.get(k) != v}
+    if differs:
+        raise WmmError(f'--resume: {path} is from other settings (earlier, now): {differs}')
+    return earlier['runs']
 
 
 def main(argv=None):
@@ -131,7 +161,10 @@ def main(argv=None):
     parser.add_argument(
         '--jobs', type=int, default=1, help='runs at once, in separate processes (default: %(default)s)'
     )
-    parser.add_argument('--out', help='write every run as JSON to this file')
+    parser.add_argument('--out', help='write every run as JSON to this file (rewritten as each run ends)')
+    parser.add_argument(
+        '--resume', action='store_true', help='keep the runs already in --out (same settings) and run the others'
+    )
     args = parser.parse_args(argv)
     from tqdm import tqdm
 
@@ -147,8 +180,17 @@ def main(argv=None):
             )
         if args.jobs < 1:
             raise WmmError(f'--jobs must be >= 1, got {args.jobs}')
+        if args.resume and not args.out:
+            raise WmmError('--resume needs --out')
         params = dict(_param(text) for text in args.param)
         indices = _indices(args.indices, args.goals)
+        header = {
+            'seed': args.seed,
+            'goals': args.goals,
+            'engine': args.engine,
+            'obstacles': args.obstacles,
+            'params': params,
+        }
         draws = {
             r: [
                 g
@@ -158,9 +200,21 @@ def main(argv=None):
             for r in robots
         }
         jobs = [(robot, method, goal) for robot in robots for method in methods for goal in draws[robot]]
+        name = {r: load_robot(r).name for r in robots}  # the name a run records ('A' is 'steerable')
+        keys = {(name[robot], method, goal.index) for robot, method, goal in jobs}
+        done = (
+            [r for r in _resumed(args.out, header) if (r['robot'], r['method'], r['goal']) in keys]
+            if args.resume
+            else []
+        )
+        finished = {(r['robot'], r['method'], r['goal']) for r in done}
+        jobs = [job for job in jobs if (name[job[0]], job[1], job[2].index) not in finished]
         options = dict(engine=args.engine, params=params, obstacles=args.obstacles, record=args.record)
-        with tqdm(total=len(jobs), unit='run', file=sys.stderr) as bar:
-            results = _run_all(jobs, options, args.jobs, bar)
+        results = done
+        with tqdm(total=len(jobs) + len(done), initial=len(done), unit='run', file=sys.stderr) as bar:
+            for results in _run_all(jobs, options, args.jobs, bar, done):
+                if args.out:
+                    _write(args.out, header, results)
     except WmmError as exc:
         print(f'wmm_randomized: {exc}', file=sys.stderr)
         return 2
@@ -171,19 +225,8 @@ def main(argv=None):
     failed = [r for r in results if r['outcome'] == 'failed']
     for r in failed:
         print(f'FAILED: {r["robot"]} {r["method"]} goal {r["goal"]}: {r["why"]}')
-    if args.out:
-        with open(args.out, 'w') as fh:
-            json.dump(
-                {
-                    'seed': args.seed,
-                    'goals': args.goals,
-                    'engine': args.engine,
-                    'runs': results,
-                    'summary': [dict(robot=r, method=m, **s) for (r, m), s in table.items()],
-                },
-                fh,
-                indent=1,
-            )
+    if args.out and not jobs:
+        _write(args.out, header, results)  # nothing left to run: the file as it is, summarized again
     return 1 if failed else 0
 
 
