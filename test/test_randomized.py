@@ -255,7 +255,7 @@ def test_the_cli_runs_the_goals_it_is_given(tmp_path, capsys):
     assert 'other settings' in capsys.readouterr().err
 
 
-def test_runs_in_parallel_give_the_serial_results_and_records(tmp_path):
+def test_runs_in_parallel_give_the_serial_results_and_records(tmp_path, capsys):
     import json
     from wmm_control.cli.randomized import main
 
@@ -271,7 +271,7 @@ def test_runs_in_parallel_give_the_serial_results_and_records(tmp_path):
         '--indices',
         '0,1',
     ]
-    assert main([*common, '--out', str(tmp_path / 'serial.json')]) == 0
+    assert main([*common, '--jobs', '1', '--out', str(tmp_path / 'serial.json')]) == 0
     assert main([*common, '--jobs', '2', '--record', str(tmp_path / 'runs'), '--out', str(tmp_path / 'jobs.json')]) == 0
     serial, jobs = (json.loads((tmp_path / f'{n}.json').read_text())['runs'] for n in ('serial', 'jobs'))
     key = [(r['method'], r['goal'], r['outcome']) for r in serial]
@@ -286,7 +286,9 @@ def test_runs_in_parallel_give_the_serial_results_and_records(tmp_path):
         'steerable_pinv_0.npz',
         'steerable_pinv_1.npz',
     ]
-    assert main([*common, '--jobs', '0']) == 2
+    with pytest.raises(SystemExit) as exit_status:
+        main([*common, '--jobs', '0'])
+    assert exit_status.value.code == 2 and 'positive whole number' in capsys.readouterr().err
 
 
 def test_no_stall_while_the_set_point_trajectory_still_runs():

@@ -16,7 +16,7 @@ of the draw (one run again, say). ``--obstacles`` puts an obstacle file's obstac
 goals clear of them (in the file's ``goal_region``, if it has one); every period's clearance
 is checked on the simulator's geometry. ``--record DIR`` writes each run as
 ``DIR/<robot>_<method>_<goal>.npz`` (:mod:`wmm_control.experiments.randomized` documents the
-arrays). ``--jobs`` runs that many runs at once, in separate processes (the results are the
+arrays). ``--jobs`` runs that many runs at once, in separate processes (default: one per core; the results are the
 same as one at a time). ``--out`` writes every run as JSON, rewritten as each run ends;
 ``--resume`` keeps the runs already in that file (from an interrupted run of the same draw,
 engine, obstacles and parameters) and runs only the others.
@@ -31,7 +31,7 @@ import sys
 from functools import partial
 
 from wmm_control.errors import WmmError
-from wmm_control.experiments.jobs import run_jobs
+from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
 from wmm_control.experiments.randomized import METHOD_RUNS, run_goal, sample_goals, summarize
 from wmm_control.robot_config import load_robot, robot_names
 
@@ -159,7 +159,10 @@ def main(argv=None):
     )
     parser.add_argument('--record', metavar='DIR', help='write each run to DIR/<robot>_<method>_<goal>.npz')
     parser.add_argument(
-        '--jobs', type=int, default=1, help='runs at once, in separate processes (default: %(default)s)'
+        '--jobs',
+        type=jobs_argument,
+        default=default_jobs(),
+        help='runs at once, in separate processes (default: one per core, %(default)s)',
     )
     parser.add_argument('--out', help='write every run as JSON to this file (rewritten as each run ends)')
     parser.add_argument(
@@ -178,8 +181,6 @@ def main(argv=None):
                 if unknown
                 else f'--goals must be >= 1, got {args.goals}'
             )
-        if args.jobs < 1:
-            raise WmmError(f'--jobs must be >= 1, got {args.jobs}')
         if args.resume and not args.out:
             raise WmmError('--resume needs --out')
         params = dict(_param(text) for text in args.param)
