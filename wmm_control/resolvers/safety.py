@@ -22,7 +22,9 @@ under a base that brakes, so both axes are not counted on at once): a Mecanum ba
 at 0.025 m/s² is not counted on to stop at 1 m/s². For a pair of a wheeled base's own body
 (chassis, wheels) and an obstacle, the row also holds without the turn's share: a turn that
 swings one corner away for the moment cannot hide a linear approach faster than the base can
-stop. With obstacles, whose distance the base's twist changes too, the look-ahead
+stop; and a row on the turn rate keeps the turn from turning the base's velocity towards the
+obstacle (at v ω, v its speed) by more than ``TURN_SHARE`` of the linear deceleration, which
+the braking rows then count on the rest of. With obstacles, whose distance the base's twist changes too, the look-ahead
 grows to the base's stopping distance (``d_s + v_max τ + v_max² / (2 min(a_max, a_b))`` over its
 linear axes) so that it brakes in time.
 
@@ -100,6 +102,10 @@ SELF_WEIGHT = 1e-2
 TOLERANCE = 1e-9
 #: [m/s] a lagging base's measured twist below this tells no path (at rest).
 PATH_SPEED = 1e-4
+#: The share of a wheeled base's linear deceleration near obstacles that its turn may take
+#: (turning under a moving base turns its path, towards an obstacle too, and the linear axes
+#: must brake that); the dampers count on the rest.
+TURN_SHARE = 0.25
 #: The QP's answer meets every constraint within this much (a distance in its scaled variables,
 #: about [m/s] for weights about 1).
 LEAST_DISTANCE_TOLERANCE = 1e-10
@@ -301,6 +307,8 @@ class SafetyStage:
             # a base that tracks its reference: its linear approach must brake on its own (a
             # lagging base's is held along its measured path above)
             rows, bound = _without_turn(rows, bound, axes, base_full, moved, to_base)
+            if moved.any() and not world_rates:
+                rows, bound = self._turn_rows(rows, bound, axes, base_full, moved, base_velocity)
         violated = rows @ command < bound - TOLERANCE
         if not violated.any():
             return SafetyResult(command, clearance, label, len(near), overtaking)
@@ -361,6 +369,34 @@ class SafetyStage:
         command[:nb] = lower[:nb] = upper[:nb] = np.clip(target, lower[:nb], upper[:nb])
         return command, lower, upper, True
 
+    def _linear_axes(self, axes):
+        """The command's entries on the base's linear axes, and the slower axis's acceleration
+        limit [m/s²] (None without them)."""
+        linear = [k for k, axis in enumerate(axes) if axis < 2]
+        return linear, (float(np.min(self._base_acc[[axes[k] for k in linear]])) if linear else None)
+
+    def _turn_rows(self, rows, bound, axes, base_full, moved, base_velocity):
+        """``rows`` and ``bound`` with, for each pair of the base's own body and an obstacle, a
+        row on the turn rate: turning at ω while driving at ``v`` (the measured twist, base
+        frame) turns the pair's normal under the base's velocity, which changes the approach
+        rate n · v at ω (n_x v_y − n_y v_x) per second, towards the obstacle for one sign of
+        ω. The linear axes must brake that as well, so the turn may take no more than
+        ``TURN_SHARE`` of their deceleration (the dampers count on the rest): a base driving
+        past an obstacle may not swing its path into it faster than it can brake."""
+        linear, slowest = self._linear_axes(axes)
+        if 2 not in axes or not linear or base_velocity is None:
+            return rows, bound
+        n = len(moved)
+        body = moved & ~rows[:n, len(axes) :].any(axis=1)
+        v = np.asarray(base_velocity, dtype=float)
+        bend = base_full[body, 0] * v[1] - base_full[body, 1] * v[0]  # n_x v_y − n_y v_x
+        if not bend.any():
+            return rows, bound
+        extra = np.zeros((int(body.sum()), rows.shape[1]))
+        extra[:, axes.index(2)] = -bend
+        budget = TURN_SHARE * slowest * np.hypot(base_full[body, 0], base_full[body, 1])
+        return np.vstack((rows, extra)), np.concatenate((bound, -budget))
+
     def _allowed(self, distances, rows, axes, moved) -> np.ndarray:
         """Each pair's fastest allowed approach [m/s], braking no harder than the command's
         acceleration limits can slow that distance. The base's turn rate is left out: turning
@@ -371,13 +407,14 @@ class SafetyStage:
             return self.allowed_approach(distances, lag=lags)
         nb = len(axes)
         reach = np.abs(rows[:, nb:]) @ self._arm_acc
-        linear = [k for k, axis in enumerate(axes) if axis < 2]
+        linear, slowest = self._linear_axes(axes)
         if linear:
             # the base's linear axes brake the distance at no more than |j_xy| times the slower
             # axis's limit, whichever way the pair's normal turns while it brakes (Σ |j_i| a_i
             # would count on braking both axes at once along a normal that the base's turn, or
             # its approach to another face, changes under it)
-            slowest = float(np.min(self._base_acc[[axes[k] for k in linear]]))
+            if 2 in axes and self.base_lag == 0.0:
+                slowest *= 1.0 - TURN_SHARE  # the rest is the turn's (_turn_rows)
             reach = reach + np.linalg.norm(rows[:, linear], axis=1) * slowest
         return self.allowed_approach(distances, reach, lags)
 
