@@ -24,7 +24,8 @@ at 0.025 m/s² is not counted on to stop at 1 m/s². For a pair of a wheeled bas
 swings one corner away for the moment cannot hide a linear approach faster than the base can
 stop; and a row on the turn rate keeps the turn from turning the base's velocity towards the
 obstacle (at v ω, v its speed) by more than ``TURN_SHARE`` of the linear deceleration, which
-the braking rows then count on the rest of. With obstacles, whose distance the base's twist changes too, the look-ahead
+the braking rows then count on the rest of. With obstacles, whose distance the base's twist
+changes too, the look-ahead
 grows to the base's stopping distance (``d_s + v_max τ + v_max² / (2 min(a_max, a_b))`` over its
 linear axes) so that it brakes in time.
 
@@ -386,8 +387,7 @@ class SafetyStage:
         linear, slowest = self._linear_axes(axes)
         if 2 not in axes or not linear or base_velocity is None:
             return rows, bound
-        n = len(moved)
-        body = moved & ~rows[:n, len(axes) :].any(axis=1)
+        body = _body_pairs(rows, axes, moved)
         v = np.asarray(base_velocity, dtype=float)
         bend = base_full[body, 0] * v[1] - base_full[body, 1] * v[0]  # n_x v_y − n_y v_x
         if not bend.any():
@@ -485,12 +485,18 @@ def _without_turn(rows, bound, axes, base_full, moved, to_base):
     if 2 not in axes:
         return rows, bound
     n = len(moved)  # the pairs' own rows come first
-    turning = moved & (base_full[:, 2] != 0.0) & ~rows[:n, len(axes) :].any(axis=1)
+    turning = _body_pairs(rows, axes, moved) & (base_full[:, 2] != 0.0)
     if not turning.any():
         return rows, bound
     linear = base_full[turning] * np.array([1.0, 1.0, 0.0])
     extra = np.hstack(((linear @ to_base)[:, axes], rows[:n][turning, len(axes) :]))
     return np.vstack((rows, extra)), np.concatenate((bound, bound[:n][turning]))
+
+
+def _body_pairs(rows, axes, moved):
+    """The pairs of the base's own body (no arm joint moves them: chassis, wheels) and an
+    obstacle, among the first ``len(moved)`` rows."""
+    return moved & ~rows[: len(moved), len(axes) :].any(axis=1)
 
 
 def _least_distance(normals, rhs, active):
