@@ -2,6 +2,8 @@
 the safety stage on the base, goals inside an obstacle, the /obstacles topic, the simulator's
 contact report, and the recorded runs."""
 
+import math
+
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
@@ -13,7 +15,7 @@ from ros_helpers import RosHarness, overrides
 from sim_bridge.collision import SelfCollisionChecker
 from sim_bridge.node import SimNode
 from wmm_control.errors import ConfigError
-from wmm_control.experiments.randomized import RandomGoal, run_goal, sample_goals
+from wmm_control.experiments.randomized import CONTACT_DEPTH, RandomGoal, run_goal, sample_goals
 from wmm_control.experiments.scenario import load_scenario
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.collision import CollisionModel
@@ -137,13 +139,15 @@ def test_distances_asked_again_follow_new_obstacles_and_a_moved_base():
 
 
 def test_a_base_driving_at_an_obstacle_is_slowed_to_what_it_can_brake():
-    robot = load_robot('mecanum')  # its base brakes at 0.025 m/s²: 1.25 m from full speed
+    robot = load_robot('mecanum')
+    # its base brakes at 0.025 m/s² per axis, of which the turn may take a quarter: 3.33 m from
+    # full speed on the diagonal (0.25 m/s on each axis)
     pillar = parse_obstacles(
         [{'name': 'pillar', 'shape': 'cylinder', 'size': [0.1, 2.0], 'pose': [0.9, 0.0, 0.0]}], 'test'
     )
     stage = SafetyStage.for_robot(robot)
     stage.set_obstacles(pillar)
-    assert stage.obstacle_lookahead == pytest.approx(0.02 + 0.25**2 / (2 * 0.025))
+    assert stage.obstacle_lookahead == pytest.approx(0.02 + 2 * 0.25**2 / (2 * 0.75 * 0.025))
     q = np.array(robot.start.arm)
     n = q.size
     command = np.concatenate(([0.25, 0.0, 0.0], np.zeros(n)))  # full speed ahead, the arm still
@@ -167,6 +171,21 @@ def test_a_base_driving_at_an_obstacle_is_slowed_to_what_it_can_brake():
     assert not far.changed
 
 
+@pytest.mark.parametrize('method, index', [('task_sharing', 1), ('amp', 6)])
+def test_robot_a_turning_past_the_table_keeps_off_it(method, index):
+    """Robot A's base lags its reference by 0.5 s and turns on while it does. Two randomized
+    runs (``table_pillar``, seed 0) in which it swung into the table as it turned past a corner:
+    ``task_sharing`` goal 1 (its reference in the base's frame: the chassis 6.7 cm into the
+    table) and ``amp`` goal 6 (in the world frame: a wheel 3.7 cm in). The stage now holds the
+    reference to the rows the base will see after the turn it cannot stop at once, and the turn
+    to the linear path the base is still on. No period in contact, and the run ends converged
+    or reported stalled."""
+    goal = sample_goals('steerable', index + 1, seed=0, obstacles='table_pillar')[index]
+    out = run_goal('steerable', method, goal, obstacles='table_pillar')
+    assert out['contact_depth_m'] <= CONTACT_DEPTH, (out['contact_pair'], out['contact_depth_m'])
+    assert out['outcome'] in ('converged', 'reported'), out['why']
+
+
 def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own_path():
     """Robot A's base follows its reference with a lag of 1/K_p = 0.5 s. Its reference is held to
     what it can stop from after that lag; and where its measured twist is already too fast (it
@@ -179,7 +198,8 @@ def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own
     stage = SafetyStage.for_robot(robot)
     stage.set_obstacles(table)
     assert stage.base_lag == pytest.approx(0.5)
-    assert stage.obstacle_lookahead == pytest.approx(0.02 + 1.0 * 0.5 + 1.0 / (2 * 0.5))
+    speed = math.sqrt(2.0)  # 1 m/s on each linear axis
+    assert stage.obstacle_lookahead == pytest.approx(0.02 + speed * 0.5 + speed**2 / (2 * 0.5))
     q = np.array(robot.start.arm)
     box = np.concatenate((robot.base.velocity, robot.arm.velocity))
     pose = np.zeros(3)
@@ -356,18 +376,16 @@ def test_table_reach_every_method_reaches_over_the_table_or_reports_a_stall_with
     assert out['outcome'] == ('reported' if method == 'task_sharing' else 'converged'), out['why']
 
 
-def _drive_past_the_table(stage, seconds=12.0):
-    """Robot B's stage in closed loop on its own commands: the base at (2.41, −0.61, −1.26) beside
-    the table of ``table_pillar``, driving at (0.11, −0.17) m/s, and a method that asks for
-    (0.16, −0.13) m/s and a turn of −0.45 rad/s throughout, the arm still. The base follows its
-    reference within its acceleration limits; returns the closest any pair came [m]."""
+def _drive(stage, pose, twist, q, want, seconds):
+    """Robot B's stage in closed loop on its own commands: the base from ``pose`` (x, y, θ) at
+    ``twist`` (base frame), the arm at ``q``, and a method that asks for ``want`` throughout.
+    The base follows its reference within its acceleration limits; returns the closest any
+    pair came [m]."""
     robot = load_robot('mecanum')
     dt = robot.period
-    pose, twist = np.array([2.4094, -0.6065, -1.2613]), np.array([0.1125, -0.1663, -0.1594])
-    q = np.array([-1.0823, -2.1645, 2.1069, -1.6751, -0.0515, 1.0037, 1.2814])
+    pose, twist, q = (np.array(v, dtype=float) for v in (pose, twist, q))
     step, limit = np.asarray(robot.base.acceleration) * dt, np.asarray(robot.base.velocity)
     arm_step, arm_limit = np.asarray(robot.arm.acceleration) * dt, np.asarray(robot.arm.velocity)
-    want = np.concatenate(([0.16, -0.13, -0.45], np.zeros(q.size)))
     dq, closest = np.zeros(q.size), np.inf
     for _ in range(round(seconds / dt)):
         lower = np.concatenate((np.maximum(twist - step, -limit), np.maximum(dq - arm_step, -arm_limit)))
@@ -381,6 +399,30 @@ def _drive_past_the_table(stage, seconds=12.0):
         q = q + dt * dq
         closest = min(closest, stage.collision.closest(q, pose)[0])
     return closest
+
+
+def _drive_past_the_table(stage, seconds=12.0):
+    """The base at (2.41, −0.61, −1.26) beside the table of ``table_pillar``, driving at
+    (0.11, −0.17) m/s, and a method that asks for (0.16, −0.13) m/s and a turn of −0.45 rad/s
+    throughout, the arm still (:func:`_drive`)."""
+    q = np.array([-1.0823, -2.1645, 2.1069, -1.6751, -0.0515, 1.0037, 1.2814])
+    want = np.concatenate(([0.16, -0.13, -0.45], np.zeros(q.size)))
+    return _drive(stage, [2.4094, -0.6065, -1.2613], [0.1125, -0.1663, -0.1594], q, want, seconds)
+
+
+def test_a_base_spinning_on_a_diagonal_is_braked_before_an_obstacle_it_swings_round_to():
+    """Robot B spinning at −1 rad/s while it drives at (−0.25, 0.19) m/s (0.31 m/s, faster than
+    either axis's limit) swings its path round onto the table. From that speed it needs 2.6 m
+    to stop at the deceleration the stage counts on; looking out only as far as one axis at
+    full speed stops (1.27 m), the stage saw the table too late and the base went into it (a
+    randomized run found it: a wheel 9.9 cm into the table). The state is that run's at 33 s."""
+    robot = load_robot('mecanum')
+    stage = SafetyStage.for_robot(robot, obstacles=load_obstacles('table_pillar'))
+    assert stage.obstacle_lookahead == pytest.approx(0.02 + 2 * 0.25**2 / (2 * 0.75 * 0.025))
+    q = np.array([0.2218, 2.1623, 0.4481, -0.9595, 0.918, 0.0046, 0.6831])
+    want = np.concatenate(([-0.25, 0.19, -1.0], np.zeros(q.size)))
+    closest = _drive(stage, [-0.4408, -0.3569, 0.1606], [-0.193, 0.135, -0.449], q, want, seconds=30.0)
+    assert closest >= stage.params.collision_safety - 1e-3
 
 
 def test_a_slow_braking_base_does_not_turn_its_path_into_a_table_it_drives_past():

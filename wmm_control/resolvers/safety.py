@@ -24,10 +24,12 @@ at 0.025 m/s² is not counted on to stop at 1 m/s². For a pair of a wheeled bas
 swings one corner away for the moment cannot hide a linear approach faster than the base can
 stop; and a row on the turn rate keeps the turn from turning the base's velocity towards the
 obstacle (at v ω, v its speed) by more than ``TURN_SHARE`` of the linear deceleration, which
-the braking rows then count on the rest of. With obstacles, whose distance the base's twist
-changes too, the look-ahead
-grows to the base's stopping distance (``d_s + v_max τ + v_max² / (2 min(a_max, a_b))`` over its
-linear axes) so that it brakes in time.
+the braking rows then count on the rest of (the turn row holds for a lagging base too). With
+obstacles, whose distance the base's twist changes too, the look-ahead grows to the base's
+stopping distance from full speed (``d_s + v τ + v² / (2 min(a, a_b))``, ``v`` the norm of
+the linear axes' speed limits, since the base may drive on a diagonal, and ``a`` the
+deceleration its rows count on: the slower axis's limit, less the turn's share) so that it
+brakes in time.
 
 The stage shapes the base's *reference*; a base whose twist follows its reference with a lag
 (a steerable base's twist controller, ξ̈ = K_p (ξ̇* − ξ̇): a time constant τ = 1/K_p, 0.5 s on
@@ -42,9 +44,13 @@ towards the obstacle while changing its ICR), the base is sent ``s v₀``: a twi
 path, which a steerable base follows by slowing its wheels without steering them, with ``s``
 low enough (down to −1) to brake the approach within the room left, within the method's box.
 The part of the reference along ``v₀`` is held to the same row as the reference: a steerable
-base first drives on along its path at that part while its wheels turn to the new one. A
-wheeled base that tracks its reference within its acceleration limits has τ = 0: the rows
-above, and no such braking.
+base first drives on along its path at that part while its wheels turn to the new one. Two
+more rows per pair follow the turn of a lagging base: the reference's turn rate on the linear
+twist the base still drives at (it takes up a new turn before its wheels steer to a new path),
+and the reference against the pair's normal as the base will see it after the turn it cannot
+stop at once (turned by ω τ, and for a reference in the base's frame, which turns with it, by
+the turn's braking ω |ω| / (2 α) too). A wheeled base that tracks its reference within its
+acceleration limits has τ = 0: the rows above, and no such braking.
 
 With ``ḋ = j · q̇`` (``q̇`` the command: the base's axes, when the method commands the base
 with it, then the arm's joints; :class:`~wmm_control.kinematics.collision.CollisionModel`),
@@ -221,15 +227,17 @@ class SafetyStage:
         self._base_acc = np.zeros(3) if base_acceleration is None else np.asarray(base_acceleration, dtype=float)
         stopping = 0.0
         if base_velocity is not None and base_acceleration is not None:
-            # from full speed, braking as its rows count on: at its limit, and no harder than a_b
-            stopping = max(
-                (
-                    float(v) * self.base_lag + float(v) ** 2 / (2.0 * min(float(a), params.collision_braking))
-                    for v, a in zip(base_velocity[:2], base_acceleration[:2])
-                    if a > 0.0
-                ),
-                default=0.0,
-            )
+            linear = [k for k in range(2) if base_acceleration[k] > 0.0]
+            if linear:
+                # from full speed on every linear axis at once (a diagonal is faster than either
+                # axis), braking as its rows count on (_allowed): the slower axis's limit, less
+                # the turn's share where the base tracks without lag, and no harder than a_b
+                speed = float(np.linalg.norm([base_velocity[k] for k in linear]))
+                brake = min(float(base_acceleration[k]) for k in linear)
+                if self.base_lag == 0.0:
+                    brake *= 1.0 - TURN_SHARE
+                brake = min(brake, params.collision_braking)
+                stopping = speed * self.base_lag + speed * speed / (2.0 * brake)
         #: [m] how far an obstacle is looked at: the base's stopping distance from full speed
         self.obstacle_lookahead = max(params.collision_lookahead, params.collision_safety + stopping)
 
@@ -304,12 +312,14 @@ class SafetyStage:
                 near.distance, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
             )
             rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
+            rows, bound = self._turn_first(rows, bound, axes, base_full, v0, moved)
+            rows, bound = self._after_turn(rows, bound, axes, base_full, v0, command, moved, to_base, world_rates)
         if base_twist is None and self.base_lag == 0.0:
             # a base that tracks its reference: its linear approach must brake on its own (a
             # lagging base's is held along its measured path above)
             rows, bound = _without_turn(rows, bound, axes, base_full, moved, to_base)
-            if moved.any() and not world_rates:
-                rows, bound = self._turn_rows(rows, bound, axes, base_full, moved, base_velocity)
+        if base_twist is None and moved.any() and not world_rates:
+            rows, bound = self._turn_rows(rows, bound, axes, base_full, moved, base_velocity)
         violated = rows @ command < bound - TOLERANCE
         if not violated.any():
             return SafetyResult(command, clearance, label, len(near), overtaking)
@@ -342,6 +352,51 @@ class SafetyStage:
         along = (own[moved, None] * v0 / norm) @ to_base  # j_b v₀ v₀ᵀ / |v₀|²
         extra = np.hstack((along[:, axes], rows[moved, len(axes) :]))
         return np.vstack((rows, extra)), np.concatenate((bound, bound[moved]))
+
+    def _turn_first(self, rows, bound, axes, base_full, v0, moved):
+        """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the row of the
+        reference's turn rate on the base's measured linear twist (``v0``): a steerable base
+        takes up a new turn rate before its wheels have steered to a new linear path, so a turn
+        that swings a corner towards an obstacle may not count on a sideways reference that
+        would carry the corner away."""
+        if 2 not in axes or not moved.any():
+            return rows, bound
+        nb, k = len(axes), axes.index(2)
+        pairs = slice(0, moved.size)
+        extra = np.zeros((int(moved.sum()), rows.shape[1]))
+        extra[:, k] = rows[pairs][moved, k]
+        extra[:, nb:] = rows[pairs][moved, nb:]
+        linear = base_full[moved, :2] @ np.asarray(v0, dtype=float)[:2]
+        return np.vstack((rows, extra)), np.concatenate((bound, bound[pairs][moved] - linear))
+
+    def _after_turn(self, rows, bound, axes, base_full, v0, command, moved, to_base, world_rates):
+        """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the same row as
+        the base will see it once it has turned on by Δθ: the pair's normal turns the other way
+        in the base's frame (j_xy becomes R(−Δθ) j_xy). A lagging base turning at ω (its
+        measured twist ``v0``) drives at its reference of τ ago: a reference in the world frame
+        (``world_rates``) is driven turned by Δθ = ω τ. A reference held in the base's frame
+        turns with the base, which turns on for its lag and then while the turn brakes at the
+        base's limit α, whatever its reference asks: Δθ = ω τ + ω |ω| / (2 α), ω the faster of
+        the measured turn and the ``command``'s. Without it, a reference that approaches at the
+        bound now swings into the obstacle as the turn goes on (robot A passing a table's
+        corner while it turns)."""
+        if 2 not in axes or not moved.any():
+            return rows, bound
+        if world_rates:
+            turn = float(v0[2]) * self.base_lag
+        else:
+            omega = max(float(v0[2]), float(command[axes.index(2)]), key=abs)
+            alpha = float(self._base_acc[2])
+            turn = omega * self.base_lag + (omega * abs(omega) / (2.0 * alpha) if alpha > 0.0 else 0.0)
+        if abs(turn) < TOLERANCE:
+            return rows, bound
+        c, s = math.cos(turn), math.sin(turn)
+        ahead = base_full[moved].copy()
+        ahead[:, 0] = c * base_full[moved, 0] + s * base_full[moved, 1]
+        ahead[:, 1] = c * base_full[moved, 1] - s * base_full[moved, 0]
+        pairs = slice(0, moved.size)  # the pairs' own rows (others follow them)
+        extra = np.hstack(((ahead @ to_base)[:, axes], rows[pairs][moved, len(axes) :]))
+        return np.vstack((rows, extra)), np.concatenate((bound, bound[pairs][moved]))
 
     def _brake_on_path(self, distances, rows, bound, axes, command, v0, own, moved, to_base, lower, upper):
         """A lagging base that already approaches a pair faster than allowed (its measured twist
