@@ -44,12 +44,13 @@ towards the obstacle while changing its ICR), the base is sent ``s v₀``: a twi
 path, which a steerable base follows by slowing its wheels without steering them, with ``s``
 low enough (down to −1) to brake the approach within the room left, within the method's box.
 The part of the reference along ``v₀`` is held to the same row as the reference: a steerable
-base first drives on along its path at that part while its wheels turn to the new one. Two
-more rows per pair follow the turn of a lagging base: the reference's turn rate on the linear
-twist the base still drives at (it takes up a new turn before its wheels steer to a new path),
-and the reference against the pair's normal as the base will see it after the turn it cannot
-stop at once (turned by ω τ, and for a reference in the base's frame, which turns with it, by
-the turn's braking ω |ω| / (2 α) too). A wheeled base that tracks its reference within its
+base first drives on along its path at that part while its wheels turn to the new one. The
+row also holds at every corner of the box between the measured twist and the reference, axis
+by axis (the base gets to its reference on each axis at its own pace: a steerable base drives
+on along its wheels' heading, and turns, before it has steered to a sideways reference), and
+against the pair's normal as the base will see it after the turn it cannot stop at once
+(turned by ω τ, and for a reference in the base's frame, which turns with it, by the turn's
+braking ω |ω| / (2 α) too). A wheeled base that tracks its reference within its
 acceleration limits has τ = 0: the rows above, and no such braking.
 
 With ``ḋ = j · q̇`` (``q̇`` the command: the base's axes, when the method commands the base
@@ -113,6 +114,11 @@ PATH_SPEED = 1e-4
 #: (turning under a moving base turns its path, towards an obstacle too, and the linear axes
 #: must brake that); the dampers count on the rest.
 TURN_SHARE = 0.25
+#: The corners of the box between a lagging base's measured twist and its reference other than
+#: the reference itself: the axes (vx, vy, ω) on which each takes the reference.
+_PARTS = tuple(
+    np.array(part, dtype=bool) for part in ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1))
+)
 #: The QP's answer meets every constraint within this much (a distance in its scaled variables,
 #: about [m/s] for weights about 1).
 LEAST_DISTANCE_TOLERANCE = 1e-10
@@ -312,7 +318,7 @@ class SafetyStage:
                 near.distance, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
             )
             rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
-            rows, bound = self._turn_first(rows, bound, axes, base_full, v0, moved)
+            rows, bound = self._between(rows, bound, axes, base_full, v0, moved, to_base)
             rows, bound = self._after_turn(rows, bound, axes, base_full, v0, command, moved, to_base, world_rates)
         if base_twist is None and self.base_lag == 0.0:
             # a base that tracks its reference: its linear approach must brake on its own (a
@@ -353,21 +359,25 @@ class SafetyStage:
         extra = np.hstack((along[:, axes], rows[moved, len(axes) :]))
         return np.vstack((rows, extra)), np.concatenate((bound, bound[moved]))
 
-    def _turn_first(self, rows, bound, axes, base_full, v0, moved):
-        """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the row of the
-        reference's turn rate on the base's measured linear twist (``v0``): a steerable base
-        takes up a new turn rate before its wheels have steered to a new linear path, so a turn
-        that swings a corner towards an obstacle may not count on a sideways reference that
-        would carry the corner away."""
-        if 2 not in axes or not moved.any():
+    def _between(self, rows, bound, axes, base_full, v0, moved, to_base):
+        """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the row at every
+        corner of the box between the base's measured twist ``v0`` and its reference, axis by
+        axis (vx, vy, ω of its own frame): a lagging base gets to its reference on each axis at
+        its own pace (a steerable base drives on along its wheels' heading, and turns, before it
+        has steered to a sideways reference), so a reference whose approach is a part towards
+        the obstacle and a part away from it may not count on the part that comes last. Each
+        corner takes the reference on some axes and ``v0`` on the others."""
+        if not moved.any():
             return rows, bound
-        nb, k = len(axes), axes.index(2)
+        nb = len(axes)
         pairs = slice(0, moved.size)
-        extra = np.zeros((int(moved.sum()), rows.shape[1]))
-        extra[:, k] = rows[pairs][moved, k]
-        extra[:, nb:] = rows[pairs][moved, nb:]
-        linear = base_full[moved, :2] @ np.asarray(v0, dtype=float)[:2]
-        return np.vstack((rows, extra)), np.concatenate((bound, bound[pairs][moved] - linear))
+        j, arm = base_full[moved], rows[pairs][moved, nb:]
+        measured = j * np.asarray(v0, dtype=float)  # each axis's share of the approach at v₀
+        extra, extra_bound = [rows], [bound]
+        for part in _PARTS:
+            extra.append(np.hstack((((j * part) @ to_base)[:, axes], arm)))
+            extra_bound.append(bound[pairs][moved] - measured[:, ~part].sum(axis=1))
+        return np.vstack(extra), np.concatenate(extra_bound)
 
     def _after_turn(self, rows, bound, axes, base_full, v0, command, moved, to_base, world_rates):
         """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the same row as
