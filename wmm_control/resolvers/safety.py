@@ -356,8 +356,7 @@ class SafetyStage:
         if norm < PATH_SPEED**2 or not moved.any():
             return rows, bound
         along = (own[moved, None] * v0 / norm) @ to_base  # j_b v₀ v₀ᵀ / |v₀|²
-        extra = np.hstack((along[:, axes], rows[moved, len(axes) :]))
-        return np.vstack((rows, extra)), np.concatenate((bound, bound[moved]))
+        return _with_base_rows(rows, bound, axes, moved, along)
 
     def _between(self, rows, bound, axes, base_full, v0, moved, to_base):
         """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the row at every
@@ -369,15 +368,13 @@ class SafetyStage:
         corner takes the reference on some axes and ``v0`` on the others."""
         if not moved.any():
             return rows, bound
-        nb = len(axes)
-        pairs = slice(0, moved.size)
-        j, arm = base_full[moved], rows[pairs][moved, nb:]
+        j = base_full[moved]
         measured = j * np.asarray(v0, dtype=float)  # each axis's share of the approach at v₀
-        extra, extra_bound = [rows], [bound]
         for part in _PARTS:
-            extra.append(np.hstack((((j * part) @ to_base)[:, axes], arm)))
-            extra_bound.append(bound[pairs][moved] - measured[:, ~part].sum(axis=1))
-        return np.vstack(extra), np.concatenate(extra_bound)
+            rows, bound = _with_base_rows(
+                rows, bound, axes, moved, (j * part) @ to_base, -measured[:, ~part].sum(axis=1)
+            )
+        return rows, bound
 
     def _after_turn(self, rows, bound, axes, base_full, v0, command, moved, to_base, world_rates):
         """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the same row as
@@ -400,13 +397,8 @@ class SafetyStage:
             turn = omega * self.base_lag + (omega * abs(omega) / (2.0 * alpha) if alpha > 0.0 else 0.0)
         if abs(turn) < TOLERANCE:
             return rows, bound
-        c, s = math.cos(turn), math.sin(turn)
-        ahead = base_full[moved].copy()
-        ahead[:, 0] = c * base_full[moved, 0] + s * base_full[moved, 1]
-        ahead[:, 1] = c * base_full[moved, 1] - s * base_full[moved, 0]
-        pairs = slice(0, moved.size)  # the pairs' own rows (others follow them)
-        extra = np.hstack(((ahead @ to_base)[:, axes], rows[pairs][moved, len(axes) :]))
-        return np.vstack((rows, extra)), np.concatenate((bound, bound[pairs][moved]))
+        ahead = base_full[moved] @ _world_to_base(-turn)  # rows R(−Δθ) j: jᵀ R(Δθ)
+        return _with_base_rows(rows, bound, axes, moved, ahead @ to_base)
 
     def _brake_on_path(self, distances, rows, bound, axes, command, v0, own, moved, to_base, lower, upper):
         """A lagging base that already approaches a pair faster than allowed (its measured twist
@@ -556,6 +548,15 @@ def _without_turn(rows, bound, axes, base_full, moved, to_base):
     linear = base_full[turning] * np.array([1.0, 1.0, 0.0])
     extra = np.hstack(((linear @ to_base)[:, axes], rows[:n][turning, len(axes) :]))
     return np.vstack((rows, extra)), np.concatenate((bound, bound[:n][turning]))
+
+
+def _with_base_rows(rows, bound, axes, moved, base, shift=0.0):
+    """``rows`` and ``bound`` with, for each pair the base moves (``moved``, over the pairs' own
+    rows, which come first), its row again with the base part ``base`` (over (vx, vy, ω) in
+    the command's terms, one row per moved pair) and its bound plus ``shift``."""
+    pairs = slice(0, moved.size)
+    extra = np.hstack((base[:, axes], rows[pairs][moved, len(axes) :]))
+    return np.vstack((rows, extra)), np.concatenate((bound, bound[pairs][moved] + shift))
 
 
 def _body_pairs(rows, axes, moved):
