@@ -32,9 +32,10 @@ deceleration its rows count on: the slower axis's limit, less the turn's share) 
 brakes in time.
 
 The stage shapes the base's *reference*; a base whose twist follows its reference with a lag
-(a steerable base's twist controller, ξ̈ = K_p (ξ̇* − ξ̇): a time constant τ = 1/K_p, 0.5 s on
-robot A) drives on at about the reference of τ ago. A row the base moves (a pair with an
-obstacle) therefore counts on stopping within ``v τ + v² / (2 a_b)``:
+(a steerable base's ICR and twist controllers, ICṘ = λ (ICR* − ICR), ξ̈ = K_p (ξ̇* − ξ̇): lags
+in series, τ = 1/K_p + 1/λ, 0.75 s on robot A: :func:`base_lag`) drives on at about the
+reference of τ ago. A row the base moves (a pair with an obstacle) therefore counts on
+stopping within ``v τ + v² / (2 a_b)``:
 
     ḋ ≥ −a_b (√(τ² + 2 (d − d_s) / a_b) − τ),
 
@@ -634,12 +635,19 @@ def _gram_solve(a, b):
 
 
 def base_lag(robot) -> float:
-    """τ [s], the time constant with which ``robot``'s base twist follows its reference: 1/K_p
-    of a steerable base's twist controller (its default, Sorour Table I), 0 for a wheeled base,
-    whose wheel controller tracks the reference within its acceleration limits."""
+    """τ [s], the lag with which ``robot``'s base twist follows its reference; 0 for a wheeled
+    base, whose wheel controller tracks the reference within its acceleration limits.
+
+    A steerable base (its controller's defaults) first moves its ICR towards the reference's
+    (the ICR P-controller, gain λ), and its twist follows the reference along the direction its
+    wheels allow (the twist controller, gain K_p, Sorour Table I): two lags in series, which
+    delay a step by the sum of their time constants, τ = 1/K_p + 1/λ. With 1/K_p alone, the
+    base's approach to an obstacle overtook the rows while it re-steered (its twist grew along
+    its wheels' heading, not the reference's)."""
     if getattr(robot, 'steerable', None) is None:
         return 0.0
-    return 1.0 / SwmrParams.from_robot_config(robot).kp
+    params = SwmrParams.from_robot_config(robot)
+    return 1.0 / params.kp + 1.0 / params.icr_gain
 
 
 def _world_to_base(theta: float) -> np.ndarray:
