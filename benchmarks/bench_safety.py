@@ -7,6 +7,13 @@ the command passed unchanged (distances and the rows of the pairs within the loo
 distance) or a QP was solved; median and p99 [µs]. Random configurations are harder than a run's: many of them have the arm folded close
 to the body or to itself.
 
+Then the same with the obstacles of ``table_pillar`` and the base in the command (its axes in
+its own frame, as ``pinv`` and ``task_sharing`` pass it, within its velocity limits; a
+lagging base's measured twist drawn within them too): the base at random poses around the
+table and the pillar, those in contact left out. Each obstacle adds a pair per link; a pair
+with an obstacle adds the rows of a base that brakes (and, for a lagging base, of its path,
+the corners of the box between its measured twist and the reference, and its turn).
+
     python benchmarks/bench_safety.py [--configurations 300]
 """
 
@@ -21,6 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a source checkout
 
 from wmm_control.kinematics import KinematicModel  # noqa: E402
+from wmm_control.kinematics.obstacles import load_obstacles  # noqa: E402
 from wmm_control.resolvers.safety import SafetyStage  # noqa: E402
 from wmm_control.robot_config import load_robot, robot_names  # noqa: E402
 
@@ -60,6 +68,48 @@ def main(argv=None):
             )
             (solved if out.changed else passed).append(time.perf_counter() - t0)
         print(f'{name:12s} {len(stage.collision.pairs):4d} pairs   passed: {_figures(passed)}   QP: {_figures(solved)}')
+    print('with table_pillar, the base in the command:')
+    for name in robot_names():
+        _with_obstacles(load_robot(name), args.configurations)
+
+
+def _with_obstacles(robot, count):
+    """The stage's cost at ``count`` random base poses around ``table_pillar``'s obstacles."""
+    stage = SafetyStage.for_robot(robot, obstacles=load_obstacles('table_pillar'))
+    model = KinematicModel(robot)
+    arm, axes = robot.arm, list(robot.base_axes)
+    limit = np.concatenate((robot.base.velocity[axes], arm.velocity))
+    rng = np.random.default_rng(0)
+    passed, solved, rows = [], [], []
+    while len(passed) + len(solved) < count:
+        pose = rng.uniform((0.2, -1.6, -np.pi), (2.8, 1.6, np.pi))
+        q = np.array(robot.start.arm)
+        if stage.collision.within(q, 0.0, pose)[1] <= 0.0:
+            continue  # in contact
+        measured = rng.uniform(-1.0, 1.0, 3) * robot.base.velocity
+        command = np.clip(rng.uniform(-1.0, 1.0, limit.size) * limit, -limit, limit)
+        model.update(pose, q)
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        to_world = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # (vx, vy, ω) → (ẋ, ẏ, θ̇)
+        world = model.jacobian_world()
+        jacobian = np.hstack(((world[:, :3] @ to_world)[:, axes], world[:, 3:]))
+        t0 = time.perf_counter()
+        out = stage.filter(
+            q,
+            command,
+            -limit,
+            limit,
+            base_pose=pose,
+            base_axes=axes,
+            base_velocity=measured,
+            task_jacobian=jacobian,
+        )
+        (solved if out.changed else passed).append(time.perf_counter() - t0)
+        rows.append(out.active)
+    print(
+        f'{robot.name:12s} {len(stage.collision.pairs):4d} pairs, {np.median(rows):3.0f} within the look-ahead '
+        f'(median)   passed: {_figures(passed)}   QP: {_figures(solved)}'
+    )
 
 
 if __name__ == '__main__':

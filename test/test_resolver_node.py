@@ -185,9 +185,10 @@ def test_the_node_chain_equals_the_direct_loop(tmp_path):
     """Over topics in lockstep, each arm command uses the feasible twist of its own cycle: the
     run equals the ROS-free loop period for period (the goal reaches the resolver one period
     after the first state, hence the shift of one row). The two differ only by the round-off of
-    the messages (poses travel as quaternions), which the closed loop carries to about 1e-6; a
-    resolver or base controller answering with its previous cycle's output would differ by
-    orders of magnitude more."""
+    the messages (poses travel as quaternions), about 1e-10 at first, which the closed loop
+    amplifies to about 1e-5 by the time the goal is reached (how far depends on the numpy and
+    pinocchio builds: 1.01e-5 with numpy 2.4); a resolver or base controller answering with its
+    previous cycle's output would differ by about 1e-2, the change of a command in a period."""
     path = tmp_path / 'one_goal.yaml'
     path.write_text(GOAL_YAML.format(duration=3.0))
     sc = load_scenario(str(path))
@@ -205,8 +206,8 @@ def test_the_node_chain_equals_the_direct_loop(tmp_path):
     n = len(nodes)
     assert n > 100 and np.all(nodes.compensated)
     np.testing.assert_allclose(nodes.t, direct.t[:n] + 0.025)
-    np.testing.assert_allclose(nodes.arm_command, direct.arm_command[:n], atol=1e-5)
-    np.testing.assert_allclose(nodes.base_reference, direct.base_reference[:n], atol=1e-5)
+    np.testing.assert_allclose(nodes.arm_command, direct.arm_command[:n], atol=1e-4)
+    np.testing.assert_allclose(nodes.base_reference, direct.base_reference[:n], atol=1e-4)
     np.testing.assert_allclose(nodes.ee_position, direct.ee_position[:n], atol=1e-6)
     # and the robot did move: compensation was active while the base steered
     assert np.max(np.abs(direct.base_reference - direct.feasible_twist)) > 0.05

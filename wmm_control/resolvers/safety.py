@@ -336,16 +336,23 @@ class SafetyStage:
         else:
             jac = np.asarray(task_jacobian, dtype=float)
             hessian = jac.T @ jac + SELF_WEIGHT * np.diag(weights)
+        # a row on no entry the box leaves free (a base held on its path, and a pair no arm joint
+        # moves) is what it is: its slack is its violation whatever the QP does, so it stays out
+        movable = (rows[:, upper > lower] != 0.0).any(axis=1)
         # active set: the rows the command breaks, then any the answer breaks, until it breaks none
         # (most periods one solve: the rows far from binding never enter the QP)
-        use = violated
+        use = violated & movable
+        solved = np.clip(command, lower, upper)
         for _ in range(len(bound)):
+            if not use.any():
+                break
             solved = self._solve(command, rows[use], bound[use], lower, upper, hessian)
-            broken = (rows @ solved < bound - 1e-7) & ~use
+            broken = (rows @ solved < bound - 1e-7) & movable & ~use
             if not broken.any():
                 break
             use = use | broken
-        return SafetyResult(solved, clearance, label, len(near), True)
+        changed = overtaking or not np.array_equal(solved, command)
+        return SafetyResult(solved, clearance, label, len(near), changed)
 
     def _along_path(self, rows, bound, axes, v0, own, moved, to_base):
         """``rows`` and ``bound`` with, for each pair the base moves (``moved``), the same row on the
