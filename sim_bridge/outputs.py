@@ -20,7 +20,7 @@ from sensor_msgs.msg import JointState
 from sim_bridge.slip import VARIANCE_FLOOR, OdometryCovariance
 from sim_bridge.supervision import Status
 from sim_bridge.world import SimWorld
-from wmm_control.nodes.conversions import odometry, planar_covariance, set_pose
+from wmm_control.nodes.conversions import odometry, planar_covariance, pose_stamped
 from wmm_control.nodes.diagnostics import diagnostic_array, node_status
 from wmm_control.nodes.qos import CLOCK_QOS, DIAGNOSTICS_QOS, STATE_PUB_QOS
 from wmm_control.nodes.robot_frames import RobotFrames
@@ -62,11 +62,7 @@ class SimOutputs:
         joints = JointState(name=list(names), position=pos.tolist(), velocity=vel.tolist())
         joints.header.stamp = stamp
         if self.pub_ee.get_subscription_count() > 0:
-            ee = PoseStamped()
-            ee.header.stamp = stamp
-            ee.header.frame_id = 'world'
-            set_pose(ee.pose, *world.ee_pose())
-            self.pub_ee.publish(ee)
+            self.pub_ee.publish(pose_stamped(stamp, 'world', *world.ee_pose()))
         odom_pose, true_pose = world.odom_pose(), world.base_pose()
         if self.pub_odom.get_subscription_count() > 0:
             covariances = (

@@ -14,6 +14,7 @@ from wmm_control.nodes.conversions import (
     odometry_values,
     planar_twist,
     planar_covariance,
+    pose_stamped,
     pose_rotation,
     pose_values,
     set_planar_pose,
@@ -93,3 +94,9 @@ def test_an_odometry_carries_its_frames_and_a_planar_covariance_in_the_ros_layou
     np.testing.assert_array_equal(np.asarray(msg.pose.covariance), full.ravel())
     assert msg.twist.covariance[35] == 6.0
     assert not np.any(odometry(msg.header.stamp, 'world', 'base_link', pose, twist).pose.covariance)
+
+
+def test_a_pose_stamped_carries_its_stamp_frame_and_pose():
+    msg = pose_stamped(stamp_from_seconds(2.5), 'world', (1.0, 2.0, 3.0), (0.0, 0.0, 1.0, 0.0))
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == (2, 500_000_000, 'world')
+    np.testing.assert_allclose(pose_values(msg.pose), [1.0, 2.0, 3.0, 0.0, 0.0, 1.0, 0.0])

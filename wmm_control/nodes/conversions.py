@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import TwistStamped
+from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Odometry
 from std_msgs.msg import Float64MultiArray
 
@@ -30,6 +30,7 @@ __all__ = [
     'planar_twist',
     'set_planar_twist',
     'twist_stamped',
+    'pose_stamped',
     'stamp_from_seconds',
     'planar_covariance',
     'odometry',
@@ -130,6 +131,15 @@ def twist_stamped(stamp, frame, twist):
     msg.header.stamp = stamp if isinstance(stamp, Time) else Time(sec=stamp[0], nanosec=stamp[1])
     msg.header.frame_id = frame
     set_planar_twist(msg.twist, twist)
+    return msg
+
+
+def pose_stamped(stamp: Time, frame: str, position, quat) -> PoseStamped:
+    """A ``PoseStamped`` in ``frame`` of a position [m] and a quaternion (x, y, z, w)."""
+    msg = PoseStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame
+    set_pose(msg.pose, position, quat)
     return msg
 
 
