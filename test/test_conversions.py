@@ -9,9 +9,12 @@ from nav_msgs.msg import Odometry
 from wmm_control.kinematics.orientation import matrix_from_rpy
 from wmm_control.nodes.conversions import (
     float_array,
+    odometry,
     odometry_pose,
     odometry_values,
     planar_twist,
+    planar_covariance,
+    pose_stamped,
     pose_rotation,
     pose_values,
     set_planar_pose,
@@ -19,6 +22,7 @@ from wmm_control.nodes.conversions import (
     set_pose,
     set_rotation,
     set_twist,
+    stamp_from_seconds,
     twist_stamped,
     twist_values,
 )
@@ -59,3 +63,40 @@ def test_twists_and_arrays():
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == (3, 500, 'base_link')
     np.testing.assert_allclose(planar_twist(msg.twist), [0.1, 0.2, 0.3])
     assert float_array(np.arange(3)).data.tolist() == [0.0, 1.0, 2.0]
+
+
+def test_seconds_become_a_stamp_never_rounded_into_the_next_second():
+    stamp = stamp_from_seconds(12.25)
+    assert (stamp.sec, stamp.nanosec) == (12, 250_000_000)
+    stamp = stamp_from_seconds(3.9999999999)
+    assert (stamp.sec, stamp.nanosec) == (3, 999_999_999)
+
+
+def test_an_odometry_carries_its_frames_and_a_planar_covariance_in_the_ros_layout():
+    cov3 = np.array([[1.0, 0.1, 0.2], [0.1, 2.0, 0.3], [0.2, 0.3, 3.0]])
+    full = np.array(planar_covariance(cov3, 1e-9)).reshape(6, 6)
+    np.testing.assert_array_equal(full[np.ix_([0, 1, 5], [0, 1, 5])], cov3)
+    np.testing.assert_array_equal(np.diag(full)[2:5], 1e-9)  # z, roll, pitch: the floor
+    assert np.count_nonzero(full) == 9 + 3
+    twist_cov = planar_covariance(np.diag([4.0, 5.0, 6.0]), 1e-9)
+    msg = odometry(
+        stamp_from_seconds(1.5),
+        'r1/odom',
+        'r1/base_link',
+        (1.0, 2.0, 0.5),
+        (0.1, 0.0, 0.2),
+        (full.ravel().tolist(), twist_cov),
+    )
+    assert (msg.header.frame_id, msg.child_frame_id, msg.header.stamp.sec) == ('r1/odom', 'r1/base_link', 1)
+    pose, twist = odometry_pose(msg)
+    np.testing.assert_allclose(pose, [1.0, 2.0, 0.5], atol=1e-12)
+    np.testing.assert_allclose(twist, [0.1, 0.0, 0.2])
+    np.testing.assert_array_equal(np.asarray(msg.pose.covariance), full.ravel())
+    assert msg.twist.covariance[35] == 6.0
+    assert not np.any(odometry(msg.header.stamp, 'world', 'base_link', pose, twist).pose.covariance)
+
+
+def test_a_pose_stamped_carries_its_stamp_frame_and_pose():
+    msg = pose_stamped(stamp_from_seconds(2.5), 'world', (1.0, 2.0, 3.0), (0.0, 0.0, 1.0, 0.0))
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == (2, 500_000_000, 'world')
+    np.testing.assert_allclose(pose_values(msg.pose), [1.0, 2.0, 3.0, 0.0, 0.0, 1.0, 0.0])

@@ -36,6 +36,8 @@ LAYERS = {
     'wmm_control.experiments.trajectories': 'core',
     'sim_bridge': 'simulator',
     'sim_bridge.node': 'nodes',  # wmm_sim, the simulator's ROS node
+    'sim_bridge.node_params': 'nodes',  # its parameters
+    'sim_bridge.outputs': 'nodes',  # its messages
     'wmm_control.nodes': 'nodes',
     'wmm_control.launching': 'nodes',  # the nodes the launch files start
     'wmm_control.experiments': 'experiments',

@@ -306,7 +306,7 @@ def test_lockstep_groups_set_at_run_time_change_what_the_sim_waits_for(ros):
     )
     caller = ros.add(Node('param_cli', context=ros.context))
     pub = caller.create_publisher(Float64MultiArray, '/arm_controller/commands', 10)
-    assert ros.spin_until(lambda: sim._started, timeout=5.0)
+    assert ros.spin_until(lambda: sim.wait.started, timeout=5.0)
     ros.spin_for(0.2)
     t0 = sim.world.time
     pub.publish(Float64MultiArray(data=[0.0] * 7))

@@ -428,8 +428,8 @@ def test_a_measured_quaternion_of_any_scale_is_the_rotation_it_names(scale):
         msg.pose.position.x = 0.5
         o = msg.pose.orientation
         o.x, o.y, o.z, o.w = 0.0, scale * math.sqrt(0.5), 0.0, scale * math.sqrt(0.5)
-        assert ros.spin_until(lambda: (pub.publish(msg), node._ee is not None)[1], timeout=10.0)
-        np.testing.assert_allclose(node._ee[1], [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]], atol=1e-12)
+        assert ros.spin_until(lambda: (pub.publish(msg), node.latest.ee is not None)[1], timeout=10.0)
+        np.testing.assert_allclose(node.latest.ee[1], [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]], atol=1e-12)
     finally:
         ros.close()
 

@@ -1,5 +1,6 @@
-"""TargetManager, CompensationExchange and MeasuredInputs (ROS-free): what redundancy_resolver
-pursues, the arm command's wait for the base's answer, and the checks of the measured inputs."""
+"""TargetManager, CompensationExchange, MeasuredInputs and LatestInputs (ROS-free): what
+redundancy_resolver pursues, the arm command's wait for the base's answer, the checks of the
+measured inputs and the state made of the latest, which events it logs and what it reports."""
 
 import math
 from types import SimpleNamespace
@@ -10,8 +11,8 @@ import pytest
 from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.resolvers.exchange import CompensationExchange
-from wmm_control.resolvers.inputs import MeasuredInputs
-from wmm_control.resolvers.targets import TargetManager
+from wmm_control.resolvers.inputs import LatestInputs, MeasuredInputs
+from wmm_control.resolvers.targets import LogEvent, LogThrottle, TargetManager
 
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 TIMEOUT = 0.5
@@ -269,3 +270,70 @@ def test_an_implausible_feasible_twist_is_rejected(inputs):
         twist, events = inputs.feasible_twist(bad)
         assert twist is None and kinds(events) == ['feasible twist']
         assert events[0].message.endswith('non-finite or beyond 10 times the base velocity limits')
+
+
+def test_the_state_is_made_of_the_latest_inputs_while_they_are_fresh(inputs):
+    latest = LatestInputs(inputs, TIMEOUT, ground_truth=False)
+    q, dq = np.zeros(7), np.zeros(7)
+    assert latest.state(q, dq, 0.0) == (None, 'no fresh /odom') and latest.base_pose(0.0) is None
+    assert kinds(latest.odometry((60.0, 0.0), IDENTITY, (0.0, 0.0, 0.0), now=0.0)) == ['odom far']
+    assert latest.odom is None  # rejected: not kept
+    latest.odometry((1.0, 2.0), IDENTITY, (0.1, 0.0, 0.0), now=1.0)
+    state, reason = latest.state(q, dq, 1.2)
+    assert reason == '' and state.base_pose.tolist() == [1.0, 2.0, 0.0] and state.ee_position is None
+    assert latest.last_state[0].tolist() == [1.0, 2.0, 0.0] and latest.base_pose(1.2).tolist() == [1, 2, 0]
+    assert latest.state(q, dq, 1.6) == (None, 'no fresh /odom') and latest.base_pose(1.6) is None
+    latest.set_timeout(1.0)
+    assert latest.state(q, dq, 1.6)[0] is not None
+
+
+def test_with_ground_truth_feedback_the_state_needs_a_fresh_end_effector_pose(inputs):
+    latest = LatestInputs(inputs, TIMEOUT, ground_truth=True)
+    q, dq = np.zeros(7), np.zeros(7)
+    latest.odometry((0.0, 0.0), IDENTITY, (0.0, 0.0, 0.0), now=0.0)
+    assert latest.state(q, dq, 0.0) == (None, 'no fresh /ee_pose')
+    assert kinds(latest.ee_pose('map', [0.5, 0.0, 1.0, *IDENTITY], now=0.0)) == ['ee_pose frame'] and latest.ee is None
+    latest.ee_pose('world', [0.5, 0.0, 1.0, *IDENTITY], now=0.1)
+    state, _ = latest.state(q, dq, 0.2)
+    assert state.ee_position.tolist() == [0.5, 0.0, 1.0] and np.allclose(state.ee_rotation, np.eye(3))
+    latest.odometry((0.0, 0.0), IDENTITY, (0.0, 0.0, 0.0), now=0.6)
+    assert latest.state(q, dq, 0.7) == (None, 'no fresh /ee_pose')  # the pose came at 0.1
+
+
+def test_events_are_logged_as_information_or_warnings_each_kind_throttled_apart():
+    throttle = LogThrottle()
+    events = [LogEvent('accepted', 'a'), LogEvent('rejected', 'r'), LogEvent('held', 'h'), LogEvent('stalled', 's')]
+    assert throttle.lines(events, 0.0) == [('info', 'a'), ('warn', 'r'), ('warn', 'h'), ('warn', 's')]
+    assert throttle.lines(events, 0.5) == [('info', 'a'), ('warn', 's')]  # rejected and held: too soon
+    assert throttle.lines(events, 1.0) == [('info', 'a'), ('warn', 'r'), ('warn', 's')]  # held: 5 s apart
+    assert ('warn', 'h') in throttle.lines(events, 5.0)
+
+
+def test_the_report_gives_the_goals_status_and_the_last_commands_values(targets):
+    goal(targets)
+    d = SimpleNamespace(
+        method='amp',
+        mode='mobile',
+        psi=0.5,
+        position_error=0.3,
+        orientation_error=0.1,
+        limit_scale=1.0,
+        accel_scale=1.0,
+        null_scale=1.0,
+        compensation_scale=1.0,
+        compensated=True,
+        limited=('arm',),
+        sigma_min=0.02,
+        cycle_time_s=0.0005,
+        reference_time_left=0.0,
+        clearance=math.inf,
+        closest_pair='',
+        collision_constraints=0,
+        collision_changed=False,
+    )
+    command = SimpleNamespace(diagnostics=d, arm_velocity=np.ones(7), base_twist=np.zeros(3))
+    level, message, values = targets.report(command)
+    assert (level, message) == ('ok', 'mobile')
+    assert values['cycle_time_us'] == pytest.approx(500.0) and values['limited'] == ['arm']
+    assert values['goal_reached'] is False and values['arm_command'] is command.arm_velocity
+    assert list(values)[:3] == ['method', 'mode', 'psi'] and list(values)[-2:] == ['arm_command', 'base_reference']

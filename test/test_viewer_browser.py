@@ -229,7 +229,7 @@ def save(img, path):
 def test_the_viewer_draws_the_robot_moves_it_and_its_goal_handle_publishes_a_goal(system, tmp_path):
     from geometry_msgs.msg import PoseStamped
 
-    from wmm_control.nodes.viewer import CAMERA_LOOK_AT, CAMERA_POSITION
+    from wmm_control.viewer.browser import CAMERA_LOOK_AT, CAMERA_POSITION
     from wmm_control.robot_config import load_robot
     from wmm_control.viewer.scene import RobotScene
 

@@ -48,12 +48,12 @@ def test_the_scene_follows_the_simulator_and_hold_here_publishes_the_end_effecto
     position, _ = view._ee
     truth = ee[-1].pose.position
     assert position == pytest.approx([truth.x, truth.y, truth.z], abs=1e-6)
-    poses = view.scene.poses(*view._base_pose())
-    for handle, expected in zip(view.shape_handles, poses.positions):
+    poses = view.scene.poses(*view.base.pose(view._now()))
+    for handle, expected in zip(view.browser.shape_handles, poses.positions):
         assert np.asarray(handle.position) == pytest.approx(expected, abs=1e-9)
     # Until a goal is known the handle waits at the end effector.
-    assert np.asarray(view.goal_handle.position) == pytest.approx(position, abs=1e-9)
-    view._hold.set()
+    assert np.asarray(view.browser.goal_handle.position) == pytest.approx(position, abs=1e-9)
+    view.browser._hold.set()
     assert ros.spin_until(lambda: len(got) == 1, timeout=5)
     goal = got[0]
     assert goal.header.frame_id == 'world'
@@ -82,8 +82,8 @@ def test_a_drag_publishes_once_at_release_and_never_a_non_finite_pose(ros):
     p, o = got[0].pose.position, got[0].pose.orientation
     assert (p.x, p.y, p.z) == pytest.approx((1.2, 0.5, 0.8)) and (o.x, o.y, o.z, o.w) == pytest.approx((0, 0, 1, 0))
     # Its own goal comes back on /goal_pose and is drawn; the handle stays there.
-    assert ros.spin_until(lambda: view.goal_frame.visible, timeout=5)
-    assert np.asarray(view.goal_frame.position) == pytest.approx((1.2, 0.5, 0.8))
+    assert ros.spin_until(lambda: view.browser.goal_frame.visible, timeout=5)
+    assert np.asarray(view.browser.goal_frame.position) == pytest.approx((1.2, 0.5, 0.8))
     assert not view.publish_goal((0, math.inf, 0), (1, 0, 0, 0)) and not view.publish_goal((0, 0, 0), (0, 0, 0, 0))
     ros.spin_for(0.3)
     assert len(got) == 1
@@ -154,7 +154,7 @@ def test_two_robots_in_namespaces_the_viewer_of_one_draws_that_robot_only(ros):
     ros.spin_for(0.3)
     assert view.robot.name == 'steerable'
     x, y, theta = r1.world.base_pose()
-    position, wxyz = view._base_pose()
+    position, wxyz = view.base.pose(view._now())
     assert np.asarray(position)[:2] == pytest.approx([x, y], abs=1e-6)
     assert 2.0 * math.atan2(wxyz[3], wxyz[0]) == pytest.approx(theta, abs=1e-6)
     pos, _ = r1.world.ee_pose()
@@ -165,8 +165,8 @@ def test_obstacles_of_the_file_and_the_topic_are_drawn_where_they_are(ros):
     from visualization_msgs.msg import Marker, MarkerArray
 
     view = viewer(ros, obstacles='table_pillar')
-    assert [h.name for h in view.obstacle_handles] == ['/obstacles/table', '/obstacles/pillar']
-    assert np.asarray(view.obstacle_handles[0].position) == pytest.approx([1.5, -0.2, -0.1])
+    assert [h.name for h in view.browser.obstacle_handles] == ['/obstacles/table', '/obstacles/pillar']
+    assert np.asarray(view.browser.obstacle_handles[0].position) == pytest.approx([1.5, -0.2, -0.1])
     publisher = ros.add(ros_node(ros, 'obstacle_publisher')).create_publisher(MarkerArray, '/obstacles', 10)
     marker = Marker()
     marker.header.frame_id = 'world'
@@ -175,5 +175,5 @@ def test_obstacles_of_the_file_and_the_topic_are_drawn_where_they_are(ros):
     marker.pose.position.x, marker.pose.orientation.w = 2.0, 1.0
     assert ros.spin_until(lambda: publisher.get_subscription_count() > 0, timeout=5)
     publisher.publish(MarkerArray(markers=[marker]))
-    assert ros.spin_until(lambda: len(view.obstacle_handles) == 3, timeout=5)
-    assert np.asarray(view.obstacle_handles[2].position) == pytest.approx([2.0, 0.0, 0.0])
+    assert ros.spin_until(lambda: len(view.browser.obstacle_handles) == 3, timeout=5)
+    assert np.asarray(view.browser.obstacle_handles[2].position) == pytest.approx([2.0, 0.0, 0.0])

@@ -1,7 +1,9 @@
 """The viewer's ROS-free parts: the scene from a URDF, its forward kinematics, paths, the status
-panel, the goal drag."""
+panel, the goal drag, the choice of the base pose, and the page drawn on a served scene."""
 
 import math
+import socket
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -9,8 +11,11 @@ import pytest
 from wmm_control.errors import ConfigError, NonFiniteError, UnknownFrameError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.robot_config import load_robot
+from wmm_control.kinematics.obstacles import Obstacle
+from wmm_control.viewer.browser import BrowserScene
 from wmm_control.viewer.drag import GoalDrag
-from wmm_control.viewer.scene import RobotScene, Trail, unit_wxyz, wxyz_from_xyzw, xyzw_from_wxyz
+from wmm_control.viewer.inputs import BaseCourse, BasePose, inputs_markdown
+from wmm_control.viewer.scene import RobotScene, Trail, finite_pose, unit_wxyz, wxyz_from_xyzw, xyzw_from_wxyz
 from wmm_control.viewer.status import NodeStatus, StatusBoard
 
 # A URDF of no robot of this package: a mesh, a prismatic and a continuous joint, a base link
@@ -164,6 +169,10 @@ def test_quaternion_helpers():
     assert unit_wxyz((2, 0, 0, 0)).tolist() == [1, 0, 0, 0]
     assert unit_wxyz((1e300, 1e300, 0, 0)) == pytest.approx([math.sqrt(0.5), math.sqrt(0.5), 0, 0])
     assert unit_wxyz((0, 0, 0, 0)) is None and unit_wxyz((math.inf, 0, 0, 0)) is None
+    position, wxyz = finite_pose([1, 2, 3], (0, 0, 0, 2))
+    assert position.tolist() == [1, 2, 3] and wxyz.tolist() == [0, 0, 0, 1]
+    assert finite_pose((1, 2, math.nan), (1, 0, 0, 0)) is None and finite_pose((1, 2), (1, 0, 0, 0)) is None
+    assert finite_pose((1, 2, 3), (0, 0, 0, 0)) is None
 
 
 def test_a_trail_keeps_points_a_step_apart_and_at_most_its_length():
@@ -200,6 +209,16 @@ def test_a_drag_publishes_at_release_and_at_most_once_per_period_while_it_goes_o
     assert not drag.update((0, 0, 0), (0, 0, 0, 0), now=6.0)
     drag.end((0, 0, math.inf), (1, 0, 0, 0), now=6.1)
     assert drag.due(6.1) is None and drag.due(9.0) is None
+
+
+def test_the_handles_events_start_update_and_end_a_drag():
+    drag = GoalDrag(period=10.0)
+    drag.event('start', (9, 9, 9), (1, 0, 0, 0), now=0.0)  # a grab takes no pose
+    assert drag.dragging and drag.due(20.0) is None
+    drag.event('update', (1, 0, 0), (1, 0, 0, 0), now=1.0)
+    assert drag.due(2.0) is None  # within the period
+    drag.event('end', (2, 0, 0), (1, 0, 0, 0), now=3.0)
+    assert not drag.dragging and drag.due(3.0)[0].tolist() == [2, 0, 0]
 
 
 def test_the_status_panel_shows_what_the_diagnostics_say():
@@ -262,3 +281,95 @@ def test_the_status_panel_shows_what_the_diagnostics_say():
     # A newer status of the same name replaces the old one.
     board.update(NodeStatus('swmr_controller', 0, 'tracking', {'status': 'tracking'}, received=10.0))
     assert 'solver_failure' not in board.markdown(10.0) and len(board) == 3
+
+
+def test_the_base_is_drawn_at_the_ground_truth_while_it_is_fresh_else_at_the_odometry():
+    base = BasePose(timeout=0.5)
+    assert base.source(0.0) == 'none'
+    position, wxyz = base.pose(0.0)
+    assert position.tolist() == [0, 0, 0] and wxyz.tolist() == [1, 0, 0, 0]  # the origin
+    base.take('ground_truth', np.array([1.0, 0, 0]), np.array([1.0, 0, 0, 0]), now=1.0)
+    assert base.source(1.2) == 'ground_truth'
+    assert base.source(2.0) == 'ground_truth'  # stale, but nothing else to draw
+    base.take('odom', np.array([2.0, 0, 0]), np.array([1.0, 0, 0, 0]), now=2.0)
+    assert base.source(2.0) == 'odom' and base.pose(2.0)[0].tolist() == [2, 0, 0]
+    base.take('ground_truth', np.array([3.0, 0, 0]), np.array([1.0, 0, 0, 0]), now=3.0)
+    assert base.pose(3.4)[0].tolist() == [3, 0, 0]
+    base.set_timeout(0.1)
+    assert base.source(3.4) == 'odom'
+
+
+def test_the_base_course_is_the_reference_twist_turned_into_the_world_while_fresh():
+    course = BaseCourse(hold=1.0)
+    quarter = np.array([math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)])  # yaw 90°
+    assert course.velocity(quarter, 0.0) is None  # no twist yet
+    course.take(np.array([0.2, 0.1, 0.5]), now=0.0)
+    assert course.velocity(quarter, 0.5) == pytest.approx([-0.1, 0.2])
+    assert course.velocity(quarter, 1.5) is None  # older than a second
+    course.take(np.array([math.nan, 0.0, 0.0]), now=2.0)  # ignored
+    assert course.velocity(quarter, 2.0) is None
+    course.take(np.array([0.0, 0.0, 0.7]), now=2.0)
+    assert course.velocity(quarter, 2.0) is None  # turning on the spot: nowhere to head
+
+
+def test_the_inputs_panel_says_how_old_the_joint_states_are_and_where_the_base_comes_from():
+    assert inputs_markdown(math.inf, 'none', 0, 0) == (
+        '- joint states: never\n- base pose from none yet (drawn at the origin)\n'
+        '- joint states rejected: 0\n- goals sent: 0'
+    )
+    text = inputs_markdown(0.123, 'odom', 2, 5)
+    assert '0.12 s ago' in text and 'odometry (/odom)' in text and 'rejected: 2' in text and 'sent: 5' in text
+
+
+def test_a_diagnostic_status_message_becomes_a_node_status():
+    kv = SimpleNamespace(key='psi', value='0.5')
+    for level in (b'\x02', 2):
+        status = NodeStatus.of(SimpleNamespace(name='r', level=level, message='m', values=[kv]), received=4.0)
+        assert status == NodeStatus('r', 2, 'm', {'psi': '0.5'}, 4.0)
+
+
+def _free_port():
+    with socket.socket() as sock:
+        sock.bind(('127.0.0.1', 0))
+        return sock.getsockname()[1]
+
+
+def test_the_page_places_the_handle_draws_the_goal_course_and_obstacles_and_takes_hold():
+    config = load_robot('steerable')
+    scene = RobotScene(config.urdf_path, config.base_link, config.ee_frame)
+    trails = (Trail(10, 0.01), Trail(10, 0.01))
+    events = []
+    page = BrowserScene('127.0.0.1', _free_port(), scene.shapes, 0.0, (1.0, 2.0), trails, events.append, '*none*')
+    try:
+        assert len(page.shape_handles) == len(scene.shapes)
+        poses = scene.poses((1.0, 2.0, 0.0), (1.0, 0.0, 0.0, 0.0))
+        page.draw_robot(poses, (1.0, 2.0, 0.0), joints_known=False)
+        assert np.asarray(page.goal_handle.position) == pytest.approx([0, 0, 0])  # no joint states yet
+        assert np.asarray(page.shape_handles[0].position) == pytest.approx(poses.positions[0])
+        page.draw_robot(poses, (1.0, 2.0, 0.0), joints_known=True)
+        assert np.asarray(page.goal_handle.position) == pytest.approx(poses.ee_position)
+        goal = np.array([2.0, 0.5, 0.8])
+        page.show_goal(goal, np.array([1.0, 0, 0, 0]), move_handle=False)  # a drag goes on
+        assert page.goal_frame.visible and np.asarray(page.goal_frame.position) == pytest.approx(goal)
+        assert np.asarray(page.goal_handle.position) == pytest.approx(poses.ee_position)
+        page.show_goal(goal, np.array([1.0, 0, 0, 0]), move_handle=True)
+        assert np.asarray(page.goal_handle.position) == pytest.approx(goal)
+        assert '(2.000, 0.500, 0.800)' in page.goal_text.content
+        page.draw_robot(scene.poses((1.5, 2.0, 0.0), (1.0, 0.0, 0.0, 0.0)), (1.5, 2.0, 0.0), joints_known=True)
+        assert np.asarray(page.goal_handle.position) == pytest.approx(goal)  # a goal is known: it stays
+        assert len(trails[1]) == 2 and trails[1].points[:, 2] == pytest.approx(0.005)
+        page.draw_course((1.0, 2.0, 0.0), np.array([0.3, -0.1]))
+        assert page.base_course.visible
+        np.testing.assert_allclose(np.asarray(page.base_course.points)[0], [[1.0, 2.0, 0.01], [1.3, 1.9, 0.01]])
+        page.draw_course((1.0, 2.0, 0.0), None)
+        assert not page.base_course.visible
+        box = Obstacle('table', 'box', (1.0, 0.5, 0.2), np.array([1.5, 0.0, 0.3]), np.eye(3))
+        page.draw_obstacles([box, Obstacle('post', 'sphere', (0.1,), np.zeros(3), np.eye(3))])
+        page.draw_obstacles([box])  # drawn anew
+        assert [h.name for h in page.obstacle_handles] == ['/obstacles/table']
+        assert not page.hold_pressed()
+        page._hold.set()  # as the button's click does
+        assert page.hold_pressed() and not page.hold_pressed()
+    finally:
+        page.stop()
+    page.stop()  # a second stop does nothing

@@ -28,7 +28,8 @@ from wmm_control.experiments.recording import BagRecorder
 from wmm_control.experiments.scenario import resolver_parameters
 from wmm_control.nodes.conversions import odometry_pose, planar_twist, pose_rotation
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
-from wmm_control.nodes.base_controller import NODE_NAMES, BaseControllerNode
+from wmm_control.nodes.base_controller import BaseControllerNode
+from wmm_control.nodes.base_controller_params import NODE_NAMES
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.robot_config import load_robot
 

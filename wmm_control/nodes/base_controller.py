@@ -68,85 +68,19 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from wmm_control.base import make_base_controller, unapplied_command
+from wmm_control.base import make_base_controller
+from wmm_control.base.period import BasePeriod
 from wmm_control.nodes.conversions import float_array, twist_stamped
 from wmm_control.nodes.diagnostics import diagnostic_array, node_status
 from wmm_control.nodes.inputs import BaseReference, JointSelector, JointStateWatchdog
-from wmm_control.nodes.parameters import (
-    Param,
-    declare_parameters,
-    max_state_wait_param,
-    require_base,
-    robot_param,
-    robot_period,
-)
+from wmm_control.nodes.base_controller_params import GAINS, NODE_NAMES, STEERABLE_PARAMS, WHEEL_PARAMS
+from wmm_control.nodes.parameters import declare_parameters, require_base
 from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
 from wmm_control.nodes.runner import guard_clock
 from wmm_control.nodes.stamps import StampedExchange, seconds
 from wmm_control.robot_config import load_robot
 
-__all__ = ['BaseControllerNode', 'NODE_NAMES', 'STEERABLE_PARAMS', 'WHEEL_PARAMS']
-
-#: The node (and executable) name of each base family.
-NODE_NAMES = {
-    'steerable': 'swmr_controller',
-    'mecanum': 'mecanum_controller',
-    'differential': 'differential_controller',
-}
-
-#: The steerable controller's gains (Sorour Table I), its only parameters of its own.
-GAINS = (
-    Param('kp', 'Gain K_p of the twist controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
-    Param('icr_gain', 'Gain λ of the ICR P-controller [1/s].', lo=1e-3, hi=40.0, read_only=True),
-)
-
-
-def _params(robot_help, gains=()):
-    return (
-        robot_param(robot_help),
-        Param(
-            'period',
-            'Control period t_s [s]; default: the robot YAML\'s period.',
-            lo=1e-3,
-            hi=1.0,
-            read_only=True,
-            default_from=robot_period,
-        ),
-        *gains,
-        Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
-        Param(
-            'reference_timeout',
-            'Reference age [s] (this node\'s clock at receipt) after which the base brakes to rest.',
-            lo=1e-3,
-            hi=60.0,
-        ),
-        Param(
-            'reference_wait', 'Steady time [s] a joint state waits for its reference.', lo=0.0, hi=1.0, read_only=True
-        ),
-        Param(
-            'joint_state_timeout',
-            'Joint-state age [s] (steady clock) after which zero rates are commanded.',
-            lo=1e-3,
-            hi=60.0,
-        ),
-        max_state_wait_param(),
-        Param(
-            'applied_rate_tolerance',
-            'Largest difference [rad/s] between the rates of a joint state and the '
-            'last command under which that command counts as applied; beyond it the controller restarts from '
-            'the measured state. 0: never.',
-            lo=0.0,
-            hi=100.0,
-            read_only=True,
-        ),
-        Param('diagnostics_period', 'Time [s] between /diagnostics messages; 0 = none.', lo=0.0, hi=3600.0),
-    )
-
-
-STEERABLE_PARAMS = _params(
-    'A robot with a steerable base (A, Sorour). Geometry, joints and limits come from its YAML.', GAINS
-)
-WHEEL_PARAMS = _params('A robot with a Mecanum or differential base. Geometry and limits come from its description.')
+__all__ = ['BaseControllerNode']
 
 
 class BaseControllerNode(Node):
@@ -186,8 +120,7 @@ class BaseControllerNode(Node):
         }
         self.reference = BaseReference(self, p.base_frame, p.reference_timeout, self.base.velocity_limit)
         self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0, 'commands_not_applied': 0}
-        self._last = None  # the last command's rates, all groups in a row
-        self._answer_dropped = False  # the last cycle's answer came too late to publish
+        self.period = BasePeriod(self.base, p.applied_rate_tolerance)
         self._next_diag = 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pub_commands = {
@@ -254,58 +187,40 @@ class BaseControllerNode(Node):
         if self.watchdog.waited_too_long(received):
             return
         now = seconds(self.get_clock())
-        if self.watchdog.resync(*self.pub_commands.values()):
-            self.base.reset(positions, rates if self.base.resync_from_rates else None)
-        elif self._answer_dropped:
-            self.base.reset(positions, rates)  # from rest when the state has no rates
-        elif rates is not None and self._last is not None:
-            self._restart_unless_applied(positions, rates)
-        self._answer_dropped = False
-        reference = self.reference.current(now)
-        if reference is None:
-            self.counters['stale_cycles'] += 1
-        command = self.base.step(reference, positions)
-        if command.status == 'solver_failure':
-            self.get_logger().error(
-                f'ICR QP failed ({command.detail.qp_status}): steering held, drive ramping down',
-                throttle_duration_sec=1.0,
-            )
-        out = {g: command.rates[g] for g in self.groups}
-        twist = command.feasible_twist
-        if not all(np.all(np.isfinite(v)) for v in (twist, *out.values())):  # cannot happen: never publish it
-            self.get_logger().error(
-                f'non-finite command {[v.tolist() for v in out.values()]}: zero rates', throttle_duration_sec=1.0
-            )
-            self.base.reset(positions)
-            out, twist = {g: np.zeros(len(v)) for g, v in out.items()}, np.zeros(3)
-        if self.watchdog.waited_too_long(received, 'answer dropped'):
-            # Held up mid-cycle (stopped, or starved): the world has moved on from this state, and
-            # an answer published now would be applied as if current. The next cycle starts again
-            # from the state it measures.
-            self._answer_dropped = True
-            return
-        self.counters['cycles'] += 1
-        for group, rates_out in out.items():
-            self.pub_commands[group].publish(float_array(rates_out))
-        self._last = np.concatenate(list(out.values()))
-        feasible = twist_stamped(stamp, self.p.base_frame, twist)
-        self.pub_feasible.publish(feasible)
-        if self.p.diagnostics_period > 0 and now >= self._next_diag:
-            self._next_diag = now + self.p.diagnostics_period
-            self.pub_diag.publish(self._diagnostics(feasible.header.stamp, command, twist, now))
-
-    def _restart_unless_applied(self, positions, rates):
-        """Restart from the measured state when the rates applied are not the last command's."""
-        why = unapplied_command(
-            np.concatenate([rates[g] for g in self.groups]), self._last, self.p.applied_rate_tolerance
-        )
+        why = self.period.start(positions, rates, self.watchdog.resync(*self.pub_commands.values()))
         if why:
             self.counters['commands_not_applied'] += 1
             self.get_logger().warn(
                 f'last {"/".join(self.groups)} command: {why}; restarting from the measured state',
                 throttle_duration_sec=1.0,
             )
-            self.base.reset(positions, rates)
+        reference = self.reference.current(now)
+        if reference is None:
+            self.counters['stale_cycles'] += 1
+        answer = self.period.step(reference, positions)
+        command = answer.command
+        if command.status == 'solver_failure':
+            self.get_logger().error(
+                f'ICR QP failed ({command.detail.qp_status}): steering held, drive ramping down',
+                throttle_duration_sec=1.0,
+            )
+        if answer.non_finite:  # cannot happen: never publish it
+            self.get_logger().error(answer.non_finite, throttle_duration_sec=1.0)
+        if self.watchdog.waited_too_long(received, 'answer dropped'):
+            # Held up mid-cycle (stopped, or starved): the world has moved on from this state, and
+            # an answer published now would be applied as if current. The next cycle starts again
+            # from the state it measures.
+            self.period.dropped()
+            return
+        self.counters['cycles'] += 1
+        for group, rates_out in answer.rates.items():
+            self.pub_commands[group].publish(float_array(rates_out))
+        self.period.published(answer)
+        feasible = twist_stamped(stamp, self.p.base_frame, answer.twist)
+        self.pub_feasible.publish(feasible)
+        if self.p.diagnostics_period > 0 and now >= self._next_diag:
+            self._next_diag = now + self.p.diagnostics_period
+            self.pub_diag.publish(self._diagnostics(feasible.header.stamp, command, answer.twist, now))
 
     def _zero_rates(self):
         for group, joints in self.base.command_groups.items():

@@ -8,9 +8,12 @@ ones, which validate a command and say why they refuse it; the rotation maths is
 needs none of it (a base controller) starts without loading pinocchio.
 """
 
+import math
+
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import TwistStamped
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from nav_msgs.msg import Odometry
 from std_msgs.msg import Float64MultiArray
 
 __all__ = [
@@ -27,6 +30,10 @@ __all__ = [
     'planar_twist',
     'set_planar_twist',
     'twist_stamped',
+    'pose_stamped',
+    'stamp_from_seconds',
+    'planar_covariance',
+    'odometry',
     'float_array',
     'parse_command',
     'parse_base_reference',
@@ -124,6 +131,47 @@ def twist_stamped(stamp, frame, twist):
     msg.header.stamp = stamp if isinstance(stamp, Time) else Time(sec=stamp[0], nanosec=stamp[1])
     msg.header.frame_id = frame
     set_planar_twist(msg.twist, twist)
+    return msg
+
+
+def pose_stamped(stamp: Time, frame: str, position, quat) -> PoseStamped:
+    """A ``PoseStamped`` in ``frame`` of a position [m] and a quaternion (x, y, z, w)."""
+    msg = PoseStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame
+    set_pose(msg.pose, position, quat)
+    return msg
+
+
+def stamp_from_seconds(seconds: float) -> Time:
+    """A ``builtin_interfaces/Time`` of ``seconds`` >= 0, rounded to the nanosecond (never
+    rounded up into the next second)."""
+    sec = math.floor(seconds)
+    return Time(sec=int(sec), nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
+
+
+def planar_covariance(cov3, floor: float) -> list[float]:
+    """The 6×6 row-major covariance (x, y, z, roll, pitch, yaw) of a ROS message, of a planar
+    (x, y, yaw) one, shape (3, 3); z, roll and pitch (which a planar base does not move in) get
+    variance ``floor``, so that the whole stays positive definite."""
+    full = np.diag(np.full(6, floor))
+    idx = np.array([0, 1, 5])
+    full[np.ix_(idx, idx)] = cov3
+    return full.ravel().tolist()
+
+
+def odometry(stamp: Time, frame: str, child: str, pose, twist, covariances=None) -> Odometry:
+    """A ``nav_msgs/Odometry`` of a planar pose (x, y, θ) in ``frame`` and twist (vx, vy, ω) of
+    ``child``; ``covariances``, when given, are the (pose, twist) 36-entry row-major lists
+    (:func:`planar_covariance`), else they stay zero (unknown)."""
+    msg = Odometry()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame
+    msg.child_frame_id = child
+    set_planar_pose(msg.pose.pose, pose)
+    set_planar_twist(msg.twist.twist, twist)
+    if covariances is not None:
+        msg.pose.covariance, msg.twist.covariance = covariances
     return msg
 
 

@@ -33,7 +33,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from wmm_control.experiments.scenario import load_scenario
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import matrix_from_rpy, quaternion_from_matrix
-from wmm_control.nodes.conversions import set_pose, set_twist
+from wmm_control.nodes.conversions import pose_stamped, set_pose, set_twist
 from wmm_control.nodes.parameters import Param, declare_parameters
 from wmm_control.nodes.qos import CLOCK_QOS, COMMAND_QOS
 from wmm_control.nodes.runner import guard_clock, run_node
@@ -74,12 +74,8 @@ def reference_message(target, frame, stamp, t):
 
 def goal_message(goal, frame, stamp):
     """A ``PoseStamped`` of a scenario goal ``[x, y, z, roll, pitch, yaw]``."""
-    msg = PoseStamped()
-    msg.header.stamp = stamp
-    msg.header.frame_id = frame
     pose = [float(v) for v in goal.pose]
-    set_pose(msg.pose, pose[:3], quaternion_from_matrix(matrix_from_rpy(pose[3:])))
-    return msg
+    return pose_stamped(stamp, frame, pose[:3], quaternion_from_matrix(matrix_from_rpy(pose[3:])))
 
 
 class GoalSequencerNode(Node):

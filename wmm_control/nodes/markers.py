@@ -22,10 +22,13 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point
 from visualization_msgs.msg import Marker, MarkerArray
 
+from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import quaternion_from_matrix
+from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.conversions import set_pose
+from wmm_control.viewer.scene import Trail
 
-__all__ = ['MarkerSet', 'MARKER_NAMESPACES']
+__all__ = ['MarkerSet', 'ResolverMarkers', 'MARKER_NAMESPACES']
 
 MARKER_NAMESPACES = ('goal', 'reference', 'ee_trail', 'base_footprint')
 
@@ -106,3 +109,43 @@ class MarkerSet:
             outline.points = _points(np.column_stack((closed, np.full(len(closed), self.floor_z))))
         markers.append(outline)
         return MarkerArray(markers=markers)
+
+
+class ResolverMarkers:
+    """The markers of the resolver's state: its target and the measured end effector's trail.
+
+    The trail follows the end effector as the resolver last measured it: the measured pose
+    with ground-truth feedback, else forward kinematics of the base pose and arm joints, on a
+    model of its own (apart from the resolver's).
+
+    Args:
+        robot: the robot (a name or a robot YAML path).
+        frame: the world frame.
+        workspace: the robot's :class:`~wmm_control.kinematics.workspace.Workspace` (footprint, floor).
+    """
+
+    def __init__(self, robot: str, frame: str, workspace: Workspace) -> None:
+        self.markers = MarkerSet(frame, workspace.footprint(), workspace.floor_z)
+        self._model = KinematicModel(robot)
+        self.trail = Trail(max_points=2000, min_step=0.005)
+
+    def build(self, stamp: Time, last_state, target, tracking: bool) -> MarkerArray:
+        """The MarkerArray of this instant.
+
+        Args:
+            last_state: (base pose (x, y, θ), arm positions, (ee position, rotation) or None) of
+                the resolver's last cycle, or None before one.
+            target: the :class:`~wmm_control.resolvers.PoseTarget` pursued, or None.
+            tracking: the target is a trajectory point (drawn as the reference, not the goal).
+        """
+        base = None
+        if last_state is not None:
+            base, q_arm, ee = last_state
+            if ee is None:
+                self._model.update(base, q_arm)
+                ee = self._model.ee_placement_world()
+            self.trail.add(ee[0])
+        pose = None if target is None else (target.position, target.rotation)
+        return self.markers.build(
+            stamp, None if tracking else pose, pose if tracking else None, self.trail.points, base
+        )

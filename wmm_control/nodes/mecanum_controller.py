@@ -17,7 +17,7 @@ node's tuning.
 
 import functools
 
-from wmm_control.nodes.base_controller import WHEEL_PARAMS as PARAMS
+from wmm_control.nodes.base_controller_params import WHEEL_PARAMS as PARAMS
 from wmm_control.nodes.base_controller import BaseControllerNode
 from wmm_control.nodes.runner import run_node
 

@@ -58,13 +58,15 @@ pursued as far as they allow and reported on ``/diagnostics``.
 
 This module only wires parameters (:mod:`~wmm_control.nodes.redundancy_resolver_params`),
 topics (through :mod:`~wmm_control.nodes.conversions`) and timers to the ROS-free core:
-the target, its checks and its events in :class:`~wmm_control.resolvers.targets.TargetManager`,
-the checks of odometry, end-effector pose and feasible twist in
-:class:`~wmm_control.resolvers.inputs.MeasuredInputs`, the exchange in
-:class:`~wmm_control.resolvers.exchange.CompensationExchange`, the commands in the resolver.
+the target, its checks, its events and its report in
+:class:`~wmm_control.resolvers.targets.TargetManager` (the events' throttle in
+:class:`~wmm_control.resolvers.targets.LogThrottle`), the checks of odometry, end-effector pose
+and feasible twist in :class:`~wmm_control.resolvers.inputs.MeasuredInputs`, the latest of them
+and the state of a cycle in :class:`~wmm_control.resolvers.inputs.LatestInputs`, the exchange in
+:class:`~wmm_control.resolvers.exchange.CompensationExchange`, the commands in the resolver; the
+markers in :class:`~wmm_control.nodes.markers.ResolverMarkers`.
 """
 
-import math
 import time
 
 import numpy as np
@@ -81,7 +83,6 @@ from visualization_msgs.msg import MarkerArray
 
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
-from wmm_control.checks import Freshness
 from wmm_control.nodes.diagnostics import diagnostic_array, node_status
 from wmm_control.nodes.inputs import JointSelector, JointStateWatchdog
 from wmm_control.nodes.parameters import declare_parameters
@@ -96,21 +97,15 @@ from wmm_control.nodes.conversions import (
     twist_stamped,
     twist_values,
 )
-from wmm_control.nodes.markers import MarkerSet
+from wmm_control.nodes.markers import ResolverMarkers
 from wmm_control.nodes.obstacle_topic import ObstacleSet, describe
 from wmm_control.nodes.redundancy_resolver_params import PARAMS
-from wmm_control.resolvers import RobotState, make_resolver, method_parameters
+from wmm_control.resolvers import make_resolver, method_parameters
 from wmm_control.resolvers.exchange import CompensationExchange
-from wmm_control.resolvers.inputs import MeasuredInputs
-from wmm_control.resolvers.targets import TargetManager
-from wmm_control.viewer.scene import Trail
+from wmm_control.resolvers.inputs import LatestInputs, MeasuredInputs
+from wmm_control.resolvers.targets import LogThrottle, TargetManager
 
 __all__ = ['PARAMS', 'RedundancyResolverNode', 'main']
-
-#: The events logged as information; the others are warnings, each kind at most once every
-#: second (steady clock) but for these.
-_INFO = ('accepted', 'tracking', 'reached')
-_THROTTLE = {'held': 5.0, 'stalled': 0.0}
 
 
 class RedundancyResolverNode(Node):
@@ -155,15 +150,15 @@ class RedundancyResolverNode(Node):
         self.inputs = MeasuredInputs(
             p.world_frame, p.max_goal_distance, self.model.config.base.velocity, JointSelector.PLAUSIBLE_FACTOR
         )
+        self.latest = LatestInputs(self.inputs, p.state_timeout, p.ee_feedback == 'ground_truth')
         self.exchange = CompensationExchange(self.resolver)
         self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
         self._set_obstacles()
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.fresh = {k: Freshness(p.state_timeout) for k in ('odom', 'ee_pose')}
-        self._odom = self._ee = self._wait = self._last = self._last_state = None
+        self._wait = self._last = None
         self._received = 0  # when the joint state of the held arm command came (time.monotonic_ns())
         self._next_diag = 0.0
-        self._logged = {}  # the last time each kind of warning was logged
+        self._throttle = LogThrottle()
         self._cycles = self._stale_cycles = 0
         #: Callables ``observe(stamp, command, reached, stalled)``, each run once a cycle's arm command
         #: is out (``command``: the :class:`~wmm_control.resolvers.ResolverCommand`; ``reached``,
@@ -190,9 +185,7 @@ class RedundancyResolverNode(Node):
                 else None
             )
         if p.markers_period > 0:
-            self._markers = MarkerSet(p.world_frame, self.workspace.footprint(), self.workspace.floor_z)
-            self._marker_model = KinematicModel(p.robot)  # the trail's FK, apart from the resolver's model
-            self._trail = Trail(max_points=2000, min_step=0.005)
+            self._markers = ResolverMarkers(p.robot, p.world_frame, self.workspace)
             self.pub_markers = self.create_publisher(MarkerArray, '~/markers', COMMAND_QOS)
             self.create_timer(p.markers_period, self._publish_markers, clock=self._steady)
         self.watchdog = JointStateWatchdog(
@@ -231,8 +224,8 @@ class RedundancyResolverNode(Node):
         }
 
     def _set_state_timeout(self, timeout):
-        for fresh in (*self.fresh.values(), self.targets.reference):
-            fresh.timeout = timeout
+        self.latest.set_timeout(timeout)
+        self.targets.reference.timeout = timeout
         self.watchdog.set_timeout(timeout)
 
     def _set_max_goal_distance(self, distance):
@@ -242,21 +235,15 @@ class RedundancyResolverNode(Node):
         return self._steady.now().nanoseconds * 1e-9
 
     def _log(self, events):
-        now = self._now() if events else 0.0
-        for event in events:
-            if event.kind in _INFO:
-                self.get_logger().info(event.message)
-            elif now - self._logged.get(event.kind, -math.inf) >= _THROTTLE.get(event.kind, 1.0):
-                self._logged[event.kind] = now
-                self.get_logger().warn(event.message)
+        for level, message in self._throttle.lines(events, self._now() if events else 0.0):
+            if level == 'info':  # one call site per severity: rclpy refuses a change at one
+                self.get_logger().info(message)
+            else:
+                self.get_logger().warn(message)
 
     # ------------------------------------------------------------------ inputs
-    def _base(self):
-        """The base pose while the odometry is fresh (a goal inside the body is rejected then), else None."""
-        return self._odom[0] if self._odom is not None and self.fresh['odom'].fresh(self._now()) else None
-
     def _on_goal(self, msg):
-        self._log(self.targets.goal(msg.header.frame_id, pose_values(msg.pose), self._base()))
+        self._log(self.targets.goal(msg.header.frame_id, pose_values(msg.pose), self.latest.base_pose(self._now())))
 
     def _on_reference(self, msg):
         point = msg.points[0] if msg.points else None
@@ -265,7 +252,8 @@ class RedundancyResolverNode(Node):
             pose = pose_values(point.transforms[0])
             vel = twist_values(point.velocities[0]) if point.velocities else np.zeros(6)
             acc = twist_values(point.accelerations[0]) if point.accelerations else np.zeros(6)
-        self._log(self.targets.trajectory_point(msg.header.frame_id, pose, vel, acc, self._now(), self._base()))
+        now = self._now()
+        self._log(self.targets.trajectory_point(msg.header.frame_id, pose, vel, acc, now, self.latest.base_pose(now)))
 
     def _set_obstacles(self):
         self.resolver.set_obstacles(self.obstacles.obstacles)
@@ -276,37 +264,12 @@ class RedundancyResolverNode(Node):
             self._set_obstacles()
 
     def _on_odom(self, msg):
-        odom, events = self.inputs.odometry(*odometry_values(msg))
-        self._log(events)
-        if odom is not None:
-            self._odom = odom
-            self.fresh['odom'].mark(self._now())
+        self._log(self.latest.odometry(*odometry_values(msg), self._now()))
 
     def _on_ee_pose(self, msg):
-        ee, events = self.inputs.ee_pose(msg.header.frame_id, pose_values(msg.pose))
-        self._log(events)
-        if ee is not None:
-            self._ee = ee
-            self.fresh['ee_pose'].mark(self._now())
+        self._log(self.latest.ee_pose(msg.header.frame_id, pose_values(msg.pose), self._now()))
 
     # ------------------------------------------------------------------ cycle
-    def _state(self, arm):
-        """The RobotState of this cycle with the arm's ``(q, dq)``, or (None, reason) when some
-        input is missing or stale."""
-        now = self._now()
-        if self._odom is None or not self.fresh['odom'].fresh(now):
-            return None, 'no fresh /odom'
-        ee = None
-        if self.p.ee_feedback == 'ground_truth':
-            if self._ee is None or not self.fresh['ee_pose'].fresh(now):
-                return None, 'no fresh /ee_pose'
-            ee = self._ee
-        (pose, twist), (q, dq) = self._odom, arm
-        self._last_state = (pose, q, ee)
-        return RobotState(
-            pose, twist, q, dq, ee_position=None if ee is None else ee[0], ee_rotation=None if ee is None else ee[1]
-        ), ''
-
     def _on_joint_states(self, msg):
         received = time.monotonic_ns()
         q, dq, reason = self.arm.read(msg)
@@ -322,7 +285,7 @@ class RedundancyResolverNode(Node):
         if self.exchange.pending:  # the last cycle's feasible twist never came
             self._finish(None)
         stamp = msg.header.stamp
-        state, reason = self._state((q, dq))
+        state, reason = self.latest.state(q, dq, self._now())
         if state is None or self.targets.target is None:
             if state is None:
                 self._stale_cycles += 1
@@ -411,24 +374,9 @@ class RedundancyResolverNode(Node):
 
     def _publish_markers(self) -> None:
         """~/markers: the goal, the tracked reference, the end-effector trail, the base footprint."""
-        base = None
-        if self._last_state is not None:
-            base, q_arm, ee = self._last_state
-            if ee is None:
-                self._marker_model.update(base, q_arm)
-                ee = self._marker_model.ee_placement_world()
-            self._trail.add(ee[0])
-        target = self.targets.target
-        pose = None if target is None else (target.position, target.rotation)
-        tracking = self.targets.tracking
+        stamp = self.get_clock().now().to_msg()
         self.pub_markers.publish(
-            self._markers.build(
-                self.get_clock().now().to_msg(),
-                None if tracking else pose,
-                pose if tracking else None,
-                self._trail.points,
-                base,
-            )
+            self._markers.build(stamp, self.latest.last_state, self.targets.target, self.targets.tracking)
         )
 
     def _diagnostics(self, stamp):
@@ -441,34 +389,8 @@ class RedundancyResolverNode(Node):
         )
         level, message = 'ok', 'no goal'
         if self._last is not None and self.targets.target is not None:
-            d = self._last.diagnostics
-            values.update(
-                {
-                    'method': d.method,
-                    'mode': d.mode,
-                    'psi': d.psi,
-                    'position_error_m': d.position_error,
-                    'orientation_error_rad': d.orientation_error,
-                    'limit_scale': d.limit_scale,
-                    'accel_scale': d.accel_scale,
-                    'null_scale': d.null_scale,
-                    'compensation_scale': d.compensation_scale,
-                    'compensated': d.compensated,
-                    'limited': list(d.limited),
-                    'sigma_min': d.sigma_min,
-                    'cycle_time_us': d.cycle_time_s * 1e6,
-                    'reference_time_left_s': d.reference_time_left,
-                    'clearance_m': d.clearance,
-                    'closest_pair': d.closest_pair,
-                    'collision_constraints': d.collision_constraints,
-                    'collision_changed': d.collision_changed,
-                    'goal_reached': self.progress.reached,
-                    'goal_stalled': self.progress.stalled,
-                    'arm_command': self._last.arm_velocity,
-                    'base_reference': self._last.base_twist,
-                }
-            )
-            level, message = self.targets.status(d)
+            level, message, goal_values = self.targets.report(self._last)
+            values.update(goal_values)
         return diagnostic_array(stamp, [node_status(self, '', self.model.config.name, level, message, values)])
 
 

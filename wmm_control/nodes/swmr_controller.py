@@ -13,7 +13,7 @@ parameters are the gains ``kp`` and ``icr_gain`` (``config/swmr_controller.yaml`
 Table I).
 """
 
-from wmm_control.nodes.base_controller import STEERABLE_PARAMS as PARAMS
+from wmm_control.nodes.base_controller_params import STEERABLE_PARAMS as PARAMS
 from wmm_control.nodes.base_controller import BaseControllerNode
 from wmm_control.nodes.runner import run_node
 

@@ -7,14 +7,18 @@ note of a normalised quaternion. Rejected: odometry with NaN/inf, beyond the dis
 from the world origin, with a twist beyond ``factor`` times the base velocity limits or a zero
 quaternion; an end-effector pose in another frame than the world's, with NaN/inf or a zero
 quaternion; a feasible twist with NaN/inf or beyond ``factor`` times the base limits.
+:class:`LatestInputs` keeps the latest accepted odometry and end-effector pose and makes the
+robot state of a cycle of them while they are fresh.
 """
 
 import numpy as np
 
+from wmm_control.checks import Freshness
 from wmm_control.kinematics.orientation import matrix_from_quaternion, yaw_from_quaternion
+from wmm_control.resolvers.interface import RobotState
 from wmm_control.resolvers.targets import LogEvent, checked_quaternion
 
-__all__ = ['MeasuredInputs']
+__all__ = ['MeasuredInputs', 'LatestInputs']
 
 
 class MeasuredInputs:
@@ -85,3 +89,70 @@ class MeasuredInputs:
                 f'beyond {self.factor:g} times the base velocity limits',
             )
         ]
+
+
+class LatestInputs:
+    """The latest odometry and end-effector pose that :class:`MeasuredInputs` accepted, each
+    fresh for ``timeout`` [s] after its receipt (the receiver's clock: a sender's stamps cannot
+    make stale data look fresh), and the robot state of a cycle made of them.
+
+    Args:
+        checks: the checks they pass.
+        timeout: how long [s] after its receipt an input is fresh.
+        ground_truth: the state carries the measured end-effector pose (``ee_feedback``
+            ``ground_truth``), which must then be fresh too; else forward kinematics.
+
+    Attributes:
+        odom: ((x, y, θ), twist (vx, vy, ω)) of the latest odometry, or None.
+        ee: (position, rotation) of the latest end-effector pose, or None.
+        last_state: (base pose, arm positions, ee or None) of the last state made, or None.
+    """
+
+    def __init__(self, checks: MeasuredInputs, timeout: float, ground_truth: bool) -> None:
+        self.checks = checks
+        self.ground_truth = ground_truth
+        self.fresh = {k: Freshness(timeout) for k in ('odom', 'ee_pose')}
+        self.odom: tuple[np.ndarray, np.ndarray] | None = None
+        self.ee: tuple[np.ndarray, np.ndarray] | None = None
+        self.last_state: tuple | None = None
+
+    def set_timeout(self, timeout: float) -> None:
+        """Judge both inputs by a new ``timeout`` [s] from now on."""
+        for fresh in self.fresh.values():
+            fresh.timeout = timeout
+
+    def odometry(self, xy, quat, twist, now: float) -> list[LogEvent]:
+        """Take the odometry received at ``now`` [s] when it passes :meth:`MeasuredInputs.odometry`."""
+        odom, events = self.checks.odometry(xy, quat, twist)
+        if odom is not None:
+            self.odom = odom
+            self.fresh['odom'].mark(now)
+        return events
+
+    def ee_pose(self, frame, pose, now: float) -> list[LogEvent]:
+        """Take the end-effector pose received at ``now`` [s] when it passes :meth:`MeasuredInputs.ee_pose`."""
+        ee, events = self.checks.ee_pose(frame, pose)
+        if ee is not None:
+            self.ee = ee
+            self.fresh['ee_pose'].mark(now)
+        return events
+
+    def base_pose(self, now: float) -> np.ndarray | None:
+        """The base pose (x, y, θ) while the odometry is fresh at ``now`` [s], else None."""
+        return self.odom[0] if self.odom is not None and self.fresh['odom'].fresh(now) else None
+
+    def state(self, q, dq, now: float) -> tuple[RobotState | None, str]:
+        """The robot state of a cycle at ``now`` [s] with the arm's positions ``q`` and rates
+        ``dq``, and '', or (None, the input that is missing or stale)."""
+        if self.odom is None or not self.fresh['odom'].fresh(now):
+            return None, 'no fresh /odom'
+        ee = None
+        if self.ground_truth:
+            if self.ee is None or not self.fresh['ee_pose'].fresh(now):
+                return None, 'no fresh /ee_pose'
+            ee = self.ee
+        pose, twist = self.odom
+        self.last_state = (pose, q, ee)
+        return RobotState(
+            pose, twist, q, dq, ee_position=None if ee is None else ee[0], ee_rotation=None if ee is None else ee[1]
+        ), ''

@@ -34,7 +34,7 @@ from wmm_control.kinematics.orientation import matrix_from_quaternion, unit_quat
 from wmm_control.resolvers.interface import PoseTarget
 from wmm_control.resolvers.progress import GoalProgress
 
-__all__ = ['GOAL', 'REFERENCE', 'LogEvent', 'TargetManager', 'checked_quaternion']
+__all__ = ['GOAL', 'REFERENCE', 'LogEvent', 'LogThrottle', 'TargetManager', 'checked_quaternion']
 
 GOAL = 'goal_pose'
 REFERENCE = 'ee_reference'
@@ -49,6 +49,31 @@ class LogEvent:
 
     kind: str
     message: str
+
+
+class LogThrottle:
+    """Which :class:`LogEvent` s a node logs, and how: ``accepted``, ``tracking`` and ``reached``
+    always, as information; every other kind as a warning, at most once per its interval of
+    the caller's clock (``held`` 5 s, ``stalled`` every time, the others 1 s), each kind apart.
+    """
+
+    INFO = ('accepted', 'tracking', 'reached')
+    INTERVALS = {'held': 5.0, 'stalled': 0.0}
+    INTERVAL = 1.0
+
+    def __init__(self) -> None:
+        self._logged: dict[str, float] = {}  # the last time each kind of warning was logged
+
+    def lines(self, events, now: float) -> list[tuple[str, str]]:
+        """(level 'info' or 'warn', message) of each of ``events`` to log at ``now`` [s]."""
+        out = []
+        for event in events:
+            if event.kind in self.INFO:
+                out.append(('info', event.message))
+            elif now - self._logged.get(event.kind, -math.inf) >= self.INTERVALS.get(event.kind, self.INTERVAL):
+                self._logged[event.kind] = now
+                out.append(('warn', event.message))
+        return out
 
 
 def checked_quaternion(quat, topic) -> tuple[np.ndarray | None, list[LogEvent]]:
@@ -233,6 +258,37 @@ class TargetManager:
                 f'{diagnostics.orientation_error:.3f} rad; {self.no_progress()} (out of reach?)'
             )
         return 'ok', 'goal reached' if self.progress.reached else diagnostics.mode
+
+    def report(self, command) -> tuple[str, str, dict]:
+        """(level, message, values) of the goal for ``/diagnostics``: :meth:`status`, and the
+        values of the last ``command`` (a :class:`~wmm_control.resolvers.ResolverCommand`) and
+        of the goal's progress, under the keys the panel and the docs name."""
+        d = command.diagnostics
+        values = {
+            'method': d.method,
+            'mode': d.mode,
+            'psi': d.psi,
+            'position_error_m': d.position_error,
+            'orientation_error_rad': d.orientation_error,
+            'limit_scale': d.limit_scale,
+            'accel_scale': d.accel_scale,
+            'null_scale': d.null_scale,
+            'compensation_scale': d.compensation_scale,
+            'compensated': d.compensated,
+            'limited': list(d.limited),
+            'sigma_min': d.sigma_min,
+            'cycle_time_us': d.cycle_time_s * 1e6,
+            'reference_time_left_s': d.reference_time_left,
+            'clearance_m': d.clearance,
+            'closest_pair': d.closest_pair,
+            'collision_constraints': d.collision_constraints,
+            'collision_changed': d.collision_changed,
+            'goal_reached': self.progress.reached,
+            'goal_stalled': self.progress.stalled,
+            'arm_command': command.arm_velocity,
+            'base_reference': command.base_twist,
+        }
+        return (*self.status(d), values)
 
     def no_progress(self) -> str:
         """What 'no progress' means with the current settings."""

@@ -13,7 +13,7 @@ import threading
 
 import numpy as np
 
-from wmm_control.viewer.scene import unit_wxyz
+from wmm_control.viewer.scene import finite_pose
 
 __all__ = ['GoalDrag']
 
@@ -40,14 +40,13 @@ class GoalDrag:
 
     def update(self, position, wxyz, now: float) -> bool:
         """The handle is at ``position``, ``wxyz`` at time ``now`` [s]; False (ignored) when not a pose."""
-        pos = np.asarray(position, dtype=float).reshape(-1)
-        quat = unit_wxyz(wxyz)
-        if quat is None or pos.shape != (3,) or not np.all(np.isfinite(pos)):
+        pose = finite_pose(position, wxyz)
+        if pose is None:
             return False
         with self._lock:
             if self._pending is None:
                 self._since = now
-            self._pending = (pos, quat)
+            self._pending = pose
         return True
 
     def end(self, position, wxyz, now: float) -> None:
@@ -56,6 +55,16 @@ class GoalDrag:
         with self._lock:
             self.dragging = False
             self._released = True
+
+    def event(self, phase: str, position, wxyz, now: float) -> None:
+        """One event of the handle at time ``now`` [s]: ``phase`` 'start' (grabbed; the pose is
+        not taken), 'end' (released at the pose), else an update to the pose."""
+        if phase == 'start':
+            self.start()
+        elif phase == 'end':
+            self.end(position, wxyz, now)
+        else:
+            self.update(position, wxyz, now)
 
     def due(self, now: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The goal (position, unit wxyz) to publish now, or None."""

@@ -22,7 +22,16 @@ import pinocchio as pin
 from wmm_control.errors import ConfigError, NonFiniteError, UnknownFrameError
 from wmm_control.kinematics.orientation import matrix_from_quaternion, quaternion_from_matrix, unit_quaternion
 
-__all__ = ['Shape', 'RobotScene', 'ScenePoses', 'Trail', 'unit_wxyz', 'wxyz_from_xyzw', 'xyzw_from_wxyz']
+__all__ = [
+    'Shape',
+    'RobotScene',
+    'ScenePoses',
+    'Trail',
+    'unit_wxyz',
+    'finite_pose',
+    'wxyz_from_xyzw',
+    'xyzw_from_wxyz',
+]
 
 
 @dataclass(frozen=True)
@@ -82,14 +91,23 @@ def unit_wxyz(quat) -> np.ndarray | None:
     return unit_quaternion(q, min_norm=1e-9)[0]
 
 
-def _se3(position, wxyz) -> pin.SE3:
+def finite_pose(position, wxyz) -> tuple[np.ndarray, np.ndarray] | None:
+    """(position (3,) [m], unit quaternion (w, x, y, z)) of a pose; None when the position is not
+    three finite numbers or the quaternion is not finite or (near) zero (:func:`unit_wxyz`)."""
+    pos = np.asarray(position, dtype=float).reshape(-1)
     quat = unit_wxyz(wxyz)
-    pos = np.asarray(position, dtype=float)
     if quat is None or pos.shape != (3,) or not np.all(np.isfinite(pos)):
+        return None
+    return pos, quat
+
+
+def _se3(position, wxyz) -> pin.SE3:
+    pose = finite_pose(position, wxyz)
+    if pose is None:
         raise NonFiniteError(
             f'not a pose: position {np.asarray(position).tolist()}, quaternion (w, x, y, z) {np.asarray(wxyz).tolist()}'
         )
-    return pin.SE3(matrix_from_quaternion(xyzw_from_wxyz(quat)), pos)
+    return pin.SE3(matrix_from_quaternion(xyzw_from_wxyz(pose[1])), pose[0])
 
 
 def _wxyz(rotation: np.ndarray) -> np.ndarray:

@@ -75,6 +75,19 @@ class NodeStatus:
     values: dict[str, str]
     received: float  # [s] receiver's clock at receipt
 
+    @classmethod
+    def of(cls, status, received: float) -> NodeStatus:
+        """The :class:`NodeStatus` of a ``diagnostic_msgs/DiagnosticStatus`` received at
+        ``received`` [s] (its level a byte, as rclpy gives it, or an int)."""
+        level = status.level
+        return cls(
+            status.name,
+            int.from_bytes(level, 'little') if isinstance(level, bytes) else int(level),
+            status.message,
+            {kv.key: kv.value for kv in status.values},
+            received,
+        )
+
 
 class StatusBoard:
     """The newest status of each name, and the panel's Markdown of them."""
