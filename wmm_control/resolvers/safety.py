@@ -109,8 +109,10 @@ SLACK_WEIGHT = 1.0
 SELF_WEIGHT = 1e-2
 #: The command is taken as meeting a damper within this much [m/s].
 TOLERANCE = 1e-9
-#: [m/s] a lagging base's measured twist below this tells no path (at rest).
-PATH_SPEED = 1e-4
+#: [m/s] a lagging base's measured twist below this tells no path to hold it on: at a crawl it
+#: covers well under the safety distance over its lag, and a reference held to so slow a path
+#: (s v₀, ``s`` ≥ −1) cannot take it away from an obstacle it has crept up to.
+PATH_SPEED = 1e-2
 #: The share of a wheeled base's linear deceleration near obstacles that its turn may take
 #: (turning under a moving base turns its path, towards an obstacle too, and the linear axes
 #: must brake that); the dampers count on the rest.
@@ -315,10 +317,11 @@ class SafetyStage:
         elif axes and base_velocity is not None and self.base_lag > 0.0:
             v0 = np.asarray(base_velocity, dtype=float)
             own = base_full @ v0  # the base's approach rates
-            command, lower, upper, overtaking = self._brake_on_path(
-                near.distance, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
-            )
-            rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
+            if v0 @ v0 >= PATH_SPEED**2:
+                command, lower, upper, overtaking = self._brake_on_path(
+                    near.distance, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
+                )
+                rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
             rows, bound = self._between(rows, bound, axes, base_full, v0, moved, to_base)
             rows, bound = self._after_turn(rows, bound, axes, base_full, v0, command, moved, to_base, world_rates)
         if base_twist is None and self.base_lag == 0.0:
@@ -361,7 +364,7 @@ class SafetyStage:
         reference's (a sideways reference drives it on along its wheels' heading for a while, into
         what lies ahead)."""
         norm = float(v0 @ v0)
-        if norm < PATH_SPEED**2 or not moved.any():
+        if not moved.any():
             return rows, bound
         along = (own[moved, None] * v0 / norm) @ to_base  # j_b v₀ v₀ᵀ / |v₀|²
         return _with_base_rows(rows, bound, axes, moved, along)
