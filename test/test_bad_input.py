@@ -13,6 +13,7 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 import fault_matrix
+import wmm_control.base.period as period_module
 import wmm_control.nodes.base_controller as node_module
 from ros_helpers import ROSOUT_QOS
 from wmm_control.nodes.stamps import StampGate
@@ -40,7 +41,7 @@ def test_the_matrix_sees_a_node_that_runs_a_cycle_per_duplicate(monkeypatch):
     """Without the stamp gate, a second publisher's copy runs a second cycle, silently (once the
     check that the last command was applied, which notices the second cycle's effect, is off too)."""
     monkeypatch.setattr(StampGate, 'admit', lambda self, stamp: '')
-    monkeypatch.setattr(node_module, 'unapplied_command', lambda measured, commanded, tolerance: '')
+    monkeypatch.setattr(period_module, 'unapplied_command', lambda measured, commanded, tolerance: '')
     kind = next(k for k in fault_matrix.KINDS if k.name == 'duplicated message')
     cell = fault_matrix.run_cell(fault_matrix.RIGS['mecanum_controller'], kind)
     assert cell.outcome == 'SILENT'
