@@ -202,10 +202,10 @@ def test_robot_a_re_steering_beside_the_table_keeps_off_it():
 def test_robot_a_crept_up_to_the_table_is_taken_away_from_it():
     """``pinv`` goal 24 of the randomized draw (``table_pillar``, seed 0): robot A stops with its
     chassis at the table, inside the safety distance, and crawls at about 1 mm/s. Held to its
-    own path (s v₀, s ≥ −1) the reference could not take it away faster than it crept, and the
-    stage's answers alternated with the periods the base read as at rest: the chassis crept
-    1 cm into the table over a minute. Below 1 cm/s the base is no longer held to its path:
-    no period is in contact, and the run ends converged or reported stalled."""
+    own path (s v₀) no faster backwards than it came (s ≥ −1), the reference could not take it
+    away faster than it crept: the chassis crept 8 mm into the table over a minute. Sent back
+    along its path as fast as the pair must separate, no period is in contact, and the run ends
+    converged or reported stalled."""
     goal = sample_goals('steerable', 25, seed=0, obstacles='table_pillar')[24]
     out = run_goal('steerable', 'pinv', goal, obstacles='table_pillar')
     assert out['contact_depth_m'] <= CONTACT_DEPTH, (out['contact_pair'], out['contact_depth_m'])

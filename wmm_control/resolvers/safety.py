@@ -43,7 +43,8 @@ and its damper gain is no steeper than ``1/τ``. Where the base's measured twist
 approaches a pair faster than that (it lagged, or a steerable base swept its wheels round
 towards the obstacle while changing its ICR), the base is sent ``s v₀``: a twist on its own
 path, which a steerable base follows by slowing its wheels without steering them, with ``s``
-low enough (down to −1) to brake the approach within the room left, within the method's box.
+low enough (down to −1, or lower where a pair must separate faster than the base approaches
+it) to brake the approach within the room left, within the method's box.
 The part of the reference along ``v₀`` is held to the same row as the reference: a steerable
 base first drives on along its path at that part while its wheels turn to the new one. The
 row also holds at every corner of the box between the measured twist and the reference, axis
@@ -109,10 +110,8 @@ SLACK_WEIGHT = 1.0
 SELF_WEIGHT = 1e-2
 #: The command is taken as meeting a damper within this much [m/s].
 TOLERANCE = 1e-9
-#: [m/s] a lagging base's measured twist below this tells no path to hold it on: at a crawl it
-#: covers well under the safety distance over its lag, and a reference held to so slow a path
-#: (s v₀, ``s`` ≥ −1) cannot take it away from an obstacle it has crept up to.
-PATH_SPEED = 1e-2
+#: [m/s] a lagging base's measured twist below this tells no path (at rest).
+PATH_SPEED = 1e-4
 #: The share of a wheeled base's linear deceleration near obstacles that its turn may take
 #: (turning under a moving base turns its path, towards an obstacle too, and the linear axes
 #: must brake that); the dampers count on the rest.
@@ -317,11 +316,10 @@ class SafetyStage:
         elif axes and base_velocity is not None and self.base_lag > 0.0:
             v0 = np.asarray(base_velocity, dtype=float)
             own = base_full @ v0  # the base's approach rates
-            if v0 @ v0 >= PATH_SPEED**2:
-                command, lower, upper, overtaking = self._brake_on_path(
-                    near.distance, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
-                )
-                rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
+            command, lower, upper, overtaking = self._brake_on_path(
+                near.distance, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
+            )
+            rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
             rows, bound = self._between(rows, bound, axes, base_full, v0, moved, to_base)
             rows, bound = self._after_turn(rows, bound, axes, base_full, v0, command, moved, to_base, world_rates)
         if base_twist is None and self.base_lag == 0.0:
@@ -364,7 +362,7 @@ class SafetyStage:
         reference's (a sideways reference drives it on along its wheels' heading for a while, into
         what lies ahead)."""
         norm = float(v0 @ v0)
-        if not moved.any():
+        if norm < PATH_SPEED**2 or not moved.any():
             return rows, bound
         along = (own[moved, None] * v0 / norm) @ to_base  # j_b v₀ v₀ᵀ / |v₀|²
         return _with_base_rows(rows, bound, axes, moved, along)
@@ -425,12 +423,15 @@ class SafetyStage:
             return command, lower, upper, False
         # the approach at the pair's bound once the base has settled at s v₀, and braking at
         # K_p (1 − s) |ḋ_b| from now on strong enough to stop it within the room left
-        scale = 1.0
+        scale = settle = 1.0
         d_s = self.params.collision_safety
         for i in np.flatnonzero(approaching):
             room = max(distances[i] - d_s, 1e-6)
-            scale = min(scale, (bound[i] - arm[i]) / own[i], 1.0 + own[i] * self.base_lag / (2.0 * room))
-        scale = max(scale, -1.0)
+            settle = min(settle, (bound[i] - arm[i]) / own[i])
+            scale = min(scale, settle, 1.0 + own[i] * self.base_lag / (2.0 * room))
+        # back along the path at up to the speed it came, or as fast as a pair must separate (a
+        # base that crept inside the safety distance at a crawl must leave faster than it came)
+        scale = max(scale, min(-1.0, settle))
         command, lower, upper = command.copy(), lower.copy(), upper.copy()
         # the twist in the command's terms, v₀ᵀ R(θ)ᵀ = (R(θ) v₀)ᵀ (to_base is a rotation), within the
         # method's box: the reference changes no faster than its own limits allow
