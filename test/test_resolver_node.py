@@ -82,12 +82,16 @@ class Driver(Node):
 def system():
     ros = RosHarness()
     driver = ros.add(Driver(ros.context))
-    # the lockstep waits, but the node's own state timeout: a test here stops the joint states
+    # the lockstep waits, but the node's own state timeout: a test here stops the joint states;
+    # markers every 20 ms of wall time (the trail takes a point a tick, and the lockstep
+    # simulation runs seconds of motion in about one second of wall time)
     ros.add(
         RedundancyResolverNode(
             context=ros.context,
             parameter_overrides=overrides(
-                diagnostics_period=1e-9, **dict(LOCKSTEP_WAITS['redundancy_resolver'], state_timeout=0.2)
+                diagnostics_period=1e-9,
+                markers_period=0.02,
+                **dict(LOCKSTEP_WAITS['redundancy_resolver'], state_timeout=0.2),
             ),
         )
     )
