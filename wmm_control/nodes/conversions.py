@@ -31,6 +31,7 @@ __all__ = [
     'set_planar_twist',
     'twist_stamped',
     'pose_stamped',
+    'split_seconds',
     'stamp_from_seconds',
     'planar_covariance',
     'odometry',
@@ -143,11 +144,16 @@ def pose_stamped(stamp: Time, frame: str, position, quat) -> PoseStamped:
     return msg
 
 
-def stamp_from_seconds(seconds: float) -> Time:
-    """A ``builtin_interfaces/Time`` of ``seconds`` >= 0, rounded to the nanosecond (never
-    rounded up into the next second)."""
+def split_seconds(seconds: float) -> dict:
+    """``sec`` and ``nanosec`` of ``seconds`` >= 0 (the fields of a ``builtin_interfaces`` Time or
+    Duration), rounded to the nanosecond (never rounded up into the next second)."""
     sec = math.floor(seconds)
-    return Time(sec=int(sec), nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
+    return dict(sec=int(sec), nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
+
+
+def stamp_from_seconds(seconds: float) -> Time:
+    """A ``builtin_interfaces/Time`` of ``seconds`` >= 0 (:func:`split_seconds`)."""
+    return Time(**split_seconds(seconds))
 
 
 def planar_covariance(cov3, floor: float) -> list[float]:

@@ -33,7 +33,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from wmm_control.experiments.scenario import load_scenario
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import matrix_from_rpy, quaternion_from_matrix
-from wmm_control.nodes.conversions import pose_stamped, set_pose, set_twist
+from wmm_control.nodes.conversions import pose_stamped, set_pose, set_twist, split_seconds
 from wmm_control.nodes.parameters import Param, declare_parameters
 from wmm_control.nodes.qos import CLOCK_QOS, COMMAND_QOS
 from wmm_control.nodes.runner import guard_clock, run_node
@@ -66,8 +66,7 @@ def reference_message(target, frame, stamp, t):
     point.transforms = [tf]
     point.velocities = [_twist(target.velocity)]
     point.accelerations = [_twist(target.acceleration)]
-    sec = int(math.floor(t))
-    point.time_from_start = Duration(sec=sec, nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
+    point.time_from_start = Duration(**split_seconds(t))
     msg.points = [point]
     return msg
 
