@@ -212,6 +212,19 @@ def test_robot_a_crept_up_to_the_table_is_taken_away_from_it():
     assert out['outcome'] in ('converged', 'reported'), out['why']
 
 
+def test_robot_a_spinning_beside_the_pillar_keeps_its_margin_off_it():
+    """``task_sharing`` goal 38 of the randomized draw (``table_pillar``, seed 0): robot A spins
+    at up to 0.58 rad/s beside the pillar while its wheels steer from one ICR to another; its
+    chassis approached the pillar faster and faster for 0.3 s while its reference asked it away,
+    and went 5.2 mm in with its body held to d_s alone. A lag of τ on each axis does not
+    describe that sweep; the body keeps ``collision_lag_margin`` more, and no period is in
+    contact."""
+    goal = sample_goals('steerable', 100, seed=0, obstacles='table_pillar')[38]
+    out = run_goal('steerable', 'task_sharing', goal, obstacles='table_pillar')
+    assert out['contact_depth_m'] <= CONTACT_DEPTH, (out['contact_pair'], out['contact_depth_m'])
+    assert out['outcome'] in ('converged', 'reported'), out['why']
+
+
 def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own_path():
     """Robot A's base follows its reference with a lag of 1/K_p + 1/λ = 0.75 s (its ICR, then its
     twist; :func:`~wmm_control.resolvers.safety.base_lag`). Its reference is held to
@@ -227,7 +240,8 @@ def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own
     tau = stage.base_lag
     assert tau == pytest.approx(1.0 / 2.0 + 1.0 / 4.0)  # K_p = 2 /s (Sorour Table I), λ = 4 /s
     speed = math.sqrt(2.0)  # 1 m/s on each linear axis
-    assert stage.obstacle_lookahead == pytest.approx(0.02 + speed * tau + speed**2 / (2 * 0.5))
+    margin = stage.params.collision_lag_margin  # the room its body keeps beyond d_s
+    assert stage.obstacle_lookahead == pytest.approx(0.02 + margin + speed * tau + speed**2 / (2 * 0.5))
     q = np.array(robot.start.arm)
     box = np.concatenate((robot.base.velocity, robot.arm.velocity))
     pose = np.zeros(3)

@@ -111,6 +111,14 @@ _SPECS = (
         hi=100.0,
         read_only=True,
     ),
+    Param(
+        'collision_lag_margin',
+        "Room [m] a lagging (steerable) base's chassis and wheels keep from obstacles beyond "
+        'collision_safety, for the sweep of its re-steering.',
+        lo=0.0,
+        hi=1.0,
+        read_only=True,
+    ),
     Param('sigma_min', 'σ_m,min: the base is activated below it (amp).', lo=0.0, hi=10.0, read_only=True),
     Param('singularity_avoidance', 'Activate the base near a singularity (amp).', read_only=True),
     Param(

@@ -52,8 +52,13 @@ by axis (the base gets to its reference on each axis at its own pace: a steerabl
 on along its wheels' heading, and turns, before it has steered to a sideways reference), and
 against the pair's normal as the base will see it after the turn it cannot stop at once
 (turned by ω τ, and for a reference in the base's frame, which turns with it, by the turn's
-braking ω |ω| / (2 α) too). A wheeled base that tracks its reference within its
-acceleration limits has τ = 0: the rows above, and no such braking.
+braking ω |ω| / (2 α) too). A lagging base's own body (chassis, wheels) keeps
+``collision_lag_margin`` more than ``d_s`` from obstacles: while its wheels steer from one ICR
+to another its twist sweeps through directions that neither its reference nor its measured
+twist has (robot A spinning beside the pillar approached it faster and faster for 0.3 s
+while its reference asked it away), which no lag on each axis describes. A wheeled base that
+tracks its reference within its acceleration limits has τ = 0: the rows above, no such
+braking and no margin.
 
 With ``ḋ = j · q̇`` (``q̇`` the command: the base's axes, when the method commands the base
 with it, then the arm's joints; :class:`~wmm_control.kinematics.collision.CollisionModel`),
@@ -139,6 +144,10 @@ class SafetyParams:
             what braking can stop [m].
         collision_braking: a_b, the deceleration of a distance that braking counts on [m/s²]
             (below what the arm's joint acceleration limits give).
+        collision_lag_margin: the room [m] a lagging base's own body (chassis, wheels) keeps
+            from obstacles beyond d_s: a steerable base re-steering its wheels sweeps its twist
+            through directions that neither its reference nor its measured twist has, which
+            the lag τ does not describe (no effect on a base without lag).
     """
 
     collision_avoidance: bool = True
@@ -147,6 +156,7 @@ class SafetyParams:
     collision_gain: float = 0.2
     collision_lookahead: float = 0.3
     collision_braking: float = 0.5
+    collision_lag_margin: float = 0.03
 
     def __post_init__(self):
         for name in (
@@ -159,6 +169,8 @@ class SafetyParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigError(f'{name} must be finite and > 0, got {value}')
+        if not (math.isfinite(self.collision_lag_margin) and self.collision_lag_margin >= 0.0):
+            raise ConfigError(f'collision_lag_margin must be finite and >= 0, got {self.collision_lag_margin}')
         if self.collision_safety >= self.collision_influence:
             raise ConfigError(
                 f'collision_safety ({self.collision_safety} m) must be below collision_influence '
@@ -246,8 +258,10 @@ class SafetyStage:
                     brake *= 1.0 - TURN_SHARE
                 brake = min(brake, params.collision_braking)
                 stopping = speed * self.base_lag + speed * speed / (2.0 * brake)
+        #: [m] the room a lagging base's body keeps from obstacles beyond d_s
+        self.body_margin = params.collision_lag_margin if self.base_lag > 0.0 else 0.0
         #: [m] how far an obstacle is looked at: the base's stopping distance from full speed
-        self.obstacle_lookahead = max(params.collision_lookahead, params.collision_safety + stopping)
+        self.obstacle_lookahead = max(params.collision_lookahead, params.collision_safety + self.body_margin + stopping)
 
     def set_obstacles(self, obstacles) -> None:
         """Keep the robot off ``obstacles`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`) from now on."""
@@ -307,7 +321,9 @@ class SafetyStage:
         # the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for world-frame rates
         to_base = _world_to_base(base_pose[2]) if world_rates else np.eye(3)
         rows = np.hstack(((base_full @ to_base)[:, axes], near.rate_jacobian))
-        allowed = self._allowed(near.distance, rows, axes, moved)
+        # the base's body keeps its margin from obstacles: its pairs are as much nearer
+        distance = near.distance - self.body_margin * _body_pairs(rows, axes, moved)
+        allowed = self._allowed(distance, rows, axes, moved)
         lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
         bound = -allowed
         overtaking = False
@@ -317,7 +333,7 @@ class SafetyStage:
             v0 = np.asarray(base_velocity, dtype=float)
             own = base_full @ v0  # the base's approach rates
             command, lower, upper, overtaking = self._brake_on_path(
-                near.distance, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
+                distance, rows, bound, axes, command, v0, own, moved, to_base, lower, upper
             )
             rows, bound = self._along_path(rows, bound, axes, v0, own, moved, to_base)
             rows, bound = self._between(rows, bound, axes, base_full, v0, moved, to_base)
