@@ -112,9 +112,9 @@ class SteerableBase:
 
     def __init__(self, controller: SwmrController, steer_joints: Iterable[str], drive_joints: Iterable[str]) -> None:
         self.controller = controller
-        self.command_groups = {'steer': tuple(steer_joints), 'drive': tuple(drive_joints)}
+        self.command_groups: Mapping[str, tuple] = {'steer': tuple(steer_joints), 'drive': tuple(drive_joints)}
         p = controller.params
-        self.rate_limits = {'steer': p.steer_rate_limit, 'drive': p.drive_rate_limit}
+        self.rate_limits: Mapping[str, Any] = {'steer': p.steer_rate_limit, 'drive': p.drive_rate_limit}
         self.velocity_limit = np.array(p.base_velocity_limit, dtype=float)
 
     @classmethod
@@ -176,8 +176,8 @@ class WheelBase:
     def __init__(self, controller: WheelController, wheel_joints: Iterable[str], family: str = 'mecanum') -> None:
         self.controller = controller
         self.family = family
-        self.command_groups = {'wheel': tuple(wheel_joints)}
-        self.rate_limits = {'wheel': controller.params.wheel_rate_limit}
+        self.command_groups: Mapping[str, tuple] = {'wheel': tuple(wheel_joints)}
+        self.rate_limits: Mapping[str, Any] = {'wheel': controller.params.wheel_rate_limit}
         self.velocity_limit = np.array(controller.params.velocity_limit, dtype=float)
 
     @classmethod

@@ -17,6 +17,7 @@ from wmm_control.resolvers.limits import CommandLimits, LimitResult
 from wmm_control.resolvers.pinv import PinvParams, PinvResolver
 from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver
 from wmm_control.resolvers.task_sharing import TaskSharingParams, TaskSharingResolver, psi_of_error
+from wmm_control.resolvers.acceleration_level import AccelerationResolver
 from wmm_control.resolvers.amp import AmpParams, AmpResolver
 from wmm_control.resolvers.traditional import TraditionalParams, TraditionalResolver
 from wmm_control.robot_config import RobotConfig
@@ -64,7 +65,7 @@ def method_parameters(method: str) -> tuple[str, ...]:
 
 def make_resolver(
     method: str, robot: str | Path | RobotConfig | KinematicModel = 'steerable', **params: Any
-) -> Resolver:
+) -> PoseServoResolver | AccelerationResolver:
     """Build the resolver named ``method`` with keyword parameters of its params class.
 
     Raises:
