@@ -27,7 +27,7 @@ from wmm_control.base import BaseController, make_base_controller
 from wmm_control.cycle import Cycle
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.orientation import matrix_from_quaternion
-from wmm_control.resolvers import PoseTarget, Resolver, RobotState
+from wmm_control.resolvers import PoseTarget, Resolver, ResolverCommand, RobotState
 
 if TYPE_CHECKING:
     from sim_bridge.world import SimWorld
@@ -59,7 +59,7 @@ class CycleRecord:
     q: np.ndarray
     ee_position: np.ndarray
     ee_rotation: np.ndarray
-    command: object
+    command: ResolverCommand
     feasible_twist: np.ndarray
     base_velocity: np.ndarray
 
