@@ -20,6 +20,7 @@ from wmm_control.kinematics.orientation import rpy_from_matrix, wrap_angle
 if TYPE_CHECKING:
     from wmm_control.experiments.scenario import Scenario
     from wmm_control.kinematics import KinematicModel
+    from wmm_control.resolvers.interface import ResolverDiagnostics
     from wmm_control.robot_config import RobotConfig
 
 __all__ = [
@@ -107,18 +108,18 @@ class RunLog:
 
     def append(
         self,
-        t,
-        goal,
-        ee_position,
-        ee_rotation,
-        base_pose,
-        q_arm,
-        arm_command,
-        base_reference,
-        feasible_twist,
-        diagnostics,
-        q=None,
-    ):
+        t: float,
+        goal: int,
+        ee_position: ArrayLike,
+        ee_rotation: ArrayLike,
+        base_pose: ArrayLike,
+        q_arm: ArrayLike,
+        arm_command: ArrayLike,
+        base_reference: ArrayLike,
+        feasible_twist: ArrayLike | None,
+        diagnostics: ResolverDiagnostics,
+        q: ArrayLike | None = None,
+    ) -> None:
         """Add one period: the state at its start, the commands sent, and the resolver's
         :class:`~wmm_control.resolvers.ResolverDiagnostics`. ``feasible_twist`` may be None;
         ``q`` (every joint of ``joint_names``) too."""
