@@ -13,7 +13,7 @@ class OwnedClient:
 
     _cid = -1
 
-    def close(self):
+    def close(self) -> None:
         """Disconnect from PyBullet; safe to call twice."""
         if self._cid >= 0:
             p.disconnect(physicsClientId=self._cid)

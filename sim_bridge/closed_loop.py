@@ -16,15 +16,21 @@ Use it for fast experiments and tests. The ROS nodes do the same over topics;
 :func:`wmm_control.experiments.direct.run_scenario` plays a whole scenario on it.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from wmm_control.base import make_base_controller
+from wmm_control.base import BaseController, make_base_controller
 from wmm_control.cycle import Cycle
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.orientation import matrix_from_quaternion
-from wmm_control.resolvers import RobotState
+from wmm_control.resolvers import PoseTarget, Resolver, ResolverCommand, RobotState
+
+if TYPE_CHECKING:
+    from sim_bridge.world import SimWorld
 
 __all__ = ['ClosedLoop', 'CycleRecord', 'FEEDBACKS']
 
@@ -53,7 +59,7 @@ class CycleRecord:
     q: np.ndarray
     ee_position: np.ndarray
     ee_rotation: np.ndarray
-    command: object
+    command: ResolverCommand
     feasible_twist: np.ndarray
     base_velocity: np.ndarray
 
@@ -72,7 +78,13 @@ class ClosedLoop:
             :func:`~wmm_control.base.make_base_controller`. It starts from the world's joints.
     """
 
-    def __init__(self, world, resolver, feedback='ground_truth', base_controller=None):
+    def __init__(
+        self,
+        world: SimWorld,
+        resolver: Resolver,
+        feedback: str = 'ground_truth',
+        base_controller: BaseController | None = None,
+    ) -> None:
         if feedback not in FEEDBACKS:
             raise ConfigError(f'feedback must be one of {FEEDBACKS}, got {feedback!r}')
         self.world = world
@@ -91,7 +103,7 @@ class ClosedLoop:
         """The positions of each base command group in ``q`` (``world.joint_names`` order)."""
         return {g: q[idx] for g, idx in self._groups.items()}
 
-    def state(self):
+    def state(self) -> RobotState:
         """The :class:`RobotState` the resolver sees now."""
         w = self.world
         _, q, qd = w.joint_state()
@@ -107,7 +119,7 @@ class ClosedLoop:
             )
         return RobotState(w.odom_pose(), w.odom_twist(), q[self._arm], qd[self._arm])
 
-    def step(self, target):
+    def step(self, target: PoseTarget) -> CycleRecord:
         """One period towards ``target`` (:class:`~wmm_control.resolvers.PoseTarget`).
 
         Returns:

@@ -21,11 +21,16 @@ them it does: they are placed around the robot from the base's pose.
 """
 
 import itertools
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pybullet as p
+from numpy.typing import ArrayLike
 
 from sim_bridge.client import OwnedClient
-from wmm_control.kinematics.obstacles import around_base
+from wmm_control.kinematics.obstacles import Obstacle, around_base
 from wmm_control.kinematics.orientation import quaternion_from_matrix
 from wmm_control.robot_config import RobotConfig, load_robot
 
@@ -35,10 +40,12 @@ __all__ = ['SelfCollisionChecker', 'add_obstacle', 'OBSTACLE_RGBA']
 OBSTACLE_RGBA = (0.85, 0.55, 0.25, 1.0)
 
 
-def add_obstacle(obstacle, cid, visual=True):
+def add_obstacle(obstacle: Obstacle, cid: int, visual: bool = True) -> int:
     """A static PyBullet body for ``obstacle`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`)
     at its world pose in client ``cid``; returns its body id."""
     size = obstacle.size
+    collision: dict[str, Any]
+    drawing: dict[str, Any] | None
     if obstacle.shape == 'box':
         kind, collision, drawing = p.GEOM_BOX, {'halfExtents': [0.5 * v for v in size]}, None
     elif obstacle.shape == 'sphere':
@@ -81,7 +88,9 @@ class SelfCollisionChecker(OwnedClient):
     Use as a context manager, or call :meth:`close`.
     """
 
-    def __init__(self, robot, margin=0.02, obstacles=()):
+    def __init__(
+        self, robot: str | Path | RobotConfig, margin: float = 0.02, obstacles: Iterable[Obstacle] = ()
+    ) -> None:
         self.robot = robot if isinstance(robot, RobotConfig) else load_robot(robot)
         self.margin = float(margin)
         self._cid = p.connect(p.DIRECT)
@@ -107,7 +116,7 @@ class SelfCollisionChecker(OwnedClient):
         pairs = [(a, b) for a in self._moving for b in body]
         pairs += list(itertools.combinations(self._moving, 2))
 
-        def near(a, b):  # b is a's parent link
+        def near(a: int, b: int) -> bool:  # b is a's parent link
             return parents[a] == b
 
         pairs = [(a, b) for a, b in pairs if not (near(a, b) or near(b, a))]
@@ -154,7 +163,9 @@ class SelfCollisionChecker(OwnedClient):
                 out[key] = min(out.get(key, pt[8]), pt[8])
         return out
 
-    def collisions(self, q_arm, base_pose=None):
+    def collisions(
+        self, q_arm: ArrayLike, base_pose: Sequence[float] | np.ndarray | None = None
+    ) -> list[tuple[str, str, float]]:
         """The pairs closer than ``margin`` at arm configuration ``q_arm`` [rad] (and, with
         obstacles, base pose ``base_pose`` (x, y, θ) [m, m, rad]).
 

@@ -152,13 +152,13 @@ class SimNode(Node):
         if self.lockstep:
             self.poll.timer_period_ns = int(poll_period(timeout) * 1e9)
 
-    def destroy_node(self):
+    def destroy_node(self) -> None:
         """Destroy the node and close the PyBullet client (also when the node was never spun)."""
         if self.world is not None:
             self.world.close()
         return super().destroy_node()
 
-    def now_s(self):
+    def now_s(self) -> float:
         """This node's clock [s]: the simulated time when it is the time source, else the ROS clock."""
         return self.world.time if self.sim_time_source else self.get_clock().now().nanoseconds * 1e-9
 
@@ -231,7 +231,7 @@ class SimNode(Node):
         self.out.publish_joints(joints)
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     return run_node(SimNode, args)
 
 

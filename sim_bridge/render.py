@@ -11,15 +11,22 @@ Views (camera aimed at the robot base, following its heading θ):
 * ``front`` — from ahead of the robot, nearly level.
 """
 
+from __future__ import annotations
+
 import math
 import struct
 import zlib
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pybullet as p
+from numpy.typing import ArrayLike
 
 from wmm_control.errors import ConfigError
+
+if TYPE_CHECKING:
+    from sim_bridge.world import SimWorld
 
 __all__ = ['VIEWS', 'render_rgb', 'render_png', 'write_png']
 
@@ -35,7 +42,9 @@ _TARGET_UP = 0.55  # target height above the floor [m]
 _FOV = 50.0  # vertical field of view [deg]
 
 
-def render_rgb(world, view='iso', width=640, height=480, distance=_DISTANCE):
+def render_rgb(
+    world: SimWorld, view: str = 'iso', width: int = 640, height: int = 480, distance: float = _DISTANCE
+) -> np.ndarray:
     """Render the world to an RGB image.
 
     Args:
@@ -82,7 +91,7 @@ def render_rgb(world, view='iso', width=640, height=480, distance=_DISTANCE):
     return np.ascontiguousarray(rgba[:, :, :3])
 
 
-def write_png(path, rgb):
+def write_png(path: str | Path, rgb: ArrayLike) -> Path:
     """Write an RGB uint8 image (shape (h, w, 3)) to ``path`` as an 8-bit PNG."""
     rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
@@ -90,7 +99,7 @@ def write_png(path, rgb):
     h, w, _ = rgb.shape
     raw = b''.join(b'\x00' + rgb[r].tobytes() for r in range(h))
 
-    def chunk(tag, data):
+    def chunk(tag: bytes, data: bytes) -> bytes:
         return struct.pack('>I', len(data)) + tag + data + struct.pack('>I', zlib.crc32(tag + data) & 0xFFFFFFFF)
 
     png = (
@@ -104,7 +113,7 @@ def write_png(path, rgb):
     return path
 
 
-def render_png(world, path, view='iso', width=640, height=480):
+def render_png(world: SimWorld, path: str | Path, view: str = 'iso', width: int = 640, height: int = 480) -> Path:
     """Render the world from a named viewpoint and save it as a PNG.
 
     Args:

@@ -24,9 +24,11 @@ same call sequence give bit-identical results.
 """
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.errors import ConfigError
 
@@ -81,7 +83,7 @@ class SlipParams:
             raise ConfigError(f'slip seed must be a non-negative int or None, got {self.seed!r}')
 
     @property
-    def is_zero(self):
+    def is_zero(self) -> bool:
         """True when the model leaves every twist unchanged."""
         return self.gain == 0.0 and not any(self.drift) and not any(self.noise_std)
 
@@ -94,7 +96,7 @@ class SlipModel:
         seed: seed used when ``params.seed`` is ``None`` [-].
     """
 
-    def __init__(self, params=None, seed=0):
+    def __init__(self, params: SlipParams | None = None, seed: int = 0) -> None:
         self.params = params if params is not None else SlipParams()
         if not isinstance(self.params, SlipParams):
             raise ConfigError(f'slip: expected SlipParams or None, got {type(params).__name__}')
@@ -105,11 +107,11 @@ class SlipModel:
         self._off = self.params.is_zero
 
     @property
-    def off(self):
+    def off(self) -> bool:
         """True when the model never changes a twist."""
         return self._off
 
-    def sample(self, rim_speed):
+    def sample(self, rim_speed: float) -> tuple[float, tuple[float, float, float]]:
         """Slip for one period: the factor on the nominal twist and the additive bias.
 
         Draws the noise (one standard-normal triple per call while the wheels turn).
@@ -134,7 +136,7 @@ class SlipModel:
             dx, dy, dw = dx + sx * float(n[0]), dy + sy * float(n[1]), dw + sw * float(n[2])
         return keep, (dx, dy, dw)
 
-    def twist_error(self, nominal, rim_speed):
+    def twist_error(self, nominal: ArrayLike, rim_speed: float) -> tuple[np.ndarray, np.ndarray]:
         """Expected error of the odometry twist and the variance of its random part, one period.
 
         Odometry reports the nominal twist; the true one differs by
@@ -169,17 +171,19 @@ class OdometryCovariance:
     variance is at least :data:`VARIANCE_FLOOR`. It starts at zero: the start pose is known.
     """
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._mean = np.zeros(3)
         self._random = np.zeros((3, 3))
         self.twist = np.full(3, VARIANCE_FLOOR)
 
     @property
-    def pose(self):
+    def pose(self) -> np.ndarray:
         """Mean squared error of (x, y, θ) [m², m², rad² and products]. Shape (3, 3)."""
         return self._random + np.outer(self._mean, self._mean) + VARIANCE_FLOOR * np.eye(3)
 
-    def update(self, theta, twist, error_mean, error_variance, dt):
+    def update(
+        self, theta: float, twist: Iterable[float], error_mean: ArrayLike, error_variance: ArrayLike, dt: float
+    ) -> None:
         """One period at odometry heading ``theta`` [rad] (at its start) and ``twist``, with the
         twist error's mean and variance (:meth:`SlipModel.twist_error`); ``dt`` [s]."""
         vx, vy, _ = (float(v) for v in twist)

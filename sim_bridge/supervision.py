@@ -9,7 +9,7 @@ the steady wall clock for lockstep's waits).
 
 import math
 from collections.abc import Iterable, Mapping
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from sim_bridge.slip import OdometryCovariance
 from sim_bridge.world import SimWorld
@@ -137,8 +137,8 @@ class ObstacleContact:
     and ``deepest_contact_m`` (the deepest penetration so far, >= 0).
     """
 
-    def __init__(self):
-        self.values = {
+    def __init__(self) -> None:
+        self.values: dict[str, Any] = {
             'clearance_m': math.inf,
             'closest_link': '',
             'closest_obstacle': '',

@@ -77,21 +77,25 @@ base's inertial (COM) frame; it is converted to and from ``base_link``.
 """
 
 import math
+from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
 import pybullet as p
+from numpy.typing import ArrayLike
 
 from wmm_control.base.wheel_controller import wheel_kinematics
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.errors import ConfigError
+from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.kinematics.orientation import quaternion_from_yaw, yaw_from_quaternion
-from wmm_control.robot_config import RobotConfig, load_robot
+from wmm_control.robot_config import DifferentialConfig, MecanumConfig, RobotConfig, SteerableConfig, load_robot
 
 from sim_bridge.client import OwnedClient
 from sim_bridge.collision import add_obstacle
-from sim_bridge.slip import SlipModel
+from sim_bridge.slip import SlipModel, SlipParams
 
 __all__ = ['SimWorld', 'CommandResult', 'se2_step', 'BASE_MODES', 'CLAMP_TOLERANCE']
 
@@ -122,7 +126,9 @@ class CommandResult(NamedTuple):
     reason: str
 
 
-def se2_step(pose, twist, dt):
+def se2_step(
+    pose: Sequence[float] | np.ndarray, twist: Sequence[float] | np.ndarray, dt: float
+) -> tuple[float, float, float]:
     """Integrate a base pose over ``dt`` with a body-frame twist held constant (SE(2) exp).
 
     Args:
@@ -188,16 +194,16 @@ class SimWorld(OwnedClient):
 
     def __init__(
         self,
-        robot='steerable',
-        base_mode='kinematic',
-        dt=0.025,
-        substeps=10,
-        slip=None,
-        seed=0,
-        gui=False,
-        start_base_pose=None,
-        start_arm=None,
-        obstacles=(),
+        robot: str | Path | RobotConfig = 'steerable',
+        base_mode: str = 'kinematic',
+        dt: float = 0.025,
+        substeps: int = 10,
+        slip: SlipParams | None = None,
+        seed: int = 0,
+        gui: bool = False,
+        start_base_pose: ArrayLike | None = None,
+        start_arm: ArrayLike | None = None,
+        obstacles: Iterable[Obstacle] = (),
     ):
         self.robot = robot if isinstance(robot, RobotConfig) else load_robot(robot)
         if base_mode not in BASE_MODES:
@@ -225,7 +231,7 @@ class SimWorld(OwnedClient):
 
         cfg = self.robot
         if self._steerable:
-            s = cfg.steerable
+            s: SteerableConfig = cfg.steerable  # type: ignore[assignment]  # not None: self._steerable
             self.command_groups = {
                 'arm': tuple(cfg.arm.joints),
                 'steer': tuple(s.steer_joints),
@@ -233,7 +239,8 @@ class SimWorld(OwnedClient):
             }
             self._r_wheel = s.wheel_radius
         else:
-            wheels = cfg.mecanum or cfg.differential
+            # a wheeled base has one of the two (load_robot checks)
+            wheels: MecanumConfig | DifferentialConfig = cfg.mecanum or cfg.differential  # type: ignore[assignment]
             self.command_groups = {'arm': tuple(cfg.arm.joints), 'wheel': tuple(wheels.wheel_joints)}
             self._r_wheel = wheels.wheel_radius
         self.joint_names = tuple(n for g in self.command_groups.values() for n in g)
@@ -259,8 +266,8 @@ class SimWorld(OwnedClient):
         self._odom_twist = (0.0, 0.0, 0.0)
         self.rim_speed = 0.0  # [m/s] mean absolute rim speed of the last period (kinematic mode)
         self._twist_cache = None
-        self.obstacles = ()
-        self._obstacle_ids = []
+        self.obstacles: tuple[Obstacle, ...] = ()
+        self._obstacle_ids: list[int] = []
 
         self._cid = p.connect(p.GUI if gui else p.DIRECT)
         if self._cid < 0:
@@ -358,15 +365,15 @@ class SimWorld(OwnedClient):
         else:
             self._setup_physics(efforts)
 
-    def set_obstacles(self, obstacles):
+    def set_obstacles(self, obstacles: Iterable[Obstacle]) -> None:
         """Replace the world's obstacles (:class:`~wmm_control.kinematics.obstacles.Obstacle`)."""
         for body in self._obstacle_ids:
             p.removeBody(body, physicsClientId=self._cid)
         self.obstacles = tuple(obstacles)
         self._obstacle_ids = [add_obstacle(o, self._cid) for o in self.obstacles]
-        self._link_names = None
+        self._link_names: dict[int, str] | None = None
 
-    def obstacle_clearance(self, reach=1.0):
+    def obstacle_clearance(self, reach: float = 1.0) -> tuple[float, str, str]:
         """The robot's closest approach to an obstacle, on the simulator's shapes and the true
         pose: ``(distance [m], link, obstacle)``, negative when they overlap; ``(inf, '', '')``
         when no obstacle is within ``reach`` [m]."""
@@ -476,7 +483,7 @@ class SimWorld(OwnedClient):
         self._twist = (c * vx_w + s * vy_w, -s * vx_w + c * vy_w, ang[2])
 
     # ------------------------------------------------------------------ commands
-    def set_command(self, group, values):
+    def set_command(self, group: str, values: ArrayLike) -> CommandResult:
         """Set the velocity command of one group; it holds until replaced.
 
         Args:
@@ -519,7 +526,7 @@ class SimWorld(OwnedClient):
         self._cmd[sl] = arr
         return CommandResult(True, clamped, reason)
 
-    def zero_command(self, group):
+    def zero_command(self, group: str) -> CommandResult:
         """Command zero velocity to every joint of ``group`` (always accepted)."""
         if group not in self.command_groups:
             return CommandResult(False, 0, f'unknown group {group!r}; groups: {sorted(self.command_groups)}')
@@ -527,12 +534,12 @@ class SimWorld(OwnedClient):
         return CommandResult(True, 0, '')
 
     @property
-    def command(self):
+    def command(self) -> np.ndarray:
         """The velocity command in force [rad/s], in :attr:`joint_names` order. Shape (n,)."""
         return self._cmd.copy()
 
     # ------------------------------------------------------------------ stepping
-    def step(self):
+    def step(self) -> None:
         """Advance the world by :attr:`dt` under the commands in force."""
         if self.base_mode == 'kinematic':
             self._step_kinematic()
@@ -664,7 +671,7 @@ class SimWorld(OwnedClient):
             p.applyExternalForce(body, -1, [f * ax, f * ay, 0.0], pc, p.WORLD_FRAME, physicsClientId=cid)
 
     # ------------------------------------------------------------------ state
-    def joint_state(self):
+    def joint_state(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
         """Every simulated movable joint: arm, then steer + drive (A) or wheels (B).
 
         Returns:
@@ -673,28 +680,28 @@ class SimWorld(OwnedClient):
         """
         return self.joint_names, self._q.copy(), self._qd.copy()
 
-    def base_pose(self):
+    def base_pose(self) -> np.ndarray:
         """True base_link pose (x, y, θ) in world [m, m, rad], θ in [−π, π]. Shape (3,)."""
         return np.array([self._pose[0], self._pose[1], _wrap(self._pose[2])])
 
-    def base_twist(self):
+    def base_twist(self) -> np.ndarray:
         """True base twist (vx, vy, ω) in the base frame [m/s, m/s, rad/s]. Shape (3,)."""
         return np.array(self._twist)
 
-    def odom_pose(self):
+    def odom_pose(self) -> np.ndarray:
         """Wheel-odometry pose (x, y, θ) [m, m, rad], θ in [−π, π]; starts at the start pose. Shape (3,)."""
         return np.array([self._odom[0], self._odom[1], _wrap(self._odom[2])])
 
     @property
-    def slip(self):
+    def slip(self) -> SlipModel:
         """The :class:`~sim_bridge.slip.SlipModel` of the kinematic base (off in physics mode)."""
         return self._slip
 
-    def odom_twist(self):
+    def odom_twist(self) -> np.ndarray:
         """Wheel-odometry twist (vx, vy, ω) in the base frame [m/s, m/s, rad/s]. Shape (3,)."""
         return np.array(self._odom_twist)
 
-    def ee_pose(self):
+    def ee_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Ground-truth end-effector pose in world (the ee link frame, not its COM frame).
 
         Returns:
@@ -704,6 +711,6 @@ class SimWorld(OwnedClient):
         return np.array(st[4]), np.array(st[5])
 
     @property
-    def client_id(self):
+    def client_id(self) -> int:
         """The PyBullet physics client id of this world (-1 once closed)."""
         return self._cid

@@ -3,13 +3,14 @@
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.errors import NonFiniteError, ShapeError
 
 __all__ = ['as_vector', 'as_finite_vector', 'Freshness']
 
 
-def as_vector(value, size, name):
+def as_vector(value: ArrayLike, size: int | None, name: str) -> np.ndarray:
     """Return ``value`` as a float64 vector of length ``size`` (any length when None).
 
     Raises:
@@ -25,7 +26,7 @@ def as_vector(value, size, name):
     return arr
 
 
-def as_finite_vector(value, size, name):
+def as_finite_vector(value: ArrayLike, size: int | None, name: str) -> np.ndarray:
     """Like :func:`as_vector`, and also reject NaN and infinity.
 
     Raises:
@@ -46,22 +47,22 @@ class Freshness:
     cannot make stale data look fresh.
     """
 
-    def __init__(self, timeout):
+    def __init__(self, timeout: float) -> None:
         self.timeout = float(timeout)
-        self._last = None
+        self._last: float | None = None
 
-    def mark(self, now):
+    def mark(self, now: float) -> None:
         """Record a receipt at time ``now`` [s]."""
         self._last = now
 
-    def reset(self):
+    def reset(self) -> None:
         self._last = None
 
-    def age(self, now):
+    def age(self, now: float) -> float:
         """Seconds since the last receipt; infinity before the first one."""
         return math.inf if self._last is None else now - self._last
 
-    def fresh(self, now):
+    def fresh(self, now: float) -> bool:
         """True when a message arrived within the timeout (and the clock did not jump back)."""
         age = self.age(now)
         return 0.0 <= age <= self.timeout

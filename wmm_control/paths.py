@@ -24,7 +24,7 @@ def _candidates():
     yield _SOURCE_ROOT.parent.parent.parent / 'share' / PACKAGE
 
 
-def share_dir():
+def share_dir() -> Path:
     """Return the directory that holds ``config/`` for this package.
 
     The source tree is used when it has a ``config`` folder (a checkout or an
@@ -38,6 +38,6 @@ def share_dir():
     return _SOURCE_ROOT
 
 
-def config_path(*parts):
+def config_path(*parts: str) -> Path:
     """Path of a file under ``config/``, e.g. ``config_path('robots', 'steerable.yaml')``."""
     return share_dir().joinpath('config', *parts)

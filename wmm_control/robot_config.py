@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -323,7 +324,7 @@ def _parse_arm(raw, tree, where_top):
     if arm.get('joints') is not None and tuple(arm.get('joints')) != names:
         raise ConfigError(f'{w}.joints: {arm.get("joints")!r} is not the URDF chain {root!r} → {tool!r}: {list(names)}')
 
-    def urdf_limit(attr):
+    def urdf_limit(attr: str) -> np.ndarray | None:
         vals = [getattr(j, attr) for j in chain]
         return None if any(v is None for v in vals) else np.array(vals, dtype=float)
 
@@ -509,7 +510,7 @@ def _check_unique(cfg):
         seen.add(name)
 
 
-def read_yaml(path, what):
+def read_yaml(path: Path, what: str) -> Any:
     """The document of the YAML file ``path``.
 
     Raises:
@@ -524,7 +525,7 @@ def read_yaml(path, what):
         raise ConfigError(f'{path}: not valid YAML: {str(exc).splitlines()[0] if str(exc) else exc}') from exc
 
 
-def read_yaml_section(path, key, what):
+def read_yaml_section(path: Path, key: str, what: str) -> dict:
     """The mapping under top-level ``key`` of the YAML file ``path``.
 
     Raises:
@@ -538,12 +539,12 @@ def read_yaml_section(path, key, what):
     return raw
 
 
-def robot_names():
+def robot_names() -> list[str]:
     """The robots shipped in ``config/robots`` (YAML stems), sorted."""
     return sorted(p.stem for p in config_path('robots').glob('*.yaml'))
 
 
-def resolve_robot_yaml(robot):
+def resolve_robot_yaml(robot: str | Path) -> Path:
     """Map a robot name, alias (A/B) or YAML path to the YAML file path."""
     key = str(robot).strip()
     name = ALIASES.get(key.lower(), key.lower())
@@ -557,7 +558,7 @@ def resolve_robot_yaml(robot):
     )
 
 
-def load_robot(robot='steerable'):
+def load_robot(robot: str | Path | RobotConfig = 'steerable') -> RobotConfig:
     """Load and validate a robot description.
 
     Args:

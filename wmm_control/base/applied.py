@@ -2,11 +2,12 @@
 from its own last command (ROS-free; the base controller nodes call it on each joint state)."""
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ['unapplied_command']
 
 
-def unapplied_command(measured, commanded, tolerance):
+def unapplied_command(measured: ArrayLike | None, commanded: ArrayLike | None, tolerance: float) -> str:
     """'' when a joint state's rates are the last command's, else why not.
 
     A joint state reports the rates the actuator applied over the period it closes: those of

@@ -18,16 +18,18 @@ The adapters only translate: the numbers are those of the wrapped controller, wh
 available as ``controller``. :func:`make_base_controller` builds the one of a robot.
 """
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, Self, runtime_checkable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.base.swmr_controller import SwmrController, SwmrParams
 from wmm_control.base.wheel_controller import WheelController
 from wmm_control.errors import ConfigError
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['BaseCommand', 'BaseController', 'SteerableBase', 'WheelBase', 'make_base_controller']
 
@@ -108,22 +110,23 @@ class SteerableBase:
     required_groups = ('steer',)
     resync_from_rates = False
 
-    def __init__(self, controller: SwmrController, steer_joints, drive_joints):
+    def __init__(self, controller: SwmrController, steer_joints: Iterable[str], drive_joints: Iterable[str]) -> None:
         self.controller = controller
-        self.command_groups = {'steer': tuple(steer_joints), 'drive': tuple(drive_joints)}
+        self.command_groups: Mapping[str, tuple] = {'steer': tuple(steer_joints), 'drive': tuple(drive_joints)}
         p = controller.params
-        self.rate_limits = {'steer': p.steer_rate_limit, 'drive': p.drive_rate_limit}
+        self.rate_limits: Mapping[str, Any] = {'steer': p.steer_rate_limit, 'drive': p.drive_rate_limit}
         self.velocity_limit = np.array(p.base_velocity_limit, dtype=float)
 
     @classmethod
-    def from_robot_config(cls, robot, dt, **overrides):
+    def from_robot_config(cls, robot: RobotConfig, dt: float, **overrides: Any) -> Self:
         """Geometry, joints and limits from a steerable robot; ``overrides``: :class:`SwmrParams`
         fields (``kp``, ``icr_gain``, ...)."""
         params = SwmrParams.from_robot_config(robot, dt=dt, **overrides)
         s = robot.steerable
-        return cls(SwmrController(SteerableGeometry.from_config(s), params), s.steer_joints, s.drive_joints)
+        # not None: SwmrParams.from_robot_config has raised for a robot without a steerable section
+        return cls(SwmrController(SteerableGeometry.from_config(s), params), s.steer_joints, s.drive_joints)  # type: ignore[union-attr]
 
-    def reset(self, positions=None, rates=None):
+    def reset(self, positions: Groups | None = None, rates: Groups | None = None) -> None:
         c = self.controller
         beta = c.beta if positions is None else positions['steer']
         if rates is None:
@@ -131,7 +134,7 @@ class SteerableBase:
         else:
             c.restart(beta, rates['steer'], rates['drive'])
 
-    def step(self, reference, positions=None):
+    def step(self, reference: ArrayLike | None, positions: Groups | None = None) -> BaseCommand:
         beta = None if positions is None else positions['steer']
         if reference is None:
             out = self.controller.step(np.zeros(3), beta_meas=beta, brake=True)
@@ -139,7 +142,7 @@ class SteerableBase:
             out = self.controller.step(reference, beta_meas=beta)
         return BaseCommand({'steer': out.beta_dot_ref, 'drive': out.phi_dot_ref}, out.twist_executed, out.status, out)
 
-    def diagnostic_values(self, command):
+    def diagnostic_values(self, command: BaseCommand) -> dict:
         out = command.detail
         return {
             'route': out.route,
@@ -151,7 +154,7 @@ class SteerableBase:
             'beta_ref': out.beta_ref,
         }
 
-    def describe(self):
+    def describe(self) -> str:
         p = self.controller.params
         return (
             f'{self.controller.geometry.n_wheels} modules, t_s {p.dt} s, β̇ ≤ {p.steer_rate_limit} rad/s, '
@@ -170,30 +173,31 @@ class WheelBase:
     required_groups = ('wheel',)
     resync_from_rates = True
 
-    def __init__(self, controller: WheelController, wheel_joints, family='mecanum'):
+    def __init__(self, controller: WheelController, wheel_joints: Iterable[str], family: str = 'mecanum') -> None:
         self.controller = controller
         self.family = family
-        self.command_groups = {'wheel': tuple(wheel_joints)}
-        self.rate_limits = {'wheel': controller.params.wheel_rate_limit}
+        self.command_groups: Mapping[str, tuple] = {'wheel': tuple(wheel_joints)}
+        self.rate_limits: Mapping[str, Any] = {'wheel': controller.params.wheel_rate_limit}
         self.velocity_limit = np.array(controller.params.velocity_limit, dtype=float)
 
     @classmethod
-    def from_robot_config(cls, robot, dt):
+    def from_robot_config(cls, robot: RobotConfig, dt: float) -> Self:
         """Wheel map, joints and limits from a Mecanum or differential robot."""
         wheels = robot.mecanum or robot.differential
-        return cls(WheelController.from_robot_config(robot, dt), wheels.wheel_joints, robot.base_type)
+        # not None: WheelController.from_robot_config has raised for a base of another family
+        return cls(WheelController.from_robot_config(robot, dt), wheels.wheel_joints, robot.base_type)  # type: ignore[union-attr]
 
-    def reset(self, positions=None, rates=None):
+    def reset(self, positions: Groups | None = None, rates: Groups | None = None) -> None:
         if rates is None:
             self.controller.reset()
         else:
             self.controller.restart(rates['wheel'])
 
-    def step(self, reference, positions=None):
+    def step(self, reference: ArrayLike | None, positions: Groups | None = None) -> BaseCommand:
         out = self.controller.stop() if reference is None else self.controller.step(reference)
         return BaseCommand({'wheel': out.wheel_rates}, out.twist, out.status, out)
 
-    def diagnostic_values(self, command):
+    def diagnostic_values(self, command: BaseCommand) -> dict:
         out = command.detail
         return {
             'velocity_scale': out.velocity_scale,
@@ -204,7 +208,7 @@ class WheelBase:
             'wheel_rate_ratio': float(np.max(np.abs(out.wheel_rates))) / self.controller.params.wheel_rate_limit,
         }
 
-    def describe(self):
+    def describe(self) -> str:
         p = self.controller.params
         return (
             f't_s {p.dt} s, |v| ≤ {list(p.velocity_limit)}, |a| ≤ {list(p.accel_limit)}, '
@@ -212,7 +216,7 @@ class WheelBase:
         )
 
 
-def make_base_controller(robot, dt, **overrides):
+def make_base_controller(robot: RobotConfig, dt: float, **overrides: Any) -> SteerableBase | WheelBase:
     """The base controller of ``robot`` (a :class:`~wmm_control.robot_config.RobotConfig`) with
     period ``dt`` [s]: :class:`SteerableBase` or :class:`WheelBase`.
 

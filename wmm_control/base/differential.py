@@ -11,11 +11,14 @@ implies a sideways velocity.
 """
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar, Self
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
+from wmm_control.robot_config import DifferentialConfig
 
 __all__ = ['DifferentialKinematics']
 
@@ -32,6 +35,10 @@ class DifferentialKinematics:
     wheel_radius: float
     track: float
 
+    if TYPE_CHECKING:  # set by __post_init__; not dataclass fields
+        _jv: ClassVar[np.ndarray]
+        _jv_pinv: ClassVar[np.ndarray]
+
     def __post_init__(self):
         for name in ('wheel_radius', 'track'):
             val = getattr(self, name)
@@ -43,19 +50,19 @@ class DifferentialKinematics:
         object.__setattr__(self, '_jv_pinv', np.linalg.pinv(jv))
 
     @classmethod
-    def from_config(cls, differential_config):
+    def from_config(cls, differential_config: DifferentialConfig) -> Self:
         """Build from a :class:`wmm_control.robot_config.DifferentialConfig`."""
         return cls(differential_config.wheel_radius, differential_config.track)
 
     @property
-    def jv(self):
+    def jv(self) -> np.ndarray:
         """The map wheel rates (left, right) → twist (vx, vy, ω). Shape (3, 2)."""
         return self._jv.copy()
 
-    def twist_from_wheels(self, wheel_rates):
+    def twist_from_wheels(self, wheel_rates: ArrayLike) -> np.ndarray:
         """Base-frame twist (vx, 0, ω) from the wheel rates (left, right) [rad/s]. Shape (3,)."""
         return self._jv @ as_finite_vector(wheel_rates, 2, 'wheel_rates')
 
-    def wheel_rates(self, twist):
+    def wheel_rates(self, twist: ArrayLike) -> np.ndarray:
         """Wheel rates (left, right) [rad/s] of the (vx, ω) part of a twist; vy is dropped. Shape (2,)."""
         return self._jv_pinv @ as_finite_vector(twist, 3, 'twist')

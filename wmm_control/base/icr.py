@@ -31,8 +31,10 @@ gives every wheel's rows at once in the chart of :func:`tangent_basis`.
 
 import math
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError, NonFiniteError
@@ -58,7 +60,11 @@ DEFAULT_ICR_SCALE = 1.0
 _TINY = 1e-12
 
 
-def wrap_half_turn(angle):
+@overload
+def wrap_half_turn(angle: float) -> float: ...
+@overload
+def wrap_half_turn(angle: ArrayLike) -> np.ndarray: ...
+def wrap_half_turn(angle: ArrayLike) -> float | np.ndarray:
     """Wrap angles to [−π/2, π/2) [rad]: the difference to the nearest twin (β or β + π).
 
     A float gives a float, anything else an array.
@@ -68,7 +74,7 @@ def wrap_half_turn(angle):
     return (angle + math.pi / 2) % math.pi - math.pi / 2
 
 
-def tangent_basis(z):
+def tangent_basis(z: ArrayLike) -> np.ndarray:
     """Orthonormal basis E = [e1 e2] of the plane tangent to the unit sphere at ``z``.
 
     The chart ``z_c + E x`` (x ∈ R²) of the ICR QP: e1 is the coordinate axis least aligned

@@ -11,11 +11,14 @@ and the world-frame rate of (x, y, θ) is ``J_I(θ) J_V ω_w`` (eq 16, ``P = J_I
 """
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar, Self
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
+from wmm_control.robot_config import MecanumConfig
 
 __all__ = ['MecanumKinematics']
 
@@ -33,6 +36,10 @@ class MecanumKinematics:
     wheel_radius: float
     d1: float
     d2: float
+
+    if TYPE_CHECKING:  # set by __post_init__; not dataclass fields
+        _jv: ClassVar[np.ndarray]
+        _jv_pinv: ClassVar[np.ndarray]
 
     def __post_init__(self):
         for name in ('wheel_radius', 'd1', 'd2'):
@@ -56,26 +63,26 @@ class MecanumKinematics:
         object.__setattr__(self, '_jv_pinv', np.linalg.pinv(jv))
 
     @classmethod
-    def from_config(cls, mecanum_config):
+    def from_config(cls, mecanum_config: MecanumConfig) -> Self:
         """Build from a :class:`wmm_control.robot_config.MecanumConfig`."""
         return cls(mecanum_config.wheel_radius, mecanum_config.d1, mecanum_config.d2)
 
     @property
-    def jv(self):
+    def jv(self) -> np.ndarray:
         """J_V. Shape (3, 4)."""
         return self._jv.copy()
 
-    def twist_from_wheels(self, wheel_rates):
+    def twist_from_wheels(self, wheel_rates: ArrayLike) -> np.ndarray:
         """Base-frame twist (vx, vy, ω) from wheel rates [rad/s]. Shape (3,)."""
         return self._jv @ as_finite_vector(wheel_rates, 4, 'wheel_rates')
 
-    def world_rates(self, theta, wheel_rates):
+    def world_rates(self, theta: float, wheel_rates: ArrayLike) -> np.ndarray:
         """World-frame (ẋ, ẏ, θ̇) = J_I(θ) J_V ω_w (eq 16). Shape (3,)."""
         c, s = np.cos(theta), np.sin(theta)
         vx, vy, w = self.twist_from_wheels(wheel_rates)
         return np.array([c * vx - s * vy, s * vx + c * vy, w])
 
-    def wheel_rates(self, twist):
+    def wheel_rates(self, twist: ArrayLike) -> np.ndarray:
         """Wheel rates [rad/s] that realise a base-frame twist exactly. Shape (4,).
 
         The inverse is ``(1/R) [[1, -1, -k], [1, 1, k], [1, 1, -k], [1, -1, k]] ξ̇``, the

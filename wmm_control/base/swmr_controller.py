@@ -68,7 +68,7 @@ Every per-wheel quantity is a numpy array over the N modules; the state (β, β�
 import math
 import time
 from dataclasses import dataclass, field, fields
-from typing import NamedTuple
+from typing import Any, NamedTuple, Self
 
 import numpy as np
 import osqp
@@ -88,6 +88,7 @@ from wmm_control.base.icr import (
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError, ShapeError
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['SwmrParams', 'SwmrOutput', 'IcrQp', 'QpResult', 'OsqpIcrSolver', 'SwmrController']
 
@@ -198,7 +199,7 @@ class SwmrParams:
             raise ConfigError(f'SwmrParams.max_icr_step must be < pi/2, got {self.max_icr_step}')
 
     @classmethod
-    def from_robot_config(cls, robot, **overrides):
+    def from_robot_config(cls, robot: RobotConfig, **overrides: Any) -> Self:
         """Limits from a :class:`RobotConfig` of a steerable robot; other fields from ``overrides``.
 
         Raises:

@@ -26,18 +26,21 @@ within ``max_i |v_i| / a_i + dt``.
 
 import math
 from dataclasses import dataclass
+from typing import Self
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.base.differential import DifferentialKinematics
 from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['WheelParams', 'WheelOutput', 'WheelController', 'wheel_kinematics']
 
 
-def wheel_kinematics(robot):
+def wheel_kinematics(robot: RobotConfig) -> MecanumKinematics | DifferentialKinematics:
     """The wheel map of a Mecanum or differential robot description.
 
     Raises:
@@ -100,7 +103,7 @@ class WheelParams:
             object.__setattr__(self, name, _limit_vector(getattr(self, name), 3, name))
 
     @classmethod
-    def from_robot_config(cls, robot, dt):
+    def from_robot_config(cls, robot: RobotConfig, dt: float) -> Self:
         """Limits from a :class:`~wmm_control.robot_config.RobotConfig` of a Mecanum or differential robot.
 
         Raises:
@@ -112,10 +115,11 @@ class WheelParams:
                 f'robot {getattr(robot, "name", robot)!r} has a {getattr(robot, "base_type", "?")} '
                 'base: this controller drives Mecanum and differential bases'
             )
+        # __post_init__ turns the limit arrays into tuples
         return cls(
             dt=dt,
-            velocity_limit=robot.base.velocity,
-            accel_limit=robot.base.acceleration,
+            velocity_limit=robot.base.velocity,  # type: ignore[arg-type]
+            accel_limit=robot.base.acceleration,  # type: ignore[arg-type]
             wheel_rate_limit=wheels.wheel_rate_limit,
         )
 
@@ -153,7 +157,7 @@ class WheelController:
         params: :class:`WheelParams`.
     """
 
-    def __init__(self, kinematics, params):
+    def __init__(self, kinematics: MecanumKinematics | DifferentialKinematics, params: WheelParams) -> None:
         self.kinematics = kinematics
         self.params = params
         jv = kinematics.jv
@@ -174,16 +178,16 @@ class WheelController:
         self._twist = np.zeros(3)
 
     @classmethod
-    def from_robot_config(cls, robot, dt):
+    def from_robot_config(cls, robot: RobotConfig, dt: float) -> Self:
         """Geometry and limits from a robot description (``config/robots/<robot>.yaml``)."""
         return cls(wheel_kinematics(robot), WheelParams.from_robot_config(robot, dt))
 
     @property
-    def twist(self):
+    def twist(self) -> np.ndarray:
         """The commanded twist (vx, vy, ω) [m/s, m/s, rad/s]. Shape (3,)."""
         return self._twist.copy()
 
-    def reset(self, twist=None):
+    def reset(self, twist: ArrayLike | None = None) -> None:
         """Set the commanded twist (default rest); one beyond the limits is scaled into them.
 
         Raises:
@@ -191,12 +195,12 @@ class WheelController:
         """
         self._twist = np.zeros(3) if twist is None else self.bound(twist)[0]
 
-    def restart(self, wheel_rates):
+    def restart(self, wheel_rates: ArrayLike) -> None:
         """Go on from the measured wheel rates [rad/s] (the last command was not applied as sent):
         the twist they make, scaled into the limits."""
         self.reset(self.kinematics.twist_from_wheels(wheel_rates))
 
-    def bound(self, reference):
+    def bound(self, reference: ArrayLike) -> tuple[np.ndarray, float]:
         """Scale ``reference`` uniformly into the velocity and wheel rate limits.
 
         Args:
@@ -225,7 +229,7 @@ class WheelController:
             return ref, 1.0
         return unit * room, room / peak
 
-    def followable(self, reference):
+    def followable(self, reference: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """``(followed, dropped)``: the part of ``reference`` the wheels can make and the rest.
 
         Raises:
@@ -238,7 +242,7 @@ class WheelController:
         followed = peak * (self._followable @ (ref / peak))  # no overflow for any finite size
         return followed, ref - followed
 
-    def step(self, reference):
+    def step(self, reference: ArrayLike) -> WheelOutput:
         """One control period towards ``reference``.
 
         Args:
@@ -254,7 +258,7 @@ class WheelController:
         bounded, scale = self.bound(followed)
         return self._advance(bounded, scale, 'limited' if scale < 1.0 else 'tracking', dropped)
 
-    def stop(self):
+    def stop(self) -> WheelOutput:
         """One period of braking to rest at the acceleration limits (stale or no reference)."""
         return self._advance(np.zeros(3), 1.0, 'braking', np.zeros(3))
 

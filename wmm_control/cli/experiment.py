@@ -29,8 +29,10 @@ import resource
 import shutil
 import sys
 import time
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -44,12 +46,13 @@ from wmm_control.experiments.report import write_report
 from wmm_control.experiments.metrics import (
     METRIC_KEYS,
     TRAJECTORY_METRIC_KEYS,
+    RunLog,
     goal_metrics,
     run_limit_report,
     trajectory_metrics,
 )
 from wmm_control.experiments.ros_run import private_domain_id, run_with_nodes
-from wmm_control.experiments.scenario import load_scenario, resolver_parameters
+from wmm_control.experiments.scenario import Scenario, load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers import TaskSharingParams, make_resolver
 
@@ -107,7 +110,7 @@ def _run_direct(scenario, run, progress):
         )
 
 
-def bag_path(out, run_name):
+def bag_path(out: str | Path, run_name: str) -> Path:
     """The rosbag2 folder of run ``run_name`` in the output folder ``out``."""
     return Path(out) / f'rosbag2_{run_name}'
 
@@ -164,7 +167,15 @@ def _selected(scenario, runs):
     return selected
 
 
-def run_experiment(scenario, runs=None, engine='nodes', show_progress=True, bag_dir=None, view_port=None, jobs=1):
+def run_experiment(
+    scenario: Scenario,
+    runs: Iterable[str] | None = None,
+    engine: str = 'nodes',
+    show_progress: bool = True,
+    bag_dir: str | Path | None = None,
+    view_port: int | None = None,
+    jobs: int = 1,
+) -> tuple[dict[str, RunLog], dict]:
     """Simulate the runs of ``scenario``, ``jobs`` at once (separate processes; 1: in this
     process); with ``bag_dir`` (engine ``nodes``), each run is recorded there as a rosbag2
     (MCAP) of all its topics, :func:`bag_path`.
@@ -199,7 +210,13 @@ def _jobs_of(scenario, selected, engine, bag_dir, view_port, progress, workers, 
     ]
 
 
-def summarize_runs(scenario, selected, logs, engine='nodes', bag_dir=None):
+def summarize_runs(
+    scenario: Scenario,
+    selected: Iterable[Mapping[str, Any]],
+    logs: Mapping[str, RunLog],
+    engine: str = 'nodes',
+    bag_dir: str | Path | None = None,
+) -> dict:
     """The ``metrics.json`` content of the runs ``selected`` of ``scenario``, simulated into
     ``logs`` (run name -> RunLog)."""
     model = KinematicModel(scenario.robot)
@@ -264,7 +281,7 @@ def _f(value, fmt):
     return '—' if value is None else format(value, fmt)
 
 
-def format_tracking_table(summary):
+def format_tracking_table(summary: Mapping[str, Any]) -> str:
     """Xing et al. Tables 2–3 style: commanded base velocity RMS and active time, end-effector errors."""
     head = (
         f'{"run":<34}{"base RMS vx, vy [cm/s], ω [°/s]":>32}{"base active [s]":>17}{"max err x, y, xy [mm]":>24}'
@@ -288,7 +305,7 @@ def format_tracking_table(summary):
     return '\n'.join(lines)
 
 
-def format_matrix(summaries):
+def format_matrix(summaries: Iterable[Mapping[str, Any]]) -> str:
     """One table over scenarios of trajectories: per robot and method, base active time and RMS,
     largest end-effector error, joint-limit margin, resolver cycle time."""
     head = (
@@ -308,7 +325,7 @@ def format_matrix(summaries):
     return '\n'.join(lines)
 
 
-def format_table(summary):
+def format_table(summary: Mapping[str, Any]) -> str:
     """A plain-text table of the summary: per run and goal, area, final errors, entry time, footprint."""
     if any('tracking' in run for run in summary['runs'].values()):
         return format_tracking_table(summary)
@@ -440,7 +457,7 @@ def _run_all(plans, args):
     return summaries
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='wmm_experiment', description=__doc__.split('\n\n')[0])
     parser.add_argument(
         'name',

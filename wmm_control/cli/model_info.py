@@ -78,7 +78,7 @@ def describe(model, base_pose, q_arm):
     return '\n'.join(lines)
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='wmm_model', description=__doc__.splitlines()[0])
     parser.add_argument('--robot', default='steerable', help='a robot name, A | B, or a path to a robot YAML')
     parser.add_argument('--arm', type=float, nargs='+', metavar='Q', help='arm joints [rad] (default: start state)')

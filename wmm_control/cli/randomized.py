@@ -28,7 +28,9 @@ import argparse
 import json
 import os
 import sys
+from collections.abc import Mapping
 from functools import partial
+from typing import Any
 
 from wmm_control.errors import WmmError
 from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
@@ -42,7 +44,7 @@ def _f(value, fmt):
     return '—' if value is None else format(value, fmt)
 
 
-def format_summary(table):
+def format_summary(table: Mapping[tuple[str, str], Mapping[str, Any]]) -> str:
     """The summary of :func:`~wmm_control.experiments.randomized.summarize` as a Markdown table."""
     lines = [
         '| robot | method | runs | converged | reported | failed | worst error [mm / rad] '
@@ -129,7 +131,7 @@ def _resumed(path, header):
     return earlier['runs']
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='wmm_randomized', description=__doc__.split('\n\n')[0])
     parser.add_argument('--goals', type=int, default=100, help='goals per robot (default: %(default)s)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the draw (default: %(default)s)')

@@ -35,6 +35,7 @@ import argparse
 import math
 import os
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +46,7 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers import METHODS
 from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, load_robot
-from wmm_control.urdf import UrdfTree
+from wmm_control.urdf import UrdfJoint, UrdfTree
 
 __all__ = ['main', 'init_robot', 'detect_wheels']
 
@@ -60,7 +61,7 @@ def _axis_is(joint, k):
     return abs(abs(axis[k]) - 1.0) < 1e-6
 
 
-def detect_wheels(tree, family, base_link, arm_joints):
+def detect_wheels(tree: UrdfTree, family: str, base_link: str, arm_joints: Iterable[str]) -> dict[str, list[str]]:
     """Wheel-side joints of ``family`` found by the conventions above.
 
     Returns:
@@ -76,7 +77,7 @@ def detect_wheels(tree, family, base_link, arm_joints):
         if j.name not in arm and j.type in ('continuous', 'revolute') and j.mimic is None
     ]
 
-    def position(joint):
+    def position(joint: UrdfJoint) -> np.ndarray:
         return tree.placement(joint.child, base_link)[1]
 
     if family == 'steerable':
@@ -300,7 +301,7 @@ def _check(path):
     return describe(model, cfg.start.base_pose, cfg.start.arm)
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='wmm_robot', description='Set up a robot from its URDF; check a robot YAML.')
     sub = parser.add_subparsers(dest='command', required=True)
     ini = sub.add_parser('init', help='write a robot YAML from a URDF')

@@ -3,15 +3,27 @@ on a :class:`~sim_bridge.world.SimWorld`, no ROS in between, logged as a
 :class:`~wmm_control.experiments.metrics.RunLog`."""
 
 import time
+from collections.abc import Callable
 
 from sim_bridge.closed_loop import ClosedLoop
+from sim_bridge.world import SimWorld
 from wmm_control.experiments.metrics import RunLog
+from wmm_control.experiments.scenario import Scenario
 from wmm_control.kinematics import KinematicModel
+from wmm_control.resolvers.interface import Resolver, ResolverDiagnostics
 
 __all__ = ['run_scenario']
 
 
-def run_scenario(world, resolver, scenario, feedback='ground_truth', label='', progress=None, until=None):
+def run_scenario(
+    world: SimWorld,
+    resolver: Resolver,
+    scenario: Scenario,
+    feedback: str = 'ground_truth',
+    label: str = '',
+    progress: Callable[[int], object] | None = None,
+    until: Callable[[ResolverDiagnostics], bool] | None = None,
+) -> RunLog:
     """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
 
     Args:

@@ -13,7 +13,11 @@ The ``*_figure`` functions return the open matplotlib Figure (the caller closes 
 ``plot_*`` functions save it as a PNG, close it and return the path.
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 import numpy as np
@@ -21,7 +25,13 @@ import pinocchio as pin
 
 from sim_bridge.render import render_rgb, write_png
 from sim_bridge.world import SimWorld
-from wmm_control.experiments.metrics import pose_error_norm
+from wmm_control.experiments.metrics import RunLog, pose_error_norm
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from wmm_control.experiments.scenario import Scenario
+    from wmm_control.kinematics import KinematicModel
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
@@ -56,7 +66,7 @@ _ERROR_LABEL = '‖e_p‖ [m, rad]'
 _TIME_LABEL = 'time [s]'
 
 
-def error_norm(log, scenario):
+def error_norm(log: RunLog, scenario: Scenario) -> np.ndarray:
     """‖e_p‖ (Sorour eq 12) of every row against the goal in force at that row.
 
     Args:
@@ -129,7 +139,9 @@ def _run_title(label, log):
     return f'{label} ({log.method})' if log.method and log.method != label else label
 
 
-def error_norm_figure(logs, metrics, scenario):
+def error_norm_figure(
+    logs: Mapping[str, RunLog], metrics: Mapping[str, Sequence[Mapping[str, Any]]], scenario: Scenario
+) -> Figure:
     """Sorour Fig 6: one panel per run, ‖e_p‖ vs time [s], each goal's area above its window.
 
     Args:
@@ -167,7 +179,9 @@ def _default_labels(logs):
     return shared or list(logs)
 
 
-def zoom_psi_figure(logs, scenario, labels=None, ylim=0.05):
+def zoom_psi_figure(
+    logs: Mapping[str, RunLog], scenario: Scenario, labels: Iterable[str] | None = None, ylim: float = 0.05
+) -> Figure:
     """Sorour Fig 7: ‖e_p‖ zoomed to ``ylim`` per run, then ψ [-] of the runs, vs time [s].
 
     Args:
@@ -261,7 +275,7 @@ def _top_view_panel(ax, label, log, scenario, model):
     ax.grid(alpha=0.3)
 
 
-def top_view_figure(logs, scenario, model):
+def top_view_figure(logs: Mapping[str, RunLog], scenario: Scenario, model: KinematicModel) -> Figure:
     """Top view (x-y [m], equal aspect) of each run: base and end-effector paths, goals, and
     the footprint (base rectangle :data:`BASE_SIZE`, arm polyline; lighter with time) every
     :data:`FOOTPRINT_PERIOD_S` of goal 1. Titles give the largest arm footprint: the largest
@@ -294,12 +308,21 @@ def _save(fig, path):
     return path
 
 
-def plot_error_norms(logs, metrics, scenario, path):
+def plot_error_norms(
+    logs: Mapping[str, RunLog], metrics: Mapping[str, Sequence[Mapping[str, Any]]], scenario: Scenario, path: str | Path
+) -> Path:
     """Write :func:`error_norm_figure` (Sorour Fig 6) to the PNG ``path``; returns the path."""
     return _save(error_norm_figure(logs, metrics, scenario), path)
 
 
-def plot_zoom_and_psi(logs, metrics, scenario, path, labels=None, ylim=0.05):
+def plot_zoom_and_psi(
+    logs: Mapping[str, RunLog],
+    metrics: object,
+    scenario: Scenario,
+    path: str | Path,
+    labels: Iterable[str] | None = None,
+    ylim: float = 0.05,
+) -> Path:
     """Write :func:`zoom_psi_figure` (Sorour Fig 7) to the PNG ``path``; returns the path.
 
     ``metrics`` is accepted for a signature like :func:`plot_error_norms`; the figure does
@@ -308,12 +331,14 @@ def plot_zoom_and_psi(logs, metrics, scenario, path, labels=None, ylim=0.05):
     return _save(zoom_psi_figure(logs, scenario, labels=labels, ylim=ylim), path)
 
 
-def plot_top_view(logs, scenario, model, path):
+def plot_top_view(logs: Mapping[str, RunLog], scenario: Scenario, model: KinematicModel, path: str | Path) -> Path:
     """Write :func:`top_view_figure` (the point of Sorour Fig 5) to the PNG ``path``; returns the path."""
     return _save(top_view_figure(logs, scenario, model), path)
 
 
-def render_goal_pictures(logs, scenario, out_dir, label, view='iso'):
+def render_goal_pictures(
+    logs: Mapping[str, RunLog], scenario: Scenario, out_dir: str | Path, label: str, view: str = 'iso'
+) -> list[Path]:
     """Render run ``label`` at the last row of each goal window with PyBullet's TinyRenderer.
 
     Writes ``goal_<i>.png`` (i = 1.., :data:`PICTURE_SIZE` px) for each goal the run reached
@@ -353,7 +378,15 @@ def render_goal_pictures(logs, scenario, out_dir, label, view='iso'):
     return paths + [_save(fig, out_dir / f'goals_{label}.png')]
 
 
-def write_figures(logs, metrics, scenario, model, out_dir, render_label=None, zoom_labels=None):
+def write_figures(
+    logs: Mapping[str, RunLog],
+    metrics: Mapping[str, Sequence[Mapping[str, Any]]],
+    scenario: Scenario,
+    model: KinematicModel,
+    out_dir: str | Path,
+    render_label: str | None = None,
+    zoom_labels: Iterable[str] | None = None,
+) -> list[Path]:
     """Write ``fig6_error_norm.png``, ``fig7_zoom_psi.png``, ``top_view.png`` into ``out_dir``
     (created), plus :func:`render_goal_pictures` of ``render_label`` when given.
 
@@ -411,7 +444,9 @@ def tracking_figure(logs, scenario, model):
     return fig
 
 
-def write_tracking_figures(logs, scenario, model, out_dir):
+def write_tracking_figures(
+    logs: Mapping[str, RunLog], scenario: Scenario, model: KinematicModel, out_dir: str | Path
+) -> list[Path]:
     """Write ``tracking.png`` (:func:`tracking_figure`) into ``out_dir``; returns the paths."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

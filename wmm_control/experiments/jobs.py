@@ -8,17 +8,19 @@ after the other in this process, whatever the number of workers.
 import argparse
 import multiprocessing
 import os
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
+from typing import Any
 
 __all__ = ['run_jobs', 'default_jobs', 'jobs_argument']
 
 
-def default_jobs():
+def default_jobs() -> int:
     """Worker processes by default: one per core."""
     return os.cpu_count() or 1
 
 
-def jobs_argument(text):
+def jobs_argument(text: str) -> int:
     """The ``--jobs`` argument (an ``argparse`` type): a positive integer."""
     try:
         value = int(text)
@@ -29,7 +31,7 @@ def jobs_argument(text):
     return value
 
 
-def run_jobs(fn, jobs, workers):
+def run_jobs(fn: Callable[[Any], Any], jobs: Iterable[Any], workers: int) -> Iterator[Any]:
     """Yield ``fn(job)`` for every job of ``jobs``, in their order.
 
     With ``workers`` 1 (or a single job) each runs in this process when its result is asked

@@ -6,10 +6,22 @@ ROS-free :class:`~sim_bridge.closed_loop.ClosedLoop` and the ROS experiment runn
 :func:`goal_metrics` turns it into the numbers of Sorour Figs 5–7 (``metrics.json``).
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any, Self
+
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from wmm_control.kinematics.orientation import rpy_from_matrix, wrap_angle
+
+if TYPE_CHECKING:
+    from wmm_control.experiments.scenario import Scenario
+    from wmm_control.kinematics import KinematicModel
+    from wmm_control.resolvers.interface import ResolverDiagnostics
+    from wmm_control.robot_config import RobotConfig
 
 __all__ = [
     'RunLog',
@@ -83,31 +95,31 @@ class RunLog:
         'q',
     )
 
-    def __init__(self, method='', label='', joint_names=()):
+    def __init__(self, method: str = '', label: str = '', joint_names: Iterable[str] = ()) -> None:
         self.method = method
         self.label = label
         self.joint_names = tuple(joint_names)
-        self.rows = {c: [] for c in self.COLUMNS}
+        self.rows: dict[str, Any] = {c: [] for c in self.COLUMNS}
         self.wall_time_s = 0.0
-        self.sim_counters = None  # the simulator's command counters per group (clamped, rejected, ...)
-        self.final_status = None  # nodes engine: the goal's state after the resolver's last cycle
-        self.first_stall_s = None  # nodes engine: when the resolver first found the goal stalled [s]
+        self.sim_counters: dict | None = None  # the simulator's command counters per group (clamped, rejected, ...)
+        self.final_status: dict | None = None  # nodes engine: the goal's state after the resolver's last cycle
+        self.first_stall_s: float | None = None  # nodes engine: when the resolver first found the goal stalled [s]
         self.frozen = False
 
     def append(
         self,
-        t,
-        goal,
-        ee_position,
-        ee_rotation,
-        base_pose,
-        q_arm,
-        arm_command,
-        base_reference,
-        feasible_twist,
-        diagnostics,
-        q=None,
-    ):
+        t: float,
+        goal: int,
+        ee_position: ArrayLike,
+        ee_rotation: ArrayLike,
+        base_pose: ArrayLike,
+        q_arm: ArrayLike,
+        arm_command: ArrayLike,
+        base_reference: ArrayLike,
+        feasible_twist: ArrayLike | None,
+        diagnostics: ResolverDiagnostics,
+        q: ArrayLike | None = None,
+    ) -> None:
         """Add one period: the state at its start, the commands sent, and the resolver's
         :class:`~wmm_control.resolvers.ResolverDiagnostics`. ``feasible_twist`` may be None;
         ``q`` (every joint of ``joint_names``) too."""
@@ -137,7 +149,7 @@ class RunLog:
         r['collision_changed'].append(d.collision_changed)
         r['q'].append(np.full(len(self.joint_names), np.nan) if q is None else np.asarray(q, dtype=float))
 
-    def freeze(self):
+    def freeze(self) -> Self:
         """Turn the columns into arrays; returns self."""
         if not self.frozen:
             for c in self.COLUMNS:
@@ -156,7 +168,7 @@ class RunLog:
         return len(self.rows['t'])
 
 
-def pose_error_norm(goal_pose, ee_position, ee_rotation):
+def pose_error_norm(goal_pose: ArrayLike, ee_position: np.ndarray, ee_rotation: np.ndarray) -> np.ndarray:
     """‖e_p‖ of Sorour eq (12): position error and wrapped RPY difference, per row. Shape (K,)."""
     goal_pose = np.asarray(goal_pose, dtype=float)
     pos = goal_pose[:3] - ee_position
@@ -169,7 +181,9 @@ def _rotation_angle(r_goal, rot):
     return float(np.linalg.norm(pin.log3(r_goal @ rot.T)))
 
 
-def goal_metrics(log, scenario, model, r_fm, q_dex, dt):
+def goal_metrics(
+    log: RunLog, scenario: Scenario, model: KinematicModel, r_fm: float, q_dex: ArrayLike, dt: float
+) -> list[dict]:
     """The per-goal metrics (:data:`METRIC_KEYS`) of a frozen :class:`RunLog`.
 
     Args:
@@ -284,7 +298,7 @@ TRAJECTORY_METRIC_KEYS = {
 }
 
 
-def trajectory_metrics(log, scenario, model, dt, skip_s=1.0):
+def trajectory_metrics(log: RunLog, scenario: Scenario, model: KinematicModel, dt: float, skip_s: float = 1.0) -> dict:
     """Xing et al. Tables 2–3 for a run of a trajectory scenario (:data:`TRAJECTORY_METRIC_KEYS`).
 
     The reference starts from the end effector's pose at the robot's start state, as the
@@ -339,7 +353,7 @@ def _joint_limit_margin(q, arm):
     return float(np.min(margin[finite])) if np.any(finite) else None
 
 
-def run_limit_report(log, robot, dt, tol=1e-9):
+def run_limit_report(log: RunLog, robot: RobotConfig, dt: float, tol: float = 1e-9) -> dict:
     """Largest excess over every limit in a run (all zero when no limit was ever passed).
 
     The run starts at rest: the first command's change is measured from zero.

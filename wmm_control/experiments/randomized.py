@@ -48,25 +48,29 @@ ground-truth feedback: the runs test the controllers, not the odometry. Its outc
 import math
 import tempfile
 from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 import yaml
+from numpy.typing import ArrayLike
 
 from wmm_control.experiments.direct import run_scenario
 from sim_bridge.collision import SelfCollisionChecker
 from sim_bridge.world import SimWorld
-from wmm_control.experiments.metrics import run_limit_report
+from wmm_control.experiments.metrics import RunLog, run_limit_report
 from wmm_control.experiments.ros_run import run_with_nodes
 from wmm_control.experiments.scenario import Goal, Scenario, load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.obstacles import load_goal_region, load_obstacles, obstacle_file
+from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file
 from wmm_control.kinematics.orientation import rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
 from wmm_control.resolvers import make_resolver
+from wmm_control.resolvers.interface import ResolverDiagnostics
 from wmm_control.resolvers.progress import GoalProgress
-from wmm_control.robot_config import load_robot
+from wmm_control.robot_config import RobotConfig, load_robot
 
 __all__ = [
     'RandomGoal',
@@ -95,7 +99,7 @@ ROBOTS = ('steerable', 'mecanum')
 #: hold a joint at its braking bound while the others take its share of the task
 #: (``hold_joint_limits``; clipped out instead, the end effector can stay put for tens of
 #: seconds).
-METHOD_RUNS = {
+METHOD_RUNS: dict[str, dict[str, Any]] = {
     'pinv': {'method': 'pinv', 'orientation_error': 'log', 'hold_joint_limits': True},
     'task_sharing': {'method': 'task_sharing', 'orientation_error': 'log', 'hold_joint_limits': True},
     'amp': {'method': 'amp', 'rows': 'full'},
@@ -105,7 +109,9 @@ METHOD_RUNS = {
 #: 0.025 m/s² (Xing Table 1): with the velocity-level methods the arm takes over the share of
 #: the task the base cannot follow (``arm_takeover``) instead of the whole body slowing to the
 #: base's pace.
-ROBOT_RUNS = {'mecanum': {'pinv': {'arm_takeover': True}, 'task_sharing': {'arm_takeover': True}}}
+ROBOT_RUNS: dict[str, dict[str, dict[str, Any]]] = {
+    'mecanum': {'pinv': {'arm_takeover': True}, 'task_sharing': {'arm_takeover': True}}
+}
 #: Longest run per robot [s] (90 s for any other): robot B's base accelerates at 0.025 m/s² (Xing Table 1). Long
 #: enough for the slowest approach that never stalls (robot A: amp, 64 s; robot B: amp, 128 s).
 DURATION_S = {'steerable': 90.0, 'mecanum': 180.0, 'ur_mecanum': 90.0, 'panda_diff': 90.0}
@@ -138,7 +144,7 @@ class RandomGoal:
     draws: int
 
 
-def goal_settings():
+def goal_settings() -> tuple[tuple[float, ...], float, float]:
     """``(goal_tolerance, stall_time, min_progress_ratio)`` of the ``redundancy_resolver``
     node, from its defaults (``config/redundancy_resolver.yaml``): (position [m], orientation
     [rad]), [s] and [-]."""
@@ -156,7 +162,9 @@ def _arm_box(arm):
     return lo, hi
 
 
-def sample_goals(robot, count, seed=0, base_radius=1.0, obstacles=''):
+def sample_goals(
+    robot: str | Path | RobotConfig, count: int, seed: int = 0, base_radius: float = 1.0, obstacles: str | Path = ''
+) -> list[RandomGoal]:
     """``count`` reachable goals for ``robot`` (see the module docstring), reproducible by
     ``seed``, clear of the obstacles of the file ``obstacles`` (name or path; '' for none).
 
@@ -173,7 +181,7 @@ def sample_goals(robot, count, seed=0, base_radius=1.0, obstacles=''):
     if region is not None:
         start = np.array([region[0][0], region[0][1], 0.0])
         base_radius = region[1]
-    goals = []
+    goals: list[RandomGoal] = []
     with SelfCollisionChecker(cfg, margin=COLLISION_MARGIN, obstacles=around) as checker:
         while len(goals) < count:
             draws = 0
@@ -215,7 +223,7 @@ def _run_direct(robot, run, goal, duration, obstacles):
     held = [0]
     first_stall = []
 
-    def done(diagnostics):
+    def done(diagnostics: ResolverDiagnostics) -> bool:
         progress.update(diagnostics)
         if progress.stalled and not first_stall:
             first_stall.append(progress.cycles * resolver.params.dt)
@@ -272,7 +280,12 @@ def _limit_use(log, robot, dt):
     return use
 
 
-def run_contact(robot, q_arm, base_pose=None, obstacles=()):
+def run_contact(
+    robot: str | Path | RobotConfig,
+    q_arm: Sequence[np.ndarray] | np.ndarray,
+    base_pose: Sequence[np.ndarray] | np.ndarray | None = None,
+    obstacles: Iterable[Obstacle] = (),
+) -> tuple[float, str]:
     """The deepest contact of a run's configurations (arm ``q_arm``, true base pose
     ``base_pose``, one row per period) with the robot's body, itself, the floor or an
     obstacle, on the simulator's geometry: ``(depth [m], 'a/b')``, ``(0.0, '')`` when every
@@ -287,7 +300,16 @@ def run_contact(robot, q_arm, base_pose=None, obstacles=()):
     return depth, pair
 
 
-def run_goal(robot, method, goal, engine='direct', duration=None, params=None, obstacles='', record=None):
+def run_goal(
+    robot: str | Path | RobotConfig,
+    method: str,
+    goal: RandomGoal,
+    engine: str = 'direct',
+    duration: float | None = None,
+    params: Mapping[str, Any] | None = None,
+    obstacles: str | Path = '',
+    record: str | Path | None = None,
+) -> dict:
     """One closed-loop run of ``method`` to ``goal`` from the robot's start state.
 
     ``params`` (resolver parameters) override those of :data:`METHOD_RUNS` and :data:`ROBOT_RUNS`.
@@ -356,7 +378,7 @@ def run_goal(robot, method, goal, engine='direct', duration=None, params=None, o
     }
 
 
-def write_record(path, log, goal_pose, obstacles=''):
+def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str | Path = '') -> None:
     """Write the run ``log`` to ``path`` (``.npz``, the module docstring says what it holds)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     text = obstacle_file(obstacles).read_text() if obstacles else ''
@@ -375,7 +397,7 @@ def _angle(rot):
     return float(np.linalg.norm(pin.log3(rot)))
 
 
-def summarize(results):
+def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
     """Per robot and method: ``runs``, ``converged``, ``reported``, ``failed``, the worst final
     errors of the converged runs, the median and largest time to converge, and the worst use of
     every limit over all runs (``limit_use_max``: largest fraction of a velocity or acceleration
@@ -385,7 +407,7 @@ def summarize(results):
     Returns:
         dict keyed by ``(robot, method)``.
     """
-    out = {}
+    out: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
     for r in results:
         out.setdefault((r['robot'], r['method']), []).append(r)
     table = {}

@@ -14,7 +14,9 @@ import os
 import platform
 import shutil
 import subprocess
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from wmm_control.experiments.metrics import METRIC_KEYS, TRAJECTORY_METRIC_KEYS
 
@@ -75,7 +77,7 @@ PAPER = {
 MATRIX = ('matrix_circle_0.25_a', 'matrix_circle_0.25_b')
 
 
-def provenance(root=None):
+def provenance(root: str | Path | None = None) -> tuple[str, str, str]:
     """``(commit, date, machine)``: ``git rev-parse --short HEAD`` of ``root`` (default: this
     source tree) or 'unknown', today's date (UTC), and the platform with its CPU count."""
     root = Path(root) if root is not None else Path(__file__).resolve().parents[2]
@@ -259,7 +261,12 @@ def _keys_section(keys, title):
     ]
 
 
-def render_report(summaries, preamble='', provenance_line=None, figure_links=None):
+def render_report(
+    summaries: Sequence[Mapping[str, Any]],
+    preamble: str = '',
+    provenance_line: str | None = None,
+    figure_links: Mapping[str, Sequence[str]] | None = None,
+) -> str:
     """The Markdown page of ``summaries`` (one ``metrics.json`` content per scenario).
 
     Args:
@@ -323,7 +330,9 @@ def _figure_links(summaries, page):
     return links
 
 
-def write_report(page, summaries, preamble_path=None):
+def write_report(
+    page: str | Path, summaries: Sequence[Mapping[str, Any]], preamble_path: str | Path | None = None
+) -> Path:
     """Write :func:`render_report` of ``summaries`` to ``page``, with the text of
     ``preamble_path`` (if given and present) first; returns ``page``."""
     page = Path(page)

@@ -11,6 +11,9 @@ and fills a :class:`~wmm_control.experiments.metrics.RunLog`, one row per contro
 
 import os
 import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -25,13 +28,14 @@ from sim_bridge.node import SimNode
 from wmm_control.errors import ConfigError
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.recording import BagRecorder
-from wmm_control.experiments.scenario import resolver_parameters
+from wmm_control.experiments.scenario import Scenario, resolver_parameters
 from wmm_control.nodes.conversions import odometry_pose, planar_twist, pose_rotation
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.base_controller import BaseControllerNode
 from wmm_control.nodes.base_controller_params import NODE_NAMES
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
-from wmm_control.robot_config import load_robot
+from wmm_control.resolvers.interface import ResolverCommand
+from wmm_control.robot_config import RobotConfig, load_robot
 
 __all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_WAITS']
 
@@ -48,16 +52,16 @@ class Recorder(Node):
     without a ``/diagnostics`` message every period.
     """
 
-    def __init__(self, context, robot, scenario, log):
+    def __init__(self, context: rclpy.Context, robot: RobotConfig, scenario: Scenario, log: RunLog) -> None:
         super().__init__('experiment_recorder', context=context)
         self.scenario = scenario
         self.log = log
         self.arm_joints = robot.arm.joints
         self._index = None
-        self._rows = {}
+        self._rows: dict[tuple[int, int], dict[str, Any]] = {}
         self.last_t = -1.0
-        self.final_status = None
-        self.first_stall_s = None
+        self.final_status: dict | None = None
+        self.first_stall_s: float | None = None
         self.create_subscription(PoseStamped, '/ee_pose', self._on_ee, 10)
         self.create_subscription(Odometry, '/ground_truth/odom', self._on_base, 10)
         self.create_subscription(JointState, '/joint_states', self._on_joints, 10)
@@ -86,7 +90,7 @@ class Recorder(Node):
     def _on_feasible(self, msg):
         self._row(msg.header.stamp)['feasible'] = planar_twist(msg.twist)
 
-    def observe(self, stamp, command, reached, stalled):
+    def observe(self, stamp: tuple[int, int], command: ResolverCommand, reached: bool, stalled: bool) -> None:
         """The resolver's cycle stamped ``stamp`` (see ``RedundancyResolverNode.cycle_observers``)."""
         row = self._row(stamp)
         row['command'] = command
@@ -94,7 +98,7 @@ class Recorder(Node):
         if self.first_stall_s is None and stalled:
             self.first_stall_s = row['t']
 
-    def flush(self):
+    def flush(self) -> None:
         """Append every complete row (a period in which a goal was pursued), in time order."""
         for key in sorted(self._rows):
             row = self._rows[key]
@@ -155,7 +159,7 @@ LOCKSTEP_WAITS = {
 }
 
 
-def private_domain_id(offset=0):
+def private_domain_id(offset: int = 0) -> int:
     """A ROS domain for this process alone (101–200, from the process id), so that an experiment
     never hears, nor drives, a robot system running on the machine's usual domain. ``offset``
     gives the process's worker runs domains of their own: offsets 1, 2, … are other domains,
@@ -163,7 +167,15 @@ def private_domain_id(offset=0):
     return 101 + (os.getpid() + offset) % 100
 
 
-def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=None, bag_path=None, view_port=None):
+def run_with_nodes(
+    scenario: Scenario,
+    run: Mapping[str, Any],
+    progress: Callable[[float], object] | None = None,
+    wall_timeout: float | None = None,
+    domain_id: int | None = None,
+    bag_path: str | Path | None = None,
+    view_port: int | None = None,
+) -> RunLog:
     """Run one entry of ``scenario.runs`` with every node in this process.
 
     Args:
@@ -210,13 +222,13 @@ def run_with_nodes(scenario, run, progress=None, wall_timeout=None, domain_id=No
     if 'slip_gain' in sim_params:
         sim_params['slip_gain'] = float(sim_params['slip_gain'])
 
-    def params(values):
+    def params(values: Mapping[str, Any]) -> list[Parameter]:
         return [Parameter(k, value=v) for k, v in values.items()]
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=private_domain_id() if domain_id is None else domain_id)
     log = RunLog(method=run['method'], label=run['name'])
-    nodes = []
+    nodes: list[Node] = []
     executor = _executor(context)
     try:
         remap = ['--ros-args', '-r', '/odom:=/ground_truth/odom'] if feedback == 'ground_truth' else []

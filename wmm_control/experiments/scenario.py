@@ -27,9 +27,11 @@ An angle may be written as an expression of ``pi`` (``pi/2``, ``-pi/2``, ``3*pi/
 
 import math
 import re
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,6 +41,9 @@ from wmm_control.robot_config import read_yaml_section
 from wmm_control.experiments.trajectories import make_trajectory
 from wmm_control.kinematics.obstacles import load_obstacles
 from wmm_control.resolvers.interface import PoseTarget
+
+if TYPE_CHECKING:
+    from wmm_control.kinematics import KinematicModel
 
 __all__ = ['Goal', 'Scenario', 'load_scenario', 'resolver_parameters', 'DEFAULT_RUNS', 'SIM_KEYS', 'RUN_KEYS']
 
@@ -96,7 +101,7 @@ class Goal:
     pose: np.ndarray
 
     @cached_property
-    def target(self):
+    def target(self) -> PoseTarget:
         """The goal as a :class:`~wmm_control.resolvers.PoseTarget` set-point (built once: a
         scenario run asks for it every period)."""
         return PoseTarget.from_rpy(self.pose)
@@ -120,7 +125,7 @@ class Scenario:
     obstacles_file: str = ''
     obstacles: tuple = ()
 
-    def reference(self, model):
+    def reference(self, model: 'KinematicModel') -> Callable[[float], PoseTarget]:
         """The trajectory ``t -> PoseTarget`` of a trajectory scenario, from the end effector's pose
         at the robot's start state (its YAML), through ``model`` (a KinematicModel of the robot)."""
         cfg = model.config
@@ -131,7 +136,7 @@ class Scenario:
         """The target in force at time ``t`` [s]: the goal, or the reference trajectory's point."""
         return reference(t) if self.trajectory is not None else self.goals[self.goal_index(t)].target
 
-    def goal_index(self, t):
+    def goal_index(self, t: float) -> int:
         """Index of the goal in force at time ``t`` [s] (0 before the first start)."""
         idx = 0
         for i, goal in enumerate(self.goals):
@@ -140,7 +145,7 @@ class Scenario:
         return idx
 
 
-def load_scenario(name_or_path):
+def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load ``config/scenarios/<name>.yaml`` or a scenario file path.
 
     Raises:
@@ -199,7 +204,7 @@ def _goals(goals_raw, duration, where):
     return tuple(Goal(t, e, p) for t, e, p in zip(starts, ends, poses))
 
 
-def resolver_parameters(run):
+def resolver_parameters(run: Mapping[str, Any]) -> dict:
     """The resolver parameters of a run entry (every key but :data:`RUN_KEYS`)."""
     return {k: v for k, v in run.items() if k not in RUN_KEYS}
 

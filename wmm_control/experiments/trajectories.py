@@ -10,9 +10,12 @@ pose, the twist and the acceleration (world frame), ω = π/20 rad/s:
 """
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from wmm_control.errors import ConfigError
 from wmm_control.resolvers.interface import PoseTarget
@@ -25,7 +28,7 @@ _Y = np.array([0.0, 1.0, 0.0])
 
 
 def _circle(x0, r0, radius):
-    def at(t):
+    def at(t: float) -> PoseTarget:
         c, s = math.cos(OMEGA * t), math.sin(OMEGA * t)
         return PoseTarget(
             x0 + radius * np.array([1.0 - c, -s, 0.0]),
@@ -38,7 +41,7 @@ def _circle(x0, r0, radius):
 
 
 def _pose(x0, r0, amplitude=0.15, angle=math.pi / 4):
-    def at(t):
+    def at(t: float) -> PoseTarget:
         c, s = math.cos(OMEGA * t), math.sin(OMEGA * t)
         rot = pin.exp3(angle * s * _Y) @ r0
         vel = np.concatenate((amplitude * OMEGA * c * np.array([1.0, 0.0, 0.0]), angle * OMEGA * c * _Y))
@@ -48,7 +51,7 @@ def _pose(x0, r0, amplitude=0.15, angle=math.pi / 4):
     return at
 
 
-def make_trajectory(spec, start_position, start_rotation):
+def make_trajectory(spec: Any, start_position: ArrayLike, start_rotation: ArrayLike) -> Callable[[float], PoseTarget]:
     """The trajectory ``t -> PoseTarget`` of a scenario's ``trajectory`` entry.
 
     Args:

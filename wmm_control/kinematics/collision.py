@@ -136,7 +136,7 @@ class CollisionModel:
         link_of = [model.frames[g.parentFrame].name for g in self.geom.geometryObjects]
         moving = [g.parentJoint in moving_joints for g in self.geom.geometryObjects]
 
-        def near(a, b):  # b is a's parent link
+        def near(a: str, b: str) -> bool:  # b is a's parent link
             return parent_link.get(a) == b
 
         pairs = []

@@ -24,10 +24,13 @@ Usage::
     ja = model.arm_jacobian_base()
 """
 
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Self
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 from scipy.linalg import lapack
 
 from wmm_control.checks import as_finite_vector
@@ -48,7 +51,7 @@ _SKEW = np.array(
 )
 
 
-def build_pinocchio_model(urdf_path):
+def build_pinocchio_model(urdf_path: str | Path) -> pin.Model:
     """Load a URDF with a planar (x, y, θ) root joint made of PX, PY and RZ.
 
     The composite root keeps ``q`` and ``v`` equal to (x, y, θ) and their world-frame
@@ -64,7 +67,7 @@ def build_pinocchio_model(urdf_path):
         raise ConfigError(f'pinocchio could not load {urdf_path}: {exc}') from exc
 
 
-def angles_to_pin_q(model, joint_angles):
+def angles_to_pin_q(model: pin.Model, joint_angles: Sequence[float] | np.ndarray) -> np.ndarray:
     """Pinocchio configuration from one number per joint velocity (angles for continuous joints).
 
     Continuous joints (nq = 2) take (cos, sin) of the angle; others take the value itself.
@@ -96,14 +99,16 @@ class KinematicModel:
         UnknownFrameError: ``ee_frame`` is not a frame of the URDF.
     """
 
-    def __init__(self, robot='steerable', ee_frame=None):
+    def __init__(self, robot: str | Path | RobotConfig = 'steerable', ee_frame: str | None = None) -> None:
         self.config = robot if isinstance(robot, RobotConfig) else load_robot(robot)
         self._build(
             self.config.urdf_path, self.config.arm.joints, ee_frame or self.config.ee_frame, self.config.base_link
         )
 
     @classmethod
-    def from_urdf(cls, urdf_path, arm_joints, ee_frame, base_link='base_link'):
+    def from_urdf(
+        cls, urdf_path: str | Path, arm_joints: Iterable[str], ee_frame: str, base_link: str = 'base_link'
+    ) -> Self:
         """A model of a URDF alone, before any robot YAML exists (``config`` is None).
 
         Args:
@@ -112,7 +117,9 @@ class KinematicModel:
             ee_frame, base_link: frame names.
         """
         self = cls.__new__(cls)
-        self.config = None
+        # A model of a URDF alone has no robot YAML; everywhere else the package builds its
+        # models from one and reads ``config`` as a RobotConfig.
+        self.config = None  # type: ignore[assignment]
         self._build(urdf_path, tuple(arm_joints), ee_frame, base_link)
         return self
 
@@ -156,11 +163,11 @@ class KinematicModel:
 
     # ------------------------------------------------------------------ frames
     @property
-    def frame_names(self):
+    def frame_names(self) -> list[str]:
         """Names of every frame of the reduced model."""
         return [f.name for f in self.model.frames]
 
-    def frame_id(self, name):
+    def frame_id(self, name: str) -> int:
         """Pinocchio frame index of ``name``.
 
         Raises:
@@ -172,7 +179,7 @@ class KinematicModel:
         return self.model.getFrameId(name)
 
     # ------------------------------------------------------------------ update
-    def configuration(self, base_pose, q_arm):
+    def configuration(self, base_pose: ArrayLike, q_arm: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Pinocchio configuration vector for a base pose (x, y, θ) and arm joint values (n,).
 
         Returns:
@@ -191,7 +198,13 @@ class KinematicModel:
             q[self._cont_q + 1] = np.sin(angles)
         return q, flat
 
-    def update(self, base_pose, q_arm, base_rate=None, dq_arm=None):
+    def update(
+        self,
+        base_pose: ArrayLike,
+        q_arm: ArrayLike,
+        base_rate: ArrayLike | None = None,
+        dq_arm: ArrayLike | None = None,
+    ) -> None:
         """Run forward kinematics and the Jacobians for one state.
 
         Args:
@@ -232,13 +245,13 @@ class KinematicModel:
             raise WmmError('call update(base_pose, q_arm) first')
 
     # ------------------------------------------------------------------ poses
-    def frame_placement_world(self, name):
+    def frame_placement_world(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """World pose of any frame: (position (3,), rotation (3, 3))."""
         self._require()
         m = pin.updateFramePlacement(self.model, self.data, self.frame_id(name))
         return m.translation.copy(), m.rotation.copy()
 
-    def ee_placement_world(self):
+    def ee_placement_world(self) -> tuple[np.ndarray, np.ndarray]:
         """End-effector position (3,) [m] and rotation (3, 3) in the world frame."""
         self._require()
         return self._oMee.translation.copy(), self._oMee.rotation.copy()
@@ -249,13 +262,13 @@ class KinematicModel:
             self._rpy_base = rpy_from_matrix(self._bMee.rotation)
         return self._bMee
 
-    def ee_placement_base(self):
+    def ee_placement_base(self) -> tuple[np.ndarray, np.ndarray]:
         """End-effector position (3,) [m] and rotation (3, 3) in the base frame."""
         self._require()
         m = self._base_ee()
         return m.translation.copy(), m.rotation.copy()
 
-    def arm_points_world(self):
+    def arm_points_world(self) -> np.ndarray:
         """World positions of the arm joint origins and of the end effector [m]. Shape (8, 3).
 
         With the base origin, they outline the robot's footprint (Sorour Fig 5).
@@ -265,12 +278,12 @@ class KinematicModel:
         pts.append(self._oMee.translation)
         return np.array(pts)
 
-    def ee_pose_world(self):
+    def ee_pose_world(self) -> np.ndarray:
         """World end-effector pose [x, y, z, roll, pitch, yaw]. Shape (6,)."""
         pos, rot = self.ee_placement_world()
         return np.concatenate((pos, rpy_from_matrix(rot)))
 
-    def ee_pose_base(self):
+    def ee_pose_base(self) -> np.ndarray:
         """Base-frame end-effector pose [x, y, z, roll, pitch, yaw]. Shape (6,)."""
         self._require()
         out = np.empty(6)
@@ -279,7 +292,7 @@ class KinematicModel:
         return out
 
     # ------------------------------------------------------------------ Jacobians
-    def jacobian_world(self):
+    def jacobian_world(self) -> np.ndarray:
         """World-frame Jacobian over (x_b, y_b, θ_b, q_m) at the end-effector point (Xing eq 2).
 
         Rows: linear then angular velocity, world axes. Shape (6, 3 + n).
@@ -287,7 +300,7 @@ class KinematicModel:
         self._require()
         return self._jac.copy()
 
-    def arm_jacobian_base(self):
+    def arm_jacobian_base(self) -> np.ndarray:
         """Arm geometric Jacobian J_a in the base frame (Sorour eq 1). Shape (6, 7)."""
         self._require()
         rt = self._oMb.rotation.T
@@ -296,7 +309,7 @@ class KinematicModel:
         np.dot(rt, self._jac[3:, N_BASE:], out=out[3:])
         return out
 
-    def h_matrix(self):
+    def h_matrix(self) -> np.ndarray:
         """Sorour eq (4): maps the base twist [ẋ ẏ 0 0 0 ω] (base frame) to the EE velocity. Shape (6, 6)."""
         self._require()
         pos = self._base_ee().translation
@@ -306,7 +319,7 @@ class KinematicModel:
         h[1, 5] = pos[0]
         return h
 
-    def jmm(self, damping=1e-6):
+    def jmm(self, damping: float = 1e-6) -> np.ndarray:
         """Sorour eq (7): ``J_mm = M_RPY [H J_b, J_a]`` with J_b = I₆. Shape (6, 6 + n).
 
         ``M_RPY = blockdiag(I₃, Ω⁻¹)`` at the RPY angles of the base-frame EE
@@ -318,10 +331,10 @@ class KinematicModel:
         out[:, :6] = self.h_matrix()
         out[:, 6:] = self.arm_jacobian_base()
         # M_RPY only changes the angular rows: rows 3..5 ← Ω⁻¹ rows 3..5.
-        out[3:] = rpy_rate_map(self._rpy_base, damping)[3:, 3:] @ out[3:]
+        out[3:] = rpy_rate_map(self._rpy_base, damping)[3:, 3:] @ out[3:]  # type: ignore[arg-type]  # set by _base_ee()
         return out
 
-    def jdot_qdot(self):
+    def jdot_qdot(self) -> np.ndarray:
         """``J̇ q̇`` at the end-effector point, world axes (Xing eq 4). Shape (6,).
 
         The classical acceleration of the end effector for ``q̈ = 0``.
@@ -336,21 +349,21 @@ class KinematicModel:
         return np.concatenate((acc.linear, acc.angular))
 
     # ------------------------------------------------------------------ manipulability
-    def arm_jacobian_world(self, rows='position'):
+    def arm_jacobian_world(self, rows: str = 'position') -> np.ndarray:
         """Arm part J_m of the world Jacobian: 'position' (3, 7) or 'full' (6, 7) rows."""
         self._require()
         return self._jac[_rows(rows), N_BASE:].copy()
 
-    def sigma_min(self, rows='position'):
+    def sigma_min(self, rows: str = 'position') -> float:
         """Smallest singular value of J_m (a distance-to-singularity measure)."""
         return float(np.linalg.svd(self.arm_jacobian_world(rows), compute_uv=False)[-1])
 
-    def manipulability(self, rows='position'):
+    def manipulability(self, rows: str = 'position') -> float:
         """``det(J_m J_mᵀ)`` (Xing eq 10; Yoshikawa's measure squared)."""
         jm = self.arm_jacobian_world(rows)
         return float(np.linalg.det(jm @ jm.T))
 
-    def manipulability_gradient(self, rows='position'):
+    def manipulability_gradient(self, rows: str = 'position') -> np.ndarray:
         """∂H/∂q_m of ``H = det(J_m J_mᵀ)`` (Xing appendix A). Shape (n,).
 
         ``∂H/∂q_k = H tr(M⁻¹ ∂M/∂q_k)`` with ``M = J_m J_mᵀ``; exact, in closed form (see
@@ -362,7 +375,7 @@ class KinematicModel:
         """
         return self._manipulability_derivatives(rows)[0].copy()
 
-    def manipulability_hessian(self, rows='position'):
+    def manipulability_hessian(self, rows: str = 'position') -> np.ndarray:
         """∂²H/∂q_m² of ``H = det(J_m J_mᵀ)`` (Xing appendix B). Shape (n, n), symmetric.
 
         Exact, in closed form; shares one evaluation with :meth:`manipulability_gradient`.

@@ -93,7 +93,7 @@ class Obstacle:
         """The shape's frame in the world."""
         return pin.SE3(self.rotation, self.position)
 
-    def geometry(self):
+    def geometry(self) -> pin.coal.ShapeBase:
         """The shape as coal has it (its Box and Cylinder take full lengths, as the file does)."""
         if self.shape == 'box':
             return pin.coal.Box(*self.size)

@@ -6,9 +6,11 @@ RPY convention (Sorour §II-A): θ = [γ, β, α] = [roll, pitch, yaw] with
 """
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 
@@ -32,14 +34,14 @@ __all__ = [
 _Z = np.array([0.0, 0.0, 1.0])
 
 
-def wrap_angle(angle):
+def wrap_angle(angle: ArrayLike) -> float | np.ndarray:
     """Wrap angles [rad] to the interval (−π, π]. Works on scalars and arrays."""
     wrapped = np.remainder(np.asarray(angle, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
     wrapped = np.where(wrapped == -np.pi, np.pi, wrapped)
     return float(wrapped) if np.ndim(wrapped) == 0 else wrapped
 
 
-def rpy_from_matrix(rot):
+def rpy_from_matrix(rot: ArrayLike) -> np.ndarray:
     """RPY angles [roll, pitch, yaw] of a rotation matrix (ZYX Euler), by pinocchio. Shape (3,).
 
     ``pin.rpy.matrixToRpy``, the inverse of :func:`matrix_from_rpy`: pitch in [−π/2, π/2]; at
@@ -48,13 +50,13 @@ def rpy_from_matrix(rot):
     return pin.rpy.matrixToRpy(np.asarray(rot, dtype=float))
 
 
-def matrix_from_rpy(rpy):
+def matrix_from_rpy(rpy: ArrayLike) -> np.ndarray:
     """Rotation matrix ``Rz(yaw) Ry(pitch) Rx(roll)`` from RPY angles. Shape (3, 3)."""
     roll, pitch, yaw = as_finite_vector(rpy, 3, 'rpy')
     return pin.rpy.rpyToMatrix(roll, pitch, yaw)
 
 
-def omega_rpy(rpy):
+def omega_rpy(rpy: Sequence[float] | np.ndarray) -> np.ndarray:
     """Sorour's Ω_RPY: maps RPY rates [γ̇, β̇, α̇] to the angular velocity ω. Shape (3, 3).
 
     ``det Ω = cos β``: singular at pitch ±π/2.
@@ -64,7 +66,7 @@ def omega_rpy(rpy):
     return np.array([[ca * cb, -sa, 0.0], [sa * cb, ca, 0.0], [-sb, 0.0, 1.0]])
 
 
-def rpy_rate_map(rpy, damping=1e-6):
+def rpy_rate_map(rpy: Sequence[float] | np.ndarray, damping: float = 1e-6) -> np.ndarray:
     """Map from a twist (v, ω) to pose rates (v, θ̇): blockdiag(I₃, Ω⁻¹). Shape (6, 6).
 
     Closed form of Ω⁻¹ with the one singular factor 1/cos β replaced by the damped
@@ -81,7 +83,7 @@ def rpy_rate_map(rpy, damping=1e-6):
     return out
 
 
-def pose_error_rpy(desired, current):
+def pose_error_rpy(desired: ArrayLike, current: ArrayLike) -> np.ndarray:
     """Sorour eq (12) pose error ``e_p = p* − p`` with wrapped RPY differences. Shape (6,).
 
     Args:
@@ -95,7 +97,9 @@ def pose_error_rpy(desired, current):
     return err
 
 
-def pose_error_log(desired_pos, desired_rot, current_pos, current_rot):
+def pose_error_log(
+    desired_pos: ArrayLike, desired_rot: ArrayLike, current_pos: ArrayLike, current_rot: ArrayLike
+) -> np.ndarray:
     """Pose error with an SO(3) log-map orientation part: ``[p* − p; log(R* Rᵀ)]``. Shape (6,).
 
     The rotation part is the world-frame rotation vector that takes the current

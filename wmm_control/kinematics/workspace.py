@@ -13,8 +13,17 @@ impossible for a reason a user can act on:
 * inside an obstacle (:mod:`~wmm_control.kinematics.obstacles`).
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pinocchio as pin
+
+if TYPE_CHECKING:
+    from wmm_control.kinematics.model import KinematicModel
+    from wmm_control.kinematics.obstacles import Obstacle
 
 __all__ = ['Workspace']
 
@@ -41,7 +50,7 @@ class Workspace:
         boxes: ``(name, rotation (3, 3), centre (3,), half extents (3,))`` in the base frame.
     """
 
-    def __init__(self, model):
+    def __init__(self, model: KinematicModel) -> None:
         self.floor_z = float(model.config.ground_z)
         pm = model.model
         arm = list(range(2, pm.njoints))
@@ -69,7 +78,9 @@ class Workspace:
         (x0, y0), (x1, y1) = pts.min(axis=0), pts.max(axis=0)
         return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
 
-    def body_part_at(self, position, base_pose):
+    def body_part_at(
+        self, position: Sequence[float] | np.ndarray, base_pose: Sequence[float] | np.ndarray
+    ) -> str | None:
         """Name of the base part whose box holds the world ``position``, or None.
 
         Args:
@@ -85,7 +96,12 @@ class Workspace:
                 return name
         return None
 
-    def impossible(self, position, base_pose=None, obstacles=()):
+    def impossible(
+        self,
+        position: Sequence[float] | np.ndarray,
+        base_pose: Sequence[float] | np.ndarray | None = None,
+        obstacles: Iterable[Obstacle] = (),
+    ) -> str:
         """'' when a goal at world ``position`` may be reached, else why it cannot.
 
         Args:

@@ -58,6 +58,7 @@ non-finite is ever published. Timers run on the steady clock, so the node works 
 """
 
 import time
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -91,7 +92,7 @@ class BaseControllerNode(Node):
             ``differential``); the node name is :data:`NODE_NAMES` ``[family]``.
     """
 
-    def __init__(self, family, **kwargs):
+    def __init__(self, family: str, **kwargs: Any) -> None:
         name = NODE_NAMES[family]
         super().__init__(name, **kwargs)
         guard_clock(self)

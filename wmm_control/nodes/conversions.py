@@ -9,6 +9,7 @@ needs none of it (a base controller) starts without loading pinocchio.
 """
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -126,7 +127,7 @@ def set_planar_twist(twist, values) -> None:
     twist.linear.x, twist.linear.y, twist.angular.z = (float(v) for v in values)
 
 
-def twist_stamped(stamp, frame, twist):
+def twist_stamped(stamp: Time | tuple[int, int], frame: str, twist: Iterable[float]) -> TwistStamped:
     """A ``TwistStamped`` of the planar twist (vx, vy, ω); ``stamp`` a Time or ``(sec, nanosec)``."""
     msg = TwistStamped()
     msg.header.stamp = stamp if isinstance(stamp, Time) else Time(sec=stamp[0], nanosec=stamp[1])
@@ -181,14 +182,14 @@ def odometry(stamp: Time, frame: str, child: str, pose, twist, covariances=None)
     return msg
 
 
-def float_array(values):
+def float_array(values: Iterable[float]) -> Float64MultiArray:
     """A ``std_msgs/Float64MultiArray`` holding ``values``."""
     msg = Float64MultiArray()
     msg.data = [float(v) for v in values]
     return msg
 
 
-def parse_command(msg, size):
+def parse_command(msg: Float64MultiArray, size: int) -> tuple[np.ndarray, str] | tuple[None, str]:
     """Validate a ``Float64MultiArray`` command.
 
     Returns:
@@ -202,7 +203,7 @@ def parse_command(msg, size):
     return data, ''
 
 
-def parse_base_reference(msg, base_frame):
+def parse_base_reference(msg: TwistStamped, base_frame: str) -> tuple[np.ndarray, str] | tuple[None, str]:
     """Validate a ``/base/reference`` ``TwistStamped`` of a planar base.
 
     Returns:

@@ -1,13 +1,19 @@
 """``/diagnostics`` messages of the nodes."""
 
+from collections.abc import Iterable, Mapping
+from typing import Any
+
 import numpy as np
 import rclpy
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 __all__ = ['diagnostic_status', 'node_status', 'diagnostic_array']
 
 
-def diagnostic_status(name, hardware_id, level, message, values):
+def diagnostic_status(
+    name: str, hardware_id: str, level: str, message: str, values: Mapping[str, Any]
+) -> DiagnosticStatus:
     """A ``DiagnosticStatus``; ``level`` is 'ok', 'warn' or 'error'; values become KeyValues."""
     status = DiagnosticStatus()
     status.level = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN, 'error': DiagnosticStatus.ERROR}[level]
@@ -40,7 +46,7 @@ def _kv(value):
     return str(value)
 
 
-def diagnostic_array(stamp, statuses):
+def diagnostic_array(stamp: Time, statuses: Iterable[DiagnosticStatus]) -> DiagnosticArray:
     """A ``DiagnosticArray`` with header stamp ``stamp``."""
     msg = DiagnosticArray()
     msg.header.stamp = stamp

@@ -21,8 +21,9 @@ again, and one that jumps more than 10 s ahead skips to that time; both are logg
 """
 
 import math
+from typing import Any
 
-from builtin_interfaces.msg import Duration
+from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import PoseStamped, Transform, Twist
 from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
 from rclpy.clock import Clock
@@ -30,13 +31,14 @@ from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 
-from wmm_control.experiments.scenario import load_scenario
+from wmm_control.experiments.scenario import Goal, load_scenario
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import matrix_from_rpy, quaternion_from_matrix
 from wmm_control.nodes.conversions import pose_stamped, set_pose, set_twist, split_seconds
 from wmm_control.nodes.parameters import Param, declare_parameters
 from wmm_control.nodes.qos import CLOCK_QOS, COMMAND_QOS
 from wmm_control.nodes.runner import guard_clock, run_node
+from wmm_control.resolvers.interface import PoseTarget
 
 __all__ = ['GoalSequencerNode', 'main']
 
@@ -54,7 +56,7 @@ def _twist(values):
     return msg
 
 
-def reference_message(target, frame, stamp, t):
+def reference_message(target: PoseTarget, frame: str, stamp: Time, t: float) -> MultiDOFJointTrajectory:
     """A one-point ``MultiDOFJointTrajectory`` of a :class:`~wmm_control.resolvers.PoseTarget` at time ``t``."""
     msg = MultiDOFJointTrajectory()
     msg.header.stamp = stamp
@@ -71,7 +73,7 @@ def reference_message(target, frame, stamp, t):
     return msg
 
 
-def goal_message(goal, frame, stamp):
+def goal_message(goal: Goal, frame: str, stamp: Time) -> PoseStamped:
     """A ``PoseStamped`` of a scenario goal ``[x, y, z, roll, pitch, yaw]``."""
     pose = [float(v) for v in goal.pose]
     return pose_stamped(stamp, frame, pose[:3], quaternion_from_matrix(matrix_from_rpy(pose[3:])))
@@ -80,7 +82,7 @@ def goal_message(goal, frame, stamp):
 class GoalSequencerNode(Node):
     """Plays one scenario's goals on ``/goal_pose``."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, **kwargs: Any) -> None:
         super().__init__('goal_sequencer', **kwargs)
         guard_clock(self)
         self.p = declare_parameters(self, 'goal_sequencer.yaml', PARAMS)
@@ -159,7 +161,7 @@ class GoalSequencerNode(Node):
             self.published += 1
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     return run_node(GoalSequencerNode, args)
 
 

@@ -1,14 +1,27 @@
 """A controller's inputs: joint states read by name and watched for their timing, the base reference."""
 
+from __future__ import annotations
+
 import math
 import time
 from collections import deque
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.checks import Freshness
 from wmm_control.nodes.conversions import parse_base_reference
 from wmm_control.nodes.stamps import StampGate, seconds
+
+if TYPE_CHECKING:
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import TwistStamped
+    from rclpy.clock import Clock
+    from rclpy.node import Node
+    from rclpy.publisher import Publisher
+    from sensor_msgs.msg import JointState
 
 __all__ = ['JointSelector', 'BaseReference', 'JointStateWatchdog', 'DELIVERY_WINDOW']
 
@@ -30,9 +43,15 @@ class JointSelector:
     POSITION_MARGIN = 0.5  # [rad]
     MAX_POSITION = 1e9  # [rad] no joint angle is larger (a wheel at 12 rad/s needs 2.6 years)
 
-    def __init__(self, joints, cache_size=16, velocity_limits=None, position_limits=None):
+    def __init__(
+        self,
+        joints: Iterable[str],
+        cache_size: int = 16,
+        velocity_limits: ArrayLike | None = None,
+        position_limits: tuple[ArrayLike, ArrayLike] | None = None,
+    ) -> None:
         self.joints = tuple(joints)
-        self._cache = {}
+        self._cache: dict[tuple[str, ...], np.ndarray | str] = {}
         self._cache_size = cache_size
         self._max_rate = (
             None
@@ -60,7 +79,7 @@ class JointSelector:
             return f'listing joints {twice} more than once (ambiguous)'
         return np.array([where[j][0] for j in self.joints])
 
-    def indices(self, msg):
+    def indices(self, msg: JointState) -> tuple[np.ndarray, str] | tuple[None, str]:
         """Indices of the joints in ``msg`` and '' or ``(None, reason)``.
 
         A message lacking a joint, naming one of them twice, or whose positions (or
@@ -80,7 +99,7 @@ class JointSelector:
             return None, f'with {len(msg.velocity)} velocities for {len(names)} names'
         return idx, ''
 
-    def read(self, msg):
+    def read(self, msg: JointState) -> tuple[np.ndarray, np.ndarray, str] | tuple[None, None, str]:
         """``(positions, velocities, '')`` of the joints, or ``(None, None, reason)``.
 
         Velocities are zero when the message has none. Non-finite values, and values beyond
@@ -121,7 +140,7 @@ class BaseReference:
             controller scales it into them) with a logged warning.
     """
 
-    def __init__(self, node, base_frame, timeout, velocity_limit=None):
+    def __init__(self, node: Node, base_frame: str, timeout: float, velocity_limit: ArrayLike | None = None) -> None:
         self._node = node
         self.base_frame = base_frame
         self.value = np.zeros(3)
@@ -130,7 +149,7 @@ class BaseReference:
         self._limit = None if velocity_limit is None else np.asarray(velocity_limit, dtype=float)
         self._stale_logged = False
 
-    def accept(self, msg):
+    def accept(self, msg: TwistStamped) -> bool:
         """Store ``msg`` if valid (True); else count and log the rejection (False)."""
         ref, reason = parse_base_reference(msg, self.base_frame)
         logger = self._node.get_logger()
@@ -151,7 +170,7 @@ class BaseReference:
         self._stale_logged = False
         return True
 
-    def current(self, now):
+    def current(self, now: float) -> np.ndarray | None:
         """The reference at node time ``now`` [s], or None when it is stale (logged once)."""
         if self.freshness.fresh(now):
             return self.value
@@ -191,7 +210,17 @@ class JointStateWatchdog:
     simulator has since changed.
     """
 
-    def __init__(self, node, timeout, period, clock, on_timeout, action, topic='joint_states', max_wait=0.0):
+    def __init__(
+        self,
+        node: Node,
+        timeout: float,
+        period: float,
+        clock: Clock,
+        on_timeout: Callable[[], object],
+        action: str,
+        topic: str = 'joint_states',
+        max_wait: float = 0.0,
+    ) -> None:
         self._node = node
         self.max_wait = float(max_wait)
         self._clock = clock
@@ -203,18 +232,18 @@ class JointStateWatchdog:
         self.stamps = StampGate(period, max_jump=self._max_jump(timeout))
         self.skipped = 0
         self.need_resync = True
-        self._offsets = deque(maxlen=DELIVERY_WINDOW)  # receipt − stamp [ns] of the last joint states
+        self._offsets: deque[int] = deque(maxlen=DELIVERY_WINDOW)  # receipt − stamp [ns] of the last joint states
         self.timer = node.create_timer(period, self._check, clock=clock)
 
     def _max_jump(self, timeout):
         return max(float(timeout), 4.0 * self._period)
 
-    def set_timeout(self, timeout):
+    def set_timeout(self, timeout: float) -> None:
         """A new timeout [s] (a parameter set at run time): for the age and for the stamp jump."""
         self.freshness.timeout = float(timeout)
         self.stamps.max_jump = self._max_jump(timeout)
 
-    def waited_too_long(self, received_ns, outcome='cycle skipped'):
+    def waited_too_long(self, received_ns: int, outcome: str = 'cycle skipped') -> bool:
         """True (logged with ``outcome``, throttled, and counted as skipped) when a joint state
         received at ``received_ns`` (``time.monotonic_ns()`` in its callback) waited longer than
         ``max_wait``."""
@@ -231,11 +260,11 @@ class JointStateWatchdog:
         )
         return True
 
-    def mark(self):
+    def mark(self) -> None:
         """A joint state arrived now."""
         self.freshness.mark(seconds(self._clock))
 
-    def late(self, stamp):
+    def late(self, stamp: Time) -> float:
         """How much later [s] than the usual delivery the joint state stamped ``stamp`` reached this
         node now (0 when it is the earliest of the window, or unstamped: a zero stamp tells no time)."""
         ns = stamp.sec * 1_000_000_000 + stamp.nanosec
@@ -245,7 +274,7 @@ class JointStateWatchdog:
         self._offsets.append(offset)
         return (offset - min(self._offsets)) * 1e-9
 
-    def admit(self, stamp):
+    def admit(self, stamp: Time) -> bool:
         """True when the joint state stamped ``stamp`` runs a cycle (it is then marked fresh)."""
         logger = self._node.get_logger()
         late = self.late(stamp) if self.max_wait > 0.0 else 0.0
@@ -271,7 +300,7 @@ class JointStateWatchdog:
             logger.warn(mismatch, throttle_duration_sec=10.0)
         return True
 
-    def resync(self, *outputs):
+    def resync(self, *outputs: Publisher) -> bool:
         """True when the node restarts from the measured state this cycle.
 
         That is after a timeout (and at start-up), and also while any of ``outputs`` (the

@@ -16,6 +16,7 @@ node's tuning.
 """
 
 import functools
+from typing import Any
 
 from wmm_control.nodes.base_controller_params import WHEEL_PARAMS as PARAMS
 from wmm_control.nodes.base_controller import BaseControllerNode
@@ -32,15 +33,15 @@ class MecanumControllerNode(BaseControllerNode):
             node name is ``<family>_controller``.
     """
 
-    def __init__(self, family='mecanum', **kwargs):
+    def __init__(self, family: str = 'mecanum', **kwargs: Any) -> None:
         super().__init__(family, **kwargs)
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     return run_node(MecanumControllerNode, args)
 
 
-def main_differential(args=None):
+def main_differential(args: list[str] | None = None) -> int:
     """``differential_controller``: the same node for a differential-drive base."""
     return run_node(functools.partial(MecanumControllerNode, family='differential'), args)
 

@@ -10,9 +10,11 @@ appear in the node YAML.
 
 import array
 import math
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from dataclasses import dataclass
 from types import SimpleNamespace
+from typing import Any
 
 import rclpy
 import yaml
@@ -21,7 +23,7 @@ from rclpy.parameter import Parameter as RosParameter
 
 from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
-from wmm_control.robot_config import load_robot, robot_names
+from wmm_control.robot_config import RobotConfig, load_robot, robot_names
 
 __all__ = [
     'Param',
@@ -57,10 +59,10 @@ class Param:
     choices: tuple | None = None
     read_only: bool = False
     size: tuple | None = None
-    default_from: object = None
+    default_from: Callable[..., Any] | None = None
 
 
-def robot_param(description=''):
+def robot_param(description: str = '') -> Param:
     """The ``robot`` parameter every node has: a shipped robot's name, an alias A/B, or a path to
     a robot YAML file (validated when the node loads it: an unknown name or a bad file stops the
     start-up with a message naming the file and the item)."""
@@ -72,7 +74,7 @@ def robot_param(description=''):
     )
 
 
-def max_state_wait_param():
+def max_state_wait_param() -> Param:
     """The ``max_state_wait`` parameter of every node that answers ``/joint_states``."""
     return Param(
         'max_state_wait',
@@ -86,7 +88,7 @@ def max_state_wait_param():
     )
 
 
-def require_base(robot, families, node_name):
+def require_base(robot: RobotConfig, families: Sequence[str], node_name: str) -> None:
     """Raise a ConfigError unless ``robot``'s base is one of ``families`` (this node drives those)."""
     if robot.base_type not in families:
         raise ConfigError(
@@ -94,19 +96,19 @@ def require_base(robot, families, node_name):
         )
 
 
-def robot_period(values):
+def robot_period(values: SimpleNamespace) -> float:
     """The default of a node's ``period``: the control period of its ``robot`` (the robot YAML's
     ``period``), so that the simulator and every controller agree unless one is told otherwise."""
     return load_robot(values.robot).period
 
 
-def robot_method(values):
+def robot_method(values: SimpleNamespace) -> str:
     """The default of ``redundancy_resolver``'s ``method``: its ``robot``'s (the robot YAML's
     ``method``)."""
     return load_robot(values.robot).method
 
 
-def load_defaults(yaml_name, node_name):
+def load_defaults(yaml_name: str, node_name: str) -> dict:
     """``ros__parameters`` of ``node_name`` (or ``/**``) from ``config/<yaml_name>``."""
     path = config_path(yaml_name)
     try:
@@ -156,7 +158,7 @@ def _descriptor(spec, default):
     return desc
 
 
-def parameter_error(spec, value):
+def parameter_error(spec: Param, value: Any) -> str:
     """Why ``value`` is not valid for ``spec`` ('' when it is).
 
     Checks what rclpy's descriptor does not: allowed strings, finiteness, and the length and
@@ -181,7 +183,13 @@ def _plain(value):
     return list(value) if isinstance(value, (list, tuple, array.array)) else value
 
 
-def declare_parameters(node, yaml_name, specs, on_change=None, check=None):
+def declare_parameters(
+    node: 'rclpy.node.Node',
+    yaml_name: str,
+    specs: Sequence[Param],
+    on_change: Mapping[str, Callable[[Any], object]] | None = None,
+    check: Callable[[SimpleNamespace], str] | None = None,
+) -> SimpleNamespace:
     """Declare every parameter of ``specs``, defaults from ``config/<yaml_name>``, and keep them live.
 
     An integer for a double parameter (``-p stall_time:=5``, ``ros2 param set NODE stall_time 5``)
@@ -211,7 +219,7 @@ def declare_parameters(node, yaml_name, specs, on_change=None, check=None):
     # The section is the node's default name, the file's stem: a node renamed at start-up
     # (``-r __node:=left_base``) keeps its defaults; ``--params-file`` overrides go by name.
     defaults = load_defaults(yaml_name, Path(yaml_name).stem)
-    values = {}
+    values: dict[str, Any] = {}
     for spec in specs:
         if spec.default_from is not None:
             if spec.name in defaults:
@@ -274,7 +282,7 @@ def _integer_override_as_double(node: 'rclpy.node.Node', name: str, default) -> 
 def _watch(node, namespace, specs, on_change, check):
     """Validate run-time sets of the parameters of ``specs``, then apply them to ``namespace``."""
 
-    def validate(params):
+    def validate(params: list[RosParameter]) -> SetParametersResult:
         changes = {}
         for prm in params:
             spec = specs.get(prm.name)
@@ -290,7 +298,7 @@ def _watch(node, namespace, specs, on_change, check):
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
-    def apply(params):
+    def apply(params: list[RosParameter]) -> None:
         for prm in params:
             if prm.name in specs:
                 value = _plain(prm.value)

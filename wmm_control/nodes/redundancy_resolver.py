@@ -68,6 +68,8 @@ markers in :class:`~wmm_control.nodes.markers.ResolverMarkers`.
 """
 
 import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -102,6 +104,8 @@ from wmm_control.nodes.obstacle_topic import ObstacleSet, describe
 from wmm_control.nodes.redundancy_resolver_params import PARAMS
 from wmm_control.resolvers import make_resolver, method_parameters
 from wmm_control.resolvers.exchange import CompensationExchange
+from wmm_control.resolvers.interface import PoseTarget
+from wmm_control.resolvers.progress import GoalProgress
 from wmm_control.resolvers.inputs import LatestInputs, MeasuredInputs
 from wmm_control.resolvers.targets import LogThrottle, TargetManager
 
@@ -111,7 +115,7 @@ __all__ = ['PARAMS', 'RedundancyResolverNode', 'main']
 class RedundancyResolverNode(Node):
     """Wraps one :class:`~wmm_control.resolvers.Resolver` and a :class:`TargetManager`; the maths lives there."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, **kwargs: Any) -> None:
         super().__init__('redundancy_resolver', **kwargs)
         guard_clock(self)
         p = self.p = declare_parameters(
@@ -164,7 +168,7 @@ class RedundancyResolverNode(Node):
         #: is out (``command``: the :class:`~wmm_control.resolvers.ResolverCommand`; ``reached``,
         #: ``stalled``: the goal's state): the cycle's exact values for code in this process (an
         #: experiment's recorder), without a ``/diagnostics`` message every period.
-        self.cycle_observers = []
+        self.cycle_observers: list[Callable[..., object]] = []
         self.pub_arm = self.create_publisher(Float64MultiArray, 'arm_controller/commands', COMMAND_QOS)
         self.pub_base = self.create_publisher(TwistStamped, 'base/reference', COMMAND_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
@@ -203,17 +207,17 @@ class RedundancyResolverNode(Node):
         )
 
     @property
-    def target(self):
+    def target(self) -> PoseTarget | None:
         """The end-effector target pursued, or None."""
         return self.targets.target
 
     @property
-    def progress(self):
+    def progress(self) -> GoalProgress:
         """The :class:`~wmm_control.resolvers.progress.GoalProgress` of the target."""
         return self.targets.progress
 
     @property
-    def counters(self):
+    def counters(self) -> dict:
         """The counts reported on /diagnostics."""
         return {
             'cycles': self._cycles,
@@ -394,7 +398,7 @@ class RedundancyResolverNode(Node):
         return diagnostic_array(stamp, [node_status(self, '', self.model.config.name, level, message, values)])
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     return run_node(RedundancyResolverNode, args)
 
 

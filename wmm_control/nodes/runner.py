@@ -4,14 +4,17 @@ import atexit
 import os
 import signal
 import threading
+from collections.abc import Callable
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 
 # rclpy.init's RCLError (a command line it cannot take) has no public home in rclpy.
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time_source import TimeSource
+from rosgraph_msgs.msg import Clock as ClockMsg
 
 from wmm_control.errors import WmmError
 
@@ -20,7 +23,7 @@ RCLError = _rclpy.RCLError
 __all__ = ['run_node', 'default_executor', 'guard_clock', 'FASTDDS_TRANSPORTS']
 
 
-def default_executor():
+def default_executor() -> Executor:
     """rclpy's events executor (several times faster per message in Jazzy), else single-threaded."""
     try:
         from rclpy.experimental import EventsExecutor
@@ -29,7 +32,7 @@ def default_executor():
     return EventsExecutor()
 
 
-def guard_clock(node):
+def guard_clock(node: Node) -> None:
     """Make ``node`` drop the ``/clock`` messages rclpy's time source cannot take, with a warning.
 
     With ``use_sim_time``, rclpy's own time source turns each ``/clock`` message into a time
@@ -40,8 +43,8 @@ def guard_clock(node):
     ``use_sim_time`` set at run time makes a new subscription, guarded in turn.
     """
 
-    def guard(callback):
-        def guarded(msg):
+    def guard(callback: Callable[[ClockMsg], object]) -> Callable[[ClockMsg], None]:
+        def guarded(msg: ClockMsg) -> None:
             if msg.clock.sec < 0:
                 node.get_logger().warn(
                     f'ignored a /clock message at {msg.clock.sec} s {msg.clock.nanosec} ns: a negative time, '
@@ -54,7 +57,7 @@ def guard_clock(node):
 
         return guarded
 
-    def guard_all(_params=()):
+    def guard_all(_params: object = ()) -> None:
         # rclpy offers no hook on its time source's /clock subscription: find it, wrap its callback.
         for sub in node.subscriptions:
             if isinstance(getattr(sub.callback, '__self__', None), TimeSource):
@@ -71,7 +74,11 @@ def guard_clock(node):
 FASTDDS_TRANSPORTS = 'UDPv4'
 
 
-def run_node(node_factory, args=None, executor_factory=default_executor):
+def run_node(
+    node_factory: Callable[[], Node],
+    args: list[str] | None = None,
+    executor_factory: Callable[[], Executor] = default_executor,
+) -> int:
     """Standard main(): init, build the node, spin until Ctrl-C, SIGTERM or shutdown, clean up.
 
     A configuration error at start-up (the command line's included) is logged and gives exit
@@ -146,7 +153,7 @@ def _ignore_stop_signals_at_exit():
         return
     _EXIT_GUARD.append(True)
 
-    def ignore():
+    def ignore() -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, signal.SIG_IGN)
 

@@ -1,17 +1,26 @@
 """Header stamps and clock times: which joint states run a cycle, and with which reference."""
 
+from __future__ import annotations
+
 import statistics
 from collections import deque
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from builtin_interfaces.msg import Time
+    from rclpy.clock import Clock
+    from rclpy.node import Node
 
 __all__ = ['seconds', 'stamp_key', 'StampGate', 'StampedExchange']
 
 
-def seconds(clock):
+def seconds(clock: Clock) -> float:
     """The clock's current time in seconds (float)."""
     return clock.now().nanoseconds * 1e-9
 
 
-def stamp_key(stamp):
+def stamp_key(stamp: Time) -> tuple[int, int]:
     """A header stamp as a hashable, comparable ``(sec, nanosec)``."""
     return (stamp.sec, stamp.nanosec)
 
@@ -32,17 +41,17 @@ class StampGate:
     :meth:`period_mismatch` reports it when it differs from ``period`` by more than 10 %.
     """
 
-    def __init__(self, period, max_jump, window=40):
+    def __init__(self, period: float, max_jump: float, window: int = 40) -> None:
         self.period = float(period)
         self.max_jump = float(max_jump)
-        self._steps = deque(maxlen=window)
+        self._steps: deque[float] = deque(maxlen=window)
         self._last = None
 
-    def restart(self):
+    def restart(self) -> None:
         """Any next stamp starts a new time base (the sender restarted, or was silent)."""
         self._last = None
 
-    def admit(self, stamp):
+    def admit(self, stamp: Time) -> str:
         """'' when the message stamped ``stamp`` runs a cycle, else why not."""
         ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         last = self._last
@@ -62,13 +71,13 @@ class StampGate:
         return ''
 
     @property
-    def measured_period(self):
+    def measured_period(self) -> float:
         """Median stamp step of the last cycles [s]; 0 before half a window."""
-        if len(self._steps) < self._steps.maxlen // 2:
+        if len(self._steps) < self._steps.maxlen // 2:  # type: ignore[operator]  # built with a maxlen
             return 0.0
         return statistics.median(self._steps)  # as np.median, 15 times faster on a deque
 
-    def period_mismatch(self):
+    def period_mismatch(self) -> str:
         """'' or a sentence saying that the sender's period differs from ``period``."""
         measured = self.measured_period
         if measured == 0.0 or abs(measured - self.period) <= 0.1 * self.period:
@@ -95,19 +104,23 @@ class StampedExchange:
         clock: the clock of the wait timer.
     """
 
-    def __init__(self, node, wait, run_cycle, clock):
+    def __init__(
+        self, node: Node, wait: float, run_cycle: Callable[[tuple[int, int], Any], None], clock: Clock
+    ) -> None:
         self._run_cycle = run_cycle
-        self._pending = None  # (stamp, payload) of the state waiting for its reference
-        self._ref_stamp = None
+        self._pending: tuple[tuple[int, int], Any] | None = (
+            None  # (stamp, payload) of the state waiting for its reference
+        )
+        self._ref_stamp: tuple[int, int] | None = None
         self._timer = node.create_timer(wait, self.run_pending, clock=clock, autostart=False) if wait > 0 else None
 
-    def reference_received(self, stamp):
+    def reference_received(self, stamp: Time) -> None:
         """Note a reference (already stored by the caller) stamped ``stamp``."""
         self._ref_stamp = stamp_key(stamp)
         if self._pending is not None and self._pending[0] == self._ref_stamp:
             self.run_pending()
 
-    def state_received(self, stamp, payload):
+    def state_received(self, stamp: Time, payload: Any) -> None:
         """A state stamped ``stamp``: its cycle runs now or once its reference comes."""
         if self._pending is not None:  # the previous state's reference never came
             self.run_pending()
@@ -118,7 +131,7 @@ class StampedExchange:
         else:
             self._timer.reset()
 
-    def run_pending(self):
+    def run_pending(self) -> None:
         """Run the waiting state's cycle now (nothing if none waits)."""
         if self._timer is not None:
             self._timer.cancel()

@@ -13,6 +13,8 @@ parameters are the gains ``kp`` and ``icr_gain`` (``config/swmr_controller.yaml`
 Table I).
 """
 
+from typing import Any
+
 from wmm_control.nodes.base_controller_params import STEERABLE_PARAMS as PARAMS
 from wmm_control.nodes.base_controller import BaseControllerNode
 from wmm_control.nodes.runner import run_node
@@ -23,11 +25,11 @@ __all__ = ['PARAMS', 'SwmrControllerNode', 'main']
 class SwmrControllerNode(BaseControllerNode):
     """The base controller node of a steerable base (node name ``swmr_controller``)."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, **kwargs: Any) -> None:
         super().__init__('steerable', **kwargs)
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     return run_node(SwmrControllerNode, args)
 
 

@@ -262,7 +262,7 @@ class ViewerNode(Node):
             )
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     return run_node(ViewerNode, args)
 
 

@@ -7,16 +7,20 @@
 """
 
 from dataclasses import fields
-
+from pathlib import Path
+from typing import Any
 
 from wmm_control.errors import ConfigError
+from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers.interface import PoseTarget, Resolver, ResolverCommand, ResolverDiagnostics, RobotState
 from wmm_control.resolvers.limits import CommandLimits, LimitResult
 from wmm_control.resolvers.pinv import PinvParams, PinvResolver
 from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver
 from wmm_control.resolvers.task_sharing import TaskSharingParams, TaskSharingResolver, psi_of_error
+from wmm_control.resolvers.acceleration_level import AccelerationResolver
 from wmm_control.resolvers.amp import AmpParams, AmpResolver
 from wmm_control.resolvers.traditional import TraditionalParams, TraditionalResolver
+from wmm_control.robot_config import RobotConfig
 
 __all__ = [
     'CommandLimits',
@@ -54,12 +58,14 @@ METHODS = {
 }
 
 
-def method_parameters(method):
+def method_parameters(method: str) -> tuple[str, ...]:
     """Names of the parameters of ``method`` (its parameters class's fields, ``dt`` included)."""
     return tuple(f.name for f in fields(METHODS[method][1]))
 
 
-def make_resolver(method, robot='steerable', **params):
+def make_resolver(
+    method: str, robot: str | Path | RobotConfig | KinematicModel = 'steerable', **params: Any
+) -> PoseServoResolver | AccelerationResolver:
     """Build the resolver named ``method`` with keyword parameters of its params class.
 
     Raises:
@@ -70,6 +76,7 @@ def make_resolver(method, robot='steerable', **params):
     except KeyError as exc:
         raise ConfigError(f'unknown method {method!r}; one of {sorted(METHODS)}') from exc
     try:
-        return cls(robot, params_cls(**params))
+        # METHODS pairs each resolver class with its own parameters class
+        return cls(robot, params_cls(**params))  # type: ignore[arg-type]
     except TypeError as exc:
         raise ConfigError(f'method {method}: {exc}') from exc

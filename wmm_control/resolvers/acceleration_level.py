@@ -30,6 +30,7 @@ import math
 import time
 from abc import abstractmethod
 from dataclasses import dataclass
+from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
@@ -37,12 +38,13 @@ import pinocchio as pin
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.resolvers.interface import Resolver, ResolverCommand, ResolverDiagnostics
+from wmm_control.resolvers.interface import PoseTarget, Resolver, ResolverCommand, ResolverDiagnostics, RobotState
 from wmm_control.resolvers.limits import CommandLimits
 from wmm_control.resolvers.pose_servo import _check_fields, lapack_svd
 from wmm_control.resolvers.safety import SafetyParams, SafetyStage
 from wmm_control.resolvers.setpoint_trajectory import SetpointTrajectory
 from wmm_control.resolvers.sns import task_scale
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['AccelerationParams', 'AccelerationResolver', 'TASK_ROWS']
 
@@ -101,7 +103,7 @@ class AccelerationResolver(Resolver):
 
     name = 'acceleration_level'
 
-    def __init__(self, robot, params):
+    def __init__(self, robot: str | Path | RobotConfig | KinematicModel, params: AccelerationParams) -> None:
         self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
         self.params = params
         self.limits = CommandLimits.for_robot(self.model.config, params.dt)
@@ -115,8 +117,8 @@ class AccelerationResolver(Resolver):
         self._kd = np.array([params.kd] * 3 + [params.kd_rot] * 3)
         self.reset()
 
-    def reset(self):
-        self._qd = None  # the commanded generalized rates u = (u_b, q̇_m) (the integrator)
+    def reset(self) -> None:
+        self._qd: np.ndarray | None = None  # the commanded generalized rates u = (u_b, q̇_m) (the integrator)
         self._last_base = np.zeros(3)  # the last base twist sent (base frame)
         self._setpoint = None  # (goal key, trajectory, time along it)
 
@@ -136,7 +138,7 @@ class AccelerationResolver(Resolver):
         self._setpoint[2] += self.params.dt
         return self._setpoint[1].sample(self._setpoint[2])
 
-    def task_acceleration(self, state, target):
+    def task_acceleration(self, state: RobotState, target: PoseTarget) -> dict:
         """Eq (23) and what the methods need.
 
         Returns:
@@ -164,7 +166,7 @@ class AccelerationResolver(Resolver):
         if state.ee_position is None:
             pos, rot = model.ee_placement_world()
         else:
-            pos, rot = state.ee_position, state.ee_rotation
+            pos, rot = state.ee_position, state.ee_rotation  # type: ignore[assignment]  # a RobotState holds both or neither
         ref = self._reference(target, pos, rot)
         jac = model.jacobian_world()
         drift = model.jdot_qdot()
@@ -199,7 +201,7 @@ class AccelerationResolver(Resolver):
             'sigma_position': sigma_position,
         }
 
-    def manipulability_acceleration(self, qd):
+    def manipulability_acceleration(self, qd: np.ndarray) -> np.ndarray:
         """Eq (13): ``q̈_A = [0; γ1 ∇²H q̇_m + γ2 (γ1 ∇H − q̇_m)]``, H over the task's rows. Shape (n_b + n,)."""
         p = self.params
         grad = self.model.manipulability_gradient(self.params.rows)
@@ -214,7 +216,7 @@ class AccelerationResolver(Resolver):
     def _accelerations(self, task):
         """The method: ``(q̈ (n_b + n,), diagnostics fields dict)`` within ``task['lower'/'upper']``."""
 
-    def step(self, state, target):
+    def step(self, state: RobotState, target: PoseTarget) -> ResolverCommand:
         t0 = time.perf_counter()
         task = self.task_acceleration(state, target)
         qdd, fields = self._accelerations(task)

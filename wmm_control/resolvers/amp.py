@@ -16,12 +16,15 @@ Each period (on top of :mod:`~wmm_control.resolvers.acceleration_level`):
 """
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from wmm_control.errors import ConfigError
 from wmm_control.resolvers.acceleration_level import AccelerationParams, AccelerationResolver
 from wmm_control.resolvers.sns import sns_accelerations
+from wmm_control.kinematics import KinematicModel
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['AmpParams', 'AmpResolver']
 
@@ -74,10 +77,12 @@ class AmpResolver(AccelerationResolver):
 
     name = 'amp'
 
-    def __init__(self, robot='mecanum', params=None):
+    def __init__(
+        self, robot: str | Path | RobotConfig | KinematicModel = 'mecanum', params: AmpParams | None = None
+    ) -> None:
         super().__init__(robot, params if params is not None else AmpParams())
 
-    def reset(self):
+    def reset(self) -> None:
         super().reset()
         self._last_sigma = None  # σ_m of the last period, for the anticipation of the test
 

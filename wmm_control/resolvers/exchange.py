@@ -9,6 +9,12 @@ command whose answer does not come (a timeout, or the next cycle starting) goes 
 the compensation, counted.
 """
 
+from typing import Any
+
+from numpy.typing import ArrayLike
+
+from wmm_control.resolvers.interface import Resolver, ResolverCommand
+
 __all__ = ['CompensationExchange']
 
 
@@ -22,7 +28,7 @@ class CompensationExchange:
         dropped: commands that went out without their compensation.
     """
 
-    def __init__(self, resolver) -> None:
+    def __init__(self, resolver: Resolver) -> None:
         self.resolver = resolver
         self.dropped = 0
         self._pending: tuple | None = None
@@ -40,10 +46,10 @@ class CompensationExchange:
         """Whether an answer to the reference ``key`` is the one awaited."""
         return self._pending is not None and key == self._pending[0]
 
-    def finish(self, feasible=None):
+    def finish(self, feasible: ArrayLike | None = None) -> tuple[ResolverCommand, Any]:
         """(arm command, stamp) of the held cycle, compensated for the feasible twist (vx, vy, ω)
         when it is given, else as it is (counted in ``dropped``); nothing is held afterwards."""
-        _, command, stamp = self._pending
+        _, command, stamp = self._pending  # type: ignore[misc]  # called while a command is held
         self._pending = None
         if feasible is None:
             self.dropped += 1

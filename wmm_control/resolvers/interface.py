@@ -11,18 +11,25 @@ Frames: the world frame is fixed, z up; the base frame is ``base_link`` (x forwa
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ShapeError
 from wmm_control.kinematics.orientation import matrix_from_rpy
 
+if TYPE_CHECKING:
+    from wmm_control.kinematics.obstacles import Obstacle
+    from wmm_control.resolvers.safety import SafetyStage
+
 __all__ = ['RobotState', 'PoseTarget', 'ResolverDiagnostics', 'ResolverCommand', 'Resolver', 'base_twist_of']
 
 
-def base_twist_of(values, axes):
+def base_twist_of(values: ArrayLike, axes: Iterable[int]) -> np.ndarray:
     """The base twist (vx, vy, ω) whose entries ``axes`` are ``values`` and the rest zero.
 
     A differential base follows (vx, ω) only (axes (0, 2)): its vy is zero by construction.
@@ -104,7 +111,7 @@ class PoseTarget:
         object.__setattr__(self, 'acceleration', as_finite_vector(self.acceleration, 6, 'target acceleration'))
 
     @classmethod
-    def from_rpy(cls, pose):
+    def from_rpy(cls, pose: ArrayLike) -> Self:
         """A set-point from ``[x, y, z, roll, pitch, yaw]`` [m, rad] (Sorour Table II layout)."""
         pose = as_finite_vector(pose, 6, 'target pose')
         return cls(pose[:3], matrix_from_rpy(pose[3:]))
@@ -178,7 +185,7 @@ class ResolverCommand:
     base_twist: np.ndarray
     diagnostics: ResolverDiagnostics
 
-    def with_arm(self, arm_velocity, **diagnostics):
+    def with_arm(self, arm_velocity: ArrayLike, **diagnostics: Any) -> Self:
         """A copy with another arm command and some diagnostics fields replaced."""
         return replace(
             self,
@@ -194,7 +201,7 @@ class Resolver(ABC):
     name = 'resolver'
 
     @abstractmethod
-    def step(self, state, target):
+    def step(self, state: RobotState, target: PoseTarget) -> ResolverCommand:
         """One control period.
 
         Args:
@@ -206,14 +213,14 @@ class Resolver(ABC):
         """
 
     #: the method's :class:`~wmm_control.resolvers.safety.SafetyStage`, which every command passes
-    safety = None
+    safety: 'SafetyStage' = None  # type: ignore[assignment]  # every method's __init__ sets its stage
 
-    def set_obstacles(self, obstacles):
+    def set_obstacles(self, obstacles: Iterable['Obstacle']) -> None:
         """Keep the robot off ``obstacles`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`,
         world frame) from now on, instead of the previous ones."""
         self.safety.set_obstacles(obstacles)
 
-    def compensate(self, command, feasible_twist):
+    def compensate(self, command: ResolverCommand, feasible_twist: ArrayLike) -> ResolverCommand:
         """Finish ``command`` with the base controller's answer ``feasible_twist``.
 
         ``feasible_twist`` is q̇_bf of Sorour eq (15): the twist (vx, vy, ω) [m/s, m/s,
@@ -223,9 +230,9 @@ class Resolver(ABC):
         return command
 
     @property
-    def uses_compensation(self):
+    def uses_compensation(self) -> bool:
         """True when :meth:`compensate` changes the command (it needs the feasible twist)."""
         return False
 
-    def reset(self):  # noqa: B027 (a default: a method without state has nothing to forget)
+    def reset(self) -> None:  # noqa: B027 (a default: a method without state has nothing to forget)
         """Forget the previous command (the next one starts from rest)."""

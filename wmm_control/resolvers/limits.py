@@ -39,11 +39,14 @@ reset) braking wins and the entry is reported as forced.
 
 import math
 from dataclasses import dataclass
+from typing import Self
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector, as_vector
 from wmm_control.errors import ConfigError
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['CommandLimits', 'LimitResult']
 
@@ -89,7 +92,14 @@ class CommandLimits:
         ConfigError: non-positive or non-finite limits, or inconsistent shapes.
     """
 
-    def __init__(self, velocity, acceleration, position_lower, position_upper, dt):
+    def __init__(
+        self,
+        velocity: ArrayLike,
+        acceleration: ArrayLike,
+        position_lower: ArrayLike,
+        position_upper: ArrayLike,
+        dt: float,
+    ) -> None:
         self.velocity = np.asarray(velocity, dtype=float)
         n = self.velocity.size
         self.acceleration = np.asarray(acceleration, dtype=float)
@@ -120,7 +130,7 @@ class CommandLimits:
         self._has_lower = np.isfinite(self.position_lower).tolist()
         self._has_upper = np.isfinite(self.position_upper).tolist()
 
-    def braking_rates(self, position):
+    def braking_rates(self, position: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Largest rates towards the lower and upper position limits from which braking stops in time.
 
         Args:
@@ -132,7 +142,7 @@ class CommandLimits:
         down, up = self._braking(self._floats(position, 'position'))
         return np.array(down), np.array(up)
 
-    def box(self, position, previous):
+    def box(self, position: ArrayLike, previous: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """This period's interval for every entry.
 
         Velocity and braking bounds always contain zero. The acceleration interval around
@@ -149,7 +159,7 @@ class CommandLimits:
         return np.array(lo), np.array(hi), np.array(forced, dtype=bool)
 
     @classmethod
-    def for_robot(cls, robot, dt):
+    def for_robot(cls, robot: RobotConfig, dt: float) -> Self:
         """Limits of the whole-body command (base, q̇_1 … q̇_n) of a robot description.
 
         The base entries are the twist axes the base can follow (``robot.base_axes``: vx, vy,
@@ -166,7 +176,7 @@ class CommandLimits:
             dt=dt,
         )
 
-    def subset(self, index):
+    def subset(self, index: slice | np.ndarray) -> 'CommandLimits':
         """The limits of some entries only (``index``: a slice or an index array)."""
         return CommandLimits(
             self.velocity[index],

@@ -6,8 +6,11 @@ Table I's 0.001 away from singularities (see :func:`~wmm_control.resolvers.pose_
 """
 
 from dataclasses import dataclass
+from pathlib import Path
 
 from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver
+from wmm_control.kinematics import KinematicModel
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['PinvParams', 'PinvResolver']
 
@@ -27,7 +30,9 @@ class PinvResolver(PoseServoResolver):
 
     name = 'pinv'
 
-    def __init__(self, robot='steerable', params=None):
+    def __init__(
+        self, robot: str | Path | RobotConfig | KinematicModel = 'steerable', params: PinvParams | None = None
+    ) -> None:
         super().__init__(robot, params if params is not None else PinvParams())
 
     def _resolve(self, jac, p_ref, e_pos, state):

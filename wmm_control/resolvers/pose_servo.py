@@ -26,18 +26,28 @@ import math
 import time
 from abc import abstractmethod
 from dataclasses import dataclass, fields, replace
+from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 from scipy.linalg import lapack
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.orientation import rpy_from_matrix, rpy_rate_map, wrap_angle
-from wmm_control.resolvers.interface import Resolver, ResolverCommand, ResolverDiagnostics, base_twist_of
+from wmm_control.resolvers.interface import (
+    PoseTarget,
+    Resolver,
+    ResolverCommand,
+    ResolverDiagnostics,
+    RobotState,
+    base_twist_of,
+)
 from wmm_control.resolvers.limits import CommandLimits
 from wmm_control.resolvers.safety import SafetyParams, SafetyStage
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['PoseServoParams', 'PoseServoResolver', 'damped_pinv_solve', 'singularity_damping', 'ORIENTATION_ERRORS']
 
@@ -112,7 +122,7 @@ def _check_fields(params, allow_zero=()):
             )
 
 
-def singularity_damping(jac, rho, region, max_damping):
+def singularity_damping(jac: np.ndarray, rho: float, region: float, max_damping: float) -> tuple[float, float]:
     """Damping of a singularity-robust inverse (Nakamura–Hanafusa, Chiaverini).
 
     ``ρ² = ρ₀² + ρ_max² (1 − (σ_min/ε)²)`` when σ_min < ε, else ρ₀: Table I's ρ₀ = 0.001
@@ -135,7 +145,7 @@ def singularity_damping(jac, rho, region, max_damping):
     return math.sqrt(rho * rho + max_damping * max_damping * (1.0 - (sigma / region) ** 2)), sigma
 
 
-def damped_pinv_solve(jac, rhs, rho, activation=None):
+def damped_pinv_solve(jac: np.ndarray, rhs: np.ndarray, rho: float, activation: np.ndarray | None = None) -> np.ndarray:
     """``A Jᵀ (J A Jᵀ + ρ² I)⁻¹ rhs``: the weighted damped pseudo-inverse of Sorour eq (9).
 
     Args:
@@ -163,7 +173,7 @@ def damped_pinv_solve(jac, rhs, rho, activation=None):
 # grows a 1e-14 change of one command to 1e-8 within 150 periods and to O(1) within 400.)
 
 
-def lapack_svd(a, compute_uv=True):
+def lapack_svd(a: np.ndarray, compute_uv: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray] | np.ndarray:
     """``np.linalg.svd(a, full_matrices=False, compute_uv=...)`` of a real matrix.
 
     Returns:
@@ -179,7 +189,7 @@ def lapack_svd(a, compute_uv=True):
     return (u, s, vt) if compute_uv else s
 
 
-def lapack_solve(a, b):
+def lapack_solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``np.linalg.solve(a, b)`` for one square matrix (LU with partial pivoting).
 
     Raises:
@@ -202,7 +212,7 @@ class PoseServoResolver(Resolver):
 
     name = 'pose_servo'
 
-    def __init__(self, robot, params):
+    def __init__(self, robot: str | Path | RobotConfig | KinematicModel, params: PoseServoParams) -> None:
         self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
         self.params = params
         config = self.model.config
@@ -219,7 +229,7 @@ class PoseServoResolver(Resolver):
         self._position = np.zeros(self.n)
         self.reset()
 
-    def reset(self):
+    def reset(self) -> None:
         n, n_arm = self.n, self.n_arm
         self._prev = np.zeros(n)  # last nominal command (base reference, arm before eq 14)
         self._prev_null = np.zeros(n)  # its null-space share
@@ -228,15 +238,15 @@ class PoseServoResolver(Resolver):
         self._arm_before = (np.zeros(n_arm), np.zeros(n_arm))
         self._arm_task = np.zeros(n_arm)  # this period's arm command: task part...
         self._arm_null = np.zeros(n_arm)  # ...and null-space part
-        self._q_arm = None
-        self._jac = None
+        self._q_arm: np.ndarray | None = None
+        self._jac: np.ndarray | None = None
         self._safety = None  # the safety stage's answer on the last arm command
-        self._base_pose = None
-        self._base_velocity = None
+        self._base_pose: np.ndarray | None = None
+        self._base_velocity: np.ndarray | None = None
         self.arm_damping = self.params.rho
 
     # ------------------------------------------------------------------ eq (12)
-    def task_reference(self, state, target):
+    def task_reference(self, state: RobotState, target: PoseTarget) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """Pose error and eq (12)'s task-space reference, with the Jacobian it is resolved on.
 
         Returns:
@@ -249,7 +259,7 @@ class PoseServoResolver(Resolver):
         if state.ee_position is None:
             pos, rot = model.ee_placement_world()
         else:
-            pos, rot = state.ee_position, state.ee_rotation
+            pos, rot = state.ee_position, state.ee_rotation  # type: ignore[assignment]  # a RobotState holds both or neither
         theta = state.base_pose[2]
         c, s = math.cos(theta), math.sin(theta)
         b_r_w = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -280,13 +290,15 @@ class PoseServoResolver(Resolver):
         _cap(p_ref[3:], p.max_angular_speed)
         return jac, p_ref, e_pos, angle
 
-    def task_damping(self, jac, activation=None):
+    def task_damping(self, jac: np.ndarray, activation: np.ndarray | None = None) -> float:
         """ρ for inverting ``jac`` with ``activation`` (:func:`singularity_damping` of the active part)."""
         p = self.params
         active = jac if activation is None else jac * np.sqrt(activation)
         return singularity_damping(active, p.rho, p.singular_region, p.max_damping)[0]
 
-    def solve_task(self, jac, p_ref, q_arm, activation=None):
+    def solve_task(
+        self, jac: np.ndarray, p_ref: np.ndarray, q_arm: np.ndarray, activation: np.ndarray | None = None
+    ) -> np.ndarray:
         """The task part: ``A Jᵀ (J A Jᵀ + ρ² I)⁻¹ ṗ_ref`` (:func:`damped_pinv_solve`), with the
         entries that cannot follow it held at their bounds and the task re-shared (not in the
         paper; both options are off by default).
@@ -370,7 +382,7 @@ class PoseServoResolver(Resolver):
     def _resolve(self, jac, p_ref, e_pos, state):
         """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ)``."""
 
-    def step(self, state, target):
+    def step(self, state: RobotState, target: PoseTarget) -> ResolverCommand:
         """One period: eq (12), the method's inversion, then the limits.
 
         The whole command (base reference and arm) is brought into the velocity, braking and
@@ -474,13 +486,13 @@ class PoseServoResolver(Resolver):
         )
 
     # ------------------------------------------------------------------ eq (14)
-    def compensation_term(self, base_reference, feasible_twist):
+    def compensation_term(self, base_reference: ArrayLike, feasible_twist: ArrayLike) -> np.ndarray:
         """Eq (14)'s arm term ``J_a⁺ M_RPY H J_b (q̇_ref(b) − q̇_bf)`` on this period's Jacobian.
 
         ``J_a`` is the arm's part of the same task Jacobian (analytic in ``'rpy'`` mode), its
         pseudo-inverse damped by :func:`singularity_damping`. Shape (n,).
         """
-        jac = self._jac
+        jac: np.ndarray = self._jac  # type: ignore[assignment]  # step() has set it
         gap = np.asarray(base_reference, dtype=float) - np.asarray(feasible_twist, dtype=float)
         deficit = jac[:, : self.n_base] @ gap[list(self.base_axes)]
         return damped_pinv_solve(jac[:, self.n_base :], deficit, self.arm_damping)

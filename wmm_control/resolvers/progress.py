@@ -39,6 +39,9 @@ and the randomized closed-loop runs share this rule.
 import bisect
 import math
 from collections import deque
+from collections.abc import Iterable
+
+from wmm_control.resolvers.interface import ResolverDiagnostics
 
 __all__ = ['GoalProgress']
 
@@ -60,7 +63,14 @@ class GoalProgress:
             within ``stall_time`` to count as progress [-].
     """
 
-    def __init__(self, tolerance, stall_time, period, min_progress=(1e-3, 1e-3), min_progress_ratio=0.1):
+    def __init__(
+        self,
+        tolerance: Iterable[float],
+        stall_time: float,
+        period: float,
+        min_progress: Iterable[float] = (1e-3, 1e-3),
+        min_progress_ratio: float = 0.1,
+    ) -> None:
         self.tolerance = tuple(float(v) for v in tolerance)
         self.period = float(period)
         self.min_progress = tuple(float(v) for v in min_progress)
@@ -69,17 +79,17 @@ class GoalProgress:
         self.start()
 
     @property
-    def stall_time(self):
+    def stall_time(self) -> float:
         """The window over which progress is judged [s]."""
         return self._stall_time
 
     @stall_time.setter
-    def stall_time(self, value):
+    def stall_time(self, value: float) -> None:
         self._stall_time = float(value)
         self._window = max(1, int(round(self._stall_time / self.period)))
         self._stride = max(1, math.ceil(self._window / _SAMPLES_PER_WINDOW))
 
-    def start(self):
+    def start(self) -> None:
         """A new goal: no cycle seen, no progress yet."""
         self.cycles = 0
         self.reached = False
@@ -87,17 +97,17 @@ class GoalProgress:
         self._best = [math.inf, math.inf]  # best (position, orientation) error of the goal
         self._held = [math.inf, math.inf]  # held (position, orientation) error of the goal
         self._block = [0.0, 0.0]  # largest errors of the stride under way
-        self._blocks = deque()  # ...and of the strides before it, a window's worth
-        self._last_reached = None
-        self._last_moving = None  # the last cycle whose target still moved
+        self._blocks: deque[list[float]] = deque()  # ...and of the strides before it, a window's worth
+        self._last_reached: int | None = None
+        self._last_moving: int | None = None  # the last cycle whose target still moved
         self._gathering_pace = True
-        self._cycles = deque()  # the cycles sampled, every stride...
-        self._samples = deque()  # ...and (best, held) errors then
+        self._cycles: deque[int] = deque()  # the cycles sampled, every stride...
+        self._samples: deque[tuple[tuple[float, ...], tuple[float, ...]]] = deque()  # ...and (best, held) errors then
 
     def _needed(self, value, index):
         return max(self.min_progress[index], self.min_progress_ratio * value)
 
-    def update(self, diagnostics):
+    def update(self, diagnostics: ResolverDiagnostics) -> None:
         """Account for one cycle's diagnostics (``position_error``, ``orientation_error``)."""
         self.cycles += 1
         pos, ori = diagnostics.position_error, diagnostics.orientation_error

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from wmm_control.resolvers.interface import PoseTarget
 
@@ -32,8 +33,15 @@ class SetpointTrajectory:
     """
 
     def __init__(
-        self, start_position, start_rotation, goal, max_speed, max_accel, max_angular_speed, max_angular_accel
-    ):
+        self,
+        start_position: ArrayLike,
+        start_rotation: ArrayLike,
+        goal: PoseTarget,
+        max_speed: float,
+        max_accel: float,
+        max_angular_speed: float,
+        max_angular_accel: float,
+    ) -> None:
         self.goal = goal
         self.p0 = np.asarray(start_position, dtype=float).copy()
         self.r0 = np.asarray(start_rotation, dtype=float).copy()
@@ -48,7 +56,7 @@ class SetpointTrajectory:
             1e-9,
         )
 
-    def sample(self, t):
+    def sample(self, t: float) -> PoseTarget:
         """The reference at time ``t`` [s] since the start: pose, twist and acceleration (world)."""
         tau = min(max(t / self.duration, 0.0), 1.0)
         s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)

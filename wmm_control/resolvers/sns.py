@@ -9,6 +9,7 @@ the largest ``α ∈ [0, 1]`` found along the way (the task scaling of Xing's Fi
 from typing import NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.resolvers.pose_servo import lapack_svd
 
@@ -17,7 +18,9 @@ __all__ = ['SnsResult', 'full_row_rank_pinv', 'sns_accelerations', 'task_scale']
 _TOL = 1e-9
 
 
-def task_scale(start, step, lower, upper, mask):
+def task_scale(
+    start: np.ndarray, step: np.ndarray, lower: np.ndarray, upper: np.ndarray, mask: np.ndarray
+) -> tuple[float, np.ndarray]:
     """Largest ``s ∈ [0, 1]`` with ``lower ≤ start + s·step ≤ upper`` on the entries of ``mask``.
 
     Returns:
@@ -53,7 +56,7 @@ class SnsResult(NamedTuple):
     pinv: object
 
 
-def full_row_rank_pinv(a, rcond):
+def full_row_rank_pinv(a: np.ndarray, rcond: float) -> np.ndarray | None:
     """``a⁺`` from one SVD when ``a`` (r, k) has full row rank, else None.
 
     Full row rank: r singular values, the smallest above ``rcond`` times the largest. Then no
@@ -65,7 +68,16 @@ def full_row_rank_pinv(a, rcond):
     return (vt.T / sv) @ u.T
 
 
-def sns_accelerations(jac, xdd, drift, lower, upper, active, held, rcond=1e-6):
+def sns_accelerations(
+    jac: np.ndarray,
+    xdd: np.ndarray,
+    drift: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    active: ArrayLike,
+    held: np.ndarray,
+    rcond: float = 1e-6,
+) -> SnsResult:
     """Xing eq (9) by saturation in the null space.
 
     Args:

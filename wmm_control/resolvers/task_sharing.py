@@ -23,12 +23,17 @@ Each period:
 """
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
+from wmm_control.resolvers.interface import ResolverCommand
 from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver, _norm, lapack_svd
+from wmm_control.kinematics import KinematicModel
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['TaskSharingParams', 'TaskSharingResolver', 'MODES', 'psi_of_error']
 
@@ -36,7 +41,7 @@ __all__ = ['TaskSharingParams', 'TaskSharingResolver', 'MODES', 'psi_of_error']
 MODES = {0.0: 'gross_motion', 0.5: 'mobile_manipulation', 1.0: 'fine_manipulation'}
 
 
-def psi_of_error(error_norm, r_fm, r_mm):
+def psi_of_error(error_norm: float, r_fm: float, r_mm: float) -> float:
     """Eq (11): the task-sharing factor ψ from the position error norm [m]."""
     if error_norm <= r_fm:
         return 1.0
@@ -83,18 +88,24 @@ class TaskSharingResolver(PoseServoResolver):
     """
 
     name = 'task_sharing'
+    params: TaskSharingParams
 
-    def __init__(self, robot='steerable', params=None, q_dex=None):
+    def __init__(
+        self,
+        robot: str | Path | RobotConfig | KinematicModel = 'steerable',
+        params: TaskSharingParams | None = None,
+        q_dex: ArrayLike | None = None,
+    ) -> None:
         super().__init__(robot, params if params is not None else TaskSharingParams())
         dex = self.model.config.arm.dexterous if q_dex is None else q_dex
         self.q_dex = as_finite_vector(dex, self.n_arm, 'q_dex').copy()
         self._psi = None
 
     @property
-    def uses_compensation(self):
+    def uses_compensation(self) -> bool:
         return self.params.compensation
 
-    def reset(self):
+    def reset(self) -> None:
         super().reset()
         self._psi = None
 
@@ -145,7 +156,7 @@ class TaskSharingResolver(PoseServoResolver):
             rows = np.vstack((jac, np.eye(n)[held]))
         return np.zeros(n)
 
-    def compensate(self, command, feasible_twist):
+    def compensate(self, command: ResolverCommand, feasible_twist: ArrayLike) -> ResolverCommand:
         """Eq (14): add ``J_a⁺ M_RPY H J_b (q̇_ref(b) − q̇_bf)`` to the arm command.
 
         Args:

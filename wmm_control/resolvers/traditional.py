@@ -10,11 +10,14 @@ moment.)
 """
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from wmm_control.resolvers.acceleration_level import AccelerationParams, AccelerationResolver
 from wmm_control.resolvers.sns import task_scale
+from wmm_control.kinematics import KinematicModel
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['TraditionalParams', 'TraditionalResolver']
 
@@ -29,7 +32,9 @@ class TraditionalResolver(AccelerationResolver):
 
     name = 'traditional'
 
-    def __init__(self, robot='mecanum', params=None):
+    def __init__(
+        self, robot: str | Path | RobotConfig | KinematicModel = 'mecanum', params: TraditionalParams | None = None
+    ) -> None:
         super().__init__(robot, params if params is not None else TraditionalParams())
 
     def _accelerations(self, task):
