@@ -98,6 +98,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import lapack
 
 from wmm_control.base.swmr_controller import SwmrParams
@@ -489,7 +490,7 @@ class SafetyStage:
         obstacle."""
         lags = np.where(moved, self.base_lag, 0.0)
         if self._arm_acc is None:
-            return self.allowed_approach(distances, lag=lags)
+            return np.asarray(self.allowed_approach(distances, lag=lags))
         nb = len(axes)
         reach = np.abs(rows[:, nb:]) @ self._arm_acc
         linear, slowest = self._linear_axes(axes)
@@ -501,9 +502,11 @@ class SafetyStage:
             if 2 in axes and self.base_lag == 0.0:
                 slowest *= 1.0 - TURN_SHARE  # the rest is the turn's (_turn_rows)
             reach = reach + np.linalg.norm(rows[:, linear], axis=1) * slowest
-        return self.allowed_approach(distances, reach, lags)
+        return np.asarray(self.allowed_approach(distances, reach, lags))
 
-    def allowed_approach(self, distance, deceleration=math.inf, lag=0.0):
+    def allowed_approach(
+        self, distance: ArrayLike, deceleration: ArrayLike = math.inf, lag: ArrayLike = 0.0
+    ) -> float | np.ndarray:
         """The fastest a pair ``distance`` [m] apart may approach [m/s] (negative: it must
         separate), its distance braking at no more than ``deceleration`` [m/s²] (and
         ``collision_braking``) after a lag of ``lag`` [s]. Each argument a number or an array
