@@ -322,8 +322,9 @@ class SafetyStage:
         # the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for world-frame rates
         to_base = _world_to_base(base_pose[2]) if world_rates else np.eye(3)
         rows = np.hstack(((base_full @ to_base)[:, axes], near.rate_jacobian))
-        # the base's body keeps its margin from obstacles: its pairs are as much nearer
-        distance = near.distance - self.body_margin * _body_pairs(rows, axes, moved)
+        distance = near.distance
+        if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
+            distance = distance - self.body_margin * _body_pairs(rows, axes, moved)
         allowed = self._allowed(distance, rows, axes, moved)
         lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
         bound = -allowed
