@@ -68,6 +68,7 @@ from sim_bridge.supervision import (
 )
 from wmm_control.errors import ConfigError
 from wmm_control.nodes.conversions import parse_command, stamp_from_seconds
+from wmm_control.nodes.diagnostics import DiagnosticsGate
 from wmm_control.nodes.obstacle_topic import ObstacleSet, describe
 from wmm_control.nodes.parameters import declare_parameters
 from wmm_control.nodes.qos import COMMAND_QOS
@@ -121,7 +122,7 @@ class SimNode(Node):
         base_frame = self.p.frame_prefix + self.world.robot.base_link
         self.out = SimOutputs(self, self.frames, self.p.frame_prefix + 'odom', base_frame)
         self._steps = 0
-        self._next_diag = 0.0
+        self._diagnostics_gate = DiagnosticsGate()
         self._wall_start = time.monotonic()
         # The simulator is the time source when it steps in lockstep, or when it publishes
         # /clock to nodes on sim time (itself included): its stamps are then its own time.
@@ -215,8 +216,7 @@ class SimNode(Node):
     def _publish_state(self):
         stamp = stamp_from_seconds(self.world.time) if self.sim_time_source else self.get_clock().now().to_msg()
         joints = self.out.publish_state(stamp, self.world, self.odom_covariance, self.lockstep or self.p.publish_clock)
-        if self.now_s() + 1e-9 >= self._next_diag and self.p.diagnostics_period > 0:
-            self._next_diag = self.now_s() + self.p.diagnostics_period
+        if self._diagnostics_gate.due(self.now_s(), self.p.diagnostics_period):
             pace = (self.world.time, self._steps, time.monotonic() - self._wall_start)
             mode = f'{self.p.timing}, {self.p.base_mode}'
             found = statuses(

@@ -11,6 +11,7 @@ from rclpy.qos import ReliabilityPolicy
 from ros_helpers import overrides
 from sim_bridge.node import SimNode
 from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
+from wmm_control.nodes.diagnostics import DiagnosticsGate
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
@@ -197,3 +198,18 @@ def test_qos_sensor_data_and_commands(ros):
     ):
         assert _reliability(probe, topic, True) == {node: ReliabilityPolicy.RELIABLE}
     assert set(_reliability(probe, '/arm_controller/commands', False).values()) == {ReliabilityPolicy.RELIABLE}
+
+
+def test_diagnostics_come_at_the_configured_rate_and_never_with_period_zero():
+    """Every node gates its /diagnostics with one DiagnosticsGate: the first cycle reports, then
+    one message per ``diagnostics_period`` of the node's clock; 0 silences it; a period changed
+    at run time applies from the next message."""
+    gate = DiagnosticsGate()
+    times = np.arange(0.0, 1.0, 0.025)  # 40 control periods of 25 ms
+    sent = [t for t in times if gate.due(t, 0.1)]
+    np.testing.assert_allclose(sent, np.arange(0.0, 1.0, 0.1), atol=1e-9)
+    assert not any(DiagnosticsGate().due(t, 0.0) for t in times)
+    gate = DiagnosticsGate()
+    assert [t for t in times if gate.due(t, 0.5 if t < 0.3 else 0.05)] == list(
+        times[[0, 20, 22, 24, 26, 28, 30, 32, 34, 36, 38]]
+    )

@@ -72,7 +72,7 @@ from std_msgs.msg import Float64MultiArray
 from wmm_control.base import make_base_controller
 from wmm_control.base.period import BasePeriod
 from wmm_control.nodes.conversions import float_array, twist_stamped
-from wmm_control.nodes.diagnostics import diagnostic_array, node_status
+from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, node_status
 from wmm_control.nodes.inputs import BaseReference, JointSelector, JointStateWatchdog
 from wmm_control.nodes.base_controller_params import GAINS, NODE_NAMES, STEERABLE_PARAMS, WHEEL_PARAMS
 from wmm_control.nodes.parameters import declare_parameters, require_base
@@ -122,7 +122,7 @@ class BaseControllerNode(Node):
         self.reference = BaseReference(self, p.base_frame, p.reference_timeout, self.base.velocity_limit)
         self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0, 'commands_not_applied': 0}
         self.period = BasePeriod(self.base, p.applied_rate_tolerance)
-        self._next_diag = 0.0
+        self._diagnostics_gate = DiagnosticsGate()
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.pub_commands = {
             g: self.create_publisher(Float64MultiArray, f'{g}_controller/commands', COMMAND_QOS) for g in self.groups
@@ -219,8 +219,7 @@ class BaseControllerNode(Node):
         self.period.published(answer)
         feasible = twist_stamped(stamp, self.p.base_frame, answer.twist)
         self.pub_feasible.publish(feasible)
-        if self.p.diagnostics_period > 0 and now >= self._next_diag:
-            self._next_diag = now + self.p.diagnostics_period
+        if self._diagnostics_gate.due(now, self.p.diagnostics_period):
             self.pub_diag.publish(self._diagnostics(feasible.header.stamp, command, answer.twist, now))
 
     def _zero_rates(self):

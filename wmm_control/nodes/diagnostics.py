@@ -8,7 +8,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-__all__ = ['diagnostic_status', 'node_status', 'diagnostic_array']
+__all__ = ['diagnostic_status', 'node_status', 'diagnostic_array', 'DiagnosticsGate']
 
 
 def diagnostic_status(
@@ -52,3 +52,19 @@ def diagnostic_array(stamp: Time, statuses: Iterable[DiagnosticStatus]) -> Diagn
     msg.header.stamp = stamp
     msg.status = list(statuses)
     return msg
+
+
+class DiagnosticsGate:
+    """When a node's next ``/diagnostics`` message is due: the first call, then once every
+    ``period`` [s] of the node's own clock (read at each call, so a changed ``diagnostics_period``
+    parameter applies from the next message); never with a period of 0."""
+
+    def __init__(self) -> None:
+        self._next = 0.0
+
+    def due(self, now: float, period: float) -> bool:
+        """True when a message is due at ``now`` [s]; it then counts as sent."""
+        if period <= 0.0 or now + 1e-9 < self._next:
+            return False
+        self._next = now + period
+        return True

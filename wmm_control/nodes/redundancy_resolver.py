@@ -85,7 +85,7 @@ from visualization_msgs.msg import MarkerArray
 
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
-from wmm_control.nodes.diagnostics import diagnostic_array, node_status
+from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, node_status
 from wmm_control.nodes.inputs import JointSelector, JointStateWatchdog
 from wmm_control.nodes.parameters import declare_parameters
 from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
@@ -161,7 +161,7 @@ class RedundancyResolverNode(Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._wait = self._last = None
         self._received = 0  # when the joint state of the held arm command came (time.monotonic_ns())
-        self._next_diag = 0.0
+        self._diagnostics_gate = DiagnosticsGate()
         self._throttle = LogThrottle()
         self._cycles = self._stale_cycles = 0
         #: Callables ``observe(stamp, command, reached, stalled)``, each run once a cycle's arm command
@@ -362,8 +362,7 @@ class RedundancyResolverNode(Node):
         for observe in self.cycle_observers:
             observe(stamp, command, self.progress.reached, self.progress.stalled)
         now = self._now()
-        if self.p.diagnostics_period > 0 and now >= self._next_diag:
-            self._next_diag = now + self.p.diagnostics_period
+        if self._diagnostics_gate.due(now, self.p.diagnostics_period):
             self.pub_diag.publish(self._diagnostics(stamp))
 
     def _publish_zero(self, stamp):
