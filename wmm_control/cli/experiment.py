@@ -140,17 +140,21 @@ def simulate(job):
         disable=job.progress != 'bar',
         bar_format='{desc:<36} {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s [{elapsed}]',
     ) as bar:
+
+        def advance(dt: float) -> None:  # a run can end a period past its duration: the bar stops at 100 %
+            bar.update(min(dt, max(bar.total - bar.n, 0.0)))
+
         if job.engine == 'nodes':
             log = run_with_nodes(
                 scenario,
                 run,
-                progress=bar.update,
+                progress=advance,
                 domain_id=job.domain_id,
                 bag_path=None if job.bag_dir is None else bag_path(job.bag_dir, run['name']),
                 view_port=job.view_port,
             )
         else:
-            log = _run_direct(scenario, run, bar.update)
+            log = _run_direct(scenario, run, advance)
     if job.progress == 'line':
         print(
             f'  {scenario.name} / {run["name"]}: {len(log) * DT:.0f} sim s in {log.wall_time_s:.0f} s',
