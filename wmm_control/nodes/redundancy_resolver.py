@@ -1,60 +1,20 @@
 """``redundancy_resolver``: whole-body redundancy resolution as a node (Sorour §II–III).
 
-Publish an end-effector goal on ``/goal_pose`` and the robot goes there.
+Publish an end-effector goal on ``/goal_pose`` (or trajectory points on ``/ee_reference``) and
+the robot goes there. Each ``/joint_states`` message runs one cycle of the resolver on the
+latest fresh ``/odom`` (and ``/ee_pose`` with ground-truth feedback): it publishes the base
+twist on ``/base/reference``, stamped with that joint state, and, once the base controller's
+``/base/feasible_twist`` with the same stamp has come (at most ``compensation_timeout``,
+steady clock; eq 14's compensation, :class:`~wmm_control.resolvers.exchange.CompensationExchange`),
+the arm's joint velocities on ``/arm_controller/commands``. ``/diagnostics`` every
+``diagnostics_period``; ``~/markers`` every ``markers_period``; ``/obstacles`` adds and removes
+obstacles live. Every topic, its type and frame, and the node's behaviour on bad input and
+stale data: ``docs/nodes.md`` (Redundancy resolution).
 
-Subscribes:
-  ``/goal_pose`` (``geometry_msgs/PoseStamped``, frame ``world_frame``): the set-point;
-  ``/ee_reference`` (``trajectory_msgs/MultiDOFJointTrajectory``, frame ``world_frame``): a
-  trajectory point, its first point's ``transforms[0]`` (pose), ``velocities[0]`` and
-  ``accelerations[0]`` (linear, angular, world axes); the latest of a goal and a reference
-  is the target. A reference older than ``state_timeout`` is held as a set-point;
-  ``/joint_states`` (``sensor_msgs/JointState``): arm joints by name; each message runs one
-  control cycle;
-  ``/odom`` (``nav_msgs/Odometry``): base pose and twist (wheel odometry on a real robot);
-  ``/ee_pose`` (``geometry_msgs/PoseStamped``): measured end-effector pose, used only when
-  ``ee_feedback`` is ``ground_truth`` (otherwise forward kinematics from odometry and joints);
-  ``/base/feasible_twist`` (``geometry_msgs/TwistStamped``): the base controller's answer to
-  this cycle's base reference (Sorour eq 15), for the arm compensation of eq (14);
-  ``/obstacles`` (``visualization_msgs/MarkerArray``, frame ``world_frame``): obstacles added
-  and removed live, beside those of the ``obstacles`` file (:mod:`wmm_control.nodes.obstacle_topic`);
-  the safety stage keeps the robot off them.
-Publishes, every cycle:
-  ``/base/reference`` (``geometry_msgs/TwistStamped``, frame ``base_frame``): the base twist,
-  stamped with the joint state the cycle answers;
-  ``/arm_controller/commands`` (``std_msgs/Float64MultiArray``): arm joint velocities in the
-  robot YAML's order;
-  ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) every ``diagnostics_period``, stamped
-  with the joint state of the cycle it reports: method, mode, ψ, errors, limit scales, σ_min,
-  compensation, cycle time, the commands sent, goal status (code in the same process gets every
-  cycle's exact values from ``cycle_observers`` instead);
-  ``~/markers`` (``visualization_msgs/MarkerArray``, frame ``world_frame``) every
-  ``markers_period`` of steady time: goal, reference, end-effector trail, base footprint
-  (:mod:`wmm_control.nodes.markers`).
-
-The exchange (:mod:`wmm_control.resolvers.exchange`), one per period: on the joint state stamped S the resolver publishes the base
-reference stamped S, waits (steady clock, at most ``compensation_timeout``) for the feasible
-twist stamped S, then publishes the arm command with the compensation. When the answer does
-not come in time the arm command goes out without it (counted, logged). Methods without
-compensation publish both at once.
-
-Safety: zero commands when there is no goal, after a rejected goal, and while the joint
-states, the odometry or (with ground-truth feedback) the end-effector pose are older than
-``state_timeout`` (steady clock, at receipt); a watchdog publishes zeros when the joint
-states stop. A goal (or ``/ee_reference`` point) in another frame, with NaN/inf or a zero
-quaternion, beyond ``max_goal_distance`` from the world origin, below the floor, above the
-highest the end effector can reach, inside the base's body at its current pose or inside an
-obstacle (:class:`~wmm_control.kinematics.workspace.Workspace`) is rejected with a logged
-reason; a non-unit quaternion is normalised with a warning. Odometry with NaN/inf, a zero
-quaternion or a twist beyond ten times the base limits, and joint states lacking an arm
-joint or naming one twice, with non-finite values, rates beyond ten times the limits or
-positions beyond the limits, are rejected. A joint state whose stamp is not after the last
-cycle's, or jumps more than ``state_timeout`` ahead, runs no cycle (a second publisher, a
-replayed message). A cycle that finishes more than ``max_state_wait`` after its joint state
-came (the node was held up: stopped, or starved) publishes nothing, and the next starts again
-from the state it measures; a joint state that reached the node that much later than they
-usually do (queued while it was held up) runs none. A goal that stops making progress is logged once. Every command stays
-within the robot's limits (:mod:`wmm_control.resolvers.limits`); a goal out of reach is
-pursued as far as they allow and reported on ``/diagnostics``.
+Safety, in short: zero commands without a goal, after a rejected goal, while an input is older
+than ``state_timeout`` and when the joint states stop (a watchdog); a joint state that is not
+newer than the last cycle's, or that waited beyond ``max_state_wait``, runs no cycle; every
+command within the robot's limits and through the safety stage.
 
 This module only wires parameters (:mod:`~wmm_control.nodes.redundancy_resolver_params`),
 topics (through :mod:`~wmm_control.nodes.conversions`) and timers to the ROS-free core:
