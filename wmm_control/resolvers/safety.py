@@ -75,13 +75,13 @@ effector holds its goal) rather than by whatever entry is cheapest (the base bac
 from the goal). Without ``J``, the nearest in ``W``.
 
 ``[lower, upper]`` being the period's box the method already keeps (velocity, acceleration,
-braking before a position limit). Each damper row has a slack of high linear cost: where the
-box leaves no command that meets every damper (the arm arrives faster than its acceleration
-limits can brake), the answer meets them as far as the box allows, and the solve never fails
-for it; where it leaves room, the slack is zero. The QP is small (the arm's joints, a slack
-per damper row the command breaks) and solved exactly by a dual active-set method
-(:func:`_least_distance`): its answer meets every constraint to rounding, and its cost is a
-few small linear solves per constraint that binds.
+braking before a position limit). One QP through a maintained solver (:mod:`qpsolvers`,
+:data:`QP_SOLVER`) over the command's entries takes every damper row that some command in the
+box could break (a row the box alone keeps, or one on no entry the box leaves free, stays out).
+Where the box leaves no command that meets every damper (the arm arrives faster than its
+acceleration limits can brake), the same solver takes the problem again with a slack per row
+of high linear cost: the answer meets the dampers as far as the box allows, and the stage never
+fails for it.
 
 When no pair is within ``d_i``, or the command already meets every damper, it passes through
 unchanged: a method runs as its paper has it until the arm nears the body.
@@ -99,7 +99,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg import lapack
+import qpsolvers
 
 from wmm_control.base.swmr_controller import SwmrParams
 from wmm_control.errors import ConfigError
@@ -127,9 +127,10 @@ TURN_SHARE = 0.25
 _PARTS = tuple(
     np.array(part, dtype=bool) for part in ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1))
 )
-#: The QP's answer meets every constraint within this much (a distance in its scaled variables,
-#: about [m/s] for weights about 1).
-LEAST_DISTANCE_TOLERANCE = 1e-10
+#: The QP solver (:mod:`qpsolvers`' name). DAQP, a dual active-set method in C, solves these
+#: dense QPs (the command's few entries, up to a few hundred damper rows) exactly to rounding in
+#: tens of microseconds; quadprog (Goldfarb–Idnani) is about half as fast (benchmarks/bench_safety.py).
+QP_SOLVER = 'daqp'
 
 
 @dataclass(frozen=True)
@@ -356,20 +357,15 @@ class SafetyStage:
             jac = np.asarray(task_jacobian, dtype=float)
             hessian = jac.T @ jac + SELF_WEIGHT * np.diag(weights)
         # a row on no entry the box leaves free (a base held on its path, and a pair no arm joint
-        # moves) is what it is: its slack is its violation whatever the QP does, so it stays out
+        # moves) is what it is: its slack is its violation whatever the QP does, so it stays out;
+        # so does a row that every command in the box meets (the box alone keeps it)
+        lower, upper = np.minimum(lower, upper), np.maximum(lower, upper)
         movable = (rows[:, upper > lower] != 0.0).any(axis=1)
-        # active set: the rows the command breaks, then any the answer breaks, until it breaks none
-        # (most periods one solve: the rows far from binding never enter the QP)
-        use = violated & movable
+        weakest = np.minimum(rows * lower, rows * upper).sum(axis=1)  # the row's least value in the box
+        use = movable & (weakest < bound - TOLERANCE)
         solved = np.clip(command, lower, upper)
-        for _ in range(len(bound)):
-            if not use.any():
-                break
+        if use.any():
             solved = self._solve(command, rows[use], bound[use], lower, upper, hessian)
-            broken = (rows @ solved < bound - 1e-7) & movable & ~use
-            if not broken.any():
-                break
-            use = use | broken
         changed = overtaking or not np.array_equal(solved, command)
         return SafetyResult(solved, clearance, label, len(near), changed)
 
@@ -529,39 +525,35 @@ class SafetyStage:
         return float(out) if out.ndim == 0 else out
 
     def _solve(self, command, rows, bound, lower, upper, hessian):
-        """The QP of the module docstring over y = (q̇, slack), the dampers ``rows`` ≥ ``bound``.
-
-        Its cost is ½ (y − y₀)ᵀ H (y − y₀) plus a constant, H = diag(``hessian``, SLACK_WEIGHT I)
-        and y₀ = (q̇₀, −SLACK_COST / SLACK_WEIGHT) its unconstrained minimum; with H = L Lᵀ
-        (Cholesky) and z = Lᵀ (y − y₀) it is the nearest point to the origin that meets every
-        constraint (:func:`_least_distance`), started from the slacks held at zero: there, y =
-        (q̇₀, 0), each slack's bound has the multiplier SLACK_COST.
-        """
+        """The QP of the module docstring: the command nearest ``command`` in the metric
+        ``hessian`` within the box that meets the dampers ``rows`` q̇ ≥ ``bound``, through
+        :func:`qpsolvers.solve_problem` (:data:`QP_SOLVER`). Where no command in the box meets
+        them all, the same solver takes the problem with a slack per row (cost
+        :data:`SLACK_COST` per unit, and :data:`SLACK_WEIGHT` quadratic): the dampers met as far
+        as the box allows."""
         n, m = command.size, bound.size
-        scale = np.zeros((n + m, n + m))  # L⁻ᵀ: y = y₀ + L⁻ᵀ z
-        # L⁻¹ by LAPACK's triangular inverse (a few µs; a triangular solve against the identity
-        # costs tens of times more through scipy's wrapper and threaded BLAS)
-        inverse, info = lapack.dtrtri(np.linalg.cholesky(hessian), lower=1)
-        if info != 0:
-            raise np.linalg.LinAlgError(f'singular Cholesky factor (dtrtri info {info})')
-        scale[:n, :n] = inverse.T
-        scale[n:, n:] = np.eye(m) / math.sqrt(SLACK_WEIGHT)
-        y0 = np.concatenate((command, np.full(m, -SLACK_COST / SLACK_WEIGHT)))
-        # a y ≥ e: the dampers (rows q̇ + slack ≥ bound), slack ≥ 0, q̇ ≥ lower and −q̇ ≥ −upper
-        a = np.zeros((2 * m + 2 * n, n + m))
-        a[:m, :n] = rows
-        a[:m, n:] = a[m : 2 * m, n:] = np.eye(m)
-        a[2 * m : 2 * m + n, :n] = np.eye(n)
-        a[2 * m + n :, :n] = -np.eye(n)
-        e = np.concatenate((bound, np.zeros(m), lower, -upper))
-        try:
-            z = _least_distance(a @ scale, e - a @ y0, list(range(m, 2 * m)))
-        except np.linalg.LinAlgError:  # active constraints dependent through rounding
-            z = None
-        if z is None:
-            # no answer (a box with lower > upper): brake as hard as the box allows
+        hard = qpsolvers.Problem(hessian, -hessian @ command, -rows, -bound, lb=lower, ub=upper)
+        answer = qpsolvers.solve_problem(hard, solver=QP_SOLVER)
+        if answer.found and answer.x is not None and np.all(np.isfinite(answer.x)):
+            return np.clip(answer.x, lower, upper)
+        # over y = (q̇, slack): rows q̇ + slack ≥ bound, slack ≥ 0
+        cost = np.zeros((n + m, n + m))
+        cost[:n, :n] = hessian
+        cost[n:, n:] = SLACK_WEIGHT * np.eye(m)
+        linear = np.concatenate((-hessian @ command, np.full(m, SLACK_COST)))
+        relaxed = qpsolvers.Problem(
+            cost,
+            linear,
+            -np.hstack((rows, np.eye(m))),
+            -bound,
+            lb=np.concatenate((lower, np.zeros(m))),
+            ub=np.concatenate((upper, np.full(m, np.inf))),
+        )
+        answer = qpsolvers.solve_problem(relaxed, solver=QP_SOLVER)
+        if not (answer.found and answer.x is not None and np.all(np.isfinite(answer.x))):
+            # the box itself is empty or the solver failed: brake as hard as the box allows
             return np.clip(np.zeros(n), lower, upper)
-        return np.clip(command + scale[:n, :n] @ z[:n], lower, upper)
+        return np.clip(answer.x[:n], lower, upper)
 
 
 def _without_turn(rows, bound, axes, base_full, moved, to_base):
@@ -595,74 +587,6 @@ def _body_pairs(rows, axes, moved):
     """The pairs of the base's own body (no arm joint moves them: chassis, wheels) and an
     obstacle, among the first ``len(moved)`` rows."""
     return moved & ~rows[: len(moved), len(axes) :].any(axis=1)
-
-
-def _least_distance(normals, rhs, active):
-    """The ``z`` of least norm with ``normals @ z ≥ rhs``, or None when there is none.
-
-    Goldfarb and Idnani's dual method ("A numerically stable dual method for solving strictly
-    convex quadratic programs", Math. Programming 27, 1983), for the identity Hessian. It starts
-    from the nearest point that meets the constraints ``active`` as equalities (their
-    multipliers must be ≥ 0) and adds the most violated constraint: it moves z along the part
-    of the new constraint's normal that the active ones leave free, raising its multiplier,
-    until the new constraint is met, or, first, an active multiplier falls to zero and that
-    constraint is dropped. Every multiplier stays ≥ 0 and ½ |z|² never falls, so no active set
-    comes back; it ends, exactly, when no constraint is violated. A normal in the span of the
-    active ones (to 1e-6 of its length) moves no z and only drops: the active normals stay
-    independent. The answer is computed anew from the last active set, without the steps'
-    rounding.
-
-    Raises:
-        numpy.linalg.LinAlgError: the active normals became dependent through rounding.
-    """
-    active = list(active)
-    u = _gram_solve(normals[active], rhs[active])  # the active constraints' multipliers
-    z = u @ normals[active]
-    norms = np.linalg.norm(normals, axis=1)
-    adding, u_add = None, 0.0
-    for _ in range(20 * len(rhs)):
-        if adding is None:
-            gap = (rhs - normals @ z) / norms  # how far z is from meeting each
-            gap[active] = -np.inf
-            adding = int(np.argmax(gap))
-            if gap[adding] <= LEAST_DISTANCE_TOLERANCE:
-                a = normals[active]
-                return _gram_solve(a, rhs[active]) @ a
-            u_add = 0.0
-        n_add, a = normals[adding], normals[active]
-        r = _gram_solve(a, a @ n_add)  # n_add's part in the span of the active normals
-        d = n_add - r @ a  # the rest: moving z along it keeps them met
-        dd = d @ d
-        full = (rhs[adding] - n_add @ z) / dd if dd > 1e-12 * (n_add @ n_add) else np.inf
-        ratios = np.full(r.size, np.inf)  # as u_add rises by t, u falls by t r:
-        np.divide(u, r, out=ratios, where=r > 0)  # the t that takes each to zero
-        drop = int(np.argmin(ratios)) if r.size else -1
-        partial = ratios[drop] if r.size else np.inf
-        step = min(full, partial)
-        if not np.isfinite(step):
-            return None  # n_add in the span, nothing to drop
-        if np.isfinite(full):
-            z = z + step * d
-        u = u - step * r
-        u_add += step
-        if full <= partial:
-            active.append(adding)
-            u = np.append(u, u_add)
-            adding = None
-        else:
-            del active[drop]
-            u = np.delete(u, drop)
-    return None
-
-
-def _gram_solve(a, b):
-    """``x`` with ``(a aᵀ) x = b``, the rows of ``a`` independent (Cholesky, LAPACK's dposv)."""
-    if not a.shape[0]:
-        return np.zeros(0)
-    _, x, info = lapack.dposv(a @ a.T, b)
-    if info != 0:
-        raise np.linalg.LinAlgError(f'dependent rows (dposv info {info})')
-    return x
 
 
 def base_lag(robot) -> float:
