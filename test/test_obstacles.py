@@ -9,11 +9,14 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
+from std_msgs.msg import Float64
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ros_helpers import RosHarness, overrides
 from sim_bridge.collision import SelfCollisionChecker
 from sim_bridge.node import SimNode
+from wmm_control.base import make_base_controller
+from wmm_control.cycle import Cycle
 from wmm_control.errors import ConfigError
 from wmm_control.experiments.randomized import CONTACT_DEPTH, RandomGoal, run_goal, sample_goals
 from wmm_control.experiments.scenario import load_scenario
@@ -22,7 +25,10 @@ from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.kinematics.obstacles import load_obstacles, parse_obstacles
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.obstacle_topic import ObstacleSet
+from wmm_control.nodes.qos import LATCHED_QOS
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
+from wmm_control.nodes.swmr_controller import SwmrControllerNode
+from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.safety import SafetyStage
 from wmm_control.robot_config import load_robot
 
@@ -475,3 +481,50 @@ def test_a_slow_braking_base_does_not_turn_its_path_into_a_table_it_drives_past(
     robot = load_robot('mecanum')
     stage = SafetyStage.for_robot(robot, obstacles=load_obstacles('table_pillar'))
     assert _drive_past_the_table(stage) >= stage.params.collision_safety - 1e-3
+
+
+def test_the_stage_brakes_the_base_with_the_lag_of_the_controller_the_cycle_runs():
+    """Robot A 0.7 m before the table, driving at it at 0.8 m/s: with Table I's gains (τ = 1/K_p
+    + 1/λ = 0.75 s) the stage lets it go on at a crawl; with a controller ten times as quick (τ =
+    0.1 s) it may go on much faster, and each stage answers as one built with that lag."""
+    robot = load_robot('steerable')
+    obstacles = load_obstacles('table_pillar')
+    n = len(robot.arm.joints)
+    command = np.concatenate(([0.8, 0.0, 0.0], np.zeros(n)))
+    box = np.concatenate(([1.0, 1.0, 1.0], np.ones(n)))
+    forward = {}
+    for kp, icr_gain in ((2.0, 4.0), (20.0, 20.0)):
+        resolver = make_resolver('pinv', robot)
+        resolver.set_obstacles(obstacles)
+        Cycle(resolver, make_base_controller(robot, robot.period, kp=kp, icr_gain=icr_gain))
+        stage = resolver.safety
+        assert stage.base_lag == pytest.approx(1.0 / kp + 1.0 / icr_gain)
+        args = (np.array(robot.start.arm), command, -box, box)
+        kwargs = dict(base_pose=np.array([0.55, -0.2, 0.0]), base_axes=(0, 1, 2), base_velocity=np.array([0.8, 0, 0]))
+        answer = stage.filter(*args, **kwargs)
+        alone = SafetyStage.for_robot(robot, resolver.params, obstacles)
+        alone.set_base_lag(1.0 / kp + 1.0 / icr_gain)
+        np.testing.assert_allclose(alone.filter(*args, **kwargs).command, answer.command, atol=1e-9)
+        forward[kp] = answer.command[0]
+    assert forward[2.0] < 0.2 < 0.4 < forward[20.0] <= 0.8
+
+
+def test_the_resolver_node_takes_the_running_base_controllers_lag():
+    """swmr_controller started with other gains publishes its τ (latched); a resolver started
+    after it brakes the base with that τ, not with the robot YAML's defaults."""
+    ros = RosHarness()
+    try:
+        ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(kp=8.0, icr_gain=10.0)))
+        ros.spin_for(0.2)
+        resolver = ros.add(RedundancyResolverNode(context=ros.context))
+        assert resolver.resolver.safety.base_lag == pytest.approx(0.75)  # the YAML's, until it hears
+        assert ros.spin_until(lambda: resolver.resolver.safety.base_lag == pytest.approx(1.0 / 8.0 + 1.0 / 10.0))
+        # a lag that is no time constant is rejected, and the last good one kept
+        probe = ros.probe('lag_probe')
+        publisher = probe.create_publisher(Float64, 'base/lag', LATCHED_QOS)
+        for bad in (math.nan, -1.0, math.inf):
+            publisher.publish(Float64(data=bad))
+            ros.spin_for(0.1)
+            assert resolver.resolver.safety.base_lag == pytest.approx(0.225)
+    finally:
+        ros.close()

@@ -45,6 +45,8 @@ class Cycle:
     def __init__(self, resolver: Resolver, base_controller: BaseController):
         self.resolver = resolver
         self.base_controller = base_controller
+        # the safety stage brakes a lagging base with the lag of the controller that runs
+        resolver.set_base_lag(base_controller.lag)
 
     def plan(self, state, target) -> ResolverCommand:
         """Phase 1: the resolver's command (arm velocity and base twist reference) for ``state``

@@ -69,6 +69,9 @@ class BaseController(Protocol):
             (those whose positions the controller closes on, or whose rates it reads).
         rate_limits: |q̇| bound per group [rad/s] (a number or one per joint).
         velocity_limit: |vx|, |vy|, |ω| bounds of the base [m/s, m/s, rad/s]. Shape (3,).
+        lag: τ [s], the time constant with which the base's twist follows its reference (0
+            for a base that tracks it within its acceleration limits); the safety stage plans
+            a lagging base's braking with it.
         resync_from_rates: whether a start after a gap in the measurements (``reset`` when they
             come back) goes on from the measured rates (a wheeled base) or starts at rest from
             the measured positions (a steerable base: it re-reads its steer angles).
@@ -80,6 +83,7 @@ class BaseController(Protocol):
     required_groups: tuple
     rate_limits: Mapping[str, Any]
     velocity_limit: np.ndarray
+    lag: float
     resync_from_rates: bool
     controller: Any
 
@@ -116,6 +120,7 @@ class SteerableBase:
         p = controller.params
         self.rate_limits: Mapping[str, Any] = {'steer': p.steer_rate_limit, 'drive': p.drive_rate_limit}
         self.velocity_limit = np.array(p.base_velocity_limit, dtype=float)
+        self.lag = p.lag
 
     @classmethod
     def from_robot_config(cls, robot: RobotConfig, dt: float, **overrides: Any) -> Self:
@@ -172,6 +177,7 @@ class WheelBase:
 
     required_groups = ('wheel',)
     resync_from_rates = True
+    lag = 0.0  # the wheel controller tracks its reference within its acceleration limits
 
     def __init__(self, controller: WheelController, wheel_joints: Iterable[str], family: str = 'mecanum') -> None:
         self.controller = controller

@@ -198,6 +198,15 @@ class SwmrParams:
         if self.max_icr_step >= np.pi / 2:
             raise ConfigError(f'SwmrParams.max_icr_step must be < pi/2, got {self.max_icr_step}')
 
+    @property
+    def lag(self) -> float:
+        """τ [s], the lag with which the base's twist follows its reference: the ICR P-controller
+        (gain λ) moves the ICR towards the reference's, and the twist controller (gain K_p) follows
+        along the direction the wheels allow: two first-order lags in series, which delay a step
+        by the sum of their time constants, τ = 1/K_p + 1/λ (0.75 s with Table I's K_p = 2 and
+        λ = 4)."""
+        return 1.0 / self.kp + 1.0 / self.icr_gain
+
     @classmethod
     def from_robot_config(cls, robot: RobotConfig, **overrides: Any) -> Self:
         """Limits from a :class:`RobotConfig` of a steerable robot; other fields from ``overrides``.

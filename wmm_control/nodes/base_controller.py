@@ -20,6 +20,10 @@ Publishes, every cycle:
   executes over the coming period, stamped with the joint state the cycle answers;
   ``/diagnostics``: status, the family's values, reference and counters, every
   ``diagnostics_period``.
+Publishes once (transient local):
+  ``/base/lag`` (``std_msgs/Float64``): τ [s], the time constant with which the base's twist
+  follows its reference (a steerable base's 1/K_p + 1/λ, from this node's ``kp`` and
+  ``icr_gain``; 0 for a wheeled base); the resolver's safety stage brakes the base with it.
 
 The exchange, one per period: a joint state stamped S runs the cycle that answers the
 reference stamped S, at once if the latest reference carries S, else as soon as it comes, or
@@ -67,7 +71,7 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray
 
 from wmm_control.base import make_base_controller
 from wmm_control.base.period import BasePeriod
@@ -76,7 +80,7 @@ from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, nod
 from wmm_control.nodes.inputs import BaseReference, JointSelector, JointStateWatchdog
 from wmm_control.nodes.base_controller_params import GAINS, NODE_NAMES, STEERABLE_PARAMS, WHEEL_PARAMS
 from wmm_control.nodes.parameters import declare_parameters, require_base
-from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
+from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STATE_SUB_QOS
 from wmm_control.nodes.runner import guard_clock
 from wmm_control.nodes.stamps import StampedExchange, seconds
 from wmm_control.robot_config import load_robot
@@ -129,6 +133,9 @@ class BaseControllerNode(Node):
         }
         self.pub_feasible = self.create_publisher(TwistStamped, 'base/feasible_twist', COMMAND_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        # τ of this controller, for the resolver's safety stage (latched: a resolver started later gets it)
+        self.pub_lag = self.create_publisher(Float64, 'base/lag', LATCHED_QOS)
+        self.pub_lag.publish(Float64(data=float(self.base.lag)))
         # One cycle per joint state, run with the reference of the same stamp (see the module doc).
         self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
         then = (

@@ -2,7 +2,7 @@
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ['STATE_PUB_QOS', 'STATE_SUB_QOS', 'COMMAND_QOS', 'CLOCK_QOS', 'DIAGNOSTICS_QOS']
+__all__ = ['STATE_PUB_QOS', 'STATE_SUB_QOS', 'COMMAND_QOS', 'CLOCK_QOS', 'DIAGNOSTICS_QOS', 'LATCHED_QOS']
 
 
 #: State streams a node *publishes* (``joint_states``, ``odom``, ``ee_pose``): reliable, keep
@@ -44,3 +44,12 @@ CLOCK_QOS = QoSProfile(
 )
 #: ``/diagnostics``: reliable, keep last 10, volatile (what diagnostic_aggregator expects).
 DIAGNOSTICS_QOS = STATE_PUB_QOS
+#: What a node states once and a late subscriber must still get (``robot_description``,
+#: ``/tf_static``, ``base/lag``): reliable, transient local, keep last 1 (what
+#: robot_state_publisher and tf2's static broadcaster offer).
+LATCHED_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)

@@ -39,16 +39,17 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, node_status
 from wmm_control.nodes.inputs import JointSelector, JointStateWatchdog
 from wmm_control.nodes.parameters import declare_parameters
-from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
+from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STATE_SUB_QOS
 from wmm_control.nodes.runner import guard_clock, run_node
 from wmm_control.nodes.stamps import stamp_key
 from wmm_control.nodes.conversions import (
@@ -137,6 +138,7 @@ class RedundancyResolverNode(Node):
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         self.create_subscription(Odometry, 'odom', self._on_odom, STATE_SUB_QOS)
         self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
+        self.create_subscription(Float64, 'base/lag', self._on_base_lag, LATCHED_QOS)
         if p.ee_feedback == 'ground_truth':
             self.create_subscription(PoseStamped, 'ee_pose', self._on_ee_pose, STATE_SUB_QOS)
         if self.resolver.uses_compensation:
@@ -226,6 +228,18 @@ class RedundancyResolverNode(Node):
     def _on_obstacles(self, msg):
         if self.obstacles.take(msg, self.get_logger()):
             self._set_obstacles()
+
+    def _on_base_lag(self, msg):
+        """The running base controller's τ: the safety stage brakes the base with it."""
+        lag = float(msg.data)
+        if lag == self.resolver.safety.base_lag:
+            return
+        try:
+            self.resolver.set_base_lag(lag)
+        except ConfigError as exc:
+            self.get_logger().warn(f'rejected /base/lag: {exc}; keeping τ = {self.resolver.safety.base_lag:g} s')
+            return
+        self.get_logger().info(f'base controller lag τ = {lag:g} s: the safety stage brakes the base with it')
 
     def _on_odom(self, msg):
         self._log(self.latest.odometry(*odometry_values(msg), self._now()))

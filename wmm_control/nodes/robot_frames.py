@@ -24,6 +24,7 @@ from std_msgs.msg import String
 
 from wmm_control.kinematics.frames import FrameTransform, JointTransforms, planar_transform, world_to_odom
 from wmm_control.nodes.conversions import set_pose
+from wmm_control.nodes.qos import LATCHED_QOS
 from wmm_control.robot_config import RobotConfig
 
 try:
@@ -38,14 +39,8 @@ except ImportError as _exc:  # pip-only install: tf2_msgs has no PyPI wheel
 
 __all__ = ['RobotFrames', 'DESCRIPTION_QOS', 'TF_UNAVAILABLE', 'transform_stamped', 'valid_frame_prefix']
 
-#: ``robot_description`` and ``/tf_static``: reliable, transient local, keep last 1 (what
-#: robot_state_publisher and tf2's static broadcaster offer: a late subscriber gets the last one).
-DESCRIPTION_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
+#: ``robot_description`` and ``/tf_static``: a late subscriber gets the last one.
+DESCRIPTION_QOS = LATCHED_QOS
 #: ``/tf``: tf2's dynamic broadcaster's (reliable, keep last 100, volatile).
 TF_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,

@@ -220,6 +220,16 @@ class Resolver(ABC):
         world frame) from now on, instead of the previous ones."""
         self.safety.set_obstacles(obstacles)
 
+    def set_base_lag(self, lag: float) -> None:
+        """Plan the base's braking near obstacles with the lag τ = ``lag`` [s] of the base
+        controller that actually runs (:attr:`~wmm_control.base.BaseController.lag`) instead of
+        its robot YAML's defaults.
+
+        Raises:
+            ConfigError: ``lag`` is not finite and ≥ 0.
+        """
+        self.safety.set_base_lag(lag)
+
     def compensate(self, command: ResolverCommand, feasible_twist: ArrayLike) -> ResolverCommand:
         """Finish ``command`` with the base controller's answer ``feasible_twist``.
 

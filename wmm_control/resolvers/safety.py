@@ -242,20 +242,31 @@ class SafetyStage:
     ):
         self.collision = collision
         self.params = params
+        self._arm_acc = None if arm_acceleration is None else np.asarray(arm_acceleration, dtype=float)
+        self._base_acc = np.zeros(3) if base_acceleration is None else np.asarray(base_acceleration, dtype=float)
+        self._base_velocity = None if base_velocity is None else np.asarray(base_velocity, dtype=float)
+        self.set_base_lag(base_lag)
+
+    def set_base_lag(self, base_lag: float) -> None:
+        """Plan a lagging base's braking with τ = ``base_lag`` [s] from now on (the base
+        controller that actually runs: :attr:`~wmm_control.base.BaseController.lag`).
+
+        Raises:
+            ConfigError: ``base_lag`` is not finite and ≥ 0.
+        """
         if not (math.isfinite(base_lag) and base_lag >= 0.0):
             raise ConfigError(f'base_lag must be finite and >= 0, got {base_lag}')
         self.base_lag = float(base_lag)
-        self._arm_acc = None if arm_acceleration is None else np.asarray(arm_acceleration, dtype=float)
-        self._base_acc = np.zeros(3) if base_acceleration is None else np.asarray(base_acceleration, dtype=float)
+        params = self.params
         stopping = 0.0
-        if base_velocity is not None and base_acceleration is not None:
-            linear = [k for k in range(2) if base_acceleration[k] > 0.0]
+        if self._base_velocity is not None and self._base_acc.any():
+            linear = [k for k in range(2) if self._base_acc[k] > 0.0]
             if linear:
                 # from full speed on every linear axis at once (a diagonal is faster than either
                 # axis), braking as its rows count on (_allowed): the slower axis's limit, less
                 # the turn's share where the base tracks without lag, and no harder than a_b
-                speed = float(np.linalg.norm([base_velocity[k] for k in linear]))
-                brake = min(float(base_acceleration[k]) for k in linear)
+                speed = float(np.linalg.norm(self._base_velocity[linear]))
+                brake = float(np.min(self._base_acc[linear]))
                 if self.base_lag == 0.0:
                     brake *= 1.0 - TURN_SHARE
                 brake = min(brake, params.collision_braking)
@@ -590,19 +601,15 @@ def _body_pairs(rows, axes, moved):
 
 
 def base_lag(robot) -> float:
-    """τ [s], the lag with which ``robot``'s base twist follows its reference; 0 for a wheeled
-    base, whose wheel controller tracks the reference within its acceleration limits.
-
-    A steerable base (its controller's defaults) first moves its ICR towards the reference's
-    (the ICR P-controller, gain λ), and its twist follows the reference along the direction its
-    wheels allow (the twist controller, gain K_p, Sorour Table I): two lags in series, which
-    delay a step by the sum of their time constants, τ = 1/K_p + 1/λ. With 1/K_p alone, the
-    base's approach to an obstacle overtook the rows while it re-steered (its twist grew along
-    its wheels' heading, not the reference's)."""
+    """τ [s] of ``robot``'s base controller at its robot YAML's defaults
+    (:attr:`~wmm_control.base.swmr_controller.SwmrParams.lag` for a steerable base; 0 for a
+    wheeled base, whose wheel controller tracks the reference within its acceleration limits).
+    The running controller's own τ replaces it (:meth:`SafetyStage.set_base_lag`): the direct
+    engine's :class:`~wmm_control.cycle.Cycle` passes its base controller's, the resolver node
+    the one the base controller node publishes."""
     if getattr(robot, 'steerable', None) is None:
         return 0.0
-    params = SwmrParams.from_robot_config(robot)
-    return 1.0 / params.kp + 1.0 / params.icr_gain
+    return SwmrParams.from_robot_config(robot).lag
 
 
 def _world_to_base(theta: float) -> np.ndarray:
