@@ -345,7 +345,7 @@ class CollisionModel:
         # joint's spatial velocity in the root frame, so n · v = n · v₀ + (p × n) · ω
         pin.computeJointJacobians(model, data, q)
         twists = data.J[:, self._idx_v]  # (v₀, ω) per arm joint rate
-        along = normals @ twists[:3] + _cross(points, normals) @ twists[3:]
+        along = normals @ twists[:3] + np.cross(points, normals) @ twists[3:]
         along *= self._moved_by[self._pair_joints[near].T]  # only the arm joints that move p
         rates = along[1] - along[0]
         # the base's twist (vx, vy, ω) moves a point p of the robot at (vx − ω p_y, vy + ω p_x, 0):
@@ -374,19 +374,6 @@ def _frozen(array: np.ndarray) -> np.ndarray:
 
 def _no_pairs(n_arm: int) -> NearPairs:
     return NearPairs(_frozen(np.zeros(0)), (), (), _frozen(np.zeros((0, n_arm))), _frozen(np.zeros((0, 3))))
-
-
-def _cross(a, b):
-    """``a × b`` along the last axis, the same operations as ``np.cross`` (which costs several
-    times more on a few rows)."""
-    return np.stack(
-        (
-            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
-        ),
-        axis=-1,
-    )
 
 
 def _halfspace():
