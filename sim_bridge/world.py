@@ -105,6 +105,7 @@ CLAMP_TOLERANCE = 1e-12
 BASE_MODES = ('kinematic', 'physics')
 GRAVITY = 9.81  # [m/s²]
 WHEEL_FRICTION = 0.9  # Coulomb coefficient of wheel–floor contact [-]
+SUPPORT_TOLERANCE = 0.005  # [m] a link this close to the floor at the start state rests on it (a caster)
 ARM_FORCE_FACTOR = 20.0  # arm velocity-motor force = factor × URDF effort (physics mode)
 SETTLE_TIME = 0.25  # [s] of zero-command physics before t = 0 (physics mode)
 _SMALL_ANGLE = 1e-6  # [rad] below this the SE(2) exponential uses its Taylor series
@@ -398,9 +399,12 @@ class SimWorld(OwnedClient):
         self._forces = forces.tolist()
         tyre = self.robot.mecanum is not None
         p.changeDynamics(self.ground_id, -1, lateralFriction=1.0, physicsClientId=cid)
+        wheels = set(self._wheel_links)
         for j in range(p.getNumJoints(body, physicsClientId=cid)):
-            # passive casters (links named *caster*) roll freely: no friction
-            if 'caster' in p.getJointInfo(body, j, physicsClientId=cid)[12].decode():
+            # a passive support (a caster: any link but the driven wheels that rests on the
+            # floor at the start state) rolls freely: no friction
+            lowest = p.getAABB(body, j, physicsClientId=cid)[0][2]
+            if j not in wheels and lowest <= self.robot.ground_z + SUPPORT_TOLERANCE:
                 p.changeDynamics(
                     body, j, lateralFriction=0.0, rollingFriction=0.0, spinningFriction=0.0, physicsClientId=cid
                 )

@@ -251,6 +251,17 @@ def test_odometry_gives_the_heading_of_its_quaternion_at_any_scale(inputs, scale
     assert kinds(events) == ([] if scale == 1.0 else ['normalised'])
 
 
+def test_a_differential_base_measuring_some_sideways_slip_is_not_a_glitch():
+    """A differential base has no vy limit (it cannot drive sideways), yet its wheels slip: a
+    measured vy of a few mm/s is odometry, not a glitch; one beyond ten times its driving
+    speed limit still is."""
+    differential = MeasuredInputs('world', 50.0, (1.0, 0.0, 2.0), 10.0)
+    (pose, twist), events = differential.odometry((0.0, 0.0), IDENTITY, (0.3, 0.004, 0.1))
+    np.testing.assert_allclose(twist, [0.3, 0.004, 0.1]) and not events
+    odom, events = differential.odometry((0.0, 0.0), IDENTITY, (0.0, 12.0, 0.0))
+    assert odom is None and kinds(events) == ['odom twist']
+
+
 def test_the_measured_end_effector_pose_is_checked(inputs):
     pose = [0.5, 0.0, 1.0, 0.0, 1e200 * math.sqrt(0.5), 0.0, 1e200 * math.sqrt(0.5)]
     (position, rotation), events = inputs.ee_pose('world', pose)

@@ -58,6 +58,11 @@ class Workspace:
         height = pm.jointPlacements[arm[0]].translation[2]
         height += sum(float(np.linalg.norm(pm.jointPlacements[j].translation)) for j in arm[1:])
         height += float(np.linalg.norm(ee.placement.translation))
+        for j in arm:  # a prismatic joint (a lift) adds its longest travel
+            joint = pm.joints[j]
+            if joint.shortname().startswith('JointModelP') and joint.nq == 1:
+                travel = (pm.lowerPositionLimit[joint.idx_q], pm.upperPositionLimit[joint.idx_q])
+                height += max((abs(float(v)) for v in travel if np.isfinite(v)), default=0.0)
         self.max_height = float(height)
         geometry = pin.buildGeomFromUrdf(pm, str(model.config.urdf_path), pin.GeometryType.COLLISION)
         self.boxes = []

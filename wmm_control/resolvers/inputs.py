@@ -27,7 +27,8 @@ class MeasuredInputs:
     Args:
         world_frame: the frame of the end-effector pose.
         max_distance: odometry farther than this from the world origin is a glitch [m].
-        base_velocity: the base's velocity limits (vx, vy, ω).
+        base_velocity: the base's velocity limits (vx, vy, ω); a measured linear speed is
+            judged against the faster linear axis.
         factor: a twist beyond this many times the limits is a glitch [-].
     """
 
@@ -35,7 +36,11 @@ class MeasuredInputs:
         self.world_frame = world_frame
         self.max_distance = float(max_distance)
         self.factor = float(factor)
-        self.plausible_twist = self.factor * np.asarray(base_velocity, dtype=float)
+        limits = np.asarray(base_velocity, dtype=float)
+        # both linear axes against the faster one: a base that cannot drive sideways (a
+        # differential base, vy limit 0) still measures some sideways slip
+        linear = float(max(limits[0], limits[1]))
+        self.plausible_twist = self.factor * np.array([linear, linear, limits[2]])
 
     def odometry(self, xy, quat, twist) -> tuple[tuple[np.ndarray, np.ndarray] | None, list[LogEvent]]:
         """(((x, y, θ), twist (vx, vy, ω)) or None, events) of the base's odometry: position
