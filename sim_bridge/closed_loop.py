@@ -1,14 +1,15 @@
 """A resolver and a base controller closed on a :class:`SimWorld`, with no ROS in between.
 
-Each period runs what the nodes run in lockstep, in the same order (the phases of
-:class:`wmm_control.cycle.Cycle`, Sorour Fig 4):
+Each period runs what the nodes run in lockstep, in the same order and with the same code
+(:class:`wmm_control.cycle.Cycle`, Sorour Fig 4):
 
-1. read the state (joint states, odometry or ground-truth base pose, end-effector pose);
-2. ``plan``: ``resolver.step(state, target)``, the arm command and the base twist reference;
+1. the inputs as the nodes receive them: the odometry (or the ground-truth base pose), the
+   end effector's pose, the target, each checked as it comes;
+2. ``plan``: the resolver's arm command and base twist reference, or the robot held;
 3. ``base``: the base controller (:func:`wmm_control.base.make_base_controller`) answers that
    reference at once, closed on the measured joints, with rates per command group and the
    feasible twist q̇_bf;
-4. ``finish``: ``resolver.compensate(command, q̇_bf)`` (Sorour eq 14) finishes the arm command;
+4. ``finish``: the arm command compensated for q̇_bf (Sorour eq 14);
 5. each group's rates go to the world (``world.set_command(group, rates)``), and the world
    steps one period.
 
@@ -18,16 +19,20 @@ Use it for fast experiments and tests. The ROS nodes do the same over topics;
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+import pinocchio as pin
 
 from wmm_control.base import BaseController, make_base_controller
+from wmm_control.base.period import default_applied_rate_tolerance
 from wmm_control.cycle import Cycle
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.orientation import matrix_from_quaternion
 from wmm_control.resolvers import PoseTarget, Resolver, ResolverCommand, RobotState
+from wmm_control.resolvers.period import ResolverSettings
 
 if TYPE_CHECKING:
     from sim_bridge.world import SimWorld
@@ -48,7 +53,9 @@ class CycleRecord:
         q: every simulated joint's position (``world.joint_names``) [rad or m]. Shape (J,).
         ee_position: true end-effector position [m]. Shape (3,).
         ee_rotation: true end-effector orientation. Shape (3, 3).
-        command: the resolver's final command (``ResolverCommand``).
+        command: the resolver's final command (``ResolverCommand``), or None when the robot
+            was held (no target, or an input refused).
+        arm_velocity: the arm rates sent (zero when held). Shape (n,).
         feasible_twist: the base controller's answer q̇_bf (base frame). Shape (3,).
         base_velocity: the base twist actually executed in the period (base frame). Shape (3,).
     """
@@ -59,7 +66,8 @@ class CycleRecord:
     q: np.ndarray
     ee_position: np.ndarray
     ee_rotation: np.ndarray
-    command: ResolverCommand
+    command: ResolverCommand | None
+    arm_velocity: np.ndarray
     feasible_twist: np.ndarray
     base_velocity: np.ndarray
 
@@ -67,6 +75,12 @@ class CycleRecord:
 class ClosedLoop:
     """Run ``resolver`` and the robot's base controller on ``world``: a
     :class:`~wmm_control.cycle.Cycle` (``cycle``) and the world's input and output.
+
+    Each period feeds the cycle what the nodes' topics would carry: the odometry (or the
+    ground-truth base pose) and, with ground-truth feedback, the end effector's pose, checked as
+    they come; the target given to :meth:`step` as a goal or a trajectory point, checked too (a
+    goal no motion reaches, or inside an obstacle, is refused and the robot held, as
+    ``redundancy_resolver`` does).
 
     Args:
         world: a :class:`~sim_bridge.world.SimWorld`.
@@ -76,6 +90,8 @@ class ClosedLoop:
             without external sensing has).
         base_controller: a :class:`~wmm_control.base.BaseController`; default
             :func:`~wmm_control.base.make_base_controller`. It starts from the world's joints.
+        settings: the resolver's input checks (default the node's,
+            :meth:`~wmm_control.resolvers.period.ResolverSettings.defaults`).
     """
 
     def __init__(
@@ -84,6 +100,7 @@ class ClosedLoop:
         resolver: Resolver,
         feedback: str = 'ground_truth',
         base_controller: BaseController | None = None,
+        settings: ResolverSettings | None = None,
     ) -> None:
         if feedback not in FEEDBACKS:
             raise ConfigError(f'feedback must be one of {FEEDBACKS}, got {feedback!r}')
@@ -92,16 +109,25 @@ class ClosedLoop:
         self.feedback = feedback
         self.robot = world.robot
         self.base = base_controller if base_controller is not None else make_base_controller(self.robot, world.dt)
-        self.cycle = Cycle(resolver, self.base)
+        if settings is None:
+            settings = ResolverSettings.defaults(ground_truth=feedback == 'ground_truth')
+        self.cycle = Cycle(resolver, self.base, world.dt, settings, default_applied_rate_tolerance(self.base.family))
+        self.world_frame = settings.world_frame
         index = {n: i for i, n in enumerate(world.joint_names)}
         self._arm = [index[n] for n in self.robot.arm.joints]
         self._groups = {g: [index[n] for n in names] for g, names in self.base.command_groups.items()}
         _, q, _ = world.joint_state()
         self.base.reset(self._positions(q))
+        #: the events of the inputs and periods so far (what a node would have logged)
+        self.events: list = []
 
     def _positions(self, q):
         """The positions of each base command group in ``q`` (``world.joint_names`` order)."""
         return {g: q[idx] for g, idx in self._groups.items()}
+
+    def set_obstacles(self, obstacles) -> None:
+        """Keep the robot off ``obstacles`` (world frame) and refuse goals inside them."""
+        self.cycle.resolver_period.set_obstacles(obstacles)
 
     def state(self) -> RobotState:
         """The :class:`RobotState` the resolver sees now."""
@@ -119,31 +145,64 @@ class ClosedLoop:
             )
         return RobotState(w.odom_pose(), w.odom_twist(), q[self._arm], qd[self._arm])
 
-    def step(self, target: PoseTarget) -> CycleRecord:
-        """One period towards ``target`` (:class:`~wmm_control.resolvers.PoseTarget`).
+    def _measure(self, now: float) -> None:
+        """The odometry (the true base pose with ground-truth feedback) and the end effector's
+        pose, as the nodes receive them."""
+        w, period = self.world, self.cycle.resolver_period
+        ground_truth = self.feedback == 'ground_truth'
+        pose, twist = (w.base_pose(), w.base_twist()) if ground_truth else (w.odom_pose(), w.odom_twist())
+        half = 0.5 * float(pose[2])
+        self.events += period.odometry(pose[:2], (0.0, 0.0, math.sin(half), math.cos(half)), twist, now)
+        if ground_truth:
+            pos, quat = w.ee_pose()
+            self.events += period.ee_pose(self.world_frame, np.concatenate((pos, quat)), now)
+
+    def submit(self, target: PoseTarget, tracking: bool = False) -> None:
+        """Give the cycle ``target``: a goal, or with ``tracking`` a point of a trajectory (its
+        velocity and acceleration the feedforward), as ``/goal_pose`` and ``/ee_reference``
+        would carry it."""
+        period, now = self.cycle.resolver_period, self.world.time
+        pose = np.concatenate((target.position, pin.Quaternion(target.rotation).coeffs()))
+        if tracking:
+            self.events += period.trajectory_point(self.world_frame, pose, target.velocity, target.acceleration, now)
+        else:
+            self.events += period.goal(self.world_frame, pose, now)
+
+    def step(self, target: PoseTarget | None = None, tracking: bool | None = None) -> CycleRecord:
+        """One period, towards ``target`` (:class:`~wmm_control.resolvers.PoseTarget`, given
+        first with :meth:`submit`; None: the target already given). ``tracking`` None: a
+        target with a velocity or an acceleration is a trajectory point, one without a goal.
 
         Returns:
             :class:`CycleRecord` of the period.
         """
         w = self.world
         t = w.time
+        self._measure(t)
+        if target is not None:
+            if tracking is None:
+                tracking = bool(np.any(target.velocity) or np.any(target.acceleration))
+            self.submit(target, tracking)
         pose = w.base_pose()
         ee_pos, ee_quat = w.ee_pose()
-        _, q_all, _ = w.joint_state()
-        state = self.state()
-        result = self.cycle.step(state, target, self._positions(q_all))
+        _, q_all, qd_all = w.joint_state()
+        result = self.cycle.step(
+            q_all[self._arm], qd_all[self._arm], self._positions(q_all), self._positions(qd_all), t
+        )
+        self.events += result.events
         for group, rates in result.base.rates.items():
             w.set_command(group, rates)
-        w.set_command('arm', result.command.arm_velocity)
+        w.set_command('arm', result.arm_velocity)
         w.step()
         return CycleRecord(
             t=t,
             base_pose=pose,
-            q_arm=state.q_arm,
+            q_arm=q_all[self._arm].copy(),
             q=q_all.copy(),
             ee_position=ee_pos,
             ee_rotation=matrix_from_quaternion(ee_quat),
             command=result.command,
-            feasible_twist=np.asarray(result.base.feasible_twist, dtype=float),
+            arm_velocity=result.arm_velocity,
+            feasible_twist=np.asarray(result.base.twist, dtype=float),
             base_velocity=w.base_twist(),
         )

@@ -13,10 +13,7 @@ from wmm_control.base import (
     WheelController,
     make_base_controller,
 )
-from wmm_control.cycle import Cycle, CycleResult
 from wmm_control.errors import ConfigError
-from wmm_control.kinematics import KinematicModel
-from wmm_control.resolvers import PoseTarget, RobotState, make_resolver
 from wmm_control.robot_config import load_robot
 
 ROBOTS = ('steerable', 'mecanum', 'panda_diff')
@@ -172,38 +169,3 @@ def test_the_factory_takes_the_steerable_gains_and_nothing_for_wheels():
     assert isinstance(make_base_controller(load_robot('mecanum'), 0.02), WheelBase)
     with pytest.raises(ConfigError):
         make_base_controller(load_robot('mecanum'), 0.02, kp=3.0)
-
-
-# ---------------------------------------------------------------- the cycle
-
-
-def state_of(robot, k):
-    q = np.asarray(robot.start.arm, dtype=float) + 0.01 * k
-    return RobotState(np.array([0.01 * k, 0.0, 0.02 * k]), np.array([0.05, 0.0, 0.01]), q, np.zeros(robot.arm.n))
-
-
-@pytest.mark.parametrize('name,method', [('steerable', 'task_sharing'), ('mecanum', 'amp')])
-def test_the_cycle_step_is_plan_then_base_then_finish(name, method):
-    robot = load_robot(name)
-    model = KinematicModel(robot)
-    model.update(np.zeros(3), robot.start.arm)
-    pos, rot = model.ee_placement_world()
-    target = PoseTarget(np.asarray(pos) + np.array([1.0, -0.5, 0.1]), rot)
-    chained = Cycle(make_resolver(method, robot), make_base_controller(robot, robot.period))
-    phased = Cycle(make_resolver(method, robot), make_base_controller(robot, robot.period))
-    positions = {g: np.zeros(len(j)) for g, j in chained.base_controller.command_groups.items()}
-    compensated = 0
-    for k in range(30):
-        result = chained.step(state_of(robot, k), target, positions)
-        assert isinstance(result, CycleResult)
-        planned = phased.plan(state_of(robot, k), target)
-        answer = phased.base(planned.base_twist, positions)
-        final = phased.finish(planned, answer.feasible_twist)
-        np.testing.assert_array_equal(result.command.arm_velocity, final.arm_velocity)
-        np.testing.assert_array_equal(result.command.base_twist, planned.base_twist)
-        np.testing.assert_array_equal(result.base.feasible_twist, answer.feasible_twist)
-        for g in positions:
-            np.testing.assert_array_equal(result.base.rates[g], answer.rates[g])
-        assert phased.finish(planned, None) is planned  # no answer: left as it is
-        compensated += not np.array_equal(final.arm_velocity, planned.arm_velocity)
-    assert compensated > 0 if chained.resolver.uses_compensation else compensated == 0

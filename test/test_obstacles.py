@@ -496,7 +496,7 @@ def test_the_stage_brakes_the_base_with_the_lag_of_the_controller_the_cycle_runs
     for kp, icr_gain in ((2.0, 4.0), (20.0, 20.0)):
         resolver = make_resolver('pinv', robot)
         resolver.set_obstacles(obstacles)
-        Cycle(resolver, make_base_controller(robot, robot.period, kp=kp, icr_gain=icr_gain))
+        Cycle(resolver, make_base_controller(robot, robot.period, kp=kp, icr_gain=icr_gain), robot.period)
         stage = resolver.safety
         assert stage.base_lag == pytest.approx(1.0 / kp + 1.0 / icr_gain)
         args = (np.array(robot.start.arm), command, -box, box)

@@ -205,7 +205,7 @@ def test_the_node_chain_equals_the_direct_loop(tmp_path):
         slip=SlipParams(sim['slip_gain'], tuple(sim['slip_drift']), tuple(sim['slip_noise'])),
         seed=sim['seed'],
     )
-    direct = run_scenario(world, make_resolver('task_sharing'), sc)
+    direct = run_scenario(world, make_resolver('task_sharing', 'steerable'), sc)
     world.close()
     n = len(nodes)
     assert n > 100 and np.all(nodes.compensated)

@@ -154,7 +154,7 @@ def test_invalid_parameters_are_rejected(bad):
 
 def test_make_resolver_names_the_methods():
     with pytest.raises(ConfigError, match='pinv'):
-        make_resolver('gradient_descent')
+        make_resolver('gradient_descent', 'steerable')
     with pytest.raises(ConfigError):
         make_resolver('pinv', lambda_dex=1.0)
     assert make_resolver('task_sharing', compensation=False).name == 'task_sharing'

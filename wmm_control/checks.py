@@ -7,7 +7,11 @@ from numpy.typing import ArrayLike
 
 from wmm_control.errors import NonFiniteError, ShapeError
 
-__all__ = ['as_vector', 'as_finite_vector', 'Freshness']
+__all__ = ['as_vector', 'as_finite_vector', 'Freshness', 'PLAUSIBLE_FACTOR']
+
+#: A measured rate or twist beyond this many times its limit is taken for a glitch, not a
+#: measurement (joint states, odometry, the base's feasible twist).
+PLAUSIBLE_FACTOR = 10.0
 
 
 def as_vector(value: ArrayLike, size: int | None, name: str) -> np.ndarray:

@@ -1,22 +1,33 @@
 """The whole-body control cycle of one period, in the order of Sorour et al. 2019 Fig 4 (ROS-free).
 
-1. :meth:`Cycle.plan`: the resolver turns the measured state and the target into the arm
-   command and the base twist reference ξ̇* (:class:`~wmm_control.resolvers.ResolverCommand`);
-2. :meth:`Cycle.base`: the base controller answers ξ̇* with joint rate commands per command
-   group and the feasible twist q̇_bf (:class:`~wmm_control.base.BaseCommand`);
-3. :meth:`Cycle.finish`: the resolver compensates the arm command for the base's answer
-   (eq 14, :meth:`~wmm_control.resolvers.Resolver.compensate`), or leaves it as it is when
-   no feasible twist came.
+:class:`Cycle` is the one orchestration of a period. Its two halves are what the nodes run:
+the resolver's (:class:`~wmm_control.resolvers.period.ResolverPeriod`, in
+``redundancy_resolver``) and the base controller's (:class:`~wmm_control.base.period.BasePeriod`,
+in the base controller nodes); the direct engine (:class:`sim_bridge.closed_loop.ClosedLoop`)
+runs the same two halves back to back:
 
-:meth:`Cycle.step` chains the three. The direct engine
-(:class:`sim_bridge.closed_loop.ClosedLoop`) runs it on a simulated world; the ROS nodes run
-the same phases over topics, each phase in the node that owns it.
+1. **plan**: the resolver turns the measured state and the target into the arm command and the
+   base twist reference ξ̇* (:class:`~wmm_control.resolvers.ResolverCommand`), or holds the
+   robot (no target, or an input missing or stale);
+2. **base**: the base controller answers ξ̇* with joint rate commands per command group and the
+   feasible twist q̇_bf (:class:`~wmm_control.base.BaseCommand`), starting again from the
+   measured joints after a gap or a command that was not applied;
+3. **finish**: the resolver compensates the arm command for the base's checked answer (eq 14,
+   :meth:`~wmm_control.resolvers.Resolver.compensate`).
+
+Inputs come in as they do in the nodes, each checked as it comes: goals and trajectory points,
+odometry, the end effector's measured pose, obstacles. So both engines take and refuse the same
+inputs and answer with the same commands.
 """
 
 from dataclasses import dataclass
 
-from wmm_control.base.contract import BaseCommand, BaseController
+import numpy as np
+
+from wmm_control.base.contract import BaseController
+from wmm_control.base.period import BasePeriod, PeriodAnswer
 from wmm_control.resolvers.interface import Resolver, ResolverCommand
+from wmm_control.resolvers.period import ResolverPeriod, ResolverSettings
 
 __all__ = ['Cycle', 'CycleResult']
 
@@ -26,12 +37,19 @@ class CycleResult:
     """One period of :class:`Cycle`.
 
     Attributes:
-        command: the resolver's final command (compensated for the base's answer).
-        base: the base controller's answer (rates per group, feasible twist).
+        command: the resolver's final command (compensated for the base's answer), or None
+            when the robot is held (zero arm rates, zero base reference).
+        arm_velocity: the arm rates sent [rad/s or m/s] (zero when held). Shape (n,).
+        base: the base controller's answer (rates per group, feasible twist; finite).
+        events: what the period has to log (:class:`~wmm_control.resolvers.targets.LogEvent`).
+        stale: '' or the input whose absence held the robot.
     """
 
-    command: ResolverCommand
-    base: BaseCommand
+    command: ResolverCommand | None
+    arm_velocity: np.ndarray
+    base: PeriodAnswer
+    events: list
+    stale: str
 
 
 class Cycle:
@@ -40,34 +58,50 @@ class Cycle:
     Args:
         resolver: a :class:`~wmm_control.resolvers.Resolver`.
         base_controller: the robot's base controller (:func:`~wmm_control.base.make_base_controller`).
+        period: the control period [s].
+        settings: the resolver's input checks (:class:`ResolverSettings`; default the
+            ``redundancy_resolver`` node's defaults).
+        applied_rate_tolerance: [rad/s] between a measured base rate and the last command under
+            which the command counts as applied (the base controller nodes' parameter); 0
+            never checks.
+
+    Attributes:
+        resolver_period: the resolver's half (:class:`ResolverPeriod`); its inputs
+            (``goal``, ``trajectory_point``, ``odometry``, ``ee_pose``, ``set_obstacles``).
+        base_period: the base controller's half (:class:`BasePeriod`).
     """
 
-    def __init__(self, resolver: Resolver, base_controller: BaseController):
+    def __init__(
+        self,
+        resolver: Resolver,
+        base_controller: BaseController,
+        period: float,
+        settings: ResolverSettings | None = None,
+        applied_rate_tolerance: float = 0.0,
+    ) -> None:
         self.resolver = resolver
         self.base_controller = base_controller
         # the safety stage brakes a lagging base with the lag of the controller that runs
         resolver.set_base_lag(base_controller.lag)
+        self.resolver_period = ResolverPeriod(resolver, period, settings)
+        self.base_period = BasePeriod(base_controller, applied_rate_tolerance)
 
-    def plan(self, state, target) -> ResolverCommand:
-        """Phase 1: the resolver's command (arm velocity and base twist reference) for ``state``
-        (:class:`~wmm_control.resolvers.RobotState`) and ``target``
-        (:class:`~wmm_control.resolvers.PoseTarget`)."""
-        return self.resolver.step(state, target)
-
-    def base(self, reference, positions=None) -> BaseCommand:
-        """Phase 2: the base controller's answer to ``reference`` (None: brake), closed on the
-        measured joint ``positions`` per command group when given."""
-        return self.base_controller.step(reference, positions)
-
-    def finish(self, command: ResolverCommand, feasible_twist=None) -> ResolverCommand:
-        """Phase 3: ``command`` compensated for the feasible twist q̇_bf (Sorour eq 14); unchanged
-        when ``feasible_twist`` is None (the base's answer did not come)."""
-        if feasible_twist is None:
-            return command
-        return self.resolver.compensate(command, feasible_twist)
-
-    def step(self, state, target, positions=None) -> CycleResult:
-        """The three phases of one period: plan → base → finish."""
-        planned = self.plan(state, target)
-        answer = self.base(planned.base_twist, positions)
-        return CycleResult(self.finish(planned, answer.feasible_twist), answer)
+    def step(self, q_arm, dq_arm, base_positions: dict, base_rates: dict | None, now: float) -> CycleResult:
+        """One period: the arm's measured positions ``q_arm`` and rates ``dq_arm``, the base
+        joints' measured positions and rates per command group (``base_rates`` None when not
+        measured), at ``now`` [s] of the caller's clock; the odometry, end-effector pose and
+        target as the inputs last gave them."""
+        plan = self.resolver_period.plan(np.asarray(q_arm, dtype=float), np.asarray(dq_arm, dtype=float), now)
+        reference = np.zeros(3) if plan.command is None else plan.command.base_twist
+        self.base_period.start(base_positions, base_rates, resync=False)
+        answer = self.base_period.step(reference, base_positions)
+        self.base_period.published(answer)
+        command = plan.command
+        events = list(plan.events)
+        if command is not None and self.resolver.uses_compensation:
+            self.resolver_period.hold(None, command)
+            twist, checked = self.resolver_period.feasible_twist(answer.twist)
+            events += checked
+            command, _ = self.resolver_period.finish(twist)
+        arm = np.zeros(len(np.asarray(q_arm))) if command is None else command.arm_velocity
+        return CycleResult(command, arm, answer, events, plan.stale)

@@ -9,10 +9,14 @@ import os
 import sys
 from pathlib import Path
 
+import yaml
+
+from wmm_control.errors import ConfigError
+
 PACKAGE = 'wmm_control'
 _SOURCE_ROOT = Path(__file__).resolve().parent.parent
 
-__all__ = ['share_dir', 'config_path']
+__all__ = ['share_dir', 'config_path', 'load_defaults']
 
 
 def _candidates():
@@ -41,3 +45,18 @@ def share_dir() -> Path:
 def config_path(*parts: str) -> Path:
     """Path of a file under ``config/``, e.g. ``config_path('robots', 'steerable.yaml')``."""
     return share_dir().joinpath('config', *parts)
+
+
+def load_defaults(yaml_name: str, node_name: str) -> dict:
+    """``ros__parameters`` of ``node_name`` (or ``/**``) from ``config/<yaml_name>``: a node's
+    parameter defaults, which the direct engine takes too."""
+    path = config_path(yaml_name)
+    try:
+        doc = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f'cannot read parameter defaults {path}: {exc}') from exc
+    for key in (node_name, '/' + node_name, '/**'):
+        section = doc.get(key)
+        if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
+            return section['ros__parameters']
+    raise ConfigError(f'{path}: no "{node_name}: ros__parameters:" section')

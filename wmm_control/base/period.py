@@ -16,8 +16,23 @@ import numpy as np
 
 from wmm_control.base.applied import unapplied_command
 from wmm_control.base.contract import BaseCommand, BaseController
+from wmm_control.paths import load_defaults
 
-__all__ = ['BasePeriod', 'PeriodAnswer']
+__all__ = ['BasePeriod', 'PeriodAnswer', 'NODE_NAMES', 'default_applied_rate_tolerance']
+
+#: The base controller node (and executable) of each base family; its parameter file
+#: (``config/<node>.yaml``) holds the tuning the direct engine takes too.
+NODE_NAMES = {
+    'steerable': 'swmr_controller',
+    'mecanum': 'mecanum_controller',
+    'differential': 'differential_controller',
+}
+
+
+def default_applied_rate_tolerance(family: str) -> float:
+    """The base controller node's default ``applied_rate_tolerance`` [rad/s] for ``family``."""
+    name = NODE_NAMES[family]
+    return float(load_defaults(f'{name}.yaml', name)['applied_rate_tolerance'])
 
 
 @dataclass(frozen=True)

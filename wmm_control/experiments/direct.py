@@ -9,7 +9,6 @@ from sim_bridge.closed_loop import ClosedLoop
 from sim_bridge.world import SimWorld
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.scenario import Scenario
-from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers.interface import Resolver, ResolverDiagnostics
 
 __all__ = ['run_scenario']
@@ -42,16 +41,26 @@ def run_scenario(
     """
     # the scenario's obstacles, in the world and in the controller's collision model
     world.set_obstacles(scenario.obstacles)
-    resolver.set_obstacles(scenario.obstacles)
     loop = ClosedLoop(world, resolver, feedback=feedback)
+    loop.set_obstacles(scenario.obstacles)
     log = RunLog(method=resolver.name, label=label, joint_names=world.joint_names)
-    reference = scenario.reference(KinematicModel(world.robot)) if scenario.trajectory is not None else None
+    reference = scenario.reference(resolver.model) if scenario.trajectory is not None else None
     n = int(round(scenario.duration / world.dt))
     t0 = time.perf_counter()
+    submitted = None
     for _ in range(n):
         gi = scenario.goal_index(world.time)
-        rec = loop.step(scenario.target(world.time, reference))
+        if reference is not None:  # a trajectory: a point every period, as goal_sequencer publishes it
+            rec = loop.step(scenario.target(world.time, reference), tracking=True)
+        else:  # goals: each when its time comes, as goal_sequencer publishes them
+            rec = loop.step(scenario.target(world.time, reference) if gi != submitted else None, tracking=False)
+            submitted = gi
         cmd = rec.command
+        if cmd is None:  # the target was refused (loop.events say why): the robot held, as the
+            # resolver node holds it, and nothing logged, as the node's recorder logs nothing
+            if progress is not None:
+                progress(1)
+            continue
         log.append(
             rec.t,
             gi,
@@ -70,5 +79,7 @@ def run_scenario(
         if until is not None and until(cmd.diagnostics):
             break
     log.wall_time_s = time.perf_counter() - t0
+    refusals = [e.message for e in loop.events if e.kind == 'rejected']
+    log.refused = refusals[-1] if refusals else ''
     log.sim_counters = {g: dict(c) for g, c in world.counters.items()}
     return log.freeze()

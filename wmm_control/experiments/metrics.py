@@ -104,6 +104,7 @@ class RunLog:
         self.sim_counters: dict | None = None  # the simulator's command counters per group (clamped, rejected, ...)
         self.final_status: dict | None = None  # nodes engine: the goal's state after the resolver's last cycle
         self.first_stall_s: float | None = None  # nodes engine: when the resolver first found the goal stalled [s]
+        self.refused = ''  # direct engine: why the last target refused was (the robot held still then)
         self.frozen = False
 
     def append(

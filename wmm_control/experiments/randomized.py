@@ -325,12 +325,15 @@ def run_goal(
         ``contact_depth_m`` and ``contact_pair`` (:func:`run_contact`),
         ``limit_use`` (largest fraction of each velocity and acceleration limit, smallest
         distance to an arm position limit), ``sim_clamped`` (command entries the simulator had
-        to clamp) and ``why`` (the reason of a failure, else empty).
+        to clamp), ``why`` (the reason of a failure, else empty) and ``refused`` (why the resolver
+        refused the goal and held the robot still, else empty).
     """
     cfg = load_robot(robot)
     duration = DURATION_S.get(cfg.name, 90.0) if duration is None else duration
     run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(cfg.name, {}).get(method, {}), **(params or {})}
     log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles)
+    if not len(log):  # the goal was refused: the robot held still
+        log, status = _held(cfg, method, goal, log.refused or 'goal refused by the resolver')
     if record is not None:
         write_record(Path(record) / f'{cfg.name}_{method}_{goal.index}.npz', log, goal.pose, obstacles)
     dt = float(np.median(np.diff(log.t))) if len(log) > 1 else cfg.period
@@ -375,7 +378,38 @@ def run_goal(
         'limit_use': _limit_use(log, cfg, dt),
         'sim_clamped': int(clamped),
         'why': '; '.join(why),
+        'refused': status.get('refused', ''),
     }
+
+
+def _held(cfg: RobotConfig, method: str, goal: RandomGoal, refused: str) -> tuple[RunLog, dict]:
+    """The log of a run whose goal the resolver refused (no motion reaches it, or it lies inside
+    an obstacle): one period of the robot held still at its start state, and the goal reported
+    (refusing it is what the resolver must do), with the reason."""
+    model = KinematicModel(cfg)
+    model.update(cfg.start.base_pose, cfg.start.arm)
+    position, rotation = model.ee_placement_world()
+    target = Goal(0.0, 0.0, goal.pose).target
+    error = float(np.linalg.norm(np.asarray(position) - target.position))
+    held = ResolverDiagnostics(
+        method,
+        'held',
+        1.0,
+        error,
+        _angle(target.rotation @ np.asarray(rotation).T),
+        1.0,
+        1.0,
+        1.0,
+        1.0,
+        (),
+        math.nan,
+        False,
+        0.0,
+    )
+    log = RunLog(method=method, label='held')
+    n = cfg.arm.n
+    log.append(0.0, 0, position, rotation, cfg.start.base_pose, cfg.start.arm, np.zeros(n), np.zeros(3), None, held)
+    return log.freeze(), {'goal_reached': False, 'first_stall_s': 0.0, 'refused': refused}
 
 
 def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str | Path = '') -> None:

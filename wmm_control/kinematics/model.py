@@ -99,7 +99,7 @@ class KinematicModel:
         UnknownFrameError: ``ee_frame`` is not a frame of the URDF.
     """
 
-    def __init__(self, robot: str | Path | RobotConfig = 'steerable', ee_frame: str | None = None) -> None:
+    def __init__(self, robot: str | Path | RobotConfig, ee_frame: str | None = None) -> None:
         self.config = robot if isinstance(robot, RobotConfig) else load_robot(robot)
         self._build(
             self.config.urdf_path, self.config.arm.joints, ee_frame or self.config.ee_frame, self.config.base_link

@@ -2,16 +2,10 @@
 same for every base family, with the steerable controller's gains besides; their defaults in
 ``config/<executable>.yaml``, the robot's geometry and limits in its description."""
 
+from wmm_control.base.period import NODE_NAMES
 from wmm_control.nodes.parameters import Param, max_state_wait_param, robot_param, robot_period
 
 __all__ = ['NODE_NAMES', 'GAINS', 'STEERABLE_PARAMS', 'WHEEL_PARAMS']
-
-#: The node (and executable) name of each base family.
-NODE_NAMES = {
-    'steerable': 'swmr_controller',
-    'mecanum': 'mecanum_controller',
-    'differential': 'differential_controller',
-}
 
 #: The steerable controller's gains (Sorour Table I), its only parameters of its own.
 GAINS = (

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
-from wmm_control.checks import Freshness
+from wmm_control.checks import PLAUSIBLE_FACTOR, Freshness
 from wmm_control.nodes.conversions import parse_base_reference
 from wmm_control.nodes.stamps import StampGate, seconds
 
@@ -39,7 +39,7 @@ class JointSelector:
             more than ``POSITION_MARGIN`` is rejected.
     """
 
-    PLAUSIBLE_FACTOR = 10.0
+    PLAUSIBLE_FACTOR = PLAUSIBLE_FACTOR
     POSITION_MARGIN = 0.5  # [rad]
     MAX_POSITION = 1e9  # [rad] no joint angle is larger (a wheel at 12 rad/s needs 2.6 years)
 

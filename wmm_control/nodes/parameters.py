@@ -17,12 +17,11 @@ from types import SimpleNamespace
 from typing import Any
 
 import rclpy
-import yaml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.parameter import Parameter as RosParameter
 
 from wmm_control.errors import ConfigError
-from wmm_control.paths import config_path
+from wmm_control.paths import load_defaults
 from wmm_control.robot_config import RobotConfig, load_robot, robot_names
 
 __all__ = [
@@ -106,20 +105,6 @@ def robot_method(values: SimpleNamespace) -> str:
     """The default of ``redundancy_resolver``'s ``method``: its ``robot``'s (the robot YAML's
     ``method``)."""
     return load_robot(values.robot).method
-
-
-def load_defaults(yaml_name: str, node_name: str) -> dict:
-    """``ros__parameters`` of ``node_name`` (or ``/**``) from ``config/<yaml_name>``."""
-    path = config_path(yaml_name)
-    try:
-        doc = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f'cannot read parameter defaults {path}: {exc}') from exc
-    for key in (node_name, '/' + node_name, '/**'):
-        section = doc.get(key)
-        if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
-            return section['ros__parameters']
-    raise ConfigError(f'{path}: no "{node_name}: ros__parameters:" section')
 
 
 def _is_number(value):

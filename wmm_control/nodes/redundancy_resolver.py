@@ -5,8 +5,8 @@ the robot goes there. Each ``/joint_states`` message runs one cycle of the resol
 latest fresh ``/odom`` (and ``/ee_pose`` with ground-truth feedback): it publishes the base
 twist on ``/base/reference``, stamped with that joint state, and, once the base controller's
 ``/base/feasible_twist`` with the same stamp has come (at most ``compensation_timeout``,
-steady clock; eq 14's compensation, :class:`~wmm_control.resolvers.exchange.CompensationExchange`),
-the arm's joint velocities on ``/arm_controller/commands``. ``/diagnostics`` every
+steady clock; eq 14's compensation), the arm's joint velocities on
+``/arm_controller/commands``. ``/diagnostics`` every
 ``diagnostics_period``; ``~/markers`` every ``markers_period``; ``/obstacles`` adds and removes
 obstacles live. Every topic, its type and frame, and the node's behaviour on bad input and
 stale data: ``docs/nodes.md`` (Redundancy resolution).
@@ -17,14 +17,12 @@ newer than the last cycle's, or that waited beyond ``max_state_wait``, runs no c
 command within the robot's limits and through the safety stage.
 
 This module only wires parameters (:mod:`~wmm_control.nodes.redundancy_resolver_params`),
-topics (through :mod:`~wmm_control.nodes.conversions`) and timers to the ROS-free core:
-the target, its checks, its events and its report in
-:class:`~wmm_control.resolvers.targets.TargetManager` (the events' throttle in
-:class:`~wmm_control.resolvers.targets.LogThrottle`), the checks of odometry, end-effector pose
-and feasible twist in :class:`~wmm_control.resolvers.inputs.MeasuredInputs`, the latest of them
-and the state of a cycle in :class:`~wmm_control.resolvers.inputs.LatestInputs`, the exchange in
-:class:`~wmm_control.resolvers.exchange.CompensationExchange`, the commands in the resolver; the
-markers in :class:`~wmm_control.nodes.markers.ResolverMarkers`.
+topics (through :mod:`~wmm_control.nodes.conversions`) and timers to the ROS-free core: the
+resolver's half of each period in :class:`~wmm_control.resolvers.period.ResolverPeriod`, which
+the direct engine runs too (the target and its checks and report, the checks of odometry,
+end-effector pose and feasible twist, the state of a cycle, the compensation exchange); the
+events' throttle in :class:`~wmm_control.resolvers.targets.LogThrottle`; the markers in
+:class:`~wmm_control.nodes.markers.ResolverMarkers`.
 """
 
 import time
@@ -45,7 +43,6 @@ from visualization_msgs.msg import MarkerArray
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, node_status
 from wmm_control.nodes.inputs import JointSelector, JointStateWatchdog
 from wmm_control.nodes.parameters import declare_parameters
@@ -64,17 +61,17 @@ from wmm_control.nodes.markers import ResolverMarkers
 from wmm_control.nodes.obstacle_topic import ObstacleSet, describe
 from wmm_control.nodes.redundancy_resolver_params import PARAMS
 from wmm_control.resolvers import make_resolver, method_parameters
-from wmm_control.resolvers.exchange import CompensationExchange
 from wmm_control.resolvers.interface import PoseTarget
 from wmm_control.resolvers.progress import GoalProgress
-from wmm_control.resolvers.inputs import LatestInputs, MeasuredInputs
-from wmm_control.resolvers.targets import LogThrottle, TargetManager
+from wmm_control.resolvers.period import ResolverPeriod, ResolverSettings
+from wmm_control.resolvers.targets import LogThrottle
 
 __all__ = ['PARAMS', 'RedundancyResolverNode', 'main']
 
 
 class RedundancyResolverNode(Node):
-    """Wraps one :class:`~wmm_control.resolvers.Resolver` and a :class:`TargetManager`; the maths lives there."""
+    """Wraps one :class:`~wmm_control.resolvers.Resolver` in a
+    :class:`~wmm_control.resolvers.period.ResolverPeriod`; the maths lives there."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('redundancy_resolver', **kwargs)
@@ -100,23 +97,19 @@ class RedundancyResolverNode(Node):
         self.arm = JointSelector(
             arm.joints, velocity_limits=arm.velocity, position_limits=(arm.position_lower, arm.position_upper)
         )
-        self.workspace = Workspace(self.model)
-        self.targets = TargetManager(
-            self.workspace,
+        settings = ResolverSettings(
             p.world_frame,
-            p.max_goal_distance,
             p.state_timeout,
-            p.goal_tolerance,
+            p.max_goal_distance,
+            tuple(p.goal_tolerance),
             p.stall_time,
-            p.period,
             p.min_progress_ratio,
-            position_only=getattr(self.resolver.params, 'rows', 'full') == 'position',
+            ground_truth=p.ee_feedback == 'ground_truth',
         )
-        self.inputs = MeasuredInputs(
-            p.world_frame, p.max_goal_distance, self.model.config.base.velocity, JointSelector.PLAUSIBLE_FACTOR
-        )
-        self.latest = LatestInputs(self.inputs, p.state_timeout, p.ee_feedback == 'ground_truth')
-        self.exchange = CompensationExchange(self.resolver)
+        #: the resolver's half of each period, as the direct engine runs it (ROS-free)
+        self.period = ResolverPeriod(self.resolver, p.period, settings)
+        self.workspace = self.period.workspace
+        self.targets, self.inputs, self.latest = self.period.targets, self.period.inputs, self.period.latest
         self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
         self._set_obstacles()
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -124,7 +117,6 @@ class RedundancyResolverNode(Node):
         self._received = 0  # when the joint state of the held arm command came (time.monotonic_ns())
         self._diagnostics_gate = DiagnosticsGate()
         self._throttle = LogThrottle()
-        self._cycles = self._stale_cycles = 0
         #: Callables ``observe(stamp, command, reached, stalled)``, each run once a cycle's arm command
         #: is out (``command``: the :class:`~wmm_control.resolvers.ResolverCommand`; ``reached``,
         #: ``stalled``: the goal's state): the cycle's exact values for code in this process (an
@@ -181,13 +173,7 @@ class RedundancyResolverNode(Node):
     @property
     def counters(self) -> dict:
         """The counts reported on /diagnostics."""
-        return {
-            'cycles': self._cycles,
-            'goals': self.targets.goals,
-            'goals_rejected': self.targets.rejected,
-            'compensation_dropped': self.exchange.dropped,
-            'stale_cycles': self._stale_cycles,
-        }
+        return self.period.counters
 
     def _set_state_timeout(self, timeout):
         self.latest.set_timeout(timeout)
@@ -209,7 +195,7 @@ class RedundancyResolverNode(Node):
 
     # ------------------------------------------------------------------ inputs
     def _on_goal(self, msg):
-        self._log(self.targets.goal(msg.header.frame_id, pose_values(msg.pose), self.latest.base_pose(self._now())))
+        self._log(self.period.goal(msg.header.frame_id, pose_values(msg.pose), self._now()))
 
     def _on_reference(self, msg):
         point = msg.points[0] if msg.points else None
@@ -218,12 +204,10 @@ class RedundancyResolverNode(Node):
             pose = pose_values(point.transforms[0])
             vel = twist_values(point.velocities[0]) if point.velocities else np.zeros(6)
             acc = twist_values(point.accelerations[0]) if point.accelerations else np.zeros(6)
-        now = self._now()
-        self._log(self.targets.trajectory_point(msg.header.frame_id, pose, vel, acc, now, self.latest.base_pose(now)))
+        self._log(self.period.trajectory_point(msg.header.frame_id, pose, vel, acc, self._now()))
 
     def _set_obstacles(self):
-        self.resolver.set_obstacles(self.obstacles.obstacles)
-        self.targets.obstacles = self.obstacles.obstacles
+        self.period.set_obstacles(self.obstacles.obstacles)
 
     def _on_obstacles(self, msg):
         if self.obstacles.take(msg, self.get_logger()):
@@ -242,10 +226,10 @@ class RedundancyResolverNode(Node):
         self.get_logger().info(f'base controller lag τ = {lag:g} s: the safety stage brakes the base with it')
 
     def _on_odom(self, msg):
-        self._log(self.latest.odometry(*odometry_values(msg), self._now()))
+        self._log(self.period.odometry(*odometry_values(msg), self._now()))
 
     def _on_ee_pose(self, msg):
-        self._log(self.latest.ee_pose(msg.header.frame_id, pose_values(msg.pose), self._now()))
+        self._log(self.period.ee_pose(msg.header.frame_id, pose_values(msg.pose), self._now()))
 
     # ------------------------------------------------------------------ cycle
     def _on_joint_states(self, msg):
@@ -260,25 +244,17 @@ class RedundancyResolverNode(Node):
             return
         if not self.watchdog.admit(msg.header.stamp):
             return
-        if self.exchange.pending:  # the last cycle's feasible twist never came
+        if self.period.pending:  # the last cycle's feasible twist never came
             self._finish(None)
         stamp = msg.header.stamp
-        state, reason = self.latest.state(q, dq, self._now())
-        if state is None or self.targets.target is None:
-            if state is None:
-                self._stale_cycles += 1
-                self.get_logger().warn(f'{reason}: zero commands', throttle_duration_sec=2.0)
+        plan = self.period.plan(q, dq, self._now(), resync=self.watchdog.resync(self.pub_arm))
+        self._log(plan.events)
+        if plan.command is None:
+            if plan.stale:
+                self.get_logger().warn(f'{plan.stale}: zero commands', throttle_duration_sec=2.0)
             self._publish_zero(stamp)
             return
-        if self.watchdog.resync(self.pub_arm):
-            self.resolver.reset()
-        self._cycles += 1
-        target, events = self.targets.current(self._now())
-        self._log(events)
-        command = self.resolver.step(state, target)
-        # Judged now, against the target the command was computed for: a new goal may come in
-        # before the arm command goes out (it waits for the feasible twist).
-        self._log(self.targets.judge(command.diagnostics))
+        command = plan.command
         if self._dropped(received):
             return
         self.pub_base.publish(twist_stamped(stamp, self.p.base_frame, command.base_twist))
@@ -286,22 +262,22 @@ class RedundancyResolverNode(Node):
             self._publish_arm(command, stamp, received)
             return
         self._received = received
-        self.exchange.hold(stamp_key(stamp), command, stamp)
+        self.period.hold(stamp_key(stamp), command, stamp)
         if self._wait is None:
             self._finish(None)
         else:
             self._wait.reset()
 
     def _on_feasible(self, msg):
-        if not self.exchange.awaits(stamp_key(msg.header.stamp)):
+        if not self.period.awaits(stamp_key(msg.header.stamp)):
             return
-        twist, events = self.inputs.feasible_twist(planar_twist(msg.twist))
+        twist, events = self.period.feasible_twist(planar_twist(msg.twist))
         self._log(events)
         if twist is not None:
             self._finish(twist)
 
     def _compensation_timeout(self):
-        if self.exchange.pending:
+        if self.period.pending:
             self._finish(None)
 
     def _finish(self, feasible):
@@ -313,7 +289,7 @@ class RedundancyResolverNode(Node):
                 'no /base/feasible_twist for this cycle in time: arm command without compensation',
                 throttle_duration_sec=1.0,
             )
-        self._publish_arm(*self.exchange.finish(feasible), self._received)
+        self._publish_arm(*self.period.finish(feasible), self._received)
 
     # ------------------------------------------------------------------ outputs
     def _dropped(self, received):
@@ -346,7 +322,7 @@ class RedundancyResolverNode(Node):
 
     def _stop(self):
         """Joint states stopped: zero commands every period (the watchdog's timeout action)."""
-        self.exchange.clear()
+        self.period.exchange.clear()
         self._publish_zero(self.get_clock().now().to_msg())
 
     def _publish_markers(self) -> None:

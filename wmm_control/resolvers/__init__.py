@@ -64,7 +64,7 @@ def method_parameters(method: str) -> tuple[str, ...]:
 
 
 def make_resolver(
-    method: str, robot: str | Path | RobotConfig | KinematicModel = 'steerable', **params: Any
+    method: str, robot: str | Path | RobotConfig | KinematicModel, **params: Any
 ) -> PoseServoResolver | AccelerationResolver:
     """Build the resolver named ``method`` with keyword parameters of its params class.
 

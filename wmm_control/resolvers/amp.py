@@ -77,9 +77,7 @@ class AmpResolver(AccelerationResolver):
 
     name = 'amp'
 
-    def __init__(
-        self, robot: str | Path | RobotConfig | KinematicModel = 'mecanum', params: AmpParams | None = None
-    ) -> None:
+    def __init__(self, robot: str | Path | RobotConfig | KinematicModel, params: AmpParams | None = None) -> None:
         super().__init__(robot, params if params is not None else AmpParams())
 
     def reset(self) -> None:

@@ -23,6 +23,7 @@ from wmm_control.errors import ShapeError
 from wmm_control.kinematics.orientation import matrix_from_rpy
 
 if TYPE_CHECKING:
+    from wmm_control.kinematics import KinematicModel
     from wmm_control.kinematics.obstacles import Obstacle
     from wmm_control.resolvers.safety import SafetyStage
 
@@ -212,6 +213,8 @@ class Resolver(ABC):
             :class:`ResolverCommand`; every entry finite and within the robot's limits.
         """
 
+    #: the robot's :class:`~wmm_control.kinematics.KinematicModel` (shared, not copied)
+    model: 'KinematicModel' = None  # type: ignore[assignment]  # every method's __init__ sets it
     #: the method's :class:`~wmm_control.resolvers.safety.SafetyStage`, which every command passes
     safety: 'SafetyStage' = None  # type: ignore[assignment]  # every method's __init__ sets its stage
 

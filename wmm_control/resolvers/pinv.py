@@ -30,9 +30,7 @@ class PinvResolver(PoseServoResolver):
 
     name = 'pinv'
 
-    def __init__(
-        self, robot: str | Path | RobotConfig | KinematicModel = 'steerable', params: PinvParams | None = None
-    ) -> None:
+    def __init__(self, robot: str | Path | RobotConfig | KinematicModel, params: PinvParams | None = None) -> None:
         super().__init__(robot, params if params is not None else PinvParams())
 
     def _resolve(self, jac, p_ref, e_pos, state):

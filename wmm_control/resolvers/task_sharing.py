@@ -92,7 +92,7 @@ class TaskSharingResolver(PoseServoResolver):
 
     def __init__(
         self,
-        robot: str | Path | RobotConfig | KinematicModel = 'steerable',
+        robot: str | Path | RobotConfig | KinematicModel,
         params: TaskSharingParams | None = None,
         q_dex: ArrayLike | None = None,
     ) -> None:

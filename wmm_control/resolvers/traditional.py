@@ -33,7 +33,7 @@ class TraditionalResolver(AccelerationResolver):
     name = 'traditional'
 
     def __init__(
-        self, robot: str | Path | RobotConfig | KinematicModel = 'mecanum', params: TraditionalParams | None = None
+        self, robot: str | Path | RobotConfig | KinematicModel, params: TraditionalParams | None = None
     ) -> None:
         super().__init__(robot, params if params is not None else TraditionalParams())
 
