@@ -18,6 +18,7 @@ Use it for fast experiments and tests. The ROS nodes do the same over topics;
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -51,6 +52,10 @@ class CycleRecord:
         command: the resolver's final command (``ResolverCommand``).
         feasible_twist: the base controller's answer q̇_bf (base frame). Shape (3,).
         base_velocity: the base twist actually executed in the period (base frame). Shape (3,).
+        cycle_s: wall time (``time.perf_counter``) of the period's control cycle
+            (:meth:`~wmm_control.cycle.Cycle.step`: the method with its safety stage, the base
+            controller, the compensation; not reading the state nor the simulator's step) [s].
+        cycle_cpu_s: the same cycle's CPU time in this thread (``time.thread_time``) [s].
     """
 
     t: float
@@ -62,6 +67,8 @@ class CycleRecord:
     command: ResolverCommand
     feasible_twist: np.ndarray
     base_velocity: np.ndarray
+    cycle_s: float
+    cycle_cpu_s: float
 
 
 class ClosedLoop:
@@ -131,7 +138,10 @@ class ClosedLoop:
         ee_pos, ee_quat = w.ee_pose()
         _, q_all, _ = w.joint_state()
         state = self.state()
-        result = self.cycle.step(state, target, self._positions(q_all))
+        positions = self._positions(q_all)
+        wall, cpu = time.perf_counter(), time.thread_time()
+        result = self.cycle.step(state, target, positions)
+        cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
         for group, rates in result.base.rates.items():
             w.set_command(group, rates)
         w.set_command('arm', result.command.arm_velocity)
@@ -146,4 +156,6 @@ class ClosedLoop:
             command=result.command,
             feasible_twist=np.asarray(result.base.feasible_twist, dtype=float),
             base_velocity=w.base_twist(),
+            cycle_s=wall,
+            cycle_cpu_s=cpu,
         )
