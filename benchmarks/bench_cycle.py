@@ -38,11 +38,14 @@ pairs (pink sees no obstacles). pink is installed for the benchmarks only (``bas
 scripts/dev.sh bench``).
 
 **The ratios** are to the median of the pink step *without* the barrier on the same robot:
-``median / pink`` is the cycle's median over it and ``p99 / pink`` the cycle's p99 over the
-same pink median (so "p99 ≤ 4× a pink step" reads as the cycle's p99 within four median pink
-steps). The last line gives, over every robot, method and kind, the worst of each: the largest
-median ratio, the largest p99 ratio and the longest cycle, each possibly from a different row::
+the cycle's median over it, and the cycle's p99 over the same pink median (so "p99 ≤ 4× a
+pink step" reads as the cycle's p99 within four median pink steps); on the wall clock, and on
+the thread's CPU clock (both pink and the cycle), which leaves out the time the thread waited
+for a core a busy machine gave to other work. The last two lines give, over every robot,
+method and kind, the worst of each: the largest median ratio, the largest p99 ratio and the
+longest cycle, each possibly from a different row; in CPU time, then on the wall clock::
 
+    in thread CPU time: median N.NN× pink, p99 N.NN× pink, max N.NN ms
     cycle: median N.NN× pink, p99 N.NN× pink, max N.NN ms
 
     python benchmarks/bench_cycle.py [--states 300] [--robots steerable,...] [--methods pinv,...]
@@ -179,22 +182,23 @@ def time_cycles(cfg, method, kind, samples):
 
 
 def time_pink(step, samples):
-    """Wall time [s] of pink's update + solve at each sample, and of its solve alone (shape (2,
-    len(samples))), and how many of the solves found no solution (timed all the same)."""
+    """pink's update + solve at each sample, wall and thread CPU time [s], and the wall time of
+    its solve alone (shape (3, len(samples))), and how many of the solves found no solution
+    (timed all the same)."""
     for s in samples[:WARM_UP]:
         step.update(step.configuration(s.state.base_pose, s.state.q_arm))
         step.set_target(s.target.position, s.target.rotation)
         step.solve()
-    times, failed = np.empty((2, len(samples))), 0
+    times, failed = np.empty((3, len(samples))), 0
     for k, s in enumerate(samples):
         q = step.configuration(s.state.base_pose, s.state.q_arm)
-        t0 = time.perf_counter()
+        w0, c0 = time.perf_counter(), time.thread_time()
         step.update(q)
         step.set_target(s.target.position, s.target.rotation)
-        t1 = time.perf_counter()
+        w1 = time.perf_counter()
         velocity = step.solve()
-        t2 = time.perf_counter()
-        times[:, k] = t2 - t0, t2 - t1
+        c2, w2 = time.thread_time(), time.perf_counter()
+        times[:, k] = w2 - w0, c2 - c0, w2 - w1
         failed += velocity is None
     return times, failed
 
@@ -211,8 +215,8 @@ def _cells(stats):
 
 def run(robots, methods, kinds, count, seed=0):
     """Time every robot × method × kind; print the tables and the last line. Returns the rows."""
-    print(f'## The whole cycle, {count} states of each kind: median / p99 / max [µs]\n')
-    print('| robot | method | kind | wall | thread CPU | median / pink | p99 / pink |')
+    print(f'## The whole cycle, {count} states of each kind: median / p99 / max [µs], ratios to pink\'s median\n')
+    print('| robot | method | kind | wall | thread CPU | wall: median, p99 / pink | CPU: median, p99 / pink |')
     print('|---|---|---|---|---|---|---|')
     rows, pinks = [], {}
     for name in robots:
@@ -227,41 +231,36 @@ def run(robots, methods, kinds, count, seed=0):
                 for variant, step in steps.items():
                     pink[variant].append(time_pink(step, samples[kind]))
                 robot_rows.append((method, kind, time_cycles(cfg, method, kind, samples[kind])))
-        pinks[name] = {}
+        pinks[name] = {'pairs': steps['barrier'].pairs}
         for variant, runs in pink.items():
             times = np.hstack([t for t, _ in runs])
-            pinks[name][variant] = (_stats(times[0]), _stats(times[1]), sum(f for _, f in runs), times.shape[1])
-        pinks[name]['pairs'] = steps['barrier'].pairs
-        pink_median = pinks[name]['plain'][0][0]
+            pinks[name][variant] = ([_stats(t) for t in times], sum(f for _, f in runs), times.shape[1])
+        (wall_pink, cpu_pink, _), _, _ = pinks[name]['plain']
         for method, kind, times in robot_rows:
             wall, cpu = _stats(times[0]), _stats(times[1])
-            ratios = (wall[0] / pink_median, wall[1] / pink_median)
+            ratios = (wall[0] / wall_pink[0], wall[1] / wall_pink[0], cpu[0] / cpu_pink[0], cpu[1] / cpu_pink[0])
             rows.append((name, method, kind, wall, cpu, ratios))
             print(
                 f'| {name} | {method} | {kind} | {_cells(wall)} | {_cells(cpu)} '
-                f'| {ratios[0]:.2f}× | {ratios[1]:.2f}× |',
+                f'| {ratios[0]:.2f}×, {ratios[1]:.2f}× | {ratios[2]:.2f}×, {ratios[3]:.2f}× |',
                 flush=True,
             )
     print('\n## One pink step on the same robot and states: median / p99 / max [µs]\n')
     print(
-        '| robot | update + solve_ik | solve_ik alone | with the barrier: update + solve_ik | solve_ik alone | pairs |'
+        '| robot | update + solve_ik: wall | CPU | solve_ik alone | with the barrier: wall | CPU | solve_ik alone | pairs |'
     )
-    print('|---|---|---|---|---|---|')
+    print('|---|---|---|---|---|---|---|---|')
     for name, p in pinks.items():
-        plain, barrier = p['plain'], p['barrier']
-        print(
-            f'| {name} | {_cells(plain[0])} | {_cells(plain[1])} | {_cells(barrier[0])} | {_cells(barrier[1])} '
-            f'| {p["pairs"]} |'
-        )
-        for variant, (_, _, failed, steps) in ((v, p[v]) for v in ('plain', 'barrier')):
+        cells = ' | '.join(_cells(stats) for variant in ('plain', 'barrier') for stats in p[variant][0])
+        print(f'| {name} | {cells} | {p["pairs"]} |')
+        for variant in ('plain', 'barrier'):
+            _, failed, steps = p[variant]
             if failed:
                 print(f'\n{name}, pink {variant}: {failed} of {steps} steps found no solution (timed all the same)')
-    worst_cpu = max(row[4][2] for row in rows)
-    print(f'\nlongest cycle in thread CPU time: {worst_cpu / 1e3:.2f} ms')
-    median = max(row[5][0] for row in rows)
-    p99 = max(row[5][1] for row in rows)
-    longest = max(row[3][2] for row in rows)
-    print(f'cycle: median {median:.2f}× pink, p99 {p99:.2f}× pink, max {longest / 1e3:.2f} ms')
+    worst = [max(row[5][k] for row in rows) for k in range(4)]
+    longest_wall, longest_cpu = (max(row[k][2] for row in rows) / 1e3 for k in (3, 4))
+    print(f'\nin thread CPU time: median {worst[2]:.2f}× pink, p99 {worst[3]:.2f}× pink, max {longest_cpu:.2f} ms')
+    print(f'cycle: median {worst[0]:.2f}× pink, p99 {worst[1]:.2f}× pink, max {longest_wall:.2f} ms')
     return rows
 
 
