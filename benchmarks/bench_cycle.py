@@ -253,6 +253,7 @@ def run(robots, methods, kinds, count, seed=0):
     for name, p in pinks.items():
         cells = ' | '.join(_cells(stats) for variant in ('plain', 'barrier') for stats in p[variant][0])
         print(f'| {name} | {cells} | {p["pairs"]} |')
+    for name, p in pinks.items():
         for variant in ('plain', 'barrier'):
             _, failed, steps = p[variant]
             if failed:

@@ -39,9 +39,9 @@ class PinkStep:
     the base's (x, y, θ) and the arm's joints), posture task at the start state.
 
     With ``barrier``, pink's ``SelfCollisionBarrier`` over the robot's own pairs: the URDF's
-    collision shapes on the same model, the pairs the package's
-    :class:`~wmm_control.kinematics.collision.CollisionModel` checks, without the floor (pink
-    has none), every pair's distance each step.
+    collision shapes on the same model, the pairs of shapes the package's
+    :class:`~wmm_control.kinematics.collision.CollisionModel` checks (those touching at the
+    start posture left out), without the floor (pink has none), every pair's distance each step.
     """
 
     def __init__(self, robot='steerable', barrier=False, dt=0.025):
@@ -58,11 +58,14 @@ class PinkStep:
         self.barriers = []
         if barrier:
             geom = pin.buildGeomFromUrdf(km.model, str(cfg.urdf_path), pin.GeometryType.COLLISION)
-            checked = {frozenset(p) for p in CollisionModel.from_robot(cfg).pairs if FLOOR not in p}
-            link = [km.model.frames[g.parentFrame].name for g in geom.geometryObjects]
-            for a in range(len(link)):
-                for b in range(a + 1, len(link)):
-                    if frozenset((link[a], link[b])) in checked:
+            # every pair of shapes the package checks (within an infinite distance), the floor's
+            # left out: pink has no floor
+            near, _, _ = CollisionModel.from_robot(cfg).within(cfg.start.arm, np.inf, cfg.start.base_pose)
+            checked = {frozenset(pair) for pair in near.shapes if FLOOR not in pair}
+            names = [g.name for g in geom.geometryObjects]
+            for a in range(len(names)):
+                for b in range(a + 1, len(names)):
+                    if frozenset((names[a], names[b])) in checked:
                         geom.addCollisionPair(pin.CollisionPair(a, b))
             geometry = {'collision_model': geom, 'collision_data': pin.GeometryData(geom)}
             self.barriers = [SelfCollisionBarrier(len(geom.collisionPairs))]
