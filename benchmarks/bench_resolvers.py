@@ -3,7 +3,7 @@
 1. Resolver cycle time (median, p99, µs) of ``pinv``, ``task_sharing`` and task sharing with
    compensation (``step`` + ``compensate``, as the node runs them), replayed on the states and
    targets of a closed-loop Table II run; each median also as a ratio to one pink IK step
-   (robot A, same run, see ``bench_swmr.py``). Targets: task sharing <= 0.5x pink's median,
+   (robot A, same run, see ``shared.py``). Targets: task sharing <= 0.5x pink's median,
    p99 <= 3x its own median. Then ``amp`` and ``traditional`` on robot B, replayed on the
    R = 0.25 m circle of Xing §4.3, against one pink step on robot B. Target: AMP <= 1.0x pink's.
 2. Simulated-to-wall time ratio of the whole Table II experiment, all ROS nodes in one process
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # for bench_swmr
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the benchmarks' shared code
 
 from wmm_control.experiments.scenario import load_scenario  # noqa: E402
 from wmm_control.resolvers import make_resolver  # noqa: E402
@@ -151,7 +151,7 @@ def report_amp_floor(cycles):
 
 def report_methods(title, robot, cycles, methods, targets):
     print(f'Resolver cycle time, {len(cycles)} recorded cycles of {title}:')
-    from bench_swmr import bench_pink
+    from shared import bench_pink
 
     pink_us = bench_pink(len(cycles), robot)
     pink_med = np.median(pink_us) if pink_us is not None else None

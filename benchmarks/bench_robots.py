@@ -10,6 +10,11 @@ Prints figures, asserts nothing.
    Mecanum base, and steerable bases with N = 2, 3, 4, 6 modules: the median cycle of
    task sharing and AMP over n, of the steerable base controller over N.
 
+Part 1 is measured more fully by ``bench_cycle.py`` (the whole cycle with the base
+controller, at free-space, self-near and obstacle-near states, against pink with and without
+its self-collision barrier); it stays for the figures of ``docs/benchmarks.md`` (Every
+shipped robot) and for part 2.
+
     python benchmarks/bench_robots.py [--cycles 400]
 """
 
@@ -26,32 +31,14 @@ sys.path.insert(0, str(ROOT))  # run from a source checkout
 sys.path.insert(0, str(ROOT / 'test'))  # the URDF factory of the tests
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_swmr import bench_pink  # noqa: E402
-from sim_bridge.closed_loop import ClosedLoop  # noqa: E402
-from sim_bridge.world import SimWorld  # noqa: E402
+from shared import bench_pink, closed_loop_states  # noqa: E402
 from urdf_factory import write_urdf  # noqa: E402
 from wmm_control.base import make_base_controller  # noqa: E402
 from wmm_control.cli.robot_setup import init_robot  # noqa: E402
-from wmm_control.kinematics.orientation import matrix_from_quaternion  # noqa: E402
-from wmm_control.resolvers import PoseTarget, make_resolver  # noqa: E402
+from wmm_control.resolvers import make_resolver  # noqa: E402
 from wmm_control.robot_config import load_robot, robot_names  # noqa: E402
 
 METHODS = ('pinv', 'task_sharing', 'amp', 'traditional')
-OFFSETS = (np.array([0.1, 0.05, -0.05]), np.array([1.5, -1.0, 0.0]))
-
-
-def record(cfg, cycles):
-    """(state, target, base reference) of ``cycles`` periods of an AMP run through both goals."""
-    out = []
-    with SimWorld(cfg) as world:
-        loop = ClosedLoop(world, make_resolver('amp', cfg))
-        p0, q0 = world.ee_pose()
-        for k in range(cycles):
-            target = PoseTarget(np.asarray(p0) + OFFSETS[0 if k < cycles // 3 else 1], matrix_from_quaternion(q0))
-            state = loop.state()
-            rec = loop.step(target)
-            out.append((state, target, rec.command.base_twist))
-    return out
 
 
 def time_method(cfg, method, states):
@@ -86,7 +73,7 @@ def per_robot(cycles):
     print('|---|---|---|' + '---|' * (len(METHODS) + 2))
     for name in robot_names():
         cfg = load_robot(name)
-        states = record(cfg, cycles)
+        states = closed_loop_states(cfg, cycles)
         cells = [_fmt(time_method(cfg, m, states)) for m in METHODS]
         pink = bench_pink(cycles, name)
         pink_cell = _fmt(pink) if pink is not None else 'not installed'
@@ -113,7 +100,7 @@ def growth(cycles):
         print('|---|---|---|')
         for n in (6, 7, 8):
             cfg = made_up(tmp, 'mecanum', arm_joints=n)
-            states = record(cfg, cycles)
+            states = closed_loop_states(cfg, cycles)
             print(
                 f'| {n} | {np.median(time_method(cfg, "task_sharing", states)):.1f} | '
                 f'{np.median(time_method(cfg, "amp", states)):.1f} |',
@@ -124,7 +111,7 @@ def growth(cycles):
         print('|---|---|')
         for modules in (2, 3, 4, 6):
             cfg = made_up(tmp, 'steerable', modules=modules)
-            states = record(cfg, cycles)
+            states = closed_loop_states(cfg, cycles)
             print(f'| {modules} | {_fmt(time_base(cfg, states))} |', flush=True)
 
 

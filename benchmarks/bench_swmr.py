@@ -29,7 +29,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the benchmarks' shared code
 
+from shared import bench_pink  # noqa: E402
 from wmm_control.base import OsqpIcrSolver, SteerableGeometry, SwmrController, SwmrParams  # noqa: E402
 from wmm_control.base.icr import wedge_rows  # noqa: E402
 from wmm_control.robot_config import load_robot  # noqa: E402
@@ -195,34 +197,6 @@ def main():
         f'  ratio: our median / pink median = {med / pmed:.2f} (target <= 0.5); '
         f'our p99 / our median = {p99 / med:.2f} (target <= 3)'
     )
-
-
-def bench_pink(cycles, robot='steerable'):
-    """Wall time [µs] of one pink IK step per cycle on ``robot``, tracking a moving end-effector target."""
-    try:
-        import pink
-        from pink.tasks import FrameTask, PostureTask
-    except ImportError:
-        return None
-    from wmm_control.kinematics import KinematicModel
-
-    km = KinematicModel(robot)
-    q0, _ = km.configuration(np.zeros(3), km.config.start.arm)
-    conf = pink.Configuration(km.model, km.model.createData(), q0)
-    ee = FrameTask(km.ee_frame, position_cost=1.0, orientation_cost=1.0)
-    posture = PostureTask(cost=1e-3)
-    posture.set_target(q0)
-    start = conf.get_transform_frame_to_world(km.ee_frame).copy()
-    times = []
-    for k in range(cycles + 50):
-        target = start.copy()
-        target.translation = start.translation + np.array([0.3 * np.sin(0.01 * k), 0.2 * np.cos(0.01 * k), 0.0])
-        ee.set_target(target)
-        t0 = time.perf_counter()
-        v = pink.solve_ik(conf, [ee, posture], 0.025, solver='quadprog')
-        times.append((time.perf_counter() - t0) * 1e6)
-        conf.integrate_inplace(v, 0.025)
-    return np.array(times[50:])
 
 
 if __name__ == '__main__':

@@ -53,7 +53,7 @@ case "$job" in
     "$VENV/bin/mypy" wmm_control sim_bridge   # types (setup.cfg [mypy])
     exec "$VENV/bin/python" -m pytest test -q "$@" ;;
   bench)
-    # pink (a QP-based IK) is a comparison point of bench_swmr.py only, not a dependency.
+    # pink (a QP-based IK) is the benchmarks' yardstick only, not a dependency.
     "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check pin-pink quadprog
     for b in benchmarks/bench_*.py; do echo "== $b"; "$VENV/bin/python" "$b"; done ;;
 esac

@@ -20,6 +20,7 @@ Use it for fast experiments and tests. The ROS nodes do the same over topics;
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -58,6 +59,10 @@ class CycleRecord:
         arm_velocity: the arm rates sent (zero when held). Shape (n,).
         feasible_twist: the base controller's answer q̇_bf (base frame). Shape (3,).
         base_velocity: the base twist actually executed in the period (base frame). Shape (3,).
+        cycle_s: wall time (``time.perf_counter``) of the period's control cycle
+            (:meth:`~wmm_control.cycle.Cycle.step`: the method with its safety stage, the base
+            controller, the compensation; not reading the state nor the simulator's step) [s].
+        cycle_cpu_s: the same cycle's CPU time in this thread (``time.thread_time``) [s].
     """
 
     t: float
@@ -70,6 +75,8 @@ class CycleRecord:
     arm_velocity: np.ndarray
     feasible_twist: np.ndarray
     base_velocity: np.ndarray
+    cycle_s: float
+    cycle_cpu_s: float
 
 
 class ClosedLoop:
@@ -186,9 +193,11 @@ class ClosedLoop:
         pose = w.base_pose()
         ee_pos, ee_quat = w.ee_pose()
         _, q_all, qd_all = w.joint_state()
+        wall, cpu = time.perf_counter(), time.thread_time()
         result = self.cycle.step(
             q_all[self._arm], qd_all[self._arm], self._positions(q_all), self._positions(qd_all), t
         )
+        cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
         self.events += result.events
         for group, rates in result.base.rates.items():
             w.set_command(group, rates)
@@ -205,4 +214,6 @@ class ClosedLoop:
             arm_velocity=result.arm_velocity,
             feasible_twist=np.asarray(result.base.twist, dtype=float),
             base_velocity=w.base_twist(),
+            cycle_s=wall,
+            cycle_cpu_s=cpu,
         )

@@ -308,3 +308,70 @@ def test_no_stall_while_the_set_point_trajectory_still_runs():
     assert run(0.0).index(True) == 10  # no trajectory: stalled after one stall_time
     moving = run(2.0)  # the trajectory's last cycle is the 20th (1.9 s)
     assert not any(moving[:30]) and all(moving[30:])
+
+
+def test_a_run_records_the_time_of_each_control_cycle(tmp_path, capsys):
+    """``--record`` keeps each period's cycle time, wall and thread CPU; ``--out`` their
+    p50 / p99 / max per run and the summary the worst of them; the printed summary shows them."""
+    import json
+    from wmm_control.cli.randomized import main
+    from wmm_control.experiments.randomized import cycle_stats
+
+    out = tmp_path / 'runs.json'
+    argv = ['--robots', 'steerable', '--methods', 'pinv', '--goals', '3', '--seed', str(SUBSET_SEED)]
+    assert main([*argv, '--indices', '1', '--jobs', '1', '--record', str(tmp_path), '--out', str(out)]) == 0
+    record = np.load(tmp_path / 'steerable_pinv_1.npz')
+    wall, cpu = record['cycle_s'], record['cycle_cpu_s']
+    periods = record['t'].shape
+    assert wall.shape == cpu.shape == periods and periods[0] > 10
+    assert np.all(np.isfinite(wall)) and np.all(np.isfinite(cpu))
+    assert np.all(wall > 0.0) and np.all(cpu > 0.0)
+    assert np.all(cpu <= wall + 1e-4)  # the thread's CPU time within the wall time around it
+    document = json.loads(out.read_text())
+    (run,) = document['runs']
+    for name, times in (('cycle_s', wall), ('cycle_cpu_s', cpu)):
+        stats = run[name]
+        assert stats == pytest.approx(cycle_stats(times), rel=1e-12)
+        assert stats['max'] == pytest.approx(times.max(), rel=1e-12)
+        assert np.min(times) <= stats['p50'] <= stats['p99'] <= stats['max']
+        for q, value in ((0.5, stats['p50']), (0.99, stats['p99'])):  # at most a share 1 - q above
+            assert np.sum(times > value) <= (1.0 - q) * (times.size - 1) + 1
+    (summary,) = document['summary']
+    assert summary['cycle_cpu_max_s'] == run['cycle_cpu_s']['max']
+    assert summary['cycle_p99_s'] == run['cycle_s']['p99']
+    printed = capsys.readouterr().out
+    assert f'{run["cycle_cpu_s"]["max"] * 1e3:.2f}' in printed.split('Control cycle per period')[1]
+
+
+def test_the_cycle_time_is_the_control_cycle_alone():
+    """CPU work added to the base controller's step counts in the cycle's time (wall and CPU);
+    work added to the simulator's step does not."""
+    import time
+    from sim_bridge.closed_loop import ClosedLoop
+    from sim_bridge.world import SimWorld
+    from wmm_control.resolvers import PoseTarget, make_resolver
+
+    def busy(seconds):
+        end = time.thread_time() + seconds
+        while time.thread_time() < end:
+            pass
+
+    with SimWorld('steerable', base_mode='kinematic') as world:
+        loop = ClosedLoop(world, make_resolver('pinv', 'steerable'))
+        target = PoseTarget(*world.ee_pose()[:1], np.eye(3))
+        base_step, world_step = loop.base.step, world.step
+
+        def slow_base(*args, **kwargs):
+            busy(0.004)
+            return base_step(*args, **kwargs)
+
+        def slow_world(*args, **kwargs):
+            busy(0.05)
+            return world_step(*args, **kwargs)
+
+        loop.base.step = slow_base
+        world.step = slow_world
+        records = [loop.step(target) for _ in range(5)]
+    for rec in records:
+        assert 0.004 <= rec.cycle_cpu_s <= rec.cycle_s + 1e-4
+        assert rec.cycle_cpu_s < 0.05  # the simulator's step is not in it

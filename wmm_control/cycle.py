@@ -86,14 +86,15 @@ class Cycle:
         self.resolver_period = ResolverPeriod(resolver, period, settings)
         self.base_period = BasePeriod(base_controller, applied_rate_tolerance)
 
-    def step(self, q_arm, dq_arm, base_positions: dict, base_rates: dict | None, now: float) -> CycleResult:
+    def step(self, q_arm, dq_arm, base_positions: dict | None, base_rates: dict | None, now: float) -> CycleResult:
         """One period: the arm's measured positions ``q_arm`` and rates ``dq_arm``, the base
-        joints' measured positions and rates per command group (``base_rates`` None when not
-        measured), at ``now`` [s] of the caller's clock; the odometry, end-effector pose and
-        target as the inputs last gave them."""
+        joints' measured positions and rates per command group (None when not measured: the
+        base controller goes on from its own state), at ``now`` [s] of the caller's clock; the
+        odometry, end-effector pose and target as the inputs last gave them."""
         plan = self.resolver_period.plan(np.asarray(q_arm, dtype=float), np.asarray(dq_arm, dtype=float), now)
         reference = np.zeros(3) if plan.command is None else plan.command.base_twist
-        self.base_period.start(base_positions, base_rates, resync=False)
+        if base_positions is not None:
+            self.base_period.start(base_positions, base_rates, resync=False)
         answer = self.base_period.step(reference, base_positions)
         self.base_period.published(answer)
         command = plan.command

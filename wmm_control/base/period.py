@@ -90,8 +90,9 @@ class BasePeriod:
         self._dropped = False
         return why
 
-    def step(self, reference, positions: dict) -> PeriodAnswer:
-        """The controller's answer to ``reference`` (None: brake) closed on ``positions``."""
+    def step(self, reference, positions: dict | None) -> PeriodAnswer:
+        """The controller's answer to ``reference`` (None: brake) closed on ``positions`` (None:
+        from its own state)."""
         command = self.base.step(reference, positions)
         rates = {g: command.rates[g] for g in self.groups}
         twist = command.feasible_twist

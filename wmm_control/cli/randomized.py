@@ -10,8 +10,9 @@ Draws ``N`` reachable goals per robot (:mod:`wmm_control.experiments.randomized`
 reachable means), runs each method to each goal from the robot's start state in lockstep, in
 this process, and prints per robot and method: runs, converged, reported (stalled, on
 ``/diagnostics``), failed, the worst final error of the converged runs, the time to converge,
-and the worst use of any velocity or acceleration limit. ``--indices`` runs only those goals
-of the draw (one run again, say). ``--obstacles`` puts an obstacle file's obstacles
+and the worst use of any velocity or acceleration limit; then the control cycle's thread CPU
+and wall time per period (the largest p99 of a run and the longest cycle). ``--indices`` runs
+only those goals of the draw (one run again, say). ``--obstacles`` puts an obstacle file's obstacles
 (:mod:`wmm_control.kinematics.obstacles`) in the simulator and the controller, and draws the
 goals clear of them (in the file's ``goal_region``, if it has one); every period's clearance
 is checked on the simulator's geometry. ``--record DIR`` writes each run as
@@ -37,7 +38,7 @@ from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
 from wmm_control.experiments.randomized import METHOD_RUNS, run_goal, sample_goals, summarize
 from wmm_control.robot_config import load_robot, robot_names
 
-__all__ = ['main', 'format_summary']
+__all__ = ['main', 'format_summary', 'format_cycle_times']
 
 
 def _f(value, fmt):
@@ -62,6 +63,26 @@ def format_summary(table: Mapping[tuple[str, str], Mapping[str, Any]]) -> str:
             f'| {err} | {_f(s["median_time_s"], ".1f")} / {_f(s["max_time_s"], ".1f")} '
             f'| {s["limit_use_max"]:.3f} | {s["position_margin_min_rad"]:.3f} '
             f'| {s["in_contact"]} | {s["deepest_contact_m"] * 1e3:.1f} |'
+        )
+    return '\n'.join(lines)
+
+
+def format_cycle_times(table: Mapping[tuple[str, str], Mapping[str, Any]]) -> str:
+    """The control cycle's times per robot and method of :func:`~wmm_control.experiments.randomized.summarize`
+    as a Markdown table [ms]: the largest p99 of a run and the longest cycle, thread CPU and wall."""
+
+    def ms(value):
+        return _f(value and value * 1e3, '.2f')
+
+    lines = [
+        '| robot | method | cycle CPU p99, worst run [ms] | cycle CPU max [ms] | cycle wall p99, worst run [ms] '
+        '| cycle wall max [ms] |',
+        '|---|---|---|---|---|---|',
+    ]
+    for (robot, method), s in table.items():
+        lines.append(
+            f'| {robot} | {method} | {ms(s["cycle_cpu_p99_s"])} | {ms(s["cycle_cpu_max_s"])} '
+            f'| {ms(s["cycle_p99_s"])} | {ms(s["cycle_max_s"])} |'
         )
     return '\n'.join(lines)
 
@@ -225,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
     only = f', goals {sorted(indices)} of them' if indices is not None else ''
     print(f'{args.goals} random reachable goals per robot (seed {args.seed}{only}), engine {args.engine}:')
     print(format_summary(table))
+    print(f'\nControl cycle per period (method, safety stage, base controller; engine {args.engine}):')
+    print(format_cycle_times(table))
     failed = [r for r in results if r['outcome'] == 'failed']
     for r in failed:
         print(f'FAILED: {r["robot"]} {r["method"]} goal {r["goal"]}: {r["why"]}')

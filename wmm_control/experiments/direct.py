@@ -73,6 +73,8 @@ def run_scenario(
             rec.feasible_twist,
             cmd.diagnostics,
             q=rec.q,
+            cycle_s=rec.cycle_s,
+            cycle_cpu_s=rec.cycle_cpu_s,
         )
         if progress is not None:
             progress(1)

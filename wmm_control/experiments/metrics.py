@@ -67,7 +67,9 @@ class RunLog:
     ``mode`` (list of str), ``limit_scale``, ``accel_scale``, ``null_scale``,
     ``compensation_scale``, ``compensated`` (bool), ``cycle_time_s``, ``sigma_min``,
     ``clearance`` [m] (the safety stage's closest pair), ``collision_changed`` (bool: the
-    stage changed the command) and ``q`` (K, J): every joint of ``joint_names`` (the
+    stage changed the command), ``cycle_s`` and ``cycle_cpu_s`` (the whole control cycle's
+    wall and thread CPU time [s], :class:`~sim_bridge.closed_loop.CycleRecord`; NaN where the
+    engine does not time it) and ``q`` (K, J): every joint of ``joint_names`` (the
     simulator's joints, the arm's first; NaN rows where a period's were not recorded).
     """
 
@@ -92,6 +94,8 @@ class RunLog:
         'sigma_min',
         'clearance',
         'collision_changed',
+        'cycle_s',
+        'cycle_cpu_s',
         'q',
     )
 
@@ -120,10 +124,13 @@ class RunLog:
         feasible_twist: ArrayLike | None,
         diagnostics: ResolverDiagnostics,
         q: ArrayLike | None = None,
+        cycle_s: float = float('nan'),
+        cycle_cpu_s: float = float('nan'),
     ) -> None:
         """Add one period: the state at its start, the commands sent, and the resolver's
         :class:`~wmm_control.resolvers.ResolverDiagnostics`. ``feasible_twist`` may be None;
-        ``q`` (every joint of ``joint_names``) too."""
+        ``q`` (every joint of ``joint_names``) too; ``cycle_s``, ``cycle_cpu_s``: the control
+        cycle's wall and thread CPU time [s], NaN when not timed."""
         d = diagnostics
         r = self.rows
         r['t'].append(float(t))
@@ -148,6 +155,8 @@ class RunLog:
         r['sigma_min'].append(d.sigma_min)
         r['clearance'].append(d.clearance)
         r['collision_changed'].append(d.collision_changed)
+        r['cycle_s'].append(float(cycle_s))
+        r['cycle_cpu_s'].append(float(cycle_cpu_s))
         r['q'].append(np.full(len(self.joint_names), np.nan) if q is None else np.asarray(q, dtype=float))
 
     def freeze(self) -> Self:

@@ -27,7 +27,11 @@ independent of the controllers' distance model); a run that goes more than
   drives (the arm's, then the steer and drive joints or the wheels);
 * ``q``, shape (K, J): their positions [rad or m] at the start of each period;
 * ``goal_pose``, shape (6,): the goal [x, y, z, roll, pitch, yaw], world frame [m, rad];
-* ``obstacles``: the obstacle file's text ('' without obstacles).
+* ``obstacles``: the obstacle file's text ('' without obstacles);
+* ``cycle_s``, ``cycle_cpu_s``, shape (K,): each period's control cycle (the method with its
+  safety stage, the base controller and the compensation, not the simulator's step), wall
+  time (``time.perf_counter``) and CPU time of its thread (``time.thread_time``) [s]; NaN
+  with the nodes engine, whose cycle runs in callbacks of two nodes and is not timed.
 
 **A run** starts from the robot's start state (its YAML), with the goal given at t = 0 as a
 set-point, in lockstep: the direct engine (:func:`wmm_control.experiments.direct.run_scenario`, the
@@ -76,6 +80,7 @@ __all__ = [
     'RandomGoal',
     'sample_goals',
     'run_goal',
+    'cycle_stats',
     'summarize',
     'ROBOTS',
     'METHOD_RUNS',
@@ -325,8 +330,10 @@ def run_goal(
         ``contact_depth_m`` and ``contact_pair`` (:func:`run_contact`),
         ``limit_use`` (largest fraction of each velocity and acceleration limit, smallest
         distance to an arm position limit), ``sim_clamped`` (command entries the simulator had
-        to clamp), ``why`` (the reason of a failure, else empty) and ``refused`` (why the resolver
-        refused the goal and held the robot still, else empty).
+        to clamp), ``cycle_s`` and ``cycle_cpu_s`` (the control cycle's wall and thread CPU
+        time over the run's periods, :func:`cycle_stats`), ``why`` (the reason of a failure,
+        else empty) and ``refused`` (why the resolver refused the goal and held the robot
+        still, else empty).
     """
     cfg = load_robot(robot)
     duration = DURATION_S.get(cfg.name, 90.0) if duration is None else duration
@@ -377,6 +384,8 @@ def run_goal(
         'contact_pair': pair,
         'limit_use': _limit_use(log, cfg, dt),
         'sim_clamped': int(clamped),
+        'cycle_s': cycle_stats(log.cycle_s),
+        'cycle_cpu_s': cycle_stats(log.cycle_cpu_s),
         'why': '; '.join(why),
         'refused': status.get('refused', ''),
     }
@@ -412,6 +421,20 @@ def _held(cfg: RobotConfig, method: str, goal: RandomGoal, refused: str) -> tupl
     return log.freeze(), {'goal_reached': False, 'first_stall_s': 0.0, 'refused': refused}
 
 
+def cycle_stats(seconds: ArrayLike) -> dict[str, float] | None:
+    """``{'p50', 'p99', 'max'}`` of a run's cycle times ``seconds`` [s] (the median, the 99th
+    percentile and the largest, over the timed periods); None when no period was timed."""
+    timed = np.asarray(seconds, dtype=float)
+    timed = timed[np.isfinite(timed)]
+    if not timed.size:
+        return None
+    return {
+        'p50': float(np.median(timed)),
+        'p99': float(np.percentile(timed, 99)),
+        'max': float(timed.max()),
+    }
+
+
 def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str | Path = '') -> None:
     """Write the run ``log`` to ``path`` (``.npz``, the module docstring says what it holds)."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -424,6 +447,8 @@ def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str |
         q=log.q,
         goal_pose=np.asarray(goal_pose, dtype=float),
         obstacles=np.array(text),
+        cycle_s=log.cycle_s,
+        cycle_cpu_s=log.cycle_cpu_s,
     )
 
 
@@ -436,7 +461,9 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
     errors of the converged runs, the median and largest time to converge, and the worst use of
     every limit over all runs (``limit_use_max``: largest fraction of a velocity or acceleration
     limit; ``position_margin_min_rad``), the runs in contact (``in_contact``) and the deepest
-    contact (``deepest_contact_m``).
+    contact (``deepest_contact_m``), and the control cycle's times over the runs timed
+    (``cycle_p99_s`` and ``cycle_cpu_p99_s``: the largest p99 of a run, wall and thread CPU;
+    ``cycle_max_s`` and ``cycle_cpu_max_s``: the longest cycle; None when no run was timed).
 
     Returns:
         dict keyed by ``(robot, method)``.
@@ -464,4 +491,9 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
             'in_contact': sum(r.get('contact_depth_m', 0.0) > CONTACT_DEPTH for r in rows),
             'deepest_contact_m': max(r.get('contact_depth_m', 0.0) for r in rows),
         }
+        for clock in ('cycle_s', 'cycle_cpu_s'):
+            timed = [r[clock] for r in rows if r.get(clock)]
+            prefix = clock.removesuffix('_s')
+            table[key][f'{prefix}_p99_s'] = max((t['p99'] for t in timed), default=None)
+            table[key][f'{prefix}_max_s'] = max((t['max'] for t in timed), default=None)
     return table
