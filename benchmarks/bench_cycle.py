@@ -53,6 +53,7 @@ longest cycle, each possibly from a different row; in CPU time, then on the wall
 """
 
 import argparse
+import functools
 import sys
 import time
 from dataclasses import dataclass
@@ -94,14 +95,19 @@ class Sample:
     previous: RobotState | None = None
 
 
+@functools.cache
+def _goal_checks(model):
+    """The workspace of ``model`` and the obstacles: what a goal is checked against."""
+    return Workspace(model), load_obstacles(OBSTACLES)
+
+
 def _moved_target(model, base_pose, q_arm, rng):
     """The end effector's pose at (``base_pose``, ``q_arm``), moved by 0.05–1 m in a random
     direction and turned by up to 0.5 rad about a random axis: a goal the resolver takes (not
     below the floor, above the arm's reach nor inside the body or an obstacle)."""
     model.update(base_pose, q_arm)
     position, rotation = model.ee_placement_world()
-    workspace = Workspace(model)
-    obstacles = load_obstacles(OBSTACLES)
+    workspace, obstacles = _goal_checks(model)
     while True:
         direction, axis = rng.normal(size=3), rng.normal(size=3)
         offset = direction / np.linalg.norm(direction) * rng.uniform(0.05, 1.0)
