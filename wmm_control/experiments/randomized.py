@@ -402,7 +402,8 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
     errors of the converged runs, the median and largest time to converge, and the worst use of
     every limit over all runs (``limit_use_max``: largest fraction of a velocity or acceleration
     limit; ``position_margin_min_rad``), the runs in contact (``in_contact``) and the deepest
-    contact (``deepest_contact_m``).
+    contact (``deepest_contact_m``). A run that raised (no ``limit_use``) counts as failed and
+    in nothing else (the limits: None when no run measured them).
 
     Returns:
         dict keyed by ``(robot, method)``.
@@ -414,7 +415,8 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
     for key, rows in out.items():
         conv = [r for r in rows if r['outcome'] == 'converged']
         times = [r['time_to_reach_s'] for r in conv]
-        use = [max(v for k, v in r['limit_use'].items() if k != 'arm_position_margin_rad') for r in rows]
+        ran = [r for r in rows if 'limit_use' in r]  # a run that raised measured nothing
+        use = [max(v for k, v in r['limit_use'].items() if k != 'arm_position_margin_rad') for r in ran]
         table[key] = {
             'runs': len(rows),
             'converged': len(conv),
@@ -424,9 +426,9 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
             'worst_orientation_error_rad': max((r['final_orientation_error_rad'] for r in conv), default=None),
             'median_time_s': float(np.median(times)) if times else None,
             'max_time_s': max(times, default=None),
-            'limit_use_max': max(use),
-            'position_margin_min_rad': min(r['limit_use']['arm_position_margin_rad'] for r in rows),
-            'non_finite': sum(r['limits_exceeded']['non_finite'] for r in rows),
+            'limit_use_max': max(use, default=None),
+            'position_margin_min_rad': min((r['limit_use']['arm_position_margin_rad'] for r in ran), default=None),
+            'non_finite': sum(r['limits_exceeded']['non_finite'] for r in ran),
             'in_contact': sum(r.get('contact_depth_m', 0.0) > CONTACT_DEPTH for r in rows),
             'deepest_contact_m': max(r.get('contact_depth_m', 0.0) for r in rows),
         }
