@@ -286,10 +286,19 @@ def test_ray_not_installed_is_one_line_and_exit_2(capfd, monkeypatch):
 
 
 def test_ray_auto_without_a_cluster_is_one_line_and_exit_2(capfd, monkeypatch, tmp_path):
-    """No cluster runs on this machine (``RAY_ADDRESS`` unset, an empty Ray temp folder)."""
-    monkeypatch.delenv('RAY_ADDRESS', raising=False)
-    monkeypatch.setenv('RAY_TMPDIR', str(tmp_path))
+    """``RAY_ADDRESS`` names a port nothing listens on; then, unset, no Ray runs on this machine
+    (Ray's ``auto`` would find any that does)."""
     monkeypatch.setattr(randomized_cli, 'run_goal', lambda *a, **k: pytest.fail('a run started'))
+    port = _free_port()
+    monkeypatch.setenv('RAY_ADDRESS', f'127.0.0.1:{port}')
+    assert randomized_main([*SWEEP, '--cluster', 'ray:auto']) == 2
+    assert capfd.readouterr().err.strip().splitlines()[-1] == (
+        f'wmm_randomized: --cluster ray:auto: nothing answers at 127.0.0.1:{port} (Connection refused)'
+    )
+    if any('gcs_server' in cmd for _, cmd in _procs().values()):
+        return  # a Ray of other work runs here: ray:auto would join it
+    monkeypatch.delenv('RAY_ADDRESS')
+    monkeypatch.setenv('RAY_TMPDIR', str(tmp_path))
     assert randomized_main([*SWEEP, '--cluster', 'ray:auto']) == 2
     assert (
         capfd.readouterr()

@@ -4,8 +4,8 @@
 :func:`run_tasks` inside :func:`ray_session`. The ``--cluster`` value says where they run
 (:func:`cluster_address`):
 
-* ``ray``: a Ray instance of this machine, started for the study (``--jobs`` CPUs) and stopped
-  after it; nothing to set up;
+* ``ray``: a Ray instance of this machine, started for the study (``--jobs`` CPUs; a new one,
+  even where a cluster runs) and stopped after it; nothing to set up;
 * ``ray:auto``: the cluster this machine is a node of (``ray start --head`` here, or ``ray
   start --address=HEAD:PORT``), found as ``ray`` finds it (``RAY_ADDRESS``, or the one started
   last on this machine);
@@ -23,6 +23,7 @@ when a ``--cluster`` is given.
 """
 
 import logging
+import os
 import socket
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -102,11 +103,19 @@ def ray_session(text: str, cpus: int) -> Iterator[Any]:
             f'--cluster {text}: Ray is not installed; pip install ".[cluster]" '
             '(or pip install -r scripts/requirements-cluster.txt)'
         ) from None
-    if address not in (None, 'auto'):
-        _answers(text, address)
+    given = os.environ.get('RAY_ADDRESS', '') if address == 'auto' else address  # where ray:auto looks first
+    if given and given != 'auto':
+        _answers(text, given)
     try:
         if address is None:
-            ray.init(num_cpus=cpus, include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR)
+            # 'local': a new instance, even where a cluster runs (ray.init would join that one)
+            ray.init(
+                address='local',
+                num_cpus=cpus,
+                include_dashboard=False,
+                log_to_driver=False,
+                logging_level=logging.ERROR,
+            )
         else:
             ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR)
     except ConnectionError as exc:
@@ -133,8 +142,19 @@ class _Attempts:
 def _task(fn: Callable[[Any], Any], job: Any, index: int, attempts: Any) -> Any:
     import ray
 
-    ray.get(attempts.start.remote(index))
+    try:
+        ray.get(attempts.start.remote(index))
+    except ray.exceptions.RayError:
+        pass  # the count is lost with the head node; the run goes on
     return fn(job)
+
+
+def _retried(ray: Any, attempts: Any, before: int) -> int:
+    """The retries the actor ``attempts`` counted (``before`` when it cannot be reached)."""
+    try:
+        return max(before, ray.get(attempts.retried.remote()))
+    except ray.exceptions.RayError:
+        return before
 
 
 def run_tasks(
@@ -158,7 +178,7 @@ def run_tasks(
     retried = 0
     while pending:
         ready, _ = ray.wait(list(pending), num_returns=1, timeout=POLL_S)
-        now = ray.get(attempts.retried.remote())
+        now = _retried(ray, attempts, retried)
         if now > retried:
             retried = now
             on_retry(retried)
