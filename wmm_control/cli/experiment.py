@@ -530,7 +530,7 @@ def main(argv: list[str] | None = None) -> int:
         type=jobs_argument,
         metavar='N',
         help='runs at once, each in a process of its own; 1: one after the other in this process '
-        f'(default: one per core, {default_jobs()} here; 1 with --view)',
+        f'(or the CPUs of --cluster ray; default: one per core, {default_jobs()} here; 1 with --view)',
     )
     parser.add_argument('--cluster', metavar='ray|ray:auto|ray:HOST:PORT|ray://HOST:PORT', help=CLUSTER_HELP)
     parser.add_argument(

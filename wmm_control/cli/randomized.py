@@ -222,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
         '--jobs',
         type=jobs_argument,
         default=default_jobs(),
-        help='runs at once, in separate processes (default: one per core, %(default)s)',
+        help='runs at once, in separate processes, or the CPUs of --cluster ray (default: one per core, %(default)s)',
     )
     parser.add_argument(
         '--sweep',
