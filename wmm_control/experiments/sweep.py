@@ -104,14 +104,17 @@ def plot_sweep(summary: Sequence[Mapping[str, Any]], sweeps: Mapping[str, Sequen
     series: dict[tuple[str, str], dict[int, Mapping[str, Any]]] = {}
     for row in summary:
         series.setdefault((row['robot'], row['method']), {})[points.index(dict(row['sweep']))] = row
-    for (robot, method), rows in series.items():
+    # the series side by side at each value, so that their bars do not hide each other
+    step = 0.012 * ((max(x) - min(x)) or 1.0)
+    for k, ((robot, method), rows) in enumerate(series.items()):
         at = sorted(rows)
         xs = [x[i] for i in at]
         share.plot(xs, [rows[i]['converged'] / rows[i]['runs'] for i in at], 'o-', label=f'{robot} {method}')
         timed = [i for i in at if rows[i]['median_time_s'] is not None]
         median = [rows[i]['median_time_s'] for i in timed]
         top = [rows[i]['max_time_s'] - rows[i]['median_time_s'] for i in timed]
-        time.errorbar([x[i] for i in timed], median, yerr=[[0.0] * len(timed), top], fmt='o-', capsize=3)
+        shifted = [x[i] + (k - (len(series) - 1) / 2) * step for i in timed]
+        time.errorbar(shifted, median, yerr=[[0.0] * len(timed), top], fmt='o-', capsize=3)
     share.set_ylabel('converged share')
     share.set_ylim(-0.05, 1.05)
     share.legend(fontsize='small')
