@@ -37,7 +37,8 @@ setup(
     maintainer_email='maintainers@wmm-control.dev',
     description='Whole-body motion control of wheeled mobile manipulators.',
     license='Apache-2.0',
-    extras_require={'test': ['pytest', 'hypothesis']},
+    # cluster: --cluster of wmm_randomized and wmm_experiment (Ray tasks), scripts/requirements-cluster.txt
+    extras_require={'test': ['pytest', 'hypothesis', 'ray[client]'], 'cluster': ['ray[client]']},
     entry_points={
         'console_scripts': [
             'wmm_model = wmm_control.cli.model_info:main',

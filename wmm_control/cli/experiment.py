@@ -3,7 +3,8 @@
 Usage::
 
     wmm_experiment [SCENARIO|all] [--scenario PATH] [--out DIR] [--runs NAME,...] [--engine nodes|direct]
-                   [--seed N] [--no-figures] [--jobs N] [--report PAGE]
+                   [--seed N] [--no-figures] [--jobs N] [--cluster ray|ray:auto|ray:HOST:PORT|ray://HOST:PORT]
+                   [--report PAGE]
 
 ``SCENARIO`` names ``config/scenarios/<SCENARIO>.yaml``; ``all`` (the default) runs both papers'
 experiments (:data:`MAIN_JOB`: Table II of Sorour et al. 2019 and Xing et al. §4), each into
@@ -15,7 +16,10 @@ topics (``--engine nodes``, the default: ``wmm_sim`` in lockstep, ``swmr_control
 ``--engine nodes``, one rosbag2 (MCAP) of all the topics of each run, ``rosbag2_<run>/``.
 ``--jobs N`` runs that many runs at once, each in a process of its own (default: one per core;
 1: one after the other in this process); every run is deterministic, so the numbers are those
-of a serial run, and this process writes the tables and figures. ``--report PAGE`` also writes
+of a serial run, and this process writes the tables and figures. ``--cluster`` runs them as Ray
+tasks instead, on a Ray instance of this machine or on a cluster
+(:mod:`wmm_control.experiments.cluster`): each run's log and recording come back to this
+process, which writes them, with the numbers of a serial run. ``--report PAGE`` also writes
 a Markdown page of every table the run produced (:mod:`wmm_control.experiments.report`), with
 the text of ``<PAGE stem>_intro.md`` beside it, if there is one, first (``bash scripts/dev.sh
 run`` writes docs/results.md so, after docs/results_intro.md).
@@ -28,8 +32,10 @@ import json
 import resource
 import shutil
 import sys
+import tempfile
 import time
 from collections.abc import Iterable, Mapping
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -41,6 +47,7 @@ from wmm_control.experiments.direct import run_scenario
 from sim_bridge.slip import SlipParams
 from sim_bridge.world import SimWorld
 from wmm_control.errors import WmmError
+from wmm_control.experiments.cluster import CLUSTER_HELP, files_of, in_order, ray_session, run_tasks, write_files
 from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
 from wmm_control.experiments.report import write_report
 from wmm_control.experiments.metrics import (
@@ -162,6 +169,39 @@ def simulate(job):
             flush=True,
         )
     return log, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def simulate_shipped(job):
+    """:func:`simulate` on another machine: its recording is written to a folder of that machine
+    and comes back as bytes: ``(RunLog, peak memory [MB], {path under the job's bag_dir: bytes})``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        bag_dir = None if job.bag_dir is None else tmp
+        log, peak_mb = simulate(dataclasses.replace(job, bag_dir=bag_dir))
+        return log, peak_mb, files_of(tmp)
+
+
+def _lost(job, why):
+    raise WmmError(f'{job.scenario.name} / {job.run["name"]}: {why}')
+
+
+def _on_cluster(todo, session):
+    """The ``(RunLog, peak memory)`` of every job of ``todo`` in their order, run as Ray tasks of
+    ``session`` (:func:`ray_session`); each recording written here as it comes back."""
+    bar = tqdm(total=len(todo), unit='run', file=sys.stderr, smoothing=0.0)
+    try:
+        tasks = run_tasks(session, simulate_shipped, todo, _lost, lambda n: bar.set_postfix(retried=n, refresh=False))
+        for job, (log, peak_mb, files) in zip(todo, in_order(_counted(tasks, bar))):
+            if job.bag_dir is not None:
+                write_files(job.bag_dir, files)
+            yield log, peak_mb
+    finally:
+        bar.close()
+
+
+def _counted(results, bar):
+    for item in results:
+        bar.update(1)
+        yield item
 
 
 def _selected(scenario, runs):
@@ -437,17 +477,21 @@ def _run_all(plans, args):
             args.engine,
             out,
             args.view_port if args.view else None,
-            'bar',
-            args.jobs,
+            'none' if args.cluster else 'bar',
+            2 if args.cluster else args.jobs,  # on a cluster: a ROS domain per run, as with workers
             first=len(todo),
         )
-    results = run_jobs(simulate, todo, args.jobs)
+    stack = ExitStack()
+    if args.cluster:
+        results = _on_cluster(todo, stack.enter_context(ray_session(args.cluster, args.jobs)))
+    else:
+        results = run_jobs(simulate, todo, args.jobs)
     summaries = []
     start = time.perf_counter()
     try:
         for scenario, selected, out in plans:
             _header(scenario, args)
-            if args.jobs == 1:  # one after the other: the scenario's own time
+            if args.jobs == 1 and not args.cluster:  # one after the other: the scenario's own time
                 start = time.perf_counter()
             logs, peak_mb = {}, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
             for run in selected:
@@ -458,6 +502,7 @@ def _run_all(plans, args):
             gc.collect()  # the runs' logs and figures are done with: keep the peak memory down
     finally:
         results.close()
+        stack.close()
     return summaries
 
 
@@ -485,8 +530,9 @@ def main(argv: list[str] | None = None) -> int:
         type=jobs_argument,
         metavar='N',
         help='runs at once, each in a process of its own; 1: one after the other in this process '
-        f'(default: one per core, {default_jobs()} here; 1 with --view)',
+        f'(or the CPUs of --cluster ray; default: one per core, {default_jobs()} here; 1 with --view)',
     )
+    parser.add_argument('--cluster', metavar='ray|ray:auto|ray:HOST:PORT|ray://HOST:PORT', help=CLUSTER_HELP)
     parser.add_argument(
         '--view',
         action='store_true',
@@ -503,6 +549,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.view and args.engine != 'nodes':
         parser.error('--view shows the nodes engine: drop --engine direct')
+    if args.view and args.cluster:
+        parser.error('--view shows one run at a time in this process: drop --cluster')
     if args.view and args.jobs not in (None, 1):
         parser.error('--view shows one run at a time: drop --jobs or give --jobs 1')
     if args.jobs is None:

@@ -4,7 +4,8 @@ Usage::
 
     wmm_randomized [--goals N] [--seed S] [--robots steerable,mecanum,...] [--methods pinv,...]
                    [--indices I,...] [--engine direct|nodes] [--obstacles FILE] [--record DIR]
-                   [--jobs N] [--out FILE [--resume]]
+                   [--sweep NAME=V1,V2,...] [--jobs N] [--cluster ray|ray:auto|ray:HOST:PORT|ray://HOST:PORT]
+                   [--out FILE [--resume]]
 
 Draws ``N`` reachable goals per robot (:mod:`wmm_control.experiments.randomized` says what
 reachable means), runs each method to each goal from the robot's start state in lockstep, in
@@ -17,25 +18,37 @@ only those goals of the draw (one run again, say). ``--obstacles`` puts an obsta
 goals clear of them (in the file's ``goal_region``, if it has one); every period's clearance
 is checked on the simulator's geometry. ``--record DIR`` writes each run as
 ``DIR/<robot>_<method>_<goal>.npz`` (:mod:`wmm_control.experiments.randomized` documents the
-arrays). ``--jobs`` runs that many runs at once, in separate processes (default: one per core; the results are the
-same as one at a time). ``--out`` writes every run as JSON, rewritten as each run ends;
-``--resume`` keeps the runs already in that file (from an interrupted run of the same draw,
-engine, obstacles and parameters) and runs only the others.
-The exit status is 1 when a run failed (a limit passed, a non-finite command, or neither
-converged nor reported).
+arrays). ``--sweep NAME=V1,V2,...`` (repeatable) runs the goals with every value of a resolver
+parameter (every combination of several; :mod:`wmm_control.experiments.sweep`), prints one
+table per value, and with ``--out`` plots the converged share and the time to converge against
+the value beside it (``<out>_sweep.png``). ``--jobs`` runs that many runs at once, in separate
+processes (default: one per core; the results are the same as one at a time). ``--cluster``
+runs them as Ray tasks, on a Ray instance of this machine or on a cluster
+(:mod:`wmm_control.experiments.cluster`), with the same results. ``--out`` writes every run as
+JSON, rewritten as each run ends; ``--resume`` keeps the runs already in that file (from an
+interrupted run of the same draw, engine, obstacles, parameters and sweep) and runs only the
+others. A run that raises is recorded as failed, with its error.
+The exit status is 1 when a run failed (a limit passed, a non-finite command, contact, an
+error, or neither converged nor reported), 2 on bad input (before any run starts).
 """
 
 import argparse
 import json
 import os
 import sys
+import tempfile
+import traceback
 from collections.abc import Mapping
+from contextlib import ExitStack
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 from wmm_control.errors import WmmError
+from wmm_control.experiments.cluster import CLUSTER_HELP, files_of, ray_session, run_tasks, write_files
 from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
-from wmm_control.experiments.randomized import METHOD_RUNS, run_goal, sample_goals, summarize
+from wmm_control.experiments.randomized import METHOD_RUNS, ROBOT_RUNS, run_goal, sample_goals, summarize
+from wmm_control.experiments.sweep import check_point, parse_sweeps, plot_sweep, point_label, sweep_grid
 from wmm_control.robot_config import load_robot, robot_names
 
 __all__ = ['main', 'format_summary', 'format_cycle_times']
@@ -61,7 +74,7 @@ def format_summary(table: Mapping[tuple[str, str], Mapping[str, Any]]) -> str:
         lines.append(
             f'| {robot} | {method} | {s["runs"]} | {s["converged"]} | {s["reported"]} | {s["failed"]} '
             f'| {err} | {_f(s["median_time_s"], ".1f")} / {_f(s["max_time_s"], ".1f")} '
-            f'| {s["limit_use_max"]:.3f} | {s["position_margin_min_rad"]:.3f} '
+            f'| {_f(s["limit_use_max"], ".3f")} | {_f(s["position_margin_min_rad"], ".3f")} '
             f'| {s["in_contact"]} | {s["deepest_contact_m"] * 1e3:.1f} |'
         )
     return '\n'.join(lines)
@@ -110,27 +123,72 @@ def _indices(text, goals):
     return out
 
 
+def _raised(robot, method, goal, exc):
+    """The record of a run that raised ``exc``: failed, with its error."""
+    return {
+        'robot': load_robot(robot).name,
+        'method': method,
+        'goal': goal.index,
+        'outcome': 'failed',
+        'why': f'raised {type(exc).__name__}: {exc}',
+        'error': ''.join(traceback.format_exception(exc)),
+    }
+
+
 def _run_one(job, options):
-    robot, method, goal = job
-    return run_goal(robot, method, goal, **options)
+    """One run, wherever it runs: ``(its record, {name: bytes} of its --record file)``. A run
+    that raises is a failed record (never retried: it would raise again)."""
+    robot, method, goal, point = job
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            params = {**options['params'], **point}
+            result = run_goal(
+                robot, method, goal, **dict(options, params=params, record=tmp if options['record'] else None)
+            )
+        except Exception as exc:
+            result = _raised(robot, method, goal, exc)
+        files = files_of(tmp)
+    if point:
+        result['sweep'] = dict(point)
+    return result, files
 
 
-def _run_all(jobs, options, workers, bar, done=()):
-    """Every run of ``jobs``, in their order, ``workers`` at a time (separate processes), after
-    the runs ``done``; yields the runs so far as each one ends."""
-    results = list(done)
-    for job, result in zip(jobs, run_jobs(partial(_run_one, options=options), jobs, workers)):
-        bar.set_description(f'{job[0]} {job[1]}')
-        results.append(result)
-        bar.update(1)
-        yield results
+def _lost(job, why):
+    """The record of a run whose worker died on every try."""
+    robot, method, goal, point = job
+    return (dict(_raised(robot, method, goal, RuntimeError(why)), **({'sweep': dict(point)} if point else {})), {})
 
 
-def _write(path, header, results):
+def _key(run):
+    """What tells a run from the others of a study (its point of a sweep included)."""
+    return run['robot'], run['method'], run['goal'], point_label(run.get('sweep', {}))
+
+
+def _run_all(jobs, options, workers, session):
+    """``(i, (record, files))`` for every job, as each ends: ``workers`` at a time (separate
+    processes), or as Ray tasks when ``session`` holds a :func:`ray_session`."""
+    fn = partial(_run_one, options=options)
+    if session is None:
+        yield from enumerate(run_jobs(fn, jobs, workers))
+    else:
+        ray, on_retry = session
+        yield from run_tasks(ray, fn, jobs, _lost, on_retry)
+
+
+def _summary(results, points):
+    """The summary rows of ``--out``: per robot and method (and point of the sweep, if any)."""
+    rows = []
+    for point in points:
+        runs = [r for r in results if r.get('sweep', {}) == point]
+        for (robot, method), s in summarize(runs).items():
+            rows.append(dict(({'sweep': point} if point else {}), robot=robot, method=method, **s))
+    return rows
+
+
+def _write(path, header, results, points):
     """``header`` and the runs ``results`` with their summary as JSON at ``path``, replaced whole
     (an interrupted write leaves the previous file)."""
-    table = summarize(results)
-    document = dict(header, runs=results, summary=[dict(robot=r, method=m, **s) for (r, m), s in table.items()])
+    document = dict(header, runs=results, summary=_summary(results, points))
     tmp = f'{path}.tmp'
     with open(tmp, 'w') as fh:
         json.dump(document, fh, indent=1)
@@ -185,8 +243,16 @@ def main(argv: list[str] | None = None) -> int:
         '--jobs',
         type=jobs_argument,
         default=default_jobs(),
-        help='runs at once, in separate processes (default: one per core, %(default)s)',
+        help='runs at once, in separate processes, or the CPUs of --cluster ray (default: one per core, %(default)s)',
     )
+    parser.add_argument(
+        '--sweep',
+        action='append',
+        default=[],
+        metavar='NAME=V1,V2,...',
+        help='run the goals with each value of a resolver parameter (repeatable: every combination)',
+    )
+    parser.add_argument('--cluster', metavar='ray|ray:auto|ray:HOST:PORT|ray://HOST:PORT', help=CLUSTER_HELP)
     parser.add_argument('--out', help='write every run as JSON to this file (rewritten as each run ends)')
     parser.add_argument(
         '--resume', action='store_true', help='keep the runs already in --out (same settings) and run the others'
@@ -207,6 +273,13 @@ def main(argv: list[str] | None = None) -> int:
         if args.resume and not args.out:
             raise WmmError('--resume needs --out')
         params = dict(_param(text) for text in args.param)
+        sweeps = parse_sweeps(args.sweep)
+        points = sweep_grid(sweeps)
+        for method in methods:
+            for robot in robots:
+                run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(load_robot(robot).name, {}).get(method, {}), **params}
+                for point in points if sweeps else ():
+                    check_point(method, run, point)
         indices = _indices(args.indices, args.goals)
         header = {
             'seed': args.seed,
@@ -214,6 +287,7 @@ def main(argv: list[str] | None = None) -> int:
             'engine': args.engine,
             'obstacles': args.obstacles,
             'params': params,
+            **({'sweep': sweeps} if sweeps else {}),
         }
         draws = {
             r: [
@@ -223,37 +297,71 @@ def main(argv: list[str] | None = None) -> int:
             ]
             for r in robots
         }
-        jobs = [(robot, method, goal) for robot in robots for method in methods for goal in draws[robot]]
+        jobs = [(r, m, g, p) for p in points for r in robots for m in methods for g in draws[r]]
         name = {r: load_robot(r).name for r in robots}  # the name a run records ('A' is 'steerable')
-        keys = {(name[robot], method, goal.index) for robot, method, goal in jobs}
-        done = (
-            [r for r in _resumed(args.out, header) if (r['robot'], r['method'], r['goal']) in keys]
-            if args.resume
-            else []
-        )
-        finished = {(r['robot'], r['method'], r['goal']) for r in done}
-        jobs = [job for job in jobs if (name[job[0]], job[1], job[2].index) not in finished]
+        keys = {(name[r], m, g.index, point_label(p)) for r, m, g, p in jobs}
+        done = [r for r in _resumed(args.out, header) if _key(r) in keys] if args.resume else []
+        finished = {_key(r) for r in done}
+        jobs = [job for job in jobs if (name[job[0]], job[1], job[2].index, point_label(job[3])) not in finished]
         options = dict(engine=args.engine, params=params, obstacles=args.obstacles, record=args.record)
-        results = done
-        with tqdm(total=len(jobs) + len(done), initial=len(done), unit='run', file=sys.stderr) as bar:
-            for results in _run_all(jobs, options, args.jobs, bar, done):
+        with ExitStack() as stack:
+            bar = stack.enter_context(
+                tqdm(total=len(jobs) + len(done), initial=len(done), unit='run', file=sys.stderr, smoothing=0.0)
+            )
+            tally = {'failed': sum(r['outcome'] == 'failed' for r in done), 'retried': 0}
+            session = None
+            if args.cluster:
+                ray = stack.enter_context(ray_session(args.cluster, args.jobs))
+                session = (ray, lambda n: _tally(bar, tally, retried=n))
+            ended: dict[int, dict] = {}
+            for i, (result, files) in _run_all(jobs, options, args.jobs, session):
+                ended[i] = result
+                robot, method, goal, point = jobs[i]
+                if args.record and files:
+                    write_files(Path(args.record) / point_label(point), files)
+                bar.set_description(f'{robot} {method}')
+                _tally(bar, tally, failed=tally['failed'] + (result['outcome'] == 'failed'))
+                bar.update(1)
                 if args.out:
-                    _write(args.out, header, results)
+                    _write(args.out, header, done + [ended[k] for k in sorted(ended)], points)
+            results = done + [ended[k] for k in sorted(ended)]
     except WmmError as exc:
         print(f'wmm_randomized: {exc}', file=sys.stderr)
         return 2
-    table = summarize(results)
     only = f', goals {sorted(indices)} of them' if indices is not None else ''
     print(f'{args.goals} random reachable goals per robot (seed {args.seed}{only}), engine {args.engine}:')
-    print(format_summary(table))
-    print(f'\nControl cycle per period (method, safety stage, base controller; engine {args.engine}):')
-    print(format_cycle_times(table))
+    for point in points:
+        if point:
+            print(f'\n{point_label(point)}:')
+        table = summarize(r for r in results if r.get('sweep', {}) == point)
+        print(format_summary(table))
+        print(f'\nControl cycle per period (method, safety stage, base controller; engine {args.engine}):')
+        print(format_cycle_times(table))
     failed = [r for r in results if r['outcome'] == 'failed']
     for r in failed:
-        print(f'FAILED: {r["robot"]} {r["method"]} goal {r["goal"]}: {r["why"]}')
+        print(f'FAILED: {r["robot"]} {r["method"]} goal {r["goal"]}{_at(r)}: {r["why"]}')
     if args.out and not jobs:
-        _write(args.out, header, results)  # nothing left to run: the file as it is, summarized again
+        _write(args.out, header, results, points)  # nothing left to run: the file as it is, summarized again
+    if args.out and sweeps:
+        with open(args.out) as fh:
+            summary = json.load(fh)['summary']
+        print(f'wrote {plot_sweep(summary, sweeps, sweep_plot_path(args.out))}')
     return 1 if failed else 0
+
+
+def sweep_plot_path(out: str | Path) -> Path:
+    """Where the plot of a sweep goes: beside ``--out``, ``<out stem>_sweep.png``."""
+    return Path(out).with_name(Path(out).stem + '_sweep.png')
+
+
+def _at(run):
+    return f' ({point_label(run["sweep"])})' if run.get('sweep') else ''
+
+
+def _tally(bar, tally, **counts):
+    """Update the runs failed and retried of ``tally`` and show them on the progress bar."""
+    tally.update(counts)
+    bar.set_postfix(tally, refresh=False)
 
 
 if __name__ == '__main__':

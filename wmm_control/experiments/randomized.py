@@ -464,6 +464,8 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
     contact (``deepest_contact_m``), and the control cycle's times over the runs timed
     (``cycle_p99_s`` and ``cycle_cpu_p99_s``: the largest p99 of a run, wall and thread CPU;
     ``cycle_max_s`` and ``cycle_cpu_max_s``: the longest cycle; None when no run was timed).
+    A run that raised (no ``limit_use``) counts as failed and in nothing else (the limits: None
+    when no run measured them).
 
     Returns:
         dict keyed by ``(robot, method)``.
@@ -475,7 +477,8 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
     for key, rows in out.items():
         conv = [r for r in rows if r['outcome'] == 'converged']
         times = [r['time_to_reach_s'] for r in conv]
-        use = [max(v for k, v in r['limit_use'].items() if k != 'arm_position_margin_rad') for r in rows]
+        ran = [r for r in rows if 'limit_use' in r]  # a run that raised measured nothing
+        use = [max(v for k, v in r['limit_use'].items() if k != 'arm_position_margin_rad') for r in ran]
         table[key] = {
             'runs': len(rows),
             'converged': len(conv),
@@ -485,9 +488,9 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
             'worst_orientation_error_rad': max((r['final_orientation_error_rad'] for r in conv), default=None),
             'median_time_s': float(np.median(times)) if times else None,
             'max_time_s': max(times, default=None),
-            'limit_use_max': max(use),
-            'position_margin_min_rad': min(r['limit_use']['arm_position_margin_rad'] for r in rows),
-            'non_finite': sum(r['limits_exceeded']['non_finite'] for r in rows),
+            'limit_use_max': max(use, default=None),
+            'position_margin_min_rad': min((r['limit_use']['arm_position_margin_rad'] for r in ran), default=None),
+            'non_finite': sum(r['limits_exceeded']['non_finite'] for r in ran),
             'in_contact': sum(r.get('contact_depth_m', 0.0) > CONTACT_DEPTH for r in rows),
             'deepest_contact_m': max(r.get('contact_depth_m', 0.0) for r in rows),
         }
