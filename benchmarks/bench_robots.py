@@ -32,7 +32,7 @@ from sim_bridge.world import SimWorld  # noqa: E402
 from urdf_factory import write_urdf  # noqa: E402
 from wmm_control.base import make_base_controller  # noqa: E402
 from wmm_control.cli.robot_setup import init_robot  # noqa: E402
-from wmm_control.kinematics.orientation import matrix_from_quaternion  # noqa: E402
+from wmm_control.geometry import matrix_from_quaternion  # noqa: E402
 from wmm_control.resolvers import PoseTarget, make_resolver  # noqa: E402
 from wmm_control.robot_config import load_robot, robot_names  # noqa: E402
 
