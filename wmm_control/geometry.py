@@ -405,14 +405,13 @@ def largest_step(
         not bind or is outside the mask, 0 where ``start`` is already out of bounds by more
         than 1e-9). Shape (n,).
     """
-    if mask is None:
-        mask = np.ones(len(start), dtype=bool)
-    per = np.full(len(start), np.inf)
-    up = mask & (step > 0)
-    down = mask & (step < 0)
-    with np.errstate(over='ignore'):  # a step of 1e-300: that entry does not bind (inf)
-        per[up] = (upper[up] - start[up]) / step[up]
-        per[down] = (lower[down] - start[down]) / step[down]
+    per = np.full(len(start), np.inf)  # a zero step does not bind
+    with np.errstate(over='ignore'):  # nor does a step of 1e-300 (inf)
+        np.divide(np.where(step > 0.0, upper - start, lower - start), step, out=per, where=step != 0.0)
     np.maximum(per, 0.0, out=per)
-    per[mask & ((start > upper + 1e-9) | (start < lower - 1e-9))] = 0.0
-    return float(min(1.0, np.min(per, initial=np.inf))), per
+    beyond = (start > upper + 1e-9) | (start < lower - 1e-9)
+    if beyond.any():
+        per[beyond] = 0.0
+    if mask is not None:
+        per[~mask] = np.inf
+    return float(min(1.0, per.min(initial=np.inf))), per

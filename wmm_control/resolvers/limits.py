@@ -119,8 +119,10 @@ class CommandLimits:
         self.dt = float(dt)
         self.n = n
         self._adt = self.acceleration * self.dt
-        self._has_lower = np.isfinite(self.position_lower)
-        self._has_upper = np.isfinite(self.position_upper)
+        self._bounded = np.flatnonzero(np.isfinite(self.position_lower) | np.isfinite(self.position_upper))
+        self._adt2 = np.tile(self._adt[self._bounded], 2)  # a dt of the entries below and above
+        self._zero = np.zeros(n)
+        self._last_braking: tuple[bytes, tuple[np.ndarray, np.ndarray]] = (b'', (self._zero, self._zero))
 
     def braking_rates(self, position: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Largest rates towards the lower and upper position limits from which braking stops in time.
@@ -131,7 +133,8 @@ class CommandLimits:
         Returns:
             (down, up): non-negative rate bounds [unit/s]; inf where there is no limit. Shape (n,) each.
         """
-        return self._braking(as_vector(position, self.n, 'position'))
+        down, up = self._braking(as_vector(position, self.n, 'position'))
+        return down.copy(), up.copy()
 
     def box(self, position: ArrayLike, previous: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """This period's interval for every entry.
@@ -201,32 +204,29 @@ class CommandLimits:
         secondary = np.zeros(n) if secondary is None else as_vector(secondary, n, 'secondary')
         down, up = self._braking(as_vector(position, n, 'position'))
         # 0. a non-finite entry is a request to stop
-        bad = ~(np.isfinite(primary) & np.isfinite(secondary))
-        primary, secondary = np.where(bad, 0.0, primary), np.where(bad, 0.0, secondary)
-        limited = set(np.flatnonzero(bad).tolist())
+        limited = ~(np.isfinite(primary) & np.isfinite(secondary))
+        if limited.any():
+            primary, secondary = np.where(limited, 0.0, primary), np.where(limited, 0.0, secondary)
         # 1. braking, joint by joint: the primary part first, the secondary part in the room left
-        clipped = np.clip(primary, -down, up)
-        sec = np.clip(secondary, -down - clipped, up - clipped)
-        limited.update(np.flatnonzero((clipped != primary) | (sec != secondary)).tolist())
+        clipped = np.minimum(np.maximum(primary, -down), up)
+        sec = np.minimum(np.maximum(secondary, -down - clipped), up - clipped)
+        limited |= (clipped != primary) | (sec != secondary)
         # 2. velocity: the whole command, uniformly (the braking bounds hold all the way to rest)
-        s_v, arg = _largest_step(np.zeros(n), clipped + sec, -self.velocity, self.velocity)
-        limited.update(arg)
+        s_v = _largest_step(self._zero, clipped + sec, -self.velocity, self.velocity, limited)
         # 3. acceleration: the primary part's change first, the secondary part's in the room left;
         #    each part changes from its own share of the previous command (primary: u − u_s)
         lo_a, hi_a = previous - self._adt, previous + self._adt
         d_p = s_v * clipped - (previous - prev_s)
         d_s = s_v * sec - prev_s
-        s_a, arg = _largest_step(previous, d_p, lo_a, hi_a)
-        limited.update(arg)
+        s_a = _largest_step(previous, d_p, lo_a, hi_a, limited)
         mid = previous + s_a * d_p
-        s_s, arg = _largest_step(mid, d_s, lo_a, hi_a)
-        limited.update(arg)
+        s_s = _largest_step(mid, d_s, lo_a, hi_a, limited)
         # 4. the period's box, braking first where it conflicts with the acceleration limit
         lo, hi, forced = self._box(down, up, previous, lo_a, hi_a)
         raw = mid + s_s * d_s
-        command = np.clip(raw, lo, hi)
+        command = np.minimum(np.maximum(raw, lo), hi)
         out_s = prev_s + s_s * d_s
-        limited.update(np.flatnonzero(forced | (np.abs(command - raw) > 1e-12)).tolist())
+        limited |= forced | (np.abs(command - raw) > 1e-12)
         share = 1.0
         if secondary.any():
             share = min(1.0, float(np.linalg.norm(out_s)) / max(float(np.linalg.norm(secondary)), 1e-300))
@@ -236,18 +236,26 @@ class CommandLimits:
             scale=s_v,
             accel_scale=s_a,
             secondary_scale=share,
-            limited=tuple(sorted(limited)),
+            limited=tuple(np.flatnonzero(limited).tolist()),
             lower=lo,
             upper=hi,
         )
 
     def _braking(self, position):
-        """:meth:`braking_rates` of a checked position vector: (down, up)."""
-        # distances to the limits (NaN positions pass through np.maximum as NaN)
-        d_up = np.maximum(self.position_upper - position, 0.0)
-        d_dn = np.maximum(position - self.position_lower, 0.0)
-        up = np.where(self._has_upper, _braking_rate(d_up, self._adt, self.dt), np.inf)
-        down = np.where(self._has_lower, _braking_rate(d_dn, self._adt, self.dt), np.inf)
+        """:meth:`braking_rates` of a checked position vector: (down, up), not to be modified.
+        The last answer is kept: a resolver asks several times a period at one position."""
+        key = position.tobytes()
+        if key == self._last_braking[0]:
+            return self._last_braking[1]
+        # distances to the limits, of the entries that have one (NaN passes through np.maximum)
+        i = self._bounded
+        distance = np.maximum(
+            np.concatenate((position[i] - self.position_lower[i], self.position_upper[i] - position[i])), 0.0
+        )
+        rates = _braking_rate(distance, self._adt2, self.dt)
+        down, up = np.full(self.n, np.inf), np.full(self.n, np.inf)
+        down[i], up[i] = rates[: i.size], rates[i.size :]
+        self._last_braking = (key, (down, up))
         return down, up
 
     def _box(self, down, up, previous, lower_accel, upper_accel):
@@ -264,28 +272,28 @@ class CommandLimits:
 
 def _braking_rate(distance, adt, dt):
     """Largest rates v from which braking by a·dt per period, one period at a time, stops within
-    ``distance`` (arrays, element-wise; ``adt`` = a dt).
+    ``distance`` (arrays, element-wise; ``adt`` = a dt; an infinite distance gives inf).
 
     Braking from v covers ``dt (n + 1) v − a dt² n (n + 1)/2`` with ``n = ⌊v / (a dt)⌋`` (v, v − a dt,
-    …, the last rate below a dt, then rest): piecewise linear in v. The continuous bound
-    ``v²/(2a) + v dt/2 = D`` meets it at every multiple of a dt and lies above it in between, so
-    its ``n`` is right or one too high. From any v within this bound, ``v − a dt`` is within the
-    next period's bound: braking always stays within the acceleration limit, and ``v dt ≤ D``.
-    A distance of zero gives zero; NaN passes through.
+    …, the last rate below a dt, then rest): piecewise linear in v, so on each piece
+    ``v = (D/dt + a dt n (n + 1)/2) / (n + 1)``. The continuous bound ``v²/(2a) + v dt/2 = D``
+    meets it at every multiple of a dt and lies above it in between, so its ``n`` is right or
+    one too high (then the rate on its piece falls below n a dt). From any v within this bound, ``v − a dt`` is
+    within the next period's bound: braking always stays within the acceleration limit, and
+    ``v dt ≤ D``. A distance of zero gives zero; NaN passes through.
     """
     half = 0.5 * adt
     with np.errstate(invalid='ignore'):
         n = np.floor((np.sqrt(half * half + (2.0 / dt) * adt * distance) - half) / adt)
-        n = np.where(np.isfinite(n), n, 0.0)
-        for _ in range(3):
-            rate = (distance / dt + adt * n * (n + 1) * 0.5) / (n + 1)
-            n = np.where((rate < n * adt) & (n > 0), n - 1, np.where(rate >= (n + 1) * adt, n + 1, n))
-        rate = (distance / dt + adt * n * (n + 1) * 0.5) / (n + 1)
-    return np.where(distance > 0.0, rate, distance)
+        n[~np.isfinite(n)] = 0.0
+        n -= (n > 0.0) & ((distance / dt + half * n * (n + 1.0)) < n * (n + 1.0) * adt)  # one too high
+        return (distance / dt + half * n * (n + 1.0)) / (n + 1.0)
 
 
-def _largest_step(start, step, lower, upper):
-    """:func:`~wmm_control.geometry.largest_step` and the indices of the bounds that bind
-    (none when the whole step fits)."""
+def _largest_step(start, step, lower, upper, binding):
+    """:func:`~wmm_control.geometry.largest_step`; the entries whose bounds bind (when the
+    whole step does not fit) are set in the boolean array ``binding``."""
     s, per = largest_step(start, step, lower, upper)
-    return s, (np.flatnonzero(per <= s + 1e-12).tolist() if s < 1.0 else ())
+    if s < 1.0:
+        binding |= per <= s + 1e-12
+    return s

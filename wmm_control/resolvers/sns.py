@@ -38,15 +38,15 @@ class SnsResult(NamedTuple):
 
 
 def full_row_rank_pinv(a: np.ndarray, rcond: float) -> np.ndarray | None:
-    """``a⁺`` from one SVD when ``a`` (r, k) has full row rank, else None.
+    """``a⁺`` when ``a`` (r, k) has full row rank, else None.
 
-    Full row rank: r singular values, the smallest above ``rcond`` times the largest; then no
-    singular value is cut from ``np.linalg.pinv(a, rcond)``.
+    Full row rank: r singular values, the smallest above ``rcond`` times the largest. One
+    ``numpy.linalg.lstsq`` call gives both: the minimum-norm least-squares solution of
+    ``a X = I`` is ``a⁺``, with the singular values below ``rcond`` times the largest cut, as
+    ``numpy.linalg.pinv(a, rcond)`` cuts them, and the rank they leave.
     """
-    sv = np.linalg.svd(a, compute_uv=False)
-    if sv.size < a.shape[0] or sv[-1] <= rcond * sv[0]:
-        return None
-    return np.linalg.pinv(a, rcond=rcond)
+    pinv, _, rank, _ = np.linalg.lstsq(a, np.eye(a.shape[0]), rcond=rcond)  # a⁺ I, and the rank
+    return pinv if rank == a.shape[0] else None
 
 
 def sns_accelerations(

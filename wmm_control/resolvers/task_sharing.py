@@ -148,7 +148,8 @@ class TaskSharingResolver(PoseServoResolver):
         held = [False] * n
         rows = jac
         for _ in range(self.n_arm):
-            null = z - np.linalg.pinv(rows, rcond=p.pinv_tolerance) @ (rows @ z)
+            # (I − J⁺J) z: J⁺(J z) is the minimum-norm least-squares solution of J x = J z
+            null = z - np.linalg.lstsq(rows, rows @ z, rcond=p.pinv_tolerance)[0]
             over = [i for i, x in enumerate(null.tolist()) if not held[i] and (x < lower[i] or x > upper[i])]
             if not over:
                 return null
