@@ -379,9 +379,9 @@ def scale_into_limits(vec: ArrayLike, limits: ArrayLike, rows: np.ndarray | None
     """
     vec = np.array(vec, dtype=float)
     limits = np.asarray(limits, dtype=float)
-    peak = float(np.max(np.abs(vec), initial=0.0))
-    if peak == 0.0:
+    if (np.abs(vec if rows is None else rows @ vec) <= limits).all():  # (an overflow to inf is not)
         return vec, 1.0
+    peak = float(np.max(np.abs(vec)))
     unit = vec / peak  # largest entry ±1: nothing below overflows
     image = np.abs(unit if rows is None else rows @ unit)
     with np.errstate(divide='ignore', over='ignore'):
