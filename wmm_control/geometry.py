@@ -405,9 +405,9 @@ def largest_step(
         not bind or is outside the mask, 0 where ``start`` is already out of bounds by more
         than 1e-9). Shape (n,).
     """
-    per = np.full(len(start), np.inf)  # a zero step does not bind
-    with np.errstate(over='ignore'):  # nor does a step of 1e-300 (inf)
-        np.divide(np.where(step > 0.0, upper - start, lower - start), step, out=per, where=step != 0.0)
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        per = np.where(step > 0.0, upper - start, lower - start) / step
+    per[step == 0.0] = np.inf  # a zero step does not bind (nor does one of 1e-300: inf)
     np.maximum(per, 0.0, out=per)
     beyond = (start > upper + 1e-9) | (start < lower - 1e-9)
     if beyond.any():

@@ -37,6 +37,7 @@ and acceleration bounds cannot both hold (a previous command that broke a bound,
 reset) braking wins and the entry is reported as forced.
 """
 
+import math
 from dataclasses import dataclass
 from typing import Self
 
@@ -122,6 +123,7 @@ class CommandLimits:
         self._bounded = np.flatnonzero(np.isfinite(self.position_lower) | np.isfinite(self.position_upper))
         self._adt2 = np.tile(self._adt[self._bounded], 2)  # a dt of the entries below and above
         self._zero = np.zeros(n)
+        self._neg_velocity = -self.velocity
         self._last_braking: tuple[bytes, tuple[np.ndarray, np.ndarray]] = (b'', (self._zero, self._zero))
 
     def braking_rates(self, position: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -198,10 +200,10 @@ class CommandLimits:
         n = self.n
         previous = as_finite_vector(previous, n, 'previous command')
         prev_s = (
-            np.zeros(n) if previous_secondary is None else as_finite_vector(previous_secondary, n, 'previous secondary')
+            self._zero if previous_secondary is None else as_finite_vector(previous_secondary, n, 'previous secondary')
         )
         primary = as_vector(primary, n, 'primary')
-        secondary = np.zeros(n) if secondary is None else as_vector(secondary, n, 'secondary')
+        secondary = self._zero if secondary is None else as_vector(secondary, n, 'secondary')
         down, up = self._braking(as_vector(position, n, 'position'))
         # 0. a non-finite entry is a request to stop
         limited = ~(np.isfinite(primary) & np.isfinite(secondary))
@@ -212,7 +214,7 @@ class CommandLimits:
         sec = np.minimum(np.maximum(secondary, -down - clipped), up - clipped)
         limited |= (clipped != primary) | (sec != secondary)
         # 2. velocity: the whole command, uniformly (the braking bounds hold all the way to rest)
-        s_v = _largest_step(self._zero, clipped + sec, -self.velocity, self.velocity, limited)
+        s_v = _largest_step(self._zero, clipped + sec, self._neg_velocity, self.velocity, limited)
         # 3. acceleration: the primary part's change first, the secondary part's in the room left;
         #    each part changes from its own share of the previous command (primary: u − u_s)
         lo_a, hi_a = previous - self._adt, previous + self._adt
@@ -229,7 +231,7 @@ class CommandLimits:
         limited |= forced | (np.abs(command - raw) > 1e-12)
         share = 1.0
         if secondary.any():
-            share = min(1.0, float(np.linalg.norm(out_s)) / max(float(np.linalg.norm(secondary)), 1e-300))
+            share = min(1.0, math.sqrt(out_s @ out_s) / max(math.sqrt(secondary @ secondary), 1e-300))
         return LimitResult(
             command=command,
             secondary=out_s,
