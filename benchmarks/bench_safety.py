@@ -27,6 +27,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a source checkout
 
+from wmm_control.geometry import rotation_z  # noqa: E402
 from wmm_control.kinematics import KinematicModel  # noqa: E402
 from wmm_control.kinematics.obstacles import load_obstacles  # noqa: E402
 from wmm_control.resolvers.safety import SafetyStage  # noqa: E402
@@ -89,8 +90,7 @@ def _with_obstacles(robot, count):
         measured = rng.uniform(-1.0, 1.0, 3) * robot.base.velocity
         command = np.clip(rng.uniform(-1.0, 1.0, limit.size) * limit, -limit, limit)
         model.update(pose, q)
-        c, s = np.cos(pose[2]), np.sin(pose[2])
-        to_world = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # (vx, vy, ω) → (ẋ, ẏ, θ̇)
+        to_world = rotation_z(pose[2])  # (vx, vy, ω) → (ẋ, ẏ, θ̇)
         world = model.jacobian_world()
         jacobian = np.hstack(((world[:, :3] @ to_world)[:, axes], world[:, 3:]))
         t0 = time.perf_counter()

@@ -18,7 +18,7 @@ import pinocchio as pin
 
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.collision import FLOOR, CollisionModel
-from wmm_control.kinematics.orientation import matrix_from_quaternion
+from wmm_control.geometry import matrix_from_quaternion
 from wmm_control.resolvers import PoseTarget, make_resolver
 from wmm_control.robot_config import load_robot
 

@@ -7,13 +7,12 @@ needs no rclpy; ``supervision.py`` holds the node's rules between steps, ROS-fre
 
 from sim_bridge.render import VIEWS, render_png, render_rgb
 from sim_bridge.slip import SlipModel, SlipParams
-from sim_bridge.world import BASE_MODES, CommandResult, SimWorld, se2_step
+from sim_bridge.world import BASE_MODES, CommandResult, SimWorld
 
 __all__ = [
     'SimWorld',
     'CommandResult',
     'BASE_MODES',
-    'se2_step',
     'SlipParams',
     'SlipModel',
     'render_png',

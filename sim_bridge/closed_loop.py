@@ -31,7 +31,7 @@ from wmm_control.base import BaseController, make_base_controller
 from wmm_control.base.period import default_applied_rate_tolerance
 from wmm_control.cycle import Cycle
 from wmm_control.errors import ConfigError
-from wmm_control.kinematics.orientation import matrix_from_quaternion
+from wmm_control.geometry import matrix_from_quaternion
 from wmm_control.resolvers import PoseTarget, Resolver, ResolverCommand, RobotState
 from wmm_control.resolvers.period import ResolverSettings
 

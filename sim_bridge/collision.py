@@ -31,7 +31,7 @@ from numpy.typing import ArrayLike
 
 from sim_bridge.client import OwnedClient
 from wmm_control.kinematics.obstacles import Obstacle, around_base
-from wmm_control.kinematics.orientation import quaternion_from_matrix
+from wmm_control.geometry import quaternion_from_matrix
 from wmm_control.robot_config import RobotConfig, load_robot
 
 __all__ = ['SelfCollisionChecker', 'add_obstacle', 'OBSTACLE_RGBA']

@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import rotation_z, twist_to_world
 
 __all__ = ['SlipParams', 'SlipModel', 'OdometryCovariance', 'VARIANCE_FLOOR']
 
@@ -187,9 +188,9 @@ class OdometryCovariance:
         """One period at odometry heading ``theta`` [rad] (at its start) and ``twist``, with the
         twist error's mean and variance (:meth:`SlipModel.twist_error`); ``dt`` [s]."""
         vx, vy, _ = (float(v) for v in twist)
-        c, s = math.cos(theta), math.sin(theta)
-        f = np.array([[1.0, 0.0, -(vx * s + vy * c) * dt], [0.0, 1.0, (vx * c - vy * s) * dt], [0.0, 0.0, 1.0]])
-        g = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        g = rotation_z(theta)  # base-frame errors into the world
+        dx, dy, _ = twist_to_world(theta, (vx, vy, 0.0)) * dt
+        f = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
         self._mean = f @ self._mean + g @ np.asarray(error_mean) * dt
         self._random = f @ self._random @ f.T + (g * np.asarray(error_variance)) @ g.T * dt * dt
         self.twist = np.asarray(error_mean) ** 2 + np.asarray(error_variance) + VARIANCE_FLOOR

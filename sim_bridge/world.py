@@ -77,7 +77,7 @@ base's inertial (COM) frame; it is converted to and from ``base_link``.
 """
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from pathlib import Path
 from typing import NamedTuple
 
@@ -90,14 +90,21 @@ from wmm_control.base.wheel_controller import wheel_kinematics
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import Obstacle
-from wmm_control.kinematics.orientation import quaternion_from_yaw, yaw_from_quaternion
+from wmm_control.geometry import (
+    matrix_from_quaternion,
+    quaternion_from_yaw,
+    se2_integrate,
+    twist_to_base,
+    wrap_angle,
+    yaw_from_quaternion,
+)
 from wmm_control.robot_config import DifferentialConfig, MecanumConfig, RobotConfig, SteerableConfig, load_robot
 
 from sim_bridge.client import OwnedClient
 from sim_bridge.collision import add_obstacle
 from sim_bridge.slip import SlipModel, SlipParams
 
-__all__ = ['SimWorld', 'CommandResult', 'se2_step', 'BASE_MODES', 'CLAMP_TOLERANCE']
+__all__ = ['SimWorld', 'CommandResult', 'BASE_MODES', 'CLAMP_TOLERANCE']
 
 #: A command beyond its velocity limit by less than this fraction is round-off: clipped, not counted.
 CLAMP_TOLERANCE = 1e-12
@@ -108,7 +115,6 @@ WHEEL_FRICTION = 0.9  # Coulomb coefficient of wheel–floor contact [-]
 SUPPORT_TOLERANCE = 0.005  # [m] a link this close to the floor at the start state rests on it (a caster)
 ARM_FORCE_FACTOR = 20.0  # arm velocity-motor force = factor × URDF effort (physics mode)
 SETTLE_TIME = 0.25  # [s] of zero-command physics before t = 0 (physics mode)
-_SMALL_ANGLE = 1e-6  # [rad] below this the SE(2) exponential uses its Taylor series
 # Mecanum roller axes (base frame, unit) per wheel fl, fr, rl, rr; reproduce Xing eq. 16.
 _ROLLER_AXES = ((1.0, -1.0), (1.0, 1.0), (1.0, 1.0), (1.0, -1.0))
 
@@ -125,40 +131,6 @@ class CommandResult(NamedTuple):
     accepted: bool
     clamped: int
     reason: str
-
-
-def se2_step(
-    pose: Sequence[float] | np.ndarray, twist: Sequence[float] | np.ndarray, dt: float
-) -> tuple[float, float, float]:
-    """Integrate a base pose over ``dt`` with a body-frame twist held constant (SE(2) exp).
-
-    Args:
-        pose: (x, y, θ) [m, m, rad], base_link in world.
-        twist: (vx, vy, ω) in the base frame [m/s, m/s, rad/s].
-        dt: duration [s].
-
-    Returns:
-        The new pose (x, y, θ) as a tuple of floats (θ not wrapped).
-    """
-    x, y, th = pose
-    vx, vy, w = twist
-    a = w * dt
-    if abs(a) < _SMALL_ANGLE:
-        a2 = a * a
-        s = 1.0 - a2 / 6.0  # sin(a)/a
-        c = a * (0.5 - a2 / 24.0)  # (1 − cos a)/a
-    else:
-        s = math.sin(a) / a
-        c = (1.0 - math.cos(a)) / a
-    dxb = (s * vx - c * vy) * dt
-    dyb = (c * vx + s * vy) * dt
-    ct, st = math.cos(th), math.sin(th)
-    return (x + ct * dxb - st * dyb, y + st * dxb + ct * dyb, th + a)
-
-
-def _wrap(angle):
-    """Angle wrapped to [−π, π] [rad]."""
-    return math.remainder(angle, 2.0 * math.pi)
 
 
 class SimWorld(OwnedClient):
@@ -483,8 +455,7 @@ class SimWorld(OwnedClient):
         rx, ry = pos[0] - com_pos[0], pos[1] - com_pos[1]
         vx_w = lin[0] - ang[2] * ry
         vy_w = lin[1] + ang[2] * rx
-        c, s = math.cos(th), math.sin(th)
-        self._twist = (c * vx_w + s * vy_w, -s * vx_w + c * vy_w, ang[2])
+        self._twist = tuple(twist_to_base(th, (vx_w, vy_w, ang[2])).tolist())
 
     # ------------------------------------------------------------------ commands
     def set_command(self, group: str, values: ArrayLike) -> CommandResult:
@@ -593,14 +564,14 @@ class SimWorld(OwnedClient):
         slip = self._slip
         if slip.off:
             for tw, h in segments:
-                odom = se2_step(odom, tw, h)
+                odom = se2_integrate(odom, tw, h)
             pose, true_tw = odom, segments[-1][0]
         else:
             keep, bias = slip.sample(rim)
             for tw, h in segments:
-                odom = se2_step(odom, tw, h)
+                odom = se2_integrate(odom, tw, h)
                 true_tw = (keep * tw[0] + bias[0], keep * tw[1] + bias[1], keep * tw[2] + bias[2])
-                pose = se2_step(pose, true_tw, h)
+                pose = se2_integrate(pose, true_tw, h)
         self._q, self._qd = q_new, vel
         self._pose, self._odom = pose, odom
         self._twist, self._odom_twist = true_tw, segments[-1][0]
@@ -621,7 +592,7 @@ class SimWorld(OwnedClient):
                 tw = tuple(self._geom.twist_from_wheels(q[st], qd[st], qd[dr]).tolist())
             else:
                 tw = tuple(self._geom.twist_from_wheels(qd[self._slices['wheel']]).tolist())
-            self._odom = se2_step(self._odom, tw, self._h)
+            self._odom = se2_integrate(self._odom, tw, self._h)
             self._odom_twist = tw
 
     def _physics_step(self):
@@ -647,9 +618,7 @@ class SimWorld(OwnedClient):
                 normal[self._wheel_links.index(c[3])] += c[9]
         pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
         lin, ang = p.getBaseVelocity(body, physicsClientId=cid)
-        rot = p.getMatrixFromQuaternion(orn)
-        xb = (rot[0], rot[3], rot[6])
-        yb = (rot[1], rot[4], rot[7])
+        xb, yb = matrix_from_quaternion(orn)[:, :2].T.tolist()  # the base's x and y axes
         states = p.getJointStates(
             body,
             [self._idx[i] for i in range(self._slices['wheel'].start, self._slices['wheel'].stop)],
@@ -686,7 +655,7 @@ class SimWorld(OwnedClient):
 
     def base_pose(self) -> np.ndarray:
         """True base_link pose (x, y, θ) in world [m, m, rad], θ in [−π, π]. Shape (3,)."""
-        return np.array([self._pose[0], self._pose[1], _wrap(self._pose[2])])
+        return np.array([self._pose[0], self._pose[1], wrap_angle(self._pose[2])])
 
     def base_twist(self) -> np.ndarray:
         """True base twist (vx, vy, ω) in the base frame [m/s, m/s, rad/s]. Shape (3,)."""
@@ -694,7 +663,7 @@ class SimWorld(OwnedClient):
 
     def odom_pose(self) -> np.ndarray:
         """Wheel-odometry pose (x, y, θ) [m, m, rad], θ in [−π, π]; starts at the start pose. Shape (3,)."""
-        return np.array([self._odom[0], self._odom[1], _wrap(self._odom[2])])
+        return np.array([self._odom[0], self._odom[1], wrap_angle(self._odom[2])])
 
     @property
     def slip(self) -> SlipModel:

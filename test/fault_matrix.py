@@ -40,7 +40,7 @@ from ros_helpers import ROSOUT_QOS, RosHarness
 from sim_bridge.node import SimNode
 from sim_bridge.world import SimWorld
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.orientation import quaternion_from_matrix
+from wmm_control.geometry import quaternion_from_matrix, twist_to_world
 from wmm_control.nodes.conversions import float_array, twist_stamped
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.base_controller import BaseControllerNode
@@ -322,9 +322,7 @@ class PlantRig(Rig):
             self.q[n] = float(np.clip(self.q[n], lo[i], hi[i]))
         vx, vy, w = self.base_twist
         th = self.base_pose[2]
-        self.base_pose += PERIOD * np.array(
-            [vx * math.cos(th) - vy * math.sin(th), vx * math.sin(th) + vy * math.cos(th), w]
-        )
+        self.base_pose += PERIOD * twist_to_world(th, (vx, vy, w))
 
     def joint_state(self, k):
         js = JointState()

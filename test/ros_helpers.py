@@ -18,6 +18,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from wmm_control.experiments.ros_run import private_domain_id
+from wmm_control.geometry import yaw_from_quaternion
 from wmm_control.nodes.conversions import float_array
 
 
@@ -129,4 +130,5 @@ def stamp_s(msg):
 
 def pose2d(odom_msg):
     p = odom_msg.pose.pose
-    return np.array([p.position.x, p.position.y, 2.0 * np.arctan2(p.orientation.z, p.orientation.w)])
+    q = p.orientation
+    return np.array([p.position.x, p.position.y, yaw_from_quaternion((q.x, q.y, q.z, q.w))])

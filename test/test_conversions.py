@@ -6,7 +6,7 @@ import numpy as np
 from geometry_msgs.msg import Pose, PoseStamped, Transform, Twist
 from nav_msgs.msg import Odometry
 
-from wmm_control.kinematics.orientation import matrix_from_rpy
+from wmm_control.geometry import matrix_from_rpy
 from wmm_control.nodes.conversions import (
     float_array,
     odometry,

@@ -34,7 +34,7 @@ def experiment(tmp_path_factory, steerable_model):
     logs, metrics = {}, {}
     for label, (method, params) in RUNS.items():
         with SimWorld('steerable') as world:
-            logs[label] = run_scenario(world, make_resolver(method, **params), scenario, label=label)
+            logs[label] = run_scenario(world, make_resolver(method, 'steerable', **params), scenario, label=label)
         metrics[label] = goal_metrics(
             logs[label], scenario, steerable_model, 0.25, steerable_model.config.arm.dexterous, world.dt
         )

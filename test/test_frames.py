@@ -10,6 +10,7 @@ import pytest
 
 from urdf_factory import write_urdf
 from wmm_control.errors import ConfigError, NonFiniteError
+from wmm_control.geometry import continuous_to_q
 from wmm_control.kinematics.frames import (
     FrameTransform,
     JointTransforms,
@@ -30,7 +31,7 @@ def _pinocchio_link_poses(urdf, positions):
         joint = model.joints[joint_id]
         value = positions.get(model.names[joint_id], 0.0)
         if joint.nq == 2:  # continuous: cos, sin
-            q[joint.idx_q : joint.idx_q + 2] = math.cos(value), math.sin(value)
+            q[joint.idx_q : joint.idx_q + 2] = continuous_to_q(value)
         else:
             q[joint.idx_q] = value
     pin.framesForwardKinematics(model, data, q)

@@ -18,6 +18,7 @@ from sim_bridge.node import SimNode
 from wmm_control.base import make_base_controller
 from wmm_control.cycle import Cycle
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import twist_to_world
 from wmm_control.experiments.randomized import CONTACT_DEPTH, RandomGoal, run_goal, sample_goals
 from wmm_control.experiments.scenario import load_scenario
 from wmm_control.kinematics import KinematicModel
@@ -107,8 +108,7 @@ def test_obstacle_distances_agree_with_the_simulator_and_their_rates_are_their_d
                 assert distance == pytest.approx(truth[links], abs=2e-3), links
             # ḋ = j q̇ + j_b (vx, vy, ω), the base's twist in its own frame
             qd, twist = rng.normal(size=q.size), rng.normal(size=3)
-            c, s = np.cos(base[2]), np.sin(base[2])
-            world = np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1], twist[2]])
+            world = twist_to_world(base[2], twist)
             ahead, behind = (model.within(q + s * h * qd, 2.0, base + s * h * world)[0] for s in (1, -1))
             for k, shapes in enumerate(mine.shapes):
                 rate = (ahead.distance[ahead.shapes.index(shapes)] - behind.distance[behind.shapes.index(shapes)]) / (
@@ -442,8 +442,7 @@ def _drive(stage, pose, twist, q, want, seconds):
             q, np.clip(want, lower, upper), lower, upper, base_pose=pose, base_axes=(0, 1, 2), base_velocity=twist
         )
         twist, dq = out.command[:3], out.command[3:]
-        c, s = np.cos(pose[2]), np.sin(pose[2])
-        pose = pose + dt * np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1], twist[2]])
+        pose = pose + dt * twist_to_world(pose[2], twist)
         q = q + dt * dq
         closest = min(closest, stage.collision.closest(q, pose)[0])
     return closest

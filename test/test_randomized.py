@@ -21,7 +21,7 @@ from wmm_control.experiments.randomized import (
     summarize,
 )
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.orientation import matrix_from_rpy
+from wmm_control.geometry import matrix_from_rpy
 from wmm_control.resolvers import ResolverDiagnostics
 from wmm_control.resolvers.progress import GoalProgress
 

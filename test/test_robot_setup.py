@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sim_bridge.closed_loop import ClosedLoop
-from wmm_control.kinematics.orientation import matrix_from_quaternion
+from wmm_control.geometry import matrix_from_quaternion
 from sim_bridge.world import SimWorld
 from urdf_factory import write_urdf
 from wmm_control.base import DifferentialKinematics, WheelController, WheelParams

@@ -13,7 +13,7 @@ import zlib
 import numpy as np
 import pytest
 
-from sim_bridge import SimWorld, SlipParams, render_png, se2_step
+from sim_bridge import SimWorld, SlipParams, render_png
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
 
@@ -148,28 +148,6 @@ def test_rotation_in_place_about_the_base_centre(world_a):
     world_a.set_command('drive', rates)
     run(world_a, 2.0)
     np.testing.assert_allclose(world_a.base_pose(), [0.0, 0.0, 1.0], atol=1e-9)
-
-
-def test_se2_step_is_exact_for_constant_twist():
-    pose = (1.0, -2.0, 0.3)
-    twist = (0.4, 0.1, 0.7)
-    one = se2_step(pose, twist, 2.0)
-    many = pose
-    for _ in range(80):
-        many = se2_step(many, twist, 0.025)
-    np.testing.assert_allclose(one, many, atol=1e-12)
-    # Closed form: rotation about the ICR at p + R(θ) (−vy/ω, vx/ω).
-    x, y, th = pose
-    vx, vy, w = twist
-    r_th = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
-    icr = np.array([x, y]) + r_th @ [-vy / w, vx / w]
-    a = w * 2.0
-    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-    np.testing.assert_allclose(one[:2], icr + rot @ (np.array([x, y]) - icr), atol=1e-12)
-    # Pure translation (ω = 0) uses the series branch.
-    np.testing.assert_allclose(
-        se2_step((0, 0, math.pi / 2), (1.0, 0.5, 0.0), 2.0), (-1.0, 2.0, math.pi / 2), atol=1e-15
-    )
 
 
 # ----------------------------------------------------------------------------- base, robot B
@@ -456,7 +434,7 @@ def test_a_base_whose_inertial_frame_is_offset_is_placed_at_its_link_pose(world_
     PyBullet's own composition of the two puts it."""
     import pinocchio as pin
     import pybullet as p
-    from wmm_control.kinematics.orientation import quaternion_from_yaw
+    from wmm_control.geometry import quaternion_from_yaw
 
     local_pos, local_quat = (
         (0.05, -0.02, 0.1),

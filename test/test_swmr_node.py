@@ -16,6 +16,7 @@ from ros_helpers import ScriptedController, overrides, pose2d, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.base import SwmrController
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import se2_twist
 from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
 
@@ -66,19 +67,6 @@ def run(ros, ref, seconds, controller_params=None, **sim_params):
     n = int(round(seconds / DT)) + 1
     assert ros.spin_until(lambda: len(pub.truth) >= n, timeout=60)
     return pub
-
-
-def se2_twist(p0, p1, dt):
-    """Constant base-frame twist that moves pose p0 to p1 in dt (SE(2) log)."""
-    c, s = np.cos(p0[2]), np.sin(p0[2])
-    d = np.array([c * (p1[0] - p0[0]) + s * (p1[1] - p0[1]), -s * (p1[0] - p0[0]) + c * (p1[1] - p0[1])])
-    a = (p1[2] - p0[2] + np.pi) % (2 * np.pi) - np.pi
-    if abs(a) < 1e-12:
-        v = d
-    else:
-        m = np.array([[np.sin(a), -(1 - np.cos(a))], [1 - np.cos(a), np.sin(a)]]) / a
-        v = np.linalg.solve(m, d)
-    return np.array([v[0], v[1], a]) / dt
 
 
 @pytest.mark.parametrize(

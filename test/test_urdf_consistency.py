@@ -6,7 +6,7 @@ import pybullet as p
 import pytest
 
 from wmm_control.kinematics import build_pinocchio_model
-from wmm_control.kinematics.model import angles_to_pin_q
+from wmm_control.geometry import angles_to_pin_q
 from wmm_control.robot_config import load_robot
 
 N_CONFIGS = 50

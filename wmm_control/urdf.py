@@ -19,6 +19,7 @@ from typing import cast
 import numpy as np
 
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import matrix_from_rpy
 
 __all__ = ['UrdfJoint', 'UrdfTree', 'MOVING_TYPES']
 
@@ -32,20 +33,6 @@ def _floats(text: str | None, size: int, default: tuple) -> np.ndarray:
     if vals.shape != (size,):
         raise ValueError(f'expected {size} numbers, got {text!r}')
     return vals
-
-
-def rotation_rpy(rpy: np.ndarray) -> np.ndarray:
-    """URDF's fixed-axis roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll). Shape (3, 3)."""
-    cr, sr = math.cos(rpy[0]), math.sin(rpy[0])
-    cp, sp = math.cos(rpy[1]), math.sin(rpy[1])
-    cy, sy = math.cos(rpy[2]), math.sin(rpy[2])
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
 
 
 @dataclass(frozen=True)
@@ -214,7 +201,7 @@ class UrdfTree:
         """
         rot, pos = np.eye(3), np.zeros(3)
         for joint in self.chain(base, link, ('base', 'wheel')):
-            r = rotation_rpy(joint.rpy)
+            r = matrix_from_rpy(joint.rpy)
             pos = pos + rot @ joint.xyz
             rot = rot @ r
         return rot, pos

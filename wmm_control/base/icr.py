@@ -31,7 +31,6 @@ gives every wheel's rows at once in the chart of :func:`tangent_basis`.
 
 import math
 from dataclasses import dataclass
-from typing import overload
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -46,7 +45,6 @@ __all__ = [
     'icr_of_headings',
     'tangent_basis',
     'wedge_rows',
-    'wrap_half_turn',
     'DEFAULT_ICR_BORDER',
     'DEFAULT_ICR_SCALE',
 ]
@@ -58,20 +56,6 @@ DEFAULT_ICR_SCALE = 1.0
 """Default metric length ℓ [m] of the homogeneous ICR representation."""
 
 _TINY = 1e-12
-
-
-@overload
-def wrap_half_turn(angle: float) -> float: ...
-@overload
-def wrap_half_turn(angle: ArrayLike) -> np.ndarray: ...
-def wrap_half_turn(angle: ArrayLike) -> float | np.ndarray:
-    """Wrap angles to [−π/2, π/2) [rad]: the difference to the nearest twin (β or β + π).
-
-    A float gives a float, anything else an array.
-    """
-    if not isinstance(angle, float):
-        angle = np.asarray(angle, dtype=float)
-    return (angle + math.pi / 2) % math.pi - math.pi / 2
 
 
 def tangent_basis(z: ArrayLike) -> np.ndarray:
@@ -257,10 +241,8 @@ def icr_of_headings(slip_rows: np.ndarray, scale: float, like=None) -> np.ndarra
     """Least-squares ICR of wheel headings: the kernel of :meth:`Icr.from_steer_angles`.
 
     The twist direction t = (vx, vy, ℓω) minimising ``Σ (g_i · t)²`` over the no-side-slip
-    rows ``g_i = (−sin β_i, cos β_i, (hx_i cos β_i + hy_i sin β_i)/ℓ)`` is the eigenvector of
-    the smallest eigenvalue of S = GᵀG: closed-form eigenvalue of the 3 × 3 matrix
-    (trigonometric method), eigenvector the largest cross product of two rows of S − λI.
-    Near-repeated eigenvalues fall back to an SVD of G.
+    rows ``g_i = (−sin β_i, cos β_i, (hx_i cos β_i + hy_i sin β_i)/ℓ)``, ‖t‖ = 1: the eigenvector
+    of the smallest eigenvalue of S = GᵀG (``numpy.linalg.eigh``).
 
     Args:
         slip_rows: the rows g(β_i) = (−sin β_i, cos β_i, hx_i cos β_i + hy_i sin β_i) of
@@ -271,32 +253,9 @@ def icr_of_headings(slip_rows: np.ndarray, scale: float, like=None) -> np.ndarra
     Returns:
         The unit homogeneous ICR ``z ∝ (−vy, vx, ℓω)``. Shape (3,).
     """
-    (s00, s01, s02), (_, s11, s12), (_, _, s22) = (slip_rows.T @ slip_rows).tolist()
-    s02, s12, s22 = s02 / scale, s12 / scale, s22 / (scale * scale)  # the rows' third entry over ℓ
-    q = (s00 + s11 + s22) / 3.0
-    off = s01 * s01 + s02 * s02 + s12 * s12
-    pp = math.sqrt(((s00 - q) ** 2 + (s11 - q) ** 2 + (s22 - q) ** 2 + 2.0 * off) / 6.0)
-    t = None
-    if pp > 1e-9 * q:
-        b00, b11, b22 = (s00 - q) / pp, (s11 - q) / pp, (s22 - q) / pp
-        b01, b02, b12 = s01 / pp, s02 / pp, s12 / pp
-        det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
-        phi = math.acos(min(1.0, max(-1.0, 0.5 * det))) / 3.0
-        lam = q + 2.0 * pp * math.cos(phi + 2.0 * math.pi / 3.0)
-        rows = ((s00 - lam, s01, s02), (s01, s11 - lam, s12), (s02, s12, s22 - lam))
-        best, bn = None, 0.0
-        for u, v in ((rows[0], rows[1]), (rows[0], rows[2]), (rows[1], rows[2])):
-            c = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
-            cn = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
-            if cn > bn:
-                best, bn = c, cn
-        # The cross product scales with the two other eigenvalue gaps; too small: degenerate.
-        if bn > 1e-12 * (pp * pp) ** 2:
-            t = best
-    if t is None:
-        t = np.linalg.svd(slip_rows * np.array((1.0, 1.0, 1.0 / scale)))[2][-1].tolist()
+    g = slip_rows * np.array((1.0, 1.0, 1.0 / scale))  # the rows' third entry over ℓ
+    t = np.linalg.eigh(g.T @ g)[1][:, 0]  # eigenvalues ascending
     z = np.array((-t[1], t[0], t[2]))
-    z /= math.sqrt(z @ z)
     if like is not None and z @ like < 0.0:
         z = -z
     return z

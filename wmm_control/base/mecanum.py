@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import twist_to_world
 from wmm_control.robot_config import MecanumConfig
 
 __all__ = ['MecanumKinematics']
@@ -78,9 +79,7 @@ class MecanumKinematics:
 
     def world_rates(self, theta: float, wheel_rates: ArrayLike) -> np.ndarray:
         """World-frame (ẋ, ẏ, θ̇) = J_I(θ) J_V ω_w (eq 16). Shape (3,)."""
-        c, s = np.cos(theta), np.sin(theta)
-        vx, vy, w = self.twist_from_wheels(wheel_rates)
-        return np.array([c * vx - s * vy, s * vx + c * vy, w])
+        return twist_to_world(theta, self.twist_from_wheels(wheel_rates))
 
     def wheel_rates(self, twist: ArrayLike) -> np.ndarray:
         """Wheel rates [rad/s] that realise a base-frame twist exactly. Shape (4,).

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wmm_control.base.icr import Icr, hip_velocity_map, wrap_half_turn
+from wmm_control.base.icr import Icr, hip_velocity_map
+from wmm_control.geometry import wrap_angle
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
 
@@ -225,7 +226,7 @@ class SteerableGeometry:
         Without ``near``: β_i = atan2(v_i) of the hip velocity v_i under
         :attr:`Icr.twist_direction` (for a finite ICR (X, Y) this is
         atan2(Y − hy_i, X − hx_i) − π/2, modulo 2π). With ``near``: for each wheel the twin (β or
-        β + π, drive reversed) nearest ``near_i``, ``near_i + wrap_half_turn(β_i − near_i)``;
+        β + π, drive reversed) nearest ``near_i``, ``near_i + wrap_angle(β_i − near_i, math.pi)``;
         a wheel whose hip the ICR sits on (any heading fits) keeps ``near_i``.
 
         Args:
@@ -244,6 +245,6 @@ class SteerableGeometry:
         heading = np.arctan2(vy, vx)
         if near is None:
             return heading
-        delta = wrap_half_turn(heading - near)
+        delta = wrap_angle(heading - near, math.pi)
         delta[np.hypot(vx, vy) < _HIP_TOL * math.sqrt(z @ z)] = 0.0
         return near + delta

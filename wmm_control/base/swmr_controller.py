@@ -83,10 +83,10 @@ from wmm_control.base.icr import (
     icr_of_headings,
     tangent_basis,
     wedge_rows,
-    wrap_half_turn,
 )
 from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.checks import as_finite_vector
+from wmm_control.geometry import scale_into_limits, wrap_angle
 from wmm_control.errors import ConfigError, ShapeError
 from wmm_control.robot_config import RobotConfig
 
@@ -687,8 +687,8 @@ class SwmrController:
             v = self._hip_rows @ np.array((z_meas, z_cmd)).T  # (2N, 2): hip velocities, vx then vy
             heading = np.arctan2(v[n:], v[:n])
             on_hip = np.hypot(v[n:], v[:n]).min(axis=1) < _HIP_TOL  # any angle fits
-            own = wrap_half_turn(self._beta - heading[:, 1])  # the command's disagreement
-            extra = wrap_half_turn(meas - heading[:, 0] - own)
+            own = wrap_angle(self._beta - heading[:, 1], math.pi)  # the command's disagreement
+            extra = wrap_angle(meas - heading[:, 0] - own, math.pi)
             start = meas - extra + np.copysign(np.maximum(np.abs(extra) - band, 0.0), extra)
             self._beta = np.where(on_hip, meas, start)
             self._icr = self._icr_of(self._beta, like=z_cmd)
@@ -1079,11 +1079,4 @@ class SwmrController:
         Raises:
             ShapeError, NonFiniteError: not 3 finite numbers.
         """
-        ref = as_finite_vector(twist_ref, 3, 'twist_ref')
-        limits = self._velocity_limit
-        size = np.abs(ref)
-        beyond = size > limits
-        if not beyond.any():
-            return ref
-        s = float((limits[beyond] / size[beyond]).min())
-        return np.clip(ref * s, -limits, limits)
+        return scale_into_limits(as_finite_vector(twist_ref, 3, 'twist_ref'), self._velocity_limit)[0]

@@ -35,6 +35,7 @@ from wmm_control.base.differential import DifferentialKinematics
 from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import scale_into_limits
 from wmm_control.robot_config import RobotConfig
 
 __all__ = ['WheelParams', 'WheelOutput', 'WheelController', 'wheel_kinematics']
@@ -175,6 +176,9 @@ class WheelController:
             raise ConfigError(
                 f'WheelParams.velocity_limit: zero on an axis the base can follow: {params.velocity_limit}'
             )
+        # bound() keeps |twist_k| ≤ velocity_limit_k and every |wheel rate| ≤ wheel_rate_limit
+        self._limited_rows = np.vstack((np.eye(3), self._inverse))
+        self._limits = np.concatenate((self._vmax, np.full(len(self._inverse), params.wheel_rate_limit)))
         self._twist = np.zeros(3)
 
     @classmethod
@@ -214,20 +218,8 @@ class WheelController:
         Raises:
             ShapeError, NonFiniteError: malformed reference.
         """
-        ref = as_finite_vector(reference, 3, 'reference').copy()
-        peak = float(np.max(np.abs(ref)))
-        if peak == 0.0:
-            return ref, 1.0
-        unit = ref / peak  # largest entry ±1: nothing below overflows
-        # Limit use per unit of ``peak`` (≥ 1/max(velocity_limit) > 0, as one |unit| entry is 1).
-        use = max(
-            float(np.max(np.abs(unit) / self._vmax)),
-            float(np.max(np.abs(self._inverse @ unit))) / self.params.wheel_rate_limit,
-        )
-        room = 1.0 / use
-        if peak <= room:
-            return ref, 1.0
-        return unit * room, room / peak
+        ref = as_finite_vector(reference, 3, 'reference')
+        return scale_into_limits(ref, self._limits, self._limited_rows)
 
     def followable(self, reference: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """``(followed, dropped)``: the part of ``reference`` the wheels can make and the rest.

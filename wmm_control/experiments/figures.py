@@ -21,11 +21,11 @@ from typing import TYPE_CHECKING, Any
 
 import matplotlib
 import numpy as np
-import pinocchio as pin
 
 from sim_bridge.render import render_rgb, write_png
 from sim_bridge.world import SimWorld
 from wmm_control.experiments.metrics import RunLog, pose_error_norm
+from wmm_control.geometry import rotation_error, se2_transform_points
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -214,8 +214,7 @@ def _base_outline(pose):
     """Corners (5, 2) of the base rectangle at ``pose`` (x, y, θ), closed."""
     half = 0.5 * np.array(BASE_SIZE)
     corners = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1], [1, 1]]) * half
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    return corners @ np.array([[c, s], [-s, c]]) + pose[:2]
+    return se2_transform_points(pose, corners)
 
 
 def _footprint_rows(log):
@@ -428,7 +427,7 @@ def tracking_figure(logs, scenario, model):
         err = np.linalg.norm(ref[:, :2] - log.ee_position[:, :2], axis=1)
         axes[0].plot(log.t, err * 1e3, label=label)
         if pose:
-            rot = [pin.log3(tg.rotation @ r.T)[1] for tg, r in zip(targets, log.ee_rotation)]
+            rot = rotation_error([tg.rotation for tg in targets], log.ee_rotation)[:, 1]
             axes[3].plot(log.t, np.degrees(rot), label=label)
         axes[1].plot(log.t, np.linalg.norm(log.base_reference[:, :2], axis=1) * 1e2, label=f'{label}: |v| [cm/s]')
         axes[1].plot(log.t, np.degrees(log.base_reference[:, 2]), ls='--', label=f'{label}: ω [°/s]')

@@ -12,10 +12,9 @@ from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import ArrayLike
 
-from wmm_control.kinematics.orientation import rpy_from_matrix, wrap_angle
+from wmm_control.geometry import rotation_angle, rotation_error, rpy_from_matrix, twist_to_world, wrap_angle
 
 if TYPE_CHECKING:
     from wmm_control.experiments.scenario import Scenario
@@ -188,7 +187,7 @@ def pose_error_norm(goal_pose: ArrayLike, ee_position: np.ndarray, ee_rotation: 
 
 
 def _rotation_angle(r_goal, rot):
-    return float(np.linalg.norm(pin.log3(r_goal @ rot.T)))
+    return rotation_angle(r_goal, rot)
 
 
 def goal_metrics(
@@ -318,7 +317,7 @@ def trajectory_metrics(log: RunLog, scenario: Scenario, model: KinematicModel, d
     reference = scenario.reference(model)
     targets = [reference(t) for t in log.t]
     pos_err = np.array([tg.position for tg in targets]) - log.ee_position
-    rot_err = np.array([pin.log3(tg.rotation @ r.T) for tg, r in zip(targets, log.ee_rotation)])
+    rot_err = rotation_error([tg.rotation for tg in targets], log.ee_rotation)
     late = log.t >= log.t[0] + skip_s
     base = log.base_reference
     moving = np.abs(base) > 1e-9
@@ -351,8 +350,7 @@ def _base_integral_error(log, moving, dt):
     errors = []
     for k in range(first, min(last, len(log.t) - 1)):
         vx, vy, w = log.base_reference[k]
-        c, s = np.cos(pose[2]), np.sin(pose[2])
-        pose = pose + dt * np.array([c * vx - s * vy, s * vx + c * vy, w])
+        pose = pose + dt * twist_to_world(pose[2], (vx, vy, w))
         errors.append(np.abs(pose[:2] - log.base_pose[k + 1, :2]))
     return np.mean(errors, axis=0).tolist() if errors else None
 

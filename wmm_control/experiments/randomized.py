@@ -57,7 +57,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 import yaml
 from numpy.typing import ArrayLike
 
@@ -69,7 +68,7 @@ from wmm_control.experiments.ros_run import run_with_nodes
 from wmm_control.experiments.scenario import Goal, Scenario, load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file
-from wmm_control.kinematics.orientation import rpy_from_matrix
+from wmm_control.geometry import rotation_angle, rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
@@ -346,7 +345,7 @@ def run_goal(
     dt = float(np.median(np.diff(log.t))) if len(log) > 1 else cfg.period
     target = Goal(0.0, duration, goal.pose).target
     pos_err = np.linalg.norm(log.ee_position - target.position, axis=1)
-    ori_err = np.array([_angle(target.rotation @ r.T) for r in log.ee_rotation])
+    ori_err = np.array([rotation_angle(target.rotation, r) for r in log.ee_rotation])
     tolerance = goal_settings()[0]
     inside = np.flatnonzero((pos_err <= tolerance[0]) & (ori_err <= tolerance[1]))
     exceeded = run_limit_report(log, cfg, dt, tol=1e-9)
@@ -405,7 +404,7 @@ def _held(cfg: RobotConfig, method: str, goal: RandomGoal, refused: str) -> tupl
         'held',
         1.0,
         error,
-        _angle(target.rotation @ np.asarray(rotation).T),
+        rotation_angle(target.rotation, np.asarray(rotation)),
         1.0,
         1.0,
         1.0,
@@ -450,10 +449,6 @@ def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str |
         cycle_s=log.cycle_s,
         cycle_cpu_s=log.cycle_cpu_s,
     )
-
-
-def _angle(rot):
-    return float(np.linalg.norm(pin.log3(rot)))
 
 
 def summarize(results: Iterable[Mapping[str, Any]]) -> dict:

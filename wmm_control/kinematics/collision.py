@@ -44,6 +44,7 @@ import numpy as np
 import pinocchio as pin
 
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import continuous_to_q
 from wmm_control.kinematics.obstacles import Obstacle, around_base
 from wmm_control.urdf import UrdfTree
 
@@ -252,7 +253,7 @@ class CollisionModel:
         q = pin.neutral(self.model)
         for iq, cont, val in zip(self._idx_q, self._continuous, np.asarray(q_arm, dtype=float).tolist()):
             if cont:
-                q[iq], q[iq + 1] = np.cos(val), np.sin(val)
+                q[iq], q[iq + 1] = continuous_to_q(val)
             else:
                 q[iq] = val
         return q

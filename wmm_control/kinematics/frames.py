@@ -24,13 +24,16 @@ from pathlib import Path
 import numpy as np
 
 from wmm_control.errors import ConfigError, NonFiniteError
-from wmm_control.kinematics.orientation import (
+from wmm_control.geometry import (
+    matrix_from_rpy,
     quaternion_from_axis_angle,
     quaternion_from_matrix,
     quaternion_from_yaw,
     quaternion_multiply,
+    se2_compose,
+    se2_inverse,
 )
-from wmm_control.urdf import UrdfJoint, UrdfTree, rotation_rpy
+from wmm_control.urdf import UrdfJoint, UrdfTree
 
 __all__ = [
     'FrameTransform',
@@ -91,16 +94,12 @@ def world_to_odom(world: str, odom: str, true_pose, odom_pose) -> FrameTransform
         true_pose: the base's pose (x, y, θ) in ``world`` (ground truth, or a localisation's).
         odom_pose: its pose (x, y, θ) in ``odom`` (dead reckoning).
     """
-    xt, yt, tt = (float(v) for v in true_pose)
-    xo, yo, to = (float(v) for v in odom_pose)
-    th = tt - to
-    c, s = math.cos(th), math.sin(th)
-    return planar_transform(world, odom, (xt - (c * xo - s * yo), yt - (s * xo + c * yo), th))
+    return planar_transform(world, odom, se2_compose(true_pose, se2_inverse(odom_pose)))
 
 
 def _origin(joint: UrdfJoint) -> tuple[np.ndarray, np.ndarray]:
     """(rotation (3, 3), quaternion (x, y, z, w)) of a joint's ``<origin rpy>``."""
-    rot = rotation_rpy(joint.rpy)
+    rot = matrix_from_rpy(joint.rpy)
     return rot, quaternion_from_matrix(rot)
 
 

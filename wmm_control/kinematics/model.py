@@ -24,18 +24,17 @@ Usage::
     ja = model.arm_jacobian_base()
 """
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Self
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
-from scipy.linalg import lapack
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError, UnknownFrameError, WmmError
-from wmm_control.kinematics.orientation import rpy_from_matrix, rpy_rate_map
+from wmm_control.geometry import continuous_to_q, rpy_from_matrix, rpy_rate_map
 from wmm_control.robot_config import RobotConfig, load_robot
 
 __all__ = ['KinematicModel', 'build_pinocchio_model', 'N_BASE']
@@ -44,7 +43,6 @@ N_BASE = 3
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _ROWS = {'position': slice(0, 3), 'full': slice(0, 6)}
 _EYE = {3: np.eye(3), 6: np.eye(6)}
-_PIVOT_ID = {3: np.arange(3), 6: np.arange(6)}  # dgesv's pivots when no rows swap
 # (w @ _SKEW).reshape(3, 3) is the cross-product matrix [w]×, row by row: (−ε_abc w_c)_ab.
 _SKEW = np.array(
     [[0, 0, 0, 0, 0, -1, 0, 1, 0], [0, 0, 1, 0, 0, 0, -1, 0, 0], [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float
@@ -65,25 +63,6 @@ def build_pinocchio_model(urdf_path: str | Path) -> pin.Model:
         return pin.buildModelFromUrdf(str(urdf_path), root)
     except (RuntimeError, ValueError) as exc:
         raise ConfigError(f'pinocchio could not load {urdf_path}: {exc}') from exc
-
-
-def angles_to_pin_q(model: pin.Model, joint_angles: Sequence[float] | np.ndarray) -> np.ndarray:
-    """Pinocchio configuration from one number per joint velocity (angles for continuous joints).
-
-    Continuous joints (nq = 2) take (cos, sin) of the angle; others take the value itself.
-
-    Args:
-        joint_angles: one entry per velocity index. Shape (model.nv,).
-    """
-    q = pin.neutral(model)
-    for joint in model.joints[1:]:
-        iq, iv = joint.idx_q, joint.idx_v
-        if joint.nq == 2 and joint.nv == 1:
-            q[iq] = np.cos(joint_angles[iv])
-            q[iq + 1] = np.sin(joint_angles[iv])
-        else:
-            q[iq : iq + joint.nq] = joint_angles[iv : iv + joint.nv]
-    return q
 
 
 class KinematicModel:
@@ -193,9 +172,7 @@ class KinematicModel:
         if self._plain_q.size:
             q[self._plain_q] = flat[self._plain_v]
         if self._cont_q.size:
-            angles = flat[self._cont_v]
-            q[self._cont_q] = np.cos(angles)
-            q[self._cont_q + 1] = np.sin(angles)
+            q[self._cont_q], q[self._cont_q + 1] = continuous_to_q(flat[self._cont_v])
         return q, flat
 
     def update(
@@ -424,18 +401,14 @@ class KinematicModel:
         v, w = jac[:3], jac[3:]
         wt = w.T
         m = jm @ jm.T
-        lu, piv, minv, info = lapack.dgesv(m, _EYE[nr])
-        if info != 0:
+        h = np.linalg.det(m)
+        if h == 0.0:
             # Exactly singular (a square arm Jacobian, e.g. six joints and six rows, at a
             # singularity): the derivatives of det(M + εI), ε = 1e-12 tr M, the limit of which
             # they approach; they point the way out of the singularity.
             m = m + (1e-12 * max(np.trace(m), 1e-300)) * _EYE[nr]
-            lu, piv, minv, info = lapack.dgesv(m, _EYE[nr])
-            if info != 0:
-                raise np.linalg.LinAlgError(f'Singular matrix (dgesv info {info})')
-        h = lu.diagonal().prod()
-        if np.count_nonzero(piv != _PIVOT_ID[nr]) % 2:
-            h = -h
+            h = np.linalg.det(m)
+        minv = np.linalg.inv(m)
         p = minv @ jm
         # ∂J_m/∂q_k as dj[k] (nr, n); z[k, :, i] = w_k × v_i (and × w_i for all six rows).
         skew = (wt @ _SKEW).reshape(n, 3, 3)  # [w_k]×
@@ -469,7 +442,7 @@ class KinematicModel:
         half += (wt[:, None, :] @ r_l)[:, 0, :] @ v
         half -= ww @ ((a_v.T @ v) * self._strict_upper)
         half *= self._sym_weight  # 2 above the diagonal, 1 on it
-        # T = that weighted triangle + (B − C) / 2: ∇²H = H (g gᵀ + T + Tᵀ), symmetric to the bit.
+        # T = that weighted triangle + (B − C) / 2: ∇²H = H (g gᵀ + T + Tᵀ), exactly symmetric.
         half += half_b
         c *= 0.5
         half -= c

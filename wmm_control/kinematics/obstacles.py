@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import matrix_from_rpy, se3_from_planar
 from wmm_control.paths import config_path
 from wmm_control.robot_config import read_yaml
 
@@ -116,8 +117,7 @@ class Obstacle:
 def around_base(obstacles, base_pose) -> list[pin.SE3]:
     """Each obstacle's placement in the frame of a base at ``base_pose`` (x, y, θ) in the world
     (the root link's frame: the world's, turned by θ about z and moved by (x, y))."""
-    x, y, theta = (float(v) for v in base_pose)
-    world_to_base = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, theta), np.array([x, y, 0.0])).inverse()
+    world_to_base = se3_from_planar(base_pose).inverse()
     return [world_to_base * obstacle.placement for obstacle in obstacles]
 
 
@@ -152,7 +152,7 @@ def parse_obstacles(entries, where: str) -> tuple[Obstacle, ...]:
         names.add(name)
         size = _numbers(entry.get('size'), None, f'{at}.size')
         pose = _numbers(entry.get('pose'), (3, 6), f'{at}.pose')
-        rotation = pin.rpy.rpyToMatrix(*pose[3:]) if len(pose) == 6 else np.eye(3)
+        rotation = matrix_from_rpy(pose[3:]) if len(pose) == 6 else np.eye(3)
         try:
             out.append(Obstacle(name, str(entry.get('shape')), tuple(size), np.array(pose[:3]), rotation))
         except ConfigError as exc:

@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
+from wmm_control.geometry import se2_inverse, se2_transform_points
+
 if TYPE_CHECKING:
     from wmm_control.kinematics.model import KinematicModel
     from wmm_control.kinematics.obstacles import Obstacle
@@ -92,10 +94,7 @@ class Workspace:
             position: world (x, y, z) [m].
             base_pose: base (x, y, θ) in the world [m, m, rad].
         """
-        x, y, th = base_pose
-        c, s = np.cos(th), np.sin(th)
-        dx, dy = position[0] - x, position[1] - y
-        local = np.array([c * dx + s * dy, -s * dx + c * dy, position[2]])
+        local = np.array([*se2_transform_points(se2_inverse(base_pose), position[:2]), position[2]])
         for name, rot, centre, half in self.boxes:
             if np.all(np.abs(rot.T @ (local - centre)) <= half):
                 return name

@@ -4,7 +4,7 @@ A pose is a position (x, y, z) [m] and a quaternion (x, y, z, w) as ROS orders i
 pose is (x, y, θ); a twist is (linear, angular) [m/s, rad/s], a planar one (vx, vy, ω). The
 readers take the values as they are (no check: the nodes judge them), except the ``parse_*``
 ones, which validate a command and say why they refuse it; the rotation maths is
-:mod:`wmm_control.kinematics.orientation`'s, imported where it is used, so that a node that
+:mod:`wmm_control.geometry`'s, imported where it is used, so that a node that
 needs none of it (a base controller) starts without loading pinocchio.
 """
 
@@ -52,7 +52,7 @@ def pose_values(pose) -> np.ndarray:
 def pose_rotation(pose) -> tuple[np.ndarray, np.ndarray]:
     """(position (3,), rotation (3, 3)) of a ``geometry_msgs/Pose`` or ``Transform`` (the
     quaternion normalised)."""
-    from wmm_control.kinematics.orientation import matrix_from_quaternion
+    from wmm_control.geometry import matrix_from_quaternion
 
     values = pose_values(pose)
     return values[:3], matrix_from_quaternion(values[3:])
@@ -65,7 +65,7 @@ def set_quaternion(orientation, quat) -> None:
 
 def set_rotation(orientation, rotation) -> None:
     """Write the quaternion of a rotation matrix into a ``geometry_msgs/Quaternion``."""
-    from wmm_control.kinematics.orientation import quaternion_from_matrix
+    from wmm_control.geometry import quaternion_from_matrix
 
     set_quaternion(orientation, quaternion_from_matrix(rotation))
 
@@ -89,7 +89,7 @@ def odometry_values(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def odometry_pose(msg) -> tuple[np.ndarray, np.ndarray]:
     """(planar pose (x, y, θ), planar twist (vx, vy, ω)) of a ``nav_msgs/Odometry``."""
-    from wmm_control.kinematics.orientation import yaw_from_quaternion
+    from wmm_control.geometry import yaw_from_quaternion
 
     xy, quat, twist = odometry_values(msg)
     return np.array([xy[0], xy[1], yaw_from_quaternion(quat)]), twist
@@ -97,7 +97,7 @@ def odometry_pose(msg) -> tuple[np.ndarray, np.ndarray]:
 
 def set_planar_pose(pose, planar) -> None:
     """Write a planar pose (x, y, θ) into a ``geometry_msgs/Pose`` (z = 0)."""
-    from wmm_control.kinematics.orientation import quaternion_from_yaw
+    from wmm_control.geometry import quaternion_from_yaw
 
     x, y, th = (float(v) for v in planar)
     set_pose(pose, (x, y, 0.0), quaternion_from_yaw(th))

@@ -33,7 +33,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 from wmm_control.experiments.scenario import Goal, load_scenario
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.orientation import matrix_from_rpy, quaternion_from_matrix
+from wmm_control.geometry import matrix_from_rpy, quaternion_from_matrix
 from wmm_control.nodes.conversions import pose_stamped, set_pose, set_twist, split_seconds
 from wmm_control.nodes.parameters import Param, declare_parameters
 from wmm_control.nodes.qos import CLOCK_QOS, COMMAND_QOS

@@ -15,7 +15,6 @@ Nothing non-finite goes out: the inputs are the resolver's validated ones.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -23,7 +22,7 @@ from geometry_msgs.msg import Point
 from visualization_msgs.msg import Marker, MarkerArray
 
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.orientation import quaternion_from_matrix
+from wmm_control.geometry import quaternion_from_matrix, se2_transform_points
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.conversions import set_pose
 from wmm_control.viewer.scene import Trail
@@ -102,9 +101,7 @@ class MarkerSet:
         if base_pose is None:
             outline.action = Marker.DELETE
         else:
-            x, y, th = (float(v) for v in base_pose)
-            c, s = math.cos(th), math.sin(th)
-            corners = self.footprint @ np.array([[c, s], [-s, c]]) + [x, y]
+            corners = se2_transform_points(base_pose, self.footprint)
             closed = np.vstack((corners, corners[:1]))
             outline.points = _points(np.column_stack((closed, np.full(len(closed), self.floor_z))))
         markers.append(outline)

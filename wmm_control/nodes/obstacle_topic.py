@@ -22,7 +22,7 @@ from visualization_msgs.msg import Marker
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import Obstacle, load_obstacles
-from wmm_control.kinematics.orientation import matrix_from_quaternion, unit_quaternion
+from wmm_control.geometry import matrix_from_quaternion, unit_quaternion
 from wmm_control.nodes.conversions import pose_values
 
 __all__ = ['ObstacleSet', 'obstacle_from_marker', 'describe', 'OBSTACLE_PARAM_HELP']

@@ -26,7 +26,6 @@ A set-point target (zero velocity and acceleration) becomes a smooth trajectory
 is tracked as given.
 """
 
-import math
 import time
 from abc import abstractmethod
 from dataclasses import dataclass
@@ -34,16 +33,15 @@ from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
-import pinocchio as pin
 
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import largest_step, rotation_2d, rotation_error, twist_to_base, twist_to_world
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers.interface import PoseTarget, Resolver, ResolverCommand, ResolverDiagnostics, RobotState
 from wmm_control.resolvers.limits import CommandLimits
-from wmm_control.resolvers.pose_servo import _check_fields, lapack_svd
+from wmm_control.resolvers.pose_servo import _check_fields
 from wmm_control.resolvers.safety import SafetyParams, SafetyStage
 from wmm_control.resolvers.setpoint_trajectory import SetpointTrajectory
-from wmm_control.resolvers.sns import task_scale
 from wmm_control.robot_config import RobotConfig
 
 __all__ = ['AccelerationParams', 'AccelerationResolver', 'TASK_ROWS']
@@ -150,16 +148,17 @@ class AccelerationResolver(Resolver):
         """
         p = self.params
         model = self.model
-        c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])
+        theta = state.base_pose[2]
         nb = self.n_base
         if self._qd is None:
             v = state.base_twist
-            base = [v[0], v[2]] if self._unicycle else [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]
+            base = [v[0], v[2]] if self._unicycle else twist_to_world(theta, v)
             self._qd = np.concatenate((base, state.dq_arm))
             self._last_base = np.asarray(state.base_twist, dtype=float).copy()
         qd = self._qd
         if self._unicycle:
-            to_world = np.array([[c, 0.0], [s, 0.0], [0.0, 1.0]])
+            axes = rotation_2d(theta)  # the base's x and y axes in the world (columns)
+            to_world = np.array([[axes[0, 0], 0.0], [axes[1, 0], 0.0], [0.0, 1.0]])  # (v, ω) ↦ (ẋ, ẏ, θ̇)
             model.update(state.base_pose, state.q_arm, to_world @ qd[:nb], qd[nb:])
         else:
             model.update(state.base_pose, state.q_arm, qd[:3], qd[3:])
@@ -171,18 +170,18 @@ class AccelerationResolver(Resolver):
         jac = model.jacobian_world()
         drift = model.jdot_qdot()
         if self._unicycle:  # columns J_b T over (v, ω); drift + J_b Ṫ u_b, Ṫ u_b = ω v (−sin θ, cos θ, 0)
-            drift = drift + jac[:, :2] @ (qd[1] * qd[0] * np.array([-s, c]))
+            drift = drift + jac[:, :2] @ (qd[1] * qd[0] * axes[:, 1])
             jac = np.hstack((jac[:, :3] @ to_world, jac[:, 3:]))
-        err = np.concatenate((ref.position - pos, pin.log3(ref.rotation @ rot.T)))
+        err = np.concatenate((ref.position - pos, rotation_error(ref.rotation, rot)))
         xd = jac @ qd
         xdd = ref.acceleration + self._kd * (ref.velocity - xd) + self._kp * err
         rows = self._rows
         self._position[nb:] = state.q_arm
         lo_v, hi_v, _ = self.limits.box(self._position, qd)
         down, up = self.limits.braking_rates(self._position)
-        sigma = float(lapack_svd(jac[rows, nb:], compute_uv=False)[-1])
-        sigma_position = sigma if rows.stop == 3 else float(lapack_svd(jac[:3, nb:], compute_uv=False)[-1])
-        target_err = np.concatenate((target.position - pos, pin.log3(target.rotation @ rot.T)))
+        sigma = model.sigma_min(self.params.rows)
+        sigma_position = sigma if rows.stop == 3 else model.sigma_min('position')
+        target_err = np.concatenate((target.position - pos, rotation_error(target.rotation, rot)))
         return {
             'jac': jac[rows],
             'xdd': xdd[rows],
@@ -252,8 +251,8 @@ class AccelerationResolver(Resolver):
             qd[:nb] = base[[0, 2]]
             self._qd, self._last_base = qd, base
             return self._command(qd, base, task, fields, t0)
-        c, s = math.cos(state.base_pose[2]), math.sin(state.base_pose[2])
-        base = np.array([c * qd[0] + s * qd[1], -s * qd[0] + c * qd[1], qd[2]])
+        theta = state.base_pose[2]
+        base = twist_to_base(theta, qd[:3])
         # The bounds hold the world-frame rates; the base controller limits its own frame, which
         # turns with the base. Keep the base-frame change within a·T too (a few 1e-5 m/s at most)
         # and the integrator consistent with what is sent.
@@ -264,7 +263,7 @@ class AccelerationResolver(Resolver):
         # within a·T (the last twist is inside the box).
         np.clip(base, -self.limits.velocity[:3], self.limits.velocity[:3], out=base)
         base[np.abs(base) < 1e-12] = 0.0
-        qd[:3] = (c * base[0] - s * base[1], s * base[0] + c * base[1], base[2])
+        qd[:3] = twist_to_world(theta, base)
         self._qd, self._last_base = qd, base
         return self._command(qd, base, task, fields, t0)
 
@@ -306,5 +305,5 @@ class AccelerationResolver(Resolver):
         q_a = self.manipulability_acceleration(task['qd'])[cols]
         q_t = np.zeros(self.n)
         q_t[cols] = q_a - active_pinv @ (task['jac'][:, cols] @ q_a)
-        beta, _ = task_scale(qdd, q_t, task['lower'], task['upper'], np.ones(self.n, dtype=bool))
+        beta, _ = largest_step(qdd, q_t, task['lower'], task['upper'])
         return beta * q_t, beta

@@ -14,7 +14,7 @@ robot state of a cycle of them while they are fresh.
 import numpy as np
 
 from wmm_control.checks import Freshness
-from wmm_control.kinematics.orientation import matrix_from_quaternion, yaw_from_quaternion
+from wmm_control.geometry import matrix_from_quaternion, yaw_from_quaternion
 from wmm_control.resolvers.interface import RobotState
 from wmm_control.resolvers.targets import LogEvent, checked_quaternion
 

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ShapeError
-from wmm_control.kinematics.orientation import matrix_from_rpy
+from wmm_control.geometry import matrix_from_rpy
 
 if TYPE_CHECKING:
     from wmm_control.kinematics import KinematicModel

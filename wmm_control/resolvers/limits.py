@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector, as_vector
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import largest_step
 from wmm_control.robot_config import RobotConfig
 
 __all__ = ['CommandLimits', 'LimitResult']
@@ -119,16 +120,11 @@ class CommandLimits:
         self.dt = float(dt)
         self.n = n
         self._adt = self.acceleration * self.dt
-        # per-entry constants of the scalar kernels below, as Python floats
-        self._velocity = self.velocity.tolist()
-        self._neg_velocity = (-self.velocity).tolist()
-        self._adt_list = self._adt.tolist()
-        self._half = (0.5 * self._adt).tolist()
-        self._two_a = (2.0 * self.acceleration).tolist()
-        self._lower = self.position_lower.tolist()
-        self._upper = self.position_upper.tolist()
-        self._has_lower = np.isfinite(self.position_lower).tolist()
-        self._has_upper = np.isfinite(self.position_upper).tolist()
+        self._bounded = np.flatnonzero(np.isfinite(self.position_lower) | np.isfinite(self.position_upper))
+        self._adt2 = np.tile(self._adt[self._bounded], 2)  # a dt of the entries below and above
+        self._zero = np.zeros(n)
+        self._neg_velocity = -self.velocity
+        self._last_braking: tuple[bytes, tuple[np.ndarray, np.ndarray]] = (b'', (self._zero, self._zero))
 
     def braking_rates(self, position: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Largest rates towards the lower and upper position limits from which braking stops in time.
@@ -139,8 +135,8 @@ class CommandLimits:
         Returns:
             (down, up): non-negative rate bounds [unit/s]; inf where there is no limit. Shape (n,) each.
         """
-        down, up = self._braking(self._floats(position, 'position'))
-        return np.array(down), np.array(up)
+        down, up = self._braking(as_vector(position, self.n, 'position'))
+        return down.copy(), up.copy()
 
     def box(self, position: ArrayLike, previous: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """This period's interval for every entry.
@@ -153,10 +149,9 @@ class CommandLimits:
         Returns:
             (lower, upper, forced): Shape (n,) each; ``forced`` flags the entries above.
         """
-        down, up = self._braking(self._floats(position, 'position'))
-        previous = self._floats(previous, 'previous command')
-        lo, hi, forced = self._box(down, up, previous, *self._accel_interval(previous))
-        return np.array(lo), np.array(hi), np.array(forced, dtype=bool)
+        down, up = self._braking(as_vector(position, self.n, 'position'))
+        previous = as_vector(previous, self.n, 'previous command')
+        return self._box(down, up, previous, previous - self._adt, previous + self._adt)
 
     @classmethod
     def for_robot(cls, robot: RobotConfig, dt: float) -> Self:
@@ -186,12 +181,6 @@ class CommandLimits:
             self.dt,
         )
 
-    # apply and the helpers below work entry by entry on Python floats: for the n = 7 or 10
-    # entries of a command, numpy's overhead per call (about 1 µs per operation, some 60 of
-    # them per apply) costs several times the arithmetic itself (apply on 10 entries: 79 µs
-    # as array operations, 22 µs so). Each entry sees the same IEEE operations in the same
-    # order as in the array form, so the results are the same to the bit.
-
     def apply(self, primary, position, previous, secondary=None, previous_secondary=None):
         """Bring ``primary + secondary`` into this period's bounds (see the module docstring).
 
@@ -209,153 +198,104 @@ class CommandLimits:
             :class:`LimitResult`.
         """
         n = self.n
-        previous = self._floats(previous, 'previous command', finite=True)
+        previous = as_finite_vector(previous, n, 'previous command')
         prev_s = (
-            [0.0] * n
-            if previous_secondary is None
-            else self._floats(previous_secondary, 'previous secondary', finite=True)
+            self._zero if previous_secondary is None else as_finite_vector(previous_secondary, n, 'previous secondary')
         )
-        primary = self._floats(primary, 'primary')
-        secondary = [0.0] * n if secondary is None else self._floats(secondary, 'secondary')
-        down, up = self._braking(self._floats(position, 'position'))
-        limited = set()
+        primary = as_vector(primary, n, 'primary')
+        secondary = self._zero if secondary is None else as_vector(secondary, n, 'secondary')
+        down, up = self._braking(as_vector(position, n, 'position'))
+        # 0. a non-finite entry is a request to stop
+        limited = ~(np.isfinite(primary) & np.isfinite(secondary))
+        if limited.any():
+            primary, secondary = np.where(limited, 0.0, primary), np.where(limited, 0.0, secondary)
         # 1. braking, joint by joint: the primary part first, the secondary part in the room left
-        clipped, sec = [0.0] * n, [0.0] * n
-        for i, (p, s, d, u) in enumerate(zip(primary, secondary, down, up)):
-            if not (math.isfinite(p) and math.isfinite(s)):  # a request to stop
-                p = s = primary[i] = secondary[i] = 0.0
-                limited.add(i)
-            clipped[i] = c = _clip(p, -d, u)
-            sec[i] = _clip(s, -d - c, u - c)
-            if c != p or sec[i] != s:
-                limited.add(i)
+        clipped = np.minimum(np.maximum(primary, -down), up)
+        sec = np.minimum(np.maximum(secondary, -down - clipped), up - clipped)
+        limited |= (clipped != primary) | (sec != secondary)
         # 2. velocity: the whole command, uniformly (the braking bounds hold all the way to rest)
-        s_v, arg = _largest_step([0.0] * n, [c + s for c, s in zip(clipped, sec)], self._neg_velocity, self._velocity)
-        limited.update(arg)
+        s_v = _largest_step(self._zero, clipped + sec, self._neg_velocity, self.velocity, limited)
         # 3. acceleration: the primary part's change first, the secondary part's in the room left;
         #    each part changes from its own share of the previous command (primary: u − u_s)
-        lo_a, hi_a = self._accel_interval(previous)
-        d_p = [s_v * c - (u - us) for c, u, us in zip(clipped, previous, prev_s)]
-        d_s = [s_v * s - us for s, us in zip(sec, prev_s)]
-        s_a, arg = _largest_step(previous, d_p, lo_a, hi_a)
-        limited.update(arg)
-        mid = [u + s_a * d for u, d in zip(previous, d_p)]
-        s_s, arg = _largest_step(mid, d_s, lo_a, hi_a)
-        limited.update(arg)
+        lo_a, hi_a = previous - self._adt, previous + self._adt
+        d_p = s_v * clipped - (previous - prev_s)
+        d_s = s_v * sec - prev_s
+        s_a = _largest_step(previous, d_p, lo_a, hi_a, limited)
+        mid = previous + s_a * d_p
+        s_s = _largest_step(mid, d_s, lo_a, hi_a, limited)
         # 4. the period's box, braking first where it conflicts with the acceleration limit
         lo, hi, forced = self._box(down, up, previous, lo_a, hi_a)
-        command, out_s = [0.0] * n, [0.0] * n
-        for i, (m, d, us, a, b) in enumerate(zip(mid, d_s, prev_s, lo, hi)):
-            raw = m + s_s * d
-            command[i] = c = _clip(raw, a, b)
-            out_s[i] = us + s_s * d
-            if forced[i] or abs(c - raw) > 1e-12:
-                limited.add(i)
-        out_s = np.array(out_s)
+        raw = mid + s_s * d_s
+        command = np.minimum(np.maximum(raw, lo), hi)
+        out_s = prev_s + s_s * d_s
+        limited |= forced | (np.abs(command - raw) > 1e-12)
         share = 1.0
-        if any(secondary):
-            # the norms as np.linalg.norm takes them (sqrt of a BLAS dot), at a third of its cost
-            asked = np.array(secondary)
-            share = min(1.0, math.sqrt(out_s.dot(out_s)) / max(math.sqrt(asked.dot(asked)), 1e-300))
+        if secondary.any():
+            share = min(1.0, math.sqrt(out_s @ out_s) / max(math.sqrt(secondary @ secondary), 1e-300))
         return LimitResult(
-            command=np.array(command),
+            command=command,
             secondary=out_s,
             scale=s_v,
             accel_scale=s_a,
             secondary_scale=share,
-            limited=tuple(sorted(limited)),
-            lower=np.array(lo),
-            upper=np.array(hi),
+            limited=tuple(np.flatnonzero(limited).tolist()),
+            lower=lo,
+            upper=hi,
         )
 
-    def _floats(self, value, name, finite=False):
-        """``value`` as a list of n floats; :func:`as_finite_vector` / :func:`as_vector` errors otherwise."""
-        arr = np.asarray(value, dtype=float)
-        out = arr.tolist() if arr.shape == (self.n,) else None
-        if out is None or (finite and not all(map(math.isfinite, out))):
-            (as_finite_vector if finite else as_vector)(value, self.n, name)  # raises the detailed error
-        return out
-
     def _braking(self, position):
-        """:meth:`braking_rates` on a list of floats: (down, up) lists."""
-        down, up = [], []
-        inv_dt = 1.0 / self.dt
-        for x, lower, upper, has_lower, has_upper, half, two_a in zip(
-            position, self._lower, self._upper, self._has_lower, self._has_upper, self._half, self._two_a
-        ):
-            # distances to the limits, max(·, 0) letting a NaN position through as np.maximum does
-            d_up, d_dn = upper - x, x - lower
-            d_up = 0.0 if d_up < 0.0 else d_up
-            d_dn = 0.0 if d_dn < 0.0 else d_dn
-            up.append(_braking_rate(d_up, half, two_a, inv_dt) if has_upper else math.inf)
-            down.append(_braking_rate(d_dn, half, two_a, inv_dt) if has_lower else math.inf)
+        """:meth:`braking_rates` of a checked position vector: (down, up), not to be modified.
+        The last answer is kept: a resolver asks several times a period at one position."""
+        key = position.tobytes()
+        if key == self._last_braking[0]:
+            return self._last_braking[1]
+        # distances to the limits, of the entries that have one (NaN passes through np.maximum)
+        i = self._bounded
+        distance = np.maximum(
+            np.concatenate((position[i] - self.position_lower[i], self.position_upper[i] - position[i])), 0.0
+        )
+        rates = _braking_rate(distance, self._adt2, self.dt)
+        down, up = np.full(self.n, np.inf), np.full(self.n, np.inf)
+        down[i], up[i] = rates[: i.size], rates[i.size :]
+        self._last_braking = (key, (down, up))
         return down, up
 
-    def _accel_interval(self, previous):
-        """``previous ∓ a dt`` (lists)."""
-        return ([u - a for u, a in zip(previous, self._adt_list)], [u + a for u, a in zip(previous, self._adt_list)])
-
     def _box(self, down, up, previous, lower_accel, upper_accel):
-        """:meth:`box` from the braking rates and the acceleration interval ``previous ∓ a dt``
-        (lists): (lower, upper, forced) lists."""
-        lower, upper, forced = [], [], []
-        for d, u, v, prev, lo_a, hi_a in zip(down, up, self._velocity, previous, lower_accel, upper_accel):
-            lo_v = -v if -v >= -d else -d
-            hi_v = v if v <= u else u
-            lo = lo_v if lo_v >= lo_a else lo_a
-            hi = hi_v if hi_v <= hi_a else hi_a
-            if lo > hi:
-                lo = hi = _clip(prev, lo_v, hi_v)
-                forced.append(True)
-            else:
-                forced.append(False)
-            lower.append(lo)
-            upper.append(hi)
-        return lower, upper, forced
+        """:meth:`box` from the braking rates and the acceleration interval ``previous ∓ a dt``:
+        (lower, upper, forced)."""
+        lo_v, hi_v = np.maximum(-self.velocity, -down), np.minimum(self.velocity, up)
+        lo, hi = np.maximum(lo_v, lower_accel), np.minimum(hi_v, upper_accel)
+        forced = lo > hi
+        if forced.any():
+            nearest = np.clip(previous, lo_v, hi_v)
+            lo, hi = np.where(forced, nearest, lo), np.where(forced, nearest, hi)
+        return lo, hi, forced
 
 
-def _braking_rate(distance, half, two_a, inv_dt):
-    """Largest rate v from which braking by a·dt per period, one period at a time, stops within ``distance``.
+def _braking_rate(distance, adt, dt):
+    """Largest rates v from which braking by a·dt per period, one period at a time, stops within
+    ``distance`` (arrays, element-wise; ``adt`` = a dt; an infinite distance gives inf).
 
     Braking from v covers ``dt (n + 1) v − a dt² n (n + 1)/2`` with ``n = ⌊v / (a dt)⌋`` (v, v − a dt,
-    …, the last rate below a dt, then rest): piecewise linear in v. The continuous bound
-    ``v²/(2a) + v dt/2 = D`` meets it at every multiple of a dt and lies above it in between, so
-    its ``n`` is right or one too high. From any v within this bound, ``v − a dt`` is within the
-    next period's bound: braking always stays within the acceleration limit, and ``v dt ≤ D``.
-    (``half`` = a dt/2, ``two_a`` = 2a, ``inv_dt`` = 1/dt.)
+    …, the last rate below a dt, then rest): piecewise linear in v, so on each piece
+    ``v = (D/dt + a dt n (n + 1)/2) / (n + 1)``. The continuous bound ``v²/(2a) + v dt/2 = D``
+    meets it at every multiple of a dt and lies above it in between, so its ``n`` is right or
+    one too high (then the rate on its piece falls below n a dt). From any v within this bound, ``v − a dt`` is
+    within the next period's bound: braking always stays within the acceleration limit, and
+    ``v dt ≤ D``. A distance of zero gives zero; NaN passes through.
     """
-    if not distance > 0.0:
-        return 0.0 if distance <= 0.0 else distance  # NaN passes through
-    adt = 2.0 * half
-    n = int((-half + math.sqrt(half * half + two_a * distance)) / adt)
-    for _ in range(3):
-        rate = (distance * inv_dt + adt * n * (n + 1) * 0.5) / (n + 1)
-        if rate < n * adt and n > 0:
-            n -= 1
-        elif rate >= (n + 1) * adt:
-            n += 1
-        else:
-            return rate
-    return rate
+    half = 0.5 * adt
+    with np.errstate(invalid='ignore'):
+        n = np.floor((np.sqrt(half * half + (2.0 / dt) * adt * distance) - half) / adt)
+        n[~np.isfinite(n)] = 0.0
+        n -= (n > 0.0) & ((distance / dt + half * n * (n + 1.0)) < n * (n + 1.0) * adt)  # one too high
+        return (distance / dt + half * n * (n + 1.0)) / (n + 1.0)
 
 
-def _clip(x, lower, upper):
-    """``np.clip`` of one float: ``min(max(x, lower), upper)``."""
-    x = lower if lower > x else x
-    return upper if upper < x else x
-
-
-def _largest_step(start, step, lower, upper):
-    """Largest ``s ∈ [0, 1]`` with ``lower ≤ start + s·step ≤ upper``, and the binding indices.
-
-    ``start`` lies within the bounds. Sequences of floats, all of one length.
-    """
-    s_each = [
-        (hi - x) / d if d > 0.0 else (lo - x) / d if d < 0.0 else math.inf
-        for x, d, lo, hi in zip(start, step, lower, upper)
-    ]
-    s = min(s_each, default=math.inf)
-    if s >= 1.0:
-        return 1.0, ()
-    s = min(1.0, max(0.0, s))
-    return s, [i for i, si in enumerate(s_each) if si <= s + 1e-12]
+def _largest_step(start, step, lower, upper, binding):
+    """:func:`~wmm_control.geometry.largest_step`; the entries whose bounds bind (when the
+    whole step does not fit) are set in the boolean array ``binding``."""
+    s, per = largest_step(start, step, lower, upper)
+    if s < 1.0:
+        binding |= per <= s + 1e-12
+    return s

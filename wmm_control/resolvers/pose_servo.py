@@ -30,13 +30,11 @@ from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import ArrayLike
-from scipy.linalg import lapack
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.orientation import rpy_from_matrix, rpy_rate_map, wrap_angle
+from wmm_control.geometry import cap_norm, norm, rotation_error, rotation_z, rpy_from_matrix, rpy_rate_map, wrap_angle
 from wmm_control.resolvers.interface import (
     PoseTarget,
     Resolver,
@@ -139,7 +137,7 @@ def singularity_damping(jac: np.ndarray, rho: float, region: float, max_damping:
     Returns:
         (ρ, σ_min).
     """
-    sigma = float(lapack_svd(jac, compute_uv=False)[-1])
+    sigma = float(np.linalg.svd(jac, compute_uv=False)[-1])
     if sigma >= region:
         return rho, sigma
     return math.sqrt(rho * rho + max_damping * max_damping * (1.0 - (sigma / region) ** 2)), sigma
@@ -161,44 +159,8 @@ def damped_pinv_solve(jac: np.ndarray, rhs: np.ndarray, rho: float, activation: 
     ja = jac if activation is None else jac * activation
     gram = ja @ jac.T
     gram.ravel()[:: gram.shape[0] + 1] += rho * rho  # the diagonal (a view: gram is a new C array)
-    out = jac.T @ lapack_solve(gram, rhs)
+    out = jac.T @ np.linalg.solve(gram, rhs)
     return out if activation is None else activation * out
-
-
-# Small dense linear algebra, straight through LAPACK. np.linalg.svd and np.linalg.solve call
-# the same routines (dgesdd, dgesv; np.linalg.pinv is built on the first) behind a layer for
-# stacks of matrices whose Python overhead is several times the work on a 6 x 10 matrix:
-# svd 9.5 -> 6.3 µs, with U and V 14 -> 9 µs, solve 5.2 -> 1.4 µs. Same routines, same
-# arithmetic: the Table II runs come out identical to the bit. (That matters: the closed loop
-# grows a 1e-14 change of one command to 1e-8 within 150 periods and to O(1) within 400.)
-
-
-def lapack_svd(a: np.ndarray, compute_uv: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray] | np.ndarray:
-    """``np.linalg.svd(a, full_matrices=False, compute_uv=...)`` of a real matrix.
-
-    Returns:
-        (u, s, vt), or only ``s`` without ``compute_uv``. Shapes (m, k), (k,), (k, n),
-        k = min(m, n).
-
-    Raises:
-        numpy.linalg.LinAlgError: the SVD did not converge (e.g. NaN entries).
-    """
-    u, s, vt, info = lapack.dgesdd(a, compute_uv=int(compute_uv), full_matrices=0)
-    if info != 0:
-        raise np.linalg.LinAlgError(f'SVD did not converge (dgesdd info {info})')
-    return (u, s, vt) if compute_uv else s
-
-
-def lapack_solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.linalg.solve(a, b)`` for one square matrix (LU with partial pivoting).
-
-    Raises:
-        numpy.linalg.LinAlgError: ``a`` is singular.
-    """
-    _, _, x, info = lapack.dgesv(a, b)
-    if info != 0:
-        raise np.linalg.LinAlgError(f'Singular matrix (dgesv info {info})')
-    return x
 
 
 class PoseServoResolver(Resolver):
@@ -260,19 +222,14 @@ class PoseServoResolver(Resolver):
             pos, rot = model.ee_placement_world()
         else:
             pos, rot = state.ee_position, state.ee_rotation  # type: ignore[assignment]  # a RobotState holds both or neither
-        theta = state.base_pose[2]
-        c, s = math.cos(theta), math.sin(theta)
-        b_r_w = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        b_r_w = rotation_z(state.base_pose[2]).T
         e_pos = target.position - pos
-        rot_err = target.rotation @ rot.T
-        angle = _length(pin.log3(rot_err))
+        e_rot = rotation_error(target.rotation, rot)
+        angle = norm(e_rot)
         ff = target.velocity
         p_ref = np.empty(6)
-        e_lin = e_pos
-        e_norm = _norm(e_pos)
-        if e_norm > p.max_linear_speed / p.lambda_p:  # an absurdly far goal: keep only its direction
-            e_lin = e_pos / e_norm * (p.max_linear_speed / p.lambda_p)
-        p_ref[:3] = b_r_w @ (p.lambda_p * e_lin + ff[:3])
+        # an absurdly far goal: keep only its direction
+        p_ref[:3] = b_r_w @ (p.lambda_p * cap_norm(e_pos, p.max_linear_speed / p.lambda_p) + ff[:3])
         if p.orientation_error == 'rpy':
             jac = model.jmm(p.rpy_damping)[:, self._jmm_cols]
             e_ang = wrap_angle(rpy_from_matrix(target.rotation) - rpy_from_matrix(rot))
@@ -285,9 +242,9 @@ class PoseServoResolver(Resolver):
             jac = np.empty((6, self.n))
             jac[:, : self.n_base] = model.h_matrix()[:, self._base_cols]
             jac[:, self.n_base :] = model.arm_jacobian_base()
-            p_ref[3:] = b_r_w @ (p.lambda_p * pin.log3(rot_err) + ff[3:])
-        _cap(p_ref[:3], p.max_linear_speed)
-        _cap(p_ref[3:], p.max_angular_speed)
+            p_ref[3:] = b_r_w @ (p.lambda_p * e_rot + ff[3:])
+        p_ref[:3] = cap_norm(p_ref[:3], p.max_linear_speed)
+        p_ref[3:] = cap_norm(p_ref[3:], p.max_angular_speed)
         return jac, p_ref, e_pos, angle
 
     def task_damping(self, jac: np.ndarray, activation: np.ndarray | None = None) -> float:
@@ -320,7 +277,7 @@ class PoseServoResolver(Resolver):
         A held entry keeps its bound (its activation set to zero) and what is left of the
         task, ``ṗ_ref − J_i u_i``, is solved again on the other columns, one round per newly
         held entry (saturation in the null space, Flacco et al. 2012, at velocity level). With
-        nothing held the result is the plain solution, to the bit.
+        nothing held the result is the plain solution itself.
 
         Args:
             jac: J over u = (base axes, q̇_a). Shape (6, n_b + n).
@@ -412,7 +369,7 @@ class PoseServoResolver(Resolver):
             method=self.name,
             mode=mode,
             psi=float(psi),
-            position_error=_norm(e_pos),
+            position_error=norm(e_pos),
             orientation_error=angle,
             limit_scale=lim.scale,
             accel_scale=lim.accel_scale,
@@ -516,35 +473,3 @@ class PoseServoResolver(Resolver):
             cycle_time_s=elapsed,
             **self._safety_fields(),
         )
-
-
-# The helpers below work on 3-vectors, where a numpy reduction (np.max, np.linalg.norm)
-# costs 1-3 µs of call overhead for a few flops: the largest magnitude is taken on Python
-# floats and the norm as np.linalg.norm takes it (the square root of the dot product), the
-# same values at a fifth of the cost.
-
-
-def _length(vec):
-    """``np.linalg.norm`` of a 1-D float array."""
-    return math.sqrt(vec.dot(vec))
-
-
-def _largest_magnitude(vec):
-    """``max |vec_i|`` of a 1-D float array."""
-    return max(map(abs, vec.tolist()))
-
-
-def _norm(vec):
-    """Euclidean norm without overflow for entries near the float range (e.g. 1e300)."""
-    big = _largest_magnitude(vec)
-    return 0.0 if big == 0.0 else big * _length(vec / big)
-
-
-def _cap(vec, limit):
-    """Scale ``vec`` in place to norm ``limit`` when it is longer, keeping its direction."""
-    big = _largest_magnitude(vec)
-    if big > limit:
-        vec /= big  # now every entry is in [−1, 1]: no overflow below
-    norm = _length(vec)
-    if norm > limit:
-        vec *= limit / norm

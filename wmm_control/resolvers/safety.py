@@ -103,6 +103,7 @@ import qpsolvers
 
 from wmm_control.base.swmr_controller import SwmrParams
 from wmm_control.errors import ConfigError
+from wmm_control.geometry import rotation_z
 from wmm_control.kinematics.collision import CollisionModel
 
 __all__ = ['SafetyParams', 'SafetyResult', 'SafetyStage', 'base_lag']
@@ -332,7 +333,7 @@ class SafetyStage:
             return SafetyResult(command, clearance, label, 0, False)
         base_full = near.base_jacobian  # over (vx, vy, ω), base frame
         # the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for world-frame rates
-        to_base = _world_to_base(base_pose[2]) if world_rates else np.eye(3)
+        to_base = rotation_z(base_pose[2]).T if world_rates else np.eye(3)  # R(θ)ᵀ
         rows = np.hstack(((base_full @ to_base)[:, axes], near.rate_jacobian))
         distance = near.distance
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
@@ -431,7 +432,7 @@ class SafetyStage:
             turn = omega * self.base_lag + (omega * abs(omega) / (2.0 * alpha) if alpha > 0.0 else 0.0)
         if abs(turn) < TOLERANCE:
             return rows, bound
-        ahead = base_full[moved] @ _world_to_base(-turn)  # rows R(−Δθ) j: jᵀ R(Δθ)
+        ahead = base_full[moved] @ rotation_z(turn)  # rows R(−Δθ) j: jᵀ R(Δθ)
         return _with_base_rows(rows, bound, axes, moved, ahead @ to_base)
 
     def _brake_on_path(self, distances, rows, bound, axes, command, v0, own, moved, to_base, lower, upper):
@@ -610,9 +611,3 @@ def base_lag(robot) -> float:
     if getattr(robot, 'steerable', None) is None:
         return 0.0
     return SwmrParams.from_robot_config(robot).lag
-
-
-def _world_to_base(theta: float) -> np.ndarray:
-    """R(θ)ᵀ on (ẋ, ẏ, θ̇): the world-frame rates of a base at heading ``theta`` as (vx, vy, ω)."""
-    c, s = math.cos(theta), math.sin(theta)
-    return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])

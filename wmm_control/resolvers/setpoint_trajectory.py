@@ -14,6 +14,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
+from wmm_control.geometry import rotation_error
 from wmm_control.resolvers.interface import PoseTarget
 
 __all__ = ['SetpointTrajectory']
@@ -46,7 +47,7 @@ class SetpointTrajectory:
         self.p0 = np.asarray(start_position, dtype=float).copy()
         self.r0 = np.asarray(start_rotation, dtype=float).copy()
         self.dp = goal.position - self.p0
-        self.rotvec = pin.log3(goal.rotation @ self.r0.T)  # world-frame rotation vector
+        self.rotvec = rotation_error(goal.rotation, self.r0)  # world-frame rotation vector
         d, angle = float(np.linalg.norm(self.dp)), float(np.linalg.norm(self.rotvec))
         self.duration = max(
             _PEAK_SPEED * d / max_speed,

@@ -11,30 +11,11 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from wmm_control.resolvers.pose_servo import lapack_svd
+from wmm_control.geometry import largest_step
 
-__all__ = ['SnsResult', 'full_row_rank_pinv', 'sns_accelerations', 'task_scale']
+__all__ = ['SnsResult', 'full_row_rank_pinv', 'sns_accelerations']
 
 _TOL = 1e-9
-
-
-def task_scale(
-    start: np.ndarray, step: np.ndarray, lower: np.ndarray, upper: np.ndarray, mask: np.ndarray
-) -> tuple[float, np.ndarray]:
-    """Largest ``s ∈ [0, 1]`` with ``lower ≤ start + s·step ≤ upper`` on the entries of ``mask``.
-
-    Returns:
-        (s, per_entry): ``per_entry`` is each masked entry's own largest s (inf where it does
-        not bind, 0 where ``start`` is already out of bounds; inf outside the mask).
-    """
-    per = np.full(len(start), np.inf)
-    up = mask & (step > 0)
-    down = mask & (step < 0)
-    per[up] = (upper[up] - start[up]) / step[up]
-    per[down] = (lower[down] - start[down]) / step[down]
-    np.maximum(per, 0.0, out=per)
-    per[mask & ((start > upper + _TOL) | (start < lower - _TOL))] = 0.0
-    return float(min(1.0, np.min(per))), per
 
 
 class SnsResult(NamedTuple):
@@ -57,15 +38,15 @@ class SnsResult(NamedTuple):
 
 
 def full_row_rank_pinv(a: np.ndarray, rcond: float) -> np.ndarray | None:
-    """``a⁺`` from one SVD when ``a`` (r, k) has full row rank, else None.
+    """``a⁺`` when ``a`` (r, k) has full row rank, else None.
 
-    Full row rank: r singular values, the smallest above ``rcond`` times the largest. Then no
-    singular value is cut and ``a⁺ = V Σ⁻¹ Uᵀ``, what ``np.linalg.pinv(a, rcond)`` gives.
+    Full row rank: r singular values, the smallest above ``rcond`` times the largest. One
+    ``numpy.linalg.lstsq`` call gives both: the minimum-norm least-squares solution of
+    ``a X = I`` is ``a⁺``, with the singular values below ``rcond`` times the largest cut, as
+    ``numpy.linalg.pinv(a, rcond)`` cuts them, and the rank they leave.
     """
-    u, sv, vt = lapack_svd(a)
-    if sv.size < a.shape[0] or sv[-1] <= rcond * sv[0]:
-        return None
-    return (vt.T / sv) @ u.T
+    pinv, _, rank, _ = np.linalg.lstsq(a, np.eye(a.shape[0]), rcond=rcond)  # a⁺ I, and the rank
+    return pinv if rank == a.shape[0] else None
 
 
 def sns_accelerations(
@@ -113,7 +94,7 @@ def sns_accelerations(
         over = act & ((q > upper + _TOL) | (q < lower - _TOL))
         if not np.any(over):
             return SnsResult(q, 1.0, act, saturated, jp)
-        s, per = task_scale(a, b, lower, upper, act)
+        s, per = largest_step(a, b, lower, upper, act)
         if best is None or s > best.alpha:
             best = SnsResult(np.clip(a + s * b, lower, upper), s, act.copy(), saturated.copy(), jp)
         worst = int(np.argmin(np.where(over, per, np.inf)))

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmm_control.checks import Freshness
-from wmm_control.kinematics.orientation import matrix_from_quaternion, unit_quaternion
+from wmm_control.geometry import matrix_from_quaternion, unit_quaternion
 from wmm_control.resolvers.interface import PoseTarget
 from wmm_control.resolvers.progress import GoalProgress
 

@@ -31,7 +31,8 @@ from numpy.typing import ArrayLike
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
 from wmm_control.resolvers.interface import ResolverCommand
-from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver, _norm, lapack_svd
+from wmm_control.geometry import norm
+from wmm_control.resolvers.pose_servo import PoseServoParams, PoseServoResolver
 from wmm_control.kinematics import KinematicModel
 from wmm_control.robot_config import RobotConfig
 
@@ -120,7 +121,7 @@ class TaskSharingResolver(PoseServoResolver):
         return self._psi, MODES[target]
 
     def _resolve(self, jac, p_ref, e_pos, state):
-        psi, mode = self._share(_norm(e_pos))
+        psi, mode = self._share(norm(e_pos))
         activation = np.empty(self.n)
         activation[: self.n_base] = 1.0 - psi
         activation[self.n_base :] = psi
@@ -147,7 +148,8 @@ class TaskSharingResolver(PoseServoResolver):
         held = [False] * n
         rows = jac
         for _ in range(self.n_arm):
-            null = z - _pinv(rows, p.pinv_tolerance) @ (rows @ z)
+            # (I − J⁺J) z: J⁺(J z) is the minimum-norm least-squares solution of J x = J z
+            null = z - np.linalg.lstsq(rows, rows @ z, rcond=p.pinv_tolerance)[0]
             over = [i for i, x in enumerate(null.tolist()) if not held[i] and (x < lower[i] or x > upper[i])]
             if not over:
                 return null
@@ -168,12 +170,3 @@ class TaskSharingResolver(PoseServoResolver):
             return command
         feasible_twist = as_finite_vector(feasible_twist, 3, 'feasible_twist')
         return self._add_compensation(command, feasible_twist)
-
-
-def _pinv(a, rcond):
-    """``np.linalg.pinv(a, rcond)``: the same operations on :func:`lapack_svd`, at half the cost."""
-    u, s, vt = lapack_svd(a)
-    sigma = s.tolist()  # (Python floats: 6 to 13 values, numpy calls cost more)
-    cutoff = rcond * sigma[0]  # LAPACK sorts them: the first is the largest
-    s_inv = np.array([1.0 / x if x > cutoff else 0.0 for x in sigma])
-    return vt.T @ (s_inv[:, None] * u.T)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from wmm_control.resolvers.acceleration_level import AccelerationParams, AccelerationResolver
-from wmm_control.resolvers.sns import task_scale
+from wmm_control.geometry import largest_step
 from wmm_control.kinematics import KinematicModel
 from wmm_control.robot_config import RobotConfig
 
@@ -39,7 +39,6 @@ class TraditionalResolver(AccelerationResolver):
 
     def _accelerations(self, task):
         jac = task['jac']
-        n = jac.shape[1]
         j_pinv = np.linalg.pinv(jac, rcond=self.params.rcond)
         qdd = j_pinv @ (task['xdd'] - task['drift'])
         if self.params.manipulability:
@@ -50,7 +49,7 @@ class TraditionalResolver(AccelerationResolver):
         # whole body's scale to zero, and with zero accelerations the robot coasts on
         qdd = np.clip(qdd, task['brake_lower'], task['brake_upper'])
         anchor = np.clip(0.0, lo, hi)
-        scale, per = task_scale(anchor, qdd - anchor, lo, hi, np.ones(n, dtype=bool))
+        scale, per = largest_step(anchor, qdd - anchor, lo, hi)
         limited = tuple(int(i) for i in np.flatnonzero(per <= scale + 1e-12)) if scale < 1.0 else ()
         return anchor + scale * (qdd - anchor), {
             'mode': 'whole_body',

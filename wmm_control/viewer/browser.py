@@ -21,7 +21,7 @@ import viser
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import Obstacle
-from wmm_control.kinematics.orientation import quaternion_from_matrix
+from wmm_control.geometry import quaternion_from_matrix
 from wmm_control.viewer.scene import ScenePoses, Shape, Trail, wxyz_from_xyzw
 
 __all__ = ['BrowserScene', 'CAMERA_LOOK_AT', 'CAMERA_POSITION']

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from wmm_control.checks import Freshness
-from wmm_control.kinematics.orientation import yaw_from_quaternion
+from wmm_control.geometry import twist_to_world, yaw_from_quaternion
 from wmm_control.viewer.scene import xyzw_from_wxyz
 
 __all__ = ['BASE_SOURCES', 'BasePose', 'BaseCourse', 'inputs_markdown']
@@ -90,8 +90,7 @@ class BaseCourse:
         if twist is None or not self._fresh.fresh(now) or not np.any(twist[:2]):
             return None
         yaw = yaw_from_quaternion(xyzw_from_wxyz(base_wxyz))
-        c, s = math.cos(yaw), math.sin(yaw)
-        return np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1]])
+        return twist_to_world(yaw, (twist[0], twist[1], 0.0))[:2]
 
 
 def inputs_markdown(joint_age: float, source: str, rejected: int, goals_sent: int) -> str:

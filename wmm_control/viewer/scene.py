@@ -20,7 +20,13 @@ import numpy as np
 import pinocchio as pin
 
 from wmm_control.errors import ConfigError, NonFiniteError, UnknownFrameError
-from wmm_control.kinematics.orientation import matrix_from_quaternion, quaternion_from_matrix, unit_quaternion
+from wmm_control.geometry import (
+    continuous_from_q,
+    continuous_to_q,
+    matrix_from_quaternion,
+    quaternion_from_matrix,
+    unit_quaternion,
+)
 
 __all__ = [
     'Shape',
@@ -229,7 +235,7 @@ class RobotScene:
             raise NonFiniteError(f'non-finite positions of joints {bad}')
         for (index, nq), value in known:
             if nq == 2:
-                self.q[index], self.q[index + 1] = math.cos(value), math.sin(value)
+                self.q[index], self.q[index + 1] = continuous_to_q(float(value))
             else:
                 self.q[index] = value
         return [n for n in names if n not in self._slots]
@@ -238,7 +244,7 @@ class RobotScene:
         """Every joint :meth:`set_joints` can set, and its current position."""
         out = {}
         for name, (index, nq) in self._slots.items():
-            out[name] = math.atan2(self.q[index + 1], self.q[index]) if nq == 2 else float(self.q[index])
+            out[name] = continuous_from_q(self.q[index], self.q[index + 1]) if nq == 2 else float(self.q[index])
         return out
 
     def poses(self, base_position, base_wxyz) -> ScenePoses:
