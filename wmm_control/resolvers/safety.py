@@ -129,8 +129,9 @@ _PARTS = tuple(
     np.array(part, dtype=bool) for part in ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1))
 )
 #: The QP solver (:mod:`qpsolvers`' name). DAQP, a dual active-set method in C, solves these
-#: dense QPs (the command's few entries, up to a few hundred damper rows) exactly to rounding in
-#: tens of microseconds; quadprog (Goldfarb–Idnani) is about half as fast (benchmarks/bench_safety.py).
+#: dense QPs (the command's few entries, up to a few hundred damper rows) to rounding; on this
+#: machine a QP of 10 variables and 40 rows with bounds took DAQP 17 µs and quadprog (compiled
+#: Goldfarb–Idnani) 32 µs at the median, OSQP set up for each call 1 ms.
 QP_SOLVER = 'daqp'
 
 
