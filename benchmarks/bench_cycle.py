@@ -68,6 +68,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # the benchmarks' shar
 from shared import PinkStep, closed_loop_states, pink_installed  # noqa: E402
 from wmm_control.base import make_base_controller  # noqa: E402
 from wmm_control.cycle import Cycle  # noqa: E402
+from wmm_control.geometry import quaternion_from_matrix, quaternion_from_yaw  # noqa: E402
 from wmm_control.kinematics.workspace import Workspace  # noqa: E402
 from wmm_control.kinematics import KinematicModel  # noqa: E402
 from wmm_control.kinematics.collision import FLOOR  # noqa: E402
@@ -178,8 +179,8 @@ def _feed(cycle, state, target, now):
     resolver node's callbacks do between two joint states (untimed: not the cycle's work)."""
     period = cycle.resolver_period
     x, y, theta = state.base_pose
-    period.odometry((x, y), (0.0, 0.0, np.sin(theta / 2), np.cos(theta / 2)), state.base_twist, now)
-    pose = np.concatenate((target.position, Rotation.from_matrix(target.rotation).as_quat()))
+    period.odometry((x, y), quaternion_from_yaw(theta), state.base_twist, now)
+    pose = np.concatenate((target.position, quaternion_from_matrix(target.rotation)))
     period.goal('world', pose, now)
 
 

@@ -19,19 +19,17 @@ Use it for fast experiments and tests. The ROS nodes do the same over topics;
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import pinocchio as pin
 
 from wmm_control.base import BaseController, make_base_controller
 from wmm_control.base.period import default_applied_rate_tolerance
 from wmm_control.cycle import Cycle
 from wmm_control.errors import ConfigError
-from wmm_control.geometry import matrix_from_quaternion
+from wmm_control.geometry import matrix_from_quaternion, quaternion_from_matrix, quaternion_from_yaw
 from wmm_control.resolvers import PoseTarget, Resolver, ResolverCommand, RobotState
 from wmm_control.resolvers.period import ResolverSettings
 
@@ -136,31 +134,33 @@ class ClosedLoop:
         """Keep the robot off ``obstacles`` (world frame) and refuse goals inside them."""
         self.cycle.resolver_period.set_obstacles(obstacles)
 
+    def _base(self):
+        """The base's (pose, twist) as the resolver receives them: the ground truth with
+        ground-truth feedback, else the wheel odometry."""
+        w = self.world
+        if self.feedback == 'ground_truth':
+            return w.base_pose(), w.base_twist()
+        return w.odom_pose(), w.odom_twist()
+
     def state(self) -> RobotState:
         """The :class:`RobotState` the resolver sees now."""
         w = self.world
         _, q, qd = w.joint_state()
+        pose, twist = self._base()
         if self.feedback == 'ground_truth':
             pos, quat = w.ee_pose()
             return RobotState(
-                w.base_pose(),
-                w.base_twist(),
-                q[self._arm],
-                qd[self._arm],
-                ee_position=pos,
-                ee_rotation=matrix_from_quaternion(quat),
+                pose, twist, q[self._arm], qd[self._arm], ee_position=pos, ee_rotation=matrix_from_quaternion(quat)
             )
-        return RobotState(w.odom_pose(), w.odom_twist(), q[self._arm], qd[self._arm])
+        return RobotState(pose, twist, q[self._arm], qd[self._arm])
 
     def _measure(self, now: float) -> None:
         """The odometry (the true base pose with ground-truth feedback) and the end effector's
         pose, as the nodes receive them."""
         w, period = self.world, self.cycle.resolver_period
-        ground_truth = self.feedback == 'ground_truth'
-        pose, twist = (w.base_pose(), w.base_twist()) if ground_truth else (w.odom_pose(), w.odom_twist())
-        half = 0.5 * float(pose[2])
-        self.events += period.odometry(pose[:2], (0.0, 0.0, math.sin(half), math.cos(half)), twist, now)
-        if ground_truth:
+        pose, twist = self._base()
+        self.events += period.odometry(pose[:2], quaternion_from_yaw(float(pose[2])), twist, now)
+        if self.feedback == 'ground_truth':
             pos, quat = w.ee_pose()
             self.events += period.ee_pose(self.world_frame, np.concatenate((pos, quat)), now)
 
@@ -169,7 +169,7 @@ class ClosedLoop:
         velocity and acceleration the feedforward), as ``/goal_pose`` and ``/ee_reference``
         would carry it."""
         period, now = self.cycle.resolver_period, self.world.time
-        pose = np.concatenate((target.position, pin.Quaternion(target.rotation).coeffs()))
+        pose = np.concatenate((target.position, quaternion_from_matrix(target.rotation)))
         if tracking:
             self.events += period.trajectory_point(self.world_frame, pose, target.velocity, target.acceleration, now)
         else:

@@ -39,7 +39,6 @@ class JointSelector:
             more than ``POSITION_MARGIN`` is rejected.
     """
 
-    PLAUSIBLE_FACTOR = PLAUSIBLE_FACTOR
     POSITION_MARGIN = 0.5  # [rad]
     MAX_POSITION = 1e9  # [rad] no joint angle is larger (a wheel at 12 rad/s needs 2.6 years)
 
@@ -56,7 +55,7 @@ class JointSelector:
         self._max_rate = (
             None
             if velocity_limits is None
-            else self.PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), len(self.joints))
+            else PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), len(self.joints))
         )
         self._bounds = (
             None
@@ -117,7 +116,7 @@ class JointSelector:
             return (
                 None,
                 None,
-                (f'with rates of {bad} beyond {self.PLAUSIBLE_FACTOR:g} times their limits (a measurement glitch?)'),
+                (f'with rates of {bad} beyond {PLAUSIBLE_FACTOR:g} times their limits (a measurement glitch?)'),
             )
         if np.any(np.abs(q) > self.MAX_POSITION):
             return None, None, f'with positions beyond {self.MAX_POSITION:g} rad: not joint angles'
