@@ -34,7 +34,16 @@ from numpy.typing import ArrayLike
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.geometry import cap_norm, norm, rotation_error, rotation_z, rpy_from_matrix, rpy_rate_map, wrap_angle
+from wmm_control.geometry import (
+    cap_norm,
+    largest_step,
+    norm,
+    rotation_error,
+    rotation_z,
+    rpy_from_matrix,
+    rpy_rate_map,
+    wrap_angle,
+)
 from wmm_control.resolvers.interface import (
     PoseTarget,
     Resolver,
@@ -45,9 +54,17 @@ from wmm_control.resolvers.interface import (
 )
 from wmm_control.resolvers.limits import CommandLimits
 from wmm_control.resolvers.safety import SafetyParams, SafetyStage
+from wmm_control.resolvers.sns import saturate_in_null_space
 from wmm_control.robot_config import RobotConfig
 
-__all__ = ['PoseServoParams', 'PoseServoResolver', 'damped_pinv_solve', 'singularity_damping', 'ORIENTATION_ERRORS']
+__all__ = [
+    'PoseServoParams',
+    'PoseServoResolver',
+    'damped_pinv',
+    'damped_pinv_solve',
+    'singularity_damping',
+    'ORIENTATION_ERRORS',
+]
 
 ORIENTATION_ERRORS = ('rpy', 'log')
 _H_COLS = (0, 1, 5)  # columns of H J_b of the base twist (vx, vy, ω)
@@ -143,24 +160,27 @@ def singularity_damping(jac: np.ndarray, rho: float, region: float, max_damping:
     return math.sqrt(rho * rho + max_damping * max_damping * (1.0 - (sigma / region) ** 2)), sigma
 
 
-def damped_pinv_solve(jac: np.ndarray, rhs: np.ndarray, rho: float, activation: np.ndarray | None = None) -> np.ndarray:
-    """``A Jᵀ (J A Jᵀ + ρ² I)⁻¹ rhs``: the weighted damped pseudo-inverse of Sorour eq (9).
+def damped_pinv(jac: np.ndarray, rho: float, activation: np.ndarray | None = None) -> np.ndarray:
+    """``A Jᵀ (J A Jᵀ + ρ² I)⁻¹``: the weighted damped pseudo-inverse of Sorour eq (9).
 
     Args:
         jac: J. Shape (m, n).
-        rhs: task-space vector. Shape (m,).
         rho: damping ρ.
         activation: the diagonal of A = W⁻¹ (1 = the column takes part fully, 0 = not at
             all), default all ones (eq 8's damped pseudo-inverse). Shape (n,).
 
     Returns:
-        Shape (n,); exactly zero where the activation is zero.
+        Shape (n, m); rows exactly zero where the activation is zero.
     """
     ja = jac if activation is None else jac * activation
     gram = ja @ jac.T
     gram.ravel()[:: gram.shape[0] + 1] += rho * rho  # the diagonal (a view: gram is a new C array)
-    out = jac.T @ np.linalg.solve(gram, rhs)
-    return out if activation is None else activation * out
+    return np.linalg.solve(gram, ja).T  # (G⁻¹ J A)ᵀ = A Jᵀ G⁻¹, G symmetric
+
+
+def damped_pinv_solve(jac: np.ndarray, rhs: np.ndarray, rho: float, activation: np.ndarray | None = None) -> np.ndarray:
+    """:func:`damped_pinv` applied to the task-space vector ``rhs`` (m,): shape (n,)."""
+    return damped_pinv(jac, rho, activation) @ rhs
 
 
 class PoseServoResolver(Resolver):
@@ -293,46 +313,46 @@ class PoseServoResolver(Resolver):
         if not (p.hold_joint_limits or p.arm_takeover):
             return task
         nb, n = self.n_base, self.n
-        lower, upper = [-math.inf] * n, [math.inf] * n
+        lower, upper = np.full(n, -np.inf), np.full(n, np.inf)
         if p.hold_joint_limits:
             self._position[nb:] = q_arm
             down, up = self.limits.braking_rates(self._position)
-            lower[nb:] = (-down[nb:]).tolist()
-            upper[nb:] = up[nb:].tolist()
+            lower[nb:], upper[nb:] = -down[nb:], up[nb:]
+        weights = np.ones(n) if activation is None else np.array(activation, dtype=float)
+        held = np.zeros(n)
         if p.arm_takeover:
             # last period's base share of the task (the command less its null-space share) ± a·t_s
-            last = [self._prev[i] - self._prev_null[i] for i in range(nb)]
-            step = (self.limits.acceleration[:nb] * self.limits.dt).tolist()
-            speed = self.limits.velocity[:nb].tolist()
-            for i in range(nb):
-                lower[i] = max(last[i] - step[i], -speed[i])
-                upper[i] = min(last[i] + step[i], speed[i])
-        active = np.ones(n) if activation is None else np.array(activation, dtype=float)
-        fixed = np.zeros(n)
-        values = task.tolist()
-        if p.arm_takeover and any(not lower[i] - 1e-12 <= values[i] <= upper[i] + 1e-12 for i in range(nb)):
-            # the base turns towards its share by the largest fraction of the way that every axis
-            # can go this period (its direction kept), within its velocity limits; the arm does the rest
-            frac = min(
-                [1.0] + [step[i] / abs(values[i] - last[i]) for i in range(nb) if abs(values[i] - last[i]) > step[i]]
-            )
-            for i in range(nb):
-                fixed[i] = min(max(last[i] + frac * (values[i] - last[i]), lower[i]), upper[i])
-                active[i] = 0.0
-            task = fixed + damped_pinv_solve(jac, p_ref - jac @ fixed, self.task_damping(jac, active), active)
-        for _ in range(self.n_arm):
-            over = [
-                i
-                for i, x in enumerate(task.tolist())
-                if active[i] > 0.0 and (x < lower[i] - 1e-12 or x > upper[i] + 1e-12)
-            ]
-            if not over:
-                break
-            for i in over:
-                fixed[i] = min(max(task[i], lower[i]), upper[i])
-                active[i] = 0.0
-            task = fixed + damped_pinv_solve(jac, p_ref - jac @ fixed, self.task_damping(jac, active), active)
-        return task
+            last = self._prev[:nb] - self._prev_null[:nb]
+            step = self.limits.acceleration[:nb] * self.limits.dt
+            speed = self.limits.velocity[:nb]
+            lower[:nb] = np.maximum(last - step, -speed)
+            upper[:nb] = np.minimum(last + step, speed)
+            base = task[:nb]
+            if np.any((base < lower[:nb] - 1e-12) | (base > upper[:nb] + 1e-12)):
+                # the base turns towards its share by the largest fraction of the way that every
+                # axis can go this period (its direction kept), within its velocity limits; the
+                # arm does the rest
+                frac, _ = largest_step(last, base - last, last - step, last + step)
+                held[:nb] = np.clip(last + frac * (base - last), lower[:nb], upper[:nb])
+                weights[:nb] = 0.0
+
+        def inverse(cols: np.ndarray) -> np.ndarray:
+            w = np.zeros(n)
+            w[cols] = weights[cols]
+            return damped_pinv(jac, self.task_damping(jac, w), w)[cols]
+
+        return saturate_in_null_space(
+            inverse,
+            jac,
+            p_ref,
+            np.zeros(len(p_ref)),
+            lower,
+            upper,
+            weights > 0.0,
+            held,
+            one_at_a_time=False,
+            scale=False,
+        ).qdd
 
     # ------------------------------------------------------------------ step
     @abstractmethod
