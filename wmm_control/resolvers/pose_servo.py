@@ -308,10 +308,9 @@ class PoseServoResolver(Resolver):
         Returns:
             Shape (n_b + n,).
         """
-        task = damped_pinv_solve(jac, p_ref, self.task_damping(jac, activation), activation)
         p = self.params
         if not (p.hold_joint_limits or p.arm_takeover):
-            return task
+            return damped_pinv_solve(jac, p_ref, self.task_damping(jac, activation), activation)
         nb, n = self.n_base, self.n
         lower, upper = np.full(n, -np.inf), np.full(n, np.inf)
         if p.hold_joint_limits:
@@ -327,7 +326,7 @@ class PoseServoResolver(Resolver):
             speed = self.limits.velocity[:nb]
             lower[:nb] = np.maximum(last - step, -speed)
             upper[:nb] = np.minimum(last + step, speed)
-            base = task[:nb]
+            base = damped_pinv_solve(jac, p_ref, self.task_damping(jac, activation), activation)[:nb]
             if np.any((base < lower[:nb] - 1e-12) | (base > upper[:nb] + 1e-12)):
                 # the base turns towards its share by the largest fraction of the way that every
                 # axis can go this period (its direction kept), within its velocity limits; the
@@ -337,9 +336,8 @@ class PoseServoResolver(Resolver):
                 weights[:nb] = 0.0
 
         def inverse(cols: np.ndarray) -> np.ndarray:
-            w = np.zeros(n)
-            w[cols] = weights[cols]
-            return damped_pinv(jac, self.task_damping(jac, w), w)[cols]
+            part, w = jac[:, cols], weights[cols]
+            return damped_pinv(part, self.task_damping(part, w), w)
 
         return saturate_in_null_space(
             inverse,

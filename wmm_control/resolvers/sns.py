@@ -104,24 +104,27 @@ def saturate_in_null_space(
         if inv is None:
             break  # this set cannot do the task
         a = x_n.copy()
-        a[cols] += inv @ (-offset - jac @ x_n)
         b = np.zeros(n)
+        a[cols] += inv @ (-offset - jac @ x_n)
         b[cols] = inv @ task
         x = a + b
         over = act & ((x > upper + _TOL) | (x < lower - _TOL))
-        last = SnsResult(x, 1.0, act.copy(), saturated.copy(), inv)
-        if not np.any(over):
-            return last
+        if not over.any():
+            return SnsResult(x, 1.0, act, saturated, inv)
         if scale or one_at_a_time:
             s, per = largest_step(a, b, lower, upper, act)
             if scale and (best is None or s > best.alpha):
                 best = SnsResult(np.clip(a + s * b, lower, upper), s, act.copy(), saturated.copy(), inv)
             if one_at_a_time:
-                over = np.arange(n) == int(np.argmin(np.where(over, per, np.inf)))
+                first = np.argmin(np.where(over, per, np.inf))  # the entry that binds first
+                over = np.zeros(n, dtype=bool)
+                over[first] = True
+        if not scale:
+            last = SnsResult(x, 1.0, act.copy(), saturated.copy(), inv)
         act &= ~over
         saturated |= over
         x_n[over] = np.clip(x[over], lower[over], upper[over])
-    if scale and best is not None:
+    if best is not None:
         return best
     if last is not None:
         return last
