@@ -379,7 +379,9 @@ def scale_into_limits(vec: ArrayLike, limits: ArrayLike, rows: np.ndarray | None
     """
     vec = np.array(vec, dtype=float)
     limits = np.asarray(limits, dtype=float)
-    if (np.abs(vec if rows is None else rows @ vec) <= limits).all():  # (an overflow to inf is not)
+    with np.errstate(over='ignore', invalid='ignore'):  # an overflow to inf (or NaN) is not within
+        image = np.abs(vec if rows is None else rows @ vec)
+    if (image <= limits).all():
         return vec, 1.0
     peak = float(np.max(np.abs(vec)))
     unit = vec / peak  # largest entry ±1: nothing below overflows

@@ -328,8 +328,9 @@ class KinematicModel:
     # ------------------------------------------------------------------ manipulability
     def arm_jacobian_world(self, rows: str = 'position') -> np.ndarray:
         """Arm part J_m of the world Jacobian: 'position' (3, 7) or 'full' (6, 7) rows."""
+        picked = _rows(rows)  # the argument first: its error holds whatever the state
         self._require()
-        return self._jac[_rows(rows), N_BASE:].copy()
+        return self._jac[picked, N_BASE:].copy()
 
     def sigma_min(self, rows: str = 'position') -> float:
         """Smallest singular value of J_m (a distance-to-singularity measure)."""

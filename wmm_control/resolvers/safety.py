@@ -528,7 +528,7 @@ class SafetyStage:
         )
         a = np.minimum(p.collision_braking, deceleration)
         room = np.maximum(distance - d_s, 0.0)
-        with np.errstate(divide='ignore', invalid='ignore'):
+        with np.errstate(divide='ignore', invalid='ignore', over='ignore'):  # a tiny a: inf, then min
             braking = np.where(a > 0.0, a * (np.sqrt(lag * lag + 2.0 * room / a) - lag), 0.0)
             gain = np.where(
                 lag > 0.0, np.minimum(p.collision_gain / (d_i - d_s), 1.0 / lag), p.collision_gain / (d_i - d_s)
