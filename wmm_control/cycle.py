@@ -20,6 +20,9 @@ odometry, the end effector's measured pose, obstacles. So both engines take and 
 inputs and answer with the same commands.
 """
 
+import gc
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +32,26 @@ from wmm_control.base.period import BasePeriod, PeriodAnswer
 from wmm_control.resolvers.interface import Resolver, ResolverCommand
 from wmm_control.resolvers.period import ResolverPeriod, ResolverSettings
 
-__all__ = ['Cycle', 'CycleResult']
+__all__ = ['Cycle', 'CycleResult', 'steady_heap']
+
+
+@contextmanager
+def steady_heap() -> Iterator[None]:
+    """Periods run inside keep the garbage collector's full passes short.
+
+    Python's collector now and then walks every container object the process has (its oldest
+    generation): with the models, the simulator and a run's log built, one such pass took
+    35.5 ms inside a 25 ms period (measured in a randomized study: one cycle of 38 ms CPU
+    against a p99 of 1.9 ms). On entry the garbage so far is collected and what survives is
+    frozen (``gc.freeze``): later passes walk only what was allocated since. On exit it is
+    handed back to the collector (``gc.unfreeze``).
+    """
+    gc.collect()
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 @dataclass(frozen=True)

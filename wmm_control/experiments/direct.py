@@ -7,6 +7,7 @@ from collections.abc import Callable
 
 from sim_bridge.closed_loop import ClosedLoop
 from sim_bridge.world import SimWorld
+from wmm_control.cycle import steady_heap
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.scenario import Scenario
 from wmm_control.resolvers.interface import Resolver, ResolverDiagnostics
@@ -48,38 +49,39 @@ def run_scenario(
     n = int(round(scenario.duration / world.dt))
     t0 = time.perf_counter()
     submitted = None
-    for _ in range(n):
-        gi = scenario.goal_index(world.time)
-        if reference is not None:  # a trajectory: a point every period, as goal_sequencer publishes it
-            rec = loop.step(scenario.target(world.time, reference), tracking=True)
-        else:  # goals: each when its time comes, as goal_sequencer publishes them
-            rec = loop.step(scenario.target(world.time, reference) if gi != submitted else None, tracking=False)
-            submitted = gi
-        cmd = rec.command
-        if cmd is None:  # the target was refused (loop.events say why): the robot held, as the
-            # resolver node holds it, and nothing logged, as the node's recorder logs nothing
+    with steady_heap():  # no full pass of the garbage collector walks the models mid-run
+        for _ in range(n):
+            gi = scenario.goal_index(world.time)
+            if reference is not None:  # a trajectory: a point every period, as goal_sequencer publishes it
+                rec = loop.step(scenario.target(world.time, reference), tracking=True)
+            else:  # goals: each when its time comes, as goal_sequencer publishes them
+                rec = loop.step(scenario.target(world.time, reference) if gi != submitted else None, tracking=False)
+                submitted = gi
+            cmd = rec.command
+            if cmd is None:  # the target was refused (loop.events say why): the robot held, as the
+                # resolver node holds it, and nothing logged, as the node's recorder logs nothing
+                if progress is not None:
+                    progress(1)
+                continue
+            log.append(
+                rec.t,
+                gi,
+                rec.ee_position,
+                rec.ee_rotation,
+                rec.base_pose,
+                rec.q_arm,
+                cmd.arm_velocity,
+                cmd.base_twist,
+                rec.feasible_twist,
+                cmd.diagnostics,
+                q=rec.q,
+                cycle_s=rec.cycle_s,
+                cycle_cpu_s=rec.cycle_cpu_s,
+            )
             if progress is not None:
                 progress(1)
-            continue
-        log.append(
-            rec.t,
-            gi,
-            rec.ee_position,
-            rec.ee_rotation,
-            rec.base_pose,
-            rec.q_arm,
-            cmd.arm_velocity,
-            cmd.base_twist,
-            rec.feasible_twist,
-            cmd.diagnostics,
-            q=rec.q,
-            cycle_s=rec.cycle_s,
-            cycle_cpu_s=rec.cycle_cpu_s,
-        )
-        if progress is not None:
-            progress(1)
-        if until is not None and until(cmd.diagnostics):
-            break
+            if until is not None and until(cmd.diagnostics):
+                break
     log.wall_time_s = time.perf_counter() - t0
     refusals = [e.message for e in loop.events if e.kind == 'rejected']
     log.refused = refusals[-1] if refusals else ''

@@ -16,6 +16,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.time_source import TimeSource
 from rosgraph_msgs.msg import Clock as ClockMsg
 
+from wmm_control.cycle import steady_heap
 from wmm_control.errors import WmmError
 
 RCLError = _rclpy.RCLError
@@ -110,8 +111,9 @@ def run_node(
         executor = executor_factory()
         executor.add_node(node)
         # spin_once in a loop rather than spin(): it returns to check the stop request.
-        while rclpy.ok() and not stop:
-            executor.spin_once(timeout_sec=0.1)
+        with steady_heap():  # what the node built stays out of the garbage collector's full passes
+            while rclpy.ok() and not stop:
+                executor.spin_once(timeout_sec=0.1)
     except ExternalShutdownException:
         pass  # the context was shut down from outside (rclpy's own signal handling): a normal stop
     except WmmError as exc:
