@@ -63,7 +63,7 @@ def test_a_robot_made_by_init_from_an_unseen_urdf_reaches_near_and_far_goals(tmp
     cfg = load_robot(out)  # no hand edit
     assert cfg.arm.n == kwargs.get('arm_joints', 7)
     if base == 'steerable':
-        assert cfg.steerable.n_modules == kwargs['modules']
+        assert cfg.base.n_modules == kwargs['modules']
     if kwargs.get('prismatic_lift'):
         assert cfg.arm.types[0] == 'prismatic'
     # a goal within the arm's reach, then one that needs the base (1.5 m ahead, 1 m to the right)
