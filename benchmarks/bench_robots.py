@@ -78,7 +78,7 @@ def per_robot(cycles):
         pink = bench_pink(cycles, name)
         pink_cell = _fmt(pink) if pink is not None else 'not installed'
         print(
-            f'| {name} | {cfg.arm.n} | {cfg.base_type} | '
+            f'| {name} | {cfg.arm.n} | {cfg.base.family} | '
             + ' | '.join(cells)
             + f' | {_fmt(time_base(cfg, states))} | {pink_cell} |',
             flush=True,

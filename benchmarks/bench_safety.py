@@ -78,7 +78,7 @@ def _with_obstacles(robot, count):
     """The stage's cost at ``count`` random base poses around ``table_pillar``'s obstacles."""
     stage = SafetyStage.for_robot(robot, obstacles=load_obstacles('table_pillar'))
     model = KinematicModel(robot)
-    arm, axes = robot.arm, list(robot.base_axes)
+    arm, axes = robot.arm, list(robot.base.axes)
     limit = np.concatenate((robot.base.velocity[axes], arm.velocity))
     rng = np.random.default_rng(0)
     passed, solved, rows = [], [], []

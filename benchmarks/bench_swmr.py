@@ -64,7 +64,7 @@ def reference(k, dt):
 
 def controller():
     robot = load_robot('steerable')
-    return SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
+    return SwmrController(SteerableGeometry.from_config(robot.base), SwmrParams.from_robot_config(robot))
 
 
 def time_steps(ctrl, cycles):

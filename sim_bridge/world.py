@@ -53,8 +53,9 @@ Base motion (``base_mode``)
       the real ground contact for *support* (normal forces from PyBullet) but with zero
       friction, and each wheel's traction is a Mecanum roller tyre model applied as an
       external force at its contact point: a roller of wheel ``i`` transmits force only
-      along its axis ``a_i`` (45° in the ground plane: fl/rr ``(1, −1)/√2``, fr/rl
-      ``(1, 1)/√2``, the axes that reproduce eq. 16), the slip velocity there is
+      along its axis ``a_i = (−sin γ_i, cos γ_i)`` in the base frame (γ_i the wheel's roller
+      angle, :class:`~wmm_control.robot_config.MecanumBase`; for robot B fl/rr
+      ``(1, −1)/√2``, fr/rl ``(1, 1)/√2``, the axes of eq. 16), the slip velocity there is
       ``s_i = a_i · (v_contact,i − R φ̇_i x̂_base)`` and the force is
       ``F_i = −clip(c s_i, ±μ N_i) a_i`` (regularised Coulomb friction, ``μ`` =
       ``WHEEL_FRICTION``, ``N_i`` the PyBullet normal force of the previous substep, ``c``
@@ -98,7 +99,7 @@ from wmm_control.geometry import (
     wrap_angle,
     yaw_from_quaternion,
 )
-from wmm_control.robot_config import DifferentialConfig, MecanumConfig, RobotConfig, SteerableConfig, load_robot
+from wmm_control.robot_config import MecanumBase, RobotConfig, SteerableBase, load_robot
 
 from sim_bridge.client import OwnedClient
 from sim_bridge.collision import add_obstacle
@@ -115,8 +116,6 @@ WHEEL_FRICTION = 0.9  # Coulomb coefficient of wheel–floor contact [-]
 SUPPORT_TOLERANCE = 0.005  # [m] a link this close to the floor at the start state rests on it (a caster)
 ARM_FORCE_FACTOR = 20.0  # arm velocity-motor force = factor × URDF effort (physics mode)
 SETTLE_TIME = 0.25  # [s] of zero-command physics before t = 0 (physics mode)
-# Mecanum roller axes (base frame, unit) per wheel fl, fr, rl, rr; reproduce Xing eq. 16.
-_ROLLER_AXES = ((1.0, -1.0), (1.0, 1.0), (1.0, 1.0), (1.0, -1.0))
 
 
 class CommandResult(NamedTuple):
@@ -197,25 +196,15 @@ class SimWorld(OwnedClient):
                 'slip: the slip model applies to base_mode "kinematic" only; '
                 'in "physics" mode slip comes from the wheel contact'
             )
-        self._steerable = self.robot.steerable is not None
-        self._geom = (
-            SteerableGeometry.from_config(self.robot.steerable) if self._steerable else wheel_kinematics(self.robot)
-        )
-
         cfg = self.robot
-        if self._steerable:
-            s: SteerableConfig = cfg.steerable  # type: ignore[assignment]  # not None: self._steerable
-            self.command_groups = {
-                'arm': tuple(cfg.arm.joints),
-                'steer': tuple(s.steer_joints),
-                'drive': tuple(s.drive_joints),
-            }
-            self._r_wheel = s.wheel_radius
-        else:
-            # a wheeled base has one of the two (load_robot checks)
-            wheels: MecanumConfig | DifferentialConfig = cfg.mecanum or cfg.differential  # type: ignore[assignment]
-            self.command_groups = {'arm': tuple(cfg.arm.joints), 'wheel': tuple(wheels.wheel_joints)}
-            self._r_wheel = wheels.wheel_radius
+        base = cfg.base
+        # the rolling model of the base: the steerable one closes on the steer angles and rates
+        self._geom = SteerableGeometry.from_config(base) if isinstance(base, SteerableBase) else wheel_kinematics(cfg)
+        self._steerable = isinstance(self._geom, SteerableGeometry)
+        # Mecanum wheels drive through their rollers (the tyre model of physics mode)
+        self._tyre = isinstance(base, MecanumBase)
+        self.command_groups = {'arm': tuple(cfg.arm.joints), **base.command_groups}
+        self._r_wheel = base.wheel_radius
         self.joint_names = tuple(n for g in self.command_groups.values() for n in g)
         self._slices = {}
         start = 0
@@ -323,11 +312,7 @@ class SimWorld(OwnedClient):
         self._com_identity = max(abs(v) for v in dyn[3]) < 1e-12 and abs(abs(dyn[4][3]) - 1.0) < 1e-12
         self._com_inv = p.invertTransform(dyn[3], dyn[4])
 
-        if self._steerable:
-            wheel_links = [joints[n] for n in cfg.steerable.drive_joints]
-        else:
-            wheel_links = [joints[n] for n in self.command_groups['wheel']]
-        self._wheel_links = wheel_links
+        self._wheel_links = [joints[n] for n in cfg.base.rolling_joints]
 
         if self.base_mode == 'kinematic':
             # Nothing is simulated dynamically: switch the default motors off.
@@ -369,7 +354,7 @@ class SimWorld(OwnedClient):
         forces[arm] *= ARM_FORCE_FACTOR
         forces[forces <= 0.0] = 1e3
         self._forces = forces.tolist()
-        tyre = self.robot.mecanum is not None
+        tyre = self._tyre
         p.changeDynamics(self.ground_id, -1, lateralFriction=1.0, physicsClientId=cid)
         wheels = set(self._wheel_links)
         for j in range(p.getNumJoints(body, physicsClientId=cid)):
@@ -398,8 +383,9 @@ class SimWorld(OwnedClient):
             )
             # Regularised Coulomb: damping c with 4 c h / m = 0.25 keeps the explicit step stable.
             self._tyre_c = 0.25 * mass / (4.0 * self._h)
-            self._roller = [(ax / math.sqrt(2.0), ay / math.sqrt(2.0)) for ax, ay in _ROLLER_AXES]
-            self._normal = [0.0] * 4
+            # the axis (base frame, unit) of each wheel's roller on the floor: traction only along it
+            angles = self.robot.base.roller_angles  # a Mecanum base: self._tyre
+            self._roller = [(-math.sin(g), math.cos(g)) for g in angles.tolist()]
         self._place()
         zero = [0.0] * self._n
         p.setJointMotorControlArray(
@@ -580,7 +566,7 @@ class SimWorld(OwnedClient):
 
     def _physics_substep(self, vel, odometry=True):
         cid, body = self._cid, self.body_id
-        if self.robot.mecanum is not None:  # the roller tyre model of Mecanum wheels
+        if self._tyre:  # the roller tyre model of Mecanum wheels
             self._apply_tyre_forces()
         p.stepSimulation(physicsClientId=cid)
         if odometry:
@@ -612,7 +598,7 @@ class SimWorld(OwnedClient):
     def _apply_tyre_forces(self):
         """Mecanum roller traction at each wheel's contact point (robot B, physics mode)."""
         cid, body = self._cid, self.body_id
-        normal = [0.0] * 4
+        normal = [0.0] * len(self._wheel_links)
         for c in p.getContactPoints(bodyA=body, bodyB=self.ground_id, physicsClientId=cid):
             if c[3] in self._wheel_links:
                 normal[self._wheel_links.index(c[3])] += c[9]
@@ -626,7 +612,7 @@ class SimWorld(OwnedClient):
         )
         links = p.getLinkStates(body, self._wheel_links, physicsClientId=cid)
         r = self._r_wheel
-        for i in range(4):
+        for i in range(len(normal)):
             if normal[i] <= 0.0:
                 continue
             cx, cy, cz = links[i][4]

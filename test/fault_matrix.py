@@ -220,7 +220,7 @@ class SimRig(Rig):
             zip(cfg.arm.joints, np.maximum(np.abs(cfg.arm.position_lower), np.abs(cfg.arm.position_upper)))
         )
         world.close()
-        self.column = f'wmm_sim ({"A" if load_robot(robot).steerable else "B"})'
+        self.column = f'wmm_sim ({"A" if load_robot(robot).base.family == "steerable" else "B"})'
         self._states = 0
         super().__init__()
         self.probe.create_subscription(JointState, '/joint_states', self._on_state, 10)
@@ -300,7 +300,7 @@ class PlantRig(Rig):
     def __init__(self, robot):
         self.config = load_robot(robot)
         cfg = self.config
-        self.joint_names = list(cfg.arm.joints) + list(cfg.wheel_joints)
+        self.joint_names = list(cfg.arm.joints) + list(cfg.base.joints)
         self.q = {n: 0.0 for n in self.joint_names}
         self.q.update(zip(cfg.arm.joints, cfg.start.arm))
         self.dq = {n: 0.0 for n in self.joint_names}
@@ -340,16 +340,14 @@ class BaseControllerRig(PlantRig):
 
     def __init__(self, robot):
         super().__init__(robot)
-        self.column = 'swmr_controller' if self.config.steerable else 'mecanum_controller'
-        self.own_joints = list(
-            self.config.steerable.steer_joints if self.config.steerable else self.config.mecanum.wheel_joints
-        )
+        self.column = 'swmr_controller' if self.config.base.family == 'steerable' else 'mecanum_controller'
+        self.own_joints = list(next(iter(self.config.base.command_groups.values())))  # steer or wheel joints
         self.reference = np.array([0.4, 0.15, 0.3]) * np.asarray(self.config.base.velocity)
         self._feasible = 0
 
     def make_node(self, overrides):
         return BaseControllerNode(
-            self.config.base_type,
+            self.config.base.family,
             context=self.context,
             parameter_overrides=[Parameter('diagnostics_period', value=PERIOD), *overrides],
         )
@@ -357,21 +355,11 @@ class BaseControllerRig(PlantRig):
     def _watch_outputs(self):
         cfg = self.config
         vmax = np.asarray(cfg.base.velocity)
-        if cfg.steerable:
-            s = cfg.steerable
-            self.watch('/steer_controller/commands', Float64MultiArray, lambda m: m.data, s.steer_rate_limit)
-            self.watch('/drive_controller/commands', Float64MultiArray, lambda m: m.data, s.drive_rate_limit)
+        for group, joints in cfg.base.command_groups.items():
+            topic = f'/{group}_controller/commands'
+            self.watch(topic, Float64MultiArray, lambda m: m.data, cfg.base.rate_limits[group])
             self.probe.create_subscription(
-                Float64MultiArray, '/steer_controller/commands', lambda m: self.set_rates(s.steer_joints, m.data), 10
-            )
-            self.probe.create_subscription(
-                Float64MultiArray, '/drive_controller/commands', lambda m: self.set_rates(s.drive_joints, m.data), 10
-            )
-        else:
-            wheels = cfg.mecanum.wheel_joints
-            self.watch('/wheel_controller/commands', Float64MultiArray, lambda m: m.data, cfg.mecanum.wheel_rate_limit)
-            self.probe.create_subscription(
-                Float64MultiArray, '/wheel_controller/commands', lambda m: self.set_rates(wheels, m.data), 10
+                Float64MultiArray, topic, lambda m, joints=joints: self.set_rates(joints, m.data), 10
             )
         self.watch(
             '/base/feasible_twist',
@@ -405,7 +393,7 @@ class ResolverRig(PlantRig):
         super().__init__(robot)
         self.method = method
         self.compensated = method == 'task_sharing'
-        self.column = f'redundancy_resolver ({"A" if self.config.steerable else "B"}, {method})'
+        self.column = f'redundancy_resolver ({"A" if self.config.base.family == "steerable" else "B"}, {method})'
         model = KinematicModel(self.config)
         model.update(self.base_pose, np.array([self.q[n] for n in self.config.arm.joints]))
         pos, self.goal_rotation = model.ee_placement_world()
@@ -697,7 +685,7 @@ def _set_odom_quaternion(x, y, z, w):
 
 def _inside_body(rig):
     x, y, _ = rig.base_pose
-    return 'goal_pose', _pose([x, y, 0.35 if rig.config.steerable else -0.15], rig.goal_rotation)
+    return 'goal_pose', _pose([x, y, 0.35 if rig.config.base.family == 'steerable' else -0.15], rig.goal_rotation)
 
 
 def _empty_reference(rig):

@@ -7,29 +7,30 @@ import pytest
 from wmm_control.base import (
     BaseCommand,
     BaseController,
-    SteerableBase,
+    SteerableBaseController,
     SwmrController,
-    WheelBase,
+    WheelBaseController,
     WheelController,
     make_base_controller,
 )
+from urdf_factory import SIX_MECANUM_WHEELS, SIX_ROLLER_ANGLES, write_mecanum_robot
 from wmm_control.errors import ConfigError
 from wmm_control.robot_config import load_robot
 
-ROBOTS = ('steerable', 'mecanum', 'panda_diff')
+ROBOTS = ('steerable', 'mecanum', 'panda_diff', 'six_mecanum')
 
 
 def expected_groups(robot):
-    if robot.steerable is not None:
-        return {'steer': tuple(robot.steerable.steer_joints), 'drive': tuple(robot.steerable.drive_joints)}
-    return {'wheel': tuple(robot.wheel_joints)}
+    if robot.base.family == 'steerable':
+        return {'steer': tuple(robot.base.steer_joints), 'drive': tuple(robot.base.drive_joints)}
+    return {'wheel': tuple(robot.base.wheel_joints)}
 
 
 def wheel_twist(base, command, before):
     """The twist the wheel kinematics give for the command's rates over the period they apply,
     from the joint positions ``before`` it."""
     c = base.controller
-    if isinstance(base, SteerableBase):
+    if isinstance(base, SteerableBaseController):
         steer, drive = command.rates['steer'], command.rates['drive']
         mid = before['steer'] + 0.5 * c.params.dt * steer  # the steer angles in the middle of the period
         return c.geometry.twist_from_wheels(mid, steer, drive)
@@ -50,20 +51,22 @@ def run(base, references):
 
 
 @pytest.fixture(scope='module', params=ROBOTS)
-def robot(request):
+def robot(request, tmp_path_factory):
+    if request.param == 'six_mecanum':  # a made-up Mecanum base of six wheels
+        return load_robot(write_mecanum_robot(tmp_path_factory.mktemp('six'), SIX_MECANUM_WHEELS, SIX_ROLLER_ANGLES))
     return load_robot(request.param)
 
 
 def test_every_family_meets_the_contract_with_the_simulators_groups(robot):
     base = make_base_controller(robot, robot.period)
     assert isinstance(base, BaseController)
-    assert base.family == robot.base_type
+    assert base.family == robot.base.family
     assert base.command_groups == expected_groups(robot)
     assert list(base.command_groups) == [g for g in ('steer', 'drive', 'wheel') if g in base.command_groups]
     assert set(base.required_groups) <= set(base.command_groups)
     assert set(base.rate_limits) == set(base.command_groups)
     np.testing.assert_array_equal(base.velocity_limit, robot.base.velocity)
-    assert base.resync_from_rates is (robot.steerable is None)  # the steerable base re-reads its angles
+    assert base.resync_from_rates is (robot.base.family != 'steerable')  # the steerable base re-reads its angles
 
 
 def test_rates_per_group_are_finite_and_realise_the_feasible_twist(robot):
@@ -83,7 +86,7 @@ def test_rates_per_group_are_finite_and_realise_the_feasible_twist(robot):
         moving += bool(np.any(command.feasible_twist))
     assert moving > 300
     followed = commands[-1][0].feasible_twist
-    if robot.differential is not None:
+    if robot.base.family == 'differential':
         ref = ref * np.array([1.0, 0.0, 1.0])  # no sideways motion
     np.testing.assert_allclose(followed, ref, atol=2e-3)  # reached within the limits
 
@@ -166,6 +169,6 @@ def test_the_factory_takes_the_steerable_gains_and_nothing_for_wheels():
     robot = load_robot('steerable')
     assert make_base_controller(robot, 0.02, kp=3.0).controller.params.kp == 3.0
     assert make_base_controller(robot, 0.02).controller.params.dt == 0.02
-    assert isinstance(make_base_controller(load_robot('mecanum'), 0.02), WheelBase)
+    assert isinstance(make_base_controller(load_robot('mecanum'), 0.02), WheelBaseController)
     with pytest.raises(ConfigError):
         make_base_controller(load_robot('mecanum'), 0.02, kp=3.0)

@@ -76,7 +76,7 @@ def test_fixed_joints_are_static_and_moving_ones_follow_the_joint_state():
     frames = JointTransforms(robot.urdf_path)
     fixed_children = {tf.child for tf in frames.fixed}
     assert robot.ee_frame in fixed_children  # the tool is a fixed joint: static
-    assert set(robot.arm.joints) | set(robot.wheel_joints) <= set(frames.moving_joints)
+    assert set(robot.arm.joints) | set(robot.base.joints) <= set(frames.moving_joints)
     half = frames.moving({robot.arm.joints[0]: 0.5})
     assert [tf.child for tf in half] == [next(t.child for t in frames.moving({robot.arm.joints[0]: 0.0}))]
     assert frames.moving({'no_such_joint': 1.0}) == []

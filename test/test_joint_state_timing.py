@@ -30,7 +30,7 @@ from wmm_control.robot_config import load_robot
 
 DT = 0.025
 ROBOT = load_robot('mecanum')
-WHEELS = ROBOT.mecanum.wheel_joints
+WHEELS = ROBOT.base.wheel_joints
 
 
 def _time(t):
@@ -261,7 +261,7 @@ def test_answers_that_were_not_applied_move_the_base_one_period_from_the_rates_a
     for k in range(unapplied):  # each answered before the next, none applied
         probe.state(5.0 + (10 + k) * DT, applied)
         assert ros.spin_until(lambda k=k: len(probe.feasible) > before + k, timeout=5.0)
-    vx_applied = MecanumKinematics.from_config(ROBOT.mecanum).twist_from_wheels(np.array(applied))[0]
+    vx_applied = MecanumKinematics.from_config(ROBOT.base).twist_from_wheels(np.array(applied))[0]
     step = ROBOT.base.acceleration[0] * DT
     last = twist_of(probe.feasible[-1])[0] - vx_applied
     if tolerance:
@@ -300,7 +300,9 @@ def test_a_cycle_held_up_past_max_state_wait_publishes_nothing_and_the_next_star
     probe.state(5.0 + 40 * DT, [0.0] * 4)  # the simulator zeroed the base meanwhile
     assert ros.spin_until(lambda: len(probe.feasible) > before, timeout=5.0)
     ros.spin_for(0.1)
-    assert twist_of(probe.feasible[before - 1])[0] > 10 * ROBOT.base.acceleration[0] * DT  # it was under way
+    # it was under way: several periods of acceleration (the probe echoes every other command a
+    # period late, and the controller restarts from that one, so 20 states make 10 steps)
+    assert twist_of(probe.feasible[before - 1])[0] > 5 * ROBOT.base.acceleration[0] * DT
     assert abs(twist_of(probe.feasible[-1])[0]) <= ROBOT.base.acceleration[0] * DT * (1 + 1e-9)
 
 

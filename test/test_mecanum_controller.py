@@ -24,7 +24,7 @@ from wmm_control.robot_config import load_robot
 
 DT = 0.025
 ROBOT = load_robot('mecanum')
-WHEELS = list(ROBOT.mecanum.wheel_joints)
+WHEELS = list(ROBOT.base.wheel_joints)
 VMAX = np.array([0.25, 0.25, 1.0])  # Xing Table 1
 AMAX = np.array([0.025, 0.025, 1.5])
 WHEEL_MAX = 13.0
@@ -38,7 +38,8 @@ def test_limits_and_geometry_come_from_the_robot_yaml():
     c = controller()
     assert c.params == WheelParams(DT, (0.25, 0.25, 1.0), (0.025, 0.025, 1.5), 13.0)
     k = c.kinematics
-    assert (k.wheel_radius, k.d1, k.d2) == (0.076, 0.25, 0.22)
+    assert k.wheel_radius == 0.076
+    np.testing.assert_allclose(k.positions, [[0.25, 0.22], [0.25, -0.22], [-0.25, 0.22], [-0.25, -0.22]], atol=1e-12)
     with pytest.raises(ConfigError, match='has a steerable base, not a Mecanum or differential one'):
         WheelController.from_robot_config(load_robot('steerable'), DT)
 

@@ -257,7 +257,7 @@ def test_a_shorter_reference_timeout_set_at_run_time_brakes_the_base(ros, cls, r
             ),
         )
     )
-    driver = ros.add(BaseDriver(ros.context, load_robot(robot).wheel_joints))
+    driver = ros.add(BaseDriver(ros.context, load_robot(robot).base.joints))
     caller = ros.add(Node('param_cli', context=ros.context))
     ros.spin_for(0.3)
     driver.reference(twist)

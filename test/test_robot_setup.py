@@ -15,10 +15,10 @@ from hypothesis import strategies as st
 from sim_bridge.closed_loop import ClosedLoop
 from wmm_control.geometry import matrix_from_quaternion
 from sim_bridge.world import SimWorld
-from urdf_factory import write_urdf
-from wmm_control.base import DifferentialKinematics, WheelController, WheelParams
+from urdf_factory import SIX_MECANUM_WHEELS, write_urdf
+from wmm_control.base import DifferentialKinematics, MecanumKinematics, WheelController, WheelParams
 from wmm_control.cli import robot_setup
-from wmm_control.errors import ConfigError
+from wmm_control.errors import ConfigError, WmmError
 from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers import PoseTarget, make_resolver
 from wmm_control.robot_config import load_robot
@@ -63,7 +63,7 @@ def test_a_robot_made_by_init_from_an_unseen_urdf_reaches_near_and_far_goals(tmp
     cfg = load_robot(out)  # no hand edit
     assert cfg.arm.n == kwargs.get('arm_joints', 7)
     if base == 'steerable':
-        assert cfg.steerable.n_modules == kwargs['modules']
+        assert cfg.base.n_modules == kwargs['modules']
     if kwargs.get('prismatic_lift'):
         assert cfg.arm.types[0] == 'prismatic'
     # a goal within the arm's reach, then one that needs the base (1.5 m ahead, 1 m to the right)
@@ -236,6 +236,23 @@ def test_init_names_what_the_urdf_lacks(tmp_path, capsys):
     assert code == 2
     assert 'found 4 wheel joints' in capsys.readouterr().err
     assert not (tmp_path / 'r.yaml').exists()
+
+
+def test_init_sets_up_a_mecanum_base_of_six_wheels_and_names_one_it_cannot(tmp_path):
+    wheels = [(tag, x if x else 0.1, y) for tag, x, y in SIX_MECANUM_WHEELS]  # the middle pair off the y axis
+    urdf = write_urdf(tmp_path / 'six.urdf', 'mecanum', arm_joints=6, wheels=wheels[::-1])
+    robot_setup.init_robot(urdf, 'mecanum', 'arm_base_link', 'tool_link', tmp_path / 'six.yaml')
+    base = load_robot(tmp_path / 'six.yaml').base
+    assert base.wheel_joints == tuple(f'wheel_{tag}_joint' for tag, _, _ in wheels)  # front to rear, left to right
+    # the linear limits take half of the wheels' rate budget at a corner of the box, turning a quarter
+    kin = MecanumKinematics.from_config(base)
+    vx, vy, w = base.velocity
+    corners = [np.max(np.abs(kin.wheel_rates([vx, sy * vy, 0.0]))) for sy in (-1.0, 1.0)]
+    assert max(corners) == pytest.approx(0.5 * base.wheel_rate_limit)
+    assert np.max(np.abs(kin.wheel_rates([0.0, 0.0, w]))) == pytest.approx(0.25 * base.wheel_rate_limit)
+    urdf = write_urdf(tmp_path / 'axis.urdf', 'mecanum', arm_joints=6, wheels=SIX_MECANUM_WHEELS)
+    with pytest.raises(WmmError, match=r"\['wheel_ml_joint', 'wheel_mr_joint'\] sit on an axis.*roller_angles"):
+        robot_setup.init_robot(urdf, 'mecanum', 'arm_base_link', 'tool_link', tmp_path / 'axis.yaml')
 
 
 # ---------------------------------------------------------------- differential base

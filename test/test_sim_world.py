@@ -14,8 +14,11 @@ import numpy as np
 import pytest
 
 from sim_bridge import SimWorld, SlipParams, render_png
+from urdf_factory import SIX_MECANUM_WHEELS, SIX_ROLLER_ANGLES, write_mecanum_robot
+from wmm_control.base import MecanumKinematics
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
+from wmm_control.robot_config import load_robot
 
 DT = 0.025
 # Robot A geometry (SPEC / Sorour Table I), written out for hand computation.
@@ -302,6 +305,28 @@ def test_physics_robot_b_strafes_with_roller_traction():
         assert abs(y - vy * 2.0) < 0.05 * vy * 2.0
         assert abs(x) < 0.02 and abs(th) < 0.02
         np.testing.assert_allclose(w.base_twist(), [0.0, vy, 0.0], atol=0.01)
+
+
+def test_a_six_wheel_mecanum_base_follows_its_kinematics_in_both_modes(tmp_path):
+    """Any number of Mecanum wheels: the kinematic base moves by the twist of their rates
+    exactly, and the roller tyre model of physics mode drives on all six."""
+    robot = load_robot(write_mecanum_robot(tmp_path, SIX_MECANUM_WHEELS, SIX_ROLLER_ANGLES))
+    kin = MecanumKinematics.from_config(robot.base)
+    vx, vy, w, t = 0.1, 0.15, 0.2, 2.0
+    with SimWorld(robot, start_base_pose=(0.0, 0.0, 0.0)) as world:
+        assert world.command_groups['wheel'] == robot.base.wheel_joints
+        world.set_command('wheel', kin.wheel_rates([vx, vy, w]))
+        run(world, t)
+        s, c = math.sin(w * t), math.cos(w * t)
+        expected = [(vx * s - vy * (1 - c)) / w, (vx * (1 - c) + vy * s) / w, w * t]  # the SE(2) exponential
+        np.testing.assert_allclose(world.base_pose(), expected, atol=1e-9)
+    with SimWorld(robot, base_mode='physics', start_base_pose=(0.0, 0.0, 0.0)) as world:
+        world.set_command('wheel', kin.wheel_rates([0.0, 0.2, 0.0]))
+        run(world, t)
+        x, y, th = world.base_pose()
+        assert abs(y - 0.2 * t) < 0.05 * 0.2 * t
+        assert abs(x) < 0.02 and abs(th) < 0.02
+        np.testing.assert_allclose(world.base_twist(), [0.0, 0.2, 0.0], atol=0.01)
 
 
 # ----------------------------------------------------------------------------- safety

@@ -89,7 +89,7 @@ def robot_a(**overrides):
 
     robot = load_robot('steerable')
     return robot, SwmrController(
-        SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot, **overrides)
+        SteerableGeometry.from_config(robot.base), SwmrParams.from_robot_config(robot, **overrides)
     )
 
 
@@ -181,9 +181,9 @@ def test_params_from_robot_config():
 
     robot = load_robot('steerable')
     p = SwmrParams.from_robot_config(robot, kp=2.0)
-    assert p.steer_rate_limit == robot.steerable.steer_rate_limit
-    assert p.steer_accel_limit == robot.steerable.steer_accel_limit
-    assert p.drive_rate_limit == robot.steerable.drive_rate_limit
+    assert p.steer_rate_limit == robot.base.steer_rate_limit
+    assert p.steer_accel_limit == robot.base.steer_accel_limit
+    assert p.drive_rate_limit == robot.base.drive_rate_limit
     np.testing.assert_allclose(p.base_velocity_limit, robot.base.velocity)
     with pytest.raises(ConfigError):
         SwmrParams.from_robot_config(load_robot('mecanum'))
@@ -665,7 +665,7 @@ def test_a_stale_reference_brakes_at_the_acceleration_limit():
     from wmm_control.robot_config import load_robot
 
     robot = load_robot('steerable')
-    ctrl = SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
+    ctrl = SwmrController(SteerableGeometry.from_config(robot.base), SwmrParams.from_robot_config(robot))
     for _ in range(400):
         out = ctrl.step([0.8, 0.0, 0.0])
     v0 = out.twist_feasible.copy()
@@ -679,7 +679,7 @@ def test_a_stale_reference_brakes_at_the_acceleration_limit():
     assert np.all(steps <= amax * ctrl.params.dt + 1e-12)
     assert np.allclose(twists[-1], 0.0)
     # the K_p law alone (no brake) is still moving after the same time
-    ctrl2 = SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
+    ctrl2 = SwmrController(SteerableGeometry.from_config(robot.base), SwmrParams.from_robot_config(robot))
     for _ in range(400):
         ctrl2.step([0.8, 0.0, 0.0])
     for _ in range(allowed):
@@ -692,7 +692,7 @@ def test_measured_steer_rates_beyond_the_limit_never_give_commands_beyond_it():
     from wmm_control.robot_config import load_robot
 
     robot = load_robot('steerable')
-    ctrl = SwmrController(SteerableGeometry.from_config(robot.steerable), SwmrParams.from_robot_config(robot))
+    ctrl = SwmrController(SteerableGeometry.from_config(robot.base), SwmrParams.from_robot_config(robot))
     limit = ctrl.params.steer_rate_limit
     rates = []
     for k in range(60):

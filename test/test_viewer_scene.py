@@ -65,7 +65,7 @@ def test_every_visual_of_the_urdf_is_a_shape_in_its_colour(robot):
         chassis = next(s for s in scene.shapes if s.name.startswith('chassis_link') and s.kind == 'box')
         assert chassis.size == pytest.approx((0.6, 0.5, 0.3))
     # Every wheel-side joint is there, and every arm joint.
-    assert set(cfg.arm.joints) | set(cfg.wheel_joints) <= set(scene.joint_names)
+    assert set(cfg.arm.joints) | set(cfg.base.joints) <= set(scene.joint_names)
 
 
 @pytest.mark.parametrize('robot', ['steerable', 'mecanum'])

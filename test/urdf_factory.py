@@ -1,13 +1,28 @@
 """URDFs of made-up mobile manipulators, written on the fly for tests (none is in the repo).
 
 :func:`write_urdf` builds a base of any family (a steerable base with N modules on a circle,
-four Mecanum wheels, or a differential pair with two casters) and an arm of n joints whose
+Mecanum wheels, four by default, or a differential pair with two casters) and an arm of n joints whose
 axes alternate z, y, y, z, y, z, ... (an anthropomorphic-like chain), optionally on a
 prismatic lift. Shapes are primitive; every link has an inertial.
 """
 
 import math
 from pathlib import Path
+
+import yaml
+
+#: The four Mecanum wheels of :func:`write_urdf` by default: (tag, x, y) [m].
+MECANUM_WHEELS = (('fl', 0.22, 0.2), ('fr', 0.22, -0.2), ('rl', -0.22, 0.2), ('rr', -0.22, -0.2))
+#: Six Mecanum wheels, a pair on the y axis, and roller angles [rad] that make every twist.
+SIX_MECANUM_WHEELS = (
+    ('fl', 0.3, 0.25),
+    ('fr', 0.3, -0.25),
+    ('ml', 0.0, 0.25),
+    ('mr', 0.0, -0.25),
+    ('rl', -0.3, 0.25),
+    ('rr', -0.3, -0.25),
+)
+SIX_ROLLER_ANGLES = (math.pi / 4, -math.pi / 4, math.pi / 3, -math.pi / 3, -math.pi / 4, math.pi / 4)
 
 
 def _inertial(mass=1.0):
@@ -49,9 +64,10 @@ def _wheel(name, parent, xyz, radius, rate):
     ]
 
 
-def write_urdf(path, base='steerable', modules=4, arm_joints=7, prismatic_lift=False):
+def write_urdf(path, base='steerable', modules=4, arm_joints=7, prismatic_lift=False, wheels=MECANUM_WHEELS):
     """Write a URDF at ``path``; returns the path. Links: ``base_link`` (on the floor),
-    ``arm_base_link`` (the arm root), ``tool_link`` (the tool)."""
+    ``arm_base_link`` (the arm root), ``tool_link`` (the tool). A Mecanum base has a wheel
+    ``wheel_<tag>_joint`` at each ``(tag, x, y)`` of ``wheels``."""
     r = 0.08
     parts = [
         _link('base_link', mass=0.1),
@@ -75,7 +91,7 @@ def write_urdf(path, base='steerable', modules=4, arm_joints=7, prismatic_lift=F
             ]
             parts += _wheel(f'drive_{i}', f'steer_{i}_link', '0 -0.03 0', r, 12.0)
     elif base == 'mecanum':
-        for tag, x, y in (('fl', 0.22, 0.2), ('fr', 0.22, -0.2), ('rl', -0.22, 0.2), ('rr', -0.22, -0.2)):
+        for tag, x, y in wheels:
             parts += _wheel(f'wheel_{tag}', 'base_link', f'{x} {y} {r}', r, 12.0)
     else:
         parts += _wheel('wheel_left', 'base_link', f'0 0.24 {r}', r, 12.0)
@@ -132,4 +148,30 @@ def write_urdf(path, base='steerable', modules=4, arm_joints=7, prismatic_lift=F
     parts += [_joint('tool_joint', 'fixed', parent, 'tool_link', f'0 0 {lengths[-1]}'), _link('tool_link', mass=0.05)]
     path = Path(path)
     path.write_text('<?xml version="1.0"?>\n<robot name="made_up">\n  ' + '\n  '.join(parts) + '\n</robot>\n')
+    return path
+
+
+def write_mecanum_robot(folder, wheels, roller_angles=None):
+    """Write a URDF (:func:`write_urdf`, a Mecanum base with ``wheels`` and a 7-joint arm) and its
+    robot YAML in ``folder``; returns the YAML's path. ``roller_angles`` [rad]: the YAML's
+    ``mecanum.roller_angles``, omitted when None."""
+    folder = Path(folder)
+    write_urdf(folder / 'mecanum_n.urdf', 'mecanum', wheels=wheels)
+    posture = [0.0, 0.5, 0.0, 1.0, 0.0, 0.5, 0.0]
+    mecanum = {'wheel_joints': [f'wheel_{tag}_joint' for tag, _, _ in wheels]}
+    if roller_angles is not None:
+        mecanum['roller_angles'] = [float(a) for a in roller_angles]
+    robot = {
+        'name': 'mecanum_n',
+        'urdf': 'mecanum_n.urdf',
+        'base_type': 'mecanum',
+        'period': 0.025,
+        'method': 'pinv',
+        'arm': {'root': 'arm_base_link', 'tool': 'tool_link', 'dexterous': posture},
+        'base': {'velocity': [0.3, 0.3, 0.6], 'acceleration': [0.6, 0.6, 1.2]},
+        'start': {'base_pose': [0.0, 0.0, 0.0], 'arm': posture},
+        'mecanum': mecanum,
+    }
+    path = folder / 'mecanum_n.yaml'
+    path.write_text(yaml.safe_dump({'robot': robot}))
     return path

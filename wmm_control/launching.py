@@ -88,7 +88,7 @@ def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool, ob
     remap = [('/clock', f'/{namespace}/clock')] if namespace else []
     executables = [
         ('wmm_sim', {'frame_prefix': f'{namespace}/' if namespace else '', 'obstacles': obstacles}),
-        (BASE_CONTROLLERS[config.base_type], {}),
+        (BASE_CONTROLLERS[config.base.family], {}),
         ('redundancy_resolver', {'obstacles': obstacles}),
     ]
     if viewer:

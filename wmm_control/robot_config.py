@@ -3,8 +3,10 @@
 The URDF is the source of truth for the kinematics: the arm is the joint chain from the
 ``arm.root`` link to the ``arm.tool`` link (any number of joints from 6 up: revolute,
 continuous or prismatic), and its position and velocity limits are the URDF's ``<limit>``.
-The base geometry (hips, wheel radius, steer offset, Mecanum half-distances, track) is read
-from the wheel and steer joints' origins and the wheel links' collision cylinders. The YAML
+The base (:data:`Base`: one of :class:`SteerableBase`, :class:`MecanumBase`,
+:class:`DifferentialBase`) has its geometry (hips, wheel radius, steer offset, Mecanum wheel
+positions, track) read from the wheel and steer joints' origins and the wheel links'
+collision cylinders. The YAML
 names those joints and links and gives what a URDF cannot: acceleration limits (default
 :data:`DEFAULT_ACCEL_PER_VELOCITY` × the velocity limit), base twist limits, the dexterous
 posture, the start state, the control period and the default method. Any URDF value may be
@@ -17,8 +19,11 @@ URDF conventions the base geometry relies on (``wmm_robot init`` writes YAMLs fo
   module's hip; its drive joint turns about the steer link's y axis and sits ``d`` along −y
   from the steer axis (the wheel offset of Sorour Table I); the drive link's collision
   cylinder (or sphere) gives the wheel radius.
-* mecanum: four wheel joints about y, order front-left, front-right, rear-left, rear-right;
-  d1 and d2 are the mean |x| and |y| of their origins (Xing eq 16).
+* mecanum: N ≥ 3 wheel joints about y, in any order (the command order); each wheel's
+  position is its origin's (x, y), its roller angle γ (``mecanum.roller_angles``, see
+  :class:`MecanumBase`) by default the usual pattern of Xing eq (16): π/4 for a wheel with
+  x y > 0 (front-left, rear-right), −π/4 for x y < 0. ``mecanum.d1`` / ``d2``, when given,
+  set every wheel's |x| / |y| (Xing's half wheelbase and half track).
 * differential: a left and a right wheel joint about y on one axle through ``base_link``'s
   origin (x = 0); the track is the distance between them. Casters are fixed links and play
   no part in the kinematics.
@@ -30,9 +35,10 @@ or by a path to a robot YAML; its ``urdf`` path is relative to that YAML.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import yaml
@@ -43,11 +49,13 @@ from wmm_control.urdf import MOVING_TYPES, UrdfTree
 
 __all__ = [
     'ArmConfig',
-    'BaseLimits',
     'StartState',
-    'SteerableConfig',
-    'MecanumConfig',
-    'DifferentialConfig',
+    'Base',
+    'BaseSection',
+    'SteerableBase',
+    'FixedWheelBase',
+    'MecanumBase',
+    'DifferentialBase',
     'RobotConfig',
     'load_robot',
     'robot_names',
@@ -56,10 +64,10 @@ __all__ = [
     'MIN_ARM_JOINTS',
     'DEFAULT_ACCEL_PER_VELOCITY',
     'read_yaml_section',
+    'usual_roller_angles',
     'resolve_robot_yaml',
 ]
 
-BASE_FAMILIES = ('steerable', 'mecanum', 'differential')
 ALIASES = {'a': 'steerable', 'b': 'mecanum'}
 MIN_ARM_JOINTS = 6
 #: [1/s] an acceleration limit the YAML does not give is this times the velocity limit
@@ -67,6 +75,7 @@ MIN_ARM_JOINTS = 6
 DEFAULT_ACCEL_PER_VELOCITY = 2.0
 #: [m] the wheel axle of a differential base may miss base_link's origin by this much.
 _AXLE_TOL = 1e-3
+_TWIST_AXES = ('vx', 'vy', 'ω')
 
 
 def _vec(raw, key, size, where):
@@ -158,17 +167,6 @@ class ArmConfig:
 
 
 @dataclass(frozen=True)
-class BaseLimits:
-    """Base twist limits, (vx, vy, ω) in the base frame: [m/s, m/s, rad/s] and per second.
-
-    A differential base has vy = 0 in both: it cannot move sideways.
-    """
-
-    velocity: np.ndarray
-    acceleration: np.ndarray
-
-
-@dataclass(frozen=True)
 class StartState:
     """The start state: base pose (x, y, θ), arm joints; optionally the expected world EE pose
     (xyz + RPY) and its tolerance [m, rad] (the papers' start states are checked against it)."""
@@ -180,10 +178,60 @@ class StartState:
 
 
 @dataclass(frozen=True)
-class SteerableConfig:
+class BaseSection(ABC):
+    """What every base family has and what callers ask of it, whatever its wheels.
+
+    One of :class:`SteerableBase`, :class:`MecanumBase`, :class:`DifferentialBase` (the
+    :data:`Base` union) is a robot's ``base``; its ``family`` names it.
+
+    Attributes:
+        velocity: base twist limits |vx|, |vy|, |ω| [m/s, m/s, rad/s] in the base frame; 0 on
+            an axis the base cannot follow. Shape (3,).
+        acceleration: base twist acceleration limits [m/s², m/s², rad/s²]. Shape (3,).
+    """
+
+    velocity: np.ndarray
+    acceleration: np.ndarray
+
+    #: the base family, the YAML's ``base_type``
+    family: ClassVar[str]
+    #: indices of the twist (vx, vy, ω) the base can follow
+    axes: ClassVar[tuple[int, ...]] = (0, 1, 2)
+
+    @property
+    @abstractmethod
+    def command_groups(self) -> dict[str, tuple]:
+        """Ordered mapping group name → joint names in command order: the groups of the
+        simulator's ``command_groups`` and of the ``/<group>_controller/commands`` topics."""
+
+    @property
+    @abstractmethod
+    def rate_limits(self) -> dict[str, float]:
+        """|q̇| bound [rad/s] per command group."""
+
+    @property
+    @abstractmethod
+    def rolling_joints(self) -> tuple:
+        """The joints whose links roll on the floor (the drive or wheel joints)."""
+
+    @property
+    def joints(self) -> tuple:
+        """Every wheel-side joint name, in command order (the groups one after the other)."""
+        return tuple(name for names in self.command_groups.values() for name in names)
+
+    @property
+    def joint_velocity_limits(self) -> dict:
+        """Velocity limit [rad/s] by joint name, for every wheel-side joint."""
+        limits = self.rate_limits
+        return {name: limits[group] for group, names in self.command_groups.items() for name in names}
+
+
+@dataclass(frozen=True)
+class SteerableBase(BaseSection):
     """Steerable base of N ≥ 2 steer + drive modules (Sorour §IV, Table I for robot A).
 
     Attributes:
+        steer_joints, drive_joints: the modules' joints, in the same order.
         hips: module hip positions (hx, hy) in the base frame [m]. Shape (N, 2).
         wheel_radius, wheel_offset: r_w and d [m].
         steer_rate_limit, steer_accel_limit: β̇ and β̈ bounds [rad/s, rad/s²].
@@ -201,92 +249,113 @@ class SteerableConfig:
     drive_rate_limit: float
     drive_accel_limit: float
 
+    family: ClassVar[str] = 'steerable'
+
     @property
     def n_modules(self) -> int:
         """Number of steer + drive modules N."""
         return len(self.steer_joints)
 
+    @property
+    def command_groups(self) -> dict[str, tuple]:
+        return {'steer': self.steer_joints, 'drive': self.drive_joints}
+
+    @property
+    def rate_limits(self) -> dict[str, float]:
+        return {'steer': self.steer_rate_limit, 'drive': self.drive_rate_limit}
+
+    @property
+    def rolling_joints(self) -> tuple:
+        return self.drive_joints
+
 
 @dataclass(frozen=True)
-class MecanumConfig:
-    """Mecanum base geometry (Xing eq 16): R, d1 (half wheelbase), d2 (half track) [m]."""
-
-    wheel_joints: tuple
-    wheel_radius: float
-    d1: float
-    d2: float
-    wheel_rate_limit: float
-
-
-@dataclass(frozen=True)
-class DifferentialConfig:
-    """Differential-drive base: two wheels on one axle through base_link's origin.
+class FixedWheelBase(BaseSection):
+    """A base whose wheels turn on fixed axles, one command group ``wheel``: the common part of
+    :class:`MecanumBase` and :class:`DifferentialBase`.
 
     Attributes:
-        wheel_joints: (left, right).
+        wheel_joints: the wheel joints, in command order.
         wheel_radius: r [m].
-        track: distance between the two wheels' contact points [m].
         wheel_rate_limit: |φ̇| bound [rad/s].
     """
 
     wheel_joints: tuple
     wheel_radius: float
-    track: float
     wheel_rate_limit: float
+
+    @property
+    def command_groups(self) -> dict[str, tuple]:
+        return {'wheel': self.wheel_joints}
+
+    @property
+    def rate_limits(self) -> dict[str, float]:
+        return {'wheel': self.wheel_rate_limit}
+
+    @property
+    def rolling_joints(self) -> tuple:
+        return self.wheel_joints
+
+
+@dataclass(frozen=True)
+class MecanumBase(FixedWheelBase):
+    """Mecanum base of N ≥ 3 wheels on axles along the base's y axis (Xing eq 16 for four).
+
+    Attributes:
+        positions: each wheel's contact point (x, y) in the base frame [m], from its joint
+            origin. Shape (N, 2).
+        roller_angles: γ_i [rad], the angle from wheel i's axle (+y) to the axis of its roller
+            touching the floor, counter-clockwise about +z seen from above (± π/4 for the usual
+            wheel). Shape (N,).
+    """
+
+    positions: np.ndarray
+    roller_angles: np.ndarray
+
+    family: ClassVar[str] = 'mecanum'
+
+
+@dataclass(frozen=True)
+class DifferentialBase(FixedWheelBase):
+    """Differential-drive base: two wheels (left, right) on one axle through base_link's origin.
+
+    Attributes:
+        track: distance between the two wheels' contact points [m].
+    """
+
+    track: float
+
+    family: ClassVar[str] = 'differential'
+    axes: ClassVar[tuple[int, ...]] = (0, 2)
+
+
+#: A robot's base: one of the three families, told apart by ``family``.
+Base = SteerableBase | MecanumBase | DifferentialBase
 
 
 @dataclass(frozen=True)
 class RobotConfig:
     """One robot: its URDF, frames, control period, default redundancy resolution method, arm,
-    base limits, start state and base geometry (one of ``steerable``, ``mecanum``,
-    ``differential`` is set, after ``base_type``)."""
+    base (its family, geometry and twist limits) and start state."""
 
     name: str
     description: str
     yaml_path: Path
     urdf_path: Path
-    base_type: str
     base_link: str
     ee_frame: str
     ground_z: float
     period: float
     method: str
     arm: ArmConfig
-    base: BaseLimits
+    base: Base
     start: StartState
-    steerable: SteerableConfig | None = None
-    mecanum: MecanumConfig | None = None
-    differential: DifferentialConfig | None = None
     raw: dict | None = field(default=None, repr=False, compare=False)
-
-    @property
-    def base_axes(self) -> tuple:
-        """Indices of the base twist (vx, vy, ω) the base can follow: all three, or (vx, ω)
-        for a differential base."""
-        return (0, 2) if self.base_type == 'differential' else (0, 1, 2)
-
-    @property
-    def wheel_joints(self) -> tuple:
-        """Every wheel-side joint name, in command order (steer then drive, or the wheels)."""
-        if self.steerable is not None:
-            return self.steerable.steer_joints + self.steerable.drive_joints
-        wheels = self.mecanum or self.differential
-        assert wheels is not None  # one base geometry is always set (load_robot)
-        return wheels.wheel_joints
 
     @property
     def joint_velocity_limits(self) -> dict:
         """Velocity limit [rad/s] by joint name, for every actuated joint."""
-        limits = dict(zip(self.arm.joints, self.arm.velocity.tolist()))
-        if self.steerable is not None:
-            s = self.steerable
-            limits.update({n: s.steer_rate_limit for n in s.steer_joints})
-            limits.update({n: s.drive_rate_limit for n in s.drive_joints})
-        else:
-            wheels = self.mecanum or self.differential
-            assert wheels is not None
-            limits.update({n: wheels.wheel_rate_limit for n in wheels.wheel_joints})
-        return limits
+        return dict(zip(self.arm.joints, self.arm.velocity.tolist())) | self.base.joint_velocity_limits
 
 
 def _urdf_velocity(tree, name, role):
@@ -427,7 +496,7 @@ def _parse_steerable(raw, tree, base_link):
         s, 'steer_rate_limit', w, _one({_urdf_velocity(tree, n, 'steer joint') for n in steer})
     )
     drive_rate = _optional_scalar(s, 'drive_rate_limit', w, drive_v)
-    return SteerableConfig(
+    return dict(
         steer_joints=steer,
         drive_joints=drive,
         hips=hips,
@@ -450,59 +519,106 @@ def _common_wheel_values(tree, names, role):
     return (_one({_wheel_radius(tree, n, role) for n in names}), _one({_urdf_velocity(tree, n, role) for n in names}))
 
 
-def _parse_mecanum(raw, tree, base_link):
-    m = _section(raw, 'mecanum', 'robot')
-    w = 'mecanum'
-    names = _joint_names(m, 'wheel_joints', w, size=4)
+def _fixed_wheels(sec, tree, base_link, where, **count):
+    """(names, origins (N, 2), wheel_radius, wheel_rate_limit) of a base on fixed wheel axles."""
+    names = _joint_names(sec, 'wheel_joints', where, **count)
     origins = _wheel_origins(tree, base_link, names, 'wheel joint')
     radius, rate = _common_wheel_values(tree, names, 'wheel joint')
-    return MecanumConfig(
+    return (
+        names,
+        origins,
+        _optional_scalar(sec, 'wheel_radius', where, radius),
+        _optional_scalar(sec, 'wheel_rate_limit', where, rate),
+    )
+
+
+def usual_roller_angles(positions: np.ndarray) -> np.ndarray:
+    """γ_i [rad] of the usual Mecanum rollers (Xing eq 16) for wheels at ``positions`` (x, y),
+    shape (N, 2): π/4 where x y > 0 (front-left, rear-right), −π/4 where x y < 0, and 0 (rollers
+    along the axle, which no base accepts) for a wheel on an axis (x y = 0). Shape (N,)."""
+    xy = np.asarray(positions, dtype=float)
+    return np.pi / 4 * np.sign(xy[:, 0] * xy[:, 1])
+
+
+def _parse_mecanum(raw, tree, base_link):
+    from wmm_control.base.mecanum import MecanumKinematics  # the base package imports this module
+
+    m = _section(raw, 'mecanum', 'robot')
+    w = 'mecanum'
+    names, origins, radius, rate = _fixed_wheels(m, tree, base_link, w, minimum=3)
+    positions = origins.copy()
+    for k, key in enumerate(('d1', 'd2')):  # Xing's half wheelbase and half track: every wheel's |x|, |y|
+        if m.get(key) is not None:
+            positions[:, k] = np.sign(origins[:, k]) * _scalar(m, key, w)
+    if m.get('roller_angles') is None:
+        on_axis = [n for n, (x, y) in zip(names, positions) if x * y == 0.0]
+        if on_axis:
+            raise ConfigError(
+                f'{w}: wheels {on_axis} sit on an axis of {base_link}: the usual roller pattern (γ = π/4 '
+                'front-left and rear-right, −π/4 front-right and rear-left) does not place them; give '
+                f'{w}.roller_angles'
+            )
+    angles = _optional_vec(m, 'roller_angles', len(names), w, usual_roller_angles(positions))
+    if not np.all(np.isfinite(angles)):
+        raise ConfigError(f'{w}.roller_angles: every entry must be finite, got {angles.tolist()}')
+    try:
+        MecanumKinematics(radius, positions, angles)
+    except ConfigError as exc:
+        raise ConfigError(f'{w}.roller_angles / wheel positions: {exc}') from exc
+    return dict(
         wheel_joints=names,
-        wheel_radius=_optional_scalar(m, 'wheel_radius', w, radius),
-        d1=_optional_scalar(m, 'd1', w, float(np.mean(np.abs(origins[:, 0])))),
-        d2=_optional_scalar(m, 'd2', w, float(np.mean(np.abs(origins[:, 1])))),
-        wheel_rate_limit=_optional_scalar(m, 'wheel_rate_limit', w, rate),
+        wheel_radius=radius,
+        wheel_rate_limit=rate,
+        positions=positions,
+        roller_angles=angles,
     )
 
 
 def _parse_differential(raw, tree, base_link):
     d = _section(raw, 'differential', 'robot')
     w = 'differential'
-    names = _joint_names(d, 'wheel_joints', w, size=2)
-    origins = _wheel_origins(tree, base_link, names, 'wheel joint')
+    names, origins, radius, rate = _fixed_wheels(d, tree, base_link, w, size=2)
     if np.any(np.abs(origins[:, 0]) > _AXLE_TOL) or origins[0, 1] <= origins[1, 1]:
         raise ConfigError(
             f'{w}.wheel_joints: the left and right wheels must sit on one axle through '
             f'{base_link} (x = 0, left at +y); the URDF puts them at {origins.round(4).tolist()}'
         )
-    radius, rate = _common_wheel_values(tree, names, 'wheel joint')
-    return DifferentialConfig(
+    return dict(
         wheel_joints=names,
-        wheel_radius=_optional_scalar(d, 'wheel_radius', w, radius),
+        wheel_radius=radius,
+        wheel_rate_limit=rate,
         track=_optional_scalar(d, 'track', w, float(origins[0, 1] - origins[1, 1])),
-        wheel_rate_limit=_optional_scalar(d, 'wheel_rate_limit', w, rate),
     )
 
 
-_BASE_PARSERS = {'steerable': _parse_steerable, 'mecanum': _parse_mecanum, 'differential': _parse_differential}
+#: Each base family's class and the parser of its YAML section (the fields of the class but the limits).
+_BASES = {
+    SteerableBase.family: (SteerableBase, _parse_steerable),
+    MecanumBase.family: (MecanumBase, _parse_mecanum),
+    DifferentialBase.family: (DifferentialBase, _parse_differential),
+}
+BASE_FAMILIES = tuple(_BASES)
 
 
-def _parse_base_limits(raw, base_type):
+def _parse_base(raw, family, tree, base_link):
+    """The robot's base of ``family``: its family's section, with the twist limits of section ``base``."""
+    cls, parse = _BASES[family]
+    fields = parse(raw, tree, base_link)
     base = _section(raw, 'base', 'robot')
-    vel = _vec(base, 'velocity', 3, 'base')
-    acc = _vec(base, 'acceleration', 3, 'base')
-    axes = (0, 2) if base_type == 'differential' else (0, 1, 2)
-    for key, arr in (('velocity', vel), ('acceleration', acc)):
-        _positive(arr[list(axes)], key, 'base')
-        if base_type == 'differential' and arr[1] != 0.0:
+    limits = {key: _vec(base, key, 3, 'base') for key in ('velocity', 'acceleration')}
+    still = [k for k in range(3) if k not in cls.axes]
+    for key, arr in limits.items():
+        _positive(arr[list(cls.axes)], key, 'base')
+        if np.any(arr[still] != 0.0):
             raise ConfigError(
-                f'base.{key}: a differential base cannot move sideways: its vy entry must be 0, got {arr.tolist()}'
+                f'base.{key}: a {family} base cannot follow {[_TWIST_AXES[k] for k in still]}: '
+                f'their entries must be 0, got {arr.tolist()}'
             )
-    return BaseLimits(velocity=vel, acceleration=acc)
+    return cls(**limits, **fields)
 
 
 def _check_unique(cfg):
-    names = list(cfg.arm.joints) + list(cfg.wheel_joints)
+    names = list(cfg.arm.joints) + list(cfg.base.joints)
     seen = set()
     for name in names:
         if name in seen:
@@ -580,9 +696,9 @@ def load_robot(robot: str | Path | RobotConfig = 'steerable') -> RobotConfig:
 
 
 def _parse(path, raw):
-    base_type = raw.get('base_type')
-    if base_type not in BASE_FAMILIES:
-        raise ConfigError(f'base_type: unknown base family {base_type!r}; expected one of {list(BASE_FAMILIES)}')
+    family = raw.get('base_type')
+    if family not in BASE_FAMILIES:
+        raise ConfigError(f'base_type: unknown base family {family!r}; expected one of {list(BASE_FAMILIES)}')
     urdf = raw.get('urdf')
     if not isinstance(urdf, str):
         raise ConfigError('missing key "urdf" (the URDF path, relative to this file)')
@@ -593,23 +709,21 @@ def _parse(path, raw):
     base_link = raw.get('base_link', 'base_link')
     tree.require_link(base_link, 'base')
     arm = _parse_arm(raw, tree, 'robot')
-    geometry = _BASE_PARSERS[base_type](raw, tree, base_link)
+    base = _parse_base(raw, family, tree, base_link)
     cfg = RobotConfig(
         name=str(raw.get('name', path.stem)),
         description=str(raw.get('description', '')),
         yaml_path=path.resolve(),
         urdf_path=urdf_path,
-        base_type=base_type,
         base_link=base_link,
         ee_frame=arm.tool,
         ground_z=_optional_scalar(raw, 'ground_z', 'robot', 0.0, positive=False),
         period=_scalar(raw, 'period', 'robot'),
         method=_word(raw, 'method', 'robot'),
         arm=arm,
-        base=_parse_base_limits(raw, base_type),
+        base=base,
         start=_parse_start(raw, arm),
         raw=raw,
-        **{base_type: geometry},
     )
     _check_unique(cfg)
     return cfg

@@ -15,7 +15,13 @@ from wmm_control.base.swmr_controller import (
     SwmrOutput,
     SwmrParams,
 )
-from wmm_control.base.contract import BaseCommand, BaseController, SteerableBase, WheelBase, make_base_controller
+from wmm_control.base.contract import (
+    BaseCommand,
+    BaseController,
+    SteerableBaseController,
+    WheelBaseController,
+    make_base_controller,
+)
 
 __all__ = [
     'BaseCommand',
@@ -23,14 +29,14 @@ __all__ = [
     'DifferentialKinematics',
     'Icr',
     'IcrQp',
-    'WheelBase',
+    'WheelBaseController',
     'WheelController',
     'MecanumKinematics',
     'WheelOutput',
     'WheelParams',
     'OsqpIcrSolver',
     'QpResult',
-    'SteerableBase',
+    'SteerableBaseController',
     'SteerableGeometry',
     'SwmrController',
     'SwmrOutput',

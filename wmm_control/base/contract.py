@@ -5,9 +5,9 @@ joint rate commands for the base's command groups and the feasible twist q̇_bf 
 realise (Sorour et al. 2019 Fig 4: the middle block between the resolver and the arm
 compensation of eq 14). Every family implements :class:`BaseController`:
 
-- :class:`SteerableBase`: the steerable base of Sorour §IV (:class:`SwmrController`), groups
+- :class:`SteerableBaseController`: the steerable base of Sorour §IV (:class:`SwmrController`), groups
   ``steer`` and ``drive``, closed on the measured steer angles;
-- :class:`WheelBase`: a Mecanum (Xing eq 16) or differential base
+- :class:`WheelBaseController`: a Mecanum (Xing eq 16) or differential base
   (:class:`WheelController`), one group ``wheel``.
 
 The group names are those of the simulator's ``world.command_groups`` and of the
@@ -18,7 +18,7 @@ The adapters only translate: the numbers are those of the wrapped controller, wh
 available as ``controller``. :func:`make_base_controller` builds the one of a robot.
 """
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol, Self, runtime_checkable
 
@@ -29,9 +29,9 @@ from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.base.swmr_controller import SwmrController, SwmrParams
 from wmm_control.base.wheel_controller import WheelController
 from wmm_control.errors import ConfigError
-from wmm_control.robot_config import RobotConfig
+from wmm_control.robot_config import DifferentialBase, MecanumBase, RobotConfig, SteerableBase
 
-__all__ = ['BaseCommand', 'BaseController', 'SteerableBase', 'WheelBase', 'make_base_controller']
+__all__ = ['BaseCommand', 'BaseController', 'SteerableBaseController', 'WheelBaseController', 'make_base_controller']
 
 #: Joint values per command group: group name → array in the group's joint order.
 Groups = Mapping[str, np.ndarray]
@@ -103,20 +103,20 @@ class BaseController(Protocol):
         """One line on the controller and its limits (for the start-up log)."""
 
 
-class SteerableBase:
+class SteerableBaseController:
     """:class:`BaseController` of a steerable base: :class:`SwmrController` (Sorour §IV).
 
     Groups ``steer`` (β̇_ref) and ``drive`` (φ̇_ref); the feasible twist is ``twist_executed``.
     The measured steer angles close the loop (``beta_meas``); a ``None`` reference brakes.
     """
 
-    family = 'steerable'
+    family = SteerableBase.family
     required_groups = ('steer',)
     resync_from_rates = False
 
-    def __init__(self, controller: SwmrController, steer_joints: Iterable[str], drive_joints: Iterable[str]) -> None:
+    def __init__(self, controller: SwmrController, base: SteerableBase) -> None:
         self.controller = controller
-        self.command_groups: Mapping[str, tuple] = {'steer': tuple(steer_joints), 'drive': tuple(drive_joints)}
+        self.command_groups: Mapping[str, tuple] = base.command_groups
         p = controller.params
         self.rate_limits: Mapping[str, Any] = {'steer': p.steer_rate_limit, 'drive': p.drive_rate_limit}
         self.velocity_limit = np.array(p.base_velocity_limit, dtype=float)
@@ -127,9 +127,9 @@ class SteerableBase:
         """Geometry, joints and limits from a steerable robot; ``overrides``: :class:`SwmrParams`
         fields (``kp``, ``icr_gain``, ...)."""
         params = SwmrParams.from_robot_config(robot, dt=dt, **overrides)
-        s = robot.steerable
-        # not None: SwmrParams.from_robot_config has raised for a robot without a steerable section
-        return cls(SwmrController(SteerableGeometry.from_config(s), params), s.steer_joints, s.drive_joints)  # type: ignore[union-attr]
+        # a steerable base: SwmrParams.from_robot_config has raised for any other
+        base: SteerableBase = robot.base  # type: ignore[assignment]
+        return cls(SwmrController(SteerableGeometry.from_config(base), params), base)
 
     def reset(self, positions: Groups | None = None, rates: Groups | None = None) -> None:
         c = self.controller
@@ -167,7 +167,7 @@ class SteerableBase:
         )
 
 
-class WheelBase:
+class WheelBaseController:
     """:class:`BaseController` of a Mecanum or differential base: :class:`WheelController`.
 
     One group ``wheel`` (the robot's wheel order); the feasible twist is the wheel map of the
@@ -179,19 +179,19 @@ class WheelBase:
     resync_from_rates = True
     lag = 0.0  # the wheel controller tracks its reference within its acceleration limits
 
-    def __init__(self, controller: WheelController, wheel_joints: Iterable[str], family: str = 'mecanum') -> None:
+    def __init__(self, controller: WheelController, base: MecanumBase | DifferentialBase) -> None:
         self.controller = controller
-        self.family = family
-        self.command_groups: Mapping[str, tuple] = {'wheel': tuple(wheel_joints)}
+        self.family = base.family
+        self.command_groups: Mapping[str, tuple] = base.command_groups
         self.rate_limits: Mapping[str, Any] = {'wheel': controller.params.wheel_rate_limit}
         self.velocity_limit = np.array(controller.params.velocity_limit, dtype=float)
 
     @classmethod
     def from_robot_config(cls, robot: RobotConfig, dt: float) -> Self:
         """Wheel map, joints and limits from a Mecanum or differential robot."""
-        wheels = robot.mecanum or robot.differential
-        # not None: WheelController.from_robot_config has raised for a base of another family
-        return cls(WheelController.from_robot_config(robot, dt), wheels.wheel_joints, robot.base_type)  # type: ignore[union-attr]
+        controller = WheelController.from_robot_config(robot, dt)
+        # a Mecanum or differential base: WheelController.from_robot_config has raised for any other
+        return cls(controller, robot.base)  # type: ignore[arg-type]
 
     def reset(self, positions: Groups | None = None, rates: Groups | None = None) -> None:
         if rates is None:
@@ -222,9 +222,11 @@ class WheelBase:
         )
 
 
-def make_base_controller(robot: RobotConfig, dt: float, **overrides: Any) -> SteerableBase | WheelBase:
+def make_base_controller(
+    robot: RobotConfig, dt: float, **overrides: Any
+) -> SteerableBaseController | WheelBaseController:
     """The base controller of ``robot`` (a :class:`~wmm_control.robot_config.RobotConfig`) with
-    period ``dt`` [s]: :class:`SteerableBase` or :class:`WheelBase`.
+    period ``dt`` [s]: :class:`SteerableBaseController` or :class:`WheelBaseController`.
 
     Args:
         overrides: :class:`SwmrParams` fields of a steerable base (``kp``, ``icr_gain``); a
@@ -233,8 +235,9 @@ def make_base_controller(robot: RobotConfig, dt: float, **overrides: Any) -> Ste
     Raises:
         ConfigError: overrides for a wheeled base, or a base of no known family.
     """
-    if robot.steerable is not None:
-        return SteerableBase.from_robot_config(robot, dt, **overrides)
-    if overrides:
-        raise ConfigError(f'robot {robot.name!r} has a {robot.base_type} base: no parameters {sorted(overrides)}')
-    return WheelBase.from_robot_config(robot, dt)
+    match robot.base:
+        case SteerableBase():
+            return SteerableBaseController.from_robot_config(robot, dt, **overrides)
+        case MecanumBase() | DifferentialBase() if not overrides:
+            return WheelBaseController.from_robot_config(robot, dt)
+    raise ConfigError(f'robot {robot.name!r} has a {robot.base.family} base: no parameters {sorted(overrides)}')

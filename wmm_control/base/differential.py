@@ -10,6 +10,8 @@ The base cannot move sideways: :meth:`DifferentialKinematics.wheel_rates` realis
 implies a sideways velocity.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, Self
 
@@ -18,7 +20,9 @@ from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
-from wmm_control.robot_config import DifferentialConfig
+
+if TYPE_CHECKING:
+    from wmm_control.robot_config import DifferentialBase
 
 __all__ = ['DifferentialKinematics']
 
@@ -50,9 +54,9 @@ class DifferentialKinematics:
         object.__setattr__(self, '_jv_pinv', np.linalg.pinv(jv))
 
     @classmethod
-    def from_config(cls, differential_config: DifferentialConfig) -> Self:
-        """Build from a :class:`wmm_control.robot_config.DifferentialConfig`."""
-        return cls(differential_config.wheel_radius, differential_config.track)
+    def from_config(cls, base: DifferentialBase) -> Self:
+        """Build from a :class:`wmm_control.robot_config.DifferentialBase`."""
+        return cls(base.wheel_radius, base.track)
 
     @property
     def jv(self) -> np.ndarray:

@@ -59,9 +59,9 @@ class SteerableGeometry:
         )
 
     @classmethod
-    def from_config(cls, steerable_config) -> 'SteerableGeometry':
-        """Build from a :class:`wmm_control.robot_config.SteerableConfig`."""
-        return cls(steerable_config.hips, steerable_config.wheel_radius, steerable_config.wheel_offset)
+    def from_config(cls, base) -> 'SteerableGeometry':
+        """Build from a :class:`wmm_control.robot_config.SteerableBase`."""
+        return cls(base.hips, base.wheel_radius, base.wheel_offset)
 
     @property
     def n_wheels(self) -> int:

@@ -88,7 +88,7 @@ from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.checks import as_finite_vector
 from wmm_control.geometry import scale_into_limits, wrap_angle
 from wmm_control.errors import ConfigError, ShapeError
-from wmm_control.robot_config import RobotConfig
+from wmm_control.robot_config import RobotConfig, SteerableBase
 
 __all__ = ['SwmrParams', 'SwmrOutput', 'IcrQp', 'QpResult', 'OsqpIcrSolver', 'SwmrController']
 
@@ -212,18 +212,18 @@ class SwmrParams:
         """Limits from a :class:`RobotConfig` of a steerable robot; other fields from ``overrides``.
 
         Raises:
-            ConfigError: the robot has no ``steerable`` section.
+            ConfigError: the robot's base is not a steerable one.
         """
-        s = getattr(robot, 'steerable', None)
-        if s is None:
-            raise ConfigError(f'robot {getattr(robot, "name", robot)!r} has no steerable section')
-        values = dict(
+        s = robot.base
+        if not isinstance(s, SteerableBase):
+            raise ConfigError(f'robot {robot.name!r} has a {s.family} base, not a steerable one')
+        values: dict[str, Any] = dict(
             steer_rate_limit=s.steer_rate_limit,
             steer_accel_limit=s.steer_accel_limit,
             drive_rate_limit=s.drive_rate_limit,
             drive_accel_limit=s.drive_accel_limit,
-            base_velocity_limit=tuple(np.asarray(robot.base.velocity, dtype=float)),
-            base_accel_limit=tuple(np.asarray(robot.base.acceleration, dtype=float)),
+            base_velocity_limit=tuple(np.asarray(s.velocity, dtype=float)),
+            base_accel_limit=tuple(np.asarray(s.acceleration, dtype=float)),
         )
         values.update(overrides)
         return cls(**values)

@@ -36,7 +36,7 @@ from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import scale_into_limits
-from wmm_control.robot_config import RobotConfig
+from wmm_control.robot_config import DifferentialBase, MecanumBase, RobotConfig
 
 __all__ = ['WheelParams', 'WheelOutput', 'WheelController', 'wheel_kinematics']
 
@@ -47,11 +47,12 @@ def wheel_kinematics(robot: RobotConfig) -> MecanumKinematics | DifferentialKine
     Raises:
         ConfigError: the robot's base is of another family.
     """
-    if robot.mecanum is not None:
-        return MecanumKinematics.from_config(robot.mecanum)
-    if robot.differential is not None:
-        return DifferentialKinematics.from_config(robot.differential)
-    raise ConfigError(f'robot {robot.name!r} has a {robot.base_type} base, not a Mecanum or differential one')
+    match robot.base:
+        case MecanumBase():
+            return MecanumKinematics.from_config(robot.base)
+        case DifferentialBase():
+            return DifferentialKinematics.from_config(robot.base)
+    raise ConfigError(f'robot {robot.name!r} has a {robot.base.family} base, not a Mecanum or differential one')
 
 
 # A change exceeding the acceleration limit by at most this fraction is taken whole:
@@ -110,18 +111,17 @@ class WheelParams:
         Raises:
             ConfigError: the robot's base is of another family.
         """
-        wheels = getattr(robot, 'mecanum', None) or getattr(robot, 'differential', None)
-        if wheels is None:
+        base = robot.base
+        if not isinstance(base, (MecanumBase, DifferentialBase)):
             raise ConfigError(
-                f'robot {getattr(robot, "name", robot)!r} has a {getattr(robot, "base_type", "?")} '
-                'base: this controller drives Mecanum and differential bases'
+                f'robot {robot.name!r} has a {base.family} base: this controller drives Mecanum and differential bases'
             )
         # __post_init__ turns the limit arrays into tuples
         return cls(
             dt=dt,
-            velocity_limit=robot.base.velocity,  # type: ignore[arg-type]
-            accel_limit=robot.base.acceleration,  # type: ignore[arg-type]
-            wheel_rate_limit=wheels.wheel_rate_limit,
+            velocity_limit=base.velocity,  # type: ignore[arg-type]
+            accel_limit=base.acceleration,  # type: ignore[arg-type]
+            wheel_rate_limit=base.wheel_rate_limit,
         )
 
 
@@ -130,8 +130,8 @@ class WheelOutput:
     """One period of :class:`WheelController`.
 
     Attributes:
-        wheel_rates: wheel rate commands [rad/s], in the robot's wheel order (Mecanum fl, fr,
-            rl, rr; differential left, right). Shape (m,).
+        wheel_rates: wheel rate commands [rad/s], in the robot's wheel order (the Mecanum
+            ``wheel_joints``; differential left, right). Shape (m,).
         twist: feasible twist q̇_bf = the wheel map of ``wheel_rates`` (base frame). Shape (3,).
         reference: the reference after the velocity limits (zero when braking). Shape (3,).
         velocity_scale: ``reference`` = velocity_scale · the requested reference, in [0, 1].

@@ -10,6 +10,7 @@ import numpy as np
 
 from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
+from wmm_control.robot_config import Base, DifferentialBase, MecanumBase, SteerableBase
 
 __all__ = ['main', 'describe']
 
@@ -20,12 +21,34 @@ def _fmt(values, digits=4):
     )
 
 
+def _describe_base(base: Base) -> str:
+    """One line on the base's geometry and wheel limits."""
+    match base:
+        case SteerableBase():
+            return (
+                f'steerable modules ({base.n_modules}): hips {base.hips.tolist()}, r_w {base.wheel_radius} m, '
+                f'd {base.wheel_offset} m, steer ≤ {base.steer_rate_limit} rad/s, ≤ {base.steer_accel_limit} rad/s², '
+                f'drive ≤ {base.drive_rate_limit} rad/s'
+            )
+        case DifferentialBase():
+            return (
+                f'differential wheels {list(base.wheel_joints)}: r {base.wheel_radius} m, track {base.track} m, '
+                f'≤ {base.wheel_rate_limit} rad/s (no sideways motion)'
+            )
+        case MecanumBase():
+            return (
+                f'mecanum wheels ({len(base.wheel_joints)}): R {base.wheel_radius} m, positions '
+                f'{base.positions.round(4).tolist()} m, roller angles {np.degrees(base.roller_angles).round(2).tolist()}°, '
+                f'≤ {base.wheel_rate_limit} rad/s'
+            )
+
+
 def describe(model, base_pose, q_arm):
     """Text report of a robot and one state of it."""
     cfg = model.config
     model.update(base_pose, q_arm)
     lines = [
-        f'robot: {cfg.name} ({cfg.base_type} base, {cfg.arm.n} arm joints) - {cfg.description}',
+        f'robot: {cfg.name} ({cfg.base.family} base, {cfg.arm.n} arm joints) - {cfg.description}',
         f'urdf: {cfg.urdf_path}',
         f'end-effector frame: {model.ee_frame}',
         '',
@@ -39,22 +62,7 @@ def describe(model, base_pose, q_arm):
         )
     lines.append(f'base velocity limits (vx, vy, ω): {_fmt(cfg.base.velocity, 3)}')
     lines.append(f'base acceleration limits:         {_fmt(cfg.base.acceleration, 3)}')
-    if cfg.steerable is not None:
-        s = cfg.steerable
-        lines.append(
-            f'steerable modules ({s.n_modules}): hips {s.hips.tolist()}, r_w {s.wheel_radius} m, '
-            f'd {s.wheel_offset} m, steer ≤ {s.steer_rate_limit} rad/s, ≤ {s.steer_accel_limit} rad/s², '
-            f'drive ≤ {s.drive_rate_limit} rad/s'
-        )
-    elif cfg.differential is not None:
-        d = cfg.differential
-        lines.append(
-            f'differential wheels {list(d.wheel_joints)}: r {d.wheel_radius} m, track {d.track} m, '
-            f'≤ {d.wheel_rate_limit} rad/s (no sideways motion)'
-        )
-    else:
-        m = cfg.mecanum
-        lines.append(f'mecanum wheels: R {m.wheel_radius} m, d1 {m.d1} m, d2 {m.d2} m, ≤ {m.wheel_rate_limit} rad/s')
+    lines.append(_describe_base(cfg.base))
     pose_w = model.ee_pose_world()
     lines += [
         '',

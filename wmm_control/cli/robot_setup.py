@@ -14,8 +14,9 @@ value commented with the rule that chose it:
 
 * wheel and steer joints, found from the URDF unless named: joints outside the arm that turn
   about their y axis (wheels) or z axis (steer joints), whose link has a collision cylinder;
-  Mecanum wheels are ordered front-left, front-right, rear-left, rear-right by their
-  position, differential ones left then right;
+  Mecanum wheels (three or more) are ordered by their position from front to rear, left to
+  right (front-left, front-right, rear-left, rear-right for four), differential ones left
+  then right;
 * base twist limits from the wheel rate limits: half the wheel rate budget each to the
   linear and the angular part (so both at once stay within it); base accelerations reach
   those in one second;
@@ -45,7 +46,8 @@ from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers import METHODS
-from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, load_robot
+from wmm_control.base.mecanum import MecanumKinematics
+from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, load_robot, usual_roller_angles
 from wmm_control.urdf import UrdfJoint, UrdfTree
 
 __all__ = ['main', 'init_robot', 'detect_wheels']
@@ -102,14 +104,14 @@ def detect_wheels(tree: UrdfTree, family: str, base_link: str, arm_joints: Itera
         and tree.wheel_radius(j.child) is not None
         and not any(_axis_is(a, 2) for a in tree.ancestors(j.child) if a.type != 'fixed')
     ]
-    want = 4 if family == 'mecanum' else 2
-    if len(wheels) != want:
+    mecanum = family == 'mecanum'
+    if (len(wheels) < 3) if mecanum else (len(wheels) != 2):
         raise WmmError(
             f'{tree.path.name}: found {len(wheels)} wheel joints (continuous, about y, a collision '
-            f'cylinder on the link) {[j.name for j in wheels]}; a {family} base needs {want}: '
-            'name them with --wheel-joints'
+            f'cylinder on the link) {[j.name for j in wheels]}; a {family} base needs '
+            f'{"3 or more" if mecanum else "2"}: name them with --wheel-joints'
         )
-    if family == 'mecanum':
+    if mecanum:  # front to rear, left to right: fl, fr, rl, rr for four
         wheels.sort(key=lambda j: (-round(position(j)[0], 6), -round(position(j)[1], 6)))
     else:
         wheels.sort(key=lambda j: -position(j)[1])
@@ -131,9 +133,17 @@ def _base_limits(cfg_wheels, family, tree, base_link):
     radius = tree.wheel_radius(joints[0].child) or 0.0
     pos = np.array([tree.placement(j.child, base_link)[1][:2] for j in joints])
     if family == 'mecanum':
-        k = float(np.mean(np.abs(pos[:, 0])) + np.mean(np.abs(pos[:, 1])))
-        v = 0.25 * rate * radius
-        return [v, v, v / max(k, 1e-3)]
+        on_axis = [n for n, (x, y) in zip(cfg_wheels['wheel_joints'], pos) if x * y == 0.0]
+        if on_axis:
+            raise WmmError(
+                f'{tree.path.name}: Mecanum wheels {on_axis} sit on an axis of {base_link}, where the usual '
+                'roller pattern places none: write the robot YAML with mecanum.roller_angles'
+            )
+        # the rows of the wheel map with the usual rollers: (|vx| + |vy|) takes up to half of each
+        # wheel's rate budget, |ω| a quarter (for four wheels at (±d1, ±d2): R rate / 4 and that / (d1 + d2))
+        rows = np.abs(MecanumKinematics(radius, pos, usual_roller_angles(pos)).inverse)
+        v = 0.5 * rate / float(np.max(rows[:, 0] + rows[:, 1]))
+        return [v, v, 0.25 * rate / float(np.max(rows[:, 2]))]
     track = float(pos[0, 1] - pos[1, 1])
     return [0.5 * rate * radius, 0.0, rate * radius / max(track, 1e-3)]
 

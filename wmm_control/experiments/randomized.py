@@ -266,7 +266,7 @@ def _run_nodes(robot, run, goal, duration, obstacles):
 def _limit_use(log, robot, dt):
     """How much of each limit the run used: the largest |value| / limit (<= 1 within) and the
     smallest distance of an arm joint to a position limit [rad]."""
-    arm, base, axes = robot.arm, robot.base, list(robot.base_axes)
+    arm, base, axes = robot.arm, robot.base, list(robot.base.axes)
     # (a differential base's vy has a zero limit: any vy at all is a limit passed, which
     # run_limit_report counts; the use is taken over the axes the base follows)
     arm_cmd, base_ref = log.arm_command, log.base_reference[:, axes]

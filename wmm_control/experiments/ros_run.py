@@ -241,10 +241,10 @@ def run_with_nodes(
         nodes.append(resolver)
         nodes.append(
             BaseControllerNode(
-                robot.base_type,
+                robot.base.family,
                 context=context,
                 parameter_overrides=params(
-                    dict(LOCKSTEP_WAITS[NODE_NAMES[robot.base_type]], robot=str(robot.yaml_path))
+                    dict(LOCKSTEP_WAITS[NODE_NAMES[robot.base.family]], robot=str(robot.yaml_path))
                 ),
             )
         )

@@ -85,9 +85,7 @@ class KinematicModel:
         )
 
     @classmethod
-    def from_urdf(
-        cls, urdf_path: str | Path, arm_joints: Iterable[str], ee_frame: str, base_link: str = 'base_link'
-    ) -> Self:
+    def from_urdf(cls, urdf_path: str | Path, arm_joints: Iterable[str], ee_frame: str, base_link: str) -> Self:
         """A model of a URDF alone, before any robot YAML exists (``config`` is None).
 
         Args:

@@ -3,14 +3,14 @@ base (robot B, Xing eq 16) or a differential-drive base as a node (one class, tw
 each checks its robot's base family).
 
 The node is :class:`~wmm_control.nodes.base_controller.BaseControllerNode` for a wheeled base
-(:class:`~wmm_control.base.WheelBase`: :class:`~wmm_control.base.WheelController`); topics,
+(:class:`~wmm_control.base.WheelBaseController`: :class:`~wmm_control.base.WheelController`); topics,
 exchange and safety are described there. Its one command group is ``wheel``: the wheel rates
-[rad/s] on ``/wheel_controller/commands``, order of the robot YAML's ``wheel_joints`` (Mecanum
-fl, fr, rl, rr; differential left, right). A differential base's reference loses its vy (it
+[rad/s] on ``/wheel_controller/commands``, order of the robot YAML's ``wheel_joints`` (Mecanum:
+any N ≥ 3 wheels; differential left, right). A differential base's reference loses its vy (it
 cannot move sideways): the feasible twist says what it follows, and the resolver's arm
 compensation covers the rest. ``/diagnostics`` adds the velocity and acceleration scales, the
-limited and dropped parts of the reference and the wheel rates. Geometry (R, d1, d2 or the
-track), the wheel joints and every limit come from the robot description;
+limited and dropped parts of the reference and the wheel rates. Geometry (R and the wheel
+positions and roller angles, or the track), the wheel joints and every limit come from the robot description;
 ``config/mecanum_controller.yaml`` and ``config/differential_controller.yaml`` hold only the
 node's tuning.
 """

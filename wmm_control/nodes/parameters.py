@@ -89,9 +89,9 @@ def max_state_wait_param() -> Param:
 
 def require_base(robot: RobotConfig, families: Sequence[str], node_name: str) -> None:
     """Raise a ConfigError unless ``robot``'s base is one of ``families`` (this node drives those)."""
-    if robot.base_type not in families:
+    if robot.base.family not in families:
         raise ConfigError(
-            f'robot {robot.name!r} has a {robot.base_type} base; {node_name} drives {" and ".join(families)} bases'
+            f'robot {robot.name!r} has a {robot.base.family} base; {node_name} drives {" and ".join(families)} bases'
         )
 
 

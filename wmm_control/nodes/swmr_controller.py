@@ -1,7 +1,7 @@
 """``swmr_controller``: the steerable-base controller of Sorour §IV as a node.
 
 The node is :class:`~wmm_control.nodes.base_controller.BaseControllerNode` for a steerable
-base (:class:`~wmm_control.base.SteerableBase`: :class:`~wmm_control.base.SwmrController`);
+base (:class:`~wmm_control.base.SteerableBaseController`: :class:`~wmm_control.base.SwmrController`);
 topics, exchange and safety are described there. Its command groups are ``steer`` (β̇_ref,
 order ``steer_joints``, on ``/steer_controller/commands``) and ``drive`` (φ̇_ref, order
 ``drive_joints``, on ``/drive_controller/commands``); each cycle closes on the measured steer

@@ -106,8 +106,9 @@ class AccelerationResolver(Resolver):
         self.params = params
         self.limits = CommandLimits.for_robot(self.model.config, params.dt)
         self.safety = SafetyStage.for_robot(self.model.config, params)
-        self._unicycle = self.model.config.base_type == 'differential'
-        self.n_base = len(self.model.config.base_axes)
+        # a base that follows (vx, ω) only moves as a unicycle: rates u_b = (v, ω)
+        self._unicycle = self.model.config.base.axes == (0, 2)
+        self.n_base = len(self.model.config.base.axes)
         self.n = self.n_base + self.model.n_arm
         self._rows = slice(0, 3) if params.rows == 'position' else slice(0, 6)
         self._position = np.zeros(self.n)
@@ -233,7 +234,7 @@ class AccelerationResolver(Resolver):
             task['box_lower'],
             task['box_upper'],
             base_pose=state.base_pose,
-            base_axes=self.model.config.base_axes,
+            base_axes=self.model.config.base.axes,
             base_velocity=state.base_twist,
             world_rates=not self._unicycle,
             task_jacobian=task['jac'],

@@ -157,11 +157,11 @@ class CommandLimits:
     def for_robot(cls, robot: RobotConfig, dt: float) -> Self:
         """Limits of the whole-body command (base, q̇_1 … q̇_n) of a robot description.
 
-        The base entries are the twist axes the base can follow (``robot.base_axes``: vx, vy,
+        The base entries are the twist axes the base can follow (``robot.base.axes``: vx, vy,
         ω, or vx, ω for a differential base), with the robot YAML's base velocity and
         acceleration limits and no position limits; the arm has its joint limits.
         """
-        arm, axes = robot.arm, list(robot.base_axes)
+        arm, axes = robot.arm, list(robot.base.axes)
         inf = np.full(len(axes), np.inf)
         return cls(
             velocity=np.concatenate((robot.base.velocity[axes], arm.velocity)),

@@ -199,7 +199,7 @@ class PoseServoResolver(Resolver):
         self.params = params
         config = self.model.config
         #: indices of (vx, vy, ω) the base can follow; u = (those, q̇_a)
-        self.base_axes = config.base_axes
+        self.base_axes = config.base.axes
         self.n_base = len(self.base_axes)
         self.n_arm = self.model.n_arm
         self.n = self.n_base + self.n_arm

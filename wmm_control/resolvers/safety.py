@@ -105,6 +105,7 @@ from wmm_control.base.swmr_controller import SwmrParams
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import rotation_z
 from wmm_control.kinematics.collision import CollisionModel
+from wmm_control.robot_config import SteerableBase
 
 __all__ = ['SafetyParams', 'SafetyResult', 'SafetyStage', 'base_lag']
 
@@ -609,6 +610,6 @@ def base_lag(robot) -> float:
     The running controller's own τ replaces it (:meth:`SafetyStage.set_base_lag`): the direct
     engine's :class:`~wmm_control.cycle.Cycle` passes its base controller's, the resolver node
     the one the base controller node publishes."""
-    if getattr(robot, 'steerable', None) is None:
+    if not isinstance(robot.base, SteerableBase):
         return 0.0
     return SwmrParams.from_robot_config(robot).lag
