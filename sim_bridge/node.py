@@ -27,7 +27,9 @@ The clock topic is relative: ``/clock`` in the root namespace, ``/r1/clock`` for
 robot in a namespace that run on its sim time remap their clock to it
 (``--ros-args -r /clock:=/r1/clock``; the launch files do).
 
-Once, transient local: ``robot_description`` (``std_msgs/String``, the URDF text) and, where
+Once, transient local: ``sim/lockstep_timeout`` (``std_msgs/Float64``: 0 in realtime, else
+``lockstep_timeout``, again when it changes), from which the other nodes learn that they run in
+lockstep (:mod:`wmm_control.nodes.sim_timing`); ``robot_description`` (``std_msgs/String``, the URDF text) and, where
 ``tf2_msgs`` can be imported, ``/tf_static`` (the fixed joints); else one log line says why TF
 is not published (:mod:`wmm_control.nodes.robot_frames`). Every frame but ``world`` carries
 ``frame_prefix``.
@@ -121,6 +123,7 @@ class SimNode(Node):
         self.frames = RobotFrames(self, self.world.robot, self.p.frame_prefix, publish_tf=self.p.publish_tf)
         base_frame = self.p.frame_prefix + self.world.robot.base_link
         self.out = SimOutputs(self, self.frames, self.p.frame_prefix + 'odom', base_frame)
+        self.out.publish_timing(self.p.lockstep_timeout if self.lockstep else 0.0)
         self._steps = 0
         self._diagnostics_gate = DiagnosticsGate()
         self._wall_start = time.monotonic()
@@ -152,6 +155,7 @@ class SimNode(Node):
     def _set_lockstep_timeout(self, timeout):
         if self.lockstep:
             self.poll.timer_period_ns = int(poll_period(timeout) * 1e9)
+            self.out.publish_timing(timeout)
 
     def destroy_node(self) -> None:
         """Destroy the node and close the PyBullet client (also when the node was never spun)."""

@@ -43,7 +43,13 @@ PARAMS = (
     Param('substeps', 'Physics steps per period [-].', lo=1, hi=1000, read_only=True),
     Param('command_timeout', 'Command age [s] (receiver clock) after which a group is zeroed.', lo=1e-3, hi=10.0),
     Param('lockstep_groups', 'Comma-separated command groups lockstep waits for, or "all".'),
-    Param('lockstep_timeout', 'Wall time [s] lockstep waits for commands before stepping anyway.', lo=1e-3, hi=60.0),
+    Param(
+        'lockstep_timeout',
+        'Wall time [s] lockstep waits for commands before stepping anyway; published on sim/lockstep_timeout '
+        '(latched; 0 in realtime) so that the other nodes know they run in lockstep.',
+        lo=1e-3,
+        hi=60.0,
+    ),
     Param(
         'publish_clock',
         'Publish the sim time on clock (relative: /clock in the root namespace, '

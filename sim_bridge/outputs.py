@@ -3,7 +3,8 @@ ROS messages, and its ``/diagnostics``.
 
 ``/ee_pose``, ``/odom`` and ``/ground_truth/odom`` are built only when a subscriber is matched
 (one that comes later is matched within a period or two and gets every message from then on);
-the clock and the joint states always go out. The odometry covariances are the slip model's
+the clock and the joint states always go out. ``sim/lockstep_timeout`` (latched) tells the
+other nodes how the simulator steps (:mod:`wmm_control.nodes.sim_timing`). The odometry covariances are the slip model's
 (:class:`~sim_bridge.slip.OdometryCovariance`), planar: z, roll and pitch carry
 :data:`~sim_bridge.slip.VARIANCE_FLOOR`.
 """
@@ -16,14 +17,16 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
 
 from sim_bridge.slip import VARIANCE_FLOOR, OdometryCovariance
 from sim_bridge.supervision import Status
 from sim_bridge.world import SimWorld
 from wmm_control.nodes.conversions import odometry, planar_covariance, pose_stamped
 from wmm_control.nodes.diagnostics import diagnostic_array, node_status
-from wmm_control.nodes.qos import CLOCK_QOS, DIAGNOSTICS_QOS, STATE_PUB_QOS
+from wmm_control.nodes.qos import CLOCK_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STATE_PUB_QOS
 from wmm_control.nodes.robot_frames import RobotFrames
+from wmm_control.nodes.sim_timing import LOCKSTEP_TOPIC
 
 __all__ = ['SimOutputs']
 
@@ -47,6 +50,12 @@ class SimOutputs:
         # Relative: each simulator in its namespace; nodes on its sim time remap /clock to it.
         self.pub_clock = node.create_publisher(ClockMsg, 'clock', CLOCK_QOS)
         self.pub_diag = node.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.pub_timing = node.create_publisher(Float64, LOCKSTEP_TOPIC, LATCHED_QOS)
+
+    def publish_timing(self, lockstep_timeout: float) -> None:
+        """Tell the nodes how the simulator steps (:mod:`wmm_control.nodes.sim_timing`): 0 in
+        realtime, else its ``lockstep_timeout`` [s]."""
+        self.pub_timing.publish(Float64(data=float(lockstep_timeout)))
 
     def publish_state(self, stamp: Time, world: SimWorld, covariance: OdometryCovariance, clock: bool) -> JointState:
         """Publish ``clock`` (when ``clock`` is set), the end-effector pose, the odometry, the

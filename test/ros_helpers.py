@@ -28,13 +28,17 @@ ROSOUT_QOS = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL,
 
 
 @contextmanager
-def held_up(obj, name, seconds):
-    """Within the block, ``obj.name(...)`` sleeps ``seconds`` before it runs: a node held up in
-    the middle of its cycle (stopped, or starved on a busy machine)."""
+def held_up(obj, name, seconds, every=1):
+    """Within the block, ``obj.name(...)`` sleeps ``seconds`` before it runs (every ``every``-th
+    call, from the first): a node held up in the middle of its cycle (stopped, or starved on a
+    busy machine)."""
     original = getattr(obj, name)
+    calls = [0]
 
     def slow(*args, **kwargs):
-        time.sleep(seconds)
+        if calls[0] % every == 0:
+            time.sleep(seconds)
+        calls[0] += 1
         return original(*args, **kwargs)
 
     setattr(obj, name, slow)

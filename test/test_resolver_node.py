@@ -181,8 +181,8 @@ def test_stale_joint_states_give_zero_commands(system):
     assert np.max(np.abs(driver.arm[-1])) > 0.0
     ros.executor.remove_node(sim)  # the robot stops reporting
     n = len(driver.arm)
-    ros.spin_for(0.6)
-    assert len(driver.arm) > n and np.allclose(driver.arm[-1], 0.0)
+    # in lockstep the watchdog allows the simulator's lockstep_timeout (1 s) besides state_timeout
+    assert ros.spin_until(lambda: len(driver.arm) > n and np.allclose(driver.arm[-1], 0.0), timeout=3.0)
 
 
 def test_the_node_chain_equals_the_direct_loop(tmp_path):

@@ -356,19 +356,103 @@ def test_robot_description_and_the_tf_tree_place_the_end_effector_where_ee_pose_
     assert ctrl.odom[-1].header.frame_id == 'r1/odom' and ctrl.odom[-1].child_frame_id == 'r1/' + config.base_link
 
 
-def test_tf_and_tf_static_go_out_where_tf2_msgs_can_be_imported(ros):
-    tf2 = pytest.importorskip('tf2_msgs.msg', reason='tf2_msgs has no PyPI wheel: TF needs a ROS 2 install')
+def _key(stamp):
+    return (stamp.sec, stamp.nanosec)
+
+
+def _tf_listener(ros, tf2):
+    """The transforms of ``/tf_static`` (a list) and of each ``/tf`` message (by stamp), as tf2's
+    listener receives them."""
     from rclpy.node import Node
     from wmm_control.nodes.robot_frames import DESCRIPTION_QOS
 
-    config = load_robot('steerable')
     listener = ros.add(Node('tf_listener', context=ros.context))
-    static, dynamic = [], []
+    static, dynamic = [], {}
     listener.create_subscription(tf2.TFMessage, '/tf_static', lambda m: static.extend(m.transforms), DESCRIPTION_QOS)
-    listener.create_subscription(tf2.TFMessage, '/tf', lambda m: dynamic.append(list(m.transforms)), 100)
+    listener.create_subscription(
+        tf2.TFMessage, '/tf', lambda m: dynamic.setdefault(_key(m.transforms[0].header.stamp), list(m.transforms)), 100
+    )
+    return static, dynamic
+
+
+def test_tf_and_tf_static_go_out_where_tf2_msgs_can_be_imported(ros):
+    """/tf_static and /tf, as received, put the tool at the ground-truth /ee_pose of the same
+    stamp. The messages of one step reach the two subscribers in either order: each /tf is
+    paired with the /ee_pose of its stamp once both are in, never with a later one."""
+    tf2 = pytest.importorskip('tf2_msgs.msg', reason='tf2_msgs has no PyPI wheel: TF needs a ROS 2 install')
+    config = load_robot('steerable')
+    static, dynamic = _tf_listener(ros, tf2)
     sim, ctrl = start(ros, lambda t, js: {'arm': np.full(7, 0.2), 'steer': np.full(4, 0.3), 'drive': np.full(4, 4.0)})
-    assert ros.spin_until(lambda: static and len(dynamic) > 20 and ctrl.ee_poses)
-    by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): m for m in ctrl.ee_poses}
-    last = dynamic[-1]
-    ee = by_stamp[(last[0].header.stamp.sec, last[0].header.stamp.nanosec)]
-    np.testing.assert_allclose(_chain(static + last, 'world', config.ee_frame), _ee_matrix(ee), atol=1e-6)
+
+    def paired():
+        ee = {_key(m.header.stamp): m for m in ctrl.ee_poses}
+        return {k: (tfs, ee[k]) for k, tfs in dynamic.items() if k in ee}
+
+    assert ros.spin_until(lambda: static and len(paired()) > 20)
+    pairs = paired()
+    for key in sorted(pairs)[-20:]:
+        tfs, ee = pairs[key]
+        np.testing.assert_allclose(_chain(static + tfs, 'world', config.ee_frame), _ee_matrix(ee), atol=1e-6)
+
+
+@pytest.mark.parametrize('robot', ['steerable', 'mecanum'])
+def test_tf_puts_every_link_where_pinocchio_puts_it_with_the_frame_prefix(ros, robot):
+    """What robot_state_publisher would publish: /tf_static and /tf, as received, place every link
+    of the URDF where pinocchio's forward kinematics of the joint states puts it, on the
+    ground-truth base pose of the same stamp; every frame but world carries frame_prefix."""
+    tf2 = pytest.importorskip('tf2_msgs.msg', reason='tf2_msgs has no PyPI wheel: TF needs a ROS 2 install')
+    import pinocchio as pin
+
+    from wmm_control.kinematics.frames import FrameTransform
+
+    config = load_robot(robot)
+    prefix = 'r2/'
+    groups = ('arm', 'steer', 'drive') if robot == 'steerable' else ('arm', 'wheel')
+    sizes = {'arm': 7, 'steer': 4, 'drive': 4, 'wheel': 4}
+    moving = {'arm': 0.3, 'steer': 0.4, 'drive': 4.0, 'wheel': 3.0}
+    static, dynamic = _tf_listener(ros, tf2)
+    sim, ctrl = start(
+        ros,
+        lambda t, js: {g: np.full(sizes[g], moving[g] * (-1) ** i) for i, g in enumerate(groups)},
+        groups=groups,
+        robot=robot,
+        frame_prefix=prefix,
+        slip_drift=[0.02, -0.01, 0.03],
+    )
+
+    def common():
+        joints = {_key(m.header.stamp): m for m in ctrl.joint_states}
+        truth = {_key(m.header.stamp): m for m in ctrl.truth}
+        return sorted(k for k in dynamic if k in joints and k in truth), joints, truth
+
+    assert ros.spin_until(lambda: static and len(common()[0]) > 40)
+    keys, joints, truth = common()
+    model = pin.buildModelFromUrdf(str(config.urdf_path))
+    data = model.createData()
+    links = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+    assert len(links) > 10
+    for key in keys[-3:]:  # the arm and the wheels have moved by then
+        position = dict(zip(joints[key].name, joints[key].position))
+        q = pin.neutral(model)
+        for jid in range(1, model.njoints):
+            joint, value = model.joints[jid], position[model.names[jid]]
+            if joint.nq == 2:  # continuous: (cos, sin)
+                q[joint.idx_q : joint.idx_q + 2] = np.cos(value), np.sin(value)
+            else:
+                q[joint.idx_q] = value
+        pin.framesForwardKinematics(model, data, q)
+        pose = truth[key].pose.pose
+        world_base = FrameTransform(
+            'world',
+            'base',
+            np.array([pose.position.x, pose.position.y, pose.position.z]),
+            np.array([pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w]),
+        ).matrix()
+        world_root = world_base @ np.linalg.inv(data.oMf[model.getFrameId(config.base_link)].homogeneous)
+        tfs = static + dynamic[key]
+        assert {m.header.frame_id for m in tfs if not m.header.frame_id.startswith(prefix)} == {'world'}
+        assert all(m.child_frame_id.startswith(prefix) for m in tfs)
+        for link in links:
+            expected = world_root @ data.oMf[model.getFrameId(link)].homogeneous
+            np.testing.assert_allclose(_chain(tfs, 'world', prefix + link), expected, atol=1e-9, err_msg=link)
+    assert not np.allclose(sim.world.odom_pose(), sim.world.base_pose(), atol=1e-3), 'odometry drifted'

@@ -113,8 +113,8 @@ def test_feasible_twist_is_what_the_base_executes_over_the_next_period(ros):
 
 
 def test_stale_reference_stops_the_base_and_holds_the_wheel_angles(ros):
-    # The reference stops after 3 s; reference_timeout 0.2 s (wall clock of the controller:
-    # lockstep runs faster than real time, so give it real seconds to notice).
+    # The reference stops after 3 s; reference_timeout 0.2 s (in lockstep, which the controller
+    # learns from the simulator, of simulated time: the next 120 periods brake the base to rest).
     pub = run(ros, lambda t: (0.3, 0.2, 0.1) if t < 3.0 else None, 3.0)
     moving = np.array(pub.velocities()['drive_fl_joint'])
     assert abs(moving) > 0.5

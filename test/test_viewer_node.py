@@ -8,11 +8,14 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
 
-from ros_helpers import overrides
+from rcl_interfaces.msg import Log
+
+from ros_helpers import ROSOUT_QOS, overrides
 from sim_bridge.node import SimNode
 from wmm_control.errors import ConfigError
 from wmm_control.nodes.viewer import ViewerNode
 from wmm_control.paths import config_path
+from wmm_control.viewer.browser import local_only
 
 
 def viewer(ros, **params):
@@ -127,6 +130,7 @@ def test_a_robot_yaml_path_and_use_sim_time_without_a_clock(ros):
         (dict(robot='C'), "unknown robot 'C'"),
         (dict(robot='/nowhere/robot.yaml'), 'not found'),
         (dict(host=' '), 'host'),
+        (dict(allow_remote_commands='yes'), 'allow_remote_commands'),
     ],
 )
 def test_invalid_parameters_fail_with_a_clear_error(ros, params, message):
@@ -177,3 +181,63 @@ def test_obstacles_of_the_file_and_the_topic_are_drawn_where_they_are(ros):
     publisher.publish(MarkerArray(markers=[marker]))
     assert ros.spin_until(lambda: len(view.browser.obstacle_handles) == 3, timeout=5)
     assert np.asarray(view.browser.obstacle_handles[2].position) == pytest.approx([2.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    'host, local',
+    [
+        ('127.0.0.1', True),
+        ('127.3.4.5', True),
+        ('localhost', True),
+        ('::1', True),
+        ('0.0.0.0', False),
+        ('::', False),
+        ('192.0.2.7', False),
+        ('no-such-host.invalid', False),
+    ],
+)
+def test_a_host_is_local_only_when_every_address_it_names_is_a_loopback_one(host, local):
+    assert local_only(host) is local
+
+
+def test_the_viewer_listens_on_this_machine_alone_by_default_and_its_page_commands_the_robot(ros):
+    view = ros.add(ViewerNode(context=ros.context, parameter_overrides=overrides(port=18083)))
+    assert view.p.host == '127.0.0.1' and view.p.allow_remote_commands is False
+    described = view.describe_parameter('allow_remote_commands')
+    assert described.read_only and 'anyone who can reach the port' in described.description
+    assert view.commands and view.browser.goal_handle is not None and view.browser.hold_button is not None
+
+
+@pytest.mark.parametrize('allow', [False, True])
+def test_a_page_served_beyond_this_machine_commands_the_robot_only_when_allowed(ros, allow):
+    """On 0.0.0.0 (every interface) the page has no goal handle nor "Hold here", and what its
+    handlers get publishes nothing, unless ``allow_remote_commands``; the log says which at start."""
+    logs = []
+    probe = ros.add(ros_node(ros, 'log_probe'))
+    probe.create_subscription(Log, '/rosout', lambda m: logs.append((m.name, m.level, m.msg)), ROSOUT_QOS)
+    view = ros.add(
+        ViewerNode(
+            context=ros.context,
+            parameter_overrides=overrides(
+                host='0.0.0.0', port=18084, allow_remote_commands=allow, drag_publish_period=0.05
+            ),
+        )
+    )
+    got = goals_on(ros)
+    assert ros.spin_until(lambda: any(name == 'wmm_viewer' and 'viewer of robot' in m for name, _, m in logs))
+    started = next((lvl, m) for name, lvl, m in logs if name == 'wmm_viewer' and 'viewer of robot' in m)
+    assert view.commands is allow
+    assert (view.browser.goal_handle is not None, view.browser.hold_button is not None) == (allow, allow)
+    if allow:
+        assert started[0] == Log.WARN and 'anyone who can reach port 18084' in started[1]
+    else:
+        assert started[0] == Log.INFO and 'commands nothing' in started[1]
+        assert 'allow_remote_commands:=true' in started[1] and 'served on 0.0.0.0' in view.browser.goal_text.content
+    ros.spin_for(0.2)
+    # what the page's handlers get: a drag released at a pose, and a press of "Hold here"
+    event = SimpleNamespace(phase='end', target=SimpleNamespace(position=(1.2, 0.5, 0.8), wxyz=(1, 0, 0, 0)))
+    view._on_handle(event)
+    view.browser._hold.set()
+    ros.spin_for(0.6)
+    assert len(got) == (2 if allow else 0)
+    assert view.counters['goals_sent'] == len(got)

@@ -33,9 +33,16 @@ with a reference of the same stamp therefore gets its feasible twist in the same
 reference published by hand (stamp 0) still drives the base, one short wait later. A
 steerable base closes each cycle on the measured steer angles.
 
+Lockstep: when the simulator says it steps in lockstep (its latched ``sim/lockstep_timeout``,
+:mod:`~wmm_control.nodes.sim_timing`), the reference is aged by the simulation's time, a joint
+state waits for its reference as long as the simulator waits for the commands (while the
+references answer the states: :class:`~wmm_control.nodes.sim_timing.AnswerWait`), no state is
+skipped for its wait, and the joint-state watchdog allows the simulator's wait besides
+``joint_state_timeout``; no parameter needs to change.
+
 Safety: when the latest reference is older than ``reference_timeout`` (this node's clock at
-receipt) the base brakes to rest at its acceleration limits (at rest within |v|/a + one
-period; a steerable base holds its steer angles). Non-finite references and references in
+receipt; the simulation's time in lockstep) the base brakes to rest at its acceleration limits
+(at rest within |v|/a + one period; a steerable base holds its steer angles). Non-finite references and references in
 another frame are rejected (an empty frame is taken as ``base_frame``, with a warning); finite
 references beyond the limits are scaled into them by the core, with a warning. When joint
 states stop for ``joint_state_timeout`` (steady clock, so a paused sim clock cannot hide it),
@@ -82,7 +89,8 @@ from wmm_control.nodes.base_controller_params import GAINS, NODE_NAMES, STEERABL
 from wmm_control.nodes.parameters import declare_parameters, require_base
 from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STATE_SUB_QOS
 from wmm_control.nodes.runner import guard_clock
-from wmm_control.nodes.stamps import StampedExchange, seconds
+from wmm_control.nodes.sim_timing import AnswerWait
+from wmm_control.nodes.stamps import StampedExchange
 from wmm_control.robot_config import load_robot
 
 __all__ = ['BaseControllerNode']
@@ -123,7 +131,9 @@ class BaseControllerNode(Node):
             g: JointSelector(joints, velocity_limits=self.base.rate_limits[g])
             for g, joints in self.base.command_groups.items()
         }
-        self.reference = BaseReference(self, p.base_frame, p.reference_timeout, self.base.velocity_limit)
+        self.reference = BaseReference(
+            self, p.base_frame, p.reference_timeout, self.base.velocity_limit, now=self._input_time
+        )
         self.counters = {'cycles': 0, 'joint_states_rejected': 0, 'stale_cycles': 0, 'commands_not_applied': 0}
         self.period = BasePeriod(self.base, p.applied_rate_tolerance)
         self._diagnostics_gate = DiagnosticsGate()
@@ -136,8 +146,6 @@ class BaseControllerNode(Node):
         # τ of this controller, for the resolver's safety stage (latched: a resolver started later gets it)
         self.pub_lag = self.create_publisher(Float64, 'base/lag', LATCHED_QOS)
         self.pub_lag.publish(Float64(data=float(self.base.lag)))
-        # One cycle per joint state, run with the reference of the same stamp (see the module doc).
-        self.exchange = StampedExchange(self, p.reference_wait, self._cycle, steady)
         then = (
             'restart from the measured wheel rates'
             if self.base.resync_from_rates
@@ -152,11 +160,17 @@ class BaseControllerNode(Node):
             f'zero {" and ".join(self.groups)} rates; will {then}',
             max_wait=p.max_state_wait,
         )
+        # One cycle per joint state, run with the reference of the same stamp (see the module doc).
+        self.exchange = StampedExchange(self, AnswerWait(self.watchdog.timing, p.reference_wait), self._cycle, steady)
         self.create_subscription(TwistStamped, 'base/reference', self._on_reference, COMMAND_QOS)
         self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
         self.get_logger().info(f'{family} base controller, robot {robot.name}: {self.base.describe()}')
 
     # ------------------------------------------------------------------ inputs
+    def _input_time(self) -> float:
+        """The time [s] by which the reference is aged: the simulation's in lockstep, else the ROS clock."""
+        return self.watchdog.now(self.get_clock())
+
     def _on_reference(self, msg):
         if self.reference.accept(msg):
             self.exchange.reference_received(msg.header.stamp)
@@ -194,7 +208,7 @@ class BaseControllerNode(Node):
         positions, rates, received = measured
         if self.watchdog.waited_too_long(received):
             return
-        now = seconds(self.get_clock())
+        now = self._input_time()
         why = self.period.start(positions, rates, self.watchdog.resync(*self.pub_commands.values()))
         if why:
             self.counters['commands_not_applied'] += 1

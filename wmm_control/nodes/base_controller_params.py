@@ -29,16 +29,23 @@ def _params(robot_help, gains=()):
         Param('base_frame', 'Frame of the reference and feasible twists.', read_only=True),
         Param(
             'reference_timeout',
-            'Reference age [s] (this node\'s clock at receipt) after which the base brakes to rest.',
+            'Reference age [s] (this node\'s clock at receipt; in lockstep the simulation\'s time) after which '
+            'the base brakes to rest.',
             lo=1e-3,
             hi=60.0,
         ),
         Param(
-            'reference_wait', 'Steady time [s] a joint state waits for its reference.', lo=0.0, hi=1.0, read_only=True
+            'reference_wait',
+            'Steady time [s] a joint state waits for its reference; in lockstep, while the references come, as '
+            'long as the simulator waits for the commands (its lockstep_timeout).',
+            lo=0.0,
+            hi=1.0,
+            read_only=True,
         ),
         Param(
             'joint_state_timeout',
-            'Joint-state age [s] (steady clock) after which zero rates are commanded.',
+            'Joint-state age [s] (steady clock) after which zero rates are commanded; in lockstep the '
+            'simulator\'s lockstep_timeout is added.',
             lo=1e-3,
             hi=60.0,
         ),

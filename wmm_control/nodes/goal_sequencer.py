@@ -13,9 +13,12 @@ twist and ``accelerations[0]`` the acceleration (linear, angular; world axes),
 effector's pose at the robot's start state (its YAML), as the paper's x0.
 
 Time: the scenario's clock starts at the first reading of this node's clock. Under
-``use_sim_time`` (recommended with ``wmm_sim``) that is the first ``/clock`` message, and the
+``use_sim_time`` (recommended with ``wmm_sim`` in realtime) that is the first ``/clock`` message, and the
 goals follow simulated time exactly: the node checks its timeline on every ``/clock``
-message; on wall time, on a steady-clock timer every 10 ms. When the scenario ends (its ``duration``), the
+message; on wall time, on a steady-clock timer every 10 ms. A simulator in lockstep says so
+(its latched ``sim/lockstep_timeout``, :mod:`~wmm_control.nodes.sim_timing`): the node then
+follows the simulator's ``clock`` (relative: ``/r1/clock`` in ``/r1``) without
+``use_sim_time``, and the scenario starts again on it. When the scenario ends (its ``duration``), the
 last goal stays in force. A clock that goes back (a restarted simulator) starts the scenario
 again, and one that jumps more than 10 s ahead skips to that time; both are logged.
 """
@@ -38,6 +41,7 @@ from wmm_control.nodes.conversions import pose_stamped, set_pose, set_twist, spl
 from wmm_control.nodes.parameters import Param, declare_parameters
 from wmm_control.nodes.qos import CLOCK_QOS, COMMAND_QOS
 from wmm_control.nodes.runner import guard_clock, run_node
+from wmm_control.nodes.sim_timing import SimTiming
 from wmm_control.resolvers.interface import PoseTarget
 
 __all__ = ['GoalSequencerNode', 'main']
@@ -93,13 +97,13 @@ class GoalSequencerNode(Node):
         if self.scenario.trajectory is not None:
             self._trajectory = self.scenario.reference(KinematicModel(self.scenario.robot))
         self._sim_time = self.get_parameter('use_sim_time').value
-        self._t0 = None
-        self._last_t = None
-        self._index = -1
-        self._last_pub = -math.inf
+        self._restart()
         self.published = 0
+        self._lockstep_clock = None  # the simulator's clock subscription while it steps in lockstep
         if self._sim_time:
             self.create_subscription(ClockMsg, '/clock', self._on_clock, CLOCK_QOS)
+        else:
+            self.timing = SimTiming(self, self._on_lockstep)
         self.create_timer(0.01, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         what = (
             f'trajectory {self.scenario.trajectory} on /ee_reference'
@@ -111,14 +115,36 @@ class GoalSequencerNode(Node):
             f'({"sim" if self._sim_time else "wall"} time)'
         )
 
+    def _restart(self):
+        """The scenario starts again at the next reading of the clock."""
+        self._t0 = self._last_t = None
+        self._index = -1
+        self._last_pub = -math.inf
+
+    def _on_lockstep(self, timeout):
+        """The simulator's timing changed: in lockstep follow its clock, else the wall clock;
+        either way the scenario starts again on the clock it now follows."""
+        lockstep = timeout > 0.0
+        if lockstep == (self._lockstep_clock is not None):
+            return
+        if lockstep:
+            # relative, as the simulator publishes it: /r1/clock for the robot in /r1
+            self._lockstep_clock = self.create_subscription(ClockMsg, 'clock', self._on_clock, CLOCK_QOS)
+        else:
+            self.destroy_subscription(self._lockstep_clock)
+            self._lockstep_clock = None
+        self._restart()
+        source = "the simulator's" if lockstep else 'wall'
+        self.get_logger().info(f'the scenario starts again on {source} time')
+
     def _on_clock(self, msg):
         if msg.clock.sec < 0:
             return  # not a time: dropped and logged (guard_clock)
         self._check(msg.clock.sec + msg.clock.nanosec * 1e-9, msg.clock)
 
     def _tick(self):
-        if self._sim_time:
-            return  # on sim time every /clock message drives the timeline
+        if self._sim_time or self._lockstep_clock is not None:
+            return  # on sim time every clock message drives the timeline
         now = self.get_clock().now()
         self._check(now.nanoseconds * 1e-9, now.to_msg())
 
@@ -129,7 +155,7 @@ class GoalSequencerNode(Node):
                 'the scenario starts again',
                 throttle_duration_sec=1.0,
             )
-            self._t0, self._index, self._last_pub = None, -1, -math.inf
+            self._restart()
         elif self._last_t is not None and t - self._last_t > MAX_CLOCK_STEP:
             self.get_logger().warn(
                 f'clock jumped {t - self._last_t:.6g} s ahead in one step: the scenario skips to that time',

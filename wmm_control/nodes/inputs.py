@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.checks import PLAUSIBLE_FACTOR, Freshness
 from wmm_control.nodes.conversions import parse_base_reference
+from wmm_control.nodes.sim_timing import SimTiming
 from wmm_control.nodes.stamps import StampGate, seconds
 
 if TYPE_CHECKING:
@@ -132,15 +133,24 @@ class BaseReference:
     Its age is judged by the node's clock at receipt (:class:`Freshness`), never by its stamp.
 
     Args:
-        node: the node whose clock and logger are used.
+        node: the node whose logger is used.
         base_frame: the one frame accepted besides an empty one.
         timeout: age [s] beyond which :meth:`current` gives None.
         velocity_limit: |vx|, |vy|, |ω| limits; a reference beyond them is kept (the
             controller scales it into them) with a logged warning.
+        now: the node's clock [s] (its receipt time); default: the node's ROS clock.
     """
 
-    def __init__(self, node: Node, base_frame: str, timeout: float, velocity_limit: ArrayLike | None = None) -> None:
+    def __init__(
+        self,
+        node: Node,
+        base_frame: str,
+        timeout: float,
+        velocity_limit: ArrayLike | None = None,
+        now: Callable[[], float] | None = None,
+    ) -> None:
         self._node = node
+        self._now = now if now is not None else (lambda: seconds(node.get_clock()))
         self.base_frame = base_frame
         self.value = np.zeros(3)
         self.freshness = Freshness(timeout)
@@ -165,7 +175,7 @@ class BaseReference:
                 throttle_duration_sec=1.0,
             )
         self.value = ref
-        self.freshness.mark(seconds(self._node.get_clock()))
+        self.freshness.mark(self._now())
         self._stale_logged = False
         return True
 
@@ -207,6 +217,13 @@ class JointStateWatchdog:
     starved) finds the states sent meanwhile queued in its transport: they reach its callback one
     by one after it goes on, the oldest first, each looking new to it, and each reports rates the
     simulator has since changed.
+
+    It also learns how the simulator steps (:attr:`timing`,
+    :class:`~wmm_control.nodes.sim_timing.SimTiming`): in lockstep nothing moves while a node computes,
+    so no state is skipped for its wait (``max_wait`` does not apply), the node's inputs are aged
+    by the simulation's time (:meth:`now`), and the joint states count as stopped only after
+    ``timeout`` plus the simulator's ``lockstep_timeout`` of wall time (it steps at least that
+    often while it runs).
     """
 
     def __init__(
@@ -222,6 +239,10 @@ class JointStateWatchdog:
     ) -> None:
         self._node = node
         self.max_wait = float(max_wait)
+        #: the simulator's timing, learned from its latched topic
+        self.timing = SimTiming(node)
+        #: the simulation's time [s]: the stamp of the last joint state admitted (0 before the first)
+        self.sim_time = 0.0
         self._clock = clock
         self._on_timeout = on_timeout
         self._action = action
@@ -242,11 +263,21 @@ class JointStateWatchdog:
         self.freshness.timeout = float(timeout)
         self.stamps.max_jump = self._max_jump(timeout)
 
+    def now(self, clock: Clock) -> float:
+        """The time [s] by which the node ages its inputs: in lockstep the simulation's
+        (:attr:`sim_time`), else ``clock``'s."""
+        return self.sim_time if self.timing.lockstep else seconds(clock)
+
+    @property
+    def limits_wait(self) -> bool:
+        """True when ``max_wait`` applies: set, and the simulator does not step in lockstep."""
+        return self.max_wait > 0.0 and not self.timing.lockstep
+
     def waited_too_long(self, received_ns: int, outcome: str = 'cycle skipped') -> bool:
         """True (logged with ``outcome``, throttled, and counted as skipped) when a joint state
         received at ``received_ns`` (``time.monotonic_ns()`` in its callback) waited longer than
-        ``max_wait``."""
-        if self.max_wait <= 0.0:
+        ``max_wait`` (never in lockstep)."""
+        if not self.limits_wait:
             return False
         wait = (time.monotonic_ns() - received_ns) * 1e-9
         if wait <= self.max_wait:
@@ -276,7 +307,7 @@ class JointStateWatchdog:
     def admit(self, stamp: Time) -> bool:
         """True when the joint state stamped ``stamp`` runs a cycle (it is then marked fresh)."""
         logger = self._node.get_logger()
-        late = self.late(stamp) if self.max_wait > 0.0 else 0.0
+        late = self.late(stamp) if self.limits_wait else 0.0
         if late > self.max_wait:
             self.skipped += 1
             logger.warn(
@@ -294,6 +325,7 @@ class JointStateWatchdog:
             )
             return False
         self.mark()
+        self.sim_time = (stamp.sec * 1_000_000_000 + stamp.nanosec) * 1e-9
         mismatch = self.stamps.period_mismatch()
         if mismatch:
             logger.warn(mismatch, throttle_duration_sec=10.0)
@@ -314,10 +346,16 @@ class JointStateWatchdog:
 
     def _check(self):
         age = self.freshness.age(seconds(self._clock))
-        if not self.freshness.timeout < age < math.inf:
+        timeout = self.timing.watchdog_timeout(self.freshness.timeout)
+        if not timeout < age < math.inf:
             return
         if not self.need_resync:
-            self._node.get_logger().warn(f'no /{self._topic} for {self.freshness.timeout} s: {self._action}')
+            lockstep = (
+                f' (the simulator, in lockstep, steps at least every {self.timing.lockstep_timeout:g} s)'
+                if self.timing.lockstep
+                else ''
+            )
+            self._node.get_logger().warn(f'no /{self._topic} for {timeout:g} s{lockstep}: {self._action}')
             self.need_resync = True
         self.stamps.restart()
         self._offsets.clear()

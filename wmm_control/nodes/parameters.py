@@ -81,7 +81,7 @@ def max_state_wait_param() -> Param:
         'cycle, steady clock) and still run a cycle: one that waited longer (the node was held up, and a '
         'real-time simulator has stepped past it) runs none; nor does one that reached this node that much '
         'later than joint states usually do (it was queued in the transport while the node was held up). '
-        '0: no limit (lockstep).',
+        '0: no limit. Not applied while the simulator steps in lockstep (it says so on sim/lockstep_timeout).',
         lo=0.0,
         hi=60.0,
     )

@@ -16,6 +16,13 @@ than ``state_timeout`` and when the joint states stop (a watchdog); a joint stat
 newer than the last cycle's, or that waited beyond ``max_state_wait``, runs no cycle; every
 command within the robot's limits and through the safety stage.
 
+Lockstep: when the simulator says it steps in lockstep (its latched ``sim/lockstep_timeout``,
+:mod:`~wmm_control.nodes.sim_timing`), the inputs are aged by the simulation's time, every
+joint state is answered however long it waited, the feasible twist is awaited as long as the
+simulator waits for the commands (while the base controller answers:
+:class:`~wmm_control.nodes.sim_timing.AnswerWait`), and the watchdog allows the simulator's wait besides
+``state_timeout``; no parameter needs to change.
+
 This module only wires parameters (:mod:`~wmm_control.nodes.redundancy_resolver_params`),
 topics (through :mod:`~wmm_control.nodes.conversions`) and timers to the ROS-free core: the
 resolver's half of each period in :class:`~wmm_control.resolvers.period.ResolverPeriod`, which
@@ -48,7 +55,8 @@ from wmm_control.nodes.inputs import JointSelector, JointStateWatchdog
 from wmm_control.nodes.parameters import declare_parameters
 from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STATE_SUB_QOS
 from wmm_control.nodes.runner import guard_clock, run_node
-from wmm_control.nodes.stamps import stamp_key
+from wmm_control.nodes.sim_timing import AnswerWait
+from wmm_control.nodes.stamps import seconds, stamp_key
 from wmm_control.nodes.conversions import (
     float_array,
     odometry_values,
@@ -113,7 +121,7 @@ class RedundancyResolverNode(Node):
         self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
         self._set_obstacles()
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._wait = self._last = None
+        self._wait = self._last = self._held = None
         self._received = 0  # when the joint state of the held arm command came (time.monotonic_ns())
         self._diagnostics_gate = DiagnosticsGate()
         self._throttle = LogThrottle()
@@ -133,6 +141,11 @@ class RedundancyResolverNode(Node):
         self.create_subscription(Float64, 'base/lag', self._on_base_lag, LATCHED_QOS)
         if p.ee_feedback == 'ground_truth':
             self.create_subscription(PoseStamped, 'ee_pose', self._on_ee_pose, STATE_SUB_QOS)
+        self.watchdog = JointStateWatchdog(
+            self, p.state_timeout, p.period, self._steady, self._stop, 'zero commands', max_wait=p.max_state_wait
+        )
+        #: how long an arm command waits for its feasible twist (longer in lockstep, while they come)
+        self.compensation_wait = AnswerWait(self.watchdog.timing, p.compensation_timeout)
         if self.resolver.uses_compensation:
             self.create_subscription(TwistStamped, 'base/feasible_twist', self._on_feasible, COMMAND_QOS)
             self._wait = (
@@ -146,9 +159,6 @@ class RedundancyResolverNode(Node):
             self._markers = ResolverMarkers(p.robot, p.world_frame, self.workspace)
             self.pub_markers = self.create_publisher(MarkerArray, '~/markers', COMMAND_QOS)
             self.create_timer(p.markers_period, self._publish_markers, clock=self._steady)
-        self.watchdog = JointStateWatchdog(
-            self, p.state_timeout, p.period, self._steady, self._stop, 'zero commands', max_wait=p.max_state_wait
-        )
         if 0.0 < p.max_state_wait <= p.compensation_timeout and self.resolver.uses_compensation:
             self.get_logger().warn(
                 f'max_state_wait {p.max_state_wait:g} s is within compensation_timeout {p.compensation_timeout:g} s: '
@@ -184,10 +194,11 @@ class RedundancyResolverNode(Node):
         self.targets.max_goal_distance = self.inputs.max_distance = float(distance)
 
     def _now(self):
-        return self._steady.now().nanoseconds * 1e-9
+        """The time [s] by which the inputs are aged: the simulation's in lockstep, else the steady clock."""
+        return self.watchdog.now(self._steady)
 
     def _log(self, events):
-        for level, message in self._throttle.lines(events, self._now() if events else 0.0):
+        for level, message in self._throttle.lines(events, seconds(self._steady) if events else 0.0):
             if level == 'info':  # one call site per severity: rclpy refuses a change at one
                 self.get_logger().info(message)
             else:
@@ -262,15 +273,20 @@ class RedundancyResolverNode(Node):
             self._publish_arm(command, stamp, received)
             return
         self._received = received
-        self.period.hold(stamp_key(stamp), command, stamp)
+        self._held = stamp_key(stamp)
+        self.period.hold(self._held, command, stamp)
         if self._wait is None:
             self._finish(None)
         else:
-            self._wait.reset()
+            self.compensation_wait.start(self._wait)
 
     def _on_feasible(self, msg):
-        if not self.period.awaits(stamp_key(msg.header.stamp)):
+        key = stamp_key(msg.header.stamp)
+        if not self.period.awaits(key):
+            if key == self._held:
+                self.compensation_wait.answered()  # late: the base answers, the next command waits for it
             return
+        self.compensation_wait.answered()
         twist, events = self.period.feasible_twist(planar_twist(msg.twist))
         self._log(events)
         if twist is not None:
@@ -278,6 +294,7 @@ class RedundancyResolverNode(Node):
 
     def _compensation_timeout(self):
         if self.period.pending:
+            self.compensation_wait.missed()
             self._finish(None)
 
     def _finish(self, feasible):

@@ -168,14 +168,16 @@ _SPECS = (
     Param(
         'state_timeout',
         'Age [s] of joint states, odometry, EE pose or trajectory reference (steady clock, '
-        'at receipt) after which commands are zero.',
+        'at receipt; in lockstep the simulation\'s time, and the joint states\' watchdog adds the '
+        'simulator\'s lockstep_timeout) after which commands are zero.',
         lo=1e-3,
         hi=60.0,
     ),
     max_state_wait_param(),
     Param(
         'compensation_timeout',
-        'Steady time [s] to wait for the feasible twist of this cycle.',
+        'Steady time [s] to wait for the feasible twist of this cycle; in lockstep, while the feasible '
+        'twists come, as long as the simulator waits for the commands (its lockstep_timeout).',
         lo=0.0,
         hi=1.0,
         read_only=True,

@@ -12,6 +12,8 @@ if TYPE_CHECKING:
     from rclpy.clock import Clock
     from rclpy.node import Node
 
+    from wmm_control.nodes.sim_timing import AnswerWait
+
 __all__ = ['seconds', 'stamp_key', 'StampGate', 'StampedExchange']
 
 
@@ -92,33 +94,44 @@ class StampedExchange:
     """One cycle per state message, run with the reference of the same stamp.
 
     A state stamped S runs the cycle that answers the reference stamped S: at once if the
-    latest reference already carries S, else when it comes, or after ``wait`` seconds of
-    ``clock`` (steady, so a paused sim clock cannot stall it) with whatever reference is
-    latest. A state arriving while another waits runs the waiting one first.
+    latest reference already carries S, else when it comes, or after ``wait`` (an
+    :class:`~wmm_control.nodes.sim_timing.AnswerWait`: ``reference_wait`` seconds, longer in
+    lockstep while the references come) of ``clock`` (steady, so a paused sim clock cannot
+    stall it) with whatever reference is latest. A state arriving while another waits runs the
+    waiting one first.
 
     Args:
         node: the node owning the wait timer.
-        wait: longest wait for the reference [s]; 0 runs every cycle at once.
+        wait: how long to wait for the reference; a configured wait of 0 runs every cycle at once.
         run_cycle: ``run_cycle(stamp, payload)``, the cycle of one state; ``stamp`` is the
             state's ``(sec, nanosec)``.
         clock: the clock of the wait timer.
     """
 
     def __init__(
-        self, node: Node, wait: float, run_cycle: Callable[[tuple[int, int], Any], None], clock: Clock
+        self, node: Node, wait: AnswerWait, run_cycle: Callable[[tuple[int, int], Any], None], clock: Clock
     ) -> None:
+        self.wait = wait
         self._run_cycle = run_cycle
         self._pending: tuple[tuple[int, int], Any] | None = (
             None  # (stamp, payload) of the state waiting for its reference
         )
         self._ref_stamp: tuple[int, int] | None = None
-        self._timer = node.create_timer(wait, self.run_pending, clock=clock, autostart=False) if wait > 0 else None
+        self._last_run: tuple[int, int] | None = None  # the stamp of the last cycle run
+        self._timer = (
+            node.create_timer(wait.configured, self._timed_out, clock=clock, autostart=False)
+            if wait.configured > 0
+            else None
+        )
 
     def reference_received(self, stamp: Time) -> None:
         """Note a reference (already stored by the caller) stamped ``stamp``."""
         self._ref_stamp = stamp_key(stamp)
         if self._pending is not None and self._pending[0] == self._ref_stamp:
+            self.wait.answered()
             self.run_pending()
+        elif self._ref_stamp == self._last_run:
+            self.wait.answered()  # late: the states are answered, the next one waits for its own
 
     def state_received(self, stamp: Time, payload: Any) -> None:
         """A state stamped ``stamp``: its cycle runs now or once its reference comes."""
@@ -126,10 +139,18 @@ class StampedExchange:
             self.run_pending()
         key = stamp_key(stamp)
         self._pending = (key, payload)
-        if self._ref_stamp == key or self._timer is None:
+        if self._ref_stamp == key:
+            self.wait.answered()
+            self.run_pending()
+        elif self._timer is None:
             self.run_pending()
         else:
-            self._timer.reset()
+            self.wait.start(self._timer)
+
+    def _timed_out(self) -> None:
+        if self._pending is not None:
+            self.wait.missed()
+        self.run_pending()
 
     def run_pending(self) -> None:
         """Run the waiting state's cycle now (nothing if none waits)."""
@@ -139,4 +160,5 @@ class StampedExchange:
             return
         stamp, payload = self._pending
         self._pending = None
+        self._last_run = stamp
         self._run_cycle(stamp, payload)

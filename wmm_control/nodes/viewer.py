@@ -23,6 +23,12 @@ Publishes:
   released (and at most every ``drag_publish_period`` during a drag), and the end effector's
   current pose when "Hold here" is pressed. Never a non-finite pose.
 
+Commands: the page drives the robot (the goal handle, "Hold here") only when it is served to
+this machine alone (``host`` a loopback address, the default ``127.0.0.1``) or
+``allow_remote_commands`` is true; served beyond it (``0.0.0.0``, a LAN address), it shows the
+robot and publishes nothing, as the log says at start: anyone who can reach the port would
+otherwise drag the goal.
+
 Topic names are relative (``-r __ns:=/r1`` views robot ``/r1``); ``/diagnostics`` is global.
 Timers run on the steady clock, so the view moves with ``use_sim_time`` too; the goal is
 stamped with the node's clock.
@@ -54,7 +60,7 @@ from wmm_control.nodes.conversions import planar_twist, pose_stamped, pose_value
 from wmm_control.nodes.obstacle_topic import ObstacleSet
 from wmm_control.nodes.viewer_params import PARAMS, check
 from wmm_control.robot_config import load_robot
-from wmm_control.viewer.browser import BrowserScene
+from wmm_control.viewer.browser import BrowserScene, local_only
 from wmm_control.viewer.drag import GoalDrag
 from wmm_control.viewer.inputs import BaseCourse, BasePose, inputs_markdown
 from wmm_control.viewer.scene import RobotScene, Trail, finite_pose, wxyz_from_xyzw, xyzw_from_wxyz
@@ -104,6 +110,8 @@ class ViewerNode(Node):
         self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
         trails = (Trail(p.trail_length, p.trail_step), Trail(p.trail_length, p.trail_step))
         start = self.robot.start.base_pose
+        #: the page may command the robot: served to this machine alone, or allowed elsewhere
+        self.commands = local_only(p.host) or p.allow_remote_commands
         self.browser = browser = BrowserScene(
             p.host,
             p.port,
@@ -113,6 +121,7 @@ class ViewerNode(Node):
             trails,
             on_handle=self._on_handle,
             panel=self.board.markdown(0.0),
+            commands=self.commands,
         )
         browser.draw_obstacles(self.obstacles.obstacles)
         self.pub_goal = self.create_publisher(PoseStamped, 'goal_pose', COMMAND_QOS)
@@ -128,10 +137,22 @@ class ViewerNode(Node):
         self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
         self.timer = self.create_timer(p.update_period, self._tick, clock=self._steady)
         self.url = f'http://{p.host}:{browser.port}'
-        self.get_logger().info(
-            f'viewer of robot {self.robot.name} at {self.url} ({len(self.scene.shapes)} shapes '
-            f'from {self.robot.urdf_path.name}); drag the goal handle to publish /goal_pose'
+        served = (
+            f'viewer of robot {self.robot.name} at {self.url} ({len(self.scene.shapes)} shapes from '
+            f'{self.robot.urdf_path.name})'
         )
+        if not self.commands:
+            self.get_logger().info(
+                f'{served}; served beyond this machine (host {p.host}), the page shows the robot and commands '
+                'nothing: allow_remote_commands:=true lets anyone who can reach the port send it goals'
+            )
+        elif local_only(p.host):
+            self.get_logger().info(f'{served}; drag the goal handle to publish /goal_pose')
+        else:
+            self.get_logger().warn(
+                f'{served}; allow_remote_commands is true: anyone who can reach port {browser.port} on this '
+                'machine\'s network can drag the goal and move the robot'
+            )
 
     def destroy_node(self) -> bool:
         """Stop the HTTP server, then destroy the node."""
@@ -217,11 +238,21 @@ class ViewerNode(Node):
 
     # ------------------------------------------------------------------ the goal handle
     def _on_handle(self, event: viser.TransformControlsEvent) -> None:
-        """viser's callback (a worker thread): note the pose; :meth:`_tick` publishes."""
-        self.drag.event(event.phase, event.target.position, event.target.wxyz, self._now())
+        """viser's callback (a worker thread): note the pose; :meth:`_tick` publishes (nothing
+        when the page may not command the robot)."""
+        if self.commands:
+            self.drag.event(event.phase, event.target.position, event.target.wxyz, self._now())
 
     def publish_goal(self, position, wxyz) -> bool:
-        """Publish a goal in ``world_frame``; False (nothing sent) for a non-finite pose."""
+        """Publish a goal in ``world_frame`` for the page; False (nothing sent) for a non-finite
+        pose, or when the page may not command the robot (:attr:`commands`)."""
+        if not self.commands:
+            self.get_logger().warn(
+                f'goal not sent: the page is served on {self.p.host}, beyond this machine, and '
+                'allow_remote_commands is false',
+                throttle_duration_sec=5.0,
+            )
+            return False
         pose = finite_pose(position, wxyz)
         if pose is None:
             self.get_logger().warn(

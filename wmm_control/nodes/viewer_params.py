@@ -10,7 +10,18 @@ __all__ = ['PARAMS', 'check']
 
 PARAMS = (
     robot_param('The robot drawn (its URDF, base link, end-effector frame and floor height).'),
-    Param('host', 'Address the HTTP server listens on (0.0.0.0: every interface).', read_only=True),
+    Param(
+        'host',
+        'Address the HTTP server listens on: 127.0.0.1 (this machine only), or another one, e.g. 0.0.0.0 '
+        '(every interface), where the page shows the robot but commands nothing unless allow_remote_commands.',
+        read_only=True,
+    ),
+    Param(
+        'allow_remote_commands',
+        'On a host other than this machine alone, let the page command the robot (the goal handle, Hold here): '
+        'anyone who can reach the port can then send it goals.',
+        read_only=True,
+    ),
     Param(
         'port', 'HTTP port of the viewer; when it is taken, the next free one (logged).', lo=1, hi=65535, read_only=True
     ),
@@ -44,5 +55,5 @@ PARAMS = (
 def check(values: SimpleNamespace) -> str:
     """'' or why the parameter values cannot serve a page (an empty host)."""
     if not str(values.host).strip():
-        return 'parameter host: empty; give an address, e.g. 0.0.0.0 or 127.0.0.1'
+        return 'parameter host: empty; give an address, e.g. 127.0.0.1 or 0.0.0.0'
     return ''

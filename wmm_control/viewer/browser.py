@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import contextlib
 import io
+import ipaddress
+import socket
 import threading
 from collections.abc import Callable, Iterable
 from typing import cast
@@ -24,7 +26,7 @@ from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.geometry import quaternion_from_matrix
 from wmm_control.viewer.scene import ScenePoses, Shape, Trail, wxyz_from_xyzw
 
-__all__ = ['BrowserScene', 'CAMERA_LOOK_AT', 'CAMERA_POSITION']
+__all__ = ['BrowserScene', 'CAMERA_LOOK_AT', 'CAMERA_POSITION', 'local_only']
 
 #: The camera the page opens with (and "Reset View" returns to), relative to the start base position.
 CAMERA_LOOK_AT = np.array([0.8, 0.3, 0.6])
@@ -39,6 +41,18 @@ _BASE_REFERENCE_COLOR = (240, 170, 0)
 _PATH_LIFT, _COURSE_LIFT = 0.005, 0.01
 
 
+def local_only(host: str) -> bool:
+    """True when a server listening on ``host`` is reached from this machine alone: every address
+    the name stands for is a loopback one (127.0.0.0/8, ::1; ``localhost``). A name that does not
+    resolve counts as reachable from elsewhere."""
+    try:
+        found = socket.getaddrinfo(host.strip(), None, proto=socket.IPPROTO_TCP)
+    except (OSError, UnicodeError):
+        return False
+    addresses = {str(info[4][0]).split('%')[0] for info in found}
+    return bool(addresses) and all(ipaddress.ip_address(a).is_loopback for a in addresses)
+
+
 class BrowserScene:
     """The served page of one robot.
 
@@ -50,6 +64,8 @@ class BrowserScene:
         trails: the end effector's and the base's paths.
         on_handle: called (from viser's worker thread) with each event of the goal handle.
         panel: the diagnostics panel's first text (Markdown).
+        commands: False leaves out everything that commands the robot (the goal handle and
+            "Hold here"): the page shows the robot and says why it sends nothing.
 
     Raises:
         ConfigError: the server cannot listen on ``host``:``port``.
@@ -65,6 +81,7 @@ class BrowserScene:
         trails: tuple[Trail, Trail],
         on_handle: Callable[[viser.TransformControlsEvent], None],
         panel: str,
+        commands: bool = True,
     ) -> None:
         try:
             with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: the node logs the URL
@@ -109,16 +126,28 @@ class BrowserScene:
             origin_color=_REFERENCE_COLOR,
             visible=False,
         )
-        self.goal_handle = server.scene.add_transform_controls(
-            '/goal_handle', scale=0.35, depth_test=False, position=(0.0, 0.0, 0.0)
-        )
-        self.goal_handle.on_update(on_handle)
-        with server.gui.add_folder('Goal'):
-            self.hold_button = server.gui.add_button(
-                'Hold here', hint='Publish the end effector\'s current pose as the goal: the robot stops where it is.'
+        self.goal_handle: viser.TransformControlsHandle | None = None
+        self.hold_button: viser.GuiButtonHandle | None = None
+        if commands:
+            self.goal_handle = server.scene.add_transform_controls(
+                '/goal_handle', scale=0.35, depth_test=False, position=(0.0, 0.0, 0.0)
             )
-            self.hold_button.on_click(lambda _event: self._hold.set())
-            self.goal_text = server.gui.add_markdown('Drag the handle to send a goal.')
+            self.goal_handle.on_update(on_handle)
+        with server.gui.add_folder('Goal'):
+            if commands:
+                self.hold_button = server.gui.add_button(
+                    'Hold here',
+                    hint='Publish the end effector\'s current pose as the goal: the robot stops where it is.',
+                )
+                self.hold_button.on_click(lambda _event: self._hold.set())
+            #: what the page says of its commands: how to send a goal, or why it sends none
+            self.commands_note = (
+                'Drag the handle to send a goal.'
+                if commands
+                else f'This page is served on {host}, beyond this machine: it shows the robot and sends it '
+                'nothing (the viewer\'s `allow_remote_commands` lets it).'
+            )
+            self.goal_text = server.gui.add_markdown(self.commands_note)
         with server.gui.add_folder('Inputs'):
             self.inputs_text = server.gui.add_markdown('*Waiting for /joint_states.*')
         with server.gui.add_folder('Diagnostics'):
@@ -171,8 +200,9 @@ class BrowserScene:
                 self.move_handle(poses.ee_position, poses.ee_wxyz)
 
     def move_handle(self, position: np.ndarray, wxyz: np.ndarray) -> None:
-        """Put the goal handle at a pose."""
-        self.goal_handle.position, self.goal_handle.wxyz = position, wxyz
+        """Put the goal handle at a pose (nothing on a page without commands)."""
+        if self.goal_handle is not None:
+            self.goal_handle.position, self.goal_handle.wxyz = position, wxyz
         self._handle_placed = True
 
     def hold_pressed(self) -> bool:
@@ -197,7 +227,9 @@ class BrowserScene:
         self.goal_frame.visible = True
         if move_handle:
             self.move_handle(position, wxyz)
-        self.goal_text.content = f'Goal in force: ({position[0]:.3f}, {position[1]:.3f}, {position[2]:.3f}) m'
+        self.goal_text.content = (
+            f'Goal in force: ({position[0]:.3f}, {position[1]:.3f}, {position[2]:.3f}) m\n\n{self.commands_note}'
+        )
 
     def show_reference(self, position: np.ndarray, wxyz: np.ndarray) -> None:
         """Draw the trajectory reference."""
