@@ -7,8 +7,10 @@ The base geometry (hips, wheel radius, steer offset, Mecanum half-distances, tra
 from the wheel and steer joints' origins and the wheel links' collision cylinders. The YAML
 names those joints and links and gives what a URDF cannot: acceleration limits (default
 :data:`DEFAULT_ACCEL_PER_VELOCITY` × the velocity limit), base twist limits, the dexterous
-posture, the start state, the control period and the default method. Any URDF value may be
-overridden in the YAML (``arm.position_lower`` …, ``steerable.hips`` …).
+posture, the start state, the control period and the default method; optionally the folders
+``package://`` mesh paths are looked up in first (``package_dirs``,
+:mod:`wmm_control.resources`). Any URDF value may be overridden in the YAML
+(``arm.position_lower`` …, ``steerable.hips`` …).
 
 URDF conventions the base geometry relies on (``wmm_robot init`` writes YAMLs for them):
 
@@ -39,6 +41,7 @@ import yaml
 
 from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
+from wmm_control.resources import check_resources, yaml_package_dirs
 from wmm_control.urdf import MOVING_TYPES, UrdfTree
 
 __all__ = [
@@ -258,6 +261,8 @@ class RobotConfig:
     mecanum: MecanumConfig | None = None
     differential: DifferentialConfig | None = None
     raw: dict | None = field(default=None, repr=False, compare=False)
+    #: folders ``package://`` mesh paths are looked up in first (:mod:`wmm_control.resources`)
+    package_dirs: tuple[Path, ...] = ()
 
     @property
     def base_axes(self) -> tuple:
@@ -590,6 +595,8 @@ def _parse(path, raw):
     if not urdf_path.is_file():
         raise ConfigError(f'urdf: file not found: {urdf_path}')
     tree = UrdfTree(urdf_path)
+    package_dirs = yaml_package_dirs(raw, path)
+    check_resources(urdf_path, package_dirs)
     base_link = raw.get('base_link', 'base_link')
     tree.require_link(base_link, 'base')
     arm = _parse_arm(raw, tree, 'robot')
@@ -609,6 +616,7 @@ def _parse(path, raw):
         base=_parse_base_limits(raw, base_type),
         start=_parse_start(raw, arm),
         raw=raw,
+        package_dirs=package_dirs,
         **{base_type: geometry},
     )
     _check_unique(cfg)

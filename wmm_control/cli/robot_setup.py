@@ -4,7 +4,8 @@ Usage::
 
     wmm_robot init URDF --base {steerable,mecanum,differential} --arm-root LINK --tool LINK \\
         --out ROBOT.yaml [--home q1,...,qn] [--wheel-joints a,b,...] [--steer-joints ...] \\
-        [--drive-joints ...] [--base-link LINK] [--name NAME] [--method METHOD] [--period S]
+        [--drive-joints ...] [--base-link LINK] [--name NAME] [--method METHOD] [--period S] \\
+        [--package-dir DIR ...]
     wmm_robot check ROBOT.yaml
 
 ``init`` writes a complete, commented robot YAML beside nothing but the URDF it names (its
@@ -12,6 +13,8 @@ Usage::
 stay in the URDF (the YAML may override them); the YAML gets what a URDF cannot give, each
 value commented with the rule that chose it:
 
+* ``package_dirs``: the folders given with ``--package-dir``, where ``package://`` mesh paths
+  are looked up first (:mod:`wmm_control.resources`);
 * wheel and steer joints, found from the URDF unless named: joints outside the arm that turn
   about their y axis (wheels) or z axis (steer joints), whose link has a collision cylinder;
   Mecanum wheels are ordered front-left, front-right, rear-left, rear-right by their
@@ -39,12 +42,14 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from wmm_control.cli.model_info import describe
 from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers import METHODS
+from wmm_control.resources import check_resources
 from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, load_robot
 from wmm_control.urdf import UrdfJoint, UrdfTree
 
@@ -147,14 +152,14 @@ def _floor_height(tree, wheels, base_link):
     )
 
 
-def _choose_home(tree, arm_root, tool, base_link, ground, seed=0):
+def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, package_dirs=()):
     """The documented posture choice (module docstring): ``(q (n,), σ_min)``."""
     chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
     names = [j.name for j in chain]
     lower = np.array([max(j.lower, -math.pi) if j.lower is not None else -math.pi for j in chain])
     upper = np.array([min(j.upper, math.pi) if j.upper is not None else math.pi for j in chain])
     model = KinematicModel.from_urdf(tree.path, names, tool, base_link)
-    clearance = CollisionModel(tree.path, names)
+    clearance = CollisionModel(tree.path, names, package_dirs=package_dirs)
     rng = np.random.default_rng(seed)
     best, best_sigma = None, -1.0
     for _ in range(HOME_DRAWS):
@@ -200,6 +205,7 @@ def init_robot(
     name=None,
     method='task_sharing',
     period=DEFAULT_PERIOD,
+    package_dirs=(),
 ):
     """Write a robot YAML for ``urdf`` at ``out`` (see the module docstring); returns its text.
 
@@ -212,6 +218,11 @@ def init_robot(
         raise WmmError(f'--base: unknown base family {family!r}; expected one of {list(BASE_FAMILIES)}')
     if method not in METHODS:
         raise WmmError(f'--method: unknown method {method!r}; expected one of {sorted(METHODS)}')
+    package_dirs = [Path(d).expanduser().resolve() for d in package_dirs]
+    for folder in package_dirs:
+        if not folder.is_dir():
+            raise WmmError(f'--package-dir: folder not found: {folder}')
+    check_resources(urdf, package_dirs)
     base_link = base_link or tree.root_link
     if base_link is None:
         raise WmmError(f'{urdf.name}: the URDF has no single root link: give --base-link')
@@ -239,7 +250,9 @@ def init_robot(
             raise WmmError(f'--home: expected {len(chain)} joint values, got {len(q_home)}')
         home_rule = 'given with --home'
     else:
-        q_home, sigma = _choose_home(tree, arm_root, tool, base_link, _floor_height(tree, wheels, base_link))
+        q_home, sigma = _choose_home(
+            tree, arm_root, tool, base_link, _floor_height(tree, wheels, base_link), package_dirs=package_dirs
+        )
         home_rule = (
             f'the best of {HOME_DRAWS} seeded draws (σ_min {sigma:.3f}): arm {HOME_CLEARANCE} m clear '
             f'of the body and itself, tool ≥ {TOOL_ABOVE_FLOOR} m above the floor'
@@ -254,6 +267,11 @@ def init_robot(
         f'  name: {name or out.stem}',
         f'  description: {urdf.stem} with a {family} base',
         f'  urdf: {rel.as_posix()}',
+    ]
+    if package_dirs:
+        dirs = ', '.join(_flow(Path(_relative(d, out.parent)).as_posix()) for d in package_dirs)
+        lines.append(f'  package_dirs: [{dirs}]   # where package:// paths are looked up first')
+    lines += [
         f'  base_type: {family}',
         f'  base_link: {base_link}',
         f'  ground_z: {ground:.6g}          # floor height in {base_link} at rest [m]',
@@ -288,6 +306,11 @@ def init_robot(
     return text
 
 
+def _flow(name: str) -> str:
+    """``name`` as a YAML flow scalar (quoted where YAML needs it)."""
+    return yaml.safe_dump(name, default_flow_style=True, width=1 << 20).splitlines()[0]
+
+
 def _relative(path, start):
     try:
         return str(Path(path).relative_to(start))
@@ -317,6 +340,13 @@ def main(argv: list[str] | None = None) -> int:
     ini.add_argument('--base-link', help='the base frame (default: the URDF root link)')
     ini.add_argument('--name', help='robot name (default: the YAML file stem)')
     ini.add_argument('--method', default='task_sharing', help='default redundancy resolution method')
+    ini.add_argument(
+        '--package-dir',
+        action='append',
+        default=[],
+        metavar='DIR',
+        help='a folder package:// paths are looked up in (it holds PKG/...); may be repeated',
+    )
     chk = sub.add_parser('check', help='load a robot YAML and print its summary')
     chk.add_argument('robot', help='robot YAML path or shipped robot name')
     args = parser.parse_args(argv)
@@ -343,6 +373,7 @@ def main(argv: list[str] | None = None) -> int:
             base_link=args.base_link,
             name=args.name,
             method=args.method,
+            package_dirs=args.package_dir,
         )
         print(f'wrote {args.out}; check it with: wmm_robot check {args.out}')
         return 0

@@ -46,6 +46,7 @@ import pinocchio as pin
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import continuous_to_q
 from wmm_control.kinematics.obstacles import Obstacle, around_base
+from wmm_control.resources import load_geometry
 from wmm_control.urdf import UrdfTree
 
 __all__ = ['CollisionModel', 'NearPairs', 'FLOOR']
@@ -104,24 +105,44 @@ class CollisionModel:
         margin: [m].
         obstacles: :class:`~wmm_control.kinematics.obstacles.Obstacle` s in the world frame
             (:meth:`set_obstacles` changes them).
+        package_dirs: folders ``package://`` mesh paths are looked up in first
+            (:mod:`wmm_control.resources`).
 
     Raises:
-        ConfigError: pinocchio cannot load the URDF or its collision shapes.
+        ConfigError: pinocchio cannot load the URDF or its collision shapes, or a mesh cannot be
+            found.
     """
 
     @classmethod
     def from_robot(cls, robot, margin: float = 0.02, obstacles=()):
         """The model of a :class:`~wmm_control.robot_config.RobotConfig`: its floor, and its start
         state's contacts left out."""
-        return cls(robot.urdf_path, robot.arm.joints, robot.ground_z, robot.start.arm, margin, obstacles)
+        return cls(
+            robot.urdf_path,
+            robot.arm.joints,
+            robot.ground_z,
+            robot.start.arm,
+            margin,
+            obstacles,
+            package_dirs=robot.package_dirs,
+        )
 
-    def __init__(self, urdf_path, arm_joints, ground_z=None, start_arm=None, margin: float = 0.02, obstacles=()):
+    def __init__(
+        self,
+        urdf_path,
+        arm_joints,
+        ground_z=None,
+        start_arm=None,
+        margin: float = 0.02,
+        obstacles=(),
+        package_dirs=(),
+    ):
         path = str(urdf_path)
         try:
             self.model = pin.buildModelFromUrdf(path)
-            self.geom = pin.buildGeomFromUrdf(self.model, path, pin.GeometryType.COLLISION)
         except (RuntimeError, ValueError) as exc:
-            raise ConfigError(f'pinocchio could not load the collision shapes of {path}: {exc}') from exc
+            raise ConfigError(f'pinocchio could not load {path}: {exc}') from exc
+        self.geom = load_geometry(self.model, path, pin.GeometryType.COLLISION, package_dirs)
         model = self.model
         tree = UrdfTree(path)
         parent_link = {j.child: j.parent for j in tree.joints.values()}
