@@ -71,7 +71,9 @@ def test_pinocchio_pybullet_and_the_viewer_read_the_same_mesh_from_the_yaml_pack
     with pytest.raises(ConfigError, match="package 'made_up_pkg'"):
         check_resources(urdf)
     out = tmp_path / 'robot' / 'r.yaml'
-    robot_setup.init_robot(urdf, 'differential', 'arm_base_link', 'tool_link', out, package_dirs=[tmp_path / 'pkgs'])
+    robot_setup.init_robot(
+        urdf, 'differential', 'arm_base_link', 'tool_link', out, package_dirs=[tmp_path / 'pkgs'], pair_samples=50
+    )
     assert yaml.safe_load(out.read_text())['robot']['package_dirs'] == ['../pkgs']
     cfg = load_robot(out)
     assert cfg.package_dirs == ((tmp_path / 'pkgs').resolve(),)
@@ -106,7 +108,9 @@ def test_pinocchio_pybullet_and_the_viewer_read_the_same_mesh_from_the_yaml_pack
 def test_check_names_the_missing_package_in_one_line_and_exits_2(tmp_path, capsys):
     urdf = _mesh_robot(tmp_path)
     out = tmp_path / 'robot' / 'r.yaml'
-    robot_setup.init_robot(urdf, 'differential', 'arm_base_link', 'tool_link', out, package_dirs=[tmp_path / 'pkgs'])
+    robot_setup.init_robot(
+        urdf, 'differential', 'arm_base_link', 'tool_link', out, package_dirs=[tmp_path / 'pkgs'], pair_samples=50
+    )
     raw = yaml.safe_load(out.read_text())
     del raw['robot']['package_dirs']
     out.write_text(yaml.safe_dump(raw))

@@ -9,8 +9,9 @@ names those joints and links and gives what a URDF cannot: acceleration limits (
 :data:`DEFAULT_ACCEL_PER_VELOCITY` × the velocity limit), base twist limits, the dexterous
 posture, the start state, the control period and the default method; optionally the folders
 ``package://`` mesh paths are looked up in first (``package_dirs``,
-:mod:`wmm_control.resources`). Any URDF value may be overridden in the YAML
-(``arm.position_lower`` …, ``steerable.hips`` …).
+:mod:`wmm_control.resources`) and the link pairs the collision model checks
+(``collision.pairs``). Any URDF value may be overridden in the YAML (``arm.position_lower`` …,
+``steerable.hips`` …).
 
 URDF conventions the base geometry relies on (``wmm_robot init`` writes YAMLs for them):
 
@@ -263,6 +264,8 @@ class RobotConfig:
     raw: dict | None = field(default=None, repr=False, compare=False)
     #: folders ``package://`` mesh paths are looked up in first (:mod:`wmm_control.resources`)
     package_dirs: tuple[Path, ...] = ()
+    #: the link pairs the collision model checks (``collision.pairs``); None: its own rules
+    collision_pairs: tuple[tuple[str, str], ...] | None = None
 
     @property
     def base_axes(self) -> tuple:
@@ -506,6 +509,23 @@ def _parse_base_limits(raw, base_type):
     return BaseLimits(velocity=vel, acceleration=acc)
 
 
+def _collision_pairs(raw, tree):
+    """``collision.pairs``: a list of [link, link] (a link of the URDF, or ``floor``); None when absent."""
+    pairs = raw.get('collision', {}).get('pairs') if isinstance(raw.get('collision'), dict) else None
+    if pairs is None:
+        return None
+    ok = isinstance(pairs, list) and all(
+        isinstance(p, list) and len(p) == 2 and all(isinstance(n, str) for n in p) for p in pairs
+    )
+    if not ok:
+        raise ConfigError(f'collision.pairs: expected a list of [link, link] pairs, got {pairs!r}')
+    for a, b in pairs:
+        for name in (a, b):
+            if name != 'floor':
+                tree.require_link(name, 'collision.pairs')
+    return tuple((a, b) for a, b in pairs)
+
+
 def _check_unique(cfg):
     names = list(cfg.arm.joints) + list(cfg.wheel_joints)
     seen = set()
@@ -617,6 +637,7 @@ def _parse(path, raw):
         start=_parse_start(raw, arm),
         raw=raw,
         package_dirs=package_dirs,
+        collision_pairs=_collision_pairs(raw, tree),
         **{base_type: geometry},
     )
     _check_unique(cfg)

@@ -5,7 +5,7 @@ Usage::
     wmm_robot init URDF --base {steerable,mecanum,differential} --arm-root LINK --tool LINK \\
         --out ROBOT.yaml [--home q1,...,qn] [--wheel-joints a,b,...] [--steer-joints ...] \\
         [--drive-joints ...] [--base-link LINK] [--name NAME] [--method METHOD] [--period S] \\
-        [--package-dir DIR ...]
+        [--package-dir DIR ...] [--srdf FILE]
     wmm_robot check ROBOT.yaml
 
 ``init`` writes a complete, commented robot YAML beside nothing but the URDF it names (its
@@ -22,14 +22,21 @@ value commented with the rule that chose it:
 * base twist limits from the wheel rate limits: half the wheel rate budget each to the
   linear and the angular part (so both at once stay within it); base accelerations reach
   those in one second;
+* the collision pairs (``collision.pairs``), chosen as MoveIt's set-up assistant does
+  (:func:`~wmm_control.kinematics.collision.choose_pairs`): adjacent links, links no arm joint
+  moves apart, pairs always in contact or never within the influence distance over
+  :data:`PAIR_SAMPLES` random postures, and an SRDF's ``disable_collisions`` (``--srdf``)
+  left out;
 * a dexterous posture and start state: ``--home``, or else the best of 400 seeded random
   postures within the limits — the one with the largest σ_min of the arm Jacobian among
-  those whose collision shapes keep 3 cm from the body and from each other, with the tool
-  at least 10 cm above the floor;
+  those whose collision shapes keep 3 cm apart over the pairs above, with the tool at least
+  10 cm above the floor;
 * the control period (0.025 s) and the default method (``task_sharing``).
 
-``check`` loads a description, prints the robot summary and exits 0, or prints one line
-saying what is wrong (file and item) and exits 2.
+``init`` and ``check`` print the number of checked collision pairs and the measured cost of
+one distance check (the median over random postures), with a warning above
+:data:`CHECK_BUDGET`. ``check`` loads a description, prints the robot summary and exits 0, or
+prints one line saying what is wrong (file and item) and exits 2.
 """
 
 from __future__ import annotations
@@ -47,18 +54,37 @@ import yaml
 from wmm_control.cli.model_info import describe
 from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.collision import CollisionModel
+from wmm_control.kinematics.collision import (
+    ALWAYS_FRACTION,
+    CollisionModel,
+    PairChoice,
+    choose_pairs,
+    median_check_time,
+)
 from wmm_control.resolvers import METHODS
+from wmm_control.resolvers.safety import SafetyParams
 from wmm_control.resources import check_resources
-from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, load_robot
+from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, RobotConfig, load_robot
 from wmm_control.urdf import UrdfJoint, UrdfTree
 
-__all__ = ['main', 'init_robot', 'detect_wheels']
+__all__ = ['main', 'init_robot', 'detect_wheels', 'collision_summary']
 
 HOME_DRAWS = 400
 HOME_CLEARANCE = 0.03  # [m] from the body and between arm links
 TOOL_ABOVE_FLOOR = 0.10  # [m]
 DEFAULT_PERIOD = 0.025
+#: Random arm postures over which the collision pairs are chosen.
+PAIR_SAMPLES = 1000
+#: [m] the safety stage's default influence distance: a pair never this close is left out.
+INFLUENCE = SafetyParams().collision_influence
+#: [m] the safety stage's default safety distance, the distance it keeps: a pair never farther
+#: apart is in contact by design and left out.
+SAFETY = SafetyParams().collision_safety
+#: [s] one distance check above this gets a warning (a tenth of the 25 ms period, and more
+#: than the rest of a cycle takes).
+CHECK_BUDGET = 0.002
+#: Random arm postures over which the cost of one distance check is measured.
+COST_POSTURES = 20
 
 
 def _axis_is(joint, k):
@@ -152,14 +178,18 @@ def _floor_height(tree, wheels, base_link):
     )
 
 
-def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, package_dirs=()):
-    """The documented posture choice (module docstring): ``(q (n,), σ_min)``."""
+def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, package_dirs=()):
+    """The documented posture choice (module docstring): ``(q (n,), σ_min)``, clear over the
+    link ``pairs`` (default: the collision model's own rules)."""
     chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
     names = [j.name for j in chain]
     lower = np.array([max(j.lower, -math.pi) if j.lower is not None else -math.pi for j in chain])
     upper = np.array([min(j.upper, math.pi) if j.upper is not None else math.pi for j in chain])
     model = KinematicModel.from_urdf(tree.path, names, tool, base_link)
-    clearance = CollisionModel(tree.path, names, package_dirs=package_dirs)
+    # chosen pairs are all checked (those in contact by design are left out already); the
+    # model's own rules leave out those in contact with every joint at zero
+    margin = -math.inf if pairs is not None else 0.02
+    clearance = CollisionModel(tree.path, names, margin=margin, pairs=pairs, package_dirs=package_dirs)
     rng = np.random.default_rng(seed)
     best, best_sigma = None, -1.0
     for _ in range(HOME_DRAWS):
@@ -206,6 +236,8 @@ def init_robot(
     method='task_sharing',
     period=DEFAULT_PERIOD,
     package_dirs=(),
+    srdf=None,
+    pair_samples=PAIR_SAMPLES,
 ):
     """Write a robot YAML for ``urdf`` at ``out`` (see the module docstring); returns its text.
 
@@ -222,6 +254,8 @@ def init_robot(
     for folder in package_dirs:
         if not folder.is_dir():
             raise WmmError(f'--package-dir: folder not found: {folder}')
+    if srdf is not None and not Path(srdf).is_file():
+        raise WmmError(f'--srdf: file not found: {srdf}')
     check_resources(urdf, package_dirs)
     base_link = base_link or tree.root_link
     if base_link is None:
@@ -244,6 +278,10 @@ def init_robot(
     else:
         wheels = detect_wheels(tree, family, base_link, [j.name for j in chain])
     velocity = _base_limits(wheels, family, tree, base_link)
+    ground = _floor_height(tree, wheels, base_link)
+    choice = choose_pairs(
+        urdf, [j.name for j in chain], ground, INFLUENCE, pair_samples, srdf, package_dirs, contact=SAFETY
+    )
     if home is not None:
         q_home = np.asarray(home, dtype=float)
         if q_home.shape != (len(chain),):
@@ -251,13 +289,12 @@ def init_robot(
         home_rule = 'given with --home'
     else:
         q_home, sigma = _choose_home(
-            tree, arm_root, tool, base_link, _floor_height(tree, wheels, base_link), package_dirs=package_dirs
+            tree, arm_root, tool, base_link, ground, pairs=choice.checked, package_dirs=package_dirs
         )
         home_rule = (
             f'the best of {HOME_DRAWS} seeded draws (σ_min {sigma:.3f}): arm {HOME_CLEARANCE} m clear '
-            f'of the body and itself, tool ≥ {TOOL_ABOVE_FLOOR} m above the floor'
+            f'over the collision pairs, tool ≥ {TOOL_ABOVE_FLOOR} m above the floor'
         )
-    ground = _floor_height(tree, wheels, base_link)
     rel = Path(_relative(urdf, out.parent))
     lines = [
         f'# Robot description of {urdf.name}, written by `wmm_robot init` (check it with `wmm_robot check`).',
@@ -295,6 +332,7 @@ def init_robot(
     for key, names in wheels.items():
         lines.append(f'    {key}: [{", ".join(names)}]')
     lines.append('    # geometry (wheel radius, hips / d1, d2 / track) and wheel rate limits from the URDF')
+    lines += _pair_lines(choice)
     text = '\n'.join(lines) + '\n'
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
@@ -311,6 +349,49 @@ def _flow(name: str) -> str:
     return yaml.safe_dump(name, default_flow_style=True, width=1 << 20).splitlines()[0]
 
 
+def _pair_lines(choice: PairChoice) -> list[str]:
+    """The ``collision:`` section of the YAML: the pairs ``choice`` keeps, with how it chose them."""
+    out = {reason: len(pairs) for reason, pairs in choice.left_out.items()}
+    lines = [
+        '  collision:',
+        f'    # the link pairs the controller\'s collision model checks ("floor": the floor): of {choice.candidates}',
+        f'    # pairs of links with shapes, left out: {out["adjacent"]} adjacent, {out["rigid"]} with no arm joint',
+        f'    # between them, {out["srdf"]} disabled by the SRDF, {out["always"]} within {choice.contact:g} m at'
+        f' {ALWAYS_FRACTION:.0%} or more',
+        f'    # and {out["never"]} never within {choice.influence:g} m of {choice.samples} random postures. Edit freely.',
+        '    pairs:',
+    ]
+    lines += [f'      - [{_flow(a)}, {_flow(b)}]' for a, b in choice.checked]
+    if not choice.checked:
+        lines[-1] = '    pairs: []'
+    return lines
+
+
+def collision_summary(cfg: RobotConfig, postures: int = COST_POSTURES, seed: int = 1) -> tuple[str, str]:
+    """``(line, warning)``: the number of collision pairs ``cfg``'s collision model checks and the
+    median cost of one distance check over ``postures`` seeded random arm postures; the warning
+    is '' within :data:`CHECK_BUDGET`."""
+    model = CollisionModel.from_robot(cfg)
+    arm = cfg.arm
+    lower = np.maximum(arm.position_lower, -math.pi)
+    upper = np.minimum(arm.position_upper, math.pi)
+    rng = np.random.default_rng(seed)
+    cost = median_check_time(model, lower + (upper - lower) * rng.random((postures, arm.n)), INFLUENCE)
+    rule = 'collision.pairs of the YAML' if cfg.collision_pairs is not None else 'the default rules'
+    links = len({frozenset(pair) for pair in model.pairs})
+    line = (
+        f'collision: {len(model.pairs)} shape pairs checked ({links} link pairs, from {rule}); one distance '
+        f'check {cost * 1e3:.2f} ms (median of {postures} random postures)'
+    )
+    warning = ''
+    if cost > CHECK_BUDGET:
+        warning = (
+            f'warning: one distance check takes {cost * 1e3:.1f} ms, above the {CHECK_BUDGET * 1e3:g} ms budget: '
+            'leave pairs out in collision.pairs (wmm_robot init chooses them; --srdf adds an SRDF\'s)'
+        )
+    return line, warning
+
+
 def _relative(path, start):
     try:
         return str(Path(path).relative_to(start))
@@ -321,7 +402,13 @@ def _relative(path, start):
 def _check(path):
     model = KinematicModel(load_robot(path))
     cfg = model.config
-    return describe(model, cfg.start.base_pose, cfg.start.arm)
+    return describe(model, cfg.start.base_pose, cfg.start.arm), *collision_summary(cfg)
+
+
+def _print_summary(line, warning):
+    print(line)
+    if warning:
+        print(warning, file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -347,12 +434,15 @@ def main(argv: list[str] | None = None) -> int:
         metavar='DIR',
         help='a folder package:// paths are looked up in (it holds PKG/...); may be repeated',
     )
+    ini.add_argument('--srdf', help='an SRDF whose disable_collisions pairs are left out')
     chk = sub.add_parser('check', help='load a robot YAML and print its summary')
     chk.add_argument('robot', help='robot YAML path or shipped robot name')
     args = parser.parse_args(argv)
     try:
         if args.command == 'check':
-            print(_check(args.robot))
+            summary, *collision = _check(args.robot)
+            print(summary)
+            _print_summary(*collision)
             return 0
         home = None
         if args.home:
@@ -374,7 +464,9 @@ def main(argv: list[str] | None = None) -> int:
             name=args.name,
             method=args.method,
             package_dirs=args.package_dir,
+            srdf=args.srdf,
         )
+        _print_summary(*collision_summary(load_robot(args.out)))
         print(f'wrote {args.out}; check it with: wmm_robot check {args.out}')
         return 0
     except WmmError as exc:
