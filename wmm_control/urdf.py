@@ -206,6 +206,17 @@ class UrdfTree:
             rot = rot @ r
         return rot, pos
 
+    def axis_in(self, joint: UrdfJoint, frame: str) -> np.ndarray:
+        """The unit axis of ``joint`` expressed in link ``frame``'s axes, every joint at zero
+        (a URDF gives it in the joint's own frame, which its origin may turn).
+
+        Raises:
+            ConfigError: ``joint`` does not descend from ``frame``.
+        """
+        rot = self.placement(joint.child, frame)[0] if joint.child != frame else np.eye(3)
+        axis = rot @ joint.axis
+        return axis / max(float(np.linalg.norm(axis)), 1e-12)
+
     # ------------------------------------------------------------------ wheels
     def wheel_radius(self, link: str) -> float | None:
         """Radius [m] of the collision cylinder (or sphere) of ``link``, None if it has none."""

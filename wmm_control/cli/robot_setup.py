@@ -15,10 +15,14 @@ value commented with the rule that chose it:
 
 * ``package_dirs``: the folders given with ``--package-dir``, where ``package://`` mesh paths
   are looked up first (:mod:`wmm_control.resources`);
+* the base frame: the URDF's root link (``--base-link`` may only name it): the frame the
+  base's planar pose and odometry describe, which the simulator moves and TF hangs every other
+  link from (on TIAGo, ``base_footprint``, on the floor under ``base_link``);
 * wheel and steer joints, found from the URDF unless named: joints outside the arm that turn
-  about their y axis (wheels) or z axis (steer joints), whose link has a collision cylinder;
-  Mecanum wheels are ordered front-left, front-right, rear-left, rear-right by their
-  position, differential ones left then right;
+  about the base frame's y axis (wheels) or z axis (steer joints), whatever the rotation of the
+  joint's own frame, whose link has a collision cylinder; Mecanum wheels are ordered
+  front-left, front-right, rear-left, rear-right by their position, differential ones left
+  then right;
 * base twist limits from the wheel rate limits: half the wheel rate budget each to the
   linear and the angular part (so both at once stay within it); base accelerations reach
   those in one second;
@@ -31,7 +35,9 @@ value commented with the rule that chose it:
   postures within the limits — the one with the largest σ_min of the arm Jacobian among
   those whose collision shapes keep 3 cm apart over the pairs above, with the tool at least
   10 cm above the floor;
-* the control period (0.025 s) and the default method (``task_sharing``).
+* the control period (``--period``, default 0.025 s) and the default method (``--method``,
+  default per base family: ``amp`` on a differential base, the method that reaches goals to
+  its side; ``task_sharing`` otherwise).
 
 ``init`` and ``check`` print the number of checked collision pairs and the measured cost of
 one distance check (the median over random postures), with a warning above
@@ -49,6 +55,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+
 import yaml
 
 from wmm_control.cli.model_info import describe
@@ -67,12 +74,15 @@ from wmm_control.resources import check_resources
 from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, RobotConfig, load_robot
 from wmm_control.urdf import UrdfJoint, UrdfTree
 
-__all__ = ['main', 'init_robot', 'detect_wheels', 'collision_summary']
+__all__ = ['main', 'init_robot', 'detect_wheels', 'collision_summary', 'DEFAULT_METHODS']
 
 HOME_DRAWS = 400
 HOME_CLEARANCE = 0.03  # [m] from the body and between arm links
 TOOL_ABOVE_FLOOR = 0.10  # [m]
 DEFAULT_PERIOD = 0.025
+#: The default method of each base family: on a differential base only AMP reaches goals to
+#: the side (docs/robots.md).
+DEFAULT_METHODS = {'steerable': 'task_sharing', 'mecanum': 'task_sharing', 'differential': 'amp'}
 #: Random arm postures over which the collision pairs are chosen.
 PAIR_SAMPLES = 1000
 #: [m] the safety stage's default influence distance: a pair never this close is left out.
@@ -87,8 +97,12 @@ CHECK_BUDGET = 0.002
 COST_POSTURES = 20
 
 
-def _axis_is(joint, k):
-    axis = joint.axis / max(np.linalg.norm(joint.axis), 1e-12)
+def _axis_is(tree, joint, base_link, k):
+    """Whether ``joint`` turns about axis ``k`` (0 x, 1 y, 2 z) of ``base_link``, either way."""
+    try:
+        axis = tree.axis_in(joint, base_link)
+    except WmmError:  # not below the base
+        return False
     return abs(abs(axis[k]) - 1.0) < 1e-6
 
 
@@ -111,13 +125,16 @@ def detect_wheels(tree: UrdfTree, family: str, base_link: str, arm_joints: Itera
     def position(joint: UrdfJoint) -> np.ndarray:
         return tree.placement(joint.child, base_link)[1]
 
+    def about(joint: UrdfJoint, k: int) -> bool:
+        return _axis_is(tree, joint, base_link, k)
+
     if family == 'steerable':
         steer = [
             j
             for j in spinning
-            if _axis_is(j, 2) and any(c.type == 'continuous' and _axis_is(c, 1) for c in tree.children(j.child))
+            if about(j, 2) and any(c.type == 'continuous' and about(c, 1) for c in tree.children(j.child))
         ]
-        drive = [next(c for c in tree.children(j.child) if c.type == 'continuous' and _axis_is(c, 1)) for j in steer]
+        drive = [next(c for c in tree.children(j.child) if c.type == 'continuous' and about(c, 1)) for j in steer]
         if len(steer) < 2:
             raise WmmError(
                 f'{tree.path.name}: found {len(steer)} steer + drive modules (a joint about z '
@@ -129,14 +146,14 @@ def detect_wheels(tree: UrdfTree, family: str, base_link: str, arm_joints: Itera
         j
         for j in spinning
         if j.type == 'continuous'
-        and _axis_is(j, 1)
+        and about(j, 1)
         and tree.wheel_radius(j.child) is not None
-        and not any(_axis_is(a, 2) for a in tree.ancestors(j.child) if a.type != 'fixed')
+        and not any(about(a, 2) for a in tree.ancestors(j.child) if a.type != 'fixed')
     ]
     want = 4 if family == 'mecanum' else 2
     if len(wheels) != want:
         raise WmmError(
-            f'{tree.path.name}: found {len(wheels)} wheel joints (continuous, about y, a collision '
+            f'{tree.path.name}: found {len(wheels)} wheel joints (continuous, about the y axis of {base_link}, a collision '
             f'cylinder on the link) {[j.name for j in wheels]}; a {family} base needs {want}: '
             'name them with --wheel-joints'
         )
@@ -180,7 +197,9 @@ def _floor_height(tree, wheels, base_link):
 
 def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, package_dirs=()):
     """The documented posture choice (module docstring): ``(q (n,), σ_min)``, clear over the
-    link ``pairs`` (default: the collision model's own rules)."""
+    link ``pairs`` (default: the collision model's own rules): :data:`HOME_CLEARANCE` apart, or
+    the safety stage's safety distance for a pair that is that far apart in none of the draws
+    (two links of a wrist)."""
     chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
     names = [j.name for j in chain]
     lower = np.array([max(j.lower, -math.pi) if j.lower is not None else -math.pi for j in chain])
@@ -191,7 +210,7 @@ def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, pa
     margin = -math.inf if pairs is not None else 0.02
     clearance = CollisionModel(tree.path, names, margin=margin, pairs=pairs, package_dirs=package_dirs)
     rng = np.random.default_rng(seed)
-    best, best_sigma = None, -1.0
+    postures, sigmas, distances = [], [], []
     for _ in range(HOME_DRAWS):
         # away from the limits: the middle 80 % of each range
         q = lower + (upper - lower) * (0.1 + 0.8 * rng.random(len(chain)))
@@ -199,18 +218,22 @@ def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, pa
         pos, _ = model.ee_placement_world()
         if pos[2] < ground + TOOL_ABOVE_FLOOR:
             continue
-        sigma = model.sigma_min('full')
-        if sigma <= best_sigma:
-            continue
-        if clearance.closest(q)[0] < HOME_CLEARANCE:
-            continue
-        best, best_sigma = q, sigma
-    if best is None:
+        postures.append(q)
+        sigmas.append(model.sigma_min('full'))
+        # exact below HOME_CLEARANCE, a lower bound above it
+        distances.append(clearance._distances_within(clearance._configuration(q), HOME_CLEARANCE))
+    if postures:
+        dist = np.array(distances).reshape(len(postures), -1)
+        need = np.where(dist.max(axis=0, initial=-np.inf) >= HOME_CLEARANCE, HOME_CLEARANCE, SAFETY)
+        clear = np.flatnonzero(np.all(dist >= need, axis=1))
+    if not postures or not clear.size:
         raise WmmError(
             f'{tree.path.name}: no posture of {HOME_DRAWS} draws keeps the arm {HOME_CLEARANCE} m clear '
-            'of the body with the tool above the floor: give one with --home'
+            f'of the body ({SAFETY} m for pairs never that far apart) with the tool above the floor: '
+            'give one with --home'
         )
-    return best, best_sigma
+    best = int(clear[np.argmax(np.asarray(sigmas)[clear])])
+    return postures[best], sigmas[best]
 
 
 def _names(text):
@@ -233,7 +256,7 @@ def init_robot(
     drive_joints=None,
     base_link=None,
     name=None,
-    method='task_sharing',
+    method=None,
     period=DEFAULT_PERIOD,
     package_dirs=(),
     srdf=None,
@@ -248,8 +271,11 @@ def init_robot(
     tree = UrdfTree(urdf)
     if family not in BASE_FAMILIES:
         raise WmmError(f'--base: unknown base family {family!r}; expected one of {list(BASE_FAMILIES)}')
+    method = method or DEFAULT_METHODS[family]
     if method not in METHODS:
         raise WmmError(f'--method: unknown method {method!r}; expected one of {sorted(METHODS)}')
+    if not (isinstance(period, (int, float)) and math.isfinite(period) and period > 0.0):
+        raise WmmError(f'--period: must be a number of seconds > 0, got {period!r}')
     package_dirs = [Path(d).expanduser().resolve() for d in package_dirs]
     for folder in package_dirs:
         if not folder.is_dir():
@@ -257,16 +283,22 @@ def init_robot(
     if srdf is not None and not Path(srdf).is_file():
         raise WmmError(f'--srdf: file not found: {srdf}')
     check_resources(urdf, package_dirs)
-    base_link = base_link or tree.root_link
-    if base_link is None:
-        raise WmmError(f'{urdf.name}: the URDF has no single root link: give --base-link')
-    tree.require_link(base_link, 'base')
+    root = tree.root_link
+    if root is None:
+        raise WmmError(f'{urdf.name}: the URDF has no single root link')
+    if base_link not in (None, root):
+        raise WmmError(
+            f'--base-link {base_link}: the base frame must be the URDF\'s root link {root!r}, the frame '
+            'the simulator moves and odometry and TF describe'
+        )
+    base_link = root
     chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
     if len(chain) < MIN_ARM_JOINTS:
         raise WmmError(
             f'{urdf.name}: the chain {arm_root!r} → {tool!r} has {len(chain)} joints; '
             f'an arm needs at least {MIN_ARM_JOINTS}'
         )
+    arm_names = [j.name for j in chain]
     if wheel_joints or steer_joints:
         wheels = (
             {'steer_joints': steer_joints, 'drive_joints': drive_joints}
@@ -276,12 +308,10 @@ def init_robot(
         if family == 'steerable' and not (steer_joints and drive_joints):
             raise WmmError('a steerable base needs both --steer-joints and --drive-joints')
     else:
-        wheels = detect_wheels(tree, family, base_link, [j.name for j in chain])
+        wheels = detect_wheels(tree, family, base_link, arm_names)
     velocity = _base_limits(wheels, family, tree, base_link)
     ground = _floor_height(tree, wheels, base_link)
-    choice = choose_pairs(
-        urdf, [j.name for j in chain], ground, INFLUENCE, pair_samples, srdf, package_dirs, contact=SAFETY
-    )
+    choice = choose_pairs(urdf, arm_names, ground, INFLUENCE, pair_samples, srdf, package_dirs, contact=SAFETY)
     if home is not None:
         q_home = np.asarray(home, dtype=float)
         if q_home.shape != (len(chain),):
@@ -293,7 +323,8 @@ def init_robot(
         )
         home_rule = (
             f'the best of {HOME_DRAWS} seeded draws (σ_min {sigma:.3f}): arm {HOME_CLEARANCE} m clear '
-            f'over the collision pairs, tool ≥ {TOOL_ABOVE_FLOOR} m above the floor'
+            f'over the collision pairs ({SAFETY} m for those never that far apart), tool ≥ {TOOL_ABOVE_FLOOR} m '
+            'above the floor'
         )
     rel = Path(_relative(urdf, out.parent))
     lines = [
@@ -310,14 +341,15 @@ def init_robot(
         lines.append(f'  package_dirs: [{dirs}]   # where package:// paths are looked up first')
     lines += [
         f'  base_type: {family}',
-        f'  base_link: {base_link}',
+        f'  base_link: {base_link}   # the URDF\'s root link: the frame odometry and TF move',
         f'  ground_z: {ground:.6g}          # floor height in {base_link} at rest [m]',
         f'  period: {period}       # control period [s]: the default of every node',
-        f'  method: {method}  # the redundancy_resolver default',
+        f'  method: {method}  # the redundancy_resolver default'
+        + (' (on a differential base, the one that reaches goals to the side)' if family == 'differential' else ''),
         '  arm:',
         f'    root: {arm_root}',
         f'    tool: {tool}    # the end-effector frame',
-        f'    # {len(chain)} joints from the URDF: {", ".join(j.name for j in chain)};',
+        f'    # {len(chain)} joints from the URDF: {", ".join(arm_names)};',
         '    # their position and velocity limits are the URDF\'s <limit> unless given here;',
         '    # acceleration limits: 2 × the velocity limit (full speed in 0.5 s) unless given here',
         f'    dexterous: {_fmt_list(q_home)}   # {home_rule}',
@@ -424,9 +456,12 @@ def main(argv: list[str] | None = None) -> int:
     ini.add_argument('--wheel-joints', help='Mecanum (fl,fr,rl,rr) or differential (left,right) wheel joints')
     ini.add_argument('--steer-joints', help='steerable base: the steer joints')
     ini.add_argument('--drive-joints', help='steerable base: the drive joints, in the order of the steer joints')
-    ini.add_argument('--base-link', help='the base frame (default: the URDF root link)')
+    ini.add_argument('--base-link', help='the base frame: the URDF root link, the only one allowed (the default)')
     ini.add_argument('--name', help='robot name (default: the YAML file stem)')
-    ini.add_argument('--method', default='task_sharing', help='default redundancy resolution method')
+    ini.add_argument(
+        '--method', help='default redundancy resolution method (default: amp on a differential base, else task_sharing)'
+    )
+    ini.add_argument('--period', type=float, default=DEFAULT_PERIOD, help='control period [s] (default 0.025)')
     ini.add_argument(
         '--package-dir',
         action='append',
@@ -463,6 +498,7 @@ def main(argv: list[str] | None = None) -> int:
             base_link=args.base_link,
             name=args.name,
             method=args.method,
+            period=args.period,
             package_dirs=args.package_dir,
             srdf=args.srdf,
         )
