@@ -173,6 +173,37 @@ BAD_FILES = {
         ),
         'is a mimic joint',
     ),
+    'missing mesh': (
+        lambda t, r: _edit_urdf(
+            t,
+            '<link name="arm_link_3">',
+            '<link name="arm_link_3"><visual><geometry><mesh filename="meshes/nowhere.stl"/></geometry></visual>',
+        ),
+        'meshes/nowhere.stl (meshes/nowhere.stl)',
+    ),
+    'unknown package': (
+        lambda t, r: _edit_urdf(
+            t,
+            '<link name="arm_link_3">',
+            '<link name="arm_link_3"><visual><geometry><mesh filename="package://no_such_pkg/m.stl"/></geometry>'
+            '</visual>',
+        ),
+        "package 'no_such_pkg' of package://no_such_pkg/m.stl not found",
+    ),
+    'wheel about x': (
+        lambda t, r: _edit_urdf(
+            t, '<axis xyz="0 1 0"/>\n    <limit effort="50"', '<axis xyz="1 0 0"/>\n    <limit effort="50"'
+        ),
+        "drive joint 'drive_fl_joint' turns about [1.0, 0.0, 0.0] in base_link, not about its y axis",
+    ),
+    'zero-mass link': (
+        lambda t, r: _edit_urdf(t, '<mass value="2.7"/>', '<mass value="0"/>'),
+        'has no mass > 0',
+    ),
+    'collision pair of no link': (
+        lambda t, r: r.__setitem__('collision', {'pairs': [['arm_link_3', 'no_such_link']]}),
+        "collision.pairs link 'no_such_link' not found",
+    ),
     'start state outside the limits': (
         lambda t, r: r['start']['arm'].__setitem__(1, 3.0),
         'start.arm: outside the position limits: arm_joint_2 = 3',
@@ -246,6 +277,61 @@ def _factory_edit(old, new):
         urdf.write_text(text.replace(old, new))
 
     return edit
+
+
+_LEFT_WHEEL = '<child link="wheel_left_link"/><origin xyz="0 0.24 0.08" rpy="0 0 0"/><axis xyz="0 1 0"/>'
+INIT_BAD = {
+    'missing mesh': (_factory_edit('<box size="0.6 0.45 0.2"/>', '<mesh filename="nowhere.stl"/>'), [], 'file missing'),
+    'unknown package': (
+        _factory_edit('<box size="0.6 0.45 0.2"/>', '<mesh filename="package://no_such_pkg/box.stl"/>'),
+        [],
+        "package 'no_such_pkg' of package://no_such_pkg/box.stl not found",
+    ),
+    'arm chain that does not exist': (
+        lambda urdf: None,
+        ['--arm-root', 'wheel_left_link'],
+        "chain broken: tool link 'tool_link' does not descend from arm root link 'wheel_left_link'",
+    ),
+    'wheel about x': (
+        _factory_edit(_LEFT_WHEEL, _LEFT_WHEEL.replace('<axis xyz="0 1 0"/>', '<axis xyz="1 0 0"/>')),
+        ['--wheel-joints', 'wheel_left_joint,wheel_right_joint'],
+        "wheel joint 'wheel_left_joint' turns about [1.0, 0.0, 0.0] in base_link, not about its y axis",
+    ),
+    'mimic joint in the arm chain': (
+        _factory_edit(
+            '<joint name="arm_joint_3" type="revolute">',
+            '<joint name="arm_joint_3" type="revolute"><mimic joint="arm_joint_2"/>',
+        ),
+        [],
+        "arm joint 'arm_joint_3' is a mimic joint (of 'arm_joint_2')",
+    ),
+    'zero-mass link': (
+        _factory_edit(
+            '<link name="arm_link_2"><inertial><mass value="1.0"/>',
+            '<link name="arm_link_2"><inertial><mass value="0"/>',
+        ),
+        [],
+        "link 'arm_link_2' (moved by joint 'arm_joint_2') has no mass > 0",
+    ),
+}
+
+
+@pytest.mark.parametrize('kind', sorted(INIT_BAD))
+def test_init_on_a_bad_description_is_one_line_and_exit_code_2(tmp_path, capsys, kind):
+    edit, extra, message = INIT_BAD[kind]
+    urdf = write_urdf(tmp_path / 'r.urdf', 'differential', arm_joints=6)
+    edit(urdf)
+    out = tmp_path / 'r.yaml'
+    args = ['init', str(urdf), '--base', 'differential', '--arm-root', 'arm_base_link', '--tool', 'tool_link']
+    args += ['--out', str(out), '--home', '0,0.3,0.6,0,0.5,0']
+    if '--arm-root' in extra:
+        args[args.index('--arm-root') + 1] = extra[1]
+    else:
+        args += extra
+    assert robot_setup.main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count('\n') == 0 and message in err, err
+    assert not out.exists()
 
 
 def test_init_finds_wheels_whose_joint_frame_is_turned_and_picks_amp_for_a_differential_base(tmp_path, capsys):

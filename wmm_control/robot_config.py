@@ -43,7 +43,7 @@ import yaml
 from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
 from wmm_control.resources import check_resources, yaml_package_dirs
-from wmm_control.urdf import MOVING_TYPES, UrdfTree
+from wmm_control.urdf import UrdfTree
 
 __all__ = [
     'ArmConfig',
@@ -311,18 +311,7 @@ def _parse_arm(raw, tree, where_top):
     tool = arm.get('tool', raw.get('ee_frame'))
     if not isinstance(root, str) or not isinstance(tool, str):
         raise ConfigError(f'{w}: give the chain as arm.root and arm.tool link names, got {root!r}, {tool!r}')
-    chain = [j for j in tree.chain(root, tool) if j.type != 'fixed']
-    for j in chain:
-        if j.mimic is not None:
-            raise ConfigError(
-                f'{tree.path.name}: arm joint {j.name!r} is a mimic joint (of {j.mimic!r}): '
-                'an arm joint must be actuated on its own'
-            )
-        if j.type not in MOVING_TYPES:
-            raise ConfigError(
-                f'{tree.path.name}: arm joint {j.name!r} has type {j.type!r}: '
-                f'an arm joint must be one of {MOVING_TYPES}'
-            )
+    chain = tree.arm_chain(root, tool)
     names = tuple(j.name for j in chain)
     n = len(names)
     if n < MIN_ARM_JOINTS:
@@ -455,6 +444,8 @@ def _one(values):
 
 def _common_wheel_values(tree, names, role):
     """(radius, velocity limit) the URDF gives every wheel joint ``names``, None where they differ."""
+    for name in names:
+        tree.require_wheel_axis(tree.joint(name, role), role)
     return (_one({_wheel_radius(tree, n, role) for n in names}), _one({_urdf_velocity(tree, n, role) for n in names}))
 
 
@@ -617,6 +608,7 @@ def _parse(path, raw):
     tree = UrdfTree(urdf_path)
     package_dirs = yaml_package_dirs(raw, path)
     check_resources(urdf_path, package_dirs)
+    tree.require_masses()
     base_link = raw.get('base_link', 'base_link')
     tree.require_link(base_link, 'base')
     arm = _parse_arm(raw, tree, 'robot')

@@ -200,7 +200,7 @@ def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, pa
     link ``pairs`` (default: the collision model's own rules): :data:`HOME_CLEARANCE` apart, or
     the safety stage's safety distance for a pair that is that far apart in none of the draws
     (two links of a wrist)."""
-    chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
+    chain = tree.arm_chain(arm_root, tool)
     names = [j.name for j in chain]
     lower = np.array([max(j.lower, -math.pi) if j.lower is not None else -math.pi for j in chain])
     upper = np.array([min(j.upper, math.pi) if j.upper is not None else math.pi for j in chain])
@@ -283,6 +283,7 @@ def init_robot(
     if srdf is not None and not Path(srdf).is_file():
         raise WmmError(f'--srdf: file not found: {srdf}')
     check_resources(urdf, package_dirs)
+    tree.require_masses()
     root = tree.root_link
     if root is None:
         raise WmmError(f'{urdf.name}: the URDF has no single root link')
@@ -292,7 +293,7 @@ def init_robot(
             'the simulator moves and odometry and TF describe'
         )
     base_link = root
-    chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
+    chain = tree.arm_chain(arm_root, tool)
     if len(chain) < MIN_ARM_JOINTS:
         raise WmmError(
             f'{urdf.name}: the chain {arm_root!r} → {tool!r} has {len(chain)} joints; '
@@ -309,6 +310,9 @@ def init_robot(
             raise WmmError('a steerable base needs both --steer-joints and --drive-joints')
     else:
         wheels = detect_wheels(tree, family, base_link, arm_names)
+    role = 'drive joint' if family == 'steerable' else 'wheel joint'
+    for wheel in wheels.get('drive_joints') or wheels['wheel_joints']:
+        tree.require_wheel_axis(tree.joint(wheel, role), role)
     velocity = _base_limits(wheels, family, tree, base_link)
     ground = _floor_height(tree, wheels, base_link)
     choice = choose_pairs(urdf, arm_names, ground, INFLUENCE, pair_samples, srdf, package_dirs, contact=SAFETY)
