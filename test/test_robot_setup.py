@@ -526,3 +526,17 @@ def test_tiago_is_set_up_from_its_urdf_as_it_comes(tmp_path, capsys, monkeypatch
     assert robot_setup.main(['check', str(out)]) == 0
     summary = capsys.readouterr().out
     assert 'torso_lift_joint' in summary and 'm, m/s, m/s²' in summary
+
+
+def test_tiago_without_its_hand_reaches_a_goal_to_its_side_with_the_default_method(tmp_path):
+    """The documented commands only, then a goal 1.5 m to the side of the gripper: a differential
+    base gets there by turning (amp, init's default for it), within 2 mm on the ground truth."""
+    share = _tiago_share()
+    urdf = share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots' / 'tiago_no_hand.urdf'
+    out = tmp_path / 'tiago_no_hand.yaml'
+    args = ['init', str(urdf), '--base', 'differential', '--arm-root', 'torso_fixed_link', '--tool', 'arm_tool_link']
+    assert robot_setup.main(args + ['--package-dir', str(share), '--out', str(out)]) == 0
+    cfg = load_robot(out)
+    assert cfg.method == 'amp'
+    errors = _reach(cfg, cfg.method, [np.array([0.0, 1.5, 0.0])], tol=0.004)
+    assert errors[0] < 0.002, errors
