@@ -94,7 +94,7 @@ SAFETY = SafetyParams().collision_safety
 #: than the rest of a cycle takes).
 CHECK_BUDGET = 0.002
 #: Random arm postures over which the cost of one distance check is measured.
-COST_POSTURES = 20
+COST_POSTURES = 100
 
 
 def _axis_is(tree, joint, base_link, k):
