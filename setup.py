@@ -38,7 +38,7 @@ setup(
     description='Whole-body motion control of wheeled mobile manipulators.',
     license='Apache-2.0',
     # cluster: --cluster of wmm_randomized and wmm_experiment (Ray tasks), scripts/requirements-cluster.txt
-    extras_require={'test': ['pytest', 'hypothesis', 'ray[client]'], 'cluster': ['ray[client]']},
+    extras_require={'test': ['pytest', 'hypothesis', 'ray[client]', 'example-robot-data'], 'cluster': ['ray[client]']},
     entry_points={
         'console_scripts': [
             'wmm_model = wmm_control.cli.model_info:main',

@@ -20,6 +20,7 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.collision import FLOOR, CollisionModel
 from wmm_control.geometry import matrix_from_quaternion
 from wmm_control.resolvers import PoseTarget, make_resolver
+from wmm_control.resources import load_geometry
 from wmm_control.robot_config import load_robot
 
 __all__ = ['PinkStep', 'pink_installed', 'bench_pink', 'closed_loop_states', 'OFFSETS']
@@ -57,7 +58,7 @@ class PinkStep:
         geometry = {}
         self.barriers = []
         if barrier:
-            geom = pin.buildGeomFromUrdf(km.model, str(cfg.urdf_path), pin.GeometryType.COLLISION)
+            geom = load_geometry(km.model, cfg.urdf_path, pin.GeometryType.COLLISION, cfg.package_dirs)
             # every pair of shapes the package checks (within an infinite distance), the floor's
             # left out: pink has no floor
             near, _, _ = CollisionModel.from_robot(cfg).within(cfg.start.arm, np.inf, cfg.start.base_pose)

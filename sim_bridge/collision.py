@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike
 from sim_bridge.client import OwnedClient
 from wmm_control.kinematics.obstacles import Obstacle, around_base
 from wmm_control.geometry import quaternion_from_matrix
+from wmm_control.resources import loadable_urdf
 from wmm_control.robot_config import RobotConfig, load_robot
 
 __all__ = ['SelfCollisionChecker', 'add_obstacle', 'OBSTACLE_RGBA']
@@ -95,7 +96,8 @@ class SelfCollisionChecker(OwnedClient):
         self.margin = float(margin)
         self._cid = p.connect(p.DIRECT)
         cid = self._cid
-        self._body = p.loadURDF(str(self.robot.urdf_path), useFixedBase=True, physicsClientId=cid)
+        urdf = loadable_urdf(self.robot.urdf_path, self.robot.package_dirs)
+        self._body = p.loadURDF(str(urdf), useFixedBase=True, physicsClientId=cid)
         plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
         self._ground = p.createMultiBody(0.0, plane, basePosition=[0.0, 0.0, self.robot.ground_z], physicsClientId=cid)
         names, parents, joint_of = {}, {}, {}

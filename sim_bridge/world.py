@@ -99,6 +99,7 @@ from wmm_control.geometry import (
     wrap_angle,
     yaw_from_quaternion,
 )
+from wmm_control.resources import loadable_urdf
 from wmm_control.robot_config import MecanumBase, RobotConfig, SteerableBase, load_robot
 
 from sim_bridge.client import OwnedClient
@@ -270,7 +271,7 @@ class SimWorld(OwnedClient):
         # Implicit cylinders: by default PyBullet turns a URDF cylinder into a convex hull, a
         # polygonal wheel that rolls on its corners (see the module docstring, physics mode).
         self.body_id = p.loadURDF(
-            str(cfg.urdf_path),
+            str(loadable_urdf(cfg.urdf_path, cfg.package_dirs)),
             basePosition=[0.0, 0.0, 0.0],
             flags=p.URDF_USE_INERTIA_FROM_FILE | p.URDF_USE_IMPLICIT_CYLINDER,
             physicsClientId=cid,

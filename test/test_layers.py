@@ -24,6 +24,7 @@ LAYERS = {
     'wmm_control.errors': 'core',
     'wmm_control.checks': 'core',
     'wmm_control.paths': 'core',
+    'wmm_control.resources': 'core',  # the one resolver of a URDF's package://, file:// and relative paths
     'wmm_control.geometry': 'core',  # SE(2), SO(3), quaternions, angles, continuous joints, limits scaling
     'wmm_control.urdf': 'core',
     'wmm_control.robot_config': 'core',

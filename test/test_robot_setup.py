@@ -5,6 +5,7 @@ import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -172,6 +173,37 @@ BAD_FILES = {
         ),
         'is a mimic joint',
     ),
+    'missing mesh': (
+        lambda t, r: _edit_urdf(
+            t,
+            '<link name="arm_link_3">',
+            '<link name="arm_link_3"><visual><geometry><mesh filename="meshes/nowhere.stl"/></geometry></visual>',
+        ),
+        'meshes/nowhere.stl (meshes/nowhere.stl)',
+    ),
+    'unknown package': (
+        lambda t, r: _edit_urdf(
+            t,
+            '<link name="arm_link_3">',
+            '<link name="arm_link_3"><visual><geometry><mesh filename="package://no_such_pkg/m.stl"/></geometry>'
+            '</visual>',
+        ),
+        "package 'no_such_pkg' of package://no_such_pkg/m.stl not found",
+    ),
+    'wheel about x': (
+        lambda t, r: _edit_urdf(
+            t, '<axis xyz="0 1 0"/>\n    <limit effort="50"', '<axis xyz="1 0 0"/>\n    <limit effort="50"'
+        ),
+        "drive joint 'drive_fl_joint' turns about [1.0, 0.0, 0.0] in base_link, not about its y axis",
+    ),
+    'zero-mass link': (
+        lambda t, r: _edit_urdf(t, '<mass value="2.7"/>', '<mass value="0"/>'),
+        'has no mass > 0',
+    ),
+    'collision pair of no link': (
+        lambda t, r: r.__setitem__('collision', {'pairs': [['arm_link_3', 'no_such_link']]}),
+        "collision.pairs link 'no_such_link' not found",
+    ),
     'start state outside the limits': (
         lambda t, r: r['start']['arm'].__setitem__(1, 3.0),
         'start.arm: outside the position limits: arm_joint_2 = 3',
@@ -253,6 +285,107 @@ def test_init_sets_up_a_mecanum_base_of_six_wheels_and_names_one_it_cannot(tmp_p
     urdf = write_urdf(tmp_path / 'axis.urdf', 'mecanum', arm_joints=6, wheels=SIX_MECANUM_WHEELS)
     with pytest.raises(WmmError, match=r"\['wheel_ml_joint', 'wheel_mr_joint'\] sit on an axis.*roller_angles"):
         robot_setup.init_robot(urdf, 'mecanum', 'arm_base_link', 'tool_link', tmp_path / 'axis.yaml')
+
+
+def _factory_edit(old, new):
+    def edit(urdf):
+        text = urdf.read_text()
+        assert old in text
+        urdf.write_text(text.replace(old, new))
+
+    return edit
+
+
+_LEFT_WHEEL = '<child link="wheel_left_link"/><origin xyz="0 0.24 0.08" rpy="0 0 0"/><axis xyz="0 1 0"/>'
+INIT_BAD = {
+    'missing mesh': (_factory_edit('<box size="0.6 0.45 0.2"/>', '<mesh filename="nowhere.stl"/>'), [], 'file missing'),
+    'unknown package': (
+        _factory_edit('<box size="0.6 0.45 0.2"/>', '<mesh filename="package://no_such_pkg/box.stl"/>'),
+        [],
+        "package 'no_such_pkg' of package://no_such_pkg/box.stl not found",
+    ),
+    'arm chain that does not exist': (
+        lambda urdf: None,
+        ['--arm-root', 'wheel_left_link'],
+        "chain broken: tool link 'tool_link' does not descend from arm root link 'wheel_left_link'",
+    ),
+    'wheel about x': (
+        _factory_edit(_LEFT_WHEEL, _LEFT_WHEEL.replace('<axis xyz="0 1 0"/>', '<axis xyz="1 0 0"/>')),
+        ['--wheel-joints', 'wheel_left_joint,wheel_right_joint'],
+        "wheel joint 'wheel_left_joint' turns about [1.0, 0.0, 0.0] in base_link, not about its y axis",
+    ),
+    'mimic joint in the arm chain': (
+        _factory_edit(
+            '<joint name="arm_joint_3" type="revolute">',
+            '<joint name="arm_joint_3" type="revolute"><mimic joint="arm_joint_2"/>',
+        ),
+        [],
+        "arm joint 'arm_joint_3' is a mimic joint (of 'arm_joint_2')",
+    ),
+    'zero-mass link': (
+        _factory_edit(
+            '<link name="arm_link_2"><inertial><mass value="1.0"/>',
+            '<link name="arm_link_2"><inertial><mass value="0"/>',
+        ),
+        [],
+        "link 'arm_link_2' (moved by joint 'arm_joint_2') has no mass > 0",
+    ),
+}
+
+
+@pytest.mark.parametrize('kind', sorted(INIT_BAD))
+def test_init_on_a_bad_description_is_one_line_and_exit_code_2(tmp_path, capsys, kind):
+    edit, extra, message = INIT_BAD[kind]
+    urdf = write_urdf(tmp_path / 'r.urdf', 'differential', arm_joints=6)
+    edit(urdf)
+    out = tmp_path / 'r.yaml'
+    args = ['init', str(urdf), '--base', 'differential', '--arm-root', 'arm_base_link', '--tool', 'tool_link']
+    args += ['--out', str(out), '--home', '0,0.3,0.6,0,0.5,0']
+    if '--arm-root' in extra:
+        args[args.index('--arm-root') + 1] = extra[1]
+    else:
+        args += extra
+    assert robot_setup.main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count('\n') == 0 and message in err, err
+    assert not out.exists()
+
+
+def test_init_finds_wheels_whose_joint_frame_is_turned_and_picks_amp_for_a_differential_base(tmp_path, capsys):
+    """TIAGo's wheel joints turn about z in a joint frame turned by −π/2 about x: about the base's y."""
+    urdf = write_urdf(tmp_path / 'r.urdf', 'differential', arm_joints=6)
+    for y in ('0.24', '-0.24'):
+        _factory_edit(
+            f'<origin xyz="0 {y} 0.08" rpy="0 0 0"/><axis xyz="0 1 0"/>',
+            f'<origin xyz="0 {y} 0.08" rpy="-1.5707963267948966 0 0"/><axis xyz="0 0 1"/>',
+        )(urdf)
+    tree = robot_setup.UrdfTree(urdf)
+    arm = [f'arm_joint_{k}' for k in range(1, 7)]
+    assert robot_setup.detect_wheels(tree, 'differential', 'base_link', arm) == {
+        'wheel_joints': ['wheel_left_joint', 'wheel_right_joint']
+    }
+    out = tmp_path / 'r.yaml'
+    args = ['init', str(urdf), '--base', 'differential', '--arm-root', 'arm_base_link', '--tool', 'tool_link']
+    assert robot_setup.main(args + ['--out', str(out), '--period', '0.02', '--home', '0,0.3,0.6,0,0.5,0']) == 0
+    cfg = load_robot(out)
+    assert cfg.method == 'amp' and cfg.period == 0.02 and cfg.base_link == 'base_link'
+    assert cfg.differential.wheel_joints == ('wheel_left_joint', 'wheel_right_joint')
+    assert cfg.differential.track == pytest.approx(0.48)
+    # only the root may be the base frame
+    capsys.readouterr()
+    assert robot_setup.main(args + ['--out', str(tmp_path / 's.yaml'), '--base-link', 'chassis_link']) == 2
+    assert "the base frame must be the URDF's root link 'base_link'" in capsys.readouterr().err
+
+
+def test_check_prints_a_prismatic_joint_in_metres(tmp_path, capsys):
+    urdf = write_urdf(tmp_path / 'lift.urdf', 'mecanum', arm_joints=8, prismatic_lift=True)
+    robot_setup.init_robot(urdf, 'mecanum', 'arm_base_link', 'tool_link', tmp_path / 'lift.yaml', pair_samples=50)
+    assert load_robot(tmp_path / 'lift.yaml').method == 'task_sharing'
+    capsys.readouterr()
+    assert robot_setup.main(['check', str(tmp_path / 'lift.yaml')]) == 0
+    rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.startswith('arm_joint_')}
+    assert rows['arm_joint_1'].split()[1:3] == ['0.000', '0.400'] and rows['arm_joint_1'].endswith('m, m/s, m/s²')
+    assert rows['arm_joint_2'].endswith('rad, rad/s, rad/s²')
 
 
 # ---------------------------------------------------------------- differential base
@@ -364,3 +497,63 @@ def test_the_new_robots_reach_a_goal_that_needs_the_base_with_wheel_contact_phys
             loop.step(target)
         assert np.linalg.norm(np.asarray(world.ee_pose()[0]) - goal) < 0.01
         assert np.hypot(*world.base_pose()[:2]) > 0.3  # the base carried it
+
+
+# ---------------------------------------------------------------- TIAGo (example-robot-data)
+def _tiago_share():
+    """The ``share`` folder of the example-robot-data wheel (it holds example-robot-data/robots/…)."""
+    from importlib.metadata import PackageNotFoundError, distribution
+
+    try:
+        return Path(str(distribution('example-robot-data').locate_file('cmeel.prefix/share')))
+    except PackageNotFoundError:
+        pytest.skip('example-robot-data is not installed (scripts/requirements-test.txt)')
+
+
+def test_tiago_is_set_up_from_its_urdf_as_it_comes(tmp_path, capsys, monkeypatch):
+    """TIAGo with its hand, with the commands of docs/robots.md: the wheels found, the base frame
+    its root, amp by default, the hand's rigid pairs left out, a start posture found."""
+    monkeypatch.delenv('ROS_PACKAGE_PATH', raising=False)
+    monkeypatch.delenv('AMENT_PREFIX_PATH', raising=False)
+    share = _tiago_share()
+    urdf = share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots' / 'tiago.urdf'
+    out = tmp_path / 'tiago.yaml'
+    args = ['init', str(urdf), '--base', 'differential', '--arm-root', 'torso_fixed_link', '--tool', 'arm_tool_link']
+    assert robot_setup.main(args + ['--out', str(out)]) == 2  # the meshes' package is not known yet
+    assert "package 'example-robot-data'" in capsys.readouterr().err
+    assert robot_setup.main(args + ['--out', str(out), '--package-dir', str(share)]) == 0
+    printed = capsys.readouterr().out
+    cfg = load_robot(out)
+    assert cfg.differential.wheel_joints == ('wheel_left_joint', 'wheel_right_joint')
+    assert cfg.base_link == 'base_footprint' and cfg.method == 'amp'
+    assert cfg.arm.joints[0] == 'torso_lift_joint' and cfg.arm.n == 8
+    hand = {name for name in robot_setup.UrdfTree(urdf).links if name.startswith('hand_')}
+    assert not any(set(pair) <= hand for pair in cfg.collision_pairs)
+    collision = CollisionModel.from_robot(cfg)
+    default = CollisionModel(cfg.urdf_path, cfg.arm.joints, cfg.ground_z, cfg.start.arm, package_dirs=cfg.package_dirs)
+    assert sum(set(pair) <= hand for pair in default.pairs) > 500  # the default rules check the hand with itself
+    assert 0 < len(collision.pairs) < 0.5 * len(default.pairs), (len(collision.pairs), len(default.pairs))
+    assert (
+        CollisionModel(
+            cfg.urdf_path, cfg.arm.joints, margin=-np.inf, pairs=cfg.collision_pairs, package_dirs=cfg.package_dirs
+        ).closest(cfg.start.arm)[0]
+        >= robot_setup.SAFETY  # 0.03 m, or 0.02 m for pairs never 0.03 m apart
+    )
+    assert 'shape pairs checked' in printed
+    assert robot_setup.main(['check', str(out)]) == 0
+    summary = capsys.readouterr().out
+    assert 'torso_lift_joint' in summary and 'm, m/s, m/s²' in summary
+
+
+def test_tiago_without_its_hand_reaches_a_goal_to_its_side_with_the_default_method(tmp_path):
+    """The documented commands only, then a goal 1.5 m to the side of the gripper: a differential
+    base gets there by turning (amp, init's default for it), within 2 mm on the ground truth."""
+    share = _tiago_share()
+    urdf = share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots' / 'tiago_no_hand.urdf'
+    out = tmp_path / 'tiago_no_hand.yaml'
+    args = ['init', str(urdf), '--base', 'differential', '--arm-root', 'torso_fixed_link', '--tool', 'arm_tool_link']
+    assert robot_setup.main(args + ['--package-dir', str(share), '--out', str(out)]) == 0
+    cfg = load_robot(out)
+    assert cfg.method == 'amp'
+    errors = _reach(cfg, cfg.method, [np.array([0.0, 1.5, 0.0])], tol=0.004)
+    assert errors[0] < 0.002, errors

@@ -7,6 +7,7 @@ prismatic lift. Shapes are primitive; every link has an inertial.
 """
 
 import math
+import struct
 from pathlib import Path
 
 import yaml
@@ -175,3 +176,18 @@ def write_mecanum_robot(folder, wheels, roller_angles=None):
     path = folder / 'mecanum_n.yaml'
     path.write_text(yaml.safe_dump({'robot': robot}))
     return path
+
+
+def write_box_stl(path):
+    """Write a binary STL (what PyBullet and pinocchio both read) of the unit cube centred on the
+    origin, 12 triangles; returns the path."""
+    corners = [(x, y, z) for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]
+    # two triangles per face, counter-clockwise seen from outside
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1)]
+    faces += [(2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    data = bytearray(b'box'.ljust(80, b' ')) + struct.pack('<I', len(faces))
+    for face in faces:
+        data += struct.pack('<12fH', 0.0, 0.0, 0.0, *(c for i in face for c in corners[i]), 0)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_bytes(bytes(data))
+    return Path(path)

@@ -9,8 +9,11 @@ positions, track) read from the wheel and steer joints' origins and the wheel li
 collision cylinders. The YAML
 names those joints and links and gives what a URDF cannot: acceleration limits (default
 :data:`DEFAULT_ACCEL_PER_VELOCITY` × the velocity limit), base twist limits, the dexterous
-posture, the start state, the control period and the default method. Any URDF value may be
-overridden in the YAML (``arm.position_lower`` …, ``steerable.hips`` …).
+posture, the start state, the control period and the default method; optionally the folders
+``package://`` mesh paths are looked up in first (``package_dirs``,
+:mod:`wmm_control.resources`) and the link pairs the collision model checks
+(``collision.pairs``). Any URDF value may be overridden in the YAML (``arm.position_lower`` …,
+``steerable.hips`` …).
 
 URDF conventions the base geometry relies on (``wmm_robot init`` writes YAMLs for them):
 
@@ -45,7 +48,8 @@ import yaml
 
 from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
-from wmm_control.urdf import MOVING_TYPES, UrdfTree
+from wmm_control.resources import check_resources, yaml_package_dirs
+from wmm_control.urdf import UrdfTree
 
 __all__ = [
     'ArmConfig',
@@ -351,6 +355,10 @@ class RobotConfig:
     base: Base
     start: StartState
     raw: dict | None = field(default=None, repr=False, compare=False)
+    #: folders ``package://`` mesh paths are looked up in first (:mod:`wmm_control.resources`)
+    package_dirs: tuple[Path, ...] = ()
+    #: the link pairs the collision model checks (``collision.pairs``); None: its own rules
+    collision_pairs: tuple[tuple[str, str], ...] | None = None
 
     @property
     def joint_velocity_limits(self) -> dict:
@@ -372,18 +380,7 @@ def _parse_arm(raw, tree, where_top):
     tool = arm.get('tool', raw.get('ee_frame'))
     if not isinstance(root, str) or not isinstance(tool, str):
         raise ConfigError(f'{w}: give the chain as arm.root and arm.tool link names, got {root!r}, {tool!r}')
-    chain = [j for j in tree.chain(root, tool) if j.type != 'fixed']
-    for j in chain:
-        if j.mimic is not None:
-            raise ConfigError(
-                f'{tree.path.name}: arm joint {j.name!r} is a mimic joint (of {j.mimic!r}): '
-                'an arm joint must be actuated on its own'
-            )
-        if j.type not in MOVING_TYPES:
-            raise ConfigError(
-                f'{tree.path.name}: arm joint {j.name!r} has type {j.type!r}: '
-                f'an arm joint must be one of {MOVING_TYPES}'
-            )
+    chain = tree.arm_chain(root, tool)
     names = tuple(j.name for j in chain)
     n = len(names)
     if n < MIN_ARM_JOINTS:
@@ -516,6 +513,8 @@ def _one(values):
 
 def _common_wheel_values(tree, names, role):
     """(radius, velocity limit) the URDF gives every wheel joint ``names``, None where they differ."""
+    for name in names:
+        tree.require_wheel_axis(tree.joint(name, role), role)
     return (_one({_wheel_radius(tree, n, role) for n in names}), _one({_urdf_velocity(tree, n, role) for n in names}))
 
 
@@ -617,6 +616,23 @@ def _parse_base(raw, family, tree, base_link):
     return cls(**limits, **fields)
 
 
+def _collision_pairs(raw, tree):
+    """``collision.pairs``: a list of [link, link] (a link of the URDF, or ``floor``); None when absent."""
+    pairs = raw.get('collision', {}).get('pairs') if isinstance(raw.get('collision'), dict) else None
+    if pairs is None:
+        return None
+    ok = isinstance(pairs, list) and all(
+        isinstance(p, list) and len(p) == 2 and all(isinstance(n, str) for n in p) for p in pairs
+    )
+    if not ok:
+        raise ConfigError(f'collision.pairs: expected a list of [link, link] pairs, got {pairs!r}')
+    for a, b in pairs:
+        for name in (a, b):
+            if name != 'floor':
+                tree.require_link(name, 'collision.pairs')
+    return tuple((a, b) for a, b in pairs)
+
+
 def _check_unique(cfg):
     names = list(cfg.arm.joints) + list(cfg.base.joints)
     seen = set()
@@ -706,6 +722,9 @@ def _parse(path, raw):
     if not urdf_path.is_file():
         raise ConfigError(f'urdf: file not found: {urdf_path}')
     tree = UrdfTree(urdf_path)
+    package_dirs = yaml_package_dirs(raw, path)
+    check_resources(urdf_path, package_dirs)
+    tree.require_masses()
     base_link = raw.get('base_link', 'base_link')
     tree.require_link(base_link, 'base')
     arm = _parse_arm(raw, tree, 'robot')
@@ -724,6 +743,8 @@ def _parse(path, raw):
         base=base,
         start=_parse_start(raw, arm),
         raw=raw,
+        package_dirs=package_dirs,
+        collision_pairs=_collision_pairs(raw, tree),
     )
     _check_unique(cfg)
     return cfg

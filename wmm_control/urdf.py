@@ -180,6 +180,28 @@ class UrdfTree:
             link = joint.parent
         return joints[::-1]
 
+    def arm_chain(self, root: str, tool: str) -> list[UrdfJoint]:
+        """The moving joints of the chain from link ``root`` to link ``tool``, root first: every one
+        revolute, continuous or prismatic, and actuated on its own (no mimic joint).
+
+        Raises:
+            ConfigError: a link is missing, the chain is broken, or a joint is a mimic joint or of
+                another type.
+        """
+        chain = [j for j in self.chain(root, tool) if j.type != 'fixed']
+        for j in chain:
+            if j.mimic is not None:
+                raise ConfigError(
+                    f'{self.path.name}: arm joint {j.name!r} is a mimic joint (of {j.mimic!r}): '
+                    'an arm joint must be actuated on its own'
+                )
+            if j.type not in MOVING_TYPES:
+                raise ConfigError(
+                    f'{self.path.name}: arm joint {j.name!r} has type {j.type!r}: '
+                    f'an arm joint must be one of {MOVING_TYPES}'
+                )
+        return chain
+
     def ancestors(self, link: str) -> list[UrdfJoint]:
         """The joints from the root link down to ``link``, root first."""
         joints = []
@@ -205,6 +227,48 @@ class UrdfTree:
             pos = pos + rot @ joint.xyz
             rot = rot @ r
         return rot, pos
+
+    def axis_in(self, joint: UrdfJoint, frame: str) -> np.ndarray:
+        """The unit axis of ``joint`` expressed in link ``frame``'s axes, every joint at zero
+        (a URDF gives it in the joint's own frame, which its origin may turn).
+
+        Raises:
+            ConfigError: ``joint`` does not descend from ``frame``.
+        """
+        rot = self.placement(joint.child, frame)[0] if joint.child != frame else np.eye(3)
+        axis = rot @ joint.axis
+        return axis / max(float(np.linalg.norm(axis)), 1e-12)
+
+    def require_wheel_axis(self, joint: UrdfJoint, role: str = 'wheel joint') -> None:
+        """Raise a ConfigError naming ``role`` unless ``joint`` turns about the root link's y axis
+        (either way; its own frame may be turned), as a wheel rolls."""
+        if self.root_link is None:
+            return
+        axis = self.axis_in(joint, self.root_link)
+        if abs(abs(axis[1]) - 1.0) > 1e-6:
+            raise ConfigError(
+                f'{self.path.name}: {role} {joint.name!r} turns about {np.round(axis, 4).tolist()} in '
+                f'{self.root_link}, not about its y axis: a wheel rolls about y'
+            )
+
+    def require_masses(self) -> None:
+        """Raise a ConfigError naming the first link that a joint moves (a revolute, continuous or
+        prismatic joint's child) without a mass > 0 in its ``<inertial>``: a simulator's dynamics
+        divide by it."""
+        for joint in self.joints.values():
+            if joint.type not in MOVING_TYPES:
+                continue
+            link = self.links.get(joint.child)
+            mass = link.find('inertial/mass') if link is not None else None
+            try:
+                value = float(mass.get('value', 'nan')) if mass is not None else 0.0
+            except ValueError:
+                value = math.nan
+            if not value > 0.0:
+                raise ConfigError(
+                    f'{self.path.name}: link {joint.child!r} (moved by joint {joint.name!r}) has no mass > 0: '
+                    'give it an <inertial> with <mass value> > 0 and its inertia'
+                )
 
     # ------------------------------------------------------------------ wheels
     def wheel_radius(self, link: str) -> float | None:

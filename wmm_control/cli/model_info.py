@@ -52,13 +52,14 @@ def describe(model, base_pose, q_arm):
         f'urdf: {cfg.urdf_path}',
         f'end-effector frame: {model.ee_frame}',
         '',
-        f'{"arm joint":<16}{"lower":>9}{"upper":>9}{"vel":>8}{"acc":>8}   [rad, rad/s, rad/s²]',
+        f'{"arm joint":<16}{"lower":>9}{"upper":>9}{"vel":>8}{"acc":>8}   units',
     ]
     a = cfg.arm
     for i, name in enumerate(a.joints):
+        unit = 'm, m/s, m/s²' if a.types[i] == 'prismatic' else 'rad, rad/s, rad/s²'
         lines.append(
             f'{name:<16}{a.position_lower[i]:>9.3f}{a.position_upper[i]:>9.3f}'
-            f'{a.velocity[i]:>8.3f}{a.acceleration[i]:>8.3f}'
+            f'{a.velocity[i]:>8.3f}{a.acceleration[i]:>8.3f}   {unit}'
         )
     lines.append(f'base velocity limits (vx, vy, ω): {_fmt(cfg.base.velocity, 3)}')
     lines.append(f'base acceleration limits:         {_fmt(cfg.base.acceleration, 3)}')

@@ -4,7 +4,8 @@ Usage::
 
     wmm_robot init URDF --base {steerable,mecanum,differential} --arm-root LINK --tool LINK \\
         --out ROBOT.yaml [--home q1,...,qn] [--wheel-joints a,b,...] [--steer-joints ...] \\
-        [--drive-joints ...] [--base-link LINK] [--name NAME] [--method METHOD] [--period S]
+        [--drive-joints ...] [--base-link LINK] [--name NAME] [--method METHOD] [--period S] \\
+        [--package-dir DIR ...] [--srdf FILE]
     wmm_robot check ROBOT.yaml
 
 ``init`` writes a complete, commented robot YAML beside nothing but the URDF it names (its
@@ -12,22 +13,37 @@ Usage::
 stay in the URDF (the YAML may override them); the YAML gets what a URDF cannot give, each
 value commented with the rule that chose it:
 
+* ``package_dirs``: the folders given with ``--package-dir``, where ``package://`` mesh paths
+  are looked up first (:mod:`wmm_control.resources`);
+* the base frame: the URDF's root link (``--base-link`` may only name it): the frame the
+  base's planar pose and odometry describe, which the simulator moves and TF hangs every other
+  link from (on TIAGo, ``base_footprint``, on the floor under ``base_link``);
 * wheel and steer joints, found from the URDF unless named: joints outside the arm that turn
-  about their y axis (wheels) or z axis (steer joints), whose link has a collision cylinder;
-  Mecanum wheels (three or more) are ordered by their position from front to rear, left to
-  right (front-left, front-right, rear-left, rear-right for four), differential ones left
+  about the base frame's y axis (wheels) or z axis (steer joints), whatever the rotation of the
+  joint's own frame, whose link has a collision cylinder; Mecanum wheels (three or more) are
+  ordered by their position from front to rear, left to right (front-left, front-right,
+  rear-left, rear-right for four), differential ones left
   then right;
 * base twist limits from the wheel rate limits: half the wheel rate budget each to the
   linear and the angular part (so both at once stay within it); base accelerations reach
   those in one second;
+* the collision pairs (``collision.pairs``), chosen as MoveIt's set-up assistant does
+  (:func:`~wmm_control.kinematics.collision.choose_pairs`): adjacent links, links no arm joint
+  moves apart, pairs always in contact or never within the influence distance over
+  :data:`PAIR_SAMPLES` random postures, and an SRDF's ``disable_collisions`` (``--srdf``)
+  left out;
 * a dexterous posture and start state: ``--home``, or else the best of 400 seeded random
   postures within the limits — the one with the largest σ_min of the arm Jacobian among
-  those whose collision shapes keep 3 cm from the body and from each other, with the tool
-  at least 10 cm above the floor;
-* the control period (0.025 s) and the default method (``task_sharing``).
+  those whose collision shapes keep 3 cm apart over the pairs above, with the tool at least
+  10 cm above the floor;
+* the control period (``--period``, default 0.025 s) and the default method (``--method``,
+  default per base family: ``amp`` on a differential base, the method that reaches goals to
+  its side; ``task_sharing`` otherwise).
 
-``check`` loads a description, prints the robot summary and exits 0, or prints one line
-saying what is wrong (file and item) and exits 2.
+``init`` and ``check`` print the number of checked collision pairs and the measured cost of
+one distance check (the median over random postures), with a warning above
+:data:`CHECK_BUDGET`. ``check`` loads a description, prints the robot summary and exits 0, or
+prints one line saying what is wrong (file and item) and exits 2.
 """
 
 from __future__ import annotations
@@ -41,25 +57,54 @@ from pathlib import Path
 
 import numpy as np
 
+import yaml
+
 from wmm_control.cli.model_info import describe
 from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.collision import CollisionModel
+from wmm_control.kinematics.collision import (
+    ALWAYS_FRACTION,
+    CollisionModel,
+    PairChoice,
+    choose_pairs,
+    median_check_time,
+)
 from wmm_control.resolvers import METHODS
 from wmm_control.base.mecanum import MecanumKinematics
-from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, load_robot, usual_roller_angles
+from wmm_control.resolvers.safety import SafetyParams
+from wmm_control.resources import check_resources
+from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, RobotConfig, load_robot, usual_roller_angles
 from wmm_control.urdf import UrdfJoint, UrdfTree
 
-__all__ = ['main', 'init_robot', 'detect_wheels']
+__all__ = ['main', 'init_robot', 'detect_wheels', 'collision_summary', 'DEFAULT_METHODS']
 
 HOME_DRAWS = 400
 HOME_CLEARANCE = 0.03  # [m] from the body and between arm links
 TOOL_ABOVE_FLOOR = 0.10  # [m]
 DEFAULT_PERIOD = 0.025
+#: The default method of each base family: on a differential base only AMP reaches goals to
+#: the side (docs/robots.md).
+DEFAULT_METHODS = {'steerable': 'task_sharing', 'mecanum': 'task_sharing', 'differential': 'amp'}
+#: Random arm postures over which the collision pairs are chosen.
+PAIR_SAMPLES = 1000
+#: [m] the safety stage's default influence distance: a pair never this close is left out.
+INFLUENCE = SafetyParams().collision_influence
+#: [m] the safety stage's default safety distance, the distance it keeps: a pair never farther
+#: apart is in contact by design and left out.
+SAFETY = SafetyParams().collision_safety
+#: [s] one distance check above this gets a warning (a tenth of the 25 ms period, and more
+#: than the rest of a cycle takes).
+CHECK_BUDGET = 0.002
+#: Random arm postures over which the cost of one distance check is measured.
+COST_POSTURES = 100
 
 
-def _axis_is(joint, k):
-    axis = joint.axis / max(np.linalg.norm(joint.axis), 1e-12)
+def _axis_is(tree, joint, base_link, k):
+    """Whether ``joint`` turns about axis ``k`` (0 x, 1 y, 2 z) of ``base_link``, either way."""
+    try:
+        axis = tree.axis_in(joint, base_link)
+    except WmmError:  # not below the base
+        return False
     return abs(abs(axis[k]) - 1.0) < 1e-6
 
 
@@ -82,13 +127,16 @@ def detect_wheels(tree: UrdfTree, family: str, base_link: str, arm_joints: Itera
     def position(joint: UrdfJoint) -> np.ndarray:
         return tree.placement(joint.child, base_link)[1]
 
+    def about(joint: UrdfJoint, k: int) -> bool:
+        return _axis_is(tree, joint, base_link, k)
+
     if family == 'steerable':
         steer = [
             j
             for j in spinning
-            if _axis_is(j, 2) and any(c.type == 'continuous' and _axis_is(c, 1) for c in tree.children(j.child))
+            if about(j, 2) and any(c.type == 'continuous' and about(c, 1) for c in tree.children(j.child))
         ]
-        drive = [next(c for c in tree.children(j.child) if c.type == 'continuous' and _axis_is(c, 1)) for j in steer]
+        drive = [next(c for c in tree.children(j.child) if c.type == 'continuous' and about(c, 1)) for j in steer]
         if len(steer) < 2:
             raise WmmError(
                 f'{tree.path.name}: found {len(steer)} steer + drive modules (a joint about z '
@@ -100,15 +148,15 @@ def detect_wheels(tree: UrdfTree, family: str, base_link: str, arm_joints: Itera
         j
         for j in spinning
         if j.type == 'continuous'
-        and _axis_is(j, 1)
+        and about(j, 1)
         and tree.wheel_radius(j.child) is not None
-        and not any(_axis_is(a, 2) for a in tree.ancestors(j.child) if a.type != 'fixed')
+        and not any(about(a, 2) for a in tree.ancestors(j.child) if a.type != 'fixed')
     ]
     mecanum = family == 'mecanum'
     if (len(wheels) < 3) if mecanum else (len(wheels) != 2):
         raise WmmError(
-            f'{tree.path.name}: found {len(wheels)} wheel joints (continuous, about y, a collision '
-            f'cylinder on the link) {[j.name for j in wheels]}; a {family} base needs '
+            f'{tree.path.name}: found {len(wheels)} wheel joints (continuous, about the y axis of {base_link}, a '
+            f'collision cylinder on the link) {[j.name for j in wheels]}; a {family} base needs '
             f'{"3 or more" if mecanum else "2"}: name them with --wheel-joints'
         )
     if mecanum:  # front to rear, left to right: fl, fr, rl, rr for four
@@ -157,16 +205,22 @@ def _floor_height(tree, wheels, base_link):
     )
 
 
-def _choose_home(tree, arm_root, tool, base_link, ground, seed=0):
-    """The documented posture choice (module docstring): ``(q (n,), σ_min)``."""
-    chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
+def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, package_dirs=()):
+    """The documented posture choice (module docstring): ``(q (n,), σ_min)``, clear over the
+    link ``pairs`` (default: the collision model's own rules): :data:`HOME_CLEARANCE` apart, or
+    the safety stage's safety distance for a pair that is that far apart in none of the draws
+    (two links of a wrist)."""
+    chain = tree.arm_chain(arm_root, tool)
     names = [j.name for j in chain]
     lower = np.array([max(j.lower, -math.pi) if j.lower is not None else -math.pi for j in chain])
     upper = np.array([min(j.upper, math.pi) if j.upper is not None else math.pi for j in chain])
     model = KinematicModel.from_urdf(tree.path, names, tool, base_link)
-    clearance = CollisionModel(tree.path, names)
+    # chosen pairs are all checked (those in contact by design are left out already); the
+    # model's own rules leave out those in contact with every joint at zero
+    margin = -math.inf if pairs is not None else 0.02
+    clearance = CollisionModel(tree.path, names, margin=margin, pairs=pairs, package_dirs=package_dirs)
     rng = np.random.default_rng(seed)
-    best, best_sigma = None, -1.0
+    postures, sigmas, distances = [], [], []
     for _ in range(HOME_DRAWS):
         # away from the limits: the middle 80 % of each range
         q = lower + (upper - lower) * (0.1 + 0.8 * rng.random(len(chain)))
@@ -174,18 +228,22 @@ def _choose_home(tree, arm_root, tool, base_link, ground, seed=0):
         pos, _ = model.ee_placement_world()
         if pos[2] < ground + TOOL_ABOVE_FLOOR:
             continue
-        sigma = model.sigma_min('full')
-        if sigma <= best_sigma:
-            continue
-        if clearance.closest(q)[0] < HOME_CLEARANCE:
-            continue
-        best, best_sigma = q, sigma
-    if best is None:
+        postures.append(q)
+        sigmas.append(model.sigma_min('full'))
+        # exact below HOME_CLEARANCE, a lower bound above it
+        distances.append(clearance._distances_within(clearance._configuration(q), HOME_CLEARANCE))
+    if postures:
+        dist = np.array(distances).reshape(len(postures), -1)
+        need = np.where(dist.max(axis=0, initial=-np.inf) >= HOME_CLEARANCE, HOME_CLEARANCE, SAFETY)
+        clear = np.flatnonzero(np.all(dist >= need, axis=1))
+    if not postures or not clear.size:
         raise WmmError(
             f'{tree.path.name}: no posture of {HOME_DRAWS} draws keeps the arm {HOME_CLEARANCE} m clear '
-            'of the body with the tool above the floor: give one with --home'
+            f'of the body ({SAFETY} m for pairs never that far apart) with the tool above the floor: '
+            'give one with --home'
         )
-    return best, best_sigma
+    best = int(clear[np.argmax(np.asarray(sigmas)[clear])])
+    return postures[best], sigmas[best]
 
 
 def _names(text):
@@ -208,8 +266,11 @@ def init_robot(
     drive_joints=None,
     base_link=None,
     name=None,
-    method='task_sharing',
+    method=None,
     period=DEFAULT_PERIOD,
+    package_dirs=(),
+    srdf=None,
+    pair_samples=PAIR_SAMPLES,
 ):
     """Write a robot YAML for ``urdf`` at ``out`` (see the module docstring); returns its text.
 
@@ -220,18 +281,35 @@ def init_robot(
     tree = UrdfTree(urdf)
     if family not in BASE_FAMILIES:
         raise WmmError(f'--base: unknown base family {family!r}; expected one of {list(BASE_FAMILIES)}')
+    method = method or DEFAULT_METHODS[family]
     if method not in METHODS:
         raise WmmError(f'--method: unknown method {method!r}; expected one of {sorted(METHODS)}')
-    base_link = base_link or tree.root_link
-    if base_link is None:
-        raise WmmError(f'{urdf.name}: the URDF has no single root link: give --base-link')
-    tree.require_link(base_link, 'base')
-    chain = [j for j in tree.chain(arm_root, tool) if j.type != 'fixed']
+    if not (isinstance(period, (int, float)) and math.isfinite(period) and period > 0.0):
+        raise WmmError(f'--period: must be a number of seconds > 0, got {period!r}')
+    package_dirs = [Path(d).expanduser().resolve() for d in package_dirs]
+    for folder in package_dirs:
+        if not folder.is_dir():
+            raise WmmError(f'--package-dir: folder not found: {folder}')
+    if srdf is not None and not Path(srdf).is_file():
+        raise WmmError(f'--srdf: file not found: {srdf}')
+    check_resources(urdf, package_dirs)
+    tree.require_masses()
+    root = tree.root_link
+    if root is None:
+        raise WmmError(f'{urdf.name}: the URDF has no single root link')
+    if base_link not in (None, root):
+        raise WmmError(
+            f'--base-link {base_link}: the base frame must be the URDF\'s root link {root!r}, the frame '
+            'the simulator moves and odometry and TF describe'
+        )
+    base_link = root
+    chain = tree.arm_chain(arm_root, tool)
     if len(chain) < MIN_ARM_JOINTS:
         raise WmmError(
             f'{urdf.name}: the chain {arm_root!r} → {tool!r} has {len(chain)} joints; '
             f'an arm needs at least {MIN_ARM_JOINTS}'
         )
+    arm_names = [j.name for j in chain]
     if wheel_joints or steer_joints:
         wheels = (
             {'steer_joints': steer_joints, 'drive_joints': drive_joints}
@@ -241,20 +319,27 @@ def init_robot(
         if family == 'steerable' and not (steer_joints and drive_joints):
             raise WmmError('a steerable base needs both --steer-joints and --drive-joints')
     else:
-        wheels = detect_wheels(tree, family, base_link, [j.name for j in chain])
+        wheels = detect_wheels(tree, family, base_link, arm_names)
+    role = 'drive joint' if family == 'steerable' else 'wheel joint'
+    for wheel in wheels.get('drive_joints') or wheels['wheel_joints']:
+        tree.require_wheel_axis(tree.joint(wheel, role), role)
     velocity = _base_limits(wheels, family, tree, base_link)
+    ground = _floor_height(tree, wheels, base_link)
+    choice = choose_pairs(urdf, arm_names, ground, INFLUENCE, pair_samples, srdf, package_dirs, contact=SAFETY)
     if home is not None:
         q_home = np.asarray(home, dtype=float)
         if q_home.shape != (len(chain),):
             raise WmmError(f'--home: expected {len(chain)} joint values, got {len(q_home)}')
         home_rule = 'given with --home'
     else:
-        q_home, sigma = _choose_home(tree, arm_root, tool, base_link, _floor_height(tree, wheels, base_link))
+        q_home, sigma = _choose_home(
+            tree, arm_root, tool, base_link, ground, pairs=choice.checked, package_dirs=package_dirs
+        )
         home_rule = (
             f'the best of {HOME_DRAWS} seeded draws (σ_min {sigma:.3f}): arm {HOME_CLEARANCE} m clear '
-            f'of the body and itself, tool ≥ {TOOL_ABOVE_FLOOR} m above the floor'
+            f'over the collision pairs ({SAFETY} m for those never that far apart), tool ≥ {TOOL_ABOVE_FLOOR} m '
+            'above the floor'
         )
-    ground = _floor_height(tree, wheels, base_link)
     rel = Path(_relative(urdf, out.parent))
     lines = [
         f'# Robot description of {urdf.name}, written by `wmm_robot init` (check it with `wmm_robot check`).',
@@ -264,15 +349,21 @@ def init_robot(
         f'  name: {name or out.stem}',
         f'  description: {urdf.stem} with a {family} base',
         f'  urdf: {rel.as_posix()}',
+    ]
+    if package_dirs:
+        dirs = ', '.join(_flow(Path(_relative(d, out.parent)).as_posix()) for d in package_dirs)
+        lines.append(f'  package_dirs: [{dirs}]   # where package:// paths are looked up first')
+    lines += [
         f'  base_type: {family}',
-        f'  base_link: {base_link}',
+        f'  base_link: {base_link}   # the URDF\'s root link: the frame odometry and TF move',
         f'  ground_z: {ground:.6g}          # floor height in {base_link} at rest [m]',
         f'  period: {period}       # control period [s]: the default of every node',
-        f'  method: {method}  # the redundancy_resolver default',
+        f'  method: {method}  # the redundancy_resolver default'
+        + (' (on a differential base, the one that reaches goals to the side)' if family == 'differential' else ''),
         '  arm:',
         f'    root: {arm_root}',
         f'    tool: {tool}    # the end-effector frame',
-        f'    # {len(chain)} joints from the URDF: {", ".join(j.name for j in chain)};',
+        f'    # {len(chain)} joints from the URDF: {", ".join(arm_names)};',
         '    # their position and velocity limits are the URDF\'s <limit> unless given here;',
         '    # acceleration limits: 2 × the velocity limit (full speed in 0.5 s) unless given here',
         f'    dexterous: {_fmt_list(q_home)}   # {home_rule}',
@@ -287,6 +378,7 @@ def init_robot(
     for key, names in wheels.items():
         lines.append(f'    {key}: [{", ".join(names)}]')
     lines.append('    # geometry (wheel radius, hips / d1, d2 / track) and wheel rate limits from the URDF')
+    lines += _pair_lines(choice)
     text = '\n'.join(lines) + '\n'
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
@@ -296,6 +388,54 @@ def init_robot(
         out.unlink()
         raise
     return text
+
+
+def _flow(name: str) -> str:
+    """``name`` as a YAML flow scalar (quoted where YAML needs it)."""
+    return yaml.safe_dump(name, default_flow_style=True, width=1 << 20).splitlines()[0]
+
+
+def _pair_lines(choice: PairChoice) -> list[str]:
+    """The ``collision:`` section of the YAML: the pairs ``choice`` keeps, with how it chose them."""
+    out = {reason: len(pairs) for reason, pairs in choice.left_out.items()}
+    lines = [
+        '  collision:',
+        f'    # the link pairs the controller\'s collision model checks ("floor": the floor): of {choice.candidates}',
+        f'    # pairs of links with shapes, left out: {out["adjacent"]} adjacent, {out["rigid"]} with no arm joint',
+        f'    # between them, {out["srdf"]} disabled by the SRDF, {out["always"]} within {choice.contact:g} m at'
+        f' {ALWAYS_FRACTION:.0%} or more',
+        f'    # and {out["never"]} never within {choice.influence:g} m of {choice.samples} random postures. Edit freely.',
+        '    pairs:',
+    ]
+    lines += [f'      - [{_flow(a)}, {_flow(b)}]' for a, b in choice.checked]
+    if not choice.checked:
+        lines[-1] = '    pairs: []'
+    return lines
+
+
+def collision_summary(cfg: RobotConfig, postures: int = COST_POSTURES, seed: int = 1) -> tuple[str, str]:
+    """``(line, warning)``: the number of collision pairs ``cfg``'s collision model checks and the
+    median cost of one distance check over ``postures`` seeded random arm postures; the warning
+    is '' within :data:`CHECK_BUDGET`."""
+    model = CollisionModel.from_robot(cfg)
+    arm = cfg.arm
+    lower = np.maximum(arm.position_lower, -math.pi)
+    upper = np.minimum(arm.position_upper, math.pi)
+    rng = np.random.default_rng(seed)
+    cost = median_check_time(model, lower + (upper - lower) * rng.random((postures, arm.n)), INFLUENCE)
+    rule = 'collision.pairs of the YAML' if cfg.collision_pairs is not None else 'the default rules'
+    links = len({frozenset(pair) for pair in model.pairs})
+    line = (
+        f'collision: {len(model.pairs)} shape pairs checked ({links} link pairs, from {rule}); one distance '
+        f'check {cost * 1e3:.2f} ms (median of {postures} random postures)'
+    )
+    warning = ''
+    if cost > CHECK_BUDGET:
+        warning = (
+            f'warning: one distance check takes {cost * 1e3:.1f} ms, above the {CHECK_BUDGET * 1e3:g} ms budget: '
+            'leave pairs out in collision.pairs (wmm_robot init chooses them; --srdf adds an SRDF\'s)'
+        )
+    return line, warning
 
 
 def _relative(path, start):
@@ -308,7 +448,13 @@ def _relative(path, start):
 def _check(path):
     model = KinematicModel(load_robot(path))
     cfg = model.config
-    return describe(model, cfg.start.base_pose, cfg.start.arm)
+    return describe(model, cfg.start.base_pose, cfg.start.arm), *collision_summary(cfg)
+
+
+def _print_summary(line, warning):
+    print(line)
+    if warning:
+        print(warning, file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -324,15 +470,28 @@ def main(argv: list[str] | None = None) -> int:
     ini.add_argument('--wheel-joints', help='Mecanum (fl,fr,rl,rr) or differential (left,right) wheel joints')
     ini.add_argument('--steer-joints', help='steerable base: the steer joints')
     ini.add_argument('--drive-joints', help='steerable base: the drive joints, in the order of the steer joints')
-    ini.add_argument('--base-link', help='the base frame (default: the URDF root link)')
+    ini.add_argument('--base-link', help='the base frame: the URDF root link, the only one allowed (the default)')
     ini.add_argument('--name', help='robot name (default: the YAML file stem)')
-    ini.add_argument('--method', default='task_sharing', help='default redundancy resolution method')
+    ini.add_argument(
+        '--method', help='default redundancy resolution method (default: amp on a differential base, else task_sharing)'
+    )
+    ini.add_argument('--period', type=float, default=DEFAULT_PERIOD, help='control period [s] (default 0.025)')
+    ini.add_argument(
+        '--package-dir',
+        action='append',
+        default=[],
+        metavar='DIR',
+        help='a folder package:// paths are looked up in (it holds PKG/...); may be repeated',
+    )
+    ini.add_argument('--srdf', help='an SRDF whose disable_collisions pairs are left out')
     chk = sub.add_parser('check', help='load a robot YAML and print its summary')
     chk.add_argument('robot', help='robot YAML path or shipped robot name')
     args = parser.parse_args(argv)
     try:
         if args.command == 'check':
-            print(_check(args.robot))
+            summary, *collision = _check(args.robot)
+            print(summary)
+            _print_summary(*collision)
             return 0
         home = None
         if args.home:
@@ -353,7 +512,11 @@ def main(argv: list[str] | None = None) -> int:
             base_link=args.base_link,
             name=args.name,
             method=args.method,
+            period=args.period,
+            package_dirs=args.package_dir,
+            srdf=args.srdf,
         )
+        _print_summary(*collision_summary(load_robot(args.out)))
         print(f'wrote {args.out}; check it with: wmm_robot check {args.out}')
         return 0
     except WmmError as exc:

@@ -11,14 +11,18 @@ base's pose at each call. Links split into
   to them);
 * *body* links: the others (chassis, wheels, steer modules, the arm's mount).
 
-Checked pairs: moving against body, moving against moving, moving against the floor (a
-half-space at the robot YAML's ``ground_z``), and every link against every obstacle, except
+Checked pairs: the link pairs the robot YAML lists (``collision.pairs``, ``floor`` for the
+floor: ``wmm_robot init`` writes them, chosen by :func:`choose_pairs` as MoveIt's set-up
+assistant chooses them) and every link against every obstacle. Without that list: moving
+against body, moving against moving, moving against the floor (a half-space at the robot
+YAML's ``ground_z``), and every link against every obstacle, except
 
 * a link and its parent link (the link it hangs from in the URDF's tree): they meet at the
   joint between them;
-* robot pairs closer than ``margin`` at the robot's start state: they touch by design (the arm's
-  first link resting on its mount; :mod:`wmm_control.cli.robot_setup`, which has no start
-  state yet, takes every joint at zero).
+
+and in both cases robot pairs closer than ``margin`` at the robot's start state: they touch by
+design (the arm's first link resting on its mount; :mod:`wmm_control.cli.robot_setup`, which
+has no start state yet, takes every joint at zero).
 
 A link and its grandparent, two joints apart, are checked: the shipped robots' collision
 shapes are drawn so that they stay apart over the joint limits wherever the real arm does
@@ -38,6 +42,8 @@ cancels; against the floor it is zero (the base moves parallel to it).
 
 from __future__ import annotations
 
+import time
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,9 +52,19 @@ import pinocchio as pin
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import continuous_to_q
 from wmm_control.kinematics.obstacles import Obstacle, around_base
+from wmm_control.resources import load_geometry
 from wmm_control.urdf import UrdfTree
 
-__all__ = ['CollisionModel', 'NearPairs', 'FLOOR']
+__all__ = [
+    'CollisionModel',
+    'NearPairs',
+    'FLOOR',
+    'PairChoice',
+    'choose_pairs',
+    'srdf_disabled_pairs',
+    'ALWAYS_FRACTION',
+    'median_check_time',
+]
 
 #: The name of the floor in pair names.
 FLOOR = 'floor'
@@ -104,24 +120,48 @@ class CollisionModel:
         margin: [m].
         obstacles: :class:`~wmm_control.kinematics.obstacles.Obstacle` s in the world frame
             (:meth:`set_obstacles` changes them).
+        pairs: the link pairs to check (``'floor'`` for the floor); None: the rules of the
+            module docstring.
+        package_dirs: folders ``package://`` mesh paths are looked up in first
+            (:mod:`wmm_control.resources`).
 
     Raises:
-        ConfigError: pinocchio cannot load the URDF or its collision shapes.
+        ConfigError: pinocchio cannot load the URDF or its collision shapes, or a mesh cannot be
+            found.
     """
 
     @classmethod
     def from_robot(cls, robot, margin: float = 0.02, obstacles=()):
-        """The model of a :class:`~wmm_control.robot_config.RobotConfig`: its floor, and its start
-        state's contacts left out."""
-        return cls(robot.urdf_path, robot.arm.joints, robot.ground_z, robot.start.arm, margin, obstacles)
+        """The model of a :class:`~wmm_control.robot_config.RobotConfig`: its floor, its pairs
+        (``collision.pairs`` of the YAML when given), and its start state's contacts left out."""
+        return cls(
+            robot.urdf_path,
+            robot.arm.joints,
+            robot.ground_z,
+            robot.start.arm,
+            margin,
+            obstacles,
+            pairs=robot.collision_pairs,
+            package_dirs=robot.package_dirs,
+        )
 
-    def __init__(self, urdf_path, arm_joints, ground_z=None, start_arm=None, margin: float = 0.02, obstacles=()):
+    def __init__(
+        self,
+        urdf_path,
+        arm_joints,
+        ground_z=None,
+        start_arm=None,
+        margin: float = 0.02,
+        obstacles=(),
+        pairs=None,
+        package_dirs=(),
+    ):
         path = str(urdf_path)
         try:
             self.model = pin.buildModelFromUrdf(path)
-            self.geom = pin.buildGeomFromUrdf(self.model, path, pin.GeometryType.COLLISION)
         except (RuntimeError, ValueError) as exc:
-            raise ConfigError(f'pinocchio could not load the collision shapes of {path}: {exc}') from exc
+            raise ConfigError(f'pinocchio could not load {path}: {exc}') from exc
+        self.geom = load_geometry(self.model, path, pin.GeometryType.COLLISION, package_dirs)
         model = self.model
         tree = UrdfTree(path)
         parent_link = {j.child: j.parent for j in tree.joints.values()}
@@ -140,12 +180,17 @@ class CollisionModel:
         def near(a: str, b: str) -> bool:  # b is a's parent link
             return parent_link.get(a) == b
 
-        pairs = []
-        for a in range(len(link_of)):
-            for b in range(a + 1, len(link_of)):
-                la, lb = link_of[a], link_of[b]
-                if (moving[a] or moving[b]) and la != lb and not (near(la, lb) or near(lb, la)):
-                    pairs.append((a, b))
+        wanted = None if pairs is None else {frozenset(pair) for pair in pairs}
+
+        def checked(a: int, b: int) -> bool:  # the YAML's pairs, or the rules of the module docstring
+            la, lb = link_of[a], link_of[b]
+            if wanted is not None:
+                return la != lb and frozenset((la, lb)) in wanted
+            if lb == FLOOR:
+                return moving[a]
+            return (moving[a] or moving[b]) and la != lb and not (near(la, lb) or near(lb, la))
+
+        shape_pairs = [(a, b) for a in range(len(link_of)) for b in range(a + 1, len(link_of)) if checked(a, b)]
         self._world_fixed = set()
         if ground_z is not None:
             floor = pin.GeometryObject(
@@ -154,7 +199,8 @@ class CollisionModel:
             floor_id = self.geom.addGeometryObject(floor)
             self._world_fixed.add(floor_id)
             link_of.append(FLOOR)
-            pairs += [(a, floor_id) for a in range(len(moving)) if moving[a]]
+            shape_pairs += [(a, floor_id) for a in range(len(moving)) if checked(a, floor_id)]
+        pairs = shape_pairs
         self._link_of = link_of
         self._n_robot = len(moving)  # geometry objects of the robot's own links
         self.data = model.createData()
@@ -271,11 +317,12 @@ class CollisionModel:
             everything[pair.first, pair.second] = True
         return everything
 
-    def _distances_within(self, q, reach: float) -> np.ndarray:
+    def _distances_within(self, q, reach: float, subset=None) -> np.ndarray:
         """Each checked pair's distance at the full configuration ``q``: exact for the pairs whose
         bounding spheres are closer than ``reach`` [m] (the broad phase, over every pair in one
         numpy expression); for the others, the gap between their spheres, a lower bound above
-        ``reach``, with coal's narrow phase skipped (mesh pairs cost tens of microseconds each)."""
+        ``reach``, with coal's narrow phase skipped (mesh pairs cost tens of microseconds each).
+        With ``subset`` (a boolean array over the pairs), only those pairs are exact."""
         geom, geom_data = self.geom, self.geom_data
         pin.updateGeometryPlacements(self.model, self.data, geom, geom_data, q)
         placements = geom_data.oMg
@@ -286,6 +333,8 @@ class CollisionModel:
         with np.errstate(invalid='ignore'):  # the floor's infinite sphere: −inf, NaN with another: checked
             gap = np.linalg.norm(centres[a] - centres[b], axis=1) - self._sphere_radius[a] - self._sphere_radius[b]
         near = ~(gap >= reach)
+        if subset is not None:
+            near &= subset
         active = np.zeros((len(centres), len(centres)), dtype=bool)
         active[a[near], b[near]] = True
         geom_data.setActiveCollisionPairs(geom, active, True)
@@ -365,6 +414,186 @@ class CollisionModel:
             _frozen(base),
         )
         return pairs, *closest
+
+
+@dataclass(frozen=True)
+class PairChoice:
+    """The robot pairs worth checking, as MoveIt's set-up assistant chooses them
+    (:func:`choose_pairs`).
+
+    Attributes:
+        checked: the link pairs left to check (``'floor'`` for the floor), sorted.
+        candidates: how many link pairs there were before any was left out.
+        left_out: the pairs left out, by reason: ``adjacent`` (a link and the nearest link with
+            shapes above it), ``rigid`` (no arm joint between them: the same arm joints move
+            both), ``srdf`` (the SRDF's ``disable_collisions``), ``always`` (in contact, within
+            the contact distance, at 95 % of the samples or more), ``never`` (never closer than the influence distance over the samples).
+        samples: how many random arm postures were drawn.
+        influence: [m] the distance of ``never``.
+        contact: [m] the distance of ``always``.
+    """
+
+    checked: tuple[tuple[str, str], ...]
+    candidates: int
+    left_out: dict[str, tuple[tuple[str, str], ...]]
+    samples: int
+    influence: float
+    contact: float
+
+
+def srdf_disabled_pairs(path) -> set[frozenset]:
+    """The ``<disable_collisions link1 link2>`` pairs of an SRDF file.
+
+    Raises:
+        ConfigError: the file cannot be read or parsed.
+    """
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as exc:
+        raise ConfigError(f'{path}: SRDF unreadable: {exc}') from exc
+    return {
+        frozenset((e.get('link1'), e.get('link2')))
+        for e in root.iter('disable_collisions')
+        if e.get('link1') and e.get('link2')
+    }
+
+
+#: A pair within the contact distance at this fraction of the samples or more is in contact
+#: by design (MoveIt's set-up assistant takes 95 % too).
+ALWAYS_FRACTION = 0.95
+
+
+def choose_pairs(
+    urdf_path,
+    arm_joints,
+    ground_z=None,
+    influence: float = 0.10,
+    samples: int = 1000,
+    srdf=None,
+    package_dirs=(),
+    seed: int = 0,
+    contact: float = 0.02,
+) -> PairChoice:
+    """The link pairs the collision model needs to check, as MoveIt's set-up assistant
+    chooses them: every pair of links with collision shapes (and each link with the floor, when
+    ``ground_z`` is given), less
+
+    1. ``adjacent`` pairs: a link and the nearest link with shapes above it in the URDF's tree;
+    2. ``rigid`` pairs: the same arm joints move both links (none: the body; every one: two
+       links of the hand), so that their distance never changes (the joints outside the arm are
+       held);
+    3. ``srdf`` pairs: the ``disable_collisions`` of the SRDF file ``srdf``;
+    4. ``always`` pairs: closer than ``contact`` [m] at :data:`ALWAYS_FRACTION` (95 %, as in
+       MoveIt) or more of ``samples`` seeded random arm postures (uniform within the joint
+       limits, ±π for a continuous joint): in contact by design at the scale of the safety
+       stage, whose safety distance (0.02 m, the default ``contact``) they hardly ever clear,
+       so that it could not hold them apart (the links of a wrist, a shoulder in its housing);
+    5. ``never`` pairs: never closer than ``influence`` [m] at those postures.
+
+    Raises:
+        ConfigError: the URDF, a mesh or the SRDF cannot be read, or an arm joint is missing.
+    """
+    tree = UrdfTree(urdf_path)
+    shaped = [name for name, elem in tree.links.items() if elem.find('collision') is not None]
+    parent = {j.child: j.parent for j in tree.joints.values()}
+    arm = set(arm_joints)
+    missing = sorted(arm - set(tree.joints))
+    if missing:
+        raise ConfigError(f'{tree.path.name}: arm joints {missing} are not in the URDF')
+    moved_by = {name: frozenset(j.name for j in tree.ancestors(name) if j.name in arm) for name in shaped}
+    moved_by[FLOOR] = frozenset()
+    shaped_set = set(shaped)
+
+    def shaped_parent(link):
+        link = parent.get(link)
+        while link is not None and link not in shaped_set:
+            link = parent.get(link)
+        return link
+
+    above = {name: shaped_parent(name) for name in shaped}
+    disabled = srdf_disabled_pairs(srdf) if srdf is not None else set()
+    names = shaped + ([FLOOR] if ground_z is not None else [])
+    left_out: dict[str, list] = {reason: [] for reason in ('adjacent', 'rigid', 'srdf', 'always', 'never')}
+    remaining = []
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            pair = (a, b)
+            if above.get(a) == b or above.get(b) == a:
+                left_out['adjacent'].append(pair)
+            elif moved_by[a] == moved_by[b]:
+                left_out['rigid'].append(pair)
+            elif frozenset(pair) in disabled:
+                left_out['srdf'].append(pair)
+            else:
+                remaining.append(pair)
+    candidates = len(names) * (len(names) - 1) // 2
+    if remaining and samples > 0:
+        model = CollisionModel(
+            urdf_path, arm_joints, ground_z, margin=-np.inf, pairs=remaining, package_dirs=package_dirs
+        )
+        ever_near, ever_apart = _sample_pairs(model, tree, arm_joints, remaining, (influence, contact), samples, seed)
+    else:
+        ever_near = ever_apart = np.ones(len(remaining), dtype=bool)
+    checked = []
+    for k, pair in enumerate(remaining):
+        if not ever_apart[k]:
+            left_out['always'].append(pair)
+        elif not ever_near[k]:
+            left_out['never'].append(pair)
+        else:
+            checked.append(pair)
+    return PairChoice(
+        checked=tuple(sorted(checked)),
+        candidates=candidates,
+        left_out={reason: tuple(pairs) for reason, pairs in left_out.items()},
+        samples=samples,
+        influence=float(influence),
+        contact=float(contact),
+    )
+
+
+def _sample_pairs(model, tree, arm_joints, pairs, distances, samples, seed):
+    """``(ever_near, apart)`` of each link pair over ``samples`` random arm postures: closer
+    than ``influence`` at one of them; farther than ``contact`` at more than
+    1 − :data:`ALWAYS_FRACTION` of them (``distances`` = (influence, contact)). A pair seen both
+    ways is not computed again."""
+    influence, contact = distances
+    enough = (1.0 - ALWAYS_FRACTION) * samples
+    joints = [tree.joint(name, 'arm joint') for name in arm_joints]
+    lower = np.array([max(j.lower, -np.pi) if j.lower is not None else -np.pi for j in joints])
+    upper = np.array([min(j.upper, np.pi) if j.upper is not None else np.pi for j in joints])
+    index = {frozenset(pair): k for k, pair in enumerate(pairs)}
+    # each shape pair's link pair (a link pair whose links have no shapes to pair has none)
+    of_shape = np.array([index[frozenset(links)] for links in model._pair_links], dtype=int)
+    ever_near = np.zeros(len(pairs), dtype=bool)
+    apart = np.zeros(len(pairs), dtype=int)
+    has_shapes = np.zeros(len(pairs), dtype=bool)
+    has_shapes[of_shape] = True
+    rng = np.random.default_rng(seed)
+    for _ in range(samples):
+        open_pairs = ~(ever_near & (apart > enough))
+        if not open_pairs[has_shapes].any():
+            break
+        q = model._configuration(lower + (upper - lower) * rng.random(len(joints)))
+        dists = model._distances_within(q, influence, subset=open_pairs[of_shape])
+        nearest = np.full(len(pairs), np.inf)
+        np.minimum.at(nearest, of_shape, dists)
+        ever_near |= nearest < influence
+        apart += nearest > contact
+    ever_apart = apart > enough
+    ever_near[~has_shapes] = ever_apart[~has_shapes] = True  # nothing to check: no cost, kept
+    return ever_near, ever_apart
+
+
+def median_check_time(model: CollisionModel, q_arms, influence: float = 0.10) -> float:
+    """The median wall time [s] of one :meth:`CollisionModel.within` at each arm posture of
+    ``q_arms`` (the base at the origin), the cost of one check in a control cycle."""
+    times = []
+    for q in q_arms:
+        start = time.perf_counter()
+        model.within(q, influence, np.zeros(3))
+        times.append(time.perf_counter() - start)
+    return float(np.median(times)) if times else 0.0
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:

@@ -22,6 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from wmm_control.geometry import se2_inverse, se2_transform_points
+from wmm_control.resources import load_geometry
 
 if TYPE_CHECKING:
     from wmm_control.kinematics.model import KinematicModel
@@ -66,7 +67,7 @@ class Workspace:
                 travel = (pm.lowerPositionLimit[joint.idx_q], pm.upperPositionLimit[joint.idx_q])
                 height += max((abs(float(v)) for v in travel if np.isfinite(v)), default=0.0)
         self.max_height = float(height)
-        geometry = pin.buildGeomFromUrdf(pm, str(model.config.urdf_path), pin.GeometryType.COLLISION)
+        geometry = load_geometry(pm, model.config.urdf_path, pin.GeometryType.COLLISION, model.config.package_dirs)
         self.boxes = []
         for obj in geometry.geometryObjects:
             half = _half_extents(obj.geometry)

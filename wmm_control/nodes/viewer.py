@@ -94,7 +94,9 @@ class ViewerNode(Node):
             },
         )
         self.robot = load_robot(p.robot)
-        self.scene = RobotScene(self.robot.urdf_path, self.robot.base_link, self.robot.ee_frame)
+        self.scene = RobotScene(
+            self.robot.urdf_path, self.robot.base_link, self.robot.ee_frame, self.robot.package_dirs
+        )
         if self.scene.skipped:
             self.get_logger().warn(f'not drawn (no drawing for their kind): {list(self.scene.skipped)}')
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)

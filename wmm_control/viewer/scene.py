@@ -13,6 +13,7 @@ Quaternions are (w, x, y, z), as the browser scene takes them.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from wmm_control.geometry import (
     quaternion_from_matrix,
     unit_quaternion,
 )
+from wmm_control.resources import load_geometry
 
 __all__ = [
     'Shape',
@@ -159,8 +161,8 @@ class RobotScene:
         urdf_path: the URDF.
         base_link: the link whose world pose is given (odometry's child frame).
         ee_frame: the end-effector frame (a link or joint of the URDF).
-        package_dirs: folders that ``package://`` mesh paths are resolved against (the URDF's
-            folder and its parent are always searched).
+        package_dirs: folders that ``package://`` mesh paths are looked up in first (the robot
+            YAML's; :mod:`wmm_control.resources`).
 
     Raises:
         ConfigError: the URDF cannot be loaded.
@@ -172,15 +174,14 @@ class RobotScene:
         urdf_path: str | Path,
         base_link: str = 'base_link',
         ee_frame: str = 'ee_link',
-        package_dirs: tuple[str, ...] = (),
+        package_dirs: Iterable[str | Path] = (),
     ) -> None:
         urdf = Path(urdf_path)
-        dirs = [str(d) for d in (*package_dirs, urdf.parent, urdf.parent.parent)]
         try:
             self.model = pin.buildModelFromUrdf(str(urdf))
-            self.geometry = pin.buildGeomFromUrdf(self.model, str(urdf), pin.GeometryType.VISUAL, None, dirs)
         except (RuntimeError, ValueError) as exc:
             raise ConfigError(f'pinocchio could not load {urdf}: {exc}') from exc
+        self.geometry = load_geometry(self.model, urdf, pin.GeometryType.VISUAL, package_dirs)
         self.data = self.model.createData()
         self.geometry_data = pin.GeometryData(self.geometry)
         self._base_frame = self._frame(base_link)
