@@ -369,8 +369,8 @@ def test_init_finds_wheels_whose_joint_frame_is_turned_and_picks_amp_for_a_diffe
     assert robot_setup.main(args + ['--out', str(out), '--period', '0.02', '--home', '0,0.3,0.6,0,0.5,0']) == 0
     cfg = load_robot(out)
     assert cfg.method == 'amp' and cfg.period == 0.02 and cfg.base_link == 'base_link'
-    assert cfg.differential.wheel_joints == ('wheel_left_joint', 'wheel_right_joint')
-    assert cfg.differential.track == pytest.approx(0.48)
+    assert cfg.base.wheel_joints == ('wheel_left_joint', 'wheel_right_joint')
+    assert cfg.base.track == pytest.approx(0.48)
     # only the root may be the base frame
     capsys.readouterr()
     assert robot_setup.main(args + ['--out', str(tmp_path / 's.yaml'), '--base-link', 'chassis_link']) == 2
@@ -524,7 +524,7 @@ def test_tiago_is_set_up_from_its_urdf_as_it_comes(tmp_path, capsys, monkeypatch
     assert robot_setup.main(args + ['--out', str(out), '--package-dir', str(share)]) == 0
     printed = capsys.readouterr().out
     cfg = load_robot(out)
-    assert cfg.differential.wheel_joints == ('wheel_left_joint', 'wheel_right_joint')
+    assert cfg.base.wheel_joints == ('wheel_left_joint', 'wheel_right_joint')
     assert cfg.base_link == 'base_footprint' and cfg.method == 'amp'
     assert cfg.arm.joints[0] == 'torso_lift_joint' and cfg.arm.n == 8
     hand = {name for name in robot_setup.UrdfTree(urdf).links if name.startswith('hand_')}
