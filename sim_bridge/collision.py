@@ -5,7 +5,8 @@ and the collision shapes of the links are compared pair by pair with
 ``getClosestPoints``. The links split into
 
 * *moving* links: those an arm joint moves (``arm_link_1`` … the end-effector link);
-* *body* links: the others (chassis, wheels, steering modules, the arm mount).
+* *body* links: the others (chassis, wheels, steering modules, the arm mount, and the head and
+  fingers at the robot YAML's ``held_joints``).
 
 A configuration is clear when every checked pair is at least ``margin`` apart and no moving
 link comes within ``margin`` of the floor. Checked pairs: moving–body and moving–moving,
@@ -107,6 +108,8 @@ class SelfCollisionChecker(OwnedClient):
             names[j] = info[12].decode()
             parents[j] = info[16]
         self.link_names = names
+        for name, value in self.robot.held_joints.items():  # the head, the fingers: where they are held
+            p.resetJointState(self._body, joint_of[name], value, physicsClientId=cid)
         self._arm = [joint_of[n] for n in self.robot.arm.joints]
         moving = set(self._arm)
         for j in sorted(names):  # descendants of an arm joint move too

@@ -8,7 +8,9 @@ joint order = the robot YAML's):
   removed live, beside those of the ``obstacles`` file (:mod:`wmm_control.nodes.obstacle_topic`):
   static bodies of the simulated world.
 Publishes, every period:
-  ``/joint_states`` (``sensor_msgs/JointState``: every simulated joint, position and velocity),
+  ``/joint_states`` (``sensor_msgs/JointState``: every simulated joint, position and velocity:
+  the arm and base joints, then the joints held outside them, at the robot YAML's
+  ``held_joints``, so that robot_state_publisher places the head and the fingers where they are),
   ``/ee_pose`` (``geometry_msgs/PoseStamped``, ground-truth end effector, frame ``world``),
   ``/odom`` (``nav_msgs/Odometry``: wheel odometry, dead reckoning through the nominal
   model, frame ``odom`` = ``world`` at the start, child ``base_link``; pose and twist

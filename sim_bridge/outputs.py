@@ -67,8 +67,14 @@ class SimOutputs:
         """
         if clock:
             self.pub_clock.publish(ClockMsg(clock=stamp))
+        # the driven joints, then those held (head, fingers): robot_state_publisher places every link
         names, pos, vel = world.joint_state()
-        joints = JointState(name=list(names), position=pos.tolist(), velocity=vel.tolist())
+        held_names, held_pos, held_vel = world.held_joint_state()
+        joints = JointState(
+            name=[*names, *held_names],
+            position=[*pos.tolist(), *held_pos.tolist()],
+            velocity=[*vel.tolist(), *held_vel.tolist()],
+        )
         joints.header.stamp = stamp
         if self.pub_ee.get_subscription_count() > 0:
             self.pub_ee.publish(pose_stamped(stamp, 'world', *world.ee_pose()))
@@ -83,7 +89,7 @@ class SimOutputs:
         if self.pub_truth.get_subscription_count() > 0:
             self.pub_truth.publish(odometry(stamp, 'world', self.base_frame, true_pose, world.base_twist()))
         if self.frames.publishing_tf:
-            self.frames.publish(stamp, dict(zip(names, pos.tolist())), odom_pose, true_pose)
+            self.frames.publish(stamp, dict(zip(names, joints.position)), odom_pose, true_pose)
         return joints
 
     def publish_joints(self, joints: JointState) -> None:

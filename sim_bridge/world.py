@@ -156,6 +156,8 @@ class SimWorld(OwnedClient):
         dt: period of :meth:`step` [s]; ``time``: simulated time since the start [s].
         command_groups: group name -> tuple of joint names (command order).
         joint_names: every simulated joint, arm then steer + drive (A) or wheels (B).
+        held_joint_names: the joints outside the arm and the base (head, fingers), held where
+            the robot YAML's ``held_joints`` puts them (:meth:`held_joint_state`).
         velocity_limits: URDF velocity limit per joint of ``joint_names`` [rad/s]. Shape (n,).
         counters: ``{group: {'clamped': entries clamped, 'rejected': commands rejected,
             'position_limited': arm joint-steps stopped at a position limit}}``.
@@ -293,6 +295,15 @@ class SimWorld(OwnedClient):
             raise ConfigError(f'{cfg.urdf_path.name}: ee frame {cfg.ee_frame!r} not found; links {sorted(links)}')
         self._ee_link = links[cfg.ee_frame]
         self._idx = [joints[n] for n in self.joint_names]
+        #: the joints outside the arm and the base, held where the robot YAML puts them
+        self.held_joint_names = tuple(cfg.held_joints)
+        missing = [n for n in self.held_joint_names if n not in joints]
+        if missing:
+            raise ConfigError(f'{cfg.urdf_path.name}: held joints {missing} not found; URDF has {sorted(joints)}')
+        self._held_idx = [joints[n] for n in self.held_joint_names]
+        self._held_q = [cfg.held_joints[n] for n in self.held_joint_names]
+        for j, value in zip(self._held_idx, self._held_q):
+            p.resetJointState(body, j, value, 0.0, physicsClientId=cid)
         yaml_vel = cfg.joint_velocity_limits
         # URDF <limit velocity> is authoritative; the YAML value covers a URDF without one.
         self.velocity_limits = np.array(
@@ -392,6 +403,16 @@ class SimWorld(OwnedClient):
         p.setJointMotorControlArray(
             body, self._idx, p.VELOCITY_CONTROL, targetVelocities=zero, forces=self._forces, physicsClientId=cid
         )
+        if self._held_idx:  # the joints outside the arm and the base: position servos where they are held
+            held_efforts = [p.getJointInfo(body, j, physicsClientId=cid)[10] for j in self._held_idx]
+            p.setJointMotorControlArray(
+                body,
+                self._held_idx,
+                p.POSITION_CONTROL,
+                targetPositions=self._held_q,
+                forces=[ARM_FORCE_FACTOR * f if f > 0.0 else 1e3 for f in held_efforts],
+                physicsClientId=cid,
+            )
         for _ in range(int(round(SETTLE_TIME / self._h))):
             self._physics_substep(np.zeros(self._n), odometry=False)
         self._read_physics()
@@ -639,6 +660,22 @@ class SimWorld(OwnedClient):
             velocities are the rates applied in the last step (measured in physics mode).
         """
         return self.joint_names, self._q.copy(), self._qd.copy()
+
+    def held_joint_state(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+        """The joints outside the arm and the base (head, fingers; :attr:`held_joint_names`),
+        where the robot YAML holds them (``held_joints``): placed there in kinematic mode,
+        position servos in physics mode.
+
+        Returns:
+            (names tuple, positions [rad or m] shape (h,), velocities [rad/s or m/s] shape (h,)),
+            as PyBullet has them.
+        """
+        states = p.getJointStates(self.body_id, self._held_idx, physicsClientId=self._cid) if self._held_idx else []
+        return (
+            self.held_joint_names,
+            np.array([s[0] for s in states], dtype=float),
+            np.array([s[1] for s in states], dtype=float),
+        )
 
     def base_pose(self) -> np.ndarray:
         """True base_link pose (x, y, θ) in world [m, m, rad], θ in [−π, π]. Shape (3,)."""

@@ -3,7 +3,8 @@
 :func:`write_urdf` builds a base of any family (a steerable base with N modules on a circle,
 Mecanum wheels, four by default, or a differential pair with two casters) and an arm of n joints whose
 axes alternate z, y, y, z, y, z, ... (an anthropomorphic-like chain), optionally on a
-prismatic lift. Shapes are primitive; every link has an inertial.
+prismatic lift, and optionally a head outside the arm (:data:`HEAD_PAN`). Shapes are primitive;
+every link has an inertial.
 """
 
 import math
@@ -24,6 +25,15 @@ SIX_MECANUM_WHEELS = (
     ('rr', -0.3, -0.25),
 )
 SIX_ROLLER_ANGLES = (math.pi / 4, -math.pi / 4, math.pi / 3, -math.pi / 3, -math.pi / 4, math.pi / 4)
+#: The head of :func:`write_urdf` (``head=True``): ``head_pan_joint`` turns about z at this (x, y, z)
+#: on ``chassis_link`` [m], within these limits [rad] (zero is outside them: it is held at the lower
+#: one by default); ``head_link``'s collision sphere of this radius sits this far along the head's
+#: x axis, level with the arm's first link (a vertical cylinder of radius ARM_RADIUS about the
+#: chassis' (0.1, 0)); ``head_visor_joint`` mimics the pan joint (multiplier, offset).
+HEAD_PAN = {'origin': (-0.2, 0.0, 0.1), 'limits': (0.25, 2.0), 'radius': 0.05, 'reach': 0.1, 'height': 0.175}
+HEAD_MIMIC = (0.5, 0.1)
+ARM_RADIUS = 0.035
+ARM_AXIS_XY = (0.1, 0.0)
 
 
 def _inertial(mass=1.0):
@@ -65,10 +75,13 @@ def _wheel(name, parent, xyz, radius, rate):
     ]
 
 
-def write_urdf(path, base='steerable', modules=4, arm_joints=7, prismatic_lift=False, wheels=MECANUM_WHEELS):
+def write_urdf(
+    path, base='steerable', modules=4, arm_joints=7, prismatic_lift=False, wheels=MECANUM_WHEELS, head=False
+):
     """Write a URDF at ``path``; returns the path. Links: ``base_link`` (on the floor),
     ``arm_base_link`` (the arm root), ``tool_link`` (the tool). A Mecanum base has a wheel
-    ``wheel_<tag>_joint`` at each ``(tag, x, y)`` of ``wheels``."""
+    ``wheel_<tag>_joint`` at each ``(tag, x, y)`` of ``wheels``; ``head`` adds the head of
+    :data:`HEAD_PAN`."""
     r = 0.08
     parts = [
         _link('base_link', mass=0.1),
@@ -102,6 +115,37 @@ def write_urdf(path, base='steerable', modules=4, arm_joints=7, prismatic_lift=F
                 _joint(f'caster_{tag}_joint', 'fixed', 'base_link', f'caster_{tag}_link', f'{x} 0 0.04'),
                 _link(f'caster_{tag}_link', '<sphere radius="0.04"/>', mass=0.2),
             ]
+    if head:
+        lower, upper = HEAD_PAN['limits']
+        multiplier, offset = HEAD_MIMIC
+        parts += [
+            _joint(
+                'head_pan_joint',
+                'revolute',
+                'chassis_link',
+                'head_link',
+                ' '.join(str(v) for v in HEAD_PAN['origin']),
+                limit=f'<limit lower="{lower}" upper="{upper}" effort="5" velocity="1.0"/>',
+            ),
+            _link(
+                'head_link',
+                f'<sphere radius="{HEAD_PAN["radius"]}"/>',
+                origin=f'{HEAD_PAN["reach"]} 0 {HEAD_PAN["height"]}',
+                mass=0.5,
+            ),
+            _joint(
+                'head_visor_joint',
+                'revolute',
+                'head_link',
+                'head_visor_link',
+                '0.05 0 0.2',
+                '0 1 0',
+                limit='<limit lower="-1" upper="1" effort="1" velocity="1.0"/>',
+            ).replace(
+                '</joint>', f'<mimic joint="head_pan_joint" multiplier="{multiplier}" offset="{offset}"/></joint>'
+            ),
+            _link('head_visor_link', mass=0.05),
+        ]
     parts += [
         _joint('arm_mount_joint', 'fixed', 'chassis_link', 'arm_base_link', '0.1 0 0.1'),
         _link('arm_base_link', '<cylinder radius="0.06" length="0.1"/>', origin='0 0 0.05'),

@@ -11,8 +11,11 @@ names those joints and links and gives what a URDF cannot: acceleration limits (
 :data:`DEFAULT_ACCEL_PER_VELOCITY` × the velocity limit), base twist limits, the dexterous
 posture, the start state, the control period and the default method; optionally the folders
 ``package://`` mesh paths are looked up in first (``package_dirs``,
-:mod:`wmm_control.resources`) and the link pairs the collision model checks
-(``collision.pairs``). Any URDF value may be overridden in the YAML (``arm.position_lower`` …,
+:mod:`wmm_control.resources`), the link pairs the collision model checks
+(``collision.pairs``) and the positions of the joints outside the arm and the base (head,
+fingers, a second arm: ``held_joints``, :func:`held_joint_positions`; by default each one's
+URDF zero clipped into its limits), where every model of the robot, the simulator and its
+``/joint_states`` hold them. Any URDF value may be overridden in the YAML (``arm.position_lower`` …,
 ``steerable.hips`` …).
 
 URDF conventions the base geometry relies on (``wmm_robot init`` writes YAMLs for them):
@@ -38,7 +41,9 @@ or by a path to a robot YAML; its ``urdf`` path is relative to that YAML.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -49,7 +54,7 @@ import yaml
 from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
 from wmm_control.resources import check_resources, yaml_package_dirs
-from wmm_control.urdf import UrdfTree
+from wmm_control.urdf import MOVING_TYPES, UrdfTree
 
 __all__ = [
     'ArmConfig',
@@ -70,6 +75,7 @@ __all__ = [
     'read_yaml_section',
     'usual_roller_angles',
     'resolve_robot_yaml',
+    'held_joint_positions',
 ]
 
 ALIASES = {'a': 'steerable', 'b': 'mecanum'}
@@ -359,6 +365,9 @@ class RobotConfig:
     package_dirs: tuple[Path, ...] = ()
     #: the link pairs the collision model checks (``collision.pairs``); None: its own rules
     collision_pairs: tuple[tuple[str, str], ...] | None = None
+    #: [rad or m] every movable joint outside the arm and the base, by name, at the position it
+    #: is held at (``held_joints``, :func:`held_joint_positions`), mimic joints included
+    held_joints: dict[str, float] = field(default_factory=dict)
 
     @property
     def joint_velocity_limits(self) -> dict:
@@ -633,6 +642,91 @@ def _collision_pairs(raw, tree):
     return tuple((a, b) for a, b in pairs)
 
 
+def _limits(joint) -> tuple[float, float]:
+    """A joint's position limits [rad or m], ±inf where the URDF gives none."""
+    return (-math.inf if joint.lower is None else joint.lower, math.inf if joint.upper is None else joint.upper)
+
+
+def held_joint_positions(
+    tree: UrdfTree, arm: Iterable[str], base: Iterable[str] = (), given: Any = None
+) -> dict[str, float]:
+    """The position of every joint held still: each movable (revolute, continuous, prismatic) joint
+    of ``tree`` but the ``arm`` joints and the ``base`` ones (wheels, steer joints) and the mimic
+    joints that follow a base joint (they turn with the wheels, as before).
+
+    A joint takes its value in ``given`` (the YAML's ``held_joints``: joint name → position [rad
+    or m]), else its URDF zero clipped into its ``<limit>`` (0 for a continuous joint); a mimic
+    joint follows its leader, ``multiplier · q + offset`` (the URDF's ``<mimic>``), and is never
+    given itself.
+
+    Raises:
+        ConfigError: ``given`` is not a mapping of joint names to numbers, or names a joint the
+            URDF lacks, a fixed one, an arm or base joint or a mimic joint, or puts a joint outside
+            its limits; or a mimic joint follows an arm joint, a joint that does not move, or
+            (through others) itself.
+    """
+    where = 'held_joints'
+    arm, base = set(arm), set(base)
+    movable = {n: j for n, j in tree.joints.items() if j.type in MOVING_TYPES}
+
+    def leader(name):
+        """The joint a chain of mimics from ``name`` ends at (``name`` itself when it mimics none)."""
+        chain = [name]
+        while movable[chain[-1]].mimic is not None:
+            follows = movable[chain[-1]].mimic
+            if follows not in movable or follows in chain:
+                raise ConfigError(
+                    f'{tree.path.name}: joint {chain[-1]!r} mimics {follows!r}, which '
+                    + ('it follows already (a loop of mimics)' if follows in chain else 'is not a movable joint')
+                )
+            chain.append(follows)
+        return chain[-1]
+
+    held = {}
+    for name, joint in movable.items():
+        first = leader(name)
+        if name in arm or name in base or first in base:
+            continue
+        if first in arm:
+            raise ConfigError(
+                f'{tree.path.name}: joint {name!r} mimics the arm joint {first!r}: a joint that moves with '
+                'the arm cannot be held still (make the arm chain end below it)'
+            )
+        held[name] = joint
+    given = {} if given is None else given
+    if not isinstance(given, dict):
+        raise ConfigError(f'{where}: expected a mapping of joint names to positions, got {given!r}')
+    values = {}
+    for name in given:
+        listed = tree.joints.get(name) if isinstance(name, str) else None
+        if listed is None:
+            raise ConfigError(f'{where}: {name!r} is not a joint of {tree.path.name}')
+        if name in arm or name in base:
+            raise ConfigError(f'{where}: {name!r} is an arm or base joint, which the controllers drive: not held')
+        if listed.type not in MOVING_TYPES:
+            raise ConfigError(f'{where}: {name!r} is a {listed.type} joint: only a movable joint is held')
+        if listed.mimic is not None:
+            raise ConfigError(
+                f'{where}: {name!r} mimics {listed.mimic!r} (the URDF\'s <mimic>): give {leader(name)!r} instead'
+            )
+        value = _scalar(given, name, where, positive=False)
+        lower, upper = _limits(listed)
+        if not lower <= value <= upper:
+            raise ConfigError(f'{where}.{name}: {value:.6g} is outside its limits [{lower:.6g}, {upper:.6g}]')
+        values[name] = value
+
+    def position(name):
+        joint = held[name]
+        if joint.mimic is not None:
+            return joint.mimic_multiplier * position(joint.mimic) + joint.mimic_offset
+        if name in values:
+            return values[name]
+        lower, upper = _limits(joint)
+        return min(max(0.0, lower), upper)
+
+    return {name: float(position(name)) for name in held}
+
+
 def _check_unique(cfg):
     names = list(cfg.arm.joints) + list(cfg.base.joints)
     seen = set()
@@ -745,6 +839,7 @@ def _parse(path, raw):
         raw=raw,
         package_dirs=package_dirs,
         collision_pairs=_collision_pairs(raw, tree),
+        held_joints=held_joint_positions(tree, arm.joints, base.joints, raw.get('held_joints')),
     )
     _check_unique(cfg)
     return cfg

@@ -11,6 +11,7 @@ import numpy as np
 from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.robot_config import Base, DifferentialBase, MecanumBase, SteerableBase
+from wmm_control.urdf import UrdfTree
 
 __all__ = ['main', 'describe']
 
@@ -61,6 +62,15 @@ def describe(model, base_pose, q_arm):
             f'{name:<16}{a.position_lower[i]:>9.3f}{a.position_upper[i]:>9.3f}'
             f'{a.velocity[i]:>8.3f}{a.acceleration[i]:>8.3f}   {unit}'
         )
+    if cfg.held_joints:
+        tree = UrdfTree(cfg.urdf_path)
+        width = max(16, *(len(name) + 1 for name in cfg.held_joints))
+        lines.append(f'{"held joint":<{width}}{"at":>9}   unit (held_joints: outside the arm and the base)')
+        for name, value in cfg.held_joints.items():
+            joint = tree.joint(name)
+            unit = 'm' if joint.type == 'prismatic' else 'rad'
+            follows = f' (mimic of {joint.mimic})' if joint.mimic is not None else ''
+            lines.append(f'{name:<{width}}{value:>9.3f}   {unit}{follows}')
     lines.append(f'base velocity limits (vx, vy, ω): {_fmt(cfg.base.velocity, 3)}')
     lines.append(f'base acceleration limits:         {_fmt(cfg.base.acceleration, 3)}')
     lines.append(_describe_base(cfg.base))

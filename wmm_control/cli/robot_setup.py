@@ -27,6 +27,9 @@ value commented with the rule that chose it:
 * base twist limits from the wheel rate limits: half the wheel rate budget each to the
   linear and the angular part (so both at once stay within it); base accelerations reach
   those in one second;
+* the positions of the joints outside the arm and the base (``held_joints``: head, fingers, a
+  second arm), each one's URDF zero clipped into its limits, where every model, the simulator
+  and ``/joint_states`` hold them (a mimic joint follows its leader);
 * the collision pairs (``collision.pairs``), chosen as MoveIt's set-up assistant does
   (:func:`~wmm_control.kinematics.collision.choose_pairs`): adjacent links, links no arm joint
   moves apart, pairs always in contact or never within the influence distance over
@@ -73,7 +76,14 @@ from wmm_control.resolvers import METHODS
 from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.resolvers.safety import SafetyParams
 from wmm_control.resources import check_resources
-from wmm_control.robot_config import BASE_FAMILIES, MIN_ARM_JOINTS, RobotConfig, load_robot, usual_roller_angles
+from wmm_control.robot_config import (
+    BASE_FAMILIES,
+    MIN_ARM_JOINTS,
+    RobotConfig,
+    held_joint_positions,
+    load_robot,
+    usual_roller_angles,
+)
 from wmm_control.urdf import UrdfJoint, UrdfTree
 
 __all__ = ['main', 'init_robot', 'detect_wheels', 'collision_summary', 'DEFAULT_METHODS']
@@ -378,6 +388,7 @@ def init_robot(
     for key, names in wheels.items():
         lines.append(f'    {key}: [{", ".join(names)}]')
     lines.append('    # geometry (wheel radius, hips / d1, d2 / track) and wheel rate limits from the URDF')
+    lines += _held_lines(tree, arm_names, [n for names in wheels.values() for n in names])
     lines += _pair_lines(choice)
     text = '\n'.join(lines) + '\n'
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -393,6 +404,29 @@ def init_robot(
 def _flow(name: str) -> str:
     """``name`` as a YAML flow scalar (quoted where YAML needs it)."""
     return yaml.safe_dump(name, default_flow_style=True, width=1 << 20).splitlines()[0]
+
+
+def _held_lines(tree: UrdfTree, arm: list[str], base: list[str]) -> list[str]:
+    """The ``held_joints:`` section of the YAML: every movable joint outside the ``arm`` and
+    ``base`` joints at its default position, a mimic joint as a comment (it follows its leader)."""
+    held = held_joint_positions(tree, arm, base)
+    lines = [
+        '  # the joints outside the arm and the base (head, fingers), held at these positions [rad or m] by',
+        '  # every model, the simulator and /joint_states: the URDF\'s zero clipped into each joint\'s limits.',
+        '  # A mimic joint follows its leader (the URDF\'s <mimic>) and is not listed. Edit freely.',
+        '  held_joints:',
+    ]
+    for name, value in held.items():
+        joint = tree.joint(name)
+        if joint.mimic is not None:
+            lines.append(f'    # {name}: {value:.6g}   follows {joint.mimic} (mimic)')
+            continue
+        bounded = joint.type != 'continuous' and joint.lower is not None and joint.upper is not None
+        limits = f' in [{joint.lower:.6g}, {joint.upper:.6g}]' if bounded else ''
+        lines.append(f'    {_flow(name)}: {value:.6g}   # {joint.type}{limits}')
+    if not held:
+        lines[-1] = '  held_joints: {}   # none: every movable joint is the arm\'s or the base\'s'
+    return lines
 
 
 def _pair_lines(choice: PairChoice) -> list[str]:

@@ -9,7 +9,8 @@ base's pose at each call. Links split into
 
 * *moving* links: the links an arm joint moves (the arm's links, the tool and what is fixed
   to them);
-* *body* links: the others (chassis, wheels, steer modules, the arm's mount).
+* *body* links: the others (chassis, wheels, steer modules, the arm's mount, and the links of
+  the joints outside the arm, at the positions they are held at: head, fingers).
 
 Checked pairs: the link pairs the robot YAML lists (``collision.pairs``, ``floor`` for the
 floor: ``wmm_robot init`` writes them, chosen by :func:`choose_pairs` as MoveIt's set-up
@@ -51,8 +52,10 @@ import pinocchio as pin
 
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import continuous_to_q
+from wmm_control.kinematics.model import held_configuration
 from wmm_control.kinematics.obstacles import Obstacle, around_base
 from wmm_control.resources import load_geometry
+from wmm_control.robot_config import held_joint_positions
 from wmm_control.urdf import UrdfTree
 
 __all__ = [
@@ -124,6 +127,9 @@ class CollisionModel:
             module docstring.
         package_dirs: folders ``package://`` mesh paths are looked up in first
             (:mod:`wmm_control.resources`).
+        held: [rad or m] the joints outside the arm (head, fingers) by name, at the positions
+            they are held at (:attr:`~wmm_control.robot_config.RobotConfig.held_joints`);
+            None: their defaults (:func:`~wmm_control.robot_config.held_joint_positions`).
 
     Raises:
         ConfigError: pinocchio cannot load the URDF or its collision shapes, or a mesh cannot be
@@ -143,6 +149,7 @@ class CollisionModel:
             obstacles,
             pairs=robot.collision_pairs,
             package_dirs=robot.package_dirs,
+            held=robot.held_joints,
         )
 
     def __init__(
@@ -155,6 +162,7 @@ class CollisionModel:
         obstacles=(),
         pairs=None,
         package_dirs=(),
+        held=None,
     ):
         path = str(urdf_path)
         try:
@@ -164,6 +172,8 @@ class CollisionModel:
         self.geom = load_geometry(self.model, path, pin.GeometryType.COLLISION, package_dirs)
         model = self.model
         tree = UrdfTree(path)
+        # the joints outside the arm stay where they are held; the arm's are set per call
+        self._held_q = held_configuration(model, held_joint_positions(tree, arm_joints) if held is None else held)
         parent_link = {j.child: j.parent for j in tree.joints.values()}
         arm_ids = [model.getJointId(n) for n in arm_joints]
         self.n_arm = len(arm_ids)
@@ -296,7 +306,7 @@ class CollisionModel:
         return list(self._pair_links)
 
     def _configuration(self, q_arm) -> np.ndarray:
-        q = pin.neutral(self.model)
+        q = self._held_q.copy()
         for iq, cont, val in zip(self._idx_q, self._continuous, np.asarray(q_arm, dtype=float).tolist()):
             if cont:
                 q[iq], q[iq + 1] = continuous_to_q(val)

@@ -1,9 +1,12 @@
 """Kinematic model of a wheeled mobile manipulator, on pinocchio.
 
 The generalized coordinates are ``q = (x_b, y_b, θ_b, q_m)``: the planar base pose in
-the world frame followed by the n arm joints (Xing eq 2). The wheel-side joints of the
-URDF (steer, drive, Mecanum wheels) are locked out of this model: they do not move the
-end effector.
+the world frame followed by the n arm joints (Xing eq 2). The other joints of the URDF are
+locked out of this model: the wheel-side joints (steer, drive, Mecanum wheels) at zero, since
+they do not move the end effector, and the joints outside the arm and the base (head, fingers)
+at the positions the robot holds them at (:attr:`RobotConfig.held_joints`;
+:func:`held_configuration` gives the configuration of any pinocchio model of the robot's URDF
+with them there).
 
 Quantities (Sorour §II, Xing §2 and appendices A–B):
 
@@ -24,7 +27,7 @@ Usage::
     ja = model.arm_jacobian_base()
 """
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Self
 
@@ -35,9 +38,10 @@ from numpy.typing import ArrayLike
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError, UnknownFrameError, WmmError
 from wmm_control.geometry import continuous_to_q, rpy_from_matrix, rpy_rate_map
-from wmm_control.robot_config import RobotConfig, load_robot
+from wmm_control.robot_config import RobotConfig, held_joint_positions, load_robot
+from wmm_control.urdf import UrdfTree
 
-__all__ = ['KinematicModel', 'build_pinocchio_model', 'N_BASE']
+__all__ = ['KinematicModel', 'build_pinocchio_model', 'held_configuration', 'N_BASE']
 
 N_BASE = 3
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -65,6 +69,26 @@ def build_pinocchio_model(urdf_path: str | Path) -> pin.Model:
         raise ConfigError(f'pinocchio could not load {urdf_path}: {exc}') from exc
 
 
+def held_configuration(model: pin.Model, held: Mapping[str, float]) -> np.ndarray:
+    """The configuration of ``model`` (a pinocchio model of the robot's URDF, with or without the
+    planar base joint) with every joint of ``held`` at its position [rad or m], the others at
+    pinocchio's neutral (zero; a continuous joint at angle 0).
+
+    Raises:
+        ConfigError: a joint of ``held`` is not a one-number joint of ``model``.
+    """
+    q = pin.neutral(model)
+    for name, value in held.items():
+        joint = model.joints[model.getJointId(name)] if model.existJointName(name) else None
+        if joint is None or joint.nv != 1:
+            raise ConfigError(f'held joint {name!r} is not a one-number joint of {model.name}')
+        if joint.nq == 2:
+            q[joint.idx_q], q[joint.idx_q + 1] = continuous_to_q(float(value))
+        else:
+            q[joint.idx_q] = float(value)
+    return q
+
+
 class KinematicModel:
     """Kinematics of one robot: base pose + n arm joints → end effector.
 
@@ -80,13 +104,13 @@ class KinematicModel:
 
     def __init__(self, robot: str | Path | RobotConfig, ee_frame: str | None = None) -> None:
         self.config = robot if isinstance(robot, RobotConfig) else load_robot(robot)
-        self._build(
-            self.config.urdf_path, self.config.arm.joints, ee_frame or self.config.ee_frame, self.config.base_link
-        )
+        cfg = self.config
+        self._build(cfg.urdf_path, cfg.arm.joints, ee_frame or cfg.ee_frame, cfg.base_link, cfg.held_joints)
 
     @classmethod
     def from_urdf(cls, urdf_path: str | Path, arm_joints: Iterable[str], ee_frame: str, base_link: str) -> Self:
-        """A model of a URDF alone, before any robot YAML exists (``config`` is None).
+        """A model of a URDF alone, before any robot YAML exists (``config`` is None): the joints
+        outside the arm held at their defaults (:func:`~wmm_control.robot_config.held_joint_positions`).
 
         Args:
             urdf_path: the URDF.
@@ -97,10 +121,12 @@ class KinematicModel:
         # A model of a URDF alone has no robot YAML; everywhere else the package builds its
         # models from one and reads ``config`` as a RobotConfig.
         self.config = None  # type: ignore[assignment]
-        self._build(urdf_path, tuple(arm_joints), ee_frame, base_link)
+        arm_joints = tuple(arm_joints)
+        held = held_joint_positions(UrdfTree(urdf_path), arm_joints)
+        self._build(urdf_path, arm_joints, ee_frame, base_link, held)
         return self
 
-    def _build(self, urdf_path, arm_names, ee_frame, base_link):
+    def _build(self, urdf_path, arm_names, ee_frame, base_link, held):
         self.full_model = build_pinocchio_model(urdf_path)
         missing = [n for n in arm_names if not self.full_model.existJointName(n)]
         if missing:
@@ -108,7 +134,7 @@ class KinematicModel:
         locked = [
             self.full_model.getJointId(n) for n in self.full_model.names[1:] if n not in arm_names and n != 'root_joint'
         ]
-        self.model = pin.buildReducedModel(self.full_model, locked, pin.neutral(self.full_model))
+        self.model = pin.buildReducedModel(self.full_model, locked, held_configuration(self.full_model, held))
         self.data = self.model.createData()
         names = list(self.model.names[2:])
         if names != list(arm_names):

@@ -94,9 +94,8 @@ class ViewerNode(Node):
             },
         )
         self.robot = load_robot(p.robot)
-        self.scene = RobotScene(
-            self.robot.urdf_path, self.robot.base_link, self.robot.ee_frame, self.robot.package_dirs
-        )
+        robot = self.robot
+        self.scene = RobotScene(robot.urdf_path, robot.base_link, robot.ee_frame, robot.package_dirs, robot.held_joints)
         if self.scene.skipped:
             self.get_logger().warn(f'not drawn (no drawing for their kind): {list(self.scene.skipped)}')
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)

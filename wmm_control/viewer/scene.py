@@ -5,7 +5,8 @@ a list of :class:`Shape` (boxes, cylinders, spheres, and triangle meshes for mes
 the URDF's colours. :class:`RobotScene` places them: joint positions by name (every joint of
 the URDF that one number moves: arm, steer, drive and wheel joints alike; a continuous one by
 its angle) and the pose of the base link in the world give the world pose of each shape and of
-the end-effector frame. Nothing here knows a link name but the two it is given.
+the end-effector frame; the joints no joint state names stay where they are held (the robot
+YAML's ``held_joints``: head, fingers). Nothing here knows a link name but the two it is given.
 
 Quaternions are (w, x, y, z), as the browser scene takes them.
 """
@@ -13,7 +14,7 @@ Quaternions are (w, x, y, z), as the browser scene takes them.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,6 +29,7 @@ from wmm_control.geometry import (
     quaternion_from_matrix,
     unit_quaternion,
 )
+from wmm_control.kinematics.model import held_configuration
 from wmm_control.resources import load_geometry
 
 __all__ = [
@@ -163,6 +165,9 @@ class RobotScene:
         ee_frame: the end-effector frame (a link or joint of the URDF).
         package_dirs: folders that ``package://`` mesh paths are looked up in first (the robot
             YAML's; :mod:`wmm_control.resources`).
+        held: [rad or m] the joints outside the arm and the base by name, at the positions the
+            robot holds them at (:attr:`~wmm_control.robot_config.RobotConfig.held_joints`)
+            until a joint state moves them; the other joints start at zero.
 
     Raises:
         ConfigError: the URDF cannot be loaded.
@@ -175,6 +180,7 @@ class RobotScene:
         base_link: str = 'base_link',
         ee_frame: str = 'ee_link',
         package_dirs: Iterable[str | Path] = (),
+        held: Mapping[str, float] | None = None,
     ) -> None:
         urdf = Path(urdf_path)
         try:
@@ -207,7 +213,7 @@ class RobotScene:
                 self._slots[self.model.names[joint_id]] = (joint.idx_q, joint.nq)
         #: Names of the joints a joint state can move.
         self.joint_names: tuple[str, ...] = tuple(self._slots)
-        self.q = pin.neutral(self.model)
+        self.q = held_configuration(self.model, held or {})
 
     def _frame(self, name: str) -> int:
         if not self.model.existFrame(name):
