@@ -114,6 +114,23 @@ def test_a_hull_is_never_farther_than_its_mesh():
     assert Pair.distance(ell.hulls, pin.SE3.Identity(), in_notch) < 0.0
 
 
+def test_a_hull_is_a_closed_outward_polytope_and_a_flat_mesh_stays_as_it_is():
+    """The L's hull has the volume of the L's hull (its triangles all face outwards) and every
+    vertex of the L's outline but the notch's corner; a flat mesh (a square) spans no volume and
+    keeps its triangles."""
+    ell = Pair(ELL, PROBE).hulls.geometryObjects[0].geometry
+    outline = [(0, 0), (0.4, 0), (0.4, 0.1), (0.1, 0.4), (0, 0.4)]  # the hull's section, 0.1 m thick
+    x, y = np.array(outline).T
+    area = 0.5 * abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1)))
+    assert ell.computeVolume() == pytest.approx(0.1 * area, rel=1e-9)
+    assert ell.num_points == 2 * len(outline)
+    square = pin.GeometryModel()
+    flat = _mesh((np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]]), np.array([[0, 1, 2], [0, 2, 3]])))
+    square.addGeometryObject(pin.GeometryObject('square', 0, 0, pin.SE3.Identity(), flat))
+    assert convex_hulls(square) == 0
+    assert isinstance(square.geometryObjects[0].geometry, pin.coal.BVHModelBase)
+
+
 def _tiago_no_hand() -> tuple[Path, Path]:
     """``(URDF, share folder)`` of TIAGo without its hand (example-robot-data)."""
     try:

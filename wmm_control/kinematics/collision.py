@@ -52,6 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial import ConvexHull, QhullError
 
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import continuous_to_q
@@ -327,7 +328,7 @@ class CollisionModel:
         """Each checked pair's distance at the full configuration ``q``: exact for the pairs whose
         bounding spheres are closer than ``reach`` [m] (the broad phase, over every pair in one
         numpy expression); for the others, the gap between their spheres, a lower bound above
-        ``reach``, with coal's narrow phase skipped (mesh pairs cost tens of microseconds each).
+        ``reach``, with coal's narrow phase skipped.
         With ``subset`` (a boolean array over the pairs), only those pairs are exact."""
         geom, geom_data = self.geom, self.geom_data
         pin.updateGeometryPlacements(self.model, self.data, geom, geom_data, q)
@@ -625,20 +626,38 @@ def convex_hulls(geometry) -> int:
     collision model errs on the safe side, by the mesh's concavities. A description that
     splits a concave part into several ``<collision>`` meshes (TIAGo's torso) keeps that
     split: each piece gets its own hull. PyBullet, the simulator, takes a URDF's collision
-    meshes as their convex hulls too.
+    meshes as their convex hulls too. A flat mesh (its vertices in one plane) has no inside and
+    stays as it is.
     """
     count = 0
     for obj in geometry.geometryObjects:
         if isinstance(obj.geometry, pin.coal.BVHModelBase):
-            obj.geometry = _convex_hull(obj.geometry)
-            count += 1
+            hull = _convex_hull(np.asarray(obj.geometry.vertices(), dtype=float))
+            if hull is not None:
+                obj.geometry = hull
+                count += 1
     return count
 
 
-def _convex_hull(mesh):
-    """coal's convex hull (qhull) of a ``BVHModel``'s vertices, triangulated."""
-    mesh.buildConvexHull(True, 'Qt')
-    return mesh.convex
+def _convex_hull(vertices: np.ndarray):
+    """coal's convex polytope of the hull of ``vertices`` (shape (n, 3)), its triangles turned
+    outwards; None when the points span no volume (qhull through scipy)."""
+    try:
+        hull = ConvexHull(vertices)
+    except QhullError:
+        return None
+    index = np.full(len(vertices), -1)
+    index[hull.vertices] = np.arange(hull.vertices.size)
+    triangles = index[hull.simplices]
+    points = vertices[hull.vertices]
+    a, b, c = (points[triangles[:, k]] for k in range(3))
+    inward = np.einsum('ij,ij->i', np.cross(b - a, c - a), hull.equations[:, :3]) < 0.0
+    triangles[inward] = triangles[inward][:, [0, 2, 1]]
+    coal = pin.coal
+    corners, faces = coal.StdVec_Vec3s(), coal.StdVec_Triangle()
+    corners.extend(list(points))
+    faces.extend([coal.Triangle(*t) for t in triangles.tolist()])
+    return coal.Convex(corners, faces)
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
