@@ -3,7 +3,8 @@ obstacles, and how fast those distances change with the arm's joint rates and th
 
 Built on pinocchio's collision model of the URDF's ``<collision>`` shapes (coal, in the
 ``pin`` wheel), each mesh taken as its convex hull (:func:`collision_geometry`), in the frame
-of the URDF's root link (``base_link``): the body does not move in it, and neither does the floor, since the base moves in its own plane; obstacles
+of the URDF's root link (``base_link``): the body does not move in it, and neither does the
+floor, since the base moves in its own plane; obstacles
 (:mod:`~wmm_control.kinematics.obstacles`, fixed in the world) are placed in it from the
 base's pose at each call. Links split into
 
@@ -644,7 +645,7 @@ def _convex_hull(vertices: np.ndarray):
     outwards; None when the points span no volume (qhull through scipy)."""
     try:
         hull = ConvexHull(vertices)
-    except QhullError:
+    except (QhullError, ValueError):  # flat, or fewer than four points
         return None
     index = np.full(len(vertices), -1)
     index[hull.vertices] = np.arange(hull.vertices.size)
