@@ -17,10 +17,9 @@ import numpy as np
 import pinocchio as pin
 
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.collision import FLOOR, CollisionModel
+from wmm_control.kinematics.collision import FLOOR, CollisionModel, collision_geometry
 from wmm_control.geometry import matrix_from_quaternion
 from wmm_control.resolvers import PoseTarget, make_resolver
-from wmm_control.resources import load_geometry
 from wmm_control.robot_config import load_robot
 
 __all__ = ['PinkStep', 'pink_installed', 'bench_pink', 'closed_loop_states', 'OFFSETS']
@@ -40,7 +39,7 @@ class PinkStep:
     the base's (x, y, θ) and the arm's joints), posture task at the start state.
 
     With ``barrier``, pink's ``SelfCollisionBarrier`` over the robot's own pairs: the URDF's
-    collision shapes on the same model, the pairs of shapes the package's
+    collision shapes (meshes as their convex hulls, as the package's) on the same model, the pairs of shapes the package's
     :class:`~wmm_control.kinematics.collision.CollisionModel` checks (those touching at the
     start posture left out), without the floor (pink has none), every pair's distance each step.
     """
@@ -58,7 +57,7 @@ class PinkStep:
         geometry = {}
         self.barriers = []
         if barrier:
-            geom = load_geometry(km.model, cfg.urdf_path, pin.GeometryType.COLLISION, cfg.package_dirs)
+            geom = collision_geometry(km.model, cfg.urdf_path, cfg.package_dirs)
             # every pair of shapes the package checks (within an infinite distance), the floor's
             # left out: pink has no floor
             near, _, _ = CollisionModel.from_robot(cfg).within(cfg.start.arm, np.inf, cfg.start.base_pose)

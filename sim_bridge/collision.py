@@ -19,6 +19,15 @@ about 160°, as the real arm would). The base pose does not matter for those: th
 plane under the wheels. :mod:`wmm_control.kinematics.collision` uses the same rules.
 Obstacles (:mod:`wmm_control.kinematics.obstacles`) are checked against every link, and for
 them it does: they are placed around the robot from the base's pose.
+
+A collision mesh is the convex hull of its vertices here: PyBullet's URDF importer takes every
+STL or COLLADA collision mesh so, and an OBJ file as one hull per object in it, unless the URDF
+marks the mesh ``concave="yes"`` (Bullet has no distance between two concave triangle meshes).
+The controller's model takes the same hulls
+(:func:`wmm_control.kinematics.collision.collision_geometry`; an OBJ file's objects make one
+hull there, never smaller than PyBullet's). A hull holds its mesh, so this check errs on the
+safe side: whenever two meshes touch, their hulls do; a contact it reports may be one of the
+hulls only, never one of the meshes it misses.
 """
 
 import itertools

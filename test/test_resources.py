@@ -77,10 +77,10 @@ def test_pinocchio_pybullet_and_the_viewer_read_the_same_mesh_from_the_yaml_pack
     assert yaml.safe_load(out.read_text())['robot']['package_dirs'] == ['../pkgs']
     cfg = load_robot(out)
     assert cfg.package_dirs == ((tmp_path / 'pkgs').resolve(),)
-    # pinocchio (the collision model): the chassis is the mesh, 0.6 × 0.45 × 0.2 m
+    # pinocchio (the collision model): the chassis is the mesh's convex hull, 0.6 × 0.45 × 0.2 m
     collision = CollisionModel.from_robot(cfg)
     chassis = next(g for g in collision.geom.geometryObjects if g.name.startswith('chassis_link'))
-    assert isinstance(chassis.geometry, pin.coal.BVHModelBase)
+    assert isinstance(chassis.geometry, pin.coal.ConvexBase)
     chassis.geometry.computeLocalAABB()
     extent = np.asarray(chassis.geometry.aabb_local.max_) - np.asarray(chassis.geometry.aabb_local.min_)
     np.testing.assert_allclose(extent, [0.6, 0.45, 0.2], atol=1e-9)

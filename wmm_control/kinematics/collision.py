@@ -2,8 +2,9 @@
 obstacles, and how fast those distances change with the arm's joint rates and the base's twist.
 
 Built on pinocchio's collision model of the URDF's ``<collision>`` shapes (coal, in the
-``pin`` wheel), in the frame of the URDF's root link (``base_link``): the body does not move
-in it, and neither does the floor, since the base moves in its own plane; obstacles
+``pin`` wheel), each mesh taken as its convex hull (:func:`collision_geometry`), in the frame
+of the URDF's root link (``base_link``): the body does not move in it, and neither does the
+floor, since the base moves in its own plane; obstacles
 (:mod:`~wmm_control.kinematics.obstacles`, fixed in the world) are placed in it from the
 base's pose at each call. Links split into
 
@@ -34,6 +35,10 @@ the upper arm when the elbow folds past about 160°, which the ±π elbow limit 
 
 The simulator's own check (``sim_bridge.collision.SelfCollisionChecker``, PyBullet's
 geometry) uses the same rules; it judges the ground truth, this model serves the controller.
+Both take a collision mesh as its convex hull: the hull holds the mesh, so its distances are
+never larger than the mesh's (both err on the safe side, by the mesh's concavities), and
+where two hulls overlap, coal's distance is negative, minus the penetration depth (two
+triangle soups would report 0 however deep they overlap).
 
 Each pair's distance ``d`` comes with its rate ``ḋ = j · q̇_arm + j_b · (vx, vy, ω)``:
 ``n · (v_b − v_a)`` at the two nearest points, ``n`` the unit vector from a's nearest point
@@ -49,6 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial import ConvexHull, QhullError
 
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import continuous_to_q
@@ -67,6 +73,8 @@ __all__ = [
     'srdf_disabled_pairs',
     'ALWAYS_FRACTION',
     'median_check_time',
+    'collision_geometry',
+    'convex_hulls',
 ]
 
 #: The name of the floor in pair names.
@@ -169,7 +177,7 @@ class CollisionModel:
             self.model = pin.buildModelFromUrdf(path)
         except (RuntimeError, ValueError) as exc:
             raise ConfigError(f'pinocchio could not load {path}: {exc}') from exc
-        self.geom = load_geometry(self.model, path, pin.GeometryType.COLLISION, package_dirs)
+        self.geom = collision_geometry(self.model, path, package_dirs)
         model = self.model
         tree = UrdfTree(path)
         # the joints outside the arm stay where they are held; the arm's are set per call
@@ -331,7 +339,7 @@ class CollisionModel:
         """Each checked pair's distance at the full configuration ``q``: exact for the pairs whose
         bounding spheres are closer than ``reach`` [m] (the broad phase, over every pair in one
         numpy expression); for the others, the gap between their spheres, a lower bound above
-        ``reach``, with coal's narrow phase skipped (mesh pairs cost tens of microseconds each).
+        ``reach``, with coal's narrow phase skipped.
         With ``subset`` (a boolean array over the pairs), only those pairs are exact."""
         geom, geom_data = self.geom, self.geom_data
         pin.updateGeometryPlacements(self.model, self.data, geom, geom_data, q)
@@ -604,6 +612,63 @@ def median_check_time(model: CollisionModel, q_arms, influence: float = 0.10) ->
         model.within(q, influence, np.zeros(3))
         times.append(time.perf_counter() - start)
     return float(np.median(times)) if times else 0.0
+
+
+def collision_geometry(model, urdf_path, package_dirs=()):
+    """pinocchio's geometry model of the URDF's ``<collision>`` shapes for ``model``, each mesh
+    as its convex hull (:func:`convex_hulls`): the geometry every collision check of the
+    controller reads.
+
+    Raises:
+        ConfigError: a mesh cannot be found, or pinocchio cannot load the shapes.
+    """
+    geometry = load_geometry(model, urdf_path, pin.GeometryType.COLLISION, package_dirs)
+    convex_hulls(geometry)
+    return geometry
+
+
+def convex_hulls(geometry) -> int:
+    """Replace, in place, each mesh shape of the pinocchio geometry model ``geometry`` (coal's
+    ``BVHModel``, a soup of triangles) by the convex hull of its vertices; returns how many.
+
+    Against a hull coal's GJK and EPA give a signed distance: negative, the penetration depth,
+    where two shapes overlap, while two triangle soups report 0 however deep they overlap. A
+    hull holds its mesh, so its distance to any shape is never larger than the mesh's: the
+    collision model errs on the safe side, by the mesh's concavities. A description that
+    splits a concave part into several ``<collision>`` meshes (TIAGo's torso) keeps that
+    split: each piece gets its own hull. PyBullet, the simulator, takes a URDF's collision
+    meshes as their convex hulls too. A flat mesh (its vertices in one plane) has no inside and
+    stays as it is.
+    """
+    count = 0
+    for obj in geometry.geometryObjects:
+        if isinstance(obj.geometry, pin.coal.BVHModelBase):
+            hull = _convex_hull(np.asarray(obj.geometry.vertices(), dtype=float))
+            if hull is not None:
+                obj.geometry = hull
+                count += 1
+    return count
+
+
+def _convex_hull(vertices: np.ndarray):
+    """coal's convex polytope of the hull of ``vertices`` (shape (n, 3)), its triangles turned
+    outwards; None when the points span no volume (qhull through scipy)."""
+    try:
+        hull = ConvexHull(vertices)
+    except (QhullError, ValueError):  # flat, or fewer than four points
+        return None
+    index = np.full(len(vertices), -1)
+    index[hull.vertices] = np.arange(hull.vertices.size)
+    triangles = index[hull.simplices]
+    points = vertices[hull.vertices]
+    a, b, c = (points[triangles[:, k]] for k in range(3))
+    inward = np.einsum('ij,ij->i', np.cross(b - a, c - a), hull.equations[:, :3]) < 0.0
+    triangles[inward] = triangles[inward][:, [0, 2, 1]]
+    coal = pin.coal
+    corners, faces = coal.StdVec_Vec3s(), coal.StdVec_Triangle()
+    corners.extend(list(points))
+    faces.extend([coal.Triangle(*t) for t in triangles.tolist()])
+    return coal.Convex(corners, faces)
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
