@@ -52,6 +52,7 @@ __all__ = [
     'continuous_to_q',
     'continuous_from_q',
     'angles_to_pin_q',
+    'set_joint_position',
     'scale_into_limits',
     'largest_step',
     'cap_norm',
@@ -324,6 +325,16 @@ def continuous_from_q(cos: ArrayLike, sin: ArrayLike) -> float | np.ndarray:
     return float(out) if np.ndim(out) == 0 else out
 
 
+def set_joint_position(q: np.ndarray, idx_q: int, nq: int, value: ArrayLike) -> None:
+    """Write one joint's position into the pinocchio configuration ``q`` (in place): a
+    continuous joint (nq = 2, one angle) as (cos, sin) (:func:`continuous_to_q`), any other
+    joint as its ``nq`` numbers."""
+    if nq == 2 and np.ndim(value) == 0:
+        q[idx_q], q[idx_q + 1] = continuous_to_q(float(value))  # type: ignore[arg-type]
+    else:
+        q[idx_q : idx_q + nq] = value
+
+
 def angles_to_pin_q(model: pin.Model, joint_angles: ArrayLike) -> np.ndarray:
     """pinocchio configuration from one number per joint velocity (angles for continuous joints).
 
@@ -336,11 +347,8 @@ def angles_to_pin_q(model: pin.Model, joint_angles: ArrayLike) -> np.ndarray:
     values = np.asarray(joint_angles, dtype=float)
     q = pin.neutral(model)
     for joint in model.joints[1:]:
-        iq, iv = joint.idx_q, joint.idx_v
-        if joint.nq == 2 and joint.nv == 1:
-            q[iq], q[iq + 1] = continuous_to_q(float(values[iv]))
-        else:
-            q[iq : iq + joint.nq] = values[iv : iv + joint.nv]
+        iv = joint.idx_v
+        set_joint_position(q, joint.idx_q, joint.nq, values[iv] if joint.nv == 1 else values[iv : iv + joint.nv])
     return q
 
 

@@ -57,7 +57,7 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull, QhullError
 
 from wmm_control.errors import ConfigError
-from wmm_control.geometry import continuous_to_q
+from wmm_control.geometry import set_joint_position
 from wmm_control.kinematics.model import held_configuration
 from wmm_control.kinematics.obstacles import Obstacle, around_base
 from wmm_control.resources import load_geometry
@@ -186,7 +186,7 @@ class CollisionModel:
         arm_ids = [model.getJointId(n) for n in arm_joints]
         self.n_arm = len(arm_ids)
         self._idx_q = [model.joints[j].idx_q for j in arm_ids]
-        self._continuous = [model.joints[j].nq == 2 for j in arm_ids]
+        self._nq = [model.joints[j].nq for j in arm_ids]
         self._idx_v = np.array([model.joints[j].idx_v for j in arm_ids])
         moving_joints = set(arm_ids)
         for j in range(1, model.njoints):  # joints below an arm joint move with it
@@ -315,11 +315,8 @@ class CollisionModel:
 
     def _configuration(self, q_arm) -> np.ndarray:
         q = self._held_q.copy()
-        for iq, cont, val in zip(self._idx_q, self._continuous, np.asarray(q_arm, dtype=float).tolist()):
-            if cont:
-                q[iq], q[iq + 1] = continuous_to_q(val)
-            else:
-                q[iq] = val
+        for iq, nq, val in zip(self._idx_q, self._nq, np.asarray(q_arm, dtype=float).tolist()):
+            set_joint_position(q, iq, nq, val)
         return q
 
     def _distances(self, q) -> np.ndarray:

@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError, UnknownFrameError, WmmError
-from wmm_control.geometry import continuous_to_q, rpy_from_matrix, rpy_rate_map
+from wmm_control.geometry import continuous_to_q, rpy_from_matrix, rpy_rate_map, set_joint_position
 from wmm_control.robot_config import RobotConfig, held_joint_positions, load_robot
 from wmm_control.urdf import UrdfTree
 
@@ -82,10 +82,7 @@ def held_configuration(model: pin.Model, held: Mapping[str, float]) -> np.ndarra
         joint = model.joints[model.getJointId(name)] if model.existJointName(name) else None
         if joint is None or joint.nv != 1:
             raise ConfigError(f'held joint {name!r} is not a one-number joint of {model.name}')
-        if joint.nq == 2:
-            q[joint.idx_q], q[joint.idx_q + 1] = continuous_to_q(float(value))
-        else:
-            q[joint.idx_q] = float(value)
+        set_joint_position(q, joint.idx_q, joint.nq, float(value))
     return q
 
 

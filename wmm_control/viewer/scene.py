@@ -24,7 +24,7 @@ import pinocchio as pin
 from wmm_control.errors import ConfigError, NonFiniteError, UnknownFrameError
 from wmm_control.geometry import (
     continuous_from_q,
-    continuous_to_q,
+    set_joint_position,
     matrix_from_quaternion,
     quaternion_from_matrix,
     unit_quaternion,
@@ -241,10 +241,7 @@ class RobotScene:
         if bad:
             raise NonFiniteError(f'non-finite positions of joints {bad}')
         for (index, nq), value in known:
-            if nq == 2:
-                self.q[index], self.q[index + 1] = continuous_to_q(float(value))
-            else:
-                self.q[index] = value
+            set_joint_position(self.q, index, nq, float(value))
         return [n for n in names if n not in self._slots]
 
     def joint_positions(self) -> dict[str, float]:
