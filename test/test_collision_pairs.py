@@ -46,6 +46,13 @@ def _distances(urdf, pairs, postures, ground_z=None):
     return out
 
 
+def _init(urdf, out):
+    """``wmm_robot init`` of the made-up differential robot, checked to succeed: ``out``."""
+    args = ['init', str(urdf), '--base', 'differential', '--arm-root', 'arm_base_link', '--tool', 'tool_link']
+    assert robot_setup.main(args + ['--out', str(out)]) == 0
+    return out
+
+
 def test_every_left_out_pair_is_left_out_for_its_reason(robot):
     choice = choose_pairs(robot, ARM6, ground_z=0.0, influence=0.1, samples=300)
     tree = UrdfTree(robot)
@@ -98,14 +105,7 @@ def test_an_srdf_leaves_its_pairs_out(robot, tmp_path):
 
 
 def test_init_writes_the_pairs_the_collision_model_then_checks_and_prints_their_cost(robot, tmp_path, capsys):
-    out = tmp_path / 'r.yaml'
-    assert (
-        robot_setup.main(
-            ['init', str(robot), '--base', 'differential', '--arm-root', 'arm_base_link', '--tool', 'tool_link']
-            + ['--out', str(out)]
-        )
-        == 0
-    )
+    out = _init(robot, tmp_path / 'r.yaml')
     printed = capsys.readouterr().out
     written = yaml.safe_load(out.read_text())['robot']['collision']['pairs']
     cfg = load_robot(out)
@@ -129,3 +129,51 @@ def test_check_warns_when_one_distance_check_exceeds_the_budget(monkeypatch, cap
     captured = capsys.readouterr()
     assert 'from the default rules' in captured.out
     assert captured.err.startswith('warning: one distance check takes') and 'budget' in captured.err
+
+
+def _box(size, xyz):
+    return f'<collision><origin xyz="{xyz}"/><geometry><box size="{size}"/></geometry></collision>'
+
+
+def test_two_links_that_rest_close_on_one_shape_pair_and_meet_on_another_are_checked(tmp_path, capsys):
+    """A collar fixed to the arm's mount rests 1 cm from the first arm link's round shape (at
+    every angle of the first joint, which turns that shape about its own axis), and the
+    collar's post stands where that link's paddle sweeps through. The link pair is no
+    ``always`` pair: it is checked, with the shape pair that rests close left out at the start
+    posture, and init still finds a start posture of its own."""
+    urdf = write_urdf(tmp_path / 'r.urdf', 'differential', arm_joints=6)
+    text = urdf.read_text()
+    # the first arm link's cylinder: radius 0.035 about the joint's axis, z 0.13–0.22 in the mount's
+    # frame; a paddle along x, z 0.195–0.215, swept round by the first joint
+    paddle = _box('0.115 0.02 0.02', '0.0925 0 0.105')
+    marker = '<link name="arm_link_1">'
+    start = text.index(marker)
+    end = text.index('</link>', start)
+    text = text[:end] + paddle + text[end:]
+    collar = (
+        '<joint name="collar_joint" type="fixed"><parent link="arm_base_link"/><child link="collar_link"/>'
+        '<origin xyz="0 0 0"/></joint><link name="collar_link"><inertial><mass value="0.1"/>'
+        '<inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>'
+        + _box('0.02 0.02 0.02', '0.055 0 0.145')  # 1 cm from the cylinder, 4 cm below the paddle
+        + _box('0.02 0.02 0.06', '0 0.1 0.205')  # the post, in the paddle's sweep at +90°
+        + '</link></robot>'
+    )
+    urdf.write_text(text.replace('</robot>', collar))
+    pair = frozenset(('collar_link', 'arm_link_1'))
+    choice = choose_pairs(urdf, ARM6, ground_z=0.0, samples=300)
+    assert pair in set(map(frozenset, choice.checked))
+    assert pair not in set(map(frozenset, choice.left_out['always']))
+    out = _init(urdf, tmp_path / 'r.yaml')
+    capsys.readouterr()
+    cfg = load_robot(out)
+    assert pair in {frozenset(p) for p in cfg.collision_pairs}
+    model = CollisionModel.from_robot(cfg)
+    checked = {frozenset(shapes) for shapes in model._pair_shapes}
+    # the resting pair is left out at the start posture, the post and the paddle are checked
+    assert frozenset(('collar_link_0', 'arm_link_1_0')) not in checked
+    assert frozenset(('collar_link_1', 'arm_link_1_1')) in checked
+    # turned onto the post, the model sees the contact
+    q = np.array(cfg.start.arm, dtype=float)
+    q[0] = np.pi / 2
+    d, names = model.closest(q)
+    assert d < 0.0 and frozenset(names) == pair

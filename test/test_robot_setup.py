@@ -533,12 +533,19 @@ def test_tiago_is_set_up_from_its_urdf_as_it_comes(tmp_path, capsys, monkeypatch
     default = CollisionModel(cfg.urdf_path, cfg.arm.joints, cfg.ground_z, cfg.start.arm, package_dirs=cfg.package_dirs)
     assert sum(set(pair) <= hand for pair in default.pairs) > 500  # the default rules check the hand with itself
     assert 0 < len(collision.pairs) < 0.5 * len(default.pairs), (len(collision.pairs), len(default.pairs))
-    assert (
-        CollisionModel(
-            cfg.urdf_path, cfg.arm.joints, margin=-np.inf, pairs=cfg.collision_pairs, package_dirs=cfg.package_dirs
-        ).closest(cfg.start.arm)[0]
-        >= robot_setup.SAFETY  # 0.03 m, or 0.02 m for pairs never 0.03 m apart
+    # the start posture keeps every checked shape pair 0.02 m apart (0.03 m for most) but those
+    # that rest closer by design, within 0.02 m at nearly every posture (the telescoping torso's
+    # column and lift, the lift's top and the upper arm), which the controller leaves out there
+    every = CollisionModel(
+        cfg.urdf_path, cfg.arm.joints, margin=-np.inf, pairs=cfg.collision_pairs, package_dirs=cfg.package_dirs
     )
+    close = every._distances(every._configuration(cfg.start.arm)) < robot_setup.SAFETY
+    assert 0 < close.sum() <= 4
+    lower = np.maximum(cfg.arm.position_lower, -np.pi)
+    upper = np.minimum(cfg.arm.position_upper, np.pi)
+    rng = np.random.default_rng(3)
+    drawn = [every._distances(every._configuration(rng.uniform(lower, upper)))[close] for _ in range(100)]
+    assert np.all((np.array(drawn) < robot_setup.SAFETY).mean(axis=0) >= 0.9)
     assert 'shape pairs checked' in printed
     assert robot_setup.main(['check', str(out)]) == 0
     summary = capsys.readouterr().out

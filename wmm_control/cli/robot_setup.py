@@ -37,8 +37,9 @@ value commented with the rule that chose it:
   left out;
 * a dexterous posture and start state: ``--home``, or else the best of 400 seeded random
   postures within the limits — the one with the largest σ_min of the arm Jacobian among
-  those whose collision shapes keep 3 cm apart over the pairs above, with the tool at least
-  10 cm above the floor;
+  those whose collision shapes keep 3 cm apart over the pairs above (2 cm for shapes never
+  3 cm apart, none for shapes within 2 cm in 95 % of the draws: those rest close by design),
+  with the tool at least 10 cm above the floor;
 * the control period (``--period``, default 0.025 s) and the default method (``--method``,
   default per base family: ``amp`` on a differential base, the method that reaches goals to
   its side; ``task_sharing`` otherwise).
@@ -217,9 +218,11 @@ def _floor_height(tree, wheels, base_link):
 
 def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, package_dirs=()):
     """The documented posture choice (module docstring): ``(q (n,), σ_min)``, clear over the
-    link ``pairs`` (default: the collision model's own rules): :data:`HOME_CLEARANCE` apart, or
-    the safety stage's safety distance for a pair that is that far apart in none of the draws
-    (two links of a wrist)."""
+    link ``pairs`` (default: the collision model's own rules): each shape pair
+    :data:`HOME_CLEARANCE` apart, or the safety stage's safety distance for one that is that far
+    apart in none of the draws (two links of a wrist); one within the safety distance in
+    :data:`~wmm_control.kinematics.collision.ALWAYS_FRACTION` of the draws rests close by
+    design, and the collision model leaves it out at this posture."""
     chain = tree.arm_chain(arm_root, tool)
     names = [j.name for j in chain]
     lower = np.array([max(j.lower, -math.pi) if j.lower is not None else -math.pi for j in chain])
@@ -245,6 +248,10 @@ def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, pa
     if postures:
         dist = np.array(distances).reshape(len(postures), -1)
         need = np.where(dist.max(axis=0, initial=-np.inf) >= HOME_CLEARANCE, HOME_CLEARANCE, SAFETY)
+        # a shape pair within SAFETY in ALWAYS_FRACTION of the draws rests close by design (one
+        # shape pair of two links that meet on another, choose_pairs): the collision model
+        # leaves it out at this posture
+        need[(dist < SAFETY).mean(axis=0) >= ALWAYS_FRACTION] = -np.inf
         clear = np.flatnonzero(np.all(dist >= need, axis=1))
     if not postures or not clear.size:
         raise WmmError(

@@ -498,11 +498,15 @@ def choose_pairs(
        links of the hand), so that their distance never changes (the joints outside the arm are
        held);
     3. ``srdf`` pairs: the ``disable_collisions`` of the SRDF file ``srdf``;
-    4. ``always`` pairs: closer than ``contact`` [m] at :data:`ALWAYS_FRACTION` (95 %, as in
-       MoveIt) or more of ``samples`` seeded random arm postures (uniform within the joint
-       limits, ±π for a continuous joint): in contact by design at the scale of the safety
-       stage, whose safety distance (0.02 m, the default ``contact``) they hardly ever clear,
-       so that it could not hold them apart (the links of a wrist, a shoulder in its housing);
+    4. ``always`` pairs: every shape pair of the two links closer than ``contact`` [m] at
+       :data:`ALWAYS_FRACTION` (95 %, as in MoveIt) or more of ``samples`` seeded random arm
+       postures (uniform within the joint limits, ±π for a continuous joint): in contact by
+       design at the scale of the safety stage, whose safety distance (0.02 m, the default
+       ``contact``) they hardly ever clear, so that it could not hold them apart (the links of
+       a wrist, a shoulder in its housing). Two links of several shapes each may rest close on
+       one shape pair and meet on another (TIAGo's torso top and upper arm): they are checked,
+       and the shape pair that rests close is left out at run time, closer than the collision
+       model's margin at the start posture (:class:`CollisionModel`);
     5. ``never`` pairs: never closer than ``influence`` [m] at those postures.
 
     Raises:
@@ -569,9 +573,9 @@ def choose_pairs(
 
 def _sample_pairs(model, tree, arm_joints, pairs, distances, samples, seed):
     """``(ever_near, apart)`` of each link pair over ``samples`` random arm postures: closer
-    than ``influence`` at one of them; farther than ``contact`` at more than
-    1 − :data:`ALWAYS_FRACTION` of them (``distances`` = (influence, contact)). A pair seen both
-    ways is not computed again."""
+    than ``influence`` at one of them; one of its shape pairs farther than ``contact`` at more
+    than 1 − :data:`ALWAYS_FRACTION` of them (``distances`` = (influence, contact)). A pair seen
+    both ways is not computed again."""
     influence, contact = distances
     enough = (1.0 - ALWAYS_FRACTION) * samples
     joints = [tree.joint(name, 'arm joint') for name in arm_joints]
@@ -581,11 +585,16 @@ def _sample_pairs(model, tree, arm_joints, pairs, distances, samples, seed):
     # each shape pair's link pair (a link pair whose links have no shapes to pair has none)
     of_shape = np.array([index[frozenset(links)] for links in model._pair_links], dtype=int)
     ever_near = np.zeros(len(pairs), dtype=bool)
-    apart = np.zeros(len(pairs), dtype=int)
+    shape_apart = np.zeros(len(of_shape), dtype=int)  # per shape pair
     has_shapes = np.zeros(len(pairs), dtype=bool)
     has_shapes[of_shape] = True
     rng = np.random.default_rng(seed)
     for _ in range(samples):
+        # a link pair is apart as often as the most often apart of its shape pairs: two links
+        # with several shapes each (a torso's column and its top) may rest close on one shape
+        # pair and meet on another, and are then checked
+        apart = np.zeros(len(pairs), dtype=int)
+        np.maximum.at(apart, of_shape, shape_apart)
         open_pairs = ~(ever_near & (apart > enough))
         if not open_pairs[has_shapes].any():
             break
@@ -594,7 +603,9 @@ def _sample_pairs(model, tree, arm_joints, pairs, distances, samples, seed):
         nearest = np.full(len(pairs), np.inf)
         np.minimum.at(nearest, of_shape, dists)
         ever_near |= nearest < influence
-        apart += nearest > contact
+        shape_apart += dists > contact
+    apart = np.zeros(len(pairs), dtype=int)
+    np.maximum.at(apart, of_shape, shape_apart)
     ever_apart = apart > enough
     ever_near[~has_shapes] = ever_apart[~has_shapes] = True  # nothing to check: no cost, kept
     return ever_near, ever_apart
