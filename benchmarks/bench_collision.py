@@ -20,7 +20,6 @@ import argparse
 import sys
 import tempfile
 import time
-from importlib.metadata import distribution
 from pathlib import Path
 from unittest import mock
 
@@ -28,8 +27,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a source checkout
+sys.path.insert(0, str(ROOT / 'benchmarks'))  # the benchmarks' shared code
 
-from wmm_control.cli.robot_setup import init_robot  # noqa: E402
+from shared import TIAGO, set_up_tiago  # noqa: E402
 from wmm_control.kinematics import collision  # noqa: E402
 from wmm_control.kinematics.collision import CollisionModel, choose_pairs  # noqa: E402
 from wmm_control.robot_config import load_robot  # noqa: E402
@@ -55,11 +55,10 @@ def choose(geometry, cfg):
         return choose_pairs(*call, package_dirs=cfg.package_dirs)
 
 
-def bench(urdf, share, postures, seed, folder):
+def bench(name, postures, seed, folder):
     start = time.perf_counter()
-    out = Path(folder) / f'{urdf.stem}.yaml'
-    init_robot(urdf, 'differential', 'torso_fixed_link', 'arm_tool_link', out, package_dirs=[share])
-    print(f'== {urdf.name}: init {time.perf_counter() - start:.1f} s')
+    out = set_up_tiago(name, folder)
+    print(f'== {TIAGO[name]}: init {time.perf_counter() - start:.1f} s')
     cfg = load_robot(out)
     checked = []
     for geometry in GEOMETRIES:
@@ -101,11 +100,9 @@ def main():
     parser.add_argument('--postures', type=int, default=200)
     parser.add_argument('--seed', type=int, default=1)
     args = parser.parse_args()
-    share = Path(str(distribution('example-robot-data').locate_file('cmeel.prefix/share')))
-    robots = share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots'
     with tempfile.TemporaryDirectory() as folder:
-        for name in ('tiago.urdf', 'tiago_no_hand.urdf'):
-            bench(robots / name, share, args.postures, args.seed, folder)
+        for name in TIAGO:
+            bench(name, args.postures, args.seed, folder)
 
 
 if __name__ == '__main__':

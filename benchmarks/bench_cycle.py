@@ -50,11 +50,17 @@ longest cycle, each possibly from a different row; in CPU time, then on the wall
 
     python benchmarks/bench_cycle.py [--states 300] [--robots steerable,...] [--methods pinv,...]
                                      [--kinds free,self,obstacles]
+
+**The robots**: every shipped one, and PAL's TIAGo with its hand (``tiago``, a real description
+with mesh collision shapes, 779 pairs of shapes checked) where the ``example-robot-data`` wheel
+is installed (the test requirements install it), set up with ``wmm_robot init`` as
+docs/robots.md gives it; ``tiago_no_hand`` on request.
 """
 
 import argparse
 import functools
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,7 +71,7 @@ from scipy.spatial.transform import Rotation
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # the benchmarks' shared code
 
-from shared import PinkStep, closed_loop_states, pink_installed  # noqa: E402
+from shared import TIAGO, PinkStep, closed_loop_states, pink_installed, set_up_tiago, tiago_share  # noqa: E402
 from wmm_control.base import make_base_controller  # noqa: E402
 from wmm_control.cycle import Cycle  # noqa: E402
 from wmm_control.geometry import quaternion_from_matrix, quaternion_from_yaw  # noqa: E402
@@ -251,13 +257,21 @@ def _cells(stats):
 
 
 def run(robots, methods, kinds, count, seed=0):
-    """Time every robot × method × kind; print the tables and the last line. Returns the rows."""
+    """Time every robot × method × kind; print the tables and the last line. Returns the rows.
+    ``robots``: shipped robot names, and :data:`~shared.TIAGO` names (set up here with ``init``)."""
+    with tempfile.TemporaryDirectory() as folder:
+        robots = [set_up_tiago(name, folder) if name in TIAGO else name for name in robots]
+        return _run(robots, methods, kinds, count, seed)
+
+
+def _run(robots, methods, kinds, count, seed):
     print(f'## The whole cycle, {count} states of each kind: median / p99 / max [µs], ratios to pink\'s median\n')
     print('| robot | method | kind | wall | thread CPU | wall: median, p99 / pink | CPU: median, p99 / pink |')
     print('|---|---|---|---|---|---|---|')
     rows, pinks = [], {}
-    for name in robots:
-        cfg = load_robot(name)
+    for robot in robots:
+        cfg = load_robot(robot)
+        name = cfg.name
         rng = np.random.default_rng(seed)
         samples = {kind: STATES[kind](cfg, count, rng) for kind in kinds}
         steps = {'plain': PinkStep(cfg), 'barrier': PinkStep(cfg, barrier=True)}
@@ -313,11 +327,16 @@ def _choice(text, allowed, what):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--states', type=int, default=300, help='states of each kind per robot (default: %(default)s)')
-    parser.add_argument('--robots', default=','.join(robot_names()), help='comma-separated (default: %(default)s)')
+    robots = list(robot_names()) + (list(TIAGO) if tiago_share() is not None else [])
+    parser.add_argument(
+        '--robots',
+        default=','.join(robots[:-1]),
+        help='comma-separated (default: %(default)s; tiago_no_hand too where example-robot-data is installed)',
+    )
     parser.add_argument('--methods', default=','.join(METHODS), help='comma-separated (default: %(default)s)')
     parser.add_argument('--kinds', default=','.join(KINDS), help='comma-separated (default: %(default)s)')
     args = parser.parse_args(argv)
-    robots = _choice(args.robots, robot_names(), 'robots')
+    robots = _choice(args.robots, robots, 'robots')
     methods, kinds = _choice(args.methods, METHODS, 'methods'), _choice(args.kinds, KINDS, 'kinds')
     if args.states <= WARM_UP:
         raise SystemExit(f'--states must be more than {WARM_UP}, got {args.states}')

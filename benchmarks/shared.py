@@ -8,10 +8,14 @@
 - :func:`bench_pink`: that step's wall time while it tracks a moving target.
 - :func:`closed_loop_states`: the states of a closed-loop run (direct engine) through a goal
   in the arm's reach and one that needs the base, to replay through a method.
+- :func:`set_up_tiago`: PAL's TIAGo from the ``example-robot-data`` wheel, set up with
+  ``wmm_robot init`` as docs/robots.md gives it (:data:`TIAGO` names its two descriptions).
 """
 
 import importlib.util
 import time
+from importlib.metadata import PackageNotFoundError, distribution
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -22,11 +26,48 @@ from wmm_control.geometry import matrix_from_quaternion
 from wmm_control.resolvers import PoseTarget, make_resolver
 from wmm_control.robot_config import load_robot
 
-__all__ = ['PinkStep', 'pink_installed', 'bench_pink', 'closed_loop_states', 'OFFSETS']
+__all__ = [
+    'PinkStep',
+    'pink_installed',
+    'bench_pink',
+    'closed_loop_states',
+    'OFFSETS',
+    'TIAGO',
+    'tiago_share',
+    'set_up_tiago',
+]
 
 #: The two goals of :func:`closed_loop_states`, from the start pose of the end effector [m]:
 #: one within the arm's reach, one that needs the base.
 OFFSETS = (np.array([0.1, 0.05, -0.05]), np.array([1.5, -1.0, 0.0]))
+
+
+#: TIAGo's descriptions in the example-robot-data wheel, by the names the benchmarks give them:
+#: with its Hey5 hand, and without.
+TIAGO = {'tiago': 'tiago.urdf', 'tiago_no_hand': 'tiago_no_hand.urdf'}
+
+
+def tiago_share() -> Path | None:
+    """The ``share`` folder of the example-robot-data wheel (it holds example-robot-data/robots/…);
+    None when the wheel is not installed."""
+    try:
+        return Path(str(distribution('example-robot-data').locate_file('cmeel.prefix/share')))
+    except PackageNotFoundError:
+        return None
+
+
+def set_up_tiago(name, folder) -> Path:
+    """``wmm_robot init`` of TIAGo's description ``name`` (a key of :data:`TIAGO`) as
+    docs/robots.md gives it, written to ``folder``/<name>.yaml; returns that path."""
+    from wmm_control.cli.robot_setup import init_robot
+
+    share = tiago_share()
+    if share is None:
+        raise SystemExit('TIAGo needs the example-robot-data wheel (pip install example-robot-data)')
+    urdf = share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots' / TIAGO[name]
+    out = Path(folder) / f'{name}.yaml'
+    init_robot(urdf, 'differential', 'torso_fixed_link', 'arm_tool_link', out, package_dirs=[share])
+    return out
 
 
 def pink_installed() -> bool:
