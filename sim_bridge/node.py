@@ -201,9 +201,7 @@ class SimNode(Node):
 
     def _lockstep_poll(self):
         if not self.wait.started:
-            topics = [f'{g}_controller/commands' for g in self.wait.groups]
-            connected = all(self.count_publishers(t) > 0 for t in topics)
-            if connected or time.monotonic() - self._wall_start > self.p.lockstep_timeout:
+            if self._controllers_listening() or time.monotonic() - self._wall_start > self.p.lockstep_timeout:
                 self.wait.started = True
                 self._publish_state()
             return
@@ -213,6 +211,20 @@ class SimNode(Node):
                 throttle_duration_sec=5.0,
             )
             self._advance()
+
+    def _controllers_listening(self) -> bool:
+        """Every awaited group's command topic has a publisher, and each node that publishes one
+        subscribes to the joint states: the first state reaches them all (a node whose
+        publisher is seen before its subscription would miss it, and the first step would wait
+        out ``lockstep_timeout``)."""
+        writers = set()
+        for group in self.wait.groups:
+            found = self.get_publishers_info_by_topic(self.resolve_topic_name(f'{group}_controller/commands'))
+            if not found:
+                return False
+            writers |= {(i.node_namespace, i.node_name) for i in found}
+        readers = self.get_subscriptions_info_by_topic(self.out.pub_joints.topic_name)
+        return writers <= {(i.node_namespace, i.node_name) for i in readers}
 
     def _advance(self):
         self.wait.end()
