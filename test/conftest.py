@@ -1,5 +1,8 @@
 """Shared fixtures: one kinematic model per robot, built once per session; a ROS harness per test."""
 
+from importlib.metadata import PackageNotFoundError, distribution
+from pathlib import Path
+
 import pytest
 
 from wmm_control.kinematics import KinematicModel
@@ -29,3 +32,16 @@ def ros():
     harness = RosHarness()
     yield harness
     harness.close()
+
+
+@pytest.fixture(scope='session')
+def tiago_robots():
+    """The folder of TIAGo's URDFs in the example-robot-data wheel
+    (``tiago.urdf``, ``tiago_no_hand.urdf``); its ``parents[3]`` is the ``share`` folder that holds
+    ``example-robot-data/``. Skips where the wheel is not installed (scripts/requirements-test.txt
+    installs it)."""
+    try:
+        share = Path(str(distribution('example-robot-data').locate_file('cmeel.prefix/share')))
+    except PackageNotFoundError:
+        pytest.skip('example-robot-data is not installed (scripts/requirements-test.txt)')
+    return share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots'

@@ -5,8 +5,6 @@ description (TIAGo's) no triangle soup is left, the broad phase's bounding spher
 every hull, and the simulator's ground truth (PyBullet) sees the same hulls."""
 
 import xml.etree.ElementTree as ET
-from importlib.metadata import PackageNotFoundError, distribution
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -131,20 +129,11 @@ def test_a_hull_is_a_closed_outward_polytope_and_a_flat_mesh_stays_as_it_is():
     assert isinstance(square.geometryObjects[0].geometry, pin.coal.BVHModelBase)
 
 
-def _tiago_no_hand() -> tuple[Path, Path]:
-    """``(URDF, share folder)`` of TIAGo without its hand (example-robot-data)."""
-    try:
-        share = Path(str(distribution('example-robot-data').locate_file('cmeel.prefix/share')))
-    except PackageNotFoundError:
-        pytest.skip('example-robot-data is not installed (scripts/requirements-test.txt)')
-    return share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots' / 'tiago_no_hand.urdf', share
-
-
-def test_the_broad_phase_holds_the_hulls_of_a_real_description():
+def test_the_broad_phase_holds_the_hulls_of_a_real_description(tiago_robots):
     """TIAGo's collision model: every mesh a hull, each inside its bounding sphere; at random arm
     postures the broad phase gives the exact distance of every pair within reach and a lower
     bound for the others; some postures put the arm's hull into the body (negative distances)."""
-    urdf, share = _tiago_no_hand()
+    urdf, share = tiago_robots / 'tiago_no_hand.urdf', tiago_robots.parents[3]
     model = CollisionModel(urdf, TIAGO_ARM, ground_z=0.0, margin=-np.inf, package_dirs=[share])
     objects = model.geom.geometryObjects
     hulls = [obj.geometry for obj in objects if isinstance(obj.geometry, pin.coal.ConvexBase)]
@@ -171,13 +160,13 @@ def test_the_broad_phase_holds_the_hulls_of_a_real_description():
     assert deepest < -0.005
 
 
-def test_the_simulator_judges_contact_on_the_same_hulls():
+def test_the_simulator_judges_contact_on_the_same_hulls(tiago_robots):
     """PyBullet, the simulator's ground truth, takes TIAGo's collision meshes as their hulls too:
     at random arm postures each link pair within 0.1 m is as far apart there as in the
     collision model, less PyBullet's collision margins (1 mm a shape), contacts included; the
     triangle soups would be up to a tenth of a metre off, reporting a link inside another as
     apart."""
-    urdf, share = _tiago_no_hand()
+    urdf, share = tiago_robots / 'tiago_no_hand.urdf', tiago_robots.parents[3]
     model = CollisionModel(urdf, TIAGO_ARM, margin=-np.inf, package_dirs=[share])
     cid = p.connect(p.DIRECT)
     try:

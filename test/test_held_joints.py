@@ -265,15 +265,10 @@ def test_joint_states_and_tf_carry_the_held_joints(ros, head_robot, tmp_path):
 TIAGO_HOME = [0.15, 0.2, -1.34, -0.2, 1.94, -1.57, 1.37, 0.0]
 
 
-def test_tiago_init_holds_its_head_and_fingers_and_a_held_value_turns_the_head(tmp_path, monkeypatch):
-    from importlib.metadata import PackageNotFoundError, distribution
-
-    try:
-        share = Path(str(distribution('example-robot-data').locate_file('cmeel.prefix/share')))
-    except PackageNotFoundError:
-        pytest.skip('example-robot-data is not installed (scripts/requirements-test.txt)')
+def test_tiago_init_holds_its_head_and_fingers_and_a_held_value_turns_the_head(tiago_robots, tmp_path, monkeypatch):
+    share = tiago_robots.parents[3]
     monkeypatch.delenv('ROS_PACKAGE_PATH', raising=False)
-    urdf = share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots' / 'tiago.urdf'
+    urdf = tiago_robots / 'tiago.urdf'
     out = tmp_path / 'tiago.yaml'
     robot_setup.init_robot(
         urdf,

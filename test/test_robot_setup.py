@@ -5,7 +5,6 @@ import re
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -500,23 +499,12 @@ def test_the_new_robots_reach_a_goal_that_needs_the_base_with_wheel_contact_phys
 
 
 # ---------------------------------------------------------------- TIAGo (example-robot-data)
-def _tiago_share():
-    """The ``share`` folder of the example-robot-data wheel (it holds example-robot-data/robots/…)."""
-    from importlib.metadata import PackageNotFoundError, distribution
-
-    try:
-        return Path(str(distribution('example-robot-data').locate_file('cmeel.prefix/share')))
-    except PackageNotFoundError:
-        pytest.skip('example-robot-data is not installed (scripts/requirements-test.txt)')
-
-
-def test_tiago_is_set_up_from_its_urdf_as_it_comes(tmp_path, capsys, monkeypatch):
+def test_tiago_is_set_up_from_its_urdf_as_it_comes(tiago_robots, tmp_path, capsys, monkeypatch):
     """TIAGo with its hand, with the commands of docs/robots.md: the wheels found, the base frame
     its root, amp by default, the hand's rigid pairs left out, a start posture found."""
     monkeypatch.delenv('ROS_PACKAGE_PATH', raising=False)
     monkeypatch.delenv('AMENT_PREFIX_PATH', raising=False)
-    share = _tiago_share()
-    urdf = share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots' / 'tiago.urdf'
+    share, urdf = tiago_robots.parents[3], tiago_robots / 'tiago.urdf'
     out = tmp_path / 'tiago.yaml'
     args = ['init', str(urdf), '--base', 'differential', '--arm-root', 'torso_fixed_link', '--tool', 'arm_tool_link']
     assert robot_setup.main(args + ['--out', str(out)]) == 2  # the meshes' package is not known yet
@@ -552,11 +540,10 @@ def test_tiago_is_set_up_from_its_urdf_as_it_comes(tmp_path, capsys, monkeypatch
     assert 'torso_lift_joint' in summary and 'm, m/s, m/s²' in summary
 
 
-def test_tiago_without_its_hand_reaches_a_goal_to_its_side_with_the_default_method(tmp_path):
+def test_tiago_without_its_hand_reaches_a_goal_to_its_side_with_the_default_method(tiago_robots, tmp_path):
     """The documented commands only, then a goal 1.5 m to the side of the gripper: a differential
     base gets there by turning (amp, init's default for it), within 2 mm on the ground truth."""
-    share = _tiago_share()
-    urdf = share / 'example-robot-data' / 'robots' / 'tiago_description' / 'robots' / 'tiago_no_hand.urdf'
+    share, urdf = tiago_robots.parents[3], tiago_robots / 'tiago_no_hand.urdf'
     out = tmp_path / 'tiago_no_hand.yaml'
     args = ['init', str(urdf), '--base', 'differential', '--arm-root', 'torso_fixed_link', '--tool', 'arm_tool_link']
     assert robot_setup.main(args + ['--package-dir', str(share), '--out', str(out)]) == 0
