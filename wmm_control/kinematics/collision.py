@@ -147,7 +147,9 @@ class CollisionModel:
             None: their defaults (:func:`~wmm_control.robot_config.held_joint_positions`).
         kinematics: the :class:`~wmm_control.kinematics.model.KinematicModel` of the same URDF,
             arm and held joints whose configuration this model reads (a method's, shared with
-            its safety stage); None: a model of its own.
+            its safety stage); None: a model of its own. A question at another state updates
+            it to that state (building this model leaves it at the start posture, the base at
+            the origin).
 
     Raises:
         ConfigError: pinocchio cannot load the URDF or its collision shapes, or a mesh cannot be
