@@ -35,8 +35,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a source checkout
 
 from wmm_control.cli.robot_setup import init_robot  # noqa: E402
-from wmm_control.kinematics import KinematicModel, collision  # noqa: E402
+from wmm_control.kinematics import collision  # noqa: E402
 from wmm_control.kinematics.collision import CollisionModel, choose_pairs  # noqa: E402
+from wmm_control.kinematics.model import KinematicModel  # noqa: E402
 from wmm_control.robot_config import load_robot  # noqa: E402
 
 INFLUENCE = 0.10
