@@ -9,7 +9,11 @@ hulls), then one ``CollisionModel.within`` at the influence distance (0.10 m), t
 stage's call each cycle, at the same seeded random arm postures for the two geometries, taken
 in turn posture by posture so that whatever else loads the machine falls on both alike; the
 floor included and the start state's contacts left out, as the controller builds the model;
-for the pairs ``init`` chose and for the default rules (no ``collision.pairs``). Also: how
+for the pairs ``init`` chose and for the default rules (no ``collision.pairs``). Each of those
+models has a kinematic model of its own, which each check updates to its posture. The hulls'
+check is then timed as a cycle makes it, on the method's kinematic model after the method's
+update (timed apart: the check reads its joint placements and Jacobians), in turn with the
+same check on a kinematic model of its own. Also: how
 ``init`` chooses the pairs on each geometry, and the deepest overlap seen (a triangle soup
 never reports one).
 
@@ -17,6 +21,7 @@ never reports one).
 """
 
 import argparse
+import functools
 import sys
 import tempfile
 import time
@@ -32,6 +37,7 @@ sys.path.insert(0, str(ROOT / 'benchmarks'))  # the benchmarks' shared code
 from shared import TIAGO, set_up_tiago  # noqa: E402
 from wmm_control.kinematics import collision  # noqa: E402
 from wmm_control.kinematics.collision import CollisionModel, choose_pairs  # noqa: E402
+from wmm_control.kinematics.model import KinematicModel  # noqa: E402
 from wmm_control.robot_config import load_robot  # noqa: E402
 
 INFLUENCE = 0.10
@@ -93,6 +99,39 @@ def bench(name, postures, seed, folder):
                 f'{np.median(row) * 1e3:.2f} ms, p90 {np.percentile(row, 90) * 1e3:.2f} ms, max '
                 f'{row.max() * 1e3:.2f} ms; closest over the postures {deepest * 1e3:.1f} mm'
             )
+        shared(cfg, pairs, rule, q_arms)
+
+
+def shared(cfg, pairs, rule, q_arms):
+    """The hulls' check as the safety stage makes it in a cycle, on the method's kinematic model
+    after the method's update at the posture (the update timed apart: the check reads its joint
+    placements and Jacobians), in turn posture by posture with the same check on a kinematic
+    model of its own (which the check updates)."""
+    kinematics = KinematicModel(cfg)
+    build = functools.partial(
+        CollisionModel,
+        cfg.urdf_path,
+        cfg.arm.joints,
+        cfg.ground_z,
+        cfg.start.arm,
+        pairs=pairs,
+        package_dirs=cfg.package_dirs,
+    )
+    alone, on_method = build(), build(kinematics=kinematics)
+    times = np.zeros((3, len(q_arms)))
+    for i, q in enumerate(q_arms):
+        t0 = time.perf_counter()
+        alone.within(q, INFLUENCE, np.zeros(3))
+        t1 = time.perf_counter()
+        kinematics.update(np.zeros(3), q)
+        t2 = time.perf_counter()
+        on_method.within(q, INFLUENCE, np.zeros(3))
+        times[:, i] = t1 - t0, t2 - t1, time.perf_counter() - t2
+    alone_ms, update_ms, shared_ms = np.median(times, axis=1) * 1e3
+    print(
+        f'  {rule}, convex hulls: one check with its own update median {alone_ms:.3f} ms; after the '
+        f"method's update ({update_ms:.3f} ms) {shared_ms:.3f} ms"
+    )
 
 
 def main():

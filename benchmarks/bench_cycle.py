@@ -144,7 +144,8 @@ def free_states(cfg, count, rng):
 
 def self_states(cfg, count, rng):
     """``count`` random arm postures near the robot's own body (see the module docstring)."""
-    stage, model, arm = SafetyStage.for_robot(cfg), KinematicModel(cfg), cfg.arm
+    model, arm = KinematicModel(cfg), cfg.arm
+    stage = SafetyStage.for_robot(cfg, kinematics=model)
     lower = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
     upper = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
     pose = np.asarray(cfg.start.base_pose, dtype=float)
@@ -163,7 +164,8 @@ def obstacle_states(cfg, count, rng):
     """``count`` random base poses near ``table_pillar``'s obstacles (see the module docstring)."""
     obstacles = load_obstacles(OBSTACLES)
     names = {o.name for o in obstacles}
-    stage, model, arm = SafetyStage.for_robot(cfg, obstacles=obstacles), KinematicModel(cfg), cfg.arm
+    model, arm = KinematicModel(cfg), cfg.arm
+    stage = SafetyStage.for_robot(cfg, obstacles=obstacles, kinematics=model)
     q = np.asarray(cfg.start.arm, dtype=float)
     out = []
     while len(out) < count:

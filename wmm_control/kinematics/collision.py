@@ -2,11 +2,16 @@
 obstacles, and how fast those distances change with the arm's joint rates and the base's twist.
 
 Built on pinocchio's collision model of the URDF's ``<collision>`` shapes (coal, in the
-``pin`` wheel), each mesh taken as its convex hull (:func:`collision_geometry`), in the frame
-of the URDF's root link (``base_link``): the body does not move in it, and neither does the
-floor, since the base moves in its own plane; obstacles
-(:mod:`~wmm_control.kinematics.obstacles`, fixed in the world) are placed in it from the
-base's pose at each call. Links split into
+``pin`` wheel), each mesh taken as its convex hull (:func:`collision_geometry`), on the
+:class:`~wmm_control.kinematics.model.KinematicModel`'s own reduced model: the planar root
+joint (x, y, θ) carries the body's shapes and the arm's joints the arm's, so every shape is in
+the world frame. The floor (a half-space at ``ground_z``, the height of the floor in the root
+link's frame, which moves in the world's horizontal plane at height 0: the same height in the
+world) and the obstacles (:mod:`~wmm_control.kinematics.obstacles`, fixed in the world) are
+placed once, when set. One configuration a cycle: built on a method's kinematic model, a
+question at the state the method's update is at reads that update's joint placements and
+joint Jacobians (``data.oMi``, ``data.J``) and runs no kinematics of its own; the shapes are
+placed from them once per update. Links split into
 
 * *moving* links: the links an arm joint moves (the arm's links, the tool and what is fixed
   to them);
@@ -42,7 +47,8 @@ triangle soups would report 0 however deep they overlap).
 
 Each pair's distance ``d`` comes with its rate ``ḋ = j · q̇_arm + j_b · (vx, vy, ω)``:
 ``n · (v_b − v_a)`` at the two nearest points, ``n`` the unit vector from a's nearest point
-to b's, the base's twist in its own frame. For two points on the robot the base's share
+to b's, from the joint Jacobians' columns (the planar root's over the world's (ẋ, ẏ, θ̇),
+turned into the base's twist in its own frame). For two points on the robot the base's share
 cancels; against the floor it is zero (the base moves parallel to it).
 """
 
@@ -57,11 +63,10 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull, QhullError
 
 from wmm_control.errors import ConfigError
-from wmm_control.geometry import set_joint_position
-from wmm_control.kinematics.model import held_configuration
-from wmm_control.kinematics.obstacles import Obstacle, around_base
+from wmm_control.geometry import rotation_z
+from wmm_control.kinematics.model import N_BASE, KinematicModel
+from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.resources import load_geometry
-from wmm_control.robot_config import held_joint_positions
 from wmm_control.urdf import UrdfTree
 
 __all__ = [
@@ -125,7 +130,9 @@ class CollisionModel:
     Args:
         urdf_path: the robot's URDF.
         arm_joints: the arm's joint names, root first.
-        ground_z: height of the floor in the root link's frame [m]; None: no floor pairs.
+        ground_z: height of the floor in the root link's frame [m], which the base moves in
+            the world's horizontal plane: the floor is at that height in the world; None: no
+            floor pairs.
         start_arm: the arm posture whose pairs closer than ``margin`` touch by design and are
             not checked (default: every joint at zero).
         margin: [m].
@@ -138,6 +145,11 @@ class CollisionModel:
         held: [rad or m] the joints outside the arm (head, fingers) by name, at the positions
             they are held at (:attr:`~wmm_control.robot_config.RobotConfig.held_joints`);
             None: their defaults (:func:`~wmm_control.robot_config.held_joint_positions`).
+        kinematics: the :class:`~wmm_control.kinematics.model.KinematicModel` of the same URDF,
+            arm and held joints whose configuration this model reads (a method's, shared with
+            its safety stage); None: a model of its own. A question at another state updates
+            it to that state (building this model leaves it at the start posture, the base at
+            the origin).
 
     Raises:
         ConfigError: pinocchio cannot load the URDF or its collision shapes, or a mesh cannot be
@@ -145,9 +157,11 @@ class CollisionModel:
     """
 
     @classmethod
-    def from_robot(cls, robot, margin: float = 0.02, obstacles=()):
+    def from_robot(cls, robot, margin: float = 0.02, obstacles=(), kinematics=None):
         """The model of a :class:`~wmm_control.robot_config.RobotConfig`: its floor, its pairs
-        (``collision.pairs`` of the YAML when given), and its start state's contacts left out."""
+        (``collision.pairs`` of the YAML when given), and its start state's contacts left out;
+        on ``kinematics`` (the robot's :class:`~wmm_control.kinematics.model.KinematicModel`)
+        when given."""
         return cls(
             robot.urdf_path,
             robot.arm.joints,
@@ -158,6 +172,7 @@ class CollisionModel:
             pairs=robot.collision_pairs,
             package_dirs=robot.package_dirs,
             held=robot.held_joints,
+            kinematics=kinematics,
         )
 
     def __init__(
@@ -171,22 +186,28 @@ class CollisionModel:
         pairs=None,
         package_dirs=(),
         held=None,
+        kinematics=None,
     ):
         path = str(urdf_path)
-        try:
-            self.model = pin.buildModelFromUrdf(path)
-        except (RuntimeError, ValueError) as exc:
-            raise ConfigError(f'pinocchio could not load {path}: {exc}') from exc
-        self.geom = collision_geometry(self.model, path, package_dirs)
-        model = self.model
         tree = UrdfTree(path)
-        # the joints outside the arm stay where they are held; the arm's are set per call
-        self._held_q = held_configuration(model, held_joint_positions(tree, arm_joints) if held is None else held)
+        arm_joints = tuple(arm_joints)
+        if kinematics is None:
+            if tree.root_link is None:
+                raise ConfigError(f'{path}: the URDF has no single root link')
+            # the root link as its end effector too: this model reads no end effector
+            kinematics = KinematicModel.from_urdf(path, arm_joints, tree.root_link, tree.root_link, held)
+        elif tuple(kinematics.model.names)[2:] != arm_joints:  # after the universe and the planar root
+            raise ConfigError(f'the kinematic model moves {list(kinematics.model.names[2:])}, not {list(arm_joints)}')
+        #: the configuration this model reads: every distance and rate is of its last update
+        self.kinematics = kinematics
+        self.model = model = kinematics.model
+        # the shapes on the kinematic model: the planar root joint carries the body's, the arm's
+        # joints the arm's; the joints outside the arm are locked at their held positions
+        self.geom = kinematics.reduce_geometry(collision_geometry(kinematics.full_model, path, package_dirs))
         parent_link = {j.child: j.parent for j in tree.joints.values()}
         arm_ids = [model.getJointId(n) for n in arm_joints]
         self.n_arm = len(arm_ids)
         self._idx_q = [model.joints[j].idx_q for j in arm_ids]
-        self._nq = [model.joints[j].nq for j in arm_ids]
         self._idx_v = np.array([model.joints[j].idx_v for j in arm_ids])
         moving_joints = set(arm_ids)
         for j in range(1, model.njoints):  # joints below an arm joint move with it
@@ -221,10 +242,10 @@ class CollisionModel:
         pairs = shape_pairs
         self._link_of = link_of
         self._n_robot = len(moving)  # geometry objects of the robot's own links
-        self.data = model.createData()
         for a, b in pairs:
             self.geom.addCollisionPair(pin.CollisionPair(a, b))
         self.geom_data = pin.GeometryData(self.geom)
+        self._placed = None
         self._results = list(self.geom_data.distanceResults)
         start = self._distances(self._configuration(np.zeros(self.n_arm) if start_arm is None else start_arm))
         keep = [k for k, d in enumerate(start) if d >= margin]
@@ -236,14 +257,15 @@ class CollisionModel:
             self.geom.addCollisionPair(pin.CollisionPair(*pairs[k]))
         self._robot_geom = self.geom.copy()
         self._robot_link_of = list(link_of)
-        # [joint, i]: arm joint i moves the joint (none moves the root: the body, the floor, the obstacles)
+        # [joint, i]: arm joint i moves the joint (none moves the planar root, which carries the
+        # body, nor the world's, which holds the floor and the obstacles)
         self._moved_by = np.array([[a in model.supports[j] for a in arm_ids] for j in range(model.njoints)])
         self.obstacles: tuple[Obstacle, ...] = ()
         self.set_obstacles(obstacles)
 
     def set_obstacles(self, obstacles) -> None:
         """Check the robot against ``obstacles`` (world frame) from now on, instead of the
-        previous ones."""
+        previous ones: placed here, once, in the world frame the whole model is in."""
         obstacles = tuple(obstacles)
         geom = self._robot_geom.copy()
         link_of = list(self._robot_link_of)
@@ -258,6 +280,7 @@ class CollisionModel:
                 geom.addCollisionPair(pin.CollisionPair(a, gid))
         self.geom, self._link_of, self.obstacles = geom, link_of, obstacles
         self._within_memo: tuple = (None, None)  # (arguments, answer) of the last within()
+        self._placed = None  # the kinematic model's revision the shapes were last placed at
         self._fixed = self._world_fixed | set(self._obstacle_ids)
         self.geom_data = pin.GeometryData(geom)
         for request in self.geom_data.distanceRequests:
@@ -298,31 +321,51 @@ class CollisionModel:
         #: a pair on the robot as it is, and a shape's height over the floor
         self._pair_base_moves = np.array(obstacle, dtype=float)
 
-    def _place_obstacles(self, base_pose) -> None:
-        """Obstacles into the root frame, the base at ``base_pose`` (x, y, θ) in the world."""
-        if not self.obstacles:
-            return
-        if base_pose is None:
-            raise ValueError('CollisionModel: the base pose is needed to place the obstacles')
-        objects = self.geom.geometryObjects
-        for gid, placement in zip(self._obstacle_ids, around_base(self.obstacles, base_pose)):
-            objects[gid].placement = placement
-
     @property
     def pairs(self) -> list[tuple[str, str]]:
         """The checked pairs, by link names."""
         return list(self._pair_links)
 
+    @property
+    def data(self) -> pin.Data:
+        """The kinematic model's data: its joints' placements and Jacobians at its last update."""
+        return self.kinematics.data
+
     def _configuration(self, q_arm) -> np.ndarray:
-        q = self._held_q.copy()
-        for iq, nq, val in zip(self._idx_q, self._nq, np.asarray(q_arm, dtype=float).tolist()):
-            set_joint_position(q, iq, nq, val)
+        """The configuration ``q = (x, y, θ, q_arm)`` of arm joints ``q_arm``, the base at the origin."""
+        return self._state(q_arm, np.zeros(N_BASE))
+
+    def _state(self, q_arm, base_pose) -> np.ndarray:
+        """``q = (x, y, θ, q_arm)``; without ``base_pose`` (no obstacles: no distance depends on
+        it) the kinematic model's current one, the origin before its first update."""
+        q = np.zeros(N_BASE + self.n_arm)
+        q[N_BASE:] = q_arm
+        if base_pose is not None:
+            q[:N_BASE] = base_pose
+        elif self.obstacles:
+            raise ValueError('CollisionModel: the base pose is needed with obstacles')
+        else:
+            current = self.kinematics.state
+            if current is not None:
+                q[:N_BASE] = current[:N_BASE]
         return q
 
+    def _place(self, q) -> None:
+        """Every shape where it is at ``q = (x, y, θ, q_arm)``: the kinematic model updated to ``q``
+        unless it is there already (a method's update of the cycle), then the shapes placed from
+        its joints' placements, once per update."""
+        kinematics = self.kinematics
+        if not np.array_equal(kinematics.state, q):
+            kinematics.update(q[:N_BASE], q[N_BASE:])
+        if self._placed != kinematics.revision:
+            pin.updateGeometryPlacements(self.model, kinematics.data, self.geom, self.geom_data)
+            self._placed = kinematics.revision
+
     def _distances(self, q) -> np.ndarray:
-        """Every checked pair's distance at the full configuration ``q``."""
+        """Every checked pair's distance at the configuration ``q`` (:meth:`_configuration`)."""
+        self._place(q)
         self.geom_data.setActiveCollisionPairs(self.geom, self._all_pairs_map(), True)
-        pin.computeDistances(self.model, self.data, self.geom, self.geom_data, q)
+        pin.computeDistances(self.geom, self.geom_data)
         return np.array([r.min_distance for r in self._results])
 
     def _all_pairs_map(self) -> np.ndarray:
@@ -333,13 +376,13 @@ class CollisionModel:
         return everything
 
     def _distances_within(self, q, reach: float, subset=None) -> np.ndarray:
-        """Each checked pair's distance at the full configuration ``q``: exact for the pairs whose
+        """Each checked pair's distance at the configuration ``q`` (:meth:`_configuration`): exact for the pairs whose
         bounding spheres are closer than ``reach`` [m] (the broad phase, over every pair in one
         numpy expression); for the others, the gap between their spheres, a lower bound above
         ``reach``, with coal's narrow phase skipped.
         With ``subset`` (a boolean array over the pairs), only those pairs are exact."""
         geom, geom_data = self.geom, self.geom_data
-        pin.updateGeometryPlacements(self.model, self.data, geom, geom_data, q)
+        self._place(q)
         placements = geom_data.oMg
         centres = np.array([m.translation for m in placements])
         for k in self._sphere_offset:  # shapes whose bounding sphere is off their frame's origin (meshes)
@@ -365,8 +408,7 @@ class CollisionModel:
         None)`` when no pair is checked."""
         if not self._results:
             return float('inf'), None
-        self._place_obstacles(base_pose)
-        dists = self._distances(self._configuration(q_arm))
+        dists = self._distances(self._state(q_arm, base_pose))
         k = int(np.argmin(dists))
         return float(dists[k]), self._pair_links[k]
 
@@ -392,9 +434,7 @@ class CollisionModel:
         n_arm = self.n_arm
         if not self._results:
             return _no_pairs(n_arm), float('inf'), None
-        self._place_obstacles(base_pose)
-        model, data = self.model, self.data
-        q = self._configuration(q_arm)
+        q = self._state(q_arm, base_pose)
         dists = self._distances_within(q, influence)
         k_min = int(np.argmin(dists))
         closest = (float(dists[k_min]), self._pair_links[k_min])
@@ -407,20 +447,23 @@ class CollisionModel:
             points[0, i], points[1, i] = result.getNearestPoint1(), result.getNearestPoint2()
             normals[i] = result.normal  # coal's: from the first shape to the second
         # ḋ = n · (v_b − v_a); a point p fixed to a joint moves at v = v₀ + ω × p, (v₀, ω) the
-        # joint's spatial velocity in the root frame, so n · v = n · v₀ + (p × n) · ω
-        pin.computeJointJacobians(model, data, q)
-        twists = data.J[:, self._idx_v]  # (v₀, ω) per arm joint rate
-        along = normals @ twists[:3] + np.cross(points, normals) @ twists[3:]
+        # spatial velocity of a column of the joint Jacobians (world frame) that the kinematic
+        # model's update computed, so n · v = n · v₀ + (p × n) · ω
+        jacobians = self.kinematics.data.J
+        moment = np.cross(points, normals)
+        twists = jacobians[:, self._idx_v]  # (v₀, ω) per arm joint rate
+        along = normals @ twists[:3] + moment @ twists[3:]
         along *= self._moved_by[self._pair_joints[near].T]  # only the arm joints that move p
         rates = along[1] - along[0]
-        # the base's twist (vx, vy, ω) moves a point p of the robot at (vx − ω p_y, vy + ω p_x, 0):
-        # n · v = n_x vx + n_y vy + (p × n)_z ω; the floor and the obstacles stay put
-        sides = np.empty((2, near.size, 3))
-        sides[:, :, 0] = normals[:, 0]
-        sides[:, :, 1] = normals[:, 1]
-        sides[:, :, 2] = points[:, :, 0] * normals[:, 1] - points[:, :, 1] * normals[:, 0]
+        # the planar root's columns, over the world frame's (ẋ, ẏ, θ̇), move every point of the
+        # robot; the floor and the obstacles stay put. Between two points of the robot they
+        # cancel, and against the floor they are zero (the base moves parallel to it).
+        root = jacobians[:, :N_BASE]
+        sides = normals @ root[:3] + moment @ root[3:]
         sides *= self._pair_on_robot[near].T[:, :, None]
-        base = (sides[1] - sides[0]) * self._pair_base_moves[near, None]
+        world = (sides[1] - sides[0]) * self._pair_base_moves[near, None]
+        # over the base's twist (vx, vy, ω) in its own frame: (ẋ, ẏ, θ̇) = R(θ) (vx, vy, ω)
+        base = world @ rotation_z(q[2])
         pairs = NearPairs(
             _frozen(dists[near]),
             tuple(self._pair_links[k] for k in near.tolist()),
@@ -613,7 +656,9 @@ def _sample_pairs(model, tree, arm_joints, pairs, distances, samples, seed):
 
 def median_check_time(model: CollisionModel, q_arms, influence: float = 0.10) -> float:
     """The median wall time [s] of one :meth:`CollisionModel.within` at each arm posture of
-    ``q_arms`` (the base at the origin), the cost of one check in a control cycle."""
+    ``q_arms`` (the base at the origin), the cost of one check in a control cycle; with the
+    kinematics pass (a model of its own updates its kinematic model to each posture), which a
+    control cycle shares with its method."""
     times = []
     for q in q_arms:
         start = time.perf_counter()

@@ -22,7 +22,7 @@ Quantities (Sorour §II, Xing §2 and appendices A–B):
 Usage::
 
     model = KinematicModel('steerable')
-    model.update(base_pose, q_arm)           # one FK + Jacobian pass
+    model.update(base_pose, q_arm)           # one FK + Jacobian pass (data.oMi, data.J)
     pos, rot = model.ee_placement_world()
     ja = model.arm_jacobian_base()
 """
@@ -105,21 +105,30 @@ class KinematicModel:
         self._build(cfg.urdf_path, cfg.arm.joints, ee_frame or cfg.ee_frame, cfg.base_link, cfg.held_joints)
 
     @classmethod
-    def from_urdf(cls, urdf_path: str | Path, arm_joints: Iterable[str], ee_frame: str, base_link: str) -> Self:
-        """A model of a URDF alone, before any robot YAML exists (``config`` is None): the joints
-        outside the arm held at their defaults (:func:`~wmm_control.robot_config.held_joint_positions`).
+    def from_urdf(
+        cls,
+        urdf_path: str | Path,
+        arm_joints: Iterable[str],
+        ee_frame: str,
+        base_link: str,
+        held: Mapping[str, float] | None = None,
+    ) -> Self:
+        """A model of a URDF alone, before any robot YAML exists (``config`` is None).
 
         Args:
             urdf_path: the URDF.
             arm_joints: the arm joint names, root first.
             ee_frame, base_link: frame names.
+            held: [rad or m] the joints outside the arm at the positions they are held at;
+                None: their defaults (:func:`~wmm_control.robot_config.held_joint_positions`).
         """
         self = cls.__new__(cls)
         # A model of a URDF alone has no robot YAML; everywhere else the package builds its
         # models from one and reads ``config`` as a RobotConfig.
         self.config = None  # type: ignore[assignment]
         arm_joints = tuple(arm_joints)
-        held = held_joint_positions(UrdfTree(urdf_path), arm_joints)
+        if held is None:
+            held = held_joint_positions(UrdfTree(urdf_path), arm_joints)
         self._build(urdf_path, arm_joints, ee_frame, base_link, held)
         return self
 
@@ -131,7 +140,9 @@ class KinematicModel:
         locked = [
             self.full_model.getJointId(n) for n in self.full_model.names[1:] if n not in arm_names and n != 'root_joint'
         ]
-        self.model = pin.buildReducedModel(self.full_model, locked, held_configuration(self.full_model, held))
+        self._locked = locked
+        self._held_q = held_configuration(self.full_model, held)
+        self.model = pin.buildReducedModel(self.full_model, locked, self._held_q)
         self.data = self.model.createData()
         names = list(self.model.names[2:])
         if names != list(arm_names):
@@ -155,6 +166,8 @@ class KinematicModel:
         self._q_flat = None
         self._v = None
         self._valid = False
+        #: how many times :meth:`update` has run: what was computed from ``data`` holds while it stays
+        self.revision = 0
         self._jac = np.zeros((6, self.nv))
         self._manip_cache = {}
         self._upper = np.triu(np.ones((self.n_arm, self.n_arm)))  # [k ≤ i]
@@ -178,7 +191,19 @@ class KinematicModel:
             raise UnknownFrameError(f'unknown frame {name!r}; body frames of {self.full_model.name}: {bodies}')
         return self.model.getFrameId(name)
 
+    def reduce_geometry(self, geometry: pin.GeometryModel) -> pin.GeometryModel:
+        """``geometry``, a geometry model of :attr:`full_model` (the URDF's shapes), on
+        :attr:`model`: each shape of a locked link fixed to the joint that carries it, at the
+        held positions (``pin.buildReducedModel``), so that :meth:`update`'s pass places it."""
+        _, reduced = pin.buildReducedModel(self.full_model, geometry, self._locked, self._held_q)
+        return reduced
+
     # ------------------------------------------------------------------ update
+    @property
+    def state(self) -> np.ndarray | None:
+        """``q = (x, y, θ, q_m)`` of the last :meth:`update` (a copy); None before the first."""
+        return None if self._q_flat is None else self._q_flat.copy()
+
     def configuration(self, base_pose: ArrayLike, q_arm: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Pinocchio configuration vector for a base pose (x, y, θ) and arm joint values (n,).
 
@@ -203,7 +228,9 @@ class KinematicModel:
         base_rate: ArrayLike | None = None,
         dq_arm: ArrayLike | None = None,
     ) -> None:
-        """Run forward kinematics and the Jacobians for one state.
+        """Run forward kinematics and the Jacobians for one state: every joint's placement and
+        Jacobian (``data.oMi``, ``data.J``, world frame), which the collision model built on this
+        model reads as they are (:class:`~wmm_control.kinematics.collision.CollisionModel`).
 
         Args:
             base_pose: (x, y, θ) of the base in the world [m, m, rad]. Shape (3,).
@@ -237,6 +264,7 @@ class KinematicModel:
         self._rpy_base = None
         self._manip_cache = {}
         self._valid = True
+        self.revision += 1
 
     def _require(self):
         if not self._valid:

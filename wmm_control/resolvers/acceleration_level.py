@@ -105,7 +105,8 @@ class AccelerationResolver(Resolver):
         self.model = robot if isinstance(robot, KinematicModel) else KinematicModel(robot)
         self.params = params
         self.limits = CommandLimits.for_robot(self.model.config, params.dt)
-        self.safety = SafetyStage.for_robot(self.model.config, params)
+        # the stage reads the configuration this method's update computes: one a cycle
+        self.safety = SafetyStage.for_robot(self.model.config, params, kinematics=self.model)
         # a base that follows (vx, ω) only moves as a unicycle: rates u_b = (v, ω)
         self._unicycle = self.model.config.base.axes == (0, 2)
         self.n_base = len(self.model.config.base.axes)

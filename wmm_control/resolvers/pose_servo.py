@@ -207,7 +207,8 @@ class PoseServoResolver(Resolver):
         self._jmm_cols = np.array(self._base_cols + list(range(6, 6 + self.n_arm)))
         self.limits = CommandLimits.for_robot(config, params.dt)
         self._arm_limits = self.limits.subset(slice(self.n_base, None))
-        self.safety = SafetyStage.for_robot(config, params)
+        # the stage reads the configuration this method's update computes: one a cycle
+        self.safety = SafetyStage.for_robot(config, params, kinematics=self.model)
         self._position = np.zeros(self.n)
         self.reset()
 

@@ -222,11 +222,13 @@ class SafetyStage:
     """
 
     @classmethod
-    def for_robot(cls, robot, params: SafetyParams = SafetyParams(), obstacles=()):
+    def for_robot(cls, robot, params: SafetyParams = SafetyParams(), obstacles=(), kinematics=None):
         """The stage of a :class:`~wmm_control.robot_config.RobotConfig`: its collision model
-        (with ``obstacles``) and its acceleration limits."""
+        (with ``obstacles``), on the method's :class:`~wmm_control.kinematics.model.KinematicModel`
+        ``kinematics`` when given (the distances then read the configuration the method's update
+        of the cycle computed), and its acceleration limits."""
         return cls(
-            CollisionModel.from_robot(robot, obstacles=obstacles),
+            CollisionModel.from_robot(robot, obstacles=obstacles, kinematics=kinematics),
             params,
             robot.arm.acceleration,
             robot.base.velocity,
