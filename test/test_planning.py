@@ -1,0 +1,177 @@
+"""The planner's ROS-free core: where to stand, a base path round the table (OMPL), timed.
+
+Every plan is checked on its own terms and against the simulator's geometry (PyBullet,
+:class:`~sim_bridge.collision.SelfCollisionChecker`), independently of the planner's distance
+model: the stance's arm reaches the goal (forward kinematics), the robot keeps its margins there
+and all along the path, and the timed path stays within the base's limits and ends at the stance.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from sim_bridge.collision import SelfCollisionChecker
+from wmm_control.experiments.randomized import sample_goals
+from wmm_control.geometry import matrix_from_rpy, rotation_angle, se2_integrate, twist_to_world, wrap_angle
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.obstacles import load_obstacles, parse_obstacles
+from wmm_control.planning import BasePathPlanner, Clearance, GoalPlanner, NoWay, Travel, time_path
+from wmm_control.robot_config import load_robot
+
+OBSTACLES = load_obstacles('table_pillar')
+NAMES = {o.name for o in OBSTACLES}
+#: [m] how much nearer PyBullet's geometry may put the robot than the planner's (coal's)
+ENGINES = 0.005
+
+
+@pytest.fixture(scope='module', params=['steerable', 'panda_diff'])
+def planned(request):
+    """(robot, planner, goal, plan) for the first table_pillar goal whose straight way is blocked."""
+    cfg = load_robot(request.param)
+    planner = GoalPlanner(cfg, OBSTACLES)
+    goals = sample_goals(cfg, 3, seed=0, obstacles='table_pillar')
+    with SelfCollisionChecker(cfg, margin=planner.travel.margin, obstacles=OBSTACLES) as checker:
+        for goal in goals:
+            plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), cfg.start.base_pose)
+            assert plan.no_way is None, plan.reason
+            straight = [
+                cfg.start.base_pose + s * (plan.stance.base_pose - cfg.start.base_pose) for s in np.linspace(0, 1, 60)
+            ]
+            if any(_obstacle_distances(checker, cfg.start.arm, pose) for pose in straight):
+                return cfg, planner, goal, plan
+    pytest.fail('no goal of the draw lies behind the table or the pillar')
+
+
+def _obstacle_distances(checker, q_arm, base_pose):
+    return [d for _a, b, d in checker.collisions(q_arm, base_pose) if b in NAMES]
+
+
+def test_the_stance_reaches_a_goal_beyond_the_table_clear_of_everything(planned):
+    cfg, planner, goal, plan = planned
+    stance = plan.stance
+    model = KinematicModel(cfg)
+    model.update(stance.base_pose, stance.q_arm)
+    position, rotation = model.ee_placement_world()
+    assert np.linalg.norm(position - goal.pose[:3]) <= 0.005
+    assert rotation_angle(matrix_from_rpy(goal.pose[3:]), rotation) <= 0.01
+    lower, upper = cfg.arm.position_lower, cfg.arm.position_upper
+    assert np.all((stance.q_arm >= lower) & (stance.q_arm <= upper))
+    margin = planner.stances.params.stance_margin
+    with SelfCollisionChecker(cfg, margin=margin - ENGINES, obstacles=OBSTACLES) as checker:
+        assert not _obstacle_distances(checker, stance.q_arm, stance.base_pose)
+    # the others come after it: ranked by their score
+    scores = [s.score for s in plan.search.stances]
+    assert scores == sorted(scores, reverse=True)
+
+
+def test_the_base_path_keeps_the_margin_from_every_obstacle_all_along(planned):
+    cfg, planner, _goal, plan = planned
+    traj = plan.trajectory
+    assert np.allclose(traj.poses[0], cfg.start.base_pose)
+    radius = planner.travel.radius
+    margin = planner.travel.margin - ENGINES
+    with SelfCollisionChecker(cfg, margin=margin, obstacles=OBSTACLES) as checker:
+        for pose, twist in zip(traj.poses[:-1], traj.twists[:-1]):
+            # as the base moves in the period: every point of the robot checked within 1 cm
+            sweep = (math.hypot(twist[0], twist[1]) + radius * abs(twist[2])) * traj.dt
+            steps = max(1, math.ceil(sweep / 0.01))
+            for s in range(steps):
+                at = se2_integrate(pose, twist, s * traj.dt / steps)
+                assert not _obstacle_distances(checker, cfg.start.arm, at), f'within {margin} m at {at}'
+
+
+def test_the_timed_path_is_within_the_base_limits_and_ends_at_the_stance(planned):
+    cfg, _planner, _goal, plan = planned
+    traj = plan.trajectory
+    assert traj.dt == cfg.period
+    assert np.allclose(np.diff(traj.t), cfg.period)
+    end = traj.poses[-1] - plan.stance.base_pose
+    assert np.hypot(end[0], end[1]) < 1e-6 and abs(wrap_angle(end[2])) < 1e-6
+    # the twists move the base from each sample to the next, and the world rates are the same twists
+    for k in range(len(traj.t) - 1):
+        moved = np.array(se2_integrate(traj.poses[k], traj.twists[k], traj.dt)) - traj.poses[k + 1]
+        assert np.hypot(moved[0], moved[1]) < 1e-6 and abs(wrap_angle(moved[2])) < 1e-6
+    assert np.allclose(traj.rates, [twist_to_world(th, tw) for th, tw in zip(traj.poses[:, 2], traj.twists)])
+    assert np.all(traj.twists[-1] == 0.0)
+    velocity, acceleration = cfg.base.velocity, cfg.base.acceleration
+    assert np.all(np.abs(traj.twists) <= velocity + 1e-6)  # a differential base: vy within 1e-6 of 0
+    # from rest and back to rest
+    rates = np.diff(np.vstack([np.zeros(3), traj.twists]), axis=0) / traj.dt
+    assert np.all(np.abs(rates) <= acceleration * (1 + 1e-6) + 1e-6)
+    assert np.max(np.abs(traj.twists[:, [0, 2]])) > 0.1 * np.min(velocity[[0, 2]])  # it does move
+
+
+def test_the_same_seed_plans_the_same_path(planned):
+    cfg, planner, _goal, plan = planned
+    again = planner.paths.plan(cfg.start.base_pose, plan.stance.base_pose)
+    assert np.array_equal(again.waypoints, plan.path.waypoints)
+
+
+def test_a_goal_inside_the_table_is_refused_with_its_reason():
+    cfg = load_robot('steerable')
+    planner = GoalPlanner(cfg, OBSTACLES)
+    table = next(o for o in OBSTACLES if o.name == 'table')
+    goal = table.position + np.array([0.0, 0.0, 0.5 * table.size[2] - 0.05])  # 5 cm under its top
+    plan = planner.plan(goal, np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.INSIDE_OBSTACLE and plan.trajectory is None
+    assert "'table'" in plan.reason
+    # just above the top, nearer than the stance margin: refused too
+    plan = planner.plan(goal + [0.0, 0.0, 0.06], np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.INSIDE_OBSTACLE
+
+
+@pytest.mark.parametrize('robot', ['steerable', 'panda_diff'])
+def test_a_goal_out_of_every_stance_s_reach_is_refused_with_its_reason(robot):
+    cfg = load_robot(robot)
+    planner = GoalPlanner(cfg, OBSTACLES)
+    plan = planner.plan([2.7, 0.0, 3.0], np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.OUT_OF_REACH and plan.stance is None
+    assert 'reach' in plan.reason
+    # below the floor
+    plan = planner.plan([2.7, 0.0, cfg.ground_z - 0.1], np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.OUT_OF_REACH
+
+
+def test_a_goal_the_arm_reaches_from_nowhere_gets_no_stance():
+    """Above the floor and below the arm's highest, yet 2 cm off the floor: no posture gets the
+    end effector there clear of the floor: every candidate is tried."""
+    cfg = load_robot('steerable')
+    planner = GoalPlanner(cfg, OBSTACLES)
+    plan = planner.plan([2.7, 0.0, cfg.ground_z + 0.02], np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.NO_STANCE and plan.search.candidates > 0
+    assert plan.reason.startswith('no stance')
+
+
+def test_a_robot_walled_in_gets_no_path_within_the_budget():
+    cfg = load_robot('steerable')
+    walls = parse_obstacles(
+        [
+            {'name': f'wall_{i}', 'shape': 'box', 'size': size, 'pose': pose}
+            for i, (size, pose) in enumerate(
+                [
+                    ([0.2, 3.4, 1.0], [1.6, 0.0, 0.5]),
+                    ([0.2, 3.4, 1.0], [-1.6, 0.0, 0.5]),
+                    ([3.4, 0.2, 1.0], [0.0, 1.6, 0.5]),
+                    ([3.4, 0.2, 1.0], [0.0, -1.6, 0.5]),
+                ]
+            )
+        ],
+        'walls',
+    )
+    model = KinematicModel(cfg)
+    travel = Travel(Clearance.of_robot(cfg, walls), model, cfg.start.arm, margin=0.1)
+    planner = BasePathPlanner(cfg.base, travel, budget=0.3)
+    path = planner.plan(cfg.start.base_pose, [3.0, 0.0, 0.0])
+    assert path.no_way is NoWay.NO_PATH and not path.found and len(path.waypoints) == 0
+    assert 'within 0.3 s' in path.reason
+    assert path.planning_time >= 0.3
+
+
+def test_a_holonomic_move_is_refused_to_a_differential_base():
+    from wmm_control.planning.timing import LinearPiece
+
+    cfg = load_robot('panda_diff')
+    sideways = LinearPiece(np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    with pytest.raises(Exception, match='vy'):
+        time_path([sideways], cfg.base, cfg.period)
