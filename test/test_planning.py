@@ -160,7 +160,7 @@ def test_a_robot_walled_in_gets_no_path_within_the_budget():
         'walls',
     )
     model = KinematicModel(cfg)
-    travel = Travel(Clearance.of_robot(cfg, walls), model, cfg.start.arm, margin=0.1)
+    travel = Travel(Clearance.of_robot(cfg, walls, body=False), model, cfg.start.arm, margin=0.1)
     planner = BasePathPlanner(cfg.base, travel, budget=0.3)
     path = planner.plan(cfg.start.base_pose, [3.0, 0.0, 0.0])
     assert path.no_way is NoWay.NO_PATH and not path.found and len(path.waypoints) == 0

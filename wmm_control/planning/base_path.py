@@ -139,11 +139,18 @@ class BasePathPlanner:
         travel: the robot driving in its travel posture.
         budget: [s] the time RRT-Connect may search.
         seed: > 0, OMPL's random seed for every plan.
-        simplify_rounds: rounds of vertex reduction after the search.
+        attempts: RRT-Connect searches (each simplified); the shortest path is kept.
+        simplify_rounds: rounds of vertex reduction after each search.
     """
 
     def __init__(
-        self, base: BaseSection, travel: Travel, budget: float = 2.0, seed: int = 1, simplify_rounds: int = 5
+        self,
+        base: BaseSection,
+        travel: Travel,
+        budget: float = 2.0,
+        seed: int = 1,
+        attempts: int = 4,
+        simplify_rounds: int = 15,
     ) -> None:
         if not budget > 0.0:
             raise ValueError(f'the time budget must be > 0 [s], got {budget}')
@@ -153,6 +160,7 @@ class BasePathPlanner:
         self.travel = travel
         self.budget = float(budget)
         self.seed = int(seed)
+        self.attempts = int(attempts)
         self.simplify_rounds = int(simplify_rounds)
         self.rho = turning_radius(base) if base.family == 'differential' else None
 
@@ -211,29 +219,53 @@ class BasePathPlanner:
         if motions.checkMotion(a, b):
             return self._path([a, b], space, began, 'direct')
         ou.RNG.setSeed(self.seed)  # every generator made from here on: see the module docstring
-        pdef = ob.ProblemDefinition(si)
-        pdef.setStartAndGoalStates(a, b)
-        planner = og.RRTConnect(si)
-        planner.setProblemDefinition(pdef)
-        planner.setup()
-        status = planner.solve(self.budget)
-        if status.getStatus() != ob.PlannerStatus.PlannerStatusType.EXACT_SOLUTION:
+        best: tuple[float, list] | None = None
+        status = None
+        for _ in range(self.attempts):
+            left = self.budget - (time.perf_counter() - began)
+            if left <= 0.0:
+                break
+            pdef = ob.ProblemDefinition(si)
+            pdef.setStartAndGoalStates(a, b)
+            planner = og.RRTConnect(si)
+            planner.setProblemDefinition(pdef)
+            planner.setup()
+            status = planner.solve(left)
+            if status.getStatus() != ob.PlannerStatus.PlannerStatusType.EXACT_SOLUTION:
+                break
+            path = pdef.getSolutionPath()
+            self._simplify(og.PathSimplifier(si), path)
+            if best is None or path.length() < best[0]:
+                best = (path.length(), [_pose(path.getState(i)) for i in range(path.getStateCount())])
+        if best is None:
+            why = status.asString() if status is not None else 'no time left'
             return BasePath(
                 np.empty((0, 3)),
                 (),
                 NoWay.NO_PATH,
-                f'no base path found within {self.budget:g} s ({status.asString()})',
+                f'no base path found within {self.budget:g} s ({why})',
                 time.perf_counter() - began,
                 'RRTConnect',
             )
-        path = pdef.getSolutionPath()
-        simplifier = og.PathSimplifier(si)
+        states = []
+        for pose in best[1]:
+            state = space.allocState()
+            _set(state, pose)
+            states.append(state)
+        return self._path(states, space, began, 'RRTConnect')
+
+    def _simplify(self, simplifier, path) -> None:
+        """Shorten ``path``: vertex reduction, then again with each segment cut in eight (so
+        that corners can be cut, not only vertices skipped), then close vertices collapsed."""
         for _ in range(self.simplify_rounds):
             if not simplifier.reduceVertices(path):
                 break
+        for _ in range(3):
+            path.subdivide()
+        for _ in range(2 * self.simplify_rounds):
+            if not simplifier.reduceVertices(path):
+                break
         simplifier.collapseCloseVertices(path)
-        states = [path.getState(i) for i in range(path.getStateCount())]
-        return self._path(states, space, began, 'RRTConnect')
 
     def _path(self, states, space, began: float, planner: str) -> BasePath:
         waypoints = np.array([_pose(s) for s in states])

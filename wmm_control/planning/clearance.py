@@ -20,6 +20,7 @@ queries (the pairs, the shapes and the floor are the controller's own):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Iterable, Sequence
 
@@ -31,6 +32,7 @@ from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.resources import load_geometry
+from wmm_control.robot_config import RobotConfig
 
 __all__ = ['Clearance', 'Travel', 'swept_radius']
 
@@ -51,11 +53,17 @@ class Clearance:
         self.collision = collision
         self.influence = float(influence)
         self._obstacles = {o.name for o in collision.obstacles}
+        self._body = any(a not in self._obstacles and b not in self._obstacles for a, b in collision.pairs)
 
     @classmethod
-    def of_robot(cls, robot, obstacles: Iterable[Obstacle], influence: float = INFLUENCE) -> Clearance:
-        """The clearance of the robot ``robot`` (a :class:`~wmm_control.robot_config.RobotConfig`)
-        among ``obstacles``."""
+    def of_robot(
+        cls, robot: RobotConfig, obstacles: Iterable[Obstacle], influence: float = INFLUENCE, body: bool = True
+    ) -> Clearance:
+        """The clearance of the robot ``robot`` among ``obstacles``; with ``body=False`` only
+        from the obstacles (the robot's own pairs and the floor's left out, so each query costs
+        less: for a base moving an arm held still, whose own distances do not change)."""
+        if not body:
+            robot = dataclasses.replace(robot, collision_pairs=())
         return cls(CollisionModel.from_robot(robot, obstacles=tuple(obstacles)), influence)
 
     @property
@@ -67,11 +75,11 @@ class Clearance:
         self, q_arm: Sequence[float] | np.ndarray, base_pose: Sequence[float] | np.ndarray
     ) -> tuple[float, float]:
         """``(obstacles, body)`` [m]: the distance of the nearest pair with an obstacle (inf
-        without obstacles) and of the nearest other pair (the robot's own links, the floor),
-        each capped at ``influence``."""
+        without obstacles) and of the nearest other pair (the robot's own links, the floor; inf
+        without them), each capped at ``influence``."""
         near, _, _ = self.collision.within(q_arm, self.influence, base_pose)
         obstacle = self.influence if self._obstacles else math.inf
-        body = self.influence
+        body = self.influence if self._body else math.inf
         for distance, (a, b) in zip(near.distance.tolist(), near.links):
             if a in self._obstacles or b in self._obstacles:
                 obstacle = min(obstacle, distance)

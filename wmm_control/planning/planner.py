@@ -85,9 +85,12 @@ class GoalPlanner:
     ) -> None:
         self.robot = robot
         self.model = KinematicModel(robot)
+        obstacles = tuple(obstacles)
         self.clearance = Clearance.of_robot(robot, obstacles)
         travel_posture = robot.start.arm if q_travel is None else q_travel
-        self.travel = Travel(self.clearance, self.model, travel_posture, travel_margin, step)
+        self.travel = Travel(
+            Clearance.of_robot(robot, obstacles, body=False), self.model, travel_posture, travel_margin, step
+        )
         self.stances = StanceFinder(self.model, self.clearance, self.travel, stance)
         self.paths = BasePathPlanner(robot.base, self.travel, budget, seed)
         self.stances_tried = int(stances_tried)

@@ -11,7 +11,10 @@ and turned from it by a few offsets. A candidate counts when
 2. the arm's inverse kinematics with the base held there reaches the goal: damped least squares
    on the world pose error ``[p* − p; log(R* Rᵀ)]`` from the travel posture, each step clipped to
    the joint limits less ``limit_margin``, until within ``position_tolerance`` and
-   ``orientation_tolerance``;
+   ``orientation_tolerance``. When no candidate gives a stance, the candidates are tried again
+   from the dexterous posture and then from postures drawn within the limits (``restarts`` passes
+   in all, reproducible): damped least squares finds the posture nearest its start, and a goal
+   near the limits may need another branch of the arm (elbow, wrist);
 3. that posture keeps ``stance_margin`` from every obstacle and ``body_margin`` between the
    robot's own links and from the floor (the controller's pairs).
 
@@ -60,6 +63,7 @@ class StanceParams:
         bearings: how many bearings around the goal.
         heading_offsets: [rad] the base's heading from facing the goal.
         wanted: stop when this many stances are found.
+        restarts: passes over the candidates from other postures when one finds none.
         clearance_weight: [1/m · m/rad] of the clearance in the score.
         clearance_cap: [m] clearance beyond it adds nothing to the score.
     """
@@ -72,10 +76,11 @@ class StanceParams:
     ik_damping: float = 0.05
     max_joint_step: float = 0.3
     limit_margin: float = 0.02
-    rings: tuple[float, ...] = (0.45, 0.6, 0.3, 0.75)
+    rings: tuple[float, ...] = (0.45, 0.6, 0.3, 0.75, 0.15)
     bearings: int = 16
     heading_offsets: tuple[float, ...] = (0.0, math.pi / 6, -math.pi / 6, math.pi / 3, -math.pi / 3)
     wanted: int = 4
+    restarts: int = 2
     clearance_weight: float = 1.0
     clearance_cap: float = 0.3
 
@@ -184,6 +189,17 @@ class StanceFinder:
         self._root = model.arm_points_world()[0].copy()
         self.reach = self.workspace.max_height - float(self._root[2])
 
+    def _seeds(self):
+        """The arm postures the inverse kinematics starts from, pass by pass: the travel posture,
+        the dexterous one, then drawn within the limits (the same draws every time)."""
+        yield self.travel.q_arm
+        rng = np.random.default_rng(0)
+        arm = self.model.config.arm
+        lower = np.where(np.isfinite(self._lower), self._lower, -math.pi)
+        upper = np.where(np.isfinite(self._upper), self._upper, math.pi)
+        for i in range(self.params.restarts):
+            yield np.clip(arm.dexterous, self._lower, self._upper) if i == 0 else rng.uniform(lower, upper)
+
     def refuse(self, goal_position: np.ndarray) -> tuple[NoWay, str] | None:
         """Why no stance can reach a goal at ``goal_position`` whatever the base does, or None."""
         margin = self.params.stance_margin
@@ -240,27 +256,34 @@ class StanceFinder:
         if refused is not None:
             return StanceSearch((), refused[0], refused[1], 0, 0)
         p = self.params
-        found, tried, solved, blocked = [], 0, 0, 0
-        for base in self.candidates(goal_position, as_finite_vector(toward, 2, 'toward')):
-            tried += 1
-            if not self.travel.valid(base):
-                blocked += 1
-                continue
-            q, pos_err, rot_err = solve_arm_ik(
-                self.model, base, self.travel.q_arm, goal_position, goal_rotation, self._lower, self._upper, p
-            )
-            if pos_err > p.position_tolerance or rot_err > p.orientation_tolerance:
-                continue
-            solved += 1
-            obstacle, body = self.clearance(q, base)
-            if obstacle < p.stance_margin or body < p.body_margin:
-                continue
-            self.model.update(base, q)
-            sigma = self.model.sigma_min('position')
-            score = sigma + p.clearance_weight * min(obstacle, p.clearance_cap)
-            found.append(Stance(base, q, pos_err, rot_err, obstacle, body, sigma, score))
-            if len(found) >= p.wanted:
+        candidates = self.candidates(goal_position, as_finite_vector(toward, 2, 'toward'))
+        clear: dict[int, bool] = {}  # candidate → valid for travel, asked once
+        found: list[Stance] = []
+        solved = 0
+        for seed in self._seeds():
+            for i, base in enumerate(candidates):
+                if i not in clear:
+                    clear[i] = self.travel.valid(base)
+                if not clear[i]:
+                    continue
+                q, pos_err, rot_err = solve_arm_ik(
+                    self.model, base, seed, goal_position, goal_rotation, self._lower, self._upper, p
+                )
+                if pos_err > p.position_tolerance or rot_err > p.orientation_tolerance:
+                    continue
+                solved += 1
+                obstacle, body = self.clearance(q, base)
+                if obstacle < p.stance_margin or body < p.body_margin:
+                    continue
+                self.model.update(base, q)
+                sigma = self.model.sigma_min('position')
+                score = sigma + p.clearance_weight * min(obstacle, p.clearance_cap)
+                found.append(Stance(base, q, pos_err, rot_err, obstacle, body, sigma, score))
+                if len(found) >= p.wanted:
+                    break
+            if found:
                 break
+        tried, blocked = len(clear), sum(not ok for ok in clear.values())
         if found:
             found.sort(key=lambda s: -s.score)
             return StanceSearch(tuple(found), None, '', tried, solved)
