@@ -60,7 +60,7 @@ def test_the_stance_reaches_a_goal_beyond_the_table_clear_of_everything(planned)
     margin = planner.stances.params.stance_margin
     with SelfCollisionChecker(cfg, margin=margin - ENGINES, obstacles=OBSTACLES) as checker:
         assert not _obstacle_distances(checker, stance.q_arm, stance.base_pose)
-    # the others come after it: ranked by their score
+    # the others come after it: ranked by their score (the robot's own pose is no stance here)
     scores = [s.score for s in plan.search.stances]
     assert scores == sorted(scores, reverse=True)
 
@@ -106,6 +106,13 @@ def test_the_same_seed_plans_the_same_path(planned):
     cfg, planner, _goal, plan = planned
     again = planner.paths.plan(cfg.start.base_pose, plan.stance.base_pose)
     assert np.array_equal(again.waypoints, plan.path.waypoints)
+
+
+def test_a_base_already_at_the_stance_stays_there(planned):
+    cfg, planner, goal, plan = planned
+    again = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), plan.stance.base_pose)
+    assert again.path.planner == 'direct' and len(again.trajectory.t) == 1
+    assert np.allclose(again.trajectory.poses[0], plan.stance.base_pose) and not again.trajectory.twists.any()
 
 
 def test_a_goal_inside_the_table_is_refused_with_its_reason():

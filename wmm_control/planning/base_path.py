@@ -187,6 +187,8 @@ class BasePathPlanner:
         def refused(kind: NoWay, reason: str) -> BasePath:
             return BasePath(np.empty((0, 3)), (), kind, reason, time.perf_counter() - began, '')
 
+        if np.array_equal(start, goal):  # there already: no motion to check
+            return self._path([start, goal], None, began, 'direct')
         if not travel.valid(start):
             return refused(
                 NoWay.START_BLOCKED,
@@ -268,6 +270,11 @@ class BasePathPlanner:
         simplifier.collapseCloseVertices(path)
 
     def _path(self, states, space, began: float, planner: str) -> BasePath:
+        """The path through ``states`` (OMPL states of ``space``; two equal poses without a space)."""
+        if space is None:
+            waypoints = np.array(states, dtype=float)
+            piece = TwistPiece(waypoints[0], np.zeros(3))
+            return BasePath(waypoints, (piece,), None, '', time.perf_counter() - began, planner)
         waypoints = np.array([_pose(s) for s in states])
         pieces: list[Piece] = []
         for a, b in zip(states[:-1], states[1:]):
@@ -275,6 +282,8 @@ class BasePathPlanner:
                 pieces.append(LinearPiece(np.array(_pose(a)), np.array(_pose(b))))
             else:
                 pieces.extend(_reeds_shepp_pieces(space, a, b, self.rho))
+        if not pieces:  # the base is there already
+            pieces.append(TwistPiece(waypoints[0], np.zeros(3)))
         return BasePath(waypoints, tuple(pieces), None, '', time.perf_counter() - began, planner)
 
 

@@ -101,7 +101,7 @@ class GoalPlanner:
         in the world, the base now at ``base_pose`` (x, y, θ)."""
         began = time.perf_counter()
         base_pose = np.asarray(base_pose, dtype=float)
-        search = self.stances.find(goal_position, goal_rotation, base_pose[:2])
+        search = self.stances.find(goal_position, goal_rotation, base_pose)
         if not search.stances:
             return Plan(None, None, None, search, search.no_way, search.reason, time.perf_counter() - began)
         path = None

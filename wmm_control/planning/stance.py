@@ -18,10 +18,12 @@ and turned from it by a few offsets. A candidate counts when
 3. that posture keeps ``stance_margin`` from every obstacle and ``body_margin`` between the
    robot's own links and from the floor (the controller's pairs).
 
-The candidates are tried in order (heading offset first, then bearing, then ring) until ``wanted``
-stances are found; they come back best first by ``σ_min + clearance_weight · min(clearance,
-clearance_cap)``, σ_min the smallest singular value of the arm's position Jacobian [m/rad] (how
-far from a singularity the arm stands) and the clearance from the obstacles [m].
+The robot's own base pose is the first candidate (without condition 1: the base is there
+already), and comes back first when it is a stance (a goal within reach needs no travel). The others are tried in order (heading offset first, then bearing,
+then ring) until ``wanted`` stances are found; they come back best first by ``σ_min +
+clearance_weight · min(clearance, clearance_cap)``, σ_min the smallest singular value of the
+arm's position Jacobian [m/rad] (how far from a singularity the arm stands) and the clearance
+from the obstacles [m].
 
 A goal gets no stance, with the reason (:class:`~wmm_control.planning.outcome.NoWay`), when it
 is nearer than ``stance_margin`` to an obstacle (or inside one), below the floor or above the
@@ -221,16 +223,16 @@ class StanceFinder:
             )
         return None
 
-    def candidates(self, goal_position: np.ndarray, toward: np.ndarray) -> list[np.ndarray]:
-        """The base poses to try for a goal at ``goal_position``, in order; ``toward`` (x, y)
-        is where the robot is (the first bearing faces it)."""
+    def candidates(self, goal_position: np.ndarray, base_pose: np.ndarray) -> list[np.ndarray]:
+        """The base poses to try for a goal at ``goal_position``, in order: ``base_pose`` (x, y,
+        θ), where the robot is, then the samples, the first bearing on its side."""
         p = self.params
         dz = float(goal_position[2]) - float(self._root[2])
         horizontal = math.sqrt(max(self.reach**2 - dz**2, 0.0))
         goal_xy = np.asarray(goal_position[:2], dtype=float)
-        away = np.asarray(toward, dtype=float) - goal_xy
+        away = base_pose[:2] - goal_xy
         first = math.atan2(away[1], away[0]) if np.any(away) else 0.0
-        out = []
+        out = [base_pose]
         for offset in p.heading_offsets:
             for i in range(p.bearings):
                 bearing = first + 2.0 * math.pi * i / p.bearings  # from the goal to the arm's root
@@ -242,13 +244,13 @@ class StanceFinder:
                     out.append(np.array((base_xy[0], base_xy[1], heading)))
         return out
 
-    def find(self, goal_position: ArrayLike, goal_rotation: ArrayLike, toward: ArrayLike = (0.0, 0.0)) -> StanceSearch:
+    def find(self, goal_position: ArrayLike, goal_rotation: ArrayLike, base_pose: ArrayLike) -> StanceSearch:
         """Stances for the goal (world position [m], rotation (3, 3)), best first (module docstring).
 
         Args:
             goal_position: (x, y, z) [m].
             goal_rotation: the end effector's orientation in the world. Shape (3, 3).
-            toward: (x, y) [m] where the robot is now: the bearings start on its side.
+            base_pose: (x, y, θ) [m, m, rad] where the robot is now.
         """
         goal_position = as_finite_vector(goal_position, 3, 'goal position')
         goal_rotation = np.asarray(goal_rotation, dtype=float)
@@ -256,14 +258,14 @@ class StanceFinder:
         if refused is not None:
             return StanceSearch((), refused[0], refused[1], 0, 0)
         p = self.params
-        candidates = self.candidates(goal_position, as_finite_vector(toward, 2, 'toward'))
+        candidates = self.candidates(goal_position, as_finite_vector(base_pose, 3, 'base pose'))
         clear: dict[int, bool] = {}  # candidate → valid for travel, asked once
         found: list[Stance] = []
         solved = 0
         for seed in self._seeds():
             for i, base in enumerate(candidates):
-                if i not in clear:
-                    clear[i] = self.travel.valid(base)
+                if i not in clear:  # the robot's own pose needs no travel there
+                    clear[i] = i == 0 or self.travel.valid(base)
                 if not clear[i]:
                     continue
                 q, pos_err, rot_err = solve_arm_ik(
@@ -285,7 +287,8 @@ class StanceFinder:
                 break
         tried, blocked = len(clear), sum(not ok for ok in clear.values())
         if found:
-            found.sort(key=lambda s: -s.score)
+            here = found[0] if found[0].base_pose is candidates[0] else None
+            found.sort(key=lambda s: (s is not here, -s.score))
             return StanceSearch(tuple(found), None, '', tried, solved)
         if blocked == tried:
             reason = 'no base pose around the goal is clear of the obstacles'
