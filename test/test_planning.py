@@ -182,3 +182,41 @@ def test_a_holonomic_move_is_refused_to_a_differential_base():
     sideways = LinearPiece(np.zeros(3), np.array([0.0, 1.0, 0.0]))
     with pytest.raises(Exception, match='vy'):
         time_path([sideways], cfg.base, cfg.period)
+
+
+def test_a_straight_se2_piece_bounds_its_twist_and_the_twist_s_change_tightly():
+    """u(λ), the twist per unit λ in the base's frame, by finite differences along random pieces
+    (turning up to half a turn): within the piece's bounds, and reaching them (not loose)."""
+    from wmm_control.geometry import se2_twist
+    from wmm_control.planning.timing import LinearPiece
+
+    rng = np.random.default_rng(3)
+    h = 1e-5
+    for _ in range(20):
+        start = rng.uniform([-2, -2, -math.pi], [2, 2, math.pi])
+        end = start + rng.uniform([-2, -2, -math.pi], [2, 2, math.pi])
+        piece = LinearPiece(start, end)
+        bound, slope = piece.rate_bounds()
+        lams = np.linspace(0.0, 1.0 - h, 801)
+        u = np.array([se2_twist(piece.pose(lam), piece.pose(lam + h), h) for lam in lams])
+        du = np.diff(u, axis=0) / np.diff(lams)[:, None]
+        assert np.all(np.abs(u) <= bound * (1 + 1e-4) + 1e-6)
+        assert np.all(np.abs(du) <= slope * (1 + 1e-3) + 1e-3)
+        assert np.all(np.max(np.abs(u), axis=0) >= 0.99 * bound - 1e-6)
+
+
+def test_timed_se2_pieces_keep_every_axis_within_its_own_limits():
+    """Robot B's base: 0.25 m/s and 0.025 m/s² on x and y, 1 rad/s and 1.5 rad/s² on the turn."""
+    from wmm_control.planning.timing import LinearPiece
+
+    cfg = load_robot('mecanum')
+    rng = np.random.default_rng(4)
+    poses = np.cumsum(rng.uniform([-0.6, -0.6, -2.0], [0.6, 0.6, 2.0], size=(4, 3)), axis=0)
+    traj = time_path([LinearPiece(a, b) for a, b in zip(poses[:-1], poses[1:])], cfg.base, cfg.period)
+    assert np.allclose(traj.poses[-1], [*poses[-1, :2], wrap_angle(poses[-1, 2])])
+    assert np.all(np.abs(traj.twists) <= cfg.base.velocity + 1e-9)
+    rates = np.diff(np.vstack([np.zeros(3), traj.twists]), axis=0) / traj.dt
+    assert np.all(np.abs(rates) <= cfg.base.acceleration * (1 + 1e-6))
+    # the turn and the translation use their limits: the slowest axis sets the pace, not a common one
+    use = np.max(np.abs(rates), axis=0) / cfg.base.acceleration
+    assert np.max(use) > 0.5
