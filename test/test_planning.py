@@ -150,6 +150,37 @@ def test_a_goal_the_arm_reaches_from_nowhere_gets_no_stance():
     assert plan.reason.startswith('no stance')
 
 
+@pytest.mark.parametrize('robot', ['steerable', 'panda_diff'])
+def test_a_robot_stopped_near_the_table_backs_away_then_keeps_the_margin(robot):
+    """Where a reactive controller leaves it: facing the table 5 cm from it. The path first takes
+    a way out that comes no nearer (less the check step), then keeps the margin."""
+    from scipy.optimize import brentq
+
+    cfg = load_robot(robot)
+    planner = GoalPlanner(cfg, OBSTACLES)
+    travel = planner.travel
+    x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, 0.0]) - 0.05, 0.0, 1.2, xtol=1e-5)
+    start = np.array([x, -0.2, 0.0])
+    goal = sample_goals(cfg, 1, seed=0, obstacles='table_pillar')[0]
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), start)
+    assert plan.no_way is None, plan.reason
+    traj = plan.trajectory
+    assert np.allclose(traj.poses[0], start)
+    out = next(k for k, pose in enumerate(traj.poses) if np.allclose(pose, plan.path.waypoints[1]))
+    radius = travel.radius
+    with SelfCollisionChecker(cfg, margin=travel.margin, obstacles=OBSTACLES) as checker:
+        for k, (pose, twist) in enumerate(zip(traj.poses[:-1], traj.twists[:-1])):
+            keep = (0.05 - travel.step if k < out else travel.margin) - ENGINES
+            steps = max(1, math.ceil((math.hypot(twist[0], twist[1]) + radius * abs(twist[2])) * traj.dt / 0.01))
+            for s in range(steps):
+                near = _obstacle_distances(checker, cfg.start.arm, se2_integrate(pose, twist, s * traj.dt / steps))
+                assert min(near, default=math.inf) >= keep
+    # touching (within the check step): no way out that keeps its clearance
+    x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, 0.0]) - 0.005, 0.0, 1.2, xtol=1e-5)
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), [x, -0.2, 0.0])
+    assert plan.no_way is NoWay.START_BLOCKED and 'where it stands' in plan.reason
+
+
 def test_a_robot_walled_in_gets_no_path_within_the_budget():
     cfg = load_robot('steerable')
     walls = parse_obstacles(

@@ -11,7 +11,10 @@ The state is the base pose (x, y, θ); the robot drives with its arm held in the
 
 A state is valid when the robot is ``margin + step`` clear of every obstacle; a motion between two
 states is checked by conservative advancement (:meth:`Travel.motion_valid`): every pose along it,
-not only the checked ones, keeps ``margin``. RRT-Connect searches within a time budget; the path
+not only the checked ones, keeps ``margin``. A robot that starts nearer an obstacle than that (a
+reactive controller may have stopped it there) first takes a way out: the nearest valid pose
+within 0.5 m (heading kept) that a motion reaches without coming nearer than it was, less
+``step``; the path then starts with that motion. RRT-Connect searches within a time budget; the path
 is then shortened by OMPL's path simplifier (vertex reduction and collapsing close vertices,
 with the same checks). A straight motion from start to goal is tried first and, if valid, is the
 path.
@@ -57,6 +60,10 @@ PADDING = 1.0
 _RS_PURE = 1e-7
 #: [m] stretches shorter than this at a Reeds–Shepp junction are not split further
 _RS_SPLIT = 1e-9
+#: [m] how far a robot that starts nearer an obstacle than the margin looks for a way out, nearest first
+ESCAPE = (0.1, 0.2, 0.35, 0.5)
+#: directions of the way out, evenly spread
+ESCAPE_BEARINGS = 16
 
 
 def turning_radius(base: BaseSection) -> float:
@@ -122,13 +129,17 @@ class _Motions(ob.MotionValidator):
         return self._space.distance(a, b) * (1.0 + self._travel.radius / self._rho)
 
     def checkMotion(self, a, b) -> bool:  # noqa: N802 (OMPL's name)
+        return self.valid(self._travel, a, b)
+
+    def valid(self, travel: Travel, a, b) -> bool:
+        """Whether the motion from ``a`` to ``b`` keeps ``travel``'s margin all along."""
         space, scratch = self._space, self._scratch
 
         def pose_at(lam: float) -> tuple[float, float, float]:
             space.interpolate(a, b, lam, scratch)
             return _pose(scratch)
 
-        return self._travel.motion_valid(pose_at, self.sweep(a, b))
+        return travel.motion_valid(pose_at, self.sweep(a, b))
 
 
 class BasePathPlanner:
@@ -189,12 +200,6 @@ class BasePathPlanner:
 
         if np.array_equal(start, goal):  # there already: no motion to check
             return self._path([start, goal], None, began, 'direct')
-        if not travel.valid(start):
-            return refused(
-                NoWay.START_BLOCKED,
-                f'the robot is {travel.obstacle_clearance(start):.3f} m from an obstacle where it stands; '
-                f'the path keeps {travel.margin + travel.step:g} m',
-            )
         if not travel.valid(goal):
             return refused(
                 NoWay.NO_PATH,
@@ -218,8 +223,22 @@ class BasePathPlanner:
         a, b = space.allocState(), space.allocState()
         _set(a, start)
         _set(b, goal)
+        before = []  # the way out, when the robot starts nearer an obstacle than the margin
+        if not self.travel.valid(start):
+            out = self._escape(space, motions, start)
+            if out is None:
+                return BasePath(
+                    np.empty((0, 3)),
+                    (),
+                    NoWay.START_BLOCKED,
+                    f'the robot is {self.travel.obstacle_clearance(start):.3f} m from an obstacle where it '
+                    f'stands, and no straight way out within {ESCAPE[-1]:g} m keeps that far',
+                    time.perf_counter() - began,
+                    '',
+                )
+            before, a = [a], out
         if motions.checkMotion(a, b):
-            return self._path([a, b], space, began, 'direct')
+            return self._path([*before, a, b], space, began, 'direct')
         ou.RNG.setSeed(self.seed)  # every generator made from here on: see the module docstring
         best: tuple[float, list] | None = None
         status = None
@@ -249,12 +268,39 @@ class BasePathPlanner:
                 time.perf_counter() - began,
                 'RRTConnect',
             )
-        states = []
+        states = list(before)
         for pose in best[1]:
             state = space.allocState()
             _set(state, pose)
             states.append(state)
         return self._path(states, space, began, 'RRTConnect')
+
+    def _escape(self, space, motions: _Motions, start: np.ndarray):
+        """A state near ``start`` (which is not valid) that is valid and reached by a motion
+        that keeps the start's clearance (less ``step``) all along: ``ESCAPE`` distances in
+        ``ESCAPE_BEARINGS`` directions, heading kept, the nearest first and of those the
+        clearest; None when there is none (or the robot is within ``step`` of an obstacle)."""
+        travel = self.travel
+        held = travel.obstacle_clearance(start) - travel.step
+        if held <= 0.0:
+            return None
+        relaxed = travel.with_margin(held)
+        a = space.allocState()
+        _set(a, start)
+        for distance in ESCAPE:
+            ways = []
+            for i in range(ESCAPE_BEARINGS):
+                bearing = 2.0 * math.pi * i / ESCAPE_BEARINGS
+                pose = start + distance * np.array((math.cos(bearing), math.sin(bearing), 0.0))
+                d = travel.obstacle_clearance(pose)
+                if d >= travel.margin + travel.step:
+                    b = space.allocState()
+                    _set(b, pose)
+                    if motions.valid(relaxed, a, b):
+                        ways.append((d, i, b))
+            if ways:
+                return max(ways, key=lambda way: (way[0], -way[1]))[2]
+        return None
 
     def _simplify(self, simplifier, path) -> None:
         """Shorten ``path``: vertex reduction, then again with each segment cut in eight (so

@@ -20,6 +20,7 @@ queries (the pairs, the shapes and the floor are the controller's own):
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections.abc import Callable, Iterable, Sequence
@@ -134,6 +135,14 @@ class Travel:
         self.step = float(step)
         self.radius = swept_radius(model, self.q_arm)
         self.queries = 0
+
+    def with_margin(self, margin: float) -> Travel:
+        """The same robot and posture, keeping ``margin`` [m] instead."""
+        if not margin > 0.0:
+            raise ValueError(f'margin must be > 0 [m], got {margin}')
+        out = copy.copy(self)
+        out.margin = float(margin)
+        return out
 
     def obstacle_clearance(self, base_pose: Sequence[float] | np.ndarray) -> float:
         """[m] the distance from the nearest obstacle of the robot at ``base_pose`` (x, y, θ),

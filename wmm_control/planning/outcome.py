@@ -16,7 +16,8 @@ class NoWay(str, Enum):
     OUT_OF_REACH = 'out_of_reach'
     #: no base pose around the goal lets the arm reach it with the clearances asked
     NO_STANCE = 'no_stance'
-    #: the robot's current pose is not clear of the obstacles by the travel margin
+    #: the robot's current pose is not clear of the obstacles by the travel margin, and no
+    #: short way out keeps the clearance it has
     START_BLOCKED = 'start_blocked'
     #: no base path to any stance was found within the time budget
     NO_PATH = 'no_path'
