@@ -23,13 +23,16 @@ OBSTACLES = load_obstacles('table_pillar')
 NAMES = {o.name for o in OBSTACLES}
 #: [m] how much nearer PyBullet's geometry may put the robot than the planner's (coal's)
 ENGINES = 0.005
+#: [s] a search budget no plan here comes near (they take under a second), so that a loaded
+#: machine cuts none short
+BUDGET = 30.0
 
 
 @pytest.fixture(scope='module', params=['steerable', 'panda_diff'])
 def planned(request):
     """(robot, planner, goal, plan) for the first table_pillar goal whose straight way is blocked."""
     cfg = load_robot(request.param)
-    planner = GoalPlanner(cfg, OBSTACLES)
+    planner = GoalPlanner(cfg, OBSTACLES, budget=BUDGET)
     goals = sample_goals(cfg, 3, seed=0, obstacles='table_pillar')
     with SelfCollisionChecker(cfg, margin=planner.travel.margin, obstacles=OBSTACLES) as checker:
         for goal in goals:
@@ -106,6 +109,9 @@ def test_the_same_seed_plans_the_same_path(planned):
     cfg, planner, _goal, plan = planned
     again = planner.paths.plan(cfg.start.base_pose, plan.stance.base_pose)
     assert np.array_equal(again.waypoints, plan.path.waypoints)
+    assert plan.path.planner == 'RRTConnect'  # searched, not the straight way: the seed matters
+    other = BasePathPlanner(cfg.base, planner.travel, budget=BUDGET, seed=planner.paths.seed + 1)
+    assert not np.array_equal(other.plan(cfg.start.base_pose, plan.stance.base_pose).waypoints, plan.path.waypoints)
 
 
 def test_a_base_already_at_the_stance_stays_there(planned):
@@ -157,7 +163,7 @@ def test_a_robot_stopped_near_the_table_backs_away_then_keeps_the_margin(robot):
     from scipy.optimize import brentq
 
     cfg = load_robot(robot)
-    planner = GoalPlanner(cfg, OBSTACLES)
+    planner = GoalPlanner(cfg, OBSTACLES, budget=BUDGET)
     travel = planner.travel
     x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, 0.0]) - 0.05, 0.0, 1.2, xtol=1e-5)
     start = np.array([x, -0.2, 0.0])
