@@ -50,6 +50,19 @@ def _obstacle_distances(checker, q_arm, base_pose):
     return [d for _a, b, d in checker.collisions(q_arm, base_pose) if b in NAMES]
 
 
+def _nearest_along(cfg, travel, traj):
+    """``(sample, distance)``: the robot's distance from the nearest obstacle (PyBullet; inf
+    beyond the travel margin), arm in the travel posture, as the base moves through each period:
+    every point of the robot checked within 1 cm."""
+    with SelfCollisionChecker(cfg, margin=travel.margin, obstacles=OBSTACLES) as checker:
+        for k, (pose, twist) in enumerate(zip(traj.poses[:-1], traj.twists[:-1])):
+            sweep = (math.hypot(twist[0], twist[1]) + travel.radius * abs(twist[2])) * traj.dt
+            steps = max(1, math.ceil(sweep / 0.01))
+            for s in range(steps):
+                near = _obstacle_distances(checker, travel.q_arm, se2_integrate(pose, twist, s * traj.dt / steps))
+                yield k, min(near, default=math.inf)
+
+
 def test_the_stance_reaches_a_goal_beyond_the_table_clear_of_everything(planned):
     cfg, planner, goal, plan = planned
     stance = plan.stance
@@ -72,16 +85,24 @@ def test_the_base_path_keeps_the_margin_from_every_obstacle_all_along(planned):
     cfg, planner, _goal, plan = planned
     traj = plan.trajectory
     assert np.allclose(traj.poses[0], cfg.start.base_pose)
-    radius = planner.travel.radius
-    margin = planner.travel.margin - ENGINES
-    with SelfCollisionChecker(cfg, margin=margin, obstacles=OBSTACLES) as checker:
-        for pose, twist in zip(traj.poses[:-1], traj.twists[:-1]):
-            # as the base moves in the period: every point of the robot checked within 1 cm
-            sweep = (math.hypot(twist[0], twist[1]) + radius * abs(twist[2])) * traj.dt
-            steps = max(1, math.ceil(sweep / 0.01))
-            for s in range(steps):
-                at = se2_integrate(pose, twist, s * traj.dt / steps)
-                assert not _obstacle_distances(checker, cfg.start.arm, at), f'within {margin} m at {at}'
+    assert np.array_equal(planner.travel.q_arm, cfg.start.arm)
+    for k, distance in _nearest_along(cfg, planner.travel, traj):
+        assert distance >= planner.travel.margin - ENGINES, f'{distance} m from an obstacle at {traj.poses[k]}'
+
+
+def test_another_travel_posture_is_the_one_the_path_keeps_clear():
+    """Panda's arm held out to its side while the base drives: a wider robot."""
+    cfg = load_robot('panda_diff')
+    planner = GoalPlanner(cfg, OBSTACLES, budget=BUDGET)
+    held_out = cfg.start.arm.copy()
+    held_out[[0, 1, 3]] = 1.4, 0.3, -1.2  # turned to the left, leaning out, elbow opened
+    planner.set_travel_posture(held_out)
+    assert planner.travel.radius > GoalPlanner(cfg, OBSTACLES).travel.radius + 0.1
+    goal = sample_goals(cfg, 1, seed=0, obstacles='table_pillar')[0]
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), cfg.start.base_pose)
+    assert plan.no_way is None, plan.reason
+    for k, distance in _nearest_along(cfg, planner.travel, plan.trajectory):
+        assert distance >= planner.travel.margin - ENGINES, f'{distance} m from an obstacle at sample {k}'
 
 
 def test_the_timed_path_is_within_the_base_limits_and_ends_at_the_stance(planned):
@@ -173,14 +194,8 @@ def test_a_robot_stopped_near_the_table_backs_away_then_keeps_the_margin(robot):
     traj = plan.trajectory
     assert np.allclose(traj.poses[0], start)
     out = next(k for k, pose in enumerate(traj.poses) if np.allclose(pose, plan.path.waypoints[1]))
-    radius = travel.radius
-    with SelfCollisionChecker(cfg, margin=travel.margin, obstacles=OBSTACLES) as checker:
-        for k, (pose, twist) in enumerate(zip(traj.poses[:-1], traj.twists[:-1])):
-            keep = (0.05 - travel.step if k < out else travel.margin) - ENGINES
-            steps = max(1, math.ceil((math.hypot(twist[0], twist[1]) + radius * abs(twist[2])) * traj.dt / 0.01))
-            for s in range(steps):
-                near = _obstacle_distances(checker, cfg.start.arm, se2_integrate(pose, twist, s * traj.dt / steps))
-                assert min(near, default=math.inf) >= keep
+    for k, distance in _nearest_along(cfg, travel, traj):
+        assert distance >= (0.05 - travel.step if k < out else travel.margin) - ENGINES
     # touching (within the check step): no way out that keeps its clearance
     x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, 0.0]) - 0.005, 0.0, 1.2, xtol=1e-5)
     plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), [x, -0.2, 0.0])

@@ -130,11 +130,16 @@ class Travel:
         if not (margin > 0.0 and step > 0.0):
             raise ValueError(f'margin and step must be > 0 [m], got {margin}, {step}')
         self.clearance = clearance
+        self.model = model
         self.q_arm = np.array(q_arm, dtype=float)
         self.margin = float(margin)
         self.step = float(step)
         self.radius = swept_radius(model, self.q_arm)
         self.queries = 0
+
+    def with_posture(self, q_arm: ArrayLike) -> Travel:
+        """The same robot and margins, the arm held at ``q_arm`` instead."""
+        return Travel(self.clearance, self.model, q_arm, self.margin, self.step)
 
     def with_margin(self, margin: float) -> Travel:
         """The same robot and posture, keeping ``margin`` [m] instead."""

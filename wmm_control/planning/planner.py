@@ -4,7 +4,8 @@
 the stances for an end-effector goal (:mod:`~wmm_control.planning.stance`), plans the base's
 path to the best one from the robot's base pose (:mod:`~wmm_control.planning.base_path`; the
 next stance when there is no path to one), and times it (:mod:`~wmm_control.planning.timing`).
-The arm travels in the posture it is given (default: the robot's start posture) and takes the
+The arm travels in the posture it is given (default: the robot's start posture;
+:meth:`GoalPlanner.set_travel_posture` changes it) and takes the
 stance's posture only once there, so the path is checked with the arm in the travel posture and
 the stance both with it (the path's end) and with the arm at the goal.
 """
@@ -95,6 +96,12 @@ class GoalPlanner:
         self.paths = BasePathPlanner(robot.base, self.travel, budget, seed)
         self.stances_tried = int(stances_tried)
         self.fraction = float(fraction)
+
+    def set_travel_posture(self, q_arm: ArrayLike) -> None:
+        """Plan with the arm held at ``q_arm`` [rad or m] while the base drives, from now on (the
+        stances' inverse kinematics start from it too)."""
+        travel = self.travel.with_posture(q_arm)
+        self.travel = self.stances.travel = self.paths.travel = travel
 
     def plan(self, goal_position: ArrayLike, goal_rotation: ArrayLike, base_pose: Sequence[float] | np.ndarray) -> Plan:
         """A plan for the end effector to reach ``goal_position`` [m] with ``goal_rotation`` (3, 3)
