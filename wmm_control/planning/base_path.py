@@ -14,15 +14,17 @@ states is checked by conservative advancement (:meth:`Travel.motion_valid`): eve
 not only the checked ones, keeps ``margin``. A robot that starts nearer an obstacle than that (a
 reactive controller may have stopped it there) first takes a way out: the nearest valid pose
 within 0.5 m (heading kept) that a motion reaches without coming nearer than it was, less
-``step``; the path then starts with that motion. RRT-Connect searches within a time budget; the path
-is then shortened by OMPL's path simplifier (vertex reduction and collapsing close vertices,
-with the same checks). A straight motion from start to goal is tried first and, if valid, is the
-path.
+``step``; the path then starts with that motion. A straight motion from start to goal is tried
+first and, if valid, is the path. Else RRT-Connect searches ``attempts`` times within the time
+budget; each path is shortened by OMPL's path simplifier (vertex reduction, again after every
+segment is cut in eight so that corners can be cut, then close vertices collapsed; with the same
+checks), and the shortest is kept.
 
 Reproducible: OMPL draws the seed of every random generator it makes from one sequence,
 which :func:`ompl.util.RNG.setSeed` restarts; each plan makes its planner and simplifier anew
 after restarting it with ``seed``, so the same query with the same seed gives the same path (the
-budget aside: a plan cut short by it depends on the machine's speed).
+budget aside: a plan cut short by it depends on the machine's speed). The sequence is one per
+process: plans in two threads at once are not reproducible.
 
 :meth:`BasePathPlanner.plan` gives a :class:`BasePath`: the simplified waypoints and the path as
 pieces the base follows one after the other (:mod:`~wmm_control.planning.timing`): one
@@ -148,7 +150,8 @@ class BasePathPlanner:
     Args:
         base: the robot's base section (its family chooses the space, its limits ρ).
         travel: the robot driving in its travel posture.
-        budget: [s] the time RRT-Connect may search.
+        budget: [s] counted from the plan's start, the time the searches may take (a search
+            begun within it is given what is left; the simplification of its path may end past it).
         seed: > 0, OMPL's random seed for every plan.
         attempts: RRT-Connect searches (each simplified); the shortest path is kept.
         simplify_rounds: rounds of vertex reduction after each search.
