@@ -32,6 +32,7 @@ LAYERS = {
     'wmm_control.base': 'core',
     'wmm_control.resolvers': 'core',
     'wmm_control.cycle': 'core',  # one control period: resolver, base, compensation
+    'wmm_control.planning': 'core',  # where to stand, a base path (OMPL), timed
     'wmm_control.viewer': 'core',  # the browser viewer's scene, panel and drag, ROS-free
     # the scenario file format (goals, trajectories), ROS-free: the goal_sequencer node plays it
     'wmm_control.experiments.scenario': 'core',

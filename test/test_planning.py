@@ -1,0 +1,274 @@
+"""The planner's ROS-free core: where to stand, a base path round the table (OMPL), timed.
+
+Every plan is checked on its own terms and against the simulator's geometry (PyBullet,
+:class:`~sim_bridge.collision.SelfCollisionChecker`), independently of the planner's distance
+model: the stance's arm reaches the goal (forward kinematics), the robot keeps its margins there
+and all along the path, and the timed path stays within the base's limits and ends at the stance.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from sim_bridge.collision import SelfCollisionChecker
+from wmm_control.experiments.randomized import sample_goals
+from wmm_control.geometry import matrix_from_rpy, rotation_angle, se2_integrate, twist_to_world, wrap_angle
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.obstacles import load_obstacles, parse_obstacles
+from wmm_control.planning import BasePathPlanner, Clearance, GoalPlanner, NoWay, Travel, time_path
+from wmm_control.robot_config import load_robot
+
+OBSTACLES = load_obstacles('table_pillar')
+NAMES = {o.name for o in OBSTACLES}
+#: [m] how much nearer PyBullet's geometry may put the robot than the planner's (coal's)
+ENGINES = 0.005
+#: [s] a search budget no plan here comes near (they take under a second), so that a loaded
+#: machine cuts none short
+BUDGET = 30.0
+
+
+@pytest.fixture(scope='module', params=['steerable', 'panda_diff'])
+def planned(request):
+    """(robot, planner, goal, plan) for the first table_pillar goal whose straight way is blocked."""
+    cfg = load_robot(request.param)
+    planner = GoalPlanner(cfg, OBSTACLES, budget=BUDGET)
+    goals = sample_goals(cfg, 3, seed=0, obstacles='table_pillar')
+    with SelfCollisionChecker(cfg, margin=planner.travel.margin, obstacles=OBSTACLES) as checker:
+        for goal in goals:
+            plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), cfg.start.base_pose)
+            assert plan.no_way is None, plan.reason
+            straight = [
+                cfg.start.base_pose + s * (plan.stance.base_pose - cfg.start.base_pose) for s in np.linspace(0, 1, 60)
+            ]
+            if any(_obstacle_distances(checker, cfg.start.arm, pose) for pose in straight):
+                return cfg, planner, goal, plan
+    pytest.fail('no goal of the draw lies behind the table or the pillar')
+
+
+def _obstacle_distances(checker, q_arm, base_pose):
+    return [d for _a, b, d in checker.collisions(q_arm, base_pose) if b in NAMES]
+
+
+def _nearest_along(cfg, travel, traj):
+    """``(sample, distance)``: the robot's distance from the nearest obstacle (PyBullet; inf
+    beyond the travel margin), arm in the travel posture, as the base moves through each period:
+    every point of the robot checked within 1 cm."""
+    with SelfCollisionChecker(cfg, margin=travel.margin, obstacles=OBSTACLES) as checker:
+        for k, (pose, twist) in enumerate(zip(traj.poses[:-1], traj.twists[:-1])):
+            sweep = (math.hypot(twist[0], twist[1]) + travel.radius * abs(twist[2])) * traj.dt
+            steps = max(1, math.ceil(sweep / 0.01))
+            for s in range(steps):
+                near = _obstacle_distances(checker, travel.q_arm, se2_integrate(pose, twist, s * traj.dt / steps))
+                yield k, min(near, default=math.inf)
+
+
+def test_the_stance_reaches_a_goal_beyond_the_table_clear_of_everything(planned):
+    cfg, planner, goal, plan = planned
+    stance = plan.stance
+    model = KinematicModel(cfg)
+    model.update(stance.base_pose, stance.q_arm)
+    position, rotation = model.ee_placement_world()
+    assert np.linalg.norm(position - goal.pose[:3]) <= 0.005
+    assert rotation_angle(matrix_from_rpy(goal.pose[3:]), rotation) <= 0.01
+    lower, upper = cfg.arm.position_lower, cfg.arm.position_upper
+    assert np.all((stance.q_arm >= lower) & (stance.q_arm <= upper))
+    margin = planner.stances.params.stance_margin
+    with SelfCollisionChecker(cfg, margin=margin - ENGINES, obstacles=OBSTACLES) as checker:
+        assert not _obstacle_distances(checker, stance.q_arm, stance.base_pose)
+    # the others come after it: ranked by their score (the robot's own pose is no stance here)
+    scores = [s.score for s in plan.search.stances]
+    assert scores == sorted(scores, reverse=True)
+
+
+def test_the_base_path_keeps_the_margin_from_every_obstacle_all_along(planned):
+    cfg, planner, _goal, plan = planned
+    traj = plan.trajectory
+    assert np.allclose(traj.poses[0], cfg.start.base_pose)
+    assert np.array_equal(planner.travel.q_arm, cfg.start.arm)
+    for k, distance in _nearest_along(cfg, planner.travel, traj):
+        assert distance >= planner.travel.margin - ENGINES, f'{distance} m from an obstacle at {traj.poses[k]}'
+
+
+def test_another_travel_posture_is_the_one_the_path_keeps_clear():
+    """Panda's arm held out to its side while the base drives: a wider robot."""
+    cfg = load_robot('panda_diff')
+    planner = GoalPlanner(cfg, OBSTACLES, budget=BUDGET)
+    held_out = cfg.start.arm.copy()
+    held_out[[0, 1, 3]] = 1.4, 0.3, -1.2  # turned to the left, leaning out, elbow opened
+    planner.set_travel_posture(held_out)
+    assert planner.travel.radius > GoalPlanner(cfg, OBSTACLES).travel.radius + 0.1
+    goal = sample_goals(cfg, 1, seed=0, obstacles='table_pillar')[0]
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), cfg.start.base_pose)
+    assert plan.no_way is None, plan.reason
+    for k, distance in _nearest_along(cfg, planner.travel, plan.trajectory):
+        assert distance >= planner.travel.margin - ENGINES, f'{distance} m from an obstacle at sample {k}'
+
+
+def test_the_timed_path_is_within_the_base_limits_and_ends_at_the_stance(planned):
+    cfg, _planner, _goal, plan = planned
+    traj = plan.trajectory
+    assert traj.dt == cfg.period
+    assert np.allclose(np.diff(traj.t), cfg.period)
+    end = traj.poses[-1] - plan.stance.base_pose
+    assert np.hypot(end[0], end[1]) < 1e-6 and abs(wrap_angle(end[2])) < 1e-6
+    # the twists move the base from each sample to the next, and the world rates are the same twists
+    for k in range(len(traj.t) - 1):
+        moved = np.array(se2_integrate(traj.poses[k], traj.twists[k], traj.dt)) - traj.poses[k + 1]
+        assert np.hypot(moved[0], moved[1]) < 1e-6 and abs(wrap_angle(moved[2])) < 1e-6
+    assert np.allclose(traj.rates, [twist_to_world(th, tw) for th, tw in zip(traj.poses[:, 2], traj.twists)])
+    assert np.all(traj.twists[-1] == 0.0)
+    velocity, acceleration = cfg.base.velocity, cfg.base.acceleration
+    assert np.all(np.abs(traj.twists) <= velocity + 1e-6)  # a differential base: vy within 1e-6 of 0
+    # from rest and back to rest
+    rates = np.diff(np.vstack([np.zeros(3), traj.twists]), axis=0) / traj.dt
+    assert np.all(np.abs(rates) <= acceleration * (1 + 1e-6) + 1e-6)
+    assert np.max(np.abs(traj.twists[:, [0, 2]])) > 0.1 * np.min(velocity[[0, 2]])  # it does move
+
+
+def test_the_same_seed_plans_the_same_path(planned):
+    cfg, planner, _goal, plan = planned
+    again = planner.paths.plan(cfg.start.base_pose, plan.stance.base_pose)
+    assert np.array_equal(again.waypoints, plan.path.waypoints)
+    assert plan.path.planner == 'RRTConnect'  # searched, not the straight way: the seed matters
+    other = BasePathPlanner(cfg.base, planner.travel, budget=BUDGET, seed=planner.paths.seed + 1)
+    assert not np.array_equal(other.plan(cfg.start.base_pose, plan.stance.base_pose).waypoints, plan.path.waypoints)
+
+
+def test_a_base_already_at_the_stance_stays_there(planned):
+    cfg, planner, goal, plan = planned
+    again = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), plan.stance.base_pose)
+    assert again.path.planner == 'direct' and len(again.trajectory.t) == 1
+    assert np.allclose(again.trajectory.poses[0], plan.stance.base_pose) and not again.trajectory.twists.any()
+
+
+def test_a_goal_inside_the_table_is_refused_with_its_reason():
+    cfg = load_robot('steerable')
+    planner = GoalPlanner(cfg, OBSTACLES)
+    table = next(o for o in OBSTACLES if o.name == 'table')
+    goal = table.position + np.array([0.0, 0.0, 0.5 * table.size[2] - 0.05])  # 5 cm under its top
+    plan = planner.plan(goal, np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.INSIDE_OBSTACLE and plan.trajectory is None
+    assert "'table'" in plan.reason
+    # just above the top, nearer than the stance margin: refused too
+    plan = planner.plan(goal + [0.0, 0.0, 0.06], np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.INSIDE_OBSTACLE
+
+
+@pytest.mark.parametrize('robot', ['steerable', 'panda_diff'])
+def test_a_goal_out_of_every_stance_s_reach_is_refused_with_its_reason(robot):
+    cfg = load_robot(robot)
+    planner = GoalPlanner(cfg, OBSTACLES)
+    plan = planner.plan([2.7, 0.0, 3.0], np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.OUT_OF_REACH and plan.stance is None
+    assert 'reach' in plan.reason
+    # below the floor
+    plan = planner.plan([2.7, 0.0, cfg.ground_z - 0.1], np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.OUT_OF_REACH
+
+
+def test_a_goal_the_arm_reaches_from_nowhere_gets_no_stance():
+    """Above the floor and below the arm's highest, yet 2 cm off the floor: no posture gets the
+    end effector there clear of the floor: every candidate is tried."""
+    cfg = load_robot('steerable')
+    planner = GoalPlanner(cfg, OBSTACLES)
+    plan = planner.plan([2.7, 0.0, cfg.ground_z + 0.02], np.eye(3), cfg.start.base_pose)
+    assert plan.no_way is NoWay.NO_STANCE and plan.search.candidates > 0
+    assert plan.reason.startswith('no stance')
+
+
+@pytest.mark.parametrize('robot', ['steerable', 'panda_diff'])
+def test_a_robot_stopped_near_the_table_backs_away_then_keeps_the_margin(robot):
+    """Where a reactive controller leaves it: facing the table 5 cm from it. The path first takes
+    a way out that comes no nearer (less the check step), then keeps the margin."""
+    from scipy.optimize import brentq
+
+    cfg = load_robot(robot)
+    planner = GoalPlanner(cfg, OBSTACLES, budget=BUDGET)
+    travel = planner.travel
+    x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, 0.0]) - 0.05, 0.0, 1.2, xtol=1e-5)
+    start = np.array([x, -0.2, 0.0])
+    goal = sample_goals(cfg, 1, seed=0, obstacles='table_pillar')[0]
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), start)
+    assert plan.no_way is None, plan.reason
+    traj = plan.trajectory
+    assert np.allclose(traj.poses[0], start)
+    out = next(k for k, pose in enumerate(traj.poses) if np.allclose(pose, plan.path.waypoints[1]))
+    for k, distance in _nearest_along(cfg, travel, traj):
+        assert distance >= (0.05 - travel.step if k < out else travel.margin) - ENGINES
+    # touching (within the check step): no way out that keeps its clearance
+    x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, 0.0]) - 0.005, 0.0, 1.2, xtol=1e-5)
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), [x, -0.2, 0.0])
+    assert plan.no_way is NoWay.START_BLOCKED and 'where it stands' in plan.reason
+
+
+def test_a_robot_walled_in_gets_no_path_within_the_budget():
+    cfg = load_robot('steerable')
+    walls = parse_obstacles(
+        [
+            {'name': f'wall_{i}', 'shape': 'box', 'size': size, 'pose': pose}
+            for i, (size, pose) in enumerate(
+                [
+                    ([0.2, 3.4, 1.0], [1.6, 0.0, 0.5]),
+                    ([0.2, 3.4, 1.0], [-1.6, 0.0, 0.5]),
+                    ([3.4, 0.2, 1.0], [0.0, 1.6, 0.5]),
+                    ([3.4, 0.2, 1.0], [0.0, -1.6, 0.5]),
+                ]
+            )
+        ],
+        'walls',
+    )
+    model = KinematicModel(cfg)
+    travel = Travel(Clearance.of_robot(cfg, walls, body=False), model, cfg.start.arm, margin=0.1)
+    planner = BasePathPlanner(cfg.base, travel, budget=0.3)
+    path = planner.plan(cfg.start.base_pose, [3.0, 0.0, 0.0])
+    assert path.no_way is NoWay.NO_PATH and not path.found and len(path.waypoints) == 0
+    assert 'within 0.3 s' in path.reason
+    assert path.planning_time >= 0.3
+
+
+def test_a_holonomic_move_is_refused_to_a_differential_base():
+    from wmm_control.planning.timing import LinearPiece
+
+    cfg = load_robot('panda_diff')
+    sideways = LinearPiece(np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    with pytest.raises(Exception, match='vy'):
+        time_path([sideways], cfg.base, cfg.period)
+
+
+def test_a_straight_se2_piece_bounds_its_twist_and_the_twist_s_change_tightly():
+    """u(λ), the twist per unit λ in the base's frame, by finite differences along random pieces
+    (turning up to half a turn): within the piece's bounds, and reaching them (not loose)."""
+    from wmm_control.geometry import se2_twist
+    from wmm_control.planning.timing import LinearPiece
+
+    rng = np.random.default_rng(3)
+    h = 1e-5
+    for _ in range(20):
+        start = rng.uniform([-2, -2, -math.pi], [2, 2, math.pi])
+        end = start + rng.uniform([-2, -2, -math.pi], [2, 2, math.pi])
+        piece = LinearPiece(start, end)
+        bound, slope = piece.rate_bounds()
+        lams = np.linspace(0.0, 1.0 - h, 801)
+        u = np.array([se2_twist(piece.pose(lam), piece.pose(lam + h), h) for lam in lams])
+        du = np.diff(u, axis=0) / np.diff(lams)[:, None]
+        assert np.all(np.abs(u) <= bound * (1 + 1e-4) + 1e-6)
+        assert np.all(np.abs(du) <= slope * (1 + 1e-3) + 1e-3)
+        assert np.all(np.max(np.abs(u), axis=0) >= 0.99 * bound - 1e-6)
+
+
+def test_timed_se2_pieces_keep_every_axis_within_its_own_limits():
+    """Robot B's base: 0.25 m/s and 0.025 m/s² on x and y, 1 rad/s and 1.5 rad/s² on the turn."""
+    from wmm_control.planning.timing import LinearPiece
+
+    cfg = load_robot('mecanum')
+    rng = np.random.default_rng(4)
+    poses = np.cumsum(rng.uniform([-0.6, -0.6, -2.0], [0.6, 0.6, 2.0], size=(4, 3)), axis=0)
+    traj = time_path([LinearPiece(a, b) for a, b in zip(poses[:-1], poses[1:])], cfg.base, cfg.period)
+    assert np.allclose(traj.poses[-1], [*poses[-1, :2], wrap_angle(poses[-1, 2])])
+    assert np.all(np.abs(traj.twists) <= cfg.base.velocity + 1e-9)
+    rates = np.diff(np.vstack([np.zeros(3), traj.twists]), axis=0) / traj.dt
+    assert np.all(np.abs(rates) <= cfg.base.acceleration * (1 + 1e-6))
+    # the turn and the translation use their limits: the slowest axis sets the pace, not a common one
+    use = np.max(np.abs(rates), axis=0) / cfg.base.acceleration
+    assert np.max(use) > 0.5

@@ -1,0 +1,388 @@
+"""The way there: a base path clear of the obstacles, planned with OMPL (the ``ompl`` wheel).
+
+The state is the base pose (x, y, θ); the robot drives with its arm held in the travel posture
+(:class:`~wmm_control.planning.clearance.Travel`). The space follows the base's family:
+
+* a holonomic base (steerable, Mecanum) moves in SE(2): between two states (x, y) along the
+  straight line while θ turns the short way, at once;
+* a differential base moves on Reeds–Shepp curves (forward and backward, arcs of radius ρ and
+  straight lines): ρ = v_max / ω_max, the radius at which it turns at full speed on both limits
+  (0.25 m for ``panda_diff``); the base follows such a curve exactly, without sliding sideways.
+
+A state is valid when the robot is ``margin + step`` clear of every obstacle; a motion between two
+states is checked by conservative advancement (:meth:`Travel.motion_valid`): every pose along it,
+not only the checked ones, keeps ``margin``. A robot that starts nearer an obstacle than that (a
+reactive controller may have stopped it there) first takes a way out: the nearest valid pose
+within 0.5 m (heading kept) that a motion reaches without coming nearer than it was, less
+``step``; the path then starts with that motion. A straight motion from start to goal is tried
+first and, if valid, is the path. Else RRT-Connect searches ``attempts`` times within the time
+budget; each path is shortened by OMPL's path simplifier (vertex reduction, again after every
+segment is cut in eight so that corners can be cut, then close vertices collapsed; with the same
+checks), and the shortest is kept.
+
+Reproducible: OMPL draws the seed of every random generator it makes from one sequence,
+which :func:`ompl.util.RNG.setSeed` restarts; each plan makes its planner and simplifier anew
+after restarting it with ``seed``, so the same query with the same seed gives the same path (the
+budget aside: a plan cut short by it depends on the machine's speed). The sequence is one per
+process: plans in two threads at once are not reproducible.
+
+:meth:`BasePathPlanner.plan` gives a :class:`BasePath`: the simplified waypoints and the path as
+pieces the base follows one after the other (:mod:`~wmm_control.planning.timing`): one
+:class:`~wmm_control.planning.timing.LinearPiece` per pair of waypoints in SE(2), and for
+Reeds–Shepp the arcs and straight lines of each curve, each a
+:class:`~wmm_control.planning.timing.TwistPiece` (split where the curvature or the direction of
+travel changes).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
+
+from wmm_control.checks import as_finite_vector
+from wmm_control.geometry import se2_twist
+from wmm_control.kinematics.obstacles import Obstacle
+from wmm_control.planning.clearance import Travel
+from wmm_control.planning.outcome import NoWay
+from wmm_control.planning.timing import LinearPiece, Piece, TwistPiece
+from wmm_control.robot_config import BaseSection
+
+__all__ = ['BasePath', 'BasePathPlanner', 'turning_radius']
+
+#: [m] added around the start, the goal, the obstacles and the robot for the sampled region
+PADDING = 1.0
+#: relative tolerance on a Reeds–Shepp stretch's twist per metre: (±1, 0, 0 or ±1/ρ)
+_RS_PURE = 1e-7
+#: [m] stretches shorter than this at a Reeds–Shepp junction are not split further
+_RS_SPLIT = 1e-9
+#: [m] how far a robot that starts nearer an obstacle than the margin looks for a way out, nearest first
+ESCAPE = (0.1, 0.2, 0.35, 0.5)
+#: directions of the way out, evenly spread
+ESCAPE_BEARINGS = 16
+
+
+def turning_radius(base: BaseSection) -> float:
+    """ρ = v_max / ω_max [m] of a base that turns at both limits on that radius."""
+    v, w = float(base.velocity[0]), float(base.velocity[2])
+    if not (v > 0.0 and w > 0.0):
+        raise ValueError(f'a base needs forward and turn rate limits > 0, got {v}, {w}')
+    return v / w
+
+
+@dataclass(frozen=True)
+class BasePath:
+    """A planned base path, or why there is none.
+
+    Attributes:
+        waypoints: (x, y, θ) [m, m, rad], start first, goal last; empty when none. Shape (N, 3).
+        pieces: the motions the base follows from one to the next (module docstring).
+        no_way: the kind of reason when there is no path, else None.
+        reason: a sentence for a log ('' when found).
+        planning_time: [s] wall time of the whole plan (search and simplification).
+        planner: 'direct' (the straight motion was valid), or OMPL's planner's name.
+    """
+
+    waypoints: np.ndarray
+    pieces: tuple[Piece, ...]
+    no_way: NoWay | None
+    reason: str
+    planning_time: float
+    planner: str
+
+    @property
+    def found(self) -> bool:
+        """Whether there is a path."""
+        return self.no_way is None
+
+
+def _pose(state) -> tuple[float, float, float]:
+    return (state.getX(), state.getY(), state.getYaw())
+
+
+def _set(state, pose: Sequence[float] | np.ndarray) -> None:
+    state.setX(float(pose[0]))
+    state.setY(float(pose[1]))
+    state.setYaw(math.remainder(float(pose[2]), 2.0 * math.pi))
+
+
+class _Motions(ob.MotionValidator):
+    """OMPL's motion check on :meth:`Travel.motion_valid`, along the space's own interpolation."""
+
+    def __init__(self, si, space, travel: Travel, reeds_shepp_radius: float | None) -> None:
+        super().__init__(si)
+        # the space, not ``si``: ``si`` holds this validator, and a reference back to it from
+        # Python would keep both alive for good
+        self._space = space
+        self._travel = travel
+        self._rho = reeds_shepp_radius
+        self._scratch = space.allocState()
+
+    def sweep(self, a, b) -> float:
+        """[m] how far any point of the robot moves, at most, per unit of the interpolation."""
+        if self._rho is None:
+            return self._travel.linear_sweep(_pose(a), _pose(b))
+        return self._space.distance(a, b) * (1.0 + self._travel.radius / self._rho)
+
+    def checkMotion(self, a, b) -> bool:  # noqa: N802 (OMPL's name)
+        return self.valid(self._travel, a, b)
+
+    def valid(self, travel: Travel, a, b) -> bool:
+        """Whether the motion from ``a`` to ``b`` keeps ``travel``'s margin all along."""
+        space, scratch = self._space, self._scratch
+
+        def pose_at(lam: float) -> tuple[float, float, float]:
+            space.interpolate(a, b, lam, scratch)
+            return _pose(scratch)
+
+        return travel.motion_valid(pose_at, self.sweep(a, b))
+
+
+class BasePathPlanner:
+    """Base paths among the obstacles for one robot (module docstring).
+
+    Args:
+        base: the robot's base section (its family chooses the space, its limits ρ).
+        travel: the robot driving in its travel posture.
+        budget: [s] counted from the plan's start, the time the searches may take (a search
+            begun within it is given what is left; the simplification of its path may end past it).
+        seed: > 0, OMPL's random seed for every plan.
+        attempts: RRT-Connect searches (each simplified); the shortest path is kept.
+        simplify_rounds: rounds of vertex reduction after each search.
+    """
+
+    def __init__(
+        self,
+        base: BaseSection,
+        travel: Travel,
+        budget: float = 2.0,
+        seed: int = 1,
+        attempts: int = 4,
+        simplify_rounds: int = 15,
+    ) -> None:
+        if not budget > 0.0:
+            raise ValueError(f'the time budget must be > 0 [s], got {budget}')
+        if int(seed) <= 0:
+            raise ValueError(f'the seed must be > 0 (OMPL takes 0 for "random"), got {seed}')
+        self.base = base
+        self.travel = travel
+        self.budget = float(budget)
+        self.seed = int(seed)
+        self.attempts = int(attempts)
+        self.simplify_rounds = int(simplify_rounds)
+        self.rho = turning_radius(base) if base.family == 'differential' else None
+
+    def _space(self, start: np.ndarray, goal: np.ndarray, obstacles: Sequence[Obstacle]):
+        space = ob.SE2StateSpace() if self.rho is None else ob.ReedsSheppStateSpace(self.rho)
+        points = [start[:2], goal[:2]] + [o.position[:2] for o in obstacles]
+        extent = max((float(max(o.size)) for o in obstacles), default=0.0)
+        pad = PADDING + self.travel.radius + extent
+        lo, hi = np.min(points, axis=0) - pad, np.max(points, axis=0) + pad
+        bounds = ob.RealVectorBounds(2)
+        for axis in range(2):
+            bounds.setLow(axis, float(lo[axis]))
+            bounds.setHigh(axis, float(hi[axis]))
+        space.setBounds(bounds)
+        return space
+
+    def plan(self, start: Sequence[float] | np.ndarray, goal: Sequence[float] | np.ndarray) -> BasePath:
+        """A path of the base from ``start`` to ``goal`` (x, y, θ in the world), or why none."""
+        began = time.perf_counter()
+        start = as_finite_vector(start, 3, 'start pose')
+        goal = as_finite_vector(goal, 3, 'goal pose')
+        travel = self.travel
+
+        def refused(kind: NoWay, reason: str) -> BasePath:
+            return BasePath(np.empty((0, 3)), (), kind, reason, time.perf_counter() - began, '')
+
+        if np.array_equal(start, goal):  # there already: no motion to check
+            return self._path([start, goal], None, began, 'direct')
+        if not travel.valid(goal):
+            return refused(
+                NoWay.NO_PATH,
+                f'the base at the stance would be {travel.obstacle_clearance(goal):.3f} m from an obstacle; '
+                f'the path keeps {travel.margin + travel.step:g} m',
+            )
+        level = ou.getLogLevel()
+        try:
+            ou.setLogLevel(ou.LOG_NONE)
+            return self._plan(start, goal, began)
+        finally:
+            ou.setLogLevel(level)
+
+    def _plan(self, start: np.ndarray, goal: np.ndarray, began: float) -> BasePath:
+        space = self._space(start, goal, self.travel.clearance.obstacles)
+        si = ob.SpaceInformation(space)
+        si.setStateValidityChecker(lambda state: self.travel.valid(_pose(state)))
+        motions = _Motions(si, space, self.travel, self.rho)
+        si.setMotionValidator(motions)
+        si.setup()
+        a, b = space.allocState(), space.allocState()
+        _set(a, start)
+        _set(b, goal)
+        before = []  # the way out, when the robot starts nearer an obstacle than the margin
+        if not self.travel.valid(start):
+            out = self._escape(space, motions, start)
+            if out is None:
+                return BasePath(
+                    np.empty((0, 3)),
+                    (),
+                    NoWay.START_BLOCKED,
+                    f'the robot is {self.travel.obstacle_clearance(start):.3f} m from an obstacle where it '
+                    f'stands, and no straight way out within {ESCAPE[-1]:g} m keeps that far',
+                    time.perf_counter() - began,
+                    '',
+                )
+            before, a = [a], out
+        if motions.checkMotion(a, b):
+            return self._path([*before, a, b], space, began, 'direct')
+        ou.RNG.setSeed(self.seed)  # every generator made from here on: see the module docstring
+        best: tuple[float, list] | None = None
+        status = None
+        for _ in range(self.attempts):
+            left = self.budget - (time.perf_counter() - began)
+            if left <= 0.0:
+                break
+            pdef = ob.ProblemDefinition(si)
+            pdef.setStartAndGoalStates(a, b)
+            planner = og.RRTConnect(si)
+            planner.setProblemDefinition(pdef)
+            planner.setup()
+            status = planner.solve(left)
+            if status.getStatus() != ob.PlannerStatus.PlannerStatusType.EXACT_SOLUTION:
+                break
+            path = pdef.getSolutionPath()
+            self._simplify(og.PathSimplifier(si), path)
+            if best is None or path.length() < best[0]:
+                best = (path.length(), [_pose(path.getState(i)) for i in range(path.getStateCount())])
+        if best is None:
+            why = status.asString() if status is not None else 'no time left'
+            return BasePath(
+                np.empty((0, 3)),
+                (),
+                NoWay.NO_PATH,
+                f'no base path found within {self.budget:g} s ({why})',
+                time.perf_counter() - began,
+                'RRTConnect',
+            )
+        states = list(before)
+        for pose in best[1]:
+            state = space.allocState()
+            _set(state, pose)
+            states.append(state)
+        return self._path(states, space, began, 'RRTConnect')
+
+    def _escape(self, space, motions: _Motions, start: np.ndarray):
+        """A state near ``start`` (which is not valid) that is valid and reached by a motion
+        that keeps the start's clearance (less ``step``) all along: ``ESCAPE`` distances in
+        ``ESCAPE_BEARINGS`` directions, heading kept, the nearest first and of those the
+        clearest; None when there is none (or the robot is within ``step`` of an obstacle)."""
+        travel = self.travel
+        held = travel.obstacle_clearance(start) - travel.step
+        if held <= 0.0:
+            return None
+        relaxed = travel.with_margin(held)
+        a = space.allocState()
+        _set(a, start)
+        for distance in ESCAPE:
+            ways = []
+            for i in range(ESCAPE_BEARINGS):
+                bearing = 2.0 * math.pi * i / ESCAPE_BEARINGS
+                pose = start + distance * np.array((math.cos(bearing), math.sin(bearing), 0.0))
+                d = travel.obstacle_clearance(pose)
+                if d >= travel.margin + travel.step:
+                    b = space.allocState()
+                    _set(b, pose)
+                    if motions.valid(relaxed, a, b):
+                        ways.append((d, i, b))
+            if ways:
+                return max(ways, key=lambda way: (way[0], -way[1]))[2]
+        return None
+
+    def _simplify(self, simplifier, path) -> None:
+        """Shorten ``path``: vertex reduction, then again with each segment cut in eight (so
+        that corners can be cut, not only vertices skipped), then close vertices collapsed."""
+        for _ in range(self.simplify_rounds):
+            if not simplifier.reduceVertices(path):
+                break
+        for _ in range(3):
+            path.subdivide()
+        for _ in range(2 * self.simplify_rounds):
+            if not simplifier.reduceVertices(path):
+                break
+        simplifier.collapseCloseVertices(path)
+
+    def _path(self, states, space, began: float, planner: str) -> BasePath:
+        """The path through ``states`` (OMPL states of ``space``; two equal poses without a space)."""
+        if space is None:
+            waypoints = np.array(states, dtype=float)
+            piece = TwistPiece(waypoints[0], np.zeros(3))
+            return BasePath(waypoints, (piece,), None, '', time.perf_counter() - began, planner)
+        waypoints = np.array([_pose(s) for s in states])
+        pieces: list[Piece] = []
+        for a, b in zip(states[:-1], states[1:]):
+            if self.rho is None:
+                pieces.append(LinearPiece(np.array(_pose(a)), np.array(_pose(b))))
+            else:
+                pieces.extend(_reeds_shepp_pieces(space, a, b, self.rho))
+        if not pieces:  # the base is there already
+            pieces.append(TwistPiece(waypoints[0], np.zeros(3)))
+        return BasePath(waypoints, tuple(pieces), None, '', time.perf_counter() - began, planner)
+
+
+def _reeds_shepp_pieces(space, a, b, rho: float) -> list[TwistPiece]:
+    """The arcs and straight lines of the Reeds–Shepp curve from ``a`` to ``b``, each a
+    :class:`TwistPiece`: found by halving the curve until each part moves at one twist per metre
+    (forward or backward; turning left, right or not), then joining equal neighbours."""
+    length = space.distance(a, b)
+    scratch = space.allocState()
+
+    def pose_at(f: float) -> np.ndarray:
+        space.interpolate(a, b, f, scratch)
+        return np.array(_pose(scratch))
+
+    def kind(f0: float, f1: float, p0: np.ndarray, p1: np.ndarray) -> tuple[int, int] | None:
+        """(direction ±1, turn −1/0/1) of the part from f0 to f1, None if it is not one."""
+        metres = (f1 - f0) * length
+        twist = se2_twist(p0, p1, 1.0) / metres
+        direction = 1 if twist[0] > 0.0 else -1
+        turn = twist[2] * rho * direction
+        nearest = round(turn)
+        pure = abs(abs(twist[0]) - 1.0) + abs(twist[1]) + abs(turn - nearest) <= _RS_PURE
+        return (direction, int(nearest)) if pure and abs(nearest) <= 1 else None
+
+    parts: list[tuple[float, float, tuple[int, int]]] = []
+
+    def split(f0: float, f1: float, p0: np.ndarray, p1: np.ndarray) -> None:
+        if (f1 - f0) * length <= _RS_SPLIT:
+            return
+        found = kind(f0, f1, p0, p1)
+        if found is not None:
+            if parts and parts[-1][2] == found:  # (a gap between them is below _RS_SPLIT)
+                parts[-1] = (parts[-1][0], f1, found)
+            else:
+                parts.append((f0, f1, found))
+            return
+        mid = 0.5 * (f0 + f1)
+        pm = pose_at(mid)
+        split(f0, mid, p0, pm)
+        split(mid, f1, pm, p1)
+
+    if length > 0.0:
+        count = max(1, math.ceil(length / 0.05))
+        marks = [i / count for i in range(count + 1)]
+        poses = [pose_at(f) for f in marks]
+        for i in range(count):
+            split(marks[i], marks[i + 1], poses[i], poses[i + 1])
+    pieces = []
+    for f0, f1, (direction, turn) in parts:
+        metres = (f1 - f0) * length
+        twist = np.array((direction * metres, 0.0, direction * turn * metres / rho))
+        pieces.append(TwistPiece(pose_at(f0), twist))
+    return pieces

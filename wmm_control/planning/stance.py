@@ -1,0 +1,302 @@
+"""Where to stand: base poses from which the arm reaches an end-effector goal, clear of everything.
+
+:class:`StanceFinder` samples base poses around the goal: rings about the goal at fractions of
+the horizontal reach left at the goal's height (the arm's length from its first joint, as
+:class:`~wmm_control.kinematics.workspace.Workspace` bounds it), at evenly spaced bearings (the
+first one on the side of the robot's current pose), each with the base heading towards the goal
+and turned from it by a few offsets. A candidate counts when
+
+1. the base there, arm in the travel posture, is clear of the obstacles by the travel margin
+   (:class:`~wmm_control.planning.clearance.Travel`: the base path must be able to end there);
+2. the arm's inverse kinematics with the base held there reaches the goal: damped least squares
+   on the world pose error ``[p* − p; log(R* Rᵀ)]`` from the travel posture, each step clipped to
+   the joint limits less ``limit_margin``, until within ``position_tolerance`` and
+   ``orientation_tolerance``. When no candidate gives a stance, the candidates are tried again
+   from the dexterous posture and then from postures drawn within the limits (``restarts`` passes
+   in all, reproducible): damped least squares finds the posture nearest its start, and a goal
+   near the limits may need another branch of the arm (elbow, wrist);
+3. that posture keeps ``stance_margin`` from every obstacle and ``body_margin`` between the
+   robot's own links and from the floor (the controller's pairs).
+
+The robot's own base pose is the first candidate (without condition 1: the base is there
+already), and comes back first when it is a stance (a goal within reach needs no travel). The others are tried in order (heading offset first, then bearing,
+then ring) until ``wanted`` stances are found; they come back best first by ``σ_min +
+clearance_weight · min(clearance, clearance_cap)``, σ_min the smallest singular value of the
+arm's position Jacobian [m/rad] (how far from a singularity the arm stands) and the clearance
+from the obstacles [m].
+
+A goal gets no stance, with the reason (:class:`~wmm_control.planning.outcome.NoWay`), when it
+is nearer than ``stance_margin`` to an obstacle (or inside one), below the floor or above the
+highest the end effector can be, or when no candidate passes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from wmm_control.checks import as_finite_vector
+from wmm_control.geometry import pose_error_log, rotation_2d
+from wmm_control.kinematics.model import KinematicModel
+from wmm_control.kinematics.workspace import Workspace
+from wmm_control.planning.clearance import Clearance, Travel
+from wmm_control.planning.outcome import NoWay
+
+__all__ = ['Stance', 'StanceParams', 'StanceSearch', 'StanceFinder', 'solve_arm_ik']
+
+
+@dataclass(frozen=True)
+class StanceParams:
+    """Settings of :class:`StanceFinder` (module docstring).
+
+    Attributes:
+        stance_margin: [m] the clearance of the arm's posture at the stance from every obstacle.
+        body_margin: [m] between the robot's own links, and from the floor, at the stance.
+        position_tolerance: [m] of the inverse kinematics.
+        orientation_tolerance: [rad] of the inverse kinematics.
+        ik_iterations: damped least-squares steps per candidate.
+        ik_damping: λ of ``Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e``.
+        max_joint_step: [rad or m] the largest change of a joint in one step.
+        limit_margin: [rad or m] kept inside the joint position limits.
+        rings: the rings' radii as fractions of the horizontal reach at the goal's height.
+        bearings: how many bearings around the goal.
+        heading_offsets: [rad] the base's heading from facing the goal.
+        wanted: stop when this many stances are found.
+        restarts: passes over the candidates from other postures when one finds none.
+        clearance_weight: [1/m · m/rad] of the clearance in the score.
+        clearance_cap: [m] clearance beyond it adds nothing to the score.
+    """
+
+    stance_margin: float = 0.03
+    body_margin: float = 0.02
+    position_tolerance: float = 0.005
+    orientation_tolerance: float = 0.01
+    ik_iterations: int = 100
+    ik_damping: float = 0.05
+    max_joint_step: float = 0.3
+    limit_margin: float = 0.02
+    rings: tuple[float, ...] = (0.45, 0.6, 0.3, 0.75, 0.15)
+    bearings: int = 16
+    heading_offsets: tuple[float, ...] = (0.0, math.pi / 6, -math.pi / 6, math.pi / 3, -math.pi / 3)
+    wanted: int = 4
+    restarts: int = 2
+    clearance_weight: float = 1.0
+    clearance_cap: float = 0.3
+
+
+@dataclass(frozen=True)
+class Stance:
+    """A base pose and arm posture that reach the goal.
+
+    Attributes:
+        base_pose: (x, y, θ) in the world [m, m, rad]. Shape (3,).
+        q_arm: the arm's joints there [rad or m]. Shape (n,).
+        position_error: [m] of the end effector from the goal.
+        orientation_error: [rad].
+        clearance: [m] from the nearest obstacle (capped at the clearance's influence).
+        body_clearance: [m] between the robot's own links and from the floor (capped likewise).
+        sigma_min: [m/rad] smallest singular value of the arm's position Jacobian.
+        score: higher is better.
+    """
+
+    base_pose: np.ndarray
+    q_arm: np.ndarray
+    position_error: float
+    orientation_error: float
+    clearance: float
+    body_clearance: float
+    sigma_min: float
+    score: float
+
+
+@dataclass(frozen=True)
+class StanceSearch:
+    """The stances found, best first; or none, with why.
+
+    Attributes:
+        stances: best first; empty when there is none.
+        no_way: the kind of reason when there is none, else None.
+        reason: a sentence for a log ('' when found).
+        candidates: base poses sampled.
+        solved: candidates whose inverse kinematics reached the goal.
+    """
+
+    stances: tuple[Stance, ...]
+    no_way: NoWay | None
+    reason: str
+    candidates: int
+    solved: int
+
+
+def solve_arm_ik(
+    model: KinematicModel,
+    base_pose: ArrayLike,
+    q_start: ArrayLike,
+    goal_position: np.ndarray,
+    goal_rotation: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    params: StanceParams,
+) -> tuple[np.ndarray, float, float]:
+    """The arm's inverse kinematics with the base held at ``base_pose`` (module docstring, 2).
+
+    Returns:
+        (q_arm, position error [m], orientation error [rad]) of the last step: the first within
+        both tolerances, else after ``params.ik_iterations`` steps.
+    """
+    q = np.clip(np.asarray(q_start, dtype=float), lower, upper)
+    damping = params.ik_damping**2 * np.eye(6)
+    for _ in range(params.ik_iterations + 1):
+        model.update(base_pose, q)
+        error = pose_error_log(goal_position, goal_rotation, *model.ee_placement_world())
+        pos_err, rot_err = float(np.linalg.norm(error[:3])), float(np.linalg.norm(error[3:]))
+        if pos_err <= params.position_tolerance and rot_err <= params.orientation_tolerance:
+            break
+        jac = model.arm_jacobian_world('full')
+        dq = jac.T @ np.linalg.solve(jac @ jac.T + damping, error)
+        largest = float(np.max(np.abs(dq)))
+        if largest > params.max_joint_step:
+            dq *= params.max_joint_step / largest
+        q = np.clip(q + dq, lower, upper)
+    return q, pos_err, rot_err
+
+
+class StanceFinder:
+    """Stances for end-effector goals (module docstring).
+
+    Args:
+        model: the robot's kinematic model.
+        clearance: its clearance among the obstacles.
+        travel: the robot driving in its travel posture (the stance's base must be valid there).
+        params: :class:`StanceParams`.
+    """
+
+    def __init__(
+        self, model: KinematicModel, clearance: Clearance, travel: Travel, params: StanceParams | None = None
+    ) -> None:
+        self.model = model
+        self.clearance = clearance
+        self.travel = travel
+        self.params = params or StanceParams()
+        self.workspace = Workspace(model)
+        arm = model.config.arm
+        margin = self.params.limit_margin
+        self._lower = np.where(np.isfinite(arm.position_lower), arm.position_lower + margin, -np.inf)
+        self._upper = np.where(np.isfinite(arm.position_upper), arm.position_upper - margin, np.inf)
+        # the arm's first joint in the base frame: the centre of its reach
+        model.update(np.zeros(3), travel.q_arm)
+        self._root = model.arm_points_world()[0].copy()
+        self.reach = self.workspace.max_height - float(self._root[2])
+
+    def _seeds(self):
+        """The arm postures the inverse kinematics starts from, pass by pass: the travel posture,
+        the dexterous one, then drawn within the limits (the same draws every time)."""
+        yield self.travel.q_arm
+        rng = np.random.default_rng(0)
+        arm = self.model.config.arm
+        lower = np.where(np.isfinite(self._lower), self._lower, -math.pi)
+        upper = np.where(np.isfinite(self._upper), self._upper, math.pi)
+        for i in range(self.params.restarts):
+            yield np.clip(arm.dexterous, self._lower, self._upper) if i == 0 else rng.uniform(lower, upper)
+
+    def refuse(self, goal_position: np.ndarray) -> tuple[NoWay, str] | None:
+        """Why no stance can reach a goal at ``goal_position`` whatever the base does, or None."""
+        margin = self.params.stance_margin
+        for obstacle in self.clearance.obstacles:
+            d = obstacle.signed_distance(goal_position)
+            if d < margin:
+                where = 'inside' if d < 0.0 else f'{d:.3f} m from'
+                return NoWay.INSIDE_OBSTACLE, (
+                    f'the goal lies {where} the obstacle {obstacle.name!r} ({obstacle.shape}); '
+                    f'the stance keeps {margin:g} m from obstacles'
+                )
+        why = self.workspace.impossible(goal_position)
+        if why:
+            return NoWay.OUT_OF_REACH, f'the goal is out of reach: {why}'
+        if abs(float(goal_position[2]) - float(self._root[2])) > self.reach:
+            return NoWay.OUT_OF_REACH, (
+                f'the goal is out of reach: {abs(goal_position[2] - self._root[2]):.3f} m from the height of '
+                f"the arm's first joint, which reaches {self.reach:.3f} m at most"
+            )
+        return None
+
+    def candidates(self, goal_position: np.ndarray, base_pose: np.ndarray) -> list[np.ndarray]:
+        """The base poses to try for a goal at ``goal_position``, in order: ``base_pose`` (x, y,
+        θ), where the robot is, then the samples, the first bearing on its side."""
+        p = self.params
+        dz = float(goal_position[2]) - float(self._root[2])
+        horizontal = math.sqrt(max(self.reach**2 - dz**2, 0.0))
+        goal_xy = np.asarray(goal_position[:2], dtype=float)
+        away = base_pose[:2] - goal_xy
+        first = math.atan2(away[1], away[0]) if np.any(away) else 0.0
+        out = [base_pose]
+        for offset in p.heading_offsets:
+            for i in range(p.bearings):
+                bearing = first + 2.0 * math.pi * i / p.bearings  # from the goal to the arm's root
+                for fraction in p.rings:
+                    r = fraction * horizontal
+                    root = goal_xy + r * np.array((math.cos(bearing), math.sin(bearing)))
+                    heading = math.remainder(bearing + math.pi + offset, 2.0 * math.pi)
+                    base_xy = root - rotation_2d(heading) @ self._root[:2]
+                    out.append(np.array((base_xy[0], base_xy[1], heading)))
+        return out
+
+    def find(self, goal_position: ArrayLike, goal_rotation: ArrayLike, base_pose: ArrayLike) -> StanceSearch:
+        """Stances for the goal (world position [m], rotation (3, 3)), best first (module docstring).
+
+        Args:
+            goal_position: (x, y, z) [m].
+            goal_rotation: the end effector's orientation in the world. Shape (3, 3).
+            base_pose: (x, y, θ) [m, m, rad] where the robot is now.
+        """
+        goal_position = as_finite_vector(goal_position, 3, 'goal position')
+        goal_rotation = np.asarray(goal_rotation, dtype=float)
+        refused = self.refuse(goal_position)
+        if refused is not None:
+            return StanceSearch((), refused[0], refused[1], 0, 0)
+        p = self.params
+        candidates = self.candidates(goal_position, as_finite_vector(base_pose, 3, 'base pose'))
+        clear: dict[int, bool] = {}  # candidate → valid for travel, asked once
+        found: list[Stance] = []
+        solved = 0
+        for seed in self._seeds():
+            for i, base in enumerate(candidates):
+                if i not in clear:  # the robot's own pose needs no travel there
+                    clear[i] = i == 0 or self.travel.valid(base)
+                if not clear[i]:
+                    continue
+                q, pos_err, rot_err = solve_arm_ik(
+                    self.model, base, seed, goal_position, goal_rotation, self._lower, self._upper, p
+                )
+                if pos_err > p.position_tolerance or rot_err > p.orientation_tolerance:
+                    continue
+                solved += 1
+                obstacle, body = self.clearance(q, base)
+                if obstacle < p.stance_margin or body < p.body_margin:
+                    continue
+                self.model.update(base, q)
+                sigma = self.model.sigma_min('position')
+                score = sigma + p.clearance_weight * min(obstacle, p.clearance_cap)
+                found.append(Stance(base, q, pos_err, rot_err, obstacle, body, sigma, score))
+                if len(found) >= p.wanted:
+                    break
+            if found:
+                break
+        tried, blocked = len(clear), sum(not ok for ok in clear.values())
+        if found:
+            here = found[0] if found[0].base_pose is candidates[0] else None
+            found.sort(key=lambda s: (s is not here, -s.score))
+            return StanceSearch(tuple(found), None, '', tried, solved)
+        if blocked == tried:
+            reason = 'no base pose around the goal is clear of the obstacles'
+        elif solved == 0:
+            reason = f'the arm reaches the goal from none of the {tried - blocked} clear base poses around it'
+        else:
+            reason = (
+                f'the arm reaches the goal from {solved} base poses, none with {p.stance_margin:g} m from the '
+                f'obstacles and {p.body_margin:g} m between its own links'
+            )
+        return StanceSearch((), NoWay.NO_STANCE, f'no stance: {reason}', tried, solved)

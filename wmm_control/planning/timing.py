@@ -1,0 +1,219 @@
+"""Timed: a base path as poses and twists at the control period, within the base's limits.
+
+A path is a sequence of pieces, each a motion ``pose(λ)``, λ from 0 to 1, of the base:
+
+* :class:`TwistPiece`: at one twist (vx, vy, ω) in the base's frame, per unit of λ (an arc or a
+  straight line of a Reeds–Shepp curve);
+* :class:`LinearPiece`: (x, y) along a straight line while θ turns the short way, at once (a
+  holonomic base's motion between two waypoints in SE(2)).
+
+The base stops at the end of each piece (where the direction of a holonomic path or the curvature
+of a Reeds–Shepp curve jumps, no finite acceleration would carry it through at speed). On each
+piece λ follows a trapezoidal (or triangular) speed profile: λ̇ ≤ V, |λ̈| ≤ A. The base's twist
+is ``u(λ) λ̇`` with ``u`` the twist per unit λ in the base's frame, and its rate ``u λ̈ + u' λ̇²``;
+with ``U_k`` and ``U'_k`` bounds of ``|u_k|`` and ``|du_k/dλ|`` over the piece (each piece gives
+them), V and A are the largest for which, on every axis k the base follows,
+
+    U_k V ≤ v_k,   U'_k V² ≤ a_k / 2,   U_k A + U'_k V² ≤ a_k,
+
+(v, a) the limits of the robot YAML times ``fraction`` (headroom for the controller that tracks
+it). A piece's duration is rounded up to whole control periods by slowing it down (time scaled by
+c ≥ 1 scales the twists by 1/c and their rates by 1/c²), so each piece starts and ends on a sample.
+
+:class:`BaseTrajectory` holds the samples: each period's pose, and the twist that takes the base
+from it to the next sample's pose in one period (the SE(2) logarithm: what a base integrating a
+constant twist over the period does), in the base's frame and as world rates (ẋ, ẏ, θ̇).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from wmm_control.errors import WmmError
+from wmm_control.geometry import se2_integrate, se2_twist, twist_to_world, wrap_angle
+from wmm_control.robot_config import BaseSection
+
+__all__ = ['BaseTrajectory', 'LinearPiece', 'Piece', 'TwistPiece', 'time_path']
+
+_AXES = ('vx', 'vy', 'ω')
+
+
+class Piece(Protocol):
+    """One motion of the base, λ from 0 to 1."""
+
+    @property
+    def start(self) -> np.ndarray:
+        """The pose (x, y, θ) at λ = 0."""
+        ...
+
+    def pose(self, lam: float) -> np.ndarray:
+        """The pose (x, y, θ) at λ. Shape (3,)."""
+        ...
+
+    def rate_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(U, U'): bounds of |u_k| and |du_k/dλ| over λ ∈ [0, 1], u the twist (vx, vy, ω) in
+        the base's frame per unit of λ. Shapes (3,), (3,)."""
+        ...
+
+
+@dataclass(frozen=True)
+class TwistPiece:
+    """The base at one twist per unit of λ: ``pose(λ) = start ∘ exp(λ twist)``.
+
+    Attributes:
+        start: (x, y, θ). Shape (3,).
+        twist: (vx, vy, ω) in the base's frame [m, m, rad per unit λ]. Shape (3,).
+    """
+
+    start: np.ndarray
+    twist: np.ndarray
+
+    def pose(self, lam: float) -> np.ndarray:
+        """The pose at λ. Shape (3,)."""
+        return np.array(se2_integrate(self.start, self.twist, lam))
+
+    def rate_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(|twist|, 0): the twist does not change."""
+        return np.abs(self.twist), np.zeros(3)
+
+
+def _max_abs_cos(lo: float, hi: float) -> float:
+    """max |cos α| over α ∈ [lo, hi]."""
+    if hi - lo >= math.pi or math.floor(hi / math.pi) >= math.ceil(lo / math.pi):
+        return 1.0
+    return max(abs(math.cos(lo)), abs(math.cos(hi)))
+
+
+@dataclass(frozen=True)
+class LinearPiece:
+    """(x, y) along the straight line from ``start`` to ``end`` while θ turns the short way.
+
+    Attributes:
+        start, end: (x, y, θ). Shape (3,).
+    """
+
+    start: np.ndarray
+    end: np.ndarray
+
+    @property
+    def delta(self) -> np.ndarray:
+        """(Δx, Δy, Δθ), Δθ the short way."""
+        d = np.asarray(self.end, dtype=float) - np.asarray(self.start, dtype=float)
+        d[2] = wrap_angle(float(d[2]))
+        return d
+
+    def pose(self, lam: float) -> np.ndarray:
+        """The pose at λ. Shape (3,)."""
+        return np.asarray(self.start, dtype=float) + lam * self.delta
+
+    def rate_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """In the base's frame u = (d cos α, d sin α, Δθ), α = φ − θ(λ) the line's bearing from
+        the heading, d its length: the bounds of |cos α| and |sin α| over the turn, and
+        |du/dλ| = d |Δθ| |sin α|, d |Δθ| |cos α|, 0."""
+        dx, dy, dth = self.delta.tolist()
+        d = math.hypot(dx, dy)
+        a0 = math.atan2(dy, dx) - float(self.start[2])
+        lo, hi = min(a0, a0 - dth), max(a0, a0 - dth)
+        cos_max = _max_abs_cos(lo, hi)
+        sin_max = _max_abs_cos(lo - 0.5 * math.pi, hi - 0.5 * math.pi)
+        turn = abs(dth)
+        return np.array((d * cos_max, d * sin_max, turn)), np.array((d * turn * sin_max, d * turn * cos_max, 0.0))
+
+
+@dataclass(frozen=True)
+class BaseTrajectory:
+    """A timed base path, sampled at the control period.
+
+    Attributes:
+        dt: [s] the period.
+        t: [s] each sample's time, from 0. Shape (K,).
+        poses: (x, y, θ) in the world [m, m, rad], θ in (−π, π]. Shape (K, 3).
+        twists: (vx, vy, ω) in the base's frame [m/s, m/s, rad/s], held from each sample to the
+            next (zero at the last). Shape (K, 3).
+        rates: the same twists as world rates (ẋ, ẏ, θ̇) at each sample. Shape (K, 3).
+    """
+
+    dt: float
+    t: np.ndarray
+    poses: np.ndarray
+    twists: np.ndarray
+    rates: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        """[s] from the first sample to the last."""
+        return float(self.t[-1])
+
+
+def _profile(speed: float, accel: float) -> tuple[float, float]:
+    """(duration [s], time at full speed's start [s]) of λ from 0 to 1 at λ̇ ≤ speed, |λ̈| ≤ accel."""
+    if speed * speed >= accel:  # no room to reach full speed: a triangle
+        ramp = math.sqrt(1.0 / accel)
+        return 2.0 * ramp, ramp
+    ramp = speed / accel
+    return 2.0 * ramp + (1.0 - speed * ramp) / speed, ramp
+
+
+def _lam(t: float, duration: float, ramp: float, accel: float) -> float:
+    """λ at time t of the profile of :func:`_profile`."""
+    if t <= ramp:
+        return 0.5 * accel * t * t
+    if t >= duration - ramp:
+        rest = duration - t
+        return 1.0 - 0.5 * accel * rest * rest
+    peak = accel * ramp
+    return 0.5 * accel * ramp * ramp + peak * (t - ramp)
+
+
+def _speed_and_accel(piece: Piece, velocity: np.ndarray, acceleration: np.ndarray) -> tuple[float, float] | None:
+    """(V, A) of the piece (module docstring); None for a piece that does not move."""
+    bound, slope = piece.rate_bounds()
+    scale = float(np.max(bound))
+    if scale <= 0.0:
+        return None
+    moving = bound > 1e-12 * scale
+    for k in np.flatnonzero(moving & ~(velocity > 0.0)).tolist():
+        raise WmmError(f'the path needs {_AXES[k]} of the base, which it cannot follow (limit 0)')
+    speed = min(float(velocity[k] / bound[k]) for k in np.flatnonzero(moving).tolist())
+    for k in np.flatnonzero(slope > 0.0).tolist():
+        speed = min(speed, math.sqrt(acceleration[k] / (2.0 * slope[k])))
+    accel = min(float((acceleration[k] - slope[k] * speed**2) / bound[k]) for k in np.flatnonzero(moving).tolist())
+    return speed, accel
+
+
+def time_path(pieces, base: BaseSection, dt: float, fraction: float = 0.95) -> BaseTrajectory:
+    """The pieces one after the other, timed within ``fraction`` of the base's twist and
+    acceleration limits and sampled every ``dt`` [s] (module docstring).
+
+    Raises:
+        WmmError: a piece moves the base along an axis it cannot follow (a holonomic motion for a
+            differential base), or there are no pieces.
+    """
+    if not (dt > 0.0 and 0.0 < fraction <= 1.0):
+        raise ValueError(f'dt must be > 0 and fraction in (0, 1], got {dt}, {fraction}')
+    pieces = list(pieces)
+    if not pieces:
+        raise WmmError('a path without pieces has no timing')
+    velocity = fraction * np.asarray(base.velocity, dtype=float)
+    acceleration = fraction * np.asarray(base.acceleration, dtype=float)
+    poses: list[np.ndarray] = []
+    for piece in pieces:
+        limits = _speed_and_accel(piece, velocity, acceleration)
+        if limits is None:
+            continue
+        duration, ramp = _profile(*limits)
+        periods = max(1, math.ceil(duration / dt - 1e-9))
+        stretch = periods * dt / duration  # ≥ 1: the piece slowed to whole periods
+        poses += [piece.pose(_lam(k * dt / stretch, duration, ramp, limits[1])) for k in range(periods)]
+    poses.append(pieces[-1].pose(1.0))
+    out = np.array(poses)
+    twists = np.zeros_like(out)
+    for k in range(len(out) - 1):
+        twists[k] = se2_twist(out[k], out[k + 1], dt)
+    rates = np.array([twist_to_world(th, tw) for th, tw in zip(out[:, 2], twists)])
+    out[:, 2] = wrap_angle(out[:, 2])
+    return BaseTrajectory(float(dt), dt * np.arange(len(out)), out, twists, rates)
