@@ -39,11 +39,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
-from wmm_control.geometry import pose_error_log, rotation_2d
+from wmm_control.geometry import pose_error_log, rotation_2d, scale_into_limits
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.planning.clearance import Clearance, Travel
 from wmm_control.planning.outcome import NoWay
+from wmm_control.resolvers.pose_servo import damped_pinv_solve
 
 __all__ = ['Stance', 'StanceParams', 'StanceSearch', 'StanceFinder', 'solve_arm_ik']
 
@@ -148,7 +149,7 @@ def solve_arm_ik(
         both tolerances, else after ``params.ik_iterations`` steps.
     """
     q = np.clip(np.asarray(q_start, dtype=float), lower, upper)
-    damping = params.ik_damping**2 * np.eye(6)
+    step_limit = np.full(q.size, params.max_joint_step)
     for _ in range(params.ik_iterations + 1):
         model.update(base_pose, q)
         error = pose_error_log(goal_position, goal_rotation, *model.ee_placement_world())
@@ -156,10 +157,7 @@ def solve_arm_ik(
         if pos_err <= params.position_tolerance and rot_err <= params.orientation_tolerance:
             break
         jac = model.arm_jacobian_world('full')
-        dq = jac.T @ np.linalg.solve(jac @ jac.T + damping, error)
-        largest = float(np.max(np.abs(dq)))
-        if largest > params.max_joint_step:
-            dq *= params.max_joint_step / largest
+        dq, _ = scale_into_limits(damped_pinv_solve(jac, error, params.ik_damping), step_limit)
         q = np.clip(q + dq, lower, upper)
     return q, pos_err, rot_err
 
