@@ -3,7 +3,7 @@
 Usage::
 
     wmm_randomized [--goals N] [--seed S] [--robots steerable,mecanum,...] [--methods pinv,...]
-                   [--indices I,...] [--engine direct|nodes] [--obstacles FILE] [--record DIR]
+                   [--indices I,...] [--engine direct|nodes] [--obstacles FILE] [--plan] [--record DIR]
                    [--sweep NAME=V1,V2,...] [--jobs N] [--cluster ray|ray:auto|ray:HOST:PORT|ray://HOST:PORT]
                    [--out FILE [--resume]]
 
@@ -16,7 +16,10 @@ and wall time per period (the largest p99 of a run and the longest cycle). ``--i
 only those goals of the draw (one run again, say). ``--obstacles`` puts an obstacle file's obstacles
 (:mod:`wmm_control.kinematics.obstacles`) in the simulator and the controller, and draws the
 goals clear of them (in the file's ``goal_region``, if it has one); every period's clearance
-is checked on the simulator's geometry. ``--record DIR`` writes each run as
+is checked on the simulator's geometry. ``--plan`` (direct engine only) plans the way to each
+goal round the obstacles first (:mod:`wmm_control.planning`), the run tracks it and then the
+goal; a goal the planner finds no way to counts as "no way", with its reason, not as
+failed. ``--record DIR`` writes each run as
 ``DIR/<robot>_<method>_<goal>.npz`` (:mod:`wmm_control.experiments.randomized` documents the
 arrays). ``--sweep NAME=V1,V2,...`` (repeatable) runs the goals with every value of a resolver
 parameter (every combination of several; :mod:`wmm_control.experiments.sweep`), prints one
@@ -61,10 +64,10 @@ def _f(value, fmt):
 def format_summary(table: Mapping[tuple[str, str], Mapping[str, Any]]) -> str:
     """The summary of :func:`~wmm_control.experiments.randomized.summarize` as a Markdown table."""
     lines = [
-        '| robot | method | runs | converged | reported | failed | worst error [mm / rad] '
+        '| robot | method | runs | converged | reported | failed | no way | worst error [mm / rad] '
         '| time to converge, median / max [s] | largest use of a limit | closest joint to a limit [rad] '
         '| in contact | deepest contact [mm] |',
-        '|---|---|---|---|---|---|---|---|---|---|---|---|',
+        '|---|---|---|---|---|---|---|---|---|---|---|---|---|',
     ]
     for (robot, method), s in table.items():
         err = (
@@ -73,6 +76,7 @@ def format_summary(table: Mapping[tuple[str, str], Mapping[str, Any]]) -> str:
         )
         lines.append(
             f'| {robot} | {method} | {s["runs"]} | {s["converged"]} | {s["reported"]} | {s["failed"]} '
+            f'| {s.get("no_way", 0)} '
             f'| {err} | {_f(s["median_time_s"], ".1f")} / {_f(s["max_time_s"], ".1f")} '
             f'| {_f(s["limit_use_max"], ".3f")} | {_f(s["position_margin_min_rad"], ".3f")} '
             f'| {s["in_contact"]} | {s["deepest_contact_m"] * 1e3:.1f} |'
@@ -238,6 +242,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         '--obstacles', default='', help='obstacle file: a name in config/obstacles (e.g. table_pillar) or a YAML path'
     )
+    parser.add_argument(
+        '--plan',
+        action='store_true',
+        help='plan the way to each goal first (wmm_control.planning) and track it; direct engine only',
+    )
     parser.add_argument('--record', metavar='DIR', help='write each run to DIR/<robot>_<method>_<goal>.npz')
     parser.add_argument(
         '--jobs',
@@ -272,6 +281,8 @@ def main(argv: list[str] | None = None) -> int:
             )
         if args.resume and not args.out:
             raise WmmError('--resume needs --out')
+        if args.plan and args.engine != 'direct':
+            raise WmmError('--plan runs with the direct engine only for now (--engine direct)')
         params = dict(_param(text) for text in args.param)
         sweeps = parse_sweeps(args.sweep)
         points = sweep_grid(sweeps)
@@ -286,6 +297,7 @@ def main(argv: list[str] | None = None) -> int:
             'goals': args.goals,
             'engine': args.engine,
             'obstacles': args.obstacles,
+            **({'plan': True} if args.plan else {}),
             'params': params,
             **({'sweep': sweeps} if sweeps else {}),
         }
@@ -303,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
         done = [r for r in _resumed(args.out, header) if _key(r) in keys] if args.resume else []
         finished = {_key(r) for r in done}
         jobs = [job for job in jobs if (name[job[0]], job[1], job[2].index, point_label(job[3])) not in finished]
-        options = dict(engine=args.engine, params=params, obstacles=args.obstacles, record=args.record)
+        options = dict(engine=args.engine, params=params, obstacles=args.obstacles, record=args.record, plan=args.plan)
         with ExitStack() as stack:
             bar = stack.enter_context(
                 tqdm(total=len(jobs) + len(done), initial=len(done), unit='run', file=sys.stderr, smoothing=0.0)

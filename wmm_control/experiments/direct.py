@@ -10,6 +10,7 @@ from sim_bridge.world import SimWorld
 from wmm_control.cycle import steady_heap
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.scenario import Scenario
+from wmm_control.planning.handoff import Handoff
 from wmm_control.resolvers.interface import Resolver, ResolverDiagnostics
 
 __all__ = ['run_scenario']
@@ -23,6 +24,7 @@ def run_scenario(
     label: str = '',
     progress: Callable[[int], object] | None = None,
     until: Callable[[ResolverDiagnostics], bool] | None = None,
+    handoff: Handoff | None = None,
 ) -> RunLog:
     """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
 
@@ -36,6 +38,9 @@ def run_scenario(
         until: optional callable ``until(diagnostics)``, given each period's
             :class:`~wmm_control.resolvers.ResolverDiagnostics`: the run ends early when it
             returns True.
+        handoff: a planned end-effector trajectory (:class:`~wmm_control.planning.handoff.Handoff`)
+            tracked first, a point every period from the start; the scenario's goals once it
+            has ended.
 
     Returns:
         The frozen :class:`~wmm_control.experiments.metrics.RunLog`.
@@ -49,10 +54,14 @@ def run_scenario(
     n = int(round(scenario.duration / world.dt))
     t0 = time.perf_counter()
     submitted = None
+    start = world.time
     with steady_heap():  # no full pass of the garbage collector walks the models mid-run
         for _ in range(n):
             gi = scenario.goal_index(world.time)
-            if reference is not None:  # a trajectory: a point every period, as goal_sequencer publishes it
+            point = handoff.point(world.time - start) if handoff is not None else None
+            if point is not None:  # the planned way there first, as /ee_reference points
+                rec = loop.step(point, tracking=True)
+            elif reference is not None:  # a trajectory: a point every period, as goal_sequencer publishes it
                 rec = loop.step(scenario.target(world.time, reference), tracking=True)
             else:  # goals: each when its time comes, as goal_sequencer publishes them
                 rec = loop.step(scenario.target(world.time, reference) if gi != submitted else None, tracking=False)

@@ -60,6 +60,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
+from wmm_control.errors import WmmError
 from wmm_control.experiments.direct import run_scenario
 from sim_bridge.collision import SelfCollisionChecker
 from sim_bridge.world import SimWorld
@@ -70,6 +71,8 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file
 from wmm_control.geometry import rotation_angle, rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
+from wmm_control.planning import GoalPlanner
+from wmm_control.planning.handoff import Handoff
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
 from wmm_control.resolvers.progress import GoalProgress
@@ -92,6 +95,8 @@ __all__ = [
     'goal_settings',
     'run_contact',
     'write_record',
+    'planned',
+    'PLAN_MARGIN',
 ]
 
 #: The robots, by name.
@@ -127,6 +132,11 @@ COLLISION_MARGIN = 0.02
 CONTACT_DEPTH = 0.001
 #: A direct run ends once the goal has been held this long [s].
 SETTLE_S = 2.0
+#: [m] the clearance of a planned base path from the obstacles (``plan``): 5 cm beyond the
+#: safety stage's influence distance, room for the end effector's tracking error before the
+#: stage's dampers act (robot A, 10 goals: pinv and task_sharing converged 7 and 4 with 0.10 m,
+#: 7 and 5 with 0.15 m)
+PLAN_MARGIN = 0.15
 
 
 @dataclass(frozen=True)
@@ -219,15 +229,35 @@ def _scenario(robot, goal, duration, obstacles):
     )
 
 
-def _run_direct(robot, run, goal, duration, obstacles):
+def planned(robot: RobotConfig, goal: RandomGoal, obstacles: str | Path = '') -> tuple[Handoff | None, dict]:
+    """The plan of ``wmm_randomized --plan`` for ``goal`` from the robot's start state among the
+    obstacles of the file ``obstacles``: (its hand-off, or None when the planner found no way;
+    ``{'planning_time_s', 'no_way', 'no_way_reason'}``, the last two None with a plan). The path
+    keeps :data:`PLAN_MARGIN` from the obstacles."""
+    planner = GoalPlanner(robot, load_obstacles(obstacles), travel_margin=PLAN_MARGIN)
+    target = Goal(0.0, 0.0, goal.pose).target
+    plan = planner.plan(target.position, target.rotation, robot.start.base_pose)
+    info = {'planning_time_s': plan.planning_time, 'no_way': None, 'no_way_reason': None}
+    if plan.trajectory is None:
+        return None, dict(info, no_way=plan.no_way.value if plan.no_way else 'no_way', no_way_reason=plan.reason)
+    return Handoff.of(planner.model, plan.trajectory, planner.travel.q_arm), info
+
+
+def _run_direct(robot, run, goal, duration, obstacles, handoff=None):
     resolver = make_resolver(run['method'], robot, **resolver_parameters(run))
     tolerance, stall_time, ratio = goal_settings()
     progress = GoalProgress(tolerance, stall_time, resolver.params.dt, min_progress_ratio=ratio)
     settle = int(round(SETTLE_S / resolver.params.dt))
     held = [0]
     first_stall = []
+    # the goal is judged once the planned trajectory has ended (while it runs, the resolver's
+    # errors are to its points)
+    tracked = [0 if handoff is None else len(handoff.points)]
 
     def done(diagnostics: ResolverDiagnostics) -> bool:
+        if tracked[0] > 0:
+            tracked[0] -= 1
+            return False
         progress.update(diagnostics)
         if progress.stalled and not first_stall:
             first_stall.append(progress.cycles * resolver.params.dt)
@@ -235,7 +265,7 @@ def _run_direct(robot, run, goal, duration, obstacles):
         return held[0] >= settle
 
     with SimWorld(robot, base_mode='kinematic') as world:
-        log = run_scenario(world, resolver, _scenario(robot, goal, duration, obstacles), until=done)
+        log = run_scenario(world, resolver, _scenario(robot, goal, duration, obstacles), until=done, handoff=handoff)
     return log, {'goal_reached': progress.reached, 'first_stall_s': first_stall[0] if first_stall else None}
 
 
@@ -313,16 +343,20 @@ def run_goal(
     params: Mapping[str, Any] | None = None,
     obstacles: str | Path = '',
     record: str | Path | None = None,
+    plan: bool = False,
 ) -> dict:
     """One closed-loop run of ``method`` to ``goal`` from the robot's start state.
 
     ``params`` (resolver parameters) override those of :data:`METHOD_RUNS` and :data:`ROBOT_RUNS`.
     ``obstacles``: an obstacle file (name or path; '' for none), in the simulator and the
     controller. ``record``: a folder to write the run to (the module docstring says how).
+    ``plan`` (direct engine only): the planner plans the way to the goal first (:func:`planned`)
+    and the run tracks its hand-off, then the goal; a goal it finds no way to is not run.
 
     Returns:
         dict: ``robot``, ``method``, ``goal`` (index), ``outcome`` (``converged`` | ``reported`` |
-        ``failed``), ``time_s`` (simulated), ``time_to_reach_s`` (first entry into the
+        ``failed``, or ``no_way`` with ``plan``: the planner's reason in ``no_way_reason``, the
+        robot held still), ``time_s`` (simulated), ``time_to_reach_s`` (first entry into the
         tolerance, null: never), ``final_position_error_m``, ``final_orientation_error_rad``,
         ``first_stall_s`` (when the goal was first reported stalled, null: never),
         ``limits_exceeded`` (:func:`~wmm_control.experiments.metrics.run_limit_report`),
@@ -332,12 +366,23 @@ def run_goal(
         to clamp), ``cycle_s`` and ``cycle_cpu_s`` (the control cycle's wall and thread CPU
         time over the run's periods, :func:`cycle_stats`), ``why`` (the reason of a failure,
         else empty) and ``refused`` (why the resolver refused the goal and held the robot
-        still, else empty).
+        still, else empty); with ``plan`` also ``planning_time_s``, ``no_way`` (its kind, else
+        None) and ``no_way_reason``.
     """
     cfg = load_robot(robot)
     duration = DURATION_S.get(cfg.name, 90.0) if duration is None else duration
     run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(cfg.name, {}).get(method, {}), **(params or {})}
-    log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles)
+    planning: dict = {}
+    if plan:
+        if engine != 'direct':
+            raise WmmError(f'the planner runs with the direct engine only, not {engine!r}')
+        handoff, planning = planned(cfg, goal, obstacles)
+        if handoff is None:
+            log, status = _held(cfg, method, goal, '')
+        else:
+            log, status = _run_direct(cfg, run, goal, duration, obstacles, handoff)
+    else:
+        log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles)
     if not len(log):  # the goal was refused: the robot held still
         log, status = _held(cfg, method, goal, log.refused or 'goal refused by the resolver')
     if record is not None:
@@ -368,6 +413,8 @@ def run_goal(
         why.append(f'neither reached nor ever reported stalled in {duration:g} s')
     if why:
         outcome = 'failed'
+    if planning.get('no_way'):
+        outcome, why = 'no_way', []
     return {
         'robot': cfg.name,
         'method': method,
@@ -387,6 +434,7 @@ def run_goal(
         'cycle_cpu_s': cycle_stats(log.cycle_cpu_s),
         'why': '; '.join(why),
         'refused': status.get('refused', ''),
+        **planning,
     }
 
 
@@ -452,7 +500,8 @@ def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str |
 
 
 def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
-    """Per robot and method: ``runs``, ``converged``, ``reported``, ``failed``, the worst final
+    """Per robot and method: ``runs``, ``converged``, ``reported``, ``failed``, ``no_way`` (the
+    planner found no way, ``--plan``), the worst final
     errors of the converged runs, the median and largest time to converge, and the worst use of
     every limit over all runs (``limit_use_max``: largest fraction of a velocity or acceleration
     limit; ``position_margin_min_rad``), the runs in contact (``in_contact``) and the deepest
@@ -479,6 +528,7 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
             'converged': len(conv),
             'reported': sum(r['outcome'] == 'reported' for r in rows),
             'failed': sum(r['outcome'] == 'failed' for r in rows),
+            'no_way': sum(r['outcome'] == 'no_way' for r in rows),
             'worst_position_error_m': max((r['final_position_error_m'] for r in conv), default=None),
             'worst_orientation_error_rad': max((r['final_orientation_error_rad'] for r in conv), default=None),
             'median_time_s': float(np.median(times)) if times else None,

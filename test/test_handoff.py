@@ -1,0 +1,97 @@
+"""The planner's hand-off to the resolver: the planned base trajectory as end-effector trajectory
+points, tracked by the method before its final approach to the goal (``wmm_randomized --plan``).
+
+The points are checked against forward kinematics of the planned base poses with the arm in the
+travel posture (pinocchio, one configuration at a time), their twists against finite differences
+of those poses; the closed-loop runs against the simulator's own contact check.
+"""
+
+import numpy as np
+import pytest
+
+from wmm_control.errors import WmmError
+from wmm_control.experiments.randomized import CONTACT_DEPTH, RandomGoal, run_goal, sample_goals
+from wmm_control.geometry import matrix_from_rpy, rotation_angle
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.obstacles import load_obstacles
+from wmm_control.planning import GoalPlanner
+from wmm_control.planning.handoff import Handoff
+from wmm_control.robot_config import load_robot
+
+OBSTACLES = load_obstacles('table_pillar')
+
+
+@pytest.fixture(scope='module')
+def behind_the_table():
+    """(robot, goal): the first table_pillar goal of robot A's draw (beyond the table)."""
+    cfg = load_robot('steerable')
+    return cfg, sample_goals(cfg, 1, seed=0, obstacles='table_pillar')[0]
+
+
+def test_the_points_are_the_forward_kinematics_of_the_planned_base_poses(behind_the_table):
+    cfg, goal = behind_the_table
+    planner = GoalPlanner(cfg, OBSTACLES, budget=30.0)
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), cfg.start.base_pose)
+    assert plan.trajectory is not None, plan.reason
+    q_travel = planner.travel.q_arm
+    handoff = Handoff.of(planner.model, plan.trajectory, q_travel)
+    traj = plan.trajectory
+    assert len(handoff.points) == len(traj.poses) and handoff.duration == pytest.approx(traj.duration)
+    model = KinematicModel(cfg)
+    positions = []
+    for pose, point in zip(traj.poses, handoff.points):
+        model.update(pose, q_travel)
+        position, rotation = model.ee_placement_world()
+        assert np.allclose(point.position, position, atol=1e-9)
+        assert rotation_angle(point.rotation, rotation) < 1e-9
+        positions.append(position)
+    # the first point is where the end effector is at the start
+    model.update(cfg.start.base_pose, cfg.start.arm)
+    assert np.allclose(handoff.points[0].position, model.ee_placement_world()[0], atol=1e-9)
+    # each twist takes the end effector to the next point over the period (the base's twist is
+    # held over it: the difference is second order in the period)
+    fd = np.diff(np.array(positions), axis=0) / traj.dt
+    velocity = np.array([p.velocity for p in handoff.points])
+    speed = float(np.max(np.linalg.norm(velocity[:, :3], axis=1)))
+    assert speed > 0.1  # the base drives
+    assert np.max(np.abs(fd - velocity[:-1, :3])) < 0.02 * speed
+    turn = np.diff(np.unwrap(traj.poses[:, 2])) / traj.dt
+    assert np.allclose(velocity[:-1, 5], turn, atol=1e-6) and np.allclose(velocity[:, 3:5], 0.0)
+    # the accelerations are the twists' forward differences; the last point is at rest
+    acceleration = np.array([p.acceleration for p in handoff.points])
+    assert np.allclose(acceleration[:-1], np.diff(velocity, axis=0) / traj.dt)
+    assert not np.any(velocity[-1]) and not np.any(acceleration[-1])
+    # in force one sample at a time, none after the last
+    assert handoff.point(0.0) is handoff.points[0] and handoff.point(1.5 * traj.dt) is handoff.points[1]
+    assert handoff.point(traj.duration + traj.dt) is None
+
+
+def test_a_goal_behind_the_table_is_reached_with_the_plan_and_not_without(behind_the_table):
+    cfg, goal = behind_the_table
+    without = run_goal(cfg, 'pinv', goal, obstacles='table_pillar', duration=30.0)
+    assert without['outcome'] != 'converged' and without['final_position_error_m'] > 0.5
+    planned = run_goal(cfg, 'pinv', goal, obstacles='table_pillar', duration=30.0, plan=True)
+    assert planned['outcome'] == 'converged', planned['why']
+    assert planned['contact_depth_m'] <= CONTACT_DEPTH and planned['no_way'] is None
+    assert planned['planning_time_s'] > 0.0
+
+
+def test_a_goal_inside_the_table_is_no_way_with_its_reason_not_a_failure():
+    cfg = load_robot('steerable')
+    table = next(o for o in OBSTACLES if o.name == 'table')
+    position = table.position + np.array([0.0, 0.0, 0.5 * table.size[2] - 0.05])
+    goal = RandomGoal(0, np.zeros(3), cfg.start.arm, np.concatenate((position, np.zeros(3))), 1)
+    result = run_goal(cfg, 'pinv', goal, obstacles='table_pillar', plan=True)
+    assert result['outcome'] == 'no_way' and result['no_way'] == 'inside_obstacle'
+    assert "'table'" in result['no_way_reason'] and result['why'] == ''
+
+
+def test_the_plan_is_refused_with_the_nodes_engine(behind_the_table, capsys):
+    from wmm_control.cli.randomized import main
+
+    cfg, goal = behind_the_table
+    with pytest.raises(WmmError, match='direct engine'):
+        run_goal(cfg, 'pinv', goal, engine='nodes', obstacles='table_pillar', plan=True)
+    args = ['--robots', 'steerable', '--methods', 'pinv', '--goals', '1', '--obstacles', 'table_pillar']
+    assert main([*args, '--engine', 'nodes', '--plan']) == 2
+    assert '--plan runs with the direct engine only' in capsys.readouterr().err
