@@ -96,7 +96,6 @@ __all__ = [
     'run_contact',
     'write_record',
     'planned',
-    'PLAN_MARGIN',
 ]
 
 #: The robots, by name.
@@ -132,11 +131,6 @@ COLLISION_MARGIN = 0.02
 CONTACT_DEPTH = 0.001
 #: A direct run ends once the goal has been held this long [s].
 SETTLE_S = 2.0
-#: [m] the clearance of a planned base path from the obstacles (``plan``): 5 cm beyond the
-#: safety stage's influence distance, room for the end effector's tracking error before the
-#: stage's dampers act (robot A, 10 goals: pinv and task_sharing converged 7 and 4 with 0.10 m,
-#: 7 and 5 with 0.15 m)
-PLAN_MARGIN = 0.15
 
 
 @dataclass(frozen=True)
@@ -232,9 +226,8 @@ def _scenario(robot, goal, duration, obstacles):
 def planned(robot: RobotConfig, goal: RandomGoal, obstacles: str | Path = '') -> tuple[Handoff | None, dict]:
     """The plan of ``wmm_randomized --plan`` for ``goal`` from the robot's start state among the
     obstacles of the file ``obstacles``: (its hand-off, or None when the planner found no way;
-    ``{'planning_time_s', 'no_way', 'no_way_reason'}``, the last two None with a plan). The path
-    keeps :data:`PLAN_MARGIN` from the obstacles."""
-    planner = GoalPlanner(robot, load_obstacles(obstacles), travel_margin=PLAN_MARGIN)
+    ``{'planning_time_s', 'no_way', 'no_way_reason'}``, the last two None with a plan)."""
+    planner = GoalPlanner(robot, load_obstacles(obstacles))
     target = Goal(0.0, 0.0, goal.pose).target
     plan = planner.plan(target.position, target.rotation, robot.start.base_pose)
     info = {'planning_time_s': plan.planning_time, 'no_way': None, 'no_way_reason': None}
