@@ -306,6 +306,11 @@ def test_lockstep_groups_set_at_run_time_change_what_the_sim_waits_for(ros):
     )
     caller = ros.add(Node('param_cli', context=ros.context))
     pub = caller.create_publisher(Float64MultiArray, '/arm_controller/commands', 10)
+    # a controller answers the joint states: the simulator starts once it listens to them too,
+    # not when its command publisher alone is seen (the first state would go unanswered)
+    ros.spin_for(0.5)
+    assert not sim.wait.started
+    caller.create_subscription(JointState, '/joint_states', lambda msg: None, 10)
     assert ros.spin_until(lambda: sim.wait.started, timeout=5.0)
     ros.spin_for(0.2)
     t0 = sim.world.time
