@@ -162,10 +162,14 @@ def test_a_second_publisher_replaying_the_simulators_states_runs_no_second_cycle
     assert set(counts.values()) == {1}, {t: n for t, n in counts.items() if n != 1}
     # Logged with the number of publishers (the simulator, the echo and this probe's).
     assert any('not after the last cycle' in w and '3 publisher(s)' in w for w in probe.warnings), probe.warnings
-    # Its limits act per simulated period: the twist never changes faster than the limit.
+    # Its limits act per simulated period: the twist never changes faster than the limit, but
+    # where the controller restarted from the measured state (a late command zeroed by the
+    # simulator's command timeout on a loaded machine: the wheels did stop)
     twists = np.array([twist_of(m) for m in sorted(probe.feasible, key=stamp_s)])
     step = np.asarray(ROBOT.base.acceleration) * DT
-    assert np.all(np.abs(np.diff(twists, axis=0)) <= step * (1 + 1e-9) + 1e-12)
+    jumps = np.any(np.abs(np.diff(twists, axis=0)) > step * (1 + 1e-9) + 1e-12, axis=1)
+    restarts = node.counters['commands_not_applied']  # the restarts (their warning is throttled)
+    assert jumps.sum() <= restarts, (int(jumps.sum()), restarts)
     assert np.any(twists)
 
 
