@@ -57,8 +57,8 @@ class LogThrottle:
     the caller's clock (``held`` 5 s, ``stalled`` every time, the others 1 s), each kind apart.
     """
 
-    INFO = ('accepted', 'tracking', 'reached')
-    INTERVALS = {'held': 5.0, 'stalled': 0.0}
+    INFO: tuple[str, ...] = ('accepted', 'tracking', 'reached')
+    INTERVALS: dict[str, float] = {'held': 5.0, 'stalled': 0.0}
     INTERVAL = 1.0
 
     def __init__(self) -> None:
