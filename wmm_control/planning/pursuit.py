@@ -460,7 +460,6 @@ class GoalPursuit:
             'reason': self.reason,
             'goal': [] if self.goal is None else self.goal.position.tolist(),
             'progress': self.progress,
-            'planning_time_s': self.planning_time,
             'replans_of_goal': self.replans,
             'goals': c.goals,
             'goals_rejected': c.goals_rejected,
@@ -470,4 +469,6 @@ class GoalPursuit:
             'points': c.points,
             'obstacles': len(self.obstacles),
         }
+        if math.isfinite(self.planning_time):  # none before the first plan
+            values['planning_time_s'] = self.planning_time
         return level, message, values
