@@ -68,7 +68,7 @@ from wmm_control.experiments.metrics import RunLog, run_limit_report
 from wmm_control.experiments.ros_run import run_with_nodes
 from wmm_control.experiments.scenario import Goal, Scenario, load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file
+from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file, obstacle_text
 from wmm_control.geometry import rotation_angle, rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
 from wmm_control.planning import GoalPlanner
@@ -522,7 +522,7 @@ def cycle_stats(seconds: ArrayLike) -> dict[str, float] | None:
 def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str | Path = '') -> None:
     """Write the run ``log`` to ``path`` (``.npz``, the module docstring says what it holds)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = obstacle_file(obstacles).read_text() if obstacles else ''
+    text = obstacle_text(obstacles) if obstacles else ''
     np.savez_compressed(
         path,
         t=log.t,
