@@ -152,8 +152,11 @@ def test_stalled_after_the_stall_time_without_motion_and_not_before(plan):
     # and not long after the plan's pose stopped moving
     moving = np.linalg.norm(np.diff(np.array(planned)[:, :2], axis=0), axis=1) > 1e-3 * dt
     assert k * dt <= (np.flatnonzero(moving)[-1] + 1) * dt + PARAMS.stall_time + dt
-    # it stays stalled while nothing moves, and follows again once the base moves
+    # it stays stalled while nothing moves, or the base moves but no nearer to the plan (pushed
+    # sideways along an obstacle), and follows again once the base comes nearer
     assert follower.step(dt, base).state is FollowState.STALLED
+    aside = base + (-PARAMS.stall_distance, 2.0 * PARAMS.stall_distance, 0.0)
+    assert follower.step(dt, aside).state is FollowState.STALLED
     moved = base + (2.0 * PARAMS.stall_distance, 0.0, 0.0)
     assert follower.step(dt, moved).state is FollowState.FOLLOWING
 

@@ -48,8 +48,9 @@ def run_scenario(
             scenario's goals once it is in its final approach.
         replan: with ``follower``, ``replan(base_pose)``, called when the follower stalls, with
             the measured base pose (x, y, θ): the follower of a new plan from there, or None
-            when there is none (the run ends). At most ``max_replans`` times; a follower stalled
-            after them goes on waiting for the robot.
+            when there is none (the run ends). At most ``max_replans`` times; when the follower
+            stalls after them the scenario's goals are given from where the robot is (the
+            method's own approach, judged as without a plan).
 
     Returns:
         The frozen :class:`~wmm_control.experiments.metrics.RunLog`.
@@ -77,13 +78,16 @@ def run_scenario(
                     resolver.model.update(pose, state.q_arm)
                     ee_position, ee_rotation = resolver.model.ee_placement_world()
                 following = follower.step(world.dt, pose, ee_position, ee_rotation)
-                if following.state is FollowState.STALLED and replan is not None and replans < max_replans:
-                    replans += 1
-                    follower = replan(pose)
-                    if follower is None:  # no way from here
-                        break
-                    following = follower.step(0.0, pose)
-                if following.state is FollowState.APPROACH:
+                if following.state is FollowState.STALLED and replan is not None:
+                    if replans >= max_replans:  # no more plans: the goal from where the robot is
+                        following = None
+                    else:
+                        replans += 1
+                        follower = replan(pose)
+                        if follower is None:  # no way from here
+                            break
+                        following = follower.step(0.0, pose)
+                if following is None or following.state is FollowState.APPROACH:
                     follower = following = None
             if following is not None:
                 rec = loop.step(following.target, tracking=True)

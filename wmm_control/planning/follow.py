@@ -42,10 +42,11 @@ pulls the clock forward: the follower keeps the last planned pose the measured b
 
 Once ``s`` reaches the plan's end the target is the goal itself (:attr:`FollowState.APPROACH`):
 the method's final whole-body approach. While following, the follower is
-:attr:`FollowState.STALLED` when for ``stall_time`` neither the planned pose at ``s`` nor the
-measured base moved by ``stall_distance`` or turned by ``stall_angle``: the robot is held
-where it is (by an obstacle the plan did not know, by the safety stage), and the caller plans
-again from where it is. It is following again as soon as either moves.
+:attr:`FollowState.STALLED` when for ``stall_time`` the planned pose at ``s`` has not moved on
+by ``stall_distance`` or turned by ``stall_angle``, and the measured base has not come that
+much nearer to it (in distance or in heading): the robot is held off the plan (by an obstacle
+the plan did not know, by the safety stage; moving along the obstacle is no progress), and the
+caller plans again from where it is. It is following again as soon as either moves on.
 
 Pure and ROS-free: time is what :meth:`PlanFollower.step` is told.
 """
@@ -173,8 +174,8 @@ class PlanFollower:
         self._rate = 0.0  # the clock's rate, starting from rest as the robot does
         self._passed = 0  # the last planned sample the base has passed
         self._idle = 0.0  # [s] without progress
-        self._anchor_plan: np.ndarray | None = None
-        self._anchor_base: np.ndarray | None = None
+        self._anchor_plan: np.ndarray | None = None  # the planned pose at the last progress
+        self._anchor_lag = (math.inf, math.inf)  # the base's lag (distance, angle) then
 
     @property
     def clock(self) -> float:
@@ -213,6 +214,11 @@ class PlanFollower:
             math.hypot(a[0] - b[0], a[1] - b[1]) >= p.stall_distance
             or abs(wrap_angle(float(a[2] - b[2]))) >= p.stall_angle
         )
+
+    @staticmethod
+    def _apart(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+        """(distance [m], heading difference [rad]) of two poses."""
+        return math.hypot(a[0] - b[0], a[1] - b[1]), abs(wrap_angle(float(a[2] - b[2])))
 
     def _index(self, s: float) -> int:
         """The sample in force at the plan's time ``s``."""
@@ -282,12 +288,14 @@ class PlanFollower:
         self._clock = clock
         if self._clock >= end:
             return FollowStep(self.goal, FollowState.APPROACH, 1.0)
-        # progress: the planned pose or the measured base moved since the last progress
+        # progress since the last: the planned pose moved on, or the base came nearer to it
         planned = self.planned_pose(self._clock)
-        if self._anchor_plan is None or self._anchor_base is None:
-            self._anchor_plan, self._anchor_base = before, base
-        if self._moved(planned, self._anchor_plan) or self._moved(base, self._anchor_base):
-            self._anchor_plan, self._anchor_base, self._idle = planned, base, 0.0
+        lag = self._apart(planned, base)
+        if self._anchor_plan is None:
+            self._anchor_plan = before
+        closer = lag[0] <= self._anchor_lag[0] - p.stall_distance or lag[1] <= self._anchor_lag[1] - p.stall_angle
+        if self._moved(planned, self._anchor_plan) or closer:
+            self._anchor_plan, self._anchor_lag, self._idle = planned, lag, 0.0
         else:
             self._idle += dt
         point = handoff.points[self._index(self._clock)]
