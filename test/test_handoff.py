@@ -118,7 +118,7 @@ def test_a_plan_through_the_table_stalls_and_the_replan_from_where_the_robot_sto
     blind = Handoff.of(planner.model, straight, planner.travel.q_arm)
     replanned = []
 
-    def replan(base_pose):
+    def replan(base_pose, q_arm):
         again = planner.plan(target.position, target.rotation, base_pose)
         replanned.append((np.array(base_pose), again.no_way))
         if again.trajectory is None:

@@ -6,7 +6,6 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-
 from sim_bridge.closed_loop import ClosedLoop
 from sim_bridge.world import SimWorld
 from wmm_control.cycle import steady_heap
@@ -27,7 +26,7 @@ def run_scenario(
     progress: Callable[[int], object] | None = None,
     until: Callable[[ResolverDiagnostics], bool] | None = None,
     follower: PlanFollower | None = None,
-    replan: Callable[[np.ndarray], PlanFollower | None] | None = None,
+    replan: Callable[[np.ndarray, np.ndarray], PlanFollower | None] | None = None,
     max_replans: int = 3,
 ) -> RunLog:
     """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
@@ -46,8 +45,8 @@ def run_scenario(
             its point every period, at the pace of the measured base and end effector, from the
             start; the
             scenario's goals once it is in its final approach.
-        replan: with ``follower``, ``replan(base_pose)``, called when the follower stalls, with
-            the measured base pose (x, y, θ): the follower of a new plan from there, or None
+        replan: with ``follower``, ``replan(base_pose, q_arm)``, called when the follower
+            stalls, with the measured base pose (x, y, θ) and arm joints: the follower of a new plan from there, or None
             when there is none (the run ends). At most ``max_replans`` times; when the follower
             stalls after them the scenario's goals are given from where the robot is (the
             method's own approach, judged as without a plan).
@@ -83,7 +82,7 @@ def run_scenario(
                         following = None
                     else:
                         replans += 1
-                        follower = replan(pose)
+                        follower = replan(pose, state.q_arm)
                         if follower is None:  # no way from here
                             break
                         following = follower.step(0.0, pose)

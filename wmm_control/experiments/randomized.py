@@ -252,7 +252,8 @@ def planned(
 def _run_direct(robot, run, goal, duration, obstacles, plan=False):
     """A direct run; with ``plan`` the plan's way there is followed first (:func:`planned`,
     :class:`~wmm_control.planning.follow.PlanFollower`), planned again from where the robot is
-    when it stalls (``MAX_REPLANS`` times at most)."""
+    when it stalls (``MAX_REPLANS`` times at most), the arm travelling in the posture it has then
+    (in the planner's own when that finds no way)."""
     resolver = make_resolver(run['method'], robot, **resolver_parameters(run))
     tolerance, stall_time, ratio = goal_settings()
     progress = GoalProgress(tolerance, stall_time, resolver.params.dt, min_progress_ratio=ratio)
@@ -278,9 +279,17 @@ def _run_direct(robot, run, goal, duration, obstacles, plan=False):
         if handoff is None:
             return None, planning
         follower = PlanFollower(handoff, target)
+        travel = planner.travel.q_arm
 
-        def replan(base_pose):
+        def replan(base_pose, q_arm):
+            # the arm travels as it is now (the plan's first point is where the end effector is);
+            # when that finds no way, in the planner's own travel posture
+            planner.set_travel_posture(q_arm)
             again, info = planned(robot, goal, obstacles, base_pose, planner)
+            if again is None:
+                planner.set_travel_posture(travel)
+                again, second = planned(robot, goal, obstacles, base_pose, planner)
+                info = dict(second, planning_time_s=info['planning_time_s'] + second['planning_time_s'])
             planning['replans'] += 1
             planning['planning_time_s'] += info['planning_time_s']
             if again is None:
