@@ -214,17 +214,15 @@ class PlanFollower:
         angle = np.abs(wrap_angle(planned[:, 2] - base[2]))
         return np.maximum(distance / p.base_lead_distance, angle / p.base_lead_angle)
 
-    def _moved(self, a: np.ndarray, b: np.ndarray) -> bool:
-        p = self.params
-        return bool(
-            math.hypot(a[0] - b[0], a[1] - b[1]) >= p.stall_distance
-            or abs(wrap_angle(float(a[2] - b[2]))) >= p.stall_angle
-        )
-
     @staticmethod
     def _apart(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
         """(distance [m], heading difference [rad]) of two poses."""
         return math.hypot(a[0] - b[0], a[1] - b[1]), abs(wrap_angle(float(a[2] - b[2])))
+
+    def _moved(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether two poses are a step of progress apart."""
+        distance, angle = self._apart(a, b)
+        return distance >= self.params.stall_distance or angle >= self.params.stall_angle
 
     def _index(self, s: float) -> int:
         """The sample in force at the plan's time ``s``."""
