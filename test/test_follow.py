@@ -56,11 +56,11 @@ def test_the_clock_waits_for_a_base_that_lags_and_catches_up_when_it_follows(pla
         assert step.state is not FollowState.APPROACH
         planned = follower.planned_pose()
         distance, angle = _lag(planned, base)
-        assert distance <= PARAMS.lead_distance + 1e-9 and angle <= PARAMS.lead_angle + 1e-9
+        assert distance <= PARAMS.base_lead_distance + 1e-9 and angle <= PARAMS.base_lead_angle + 1e-9
     waited = follower.clock
-    assert 0.0 < waited < 0.5 * handoff.duration and follower.rate == pytest.approx(0.0, abs=1e-12)
+    assert 0.0 < waited < 0.5 * handoff.duration and follower.rate == pytest.approx(0.0, abs=1e-6)
     distance, _ = _lag(follower.planned_pose(waited), base)
-    assert distance > PARAMS.slow_from * PARAMS.lead_distance  # it went as far as the lead lets it
+    assert distance > PARAMS.slow_from * PARAMS.base_lead_distance  # it went as far as the lead lets it
     # the point given while waiting is a point of the plan, held still (no feedforward pulling on)
     assert np.allclose(step.target.velocity, 0.0, atol=1e-9) and np.allclose(step.target.acceleration, 0.0, atol=1e-9)
     assert any(
@@ -80,6 +80,47 @@ def test_the_clock_waits_for_a_base_that_lags_and_catches_up_when_it_follows(pla
     # the plan done: the goal, for good
     assert step.target is goal and step.progress == 1.0
     assert follower.step(dt, base).target is goal and follower.remaining_poses().shape == (0, 3)
+
+
+def _ee(handoff, k):
+    """The end effector exactly on the point of sample k."""
+    return handoff.points[k].position, handoff.points[k].rotation
+
+
+def test_with_the_end_effector_the_clock_waits_for_it_and_slows_for_a_lagging_base_without_stopping(plan):
+    handoff, goal = plan
+    dt = handoff.dt
+    # the end effector stays where it starts: the point goes no further than the lead from it
+    follower = PlanFollower(handoff, goal, PARAMS)
+    still = _ee(handoff, 0)
+    for _ in range(int(5.0 / dt)):
+        step = follower.step(dt, handoff.base_poses[0], *still)
+        assert np.linalg.norm(step.target.position - still[0]) <= PARAMS.lead_distance + 1e-9
+    assert 0.0 < follower.clock < handoff.duration and follower.rate == pytest.approx(0.0, abs=1e-9)
+    # the end effector on its point while the base stays behind (the arm reaches out): the clock
+    # goes on at the base's floor, not to a stop (a method whose end effector is on its point
+    # does not move its base on), until the base is base_stop leads behind: off the plan
+    follower = PlanFollower(handoff, goal, PARAMS)
+    base = handoff.base_poses[0]
+    floored, stopped = [], []
+    for _ in range(int(10.0 / dt)):
+        k = min(int(math.floor(follower.clock / dt + 1e-9)), len(handoff.points) - 1)
+        lag = _lag(follower.planned_pose(), base)
+        behind = max(lag[0] / PARAMS.base_lead_distance, lag[1] / PARAMS.base_lead_angle)
+        step = follower.step(dt, base, *_ee(handoff, k))
+        if 1.0 <= behind < PARAMS.base_stop:
+            floored.append(follower.rate)
+        elif behind >= PARAMS.base_stop:
+            stopped.append(follower.rate)
+    assert len(floored) > 10 and min(floored[5:]) == pytest.approx(PARAMS.base_floor)
+    assert stopped and max(stopped) == pytest.approx(0.0, abs=1e-9)
+    assert step.state is FollowState.STALLED
+    # and both on the plan: full pace
+    follower = PlanFollower(handoff, goal, PARAMS)
+    for _ in range(int(2.0 / dt)):
+        k = min(int(math.floor(follower.clock / dt + 1e-9)), len(handoff.points) - 1)
+        follower.step(dt, follower.planned_pose(), *_ee(handoff, k))
+    assert follower.rate == pytest.approx(1.0)
 
 
 def test_a_base_ahead_of_the_plan_pulls_its_clock_forward(plan):
@@ -117,8 +158,11 @@ def test_stalled_after_the_stall_time_without_motion_and_not_before(plan):
     # and not long after the plan's pose stopped moving
     moving = np.linalg.norm(np.diff(np.array(planned)[:, :2], axis=0), axis=1) > 1e-3 * dt
     assert k * dt <= (np.flatnonzero(moving)[-1] + 1) * dt + PARAMS.stall_time + dt
-    # it stays stalled while nothing moves, and follows again once the base moves
+    # it stays stalled while nothing moves, or the base moves but no nearer to the plan (pushed
+    # sideways along an obstacle), and follows again once the base comes nearer
     assert follower.step(dt, base).state is FollowState.STALLED
+    aside = base + (-PARAMS.stall_distance, 2.0 * PARAMS.stall_distance, 0.0)
+    assert follower.step(dt, aside).state is FollowState.STALLED
     moved = base + (2.0 * PARAMS.stall_distance, 0.0, 0.0)
     assert follower.step(dt, moved).state is FollowState.FOLLOWING
 
@@ -144,6 +188,9 @@ def test_a_slow_base_is_not_stalled(plan):
     [
         {'lead_distance': 0.0},
         {'lead_angle': -0.1},
+        {'base_lead_distance': math.inf},
+        {'base_floor': 1.5},
+        {'base_stop': 0.5},
         {'slow_from': 1.0},
         {'slow_from': -0.1},
         {'rate_slew': math.nan},
@@ -167,4 +214,8 @@ def test_bad_steps_are_rejected(plan):
         follower.step(0.01, (0.0, math.nan, 0.0))
     with pytest.raises(ValueError):
         follower.step(0.01, (0.0, 0.0))
+    with pytest.raises(ValueError):
+        follower.step(0.01, np.zeros(3), np.zeros(3))
+    with pytest.raises(ValueError):
+        follower.step(0.01, np.zeros(3), (0.0, math.inf, 0.0), np.eye(3))
     assert follower.clock == 0.0

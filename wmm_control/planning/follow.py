@@ -7,20 +7,35 @@ given by the wall clock then run ahead of the robot, and the resolver, tracking 
 the corner the path went round.
 
 :class:`PlanFollower` gives the points by the plan's own clock ``s`` [s], which advances at a
-rate ``r ∈ [0, 1]`` of the elapsed time set by how far the measured base lags the planned base
-pose at ``s``: with ``e = max(‖Δxy‖ / lead_distance, |Δθ| / lead_angle)`` the lag as a fraction
-of the lead,
+rate ``r ∈ [0, 1]`` of the elapsed time set by how far the robot lags the plan at ``s``. A lag
+is taken as a fraction of the lead, ``e = max(‖Δp‖ / lead_distance, |Δθ| / lead_angle)`` (Δp
+the position's difference, Δθ the rotation's angle), and gives the pace
 
-    r* = clip((1 − e) / (1 − slow_from), 0, 1)
+    r(e) = clip((1 − e) / (1 − slow_from), 0, 1)
 
-(full pace while the lag is within ``slow_from`` of the lead, stopped at the lead); ``r`` rises
+(full pace while the lag is within ``slow_from`` of the lead, stopped at the lead). Two lags
+are taken:
+
+* the measured base's behind the planned base pose at ``s``, ``e_b``, against its own lead
+  (``base_lead_distance``, ``base_lead_angle``: the arm's posture while following may differ
+  from the travel posture the plan assumed, by a method's choice of how to share the motion);
+* with the measured end effector (``ee_position``, ``ee_rotation``), its lag behind the point
+  in force at ``s``, ``e_e``.
+
+``r* = min(r(e_e), max(r(e_b), base_floor))`` with the end effector (0 once ``e_b`` reaches
+``base_stop``), ``r* = r(e_b)`` without. So the point waits for the end effector, which every
+method servoes to it, and slows for the base down to ``base_floor`` of the pace, not to a
+stop: a method that moves the end effector partly with the arm (task sharing, or any
+whole-body one whose share of the base lags, as a steerable base's does while it re-steers)
+does not bring its base back onto the plan once the end effector is on its point, and a point
+that waited for it would wait for ever. A base ``base_stop`` leads behind is off the plan: the
+clock stops, the follower stalls, and the caller plans again from where the robot is. ``r`` rises
 towards ``r*`` by at most ``rate_slew`` per second (the point does not start at once) and falls
-to it at once. So the point waits for the robot: a period's step of the clock moves the planned
-pose by at most ``(1 − e)`` of the room left to the lead when the plan's speed over a period is
-within ``(1 − slow_from)`` of the lead (1 m/s and 1 rad/s at 40 Hz with the defaults), and the
-measured base is never more than the lead behind the point it is given, save what its own last
-period's motion adds. The point's twist is the planned one times
-``r``, its acceleration times ``r²`` (the planned motion slowed down).
+to it at once: a period's step of the clock moves the point by at most ``(1 − e)`` of the room
+left to the lead when the plan's speed over a period is within ``(1 − slow_from)`` of the lead
+(1 m/s and 1 rad/s at 40 Hz with the defaults), so the robot is never more than the lead
+behind the point it is given, save what its own last period's motion adds. The point's twist is
+the planned one times ``r``, its acceleration times ``r²`` (the planned motion slowed down).
 
 A base that is ahead of the plan (it cut a corner, or the planned pose at ``s`` is behind it)
 pulls the clock forward: the follower keeps the last planned pose the measured base has passed
@@ -29,10 +44,11 @@ pulls the clock forward: the follower keeps the last planned pose the measured b
 
 Once ``s`` reaches the plan's end the target is the goal itself (:attr:`FollowState.APPROACH`):
 the method's final whole-body approach. While following, the follower is
-:attr:`FollowState.STALLED` when for ``stall_time`` neither the planned pose at ``s`` nor the
-measured base moved by ``stall_distance`` or turned by ``stall_angle``: the robot is held
-where it is (by an obstacle the plan did not know, by the safety stage), and the caller plans
-again from where it is. It is following again as soon as either moves.
+:attr:`FollowState.STALLED` when for ``stall_time`` the planned pose at ``s`` has not moved on
+by ``stall_distance`` or turned by ``stall_angle``, and the measured base has not come that
+much nearer to it (in distance or in heading): the robot is held off the plan (by an obstacle
+the plan did not know, by the safety stage; moving along the obstacle is no progress), and the
+caller plans again from where it is. It is following again as soon as either moves on.
 
 Pure and ROS-free: time is what :meth:`PlanFollower.step` is told.
 """
@@ -48,7 +64,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
-from wmm_control.geometry import wrap_angle
+from wmm_control.geometry import norm, rotation_angle, wrap_angle
 from wmm_control.planning.handoff import Handoff
 from wmm_control.resolvers.interface import PoseTarget
 
@@ -60,9 +76,15 @@ class FollowParams:
     """Settings of :class:`PlanFollower` (module docstring).
 
     Attributes:
-        lead_distance: [m] the base's lag behind the planned pose at which the plan's clock stops.
-        lead_angle: [rad] the same for the heading.
+        lead_distance: [m] the end effector's lag behind its point at which the plan's clock stops.
+        lead_angle: [rad] the same for its orientation.
+        base_lead_distance: [m] the base's lag behind its planned pose at which the base's pace
+            is least (module docstring).
+        base_lead_angle: [rad] the same for its heading.
         slow_from: the fraction of the lead, in [0, 1), up to which the clock keeps full pace.
+        base_floor: the pace, in [0, 1], the base's lag leaves the clock when the end effector
+            is measured.
+        base_stop: the base's lag, in base leads (≥ 1), at which the clock stops all the same.
         rate_slew: [1/s] the most the clock's rate rises per second.
         lookahead: [s] of the plan, ahead of its clock, searched for the pose the base has passed.
         stall_time: [s] without progress (module docstring) before the follower is stalled.
@@ -75,7 +97,11 @@ class FollowParams:
 
     lead_distance: float = 0.15
     lead_angle: float = 0.35
+    base_lead_distance: float = 0.3
+    base_lead_angle: float = 0.6
     slow_from: float = 0.5
+    base_floor: float = 0.25
+    base_stop: float = 2.0
     rate_slew: float = 2.0
     lookahead: float = 2.0
     stall_time: float = 5.0
@@ -83,7 +109,16 @@ class FollowParams:
     stall_angle: float = 0.05
 
     def __post_init__(self) -> None:
-        positive = ('lead_distance', 'lead_angle', 'rate_slew', 'stall_time', 'stall_distance', 'stall_angle')
+        positive = (
+            'lead_distance',
+            'lead_angle',
+            'base_lead_distance',
+            'base_lead_angle',
+            'rate_slew',
+            'stall_time',
+            'stall_distance',
+            'stall_angle',
+        )
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
@@ -92,6 +127,10 @@ class FollowParams:
             raise ConfigError(f'FollowParams.lookahead must be a finite number >= 0 [s], got {self.lookahead!r}')
         if not (isinstance(self.slow_from, (int, float)) and 0.0 <= self.slow_from < 1.0):
             raise ConfigError(f'FollowParams.slow_from must be in [0, 1), got {self.slow_from!r}')
+        if not (isinstance(self.base_stop, (int, float)) and 1.0 <= self.base_stop < math.inf):
+            raise ConfigError(f'FollowParams.base_stop must be a finite number >= 1, got {self.base_stop!r}')
+        if not (isinstance(self.base_floor, (int, float)) and 0.0 <= self.base_floor <= 1.0):
+            raise ConfigError(f'FollowParams.base_floor must be in [0, 1], got {self.base_floor!r}')
 
 
 class FollowState(enum.Enum):
@@ -141,8 +180,8 @@ class PlanFollower:
         self._rate = 0.0  # the clock's rate, starting from rest as the robot does
         self._passed = 0  # the last planned sample the base has passed
         self._idle = 0.0  # [s] without progress
-        self._anchor_plan: np.ndarray | None = None
-        self._anchor_base: np.ndarray | None = None
+        self._anchor_plan: np.ndarray | None = None  # the planned pose at the last progress
+        self._anchor_lag = (math.inf, math.inf)  # the base's lag (distance, angle) then
 
     @property
     def clock(self) -> float:
@@ -173,54 +212,99 @@ class PlanFollower:
         planned = np.atleast_2d(planned)
         distance = np.hypot(planned[:, 0] - base[0], planned[:, 1] - base[1])
         angle = np.abs(wrap_angle(planned[:, 2] - base[2]))
-        return np.maximum(distance / p.lead_distance, angle / p.lead_angle)
+        return np.maximum(distance / p.base_lead_distance, angle / p.base_lead_angle)
+
+    @staticmethod
+    def _apart(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+        """(distance [m], heading difference [rad]) of two poses."""
+        return math.hypot(a[0] - b[0], a[1] - b[1]), abs(wrap_angle(float(a[2] - b[2])))
 
     def _moved(self, a: np.ndarray, b: np.ndarray) -> bool:
-        p = self.params
-        return bool(
-            math.hypot(a[0] - b[0], a[1] - b[1]) >= p.stall_distance
-            or abs(wrap_angle(float(a[2] - b[2]))) >= p.stall_angle
+        """Whether two poses are a step of progress apart."""
+        distance, angle = self._apart(a, b)
+        return distance >= self.params.stall_distance or angle >= self.params.stall_angle
+
+    def _index(self, s: float) -> int:
+        """The sample in force at the plan's time ``s``."""
+        return min(int(math.floor(s / self.handoff.dt + 1e-9)), len(self.handoff.points) - 1)
+
+    def _ee_lag(self, k: int, ee: PoseTarget) -> float:
+        """The end effector's lag behind the point of sample ``k`` as a fraction of the lead."""
+        point, p = self.handoff.points[k], self.params
+        return max(
+            norm(point.position - ee.position) / p.lead_distance,
+            rotation_angle(point.rotation, ee.rotation) / p.lead_angle,
         )
 
-    def step(self, dt: float, base_pose: ArrayLike) -> FollowStep:
-        """Advance the plan's clock by the period ``dt`` [s] at the pace the measured base
-        ``base_pose`` (x, y, θ) keeps, and give what the resolver tracks this period.
+    def _pace(self, lag: float, floor: float = 0.0) -> float:
+        return min(max((1.0 - lag) / (1.0 - self.params.slow_from), floor), 1.0)
+
+    def step(
+        self,
+        dt: float,
+        base_pose: ArrayLike,
+        ee_position: ArrayLike | None = None,
+        ee_rotation: ArrayLike | None = None,
+    ) -> FollowStep:
+        """Advance the plan's clock by the period ``dt`` [s] at the pace the robot keeps (its
+        measured base pose ``base_pose`` (x, y, θ) and, if given, end-effector pose
+        ``ee_position`` [m], ``ee_rotation`` (3, 3) in the world), and give what the resolver
+        tracks this period.
 
         Raises:
-            ValueError: ``dt`` not a finite number ≥ 0, or ``base_pose`` not three finite numbers.
+            ValueError: ``dt`` not a finite number ≥ 0, ``base_pose`` not three finite numbers,
+                an end-effector pose malformed or given by half.
         """
         if not (math.isfinite(dt) and dt >= 0.0):
             raise ValueError(f'dt must be a finite number >= 0 [s], got {dt!r}')
         base = as_finite_vector(base_pose, 3, 'base pose')
+        ee = None
+        if ee_position is not None and ee_rotation is not None:  # PoseTarget checks them
+            ee = PoseTarget(np.asarray(ee_position, dtype=float), np.asarray(ee_rotation, dtype=float))
+        elif ee_position is not None or ee_rotation is not None:
+            raise ValueError('the end effector is measured by its position and its rotation together')
         p, handoff = self.params, self.handoff
         end = handoff.duration
         if self._clock >= end:
             return FollowStep(self.goal, FollowState.APPROACH, 1.0)
         # the base ahead of the plan pulls the clock forward
         last = len(handoff.base_poses) - 1
+        given = self._index(self._clock)  # the point given last period
         horizon = min(last, int(math.floor((self._clock + p.lookahead) / handoff.dt + 1e-9)))
         window = handoff.base_poses[self._passed : horizon + 1]
         if len(window):
             self._passed += int(np.argmin(self._lag(window, base)))
         self._clock = max(self._clock, self._passed * handoff.dt)
-        # the clock's pace from the lag behind the planned pose at it
-        lag = float(self._lag(self.planned_pose(self._clock), base)[0])
-        wanted = min(max((1.0 - lag) / (1.0 - p.slow_from), 0.0), 1.0)
+        # the clock's pace from the lags behind the plan at it
+        base_lag = float(self._lag(self.planned_pose(self._clock), base)[0])
+        wanted = self._pace(base_lag)
+        if ee is not None:
+            floor = p.base_floor if base_lag < p.base_stop else 0.0
+            wanted = min(self._pace(self._ee_lag(self._index(self._clock), ee)), max(wanted, floor))
         self._rate = min(wanted, self._rate + p.rate_slew * dt)
         before = self.planned_pose(self._clock)
-        self._clock = min(self._clock + self._rate * dt, end)
+        clock = min(self._clock + self._rate * dt, end)
+        if ee is not None:  # no new point beyond the lead from the end effector (the samples' step)
+            k = self._index(clock)
+            while k > given and self._ee_lag(k, ee) > 1.0:
+                k -= 1
+            if clock > (k + 1.0 - 1e-6) * handoff.dt:  # held at sample k: the rate it moved at
+                clock = max(self._clock, (k + 1.0 - 1e-6) * handoff.dt)
+                self._rate = (clock - self._clock) / dt if dt > 0.0 else 0.0
+        self._clock = clock
         if self._clock >= end:
             return FollowStep(self.goal, FollowState.APPROACH, 1.0)
-        # progress: the planned pose or the measured base moved since the last progress
+        # progress since the last: the planned pose moved on, or the base came nearer to it
         planned = self.planned_pose(self._clock)
-        if self._anchor_plan is None or self._anchor_base is None:
-            self._anchor_plan, self._anchor_base = before, base
-        if self._moved(planned, self._anchor_plan) or self._moved(base, self._anchor_base):
-            self._anchor_plan, self._anchor_base, self._idle = planned, base, 0.0
+        lag = self._apart(planned, base)
+        if self._anchor_plan is None:
+            self._anchor_plan = before
+        closer = lag[0] <= self._anchor_lag[0] - p.stall_distance or lag[1] <= self._anchor_lag[1] - p.stall_angle
+        if self._moved(planned, self._anchor_plan) or closer:
+            self._anchor_plan, self._anchor_lag, self._idle = planned, lag, 0.0
         else:
             self._idle += dt
-        k = min(int(math.floor(self._clock / handoff.dt + 1e-9)), last)
-        point = handoff.points[k]
+        point = handoff.points[self._index(self._clock)]
         target = PoseTarget(
             point.position,
             point.rotation,
@@ -235,5 +319,4 @@ class PlanFollower:
         plan's clock to the path's end (empty once the plan is done). Shape (N, 3)."""
         if self._clock >= self.handoff.duration:
             return np.zeros((0, 3))
-        k = int(math.floor(self._clock / self.handoff.dt + 1e-9))
-        return self.handoff.base_poses[k:].copy()
+        return self.handoff.base_poses[self._index(self._clock) :].copy()
