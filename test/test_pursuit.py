@@ -131,16 +131,19 @@ def test_an_obstacle_on_the_rest_of_the_path_makes_it_plan_again(pursuit):
     assert np.min(np.hypot(path[:, 0] - ahead[0], path[:, 1] - ahead[1])) > 0.2
 
 
-def test_progress_that_stalls_is_planned_again_then_given_up_as_no_way(pursuit):
+def test_progress_that_stalls_is_planned_again_then_the_goal_goes_to_the_resolver(pursuit):
     pursuit.new_goal('world', pose(BEHIND_TABLE, yaw=0.5 * np.pi))
     settle(pursuit)
-    said = []
-    for _ in range(2):  # the base never moves: stalled after 1 s, planned again once, then no way
-        for _ in range(200):
-            said += [e.message for e in pursuit.step(0.025, START, Q_ARM).events]
+    said, forwarded = [], False
+    for _ in range(2):  # the base never moves: stalled after 1 s, planned again once, then the goal
+        for _ in range(400):
+            out = pursuit.step(0.025, START, Q_ARM)
+            said += [e.message for e in out.events]
+            forwarded = forwarded or out.forward_goal
             if pursuit.state is not PursuitState.FOLLOWING:
                 break
         if pursuit.state is PursuitState.PLANNING:
             settle(pursuit)
     assert any('progress stalled' in m and 'planning again' in m for m in said), said
-    assert pursuit.state is PursuitState.NO_WAY and 'after 1 plans made again' in pursuit.reason
+    assert pursuit.state is PursuitState.APPROACH and forwarded
+    assert any('after 1 plans made again: the goal goes to the resolver' in m for m in said), said

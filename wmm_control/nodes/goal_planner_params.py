@@ -51,8 +51,8 @@ _SPECS = (
     ),
     Param(
         'max_replans',
-        'Plans made again for one goal (progress stalled, an obstacle moved onto the path) before it is '
-        'reported as no way.',
+        'Plans made again for one goal (progress stalled, an obstacle moved onto the path); after them the goal '
+        'goes to the resolver from where the robot is.',
         lo=0,
         hi=1000,
     ),
@@ -82,12 +82,20 @@ _SPECS = (
     ),
     Param(
         'lead_distance',
-        'Lag [m] of the base behind the planned pose at which the plan\'s clock stops (follower).',
+        'Lag [m] of the end effector behind its point at which the plan\'s clock stops (follower).',
         lo=1e-3,
         hi=10.0,
         read_only=True,
     ),
-    Param('lead_angle', 'The same for the heading [rad] (follower).', lo=1e-3, hi=6.3, read_only=True),
+    Param('lead_angle', 'The same for its orientation [rad] (follower).', lo=1e-3, hi=6.3, read_only=True),
+    Param(
+        'base_lead_distance',
+        'Lag [m] of the base behind its planned pose at which the base\'s pace is least (follower).',
+        lo=1e-3,
+        hi=10.0,
+        read_only=True,
+    ),
+    Param('base_lead_angle', 'The same for its heading [rad] (follower).', lo=1e-3, hi=6.3, read_only=True),
     Param(
         'slow_from',
         'Fraction of the lead up to which the plan\'s clock keeps full pace, in [0, 1) (follower).',
@@ -96,8 +104,20 @@ _SPECS = (
         read_only=True,
     ),
     Param(
-        'rate_slew', 'Most the clock\'s rate changes per second [1/s] (follower).', lo=1e-3, hi=1000.0, read_only=True
+        'base_floor',
+        'Pace, in [0, 1], the base\'s lag leaves the plan\'s clock while the end effector is measured (follower).',
+        lo=0.0,
+        hi=1.0,
+        read_only=True,
     ),
+    Param(
+        'base_stop',
+        'Lag of the base, in base leads, at which the clock stops all the same: off the plan (follower).',
+        lo=1.0,
+        hi=100.0,
+        read_only=True,
+    ),
+    Param('rate_slew', 'Most the clock\'s rate rises per second [1/s] (follower).', lo=1e-3, hi=1000.0, read_only=True),
     Param(
         'lookahead',
         'Time [s] of the plan ahead of its clock searched for the pose the base has passed (follower).',

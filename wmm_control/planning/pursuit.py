@@ -16,11 +16,14 @@ logged, and the robot is held where it is. An accepted one is planned
 * **no way**: the planner's reason (the goal inside an obstacle, out of reach, no stance, no
   path within the budget); nothing is forwarded and the robot is held.
 
-While following, the plan is made again from where the base is (at most ``max_replans`` times
-a goal; then no way) when the follower reports a stall, or when the obstacles change and the
-rest of the planned path (:meth:`PlanFollower.remaining_poses`) comes nearer an obstacle than
-the travel margin (checked by the worker, on the new obstacles). Until the new plan comes the
-robot is held.
+The follower paces the points by the measured base and end effector (forward kinematics of
+the base pose and arm joints). While following, the plan is made again from where the base is
+when the follower reports a stall, or when the obstacles change and the rest of the planned
+path (:meth:`PlanFollower.remaining_poses`) comes nearer an obstacle than the travel margin
+(checked by the worker, on the new obstacles); the arm then travels in the posture it has (the
+planner's own when that finds no way). Until the new plan comes the robot is held. After
+``max_replans`` such plans for a goal the goal goes to the resolver from where the robot is (the
+method's own approach), as ``wmm_randomized --plan`` does.
 
 **Holding** the robot is giving the resolver the end effector's current pose as its goal (what
 the viewer's "Hold here" does), from the measured base pose and arm joints; it is due whenever
@@ -32,6 +35,7 @@ Time is what :meth:`GoalPursuit.step` is told.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import queue
 import threading
@@ -110,6 +114,8 @@ class _PlanJob:
     obstacles: tuple[Obstacle, ...]
     goal: PoseTarget
     base_pose: np.ndarray
+    #: the arm's posture to travel in, first (the planner's own when that finds no way); None: its own
+    q_travel: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -203,6 +209,22 @@ class PlanWorker:
             self._version = version
         return self._planner
 
+    def _plan(self, planner: GoalPlanner, job: _PlanJob) -> tuple[Plan, np.ndarray]:
+        """The plan of ``job`` and the arm's travel posture it is for: ``job.q_travel`` when given,
+        and when that finds no way the planner's own (the planning times added)."""
+        goal, own = job.goal, planner.travel.q_arm
+        if job.q_travel is None:
+            return planner.plan(goal.position, goal.rotation, job.base_pose), own
+        planner.set_travel_posture(job.q_travel)
+        try:
+            plan = planner.plan(goal.position, goal.rotation, job.base_pose)
+        finally:
+            planner.set_travel_posture(own)
+        if plan.trajectory is not None:
+            return plan, job.q_travel
+        second = planner.plan(goal.position, goal.rotation, job.base_pose)
+        return dataclasses.replace(second, planning_time=plan.planning_time + second.planning_time), own
+
     def _run(self) -> None:
         while True:
             job = self._jobs.get()
@@ -215,12 +237,11 @@ class PlanWorker:
                 if isinstance(job, _CheckJob):
                     self._results.put(_Checked(job.ticket, path_blocked(planner, job.poses)))
                     continue
-                goal = job.goal
-                plan = planner.plan(goal.position, goal.rotation, job.base_pose)
+                plan, travel = self._plan(planner, job)
                 here = plan.stance is not None and np.array_equal(plan.stance.base_pose, job.base_pose)
                 handoff = None
                 if plan.trajectory is not None and not here:
-                    handoff = Handoff.of(planner.model, plan.trajectory, planner.travel.q_arm)
+                    handoff = Handoff.of(planner.model, plan.trajectory, travel)
                 self._results.put(_Planned(job.ticket, job.version, plan, handoff, here))
             except Exception as exc:  # a bug or a bad robot: reported, and the worker lives on
                 self._results.put(_Failed(job.ticket, f'{type(exc).__name__}: {exc}'))
@@ -245,8 +266,8 @@ class GoalPursuit:
         world_frame: the frame of the goals.
         max_goal_distance: [m] goals farther from the world origin (on an axis) are refused.
         follow: the :class:`~wmm_control.planning.follow.FollowParams` (default: its defaults).
-        max_replans: plans made again for one goal (a stall, an obstacle on the path) before it
-            is given up as no way.
+        max_replans: plans made again for one goal (a stall, an obstacle on the path) before the
+            goal goes to the resolver from where the robot is.
         planner: keyword arguments of :class:`~wmm_control.planning.GoalPlanner`.
     """
 
@@ -333,15 +354,17 @@ class GoalPursuit:
         base = None if base_pose is None else np.asarray(base_pose, dtype=float)
         forward = self._take_results(events, base)
         reference = None
+        arm = None if q_arm is None else np.asarray(q_arm, dtype=float)
+        ee = self._end_effector(base, arm)
         if self.state is PursuitState.FOLLOWING and self.follower is not None and base is not None:
-            step = self.follower.step(dt, base)
+            step = self.follower.step(dt, base, *(ee if ee is not None else (None, None)))
             self.progress = step.progress
             if step.state is FollowState.APPROACH:
                 self.state = PursuitState.APPROACH
                 forward = True
                 events.append(LogEvent('approach', 'the planned path is done: the goal goes to the resolver'))
             elif step.state is FollowState.STALLED:
-                self._replan(events, 'progress stalled on the planned path', base)
+                forward = self._replan(events, 'progress stalled on the planned path', base)
             else:
                 reference = step.target
                 self._engaged = True
@@ -350,15 +373,21 @@ class GoalPursuit:
             self._engaged = True
             self._hold_due = False  # what is sent now replaces a hold
         if self._plan_due and base is not None:
-            self._submit_plan(events, base)
+            self._submit_plan(events, base, arm)
         hold = None
-        if self._hold_due and base is not None and q_arm is not None:
-            self.model.update(base, np.asarray(q_arm, dtype=float))
-            position, rotation = self.model.ee_placement_world()
-            hold = PoseTarget(np.array(position, dtype=float), np.array(rotation, dtype=float))
+        if self._hold_due and ee is not None:
+            hold = PoseTarget(*ee)
             self._hold_due = self._engaged = False
         path, self._path = self._path, None
         return PursuitStep(reference, forward, hold, path, tuple(events))
+
+    def _end_effector(self, base: np.ndarray | None, q_arm: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """(position, rotation) of the end effector at the base pose and arm joints, or None."""
+        if base is None or q_arm is None:
+            return None
+        self.model.update(base, q_arm)
+        position, rotation = self.model.ee_placement_world()
+        return np.array(position, dtype=float), np.array(rotation, dtype=float)
 
     def _stop(self, state: PursuitState, reason: str) -> None:
         """Stop pursuing what was pursued: no plan followed, a hold due if the resolver may be
@@ -380,10 +409,20 @@ class GoalPursuit:
         self._stop(PursuitState.NO_WAY, reason)
         events.append(LogEvent('no_way', f'no way to the goal: {reason}; holding still'))
 
-    def _replan(self, events: list[LogEvent], why: str, base: np.ndarray) -> None:
+    def _replan(self, events: list[LogEvent], why: str, base: np.ndarray) -> bool:
+        """Plan again from ``base`` for ``why``; after ``max_replans`` the goal goes to the resolver
+        from where the robot is instead (True: forward it now), as ``wmm_randomized --plan`` does."""
         if self.replans >= self.max_replans:
-            self._no_way(events, f'{why}, after {self.replans} plans made again')
-            return
+            self.follower = None
+            self.state, self.reason = PursuitState.APPROACH, ''
+            events.append(
+                LogEvent(
+                    'approach',
+                    f'{why}, after {self.replans} plans made again: the goal goes to the resolver from where the '
+                    'robot is',
+                )
+            )
+            return True
         self.replans += 1
         self.counters.replans += 1
         self._plan_due = why
@@ -391,11 +430,15 @@ class GoalPursuit:
         events.append(
             LogEvent('replan', f'{why}: planning again from where the base is ({self.replans} of {self.max_replans})')
         )
+        return False
 
-    def _submit_plan(self, events: list[LogEvent], base: np.ndarray) -> None:
+    def _submit_plan(self, events: list[LogEvent], base: np.ndarray, q_arm: np.ndarray | None) -> None:
+        """Queue the plan due: a plan made again lets the arm travel in the posture it has (the
+        first point where the end effector is), the planner's own when that finds no way."""
         assert self.goal is not None
         why, self._plan_due = self._plan_due, ''
-        self.worker.submit(_PlanJob(self._ticket, self.version, self.obstacles, self.goal, base.copy()))
+        q_travel = q_arm.copy() if self.replans > 0 and q_arm is not None else None
+        self.worker.submit(_PlanJob(self._ticket, self.version, self.obstacles, self.goal, base.copy(), q_travel))
         self.counters.plans += 1
         events.append(LogEvent('planning', f'planning ({why}) from the base at {np.round(base, 3).tolist()}'))
 
@@ -409,7 +452,7 @@ class GoalPursuit:
                 self._no_way(events, f'the planner failed ({result.error})')
             elif isinstance(result, _Checked):
                 if result.blocked and self.state is PursuitState.FOLLOWING and base is not None:
-                    self._replan(events, result.blocked, base)
+                    forward = self._replan(events, result.blocked, base) or forward
             else:
                 forward = self._planned(events, result) or forward
         return forward
