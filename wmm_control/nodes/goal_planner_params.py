@@ -7,7 +7,7 @@ import dataclasses
 import inspect
 
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP
-from wmm_control.nodes.parameters import Param, robot_param, robot_period
+from wmm_control.nodes.parameters import Param, defaults_elsewhere, robot_param, robot_period
 from wmm_control.planning.follow import FollowParams
 from wmm_control.planning.planner import GoalPlanner
 
@@ -146,11 +146,5 @@ def _class_defaults() -> dict:
     return out
 
 
-_CLASS_DEFAULTS = _class_defaults()
 #: The node's parameters (module docstring).
-PARAMS = tuple(
-    dataclasses.replace(spec, default_from=lambda _values, d=_CLASS_DEFAULTS[spec.name]: d)
-    if spec.name in _CLASS_DEFAULTS
-    else spec
-    for spec in _SPECS
-)
+PARAMS = defaults_elsewhere(_SPECS, _class_defaults())
