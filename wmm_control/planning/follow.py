@@ -22,14 +22,14 @@ are taken:
 * with the measured end effector (``ee_position``, ``ee_rotation``), its lag behind the point
   in force at ``s``, ``e_e``.
 
-``r* = min(r(e_e), max(r(e_b), base_floor))`` with the end effector (0 once ``e_b`` reaches
-``base_stop``), ``r* = r(e_b)`` without. So the point waits for the end effector, which every
-method servoes to it, and slows for the base down to ``base_floor`` of the pace, not to a
-stop: a method that moves the end effector partly with the arm (task sharing, or any
-whole-body one whose share of the base lags, as a steerable base's does while it re-steers)
-does not bring its base back onto the plan once the end effector is on its point, and a point
-that waited for it would wait for ever. A base ``base_stop`` leads behind is off the plan: the
-clock stops, the follower stalls, and the caller plans again from where the robot is. ``r`` rises
+``r* = min(r(e_e), max(r(e_b), base_floor))`` with the end effector, ``r* = r(e_b)`` without.
+So the point waits for the end effector, which every method servoes to it, and slows for the
+base down to ``base_floor`` of the pace, not to a stop: a method that moves the end effector
+partly with the arm (task sharing, or any whole-body one whose share of the base lags, as a
+steerable base's does while it re-steers) does not bring its base back onto the plan once the
+end effector is on its point, and a point that waited for it would wait for ever. (Stopping
+the clock, and so stalling and planning again, once the base lags two leads behind converged
+fewer runs: `panda_diff`'s base, which cannot move sideways, lags that far on most paths.) ``r`` rises
 towards ``r*`` by at most ``rate_slew`` per second (the point does not start at once) and falls
 to it at once: a period's step of the clock moves the point by at most ``(1 − e)`` of the room
 left to the lead when the plan's speed over a period is within ``(1 − slow_from)`` of the lead
@@ -84,7 +84,6 @@ class FollowParams:
         slow_from: the fraction of the lead, in [0, 1), up to which the clock keeps full pace.
         base_floor: the pace, in [0, 1], the base's lag leaves the clock when the end effector
             is measured.
-        base_stop: the base's lag, in base leads (≥ 1), at which the clock stops all the same.
         rate_slew: [1/s] the most the clock's rate rises per second.
         lookahead: [s] of the plan, ahead of its clock, searched for the pose the base has passed.
         stall_time: [s] without progress (module docstring) before the follower is stalled.
@@ -101,7 +100,6 @@ class FollowParams:
     base_lead_angle: float = 0.6
     slow_from: float = 0.5
     base_floor: float = 0.25
-    base_stop: float = 2.0
     rate_slew: float = 2.0
     lookahead: float = 2.0
     stall_time: float = 5.0
@@ -127,8 +125,6 @@ class FollowParams:
             raise ConfigError(f'FollowParams.lookahead must be a finite number >= 0 [s], got {self.lookahead!r}')
         if not (isinstance(self.slow_from, (int, float)) and 0.0 <= self.slow_from < 1.0):
             raise ConfigError(f'FollowParams.slow_from must be in [0, 1), got {self.slow_from!r}')
-        if not (isinstance(self.base_stop, (int, float)) and 1.0 <= self.base_stop < math.inf):
-            raise ConfigError(f'FollowParams.base_stop must be a finite number >= 1, got {self.base_stop!r}')
         if not (isinstance(self.base_floor, (int, float)) and 0.0 <= self.base_floor <= 1.0):
             raise ConfigError(f'FollowParams.base_floor must be in [0, 1], got {self.base_floor!r}')
 
@@ -279,8 +275,7 @@ class PlanFollower:
         base_lag = float(self._lag(self.planned_pose(self._clock), base)[0])
         wanted = self._pace(base_lag)
         if ee is not None:
-            floor = p.base_floor if base_lag < p.base_stop else 0.0
-            wanted = min(self._pace(self._ee_lag(self._index(self._clock), ee)), max(wanted, floor))
+            wanted = min(self._pace(self._ee_lag(self._index(self._clock), ee)), max(wanted, p.base_floor))
         self._rate = min(wanted, self._rate + p.rate_slew * dt)
         before = self.planned_pose(self._clock)
         clock = min(self._clock + self._rate * dt, end)
