@@ -110,13 +110,6 @@ _SPECS = (
         hi=1.0,
         read_only=True,
     ),
-    Param(
-        'base_stop',
-        'Lag of the base, in base leads, at which the clock stops all the same: off the plan (follower).',
-        lo=1.0,
-        hi=100.0,
-        read_only=True,
-    ),
     Param('rate_slew', 'Most the clock\'s rate rises per second [1/s] (follower).', lo=1e-3, hi=1000.0, read_only=True),
     Param(
         'lookahead',
