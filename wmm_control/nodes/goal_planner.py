@@ -116,8 +116,9 @@ class GoalPlannerNode(Node):
         )
 
     def destroy_node(self) -> bool:
-        """Stop the planner's thread, then destroy the node."""
-        self.pursuit.close()
+        """Stop the planner's thread (a plan under way is finished: at most the path budget per
+        stance tried, and the stance search), then destroy the node."""
+        self.pursuit.close(timeout=self.p.budget * self.p.stances_tried + 5.0)
         return super().destroy_node()
 
     def _set_state_timeout(self, timeout: float) -> None:

@@ -197,11 +197,14 @@ class PlanWorker:
             except queue.Empty:
                 return out
 
-    def close(self, timeout: float = 0.0) -> None:
-        """Stop after the job under way (waiting up to ``timeout`` [s] for it)."""
+    def close(self, timeout: float | None = None) -> None:
+        """Stop: the jobs queued are dropped, the one under way is finished (an OMPL search
+        cannot be cut short), waited for up to ``timeout`` [s] (None: until it is done). A
+        process must not end while the thread is inside OMPL: the interpreter's finalization
+        then aborts it."""
+        self.wanted = -1
         self._jobs.put(None)
-        if timeout > 0.0:
-            self._thread.join(timeout)
+        self._thread.join(timeout)
 
     def _planner_for(self, version: int, obstacles: tuple[Obstacle, ...]) -> GoalPlanner:
         if self._planner is None or version != self._version:
@@ -307,9 +310,9 @@ class GoalPursuit:
         self._path: np.ndarray | None = None
         self._no_way_version = -1  # of the obstacles when the goal in force got no way
 
-    def close(self) -> None:
-        """Stop the worker."""
-        self.worker.close()
+    def close(self, timeout: float | None = None) -> None:
+        """Stop the worker, waiting up to ``timeout`` [s] for a plan under way (None: until done)."""
+        self.worker.close(timeout)
 
     # ------------------------------------------------------------------ inputs
     def new_goal(self, frame: str, pose: ArrayLike) -> list[LogEvent]:
