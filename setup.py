@@ -49,6 +49,7 @@ setup(
             'wmm_robot = wmm_control.cli.robot_setup:main',
             'redundancy_resolver = wmm_control.nodes.redundancy_resolver:main',
             'goal_sequencer = wmm_control.nodes.goal_sequencer:main',
+            'goal_planner = wmm_control.nodes.goal_planner:main',
             'wmm_viewer = wmm_control.nodes.viewer:main',
             'wmm_experiment = wmm_control.cli.experiment:main',
             'wmm_randomized = wmm_control.cli.randomized:main',

@@ -95,3 +95,50 @@ def test_the_plan_is_refused_with_the_nodes_engine(behind_the_table, capsys):
     args = ['--robots', 'steerable', '--methods', 'pinv', '--goals', '1', '--obstacles', 'table_pillar']
     assert main([*args, '--engine', 'nodes', '--plan']) == 2
     assert '--plan runs with the direct engine only' in capsys.readouterr().err
+
+
+def test_a_plan_through_the_table_stalls_and_the_replan_from_where_the_robot_stopped_gets_there(behind_the_table):
+    """A plan that did not know the table: the straight way to the stance. The safety stage holds
+    the robot in front of the table, the follower reports the stall, and the plan made from the
+    measured base pose (by a planner that knows the table) takes the robot round it to the goal."""
+    from sim_bridge.world import SimWorld
+    from wmm_control.experiments.direct import run_scenario
+    from wmm_control.experiments.randomized import METHOD_RUNS, _scenario, run_contact
+    from wmm_control.experiments.scenario import Goal, resolver_parameters
+    from wmm_control.planning.follow import PlanFollower
+    from wmm_control.planning.timing import LinearPiece, time_path
+    from wmm_control.resolvers import make_resolver
+
+    cfg, goal = behind_the_table
+    target = Goal(0.0, 0.0, goal.pose).target
+    planner = GoalPlanner(cfg, OBSTACLES, budget=30.0)
+    plan = planner.plan(target.position, target.rotation, cfg.start.base_pose)
+    assert plan.stance is not None, plan.reason
+    straight = time_path([LinearPiece(np.asarray(cfg.start.base_pose), plan.stance.base_pose)], cfg.base, cfg.period)
+    blind = Handoff.of(planner.model, straight, planner.travel.q_arm)
+    replanned = []
+
+    def replan(base_pose, q_arm):
+        again = planner.plan(target.position, target.rotation, base_pose)
+        replanned.append((np.array(base_pose), again.no_way))
+        if again.trajectory is None:
+            return None
+        return PlanFollower(Handoff.of(planner.model, again.trajectory, planner.travel.q_arm), target)
+
+    resolver = make_resolver('pinv', cfg, **resolver_parameters(METHOD_RUNS['pinv']))
+    with SimWorld(cfg, base_mode='kinematic') as world:
+        log = run_scenario(
+            world,
+            resolver,
+            _scenario(cfg, goal, 90.0, "table_pillar"),
+            follower=PlanFollower(blind, target),
+            replan=replan,
+        )
+    assert len(replanned) == 1 and replanned[0][1] is None
+    # it stalled in front of the table, short of the stance
+    table = next(o for o in OBSTACLES if o.name == 'table')
+    assert replanned[0][0][0] < table.position[0]
+    # and got there round it, never in contact
+    error = np.linalg.norm(log.ee_position[-1] - target.position)
+    assert error < 0.01 and rotation_angle(target.rotation, log.ee_rotation[-1]) < 0.02
+    assert run_contact(cfg, log.q_arm, log.base_pose, OBSTACLES)[0] <= CONTACT_DEPTH

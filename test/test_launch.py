@@ -120,6 +120,8 @@ CASES = [
     ('robot_a.launch.py', [], {'': 'steerable'}, 3),
     ('robot_b.launch.py', ['use_sim_time:=true'], {'': 'mecanum'}, 3),
     ('robot.launch.py', ['robot:=panda_diff'], {'': 'panda_diff'}, 3),
+    # the resolver takes its goals from goal_planner: reaching one says the planner forwarded it
+    ('robot.launch.py', ['planner:=true', 'obstacles:=table_pillar'], {'': 'steerable'}, 4),
     ('two_robots.launch.py', ['use_sim_time:=true'], {'/r1': 'steerable', '/r2': 'mecanum'}, 6),
 ]
 

@@ -21,7 +21,15 @@ from sensor_msgs.msg import JointState
 from ros_helpers import RosHarness, overrides
 from sim_bridge.node import SimNode
 from wmm_control.base import WheelParams, SwmrParams
-from wmm_control.nodes import goal_sequencer, mecanum_controller, redundancy_resolver, swmr_controller, viewer
+from wmm_control.nodes import (
+    goal_planner,
+    goal_sequencer,
+    mecanum_controller,
+    redundancy_resolver,
+    swmr_controller,
+    viewer,
+)
+from wmm_control.nodes.goal_planner import GoalPlannerNode
 from wmm_control.nodes.parameters import robot_method, robot_period
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.viewer import ViewerNode
@@ -47,6 +55,11 @@ NODES = {
         dict(method='amp', goal_tolerance=[0.02, 0.03], lambda_p=2.5),
     ),
     'goal_sequencer': (GoalSequencerNode, goal_sequencer.PARAMS, dict(republish_period=2.0)),
+    'goal_planner': (
+        GoalPlannerNode,
+        goal_planner.PARAMS,
+        dict(obstacles='table_pillar', max_replans=5, travel_margin=0.15, stall_time=4.0),
+    ),
     'wmm_viewer': (
         ViewerNode,
         viewer.PARAMS,
@@ -341,6 +354,7 @@ NODE_YAMLS = {
     'mecanum_controller.yaml': mecanum_controller.PARAMS,
     'redundancy_resolver.yaml': redundancy_resolver.PARAMS,
     'goal_sequencer.yaml': goal_sequencer.PARAMS,
+    'goal_planner.yaml': goal_planner.PARAMS,
     'wmm_viewer.yaml': viewer.PARAMS,
 }
 
@@ -367,6 +381,7 @@ def test_the_control_period_has_one_home_the_robot_yaml(ros):
     # still takes its own when given one.
     with_period = [yaml_name for yaml_name, specs in NODE_YAMLS.items() if any(s.name == 'period' for s in specs)]
     assert sorted(with_period) == [
+        'goal_planner.yaml',
         'mecanum_controller.yaml',
         'redundancy_resolver.yaml',
         'swmr_controller.yaml',

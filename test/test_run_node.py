@@ -25,6 +25,7 @@ from wmm_control.nodes.runner import run_node
         'wmm_control.nodes.mecanum_controller',
         'wmm_control.nodes.redundancy_resolver',
         'wmm_control.nodes.goal_sequencer',
+        'wmm_control.nodes.goal_planner',
     ],
 )
 def test_a_params_file_that_cannot_be_read_is_a_clear_error_not_a_traceback(module, tmp_path, capfd):

@@ -241,3 +241,30 @@ def test_a_page_served_beyond_this_machine_commands_the_robot_only_when_allowed(
     ros.spin_for(0.6)
     assert len(got) == (2 if allow else 0)
     assert view.counters['goals_sent'] == len(got)
+
+
+def test_the_planners_path_is_drawn_on_the_floor_and_an_empty_one_hides_it(ros):
+    from nav_msgs.msg import Path
+
+    from wmm_control.nodes.conversions import set_planar_pose
+    from wmm_control.nodes.qos import LATCHED_QOS
+
+    view = viewer(ros, obstacles='table_pillar')
+    planned = view.browser.planned_path
+    assert not planned.visible
+    publisher = ros.add(ros_node(ros, 'planner_stand_in')).create_publisher(Path, '/goal_planner/path', LATCHED_QOS)
+    path = Path()
+    path.header.frame_id = 'world'
+    for pose in ((0.0, 0.0, 0.0), (1.0, -1.0, 0.5), (2.4, -0.8, 1.5)):
+        stamped = PoseStamped()
+        set_planar_pose(stamped.pose, pose)
+        path.poses.append(stamped)
+    publisher.publish(path)
+    assert ros.spin_until(lambda: planned.visible, timeout=5)
+    segments = np.asarray(planned.points)
+    assert segments.shape == (2, 2, 3)
+    assert segments[0, 0, :2] == pytest.approx([0.0, 0.0]) and segments[1, 1, :2] == pytest.approx([2.4, -0.8])
+    assert np.all(segments[..., 2] > view.robot.ground_z)  # on the floor, above the grid
+    path.poses = []
+    publisher.publish(path)
+    assert ros.spin_until(lambda: not planned.visible, timeout=5)

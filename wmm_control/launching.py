@@ -2,7 +2,9 @@
 
 A robot's system is ``wmm_sim``, the base controller of its base family (``swmr_controller``
 for a steerable base, ``mecanum_controller``, ``differential_controller``), the
-``redundancy_resolver`` and, with ``viewer:=true``, ``wmm_viewer``. Every node gets the robot
+``redundancy_resolver``, with ``planner:=true`` ``goal_planner`` (the resolver's ``goal_pose``
+then remapped to ``goal_planner/goal``: the user's goals go to the planner) and, with
+``viewer:=true``, ``wmm_viewer``. Every node gets the robot
 as its ``robot`` parameter (the robot YAML's path) and ``use_sim_time``. In a namespace
 (``/r1``), the nodes remap ``/clock`` to the simulator's ``/r1/clock`` and the simulator
 prefixes its TF frames with ``r1/``.
@@ -48,7 +50,7 @@ def _flag(context: LaunchContext, name: str) -> bool:
 
 
 def common_arguments() -> list[DeclareLaunchArgument]:
-    """``use_sim_time`` and ``viewer``, the arguments of every launch file."""
+    """``use_sim_time``, ``viewer``, ``obstacles`` and ``planner``, the arguments of every launch file."""
     return [
         DeclareLaunchArgument(
             'use_sim_time', default_value='false', description='Every node on the simulator\'s clock (true or false).'
@@ -64,10 +66,20 @@ def common_arguments() -> list[DeclareLaunchArgument]:
                 'table_reach) or a YAML path; empty for none.'
             ),
         ),
+        DeclareLaunchArgument(
+            'planner',
+            default_value='false',
+            description=(
+                'Also start goal_planner between /goal_pose and the resolver: goals beyond the obstacles are '
+                'reached by a planned way round them (true or false).'
+            ),
+        ),
     ]
 
 
-def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool, obstacles: str = '') -> list[Node]:
+def robot_nodes(
+    robot: str, namespace: str, use_sim_time: bool, viewer: bool, obstacles: str = '', planner: bool = False
+) -> list[Node]:
     """The nodes of one robot's system.
 
     Args:
@@ -75,7 +87,9 @@ def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool, ob
         namespace: '' or a namespace such as ``r1`` (no slashes).
         use_sim_time: every node on the simulator's clock.
         viewer: start ``wmm_viewer`` too.
-        obstacles: an obstacle file (name or path; '' for none) for the simulator and the resolver.
+        obstacles: an obstacle file (name or path; '' for none) for the simulator, the resolver and
+            the planner.
+        planner: start ``goal_planner`` too, and remap the resolver's ``goal_pose`` to it.
 
     Raises:
         ConfigError: the robot or the obstacle file cannot be loaded.
@@ -86,13 +100,17 @@ def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool, ob
         obstacles = str(obstacle_file(obstacles).resolve())
     common = {'robot': str(config.yaml_path), 'use_sim_time': use_sim_time}
     remap = [('/clock', f'/{namespace}/clock')] if namespace else []
+    # the resolver takes its goals from the planner when it runs (relative: goal_planner/goal in a namespace)
+    resolver_remap = [('goal_pose', 'goal_planner/goal')] if planner else []
     executables = [
-        ('wmm_sim', {'frame_prefix': f'{namespace}/' if namespace else '', 'obstacles': obstacles}),
-        (BASE_CONTROLLERS[config.base.family], {}),
-        ('redundancy_resolver', {'obstacles': obstacles}),
+        ('wmm_sim', {'frame_prefix': f'{namespace}/' if namespace else '', 'obstacles': obstacles}, []),
+        (BASE_CONTROLLERS[config.base.family], {}, []),
+        ('redundancy_resolver', {'obstacles': obstacles}, resolver_remap),
     ]
+    if planner:
+        executables.append(('goal_planner', {'obstacles': obstacles}, []))
     if viewer:
-        executables.append(('wmm_viewer', {'obstacles': obstacles}))
+        executables.append(('wmm_viewer', {'obstacles': obstacles}, []))
     return [
         Node(
             package='wmm_control',
@@ -100,9 +118,9 @@ def robot_nodes(robot: str, namespace: str, use_sim_time: bool, viewer: bool, ob
             namespace=namespace or None,
             output='screen',
             parameters=[dict(common, **extra)],
-            remappings=remap,
+            remappings=remap + own,
         )
-        for exe, extra in executables
+        for exe, extra, own in executables
     ]
 
 
@@ -129,6 +147,7 @@ def robot_launch_description(robot: str | None = None) -> LaunchDescription:
             _flag(context, 'use_sim_time'),
             _flag(context, 'viewer'),
             LaunchConfiguration('obstacles').perform(context).strip(),
+            _flag(context, 'planner'),
         )
 
     return LaunchDescription([*arguments, OpaqueFunction(function=nodes)])
@@ -146,9 +165,10 @@ def two_robots_launch_description() -> LaunchDescription:
     def nodes(context: LaunchContext) -> list[Node]:
         sim_time, viewer = _flag(context, 'use_sim_time'), _flag(context, 'viewer')
         obstacles = LaunchConfiguration('obstacles').perform(context).strip()
+        planner = _flag(context, 'planner')
         return [
-            *robot_nodes(LaunchConfiguration('robot1').perform(context), 'r1', sim_time, viewer, obstacles),
-            *robot_nodes(LaunchConfiguration('robot2').perform(context), 'r2', sim_time, False, obstacles),
+            *robot_nodes(LaunchConfiguration('robot1').perform(context), 'r1', sim_time, viewer, obstacles, planner),
+            *robot_nodes(LaunchConfiguration('robot2').perform(context), 'r2', sim_time, False, obstacles, planner),
         ]
 
     return LaunchDescription([*arguments, OpaqueFunction(function=nodes)])

@@ -39,6 +39,7 @@ import argparse
 import json
 import os
 import sys
+import shutil
 import tempfile
 import traceback
 from collections.abc import Mapping
@@ -52,6 +53,7 @@ from wmm_control.experiments.cluster import CLUSTER_HELP, files_of, ray_session,
 from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
 from wmm_control.experiments.randomized import METHOD_RUNS, ROBOT_RUNS, run_goal, sample_goals, summarize
 from wmm_control.experiments.sweep import check_point, parse_sweeps, plot_sweep, point_label, sweep_grid
+from wmm_control.kinematics.obstacles import is_drawn, obstacle_file, obstacle_text
 from wmm_control.robot_config import load_robot, robot_names
 
 __all__ = ['main', 'format_summary', 'format_cycle_times']
@@ -267,10 +269,19 @@ def main(argv: list[str] | None = None) -> int:
         '--resume', action='store_true', help='keep the runs already in --out (same settings) and run the others'
     )
     args = parser.parse_args(argv)
-    from tqdm import tqdm
-
     robots = [r for r in args.robots.split(',') if r]
     methods = [m for m in args.methods.split(',') if m]
+    cleanup: list[Path] = []
+    try:
+        return _main(args, robots, methods, cleanup)
+    finally:
+        for folder in cleanup:
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _main(args, robots, methods, cleanup) -> int:
+    from tqdm import tqdm
+
     try:
         unknown = sorted(set(methods) - set(METHOD_RUNS))
         if unknown or args.goals < 1:
@@ -301,6 +312,12 @@ def main(argv: list[str] | None = None) -> int:
             'params': params,
             **({'sweep': sweeps} if sweeps else {}),
         }
+        if is_drawn(args.obstacles):  # the seed's draw, as a file every run (and process) reads
+            drawn = Path(tempfile.mkdtemp(prefix='wmm_obstacles_'))
+            cleanup.append(drawn)
+            path = drawn / f'{obstacle_file(args.obstacles).stem}_seed{args.seed}.yaml'
+            path.write_text(obstacle_text(args.obstacles, args.seed))
+            args.obstacles = str(path)
         draws = {
             r: [
                 g

@@ -5,12 +5,13 @@ on a :class:`~sim_bridge.world.SimWorld`, no ROS in between, logged as a
 import time
 from collections.abc import Callable
 
+import numpy as np
 from sim_bridge.closed_loop import ClosedLoop
 from sim_bridge.world import SimWorld
 from wmm_control.cycle import steady_heap
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.scenario import Scenario
-from wmm_control.planning.handoff import Handoff
+from wmm_control.planning.follow import FollowState, PlanFollower
 from wmm_control.resolvers.interface import Resolver, ResolverDiagnostics
 
 __all__ = ['run_scenario']
@@ -24,7 +25,9 @@ def run_scenario(
     label: str = '',
     progress: Callable[[int], object] | None = None,
     until: Callable[[ResolverDiagnostics], bool] | None = None,
-    handoff: Handoff | None = None,
+    follower: PlanFollower | None = None,
+    replan: Callable[[np.ndarray, np.ndarray], PlanFollower | None] | None = None,
+    max_replans: int = 3,
 ) -> RunLog:
     """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
 
@@ -36,11 +39,17 @@ def run_scenario(
         label: name of the run in the log.
         progress: optional callable ``progress(n_periods)`` called after each period.
         until: optional callable ``until(diagnostics)``, given each period's
-            :class:`~wmm_control.resolvers.ResolverDiagnostics`: the run ends early when it
-            returns True.
-        handoff: a planned end-effector trajectory (:class:`~wmm_control.planning.handoff.Handoff`)
-            tracked first, a point every period from the start; the scenario's goals once it
-            has ended.
+            :class:`~wmm_control.resolvers.ResolverDiagnostics` towards the scenario's goals
+            (not those of a plan's points): the run ends early when it returns True.
+        follower: a plan to follow first (:class:`~wmm_control.planning.follow.PlanFollower`):
+            its point every period, at the pace of the measured base and end effector, from the
+            start; the
+            scenario's goals once it is in its final approach.
+        replan: with ``follower``, ``replan(base_pose, q_arm)``, called when the follower
+            stalls, with the measured base pose (x, y, θ) and arm joints: the follower of a new plan from there, or None
+            when there is none (the run ends). At most ``max_replans`` times; when the follower
+            stalls after them the scenario's goals are given from where the robot is (the
+            method's own approach, judged as without a plan).
 
     Returns:
         The frozen :class:`~wmm_control.experiments.metrics.RunLog`.
@@ -54,13 +63,33 @@ def run_scenario(
     n = int(round(scenario.duration / world.dt))
     t0 = time.perf_counter()
     submitted = None
-    start = world.time
+    replans = 0
     with steady_heap():  # no full pass of the garbage collector walks the models mid-run
         for _ in range(n):
             gi = scenario.goal_index(world.time)
-            point = handoff.point(world.time - start) if handoff is not None else None
-            if point is not None:  # the planned way there first, as /ee_reference points
-                rec = loop.step(point, tracking=True)
+            following = None
+            if follower is not None:  # the planned way there first, as /ee_reference points
+                state = loop.state()
+                pose = state.base_pose
+                if state.ee_position is not None:  # measured; else forward kinematics of the state
+                    ee_position, ee_rotation = state.ee_position, state.ee_rotation
+                else:
+                    resolver.model.update(pose, state.q_arm)
+                    ee_position, ee_rotation = resolver.model.ee_placement_world()
+                following = follower.step(world.dt, pose, ee_position, ee_rotation)
+                if following.state is FollowState.STALLED and replan is not None:
+                    if replans >= max_replans:  # no more plans: the goal from where the robot is
+                        following = None
+                    else:
+                        replans += 1
+                        follower = replan(pose, state.q_arm)
+                        if follower is None:  # no way from here
+                            break
+                        following = follower.step(0.0, pose)
+                if following is None or following.state is FollowState.APPROACH:
+                    follower = following = None
+            if following is not None:
+                rec = loop.step(following.target, tracking=True)
             elif reference is not None:  # a trajectory: a point every period, as goal_sequencer publishes it
                 rec = loop.step(scenario.target(world.time, reference), tracking=True)
             else:  # goals: each when its time comes, as goal_sequencer publishes them
@@ -89,7 +118,7 @@ def run_scenario(
             )
             if progress is not None:
                 progress(1)
-            if until is not None and until(cmd.diagnostics):
+            if until is not None and following is None and until(cmd.diagnostics):
                 break
     log.wall_time_s = time.perf_counter() - t0
     refusals = [e.message for e in loop.events if e.kind == 'rejected']

@@ -68,10 +68,11 @@ from wmm_control.experiments.metrics import RunLog, run_limit_report
 from wmm_control.experiments.ros_run import run_with_nodes
 from wmm_control.experiments.scenario import Goal, Scenario, load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
-from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file
+from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file, obstacle_text
 from wmm_control.geometry import rotation_angle, rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
 from wmm_control.planning import GoalPlanner
+from wmm_control.planning.follow import PlanFollower
 from wmm_control.planning.handoff import Handoff
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
@@ -92,6 +93,7 @@ __all__ = [
     'COLLISION_MARGIN',
     'CONTACT_DEPTH',
     'SETTLE_S',
+    'MAX_REPLANS',
     'goal_settings',
     'run_contact',
     'write_record',
@@ -131,6 +133,8 @@ COLLISION_MARGIN = 0.02
 CONTACT_DEPTH = 0.001
 #: A direct run ends once the goal has been held this long [s].
 SETTLE_S = 2.0
+#: With ``plan``, the most times a run plans again from where the robot stalled.
+MAX_REPLANS = 3
 
 
 @dataclass(frozen=True)
@@ -223,43 +227,88 @@ def _scenario(robot, goal, duration, obstacles):
     )
 
 
-def planned(robot: RobotConfig, goal: RandomGoal, obstacles: str | Path = '') -> tuple[Handoff | None, dict]:
-    """The plan of ``wmm_randomized --plan`` for ``goal`` from the robot's start state among the
-    obstacles of the file ``obstacles``: (its hand-off, or None when the planner found no way;
-    ``{'planning_time_s', 'no_way', 'no_way_reason'}``, the last two None with a plan)."""
-    planner = GoalPlanner(robot, load_obstacles(obstacles))
+def planned(
+    robot: RobotConfig,
+    goal: RandomGoal,
+    obstacles: str | Path = '',
+    base_pose: ArrayLike | None = None,
+    planner: GoalPlanner | None = None,
+) -> tuple[Handoff | None, dict]:
+    """The plan of ``wmm_randomized --plan`` for ``goal`` among the obstacles of the file
+    ``obstacles``, from ``base_pose`` (default: the robot's start pose), by ``planner`` (default:
+    a new :class:`~wmm_control.planning.GoalPlanner` of the robot among those obstacles): (its
+    hand-off, or None when the planner found no way; ``{'planning_time_s', 'no_way',
+    'no_way_reason'}``, the last two None with a plan)."""
+    planner = GoalPlanner(robot, load_obstacles(obstacles)) if planner is None else planner
     target = Goal(0.0, 0.0, goal.pose).target
-    plan = planner.plan(target.position, target.rotation, robot.start.base_pose)
+    start = robot.start.base_pose if base_pose is None else np.asarray(base_pose, dtype=float)
+    plan = planner.plan(target.position, target.rotation, start)
     info = {'planning_time_s': plan.planning_time, 'no_way': None, 'no_way_reason': None}
     if plan.trajectory is None:
         return None, dict(info, no_way=plan.no_way.value if plan.no_way else 'no_way', no_way_reason=plan.reason)
     return Handoff.of(planner.model, plan.trajectory, planner.travel.q_arm), info
 
 
-def _run_direct(robot, run, goal, duration, obstacles, handoff=None):
+def _run_direct(robot, run, goal, duration, obstacles, plan=False):
+    """A direct run; with ``plan`` the plan's way there is followed first (:func:`planned`,
+    :class:`~wmm_control.planning.follow.PlanFollower`), planned again from where the robot is
+    when it stalls (``MAX_REPLANS`` times at most), the arm travelling in the posture it has then
+    (in the planner's own when that finds no way)."""
     resolver = make_resolver(run['method'], robot, **resolver_parameters(run))
     tolerance, stall_time, ratio = goal_settings()
     progress = GoalProgress(tolerance, stall_time, resolver.params.dt, min_progress_ratio=ratio)
     settle = int(round(SETTLE_S / resolver.params.dt))
     held = [0]
     first_stall = []
-    # the goal is judged once the planned trajectory has ended (while it runs, the resolver's
-    # errors are to its points)
-    tracked = [0 if handoff is None else len(handoff.points)]
 
     def done(diagnostics: ResolverDiagnostics) -> bool:
-        if tracked[0] > 0:
-            tracked[0] -= 1
-            return False
+        # given the diagnostics towards the goal only: once a plan is followed to its end
         progress.update(diagnostics)
         if progress.stalled and not first_stall:
             first_stall.append(progress.cycles * resolver.params.dt)
         held[0] = held[0] + 1 if progress.reached else 0
         return held[0] >= settle
 
+    planning: dict = {}
+    follower = replan = None
+    if plan:
+        planner = GoalPlanner(robot, load_obstacles(obstacles))
+        target = Goal(0.0, 0.0, goal.pose).target
+        handoff, planning = planned(robot, goal, obstacles, planner=planner)
+        planning['replans'] = 0
+        if handoff is None:
+            return None, planning
+        follower = PlanFollower(handoff, target)
+        travel = planner.travel.q_arm
+
+        def replan(base_pose, q_arm):
+            # the arm travels as it is now (the plan's first point is where the end effector is);
+            # when that finds no way, in the planner's own travel posture
+            planner.set_travel_posture(q_arm)
+            again, info = planned(robot, goal, obstacles, base_pose, planner)
+            if again is None:
+                planner.set_travel_posture(travel)
+                again, second = planned(robot, goal, obstacles, base_pose, planner)
+                info = dict(second, planning_time_s=info['planning_time_s'] + second['planning_time_s'])
+            planning['replans'] += 1
+            planning['planning_time_s'] += info['planning_time_s']
+            if again is None:
+                planning.update(no_way=info['no_way'], no_way_reason=info['no_way_reason'])
+                return None
+            return PlanFollower(again, target)
+
     with SimWorld(robot, base_mode='kinematic') as world:
-        log = run_scenario(world, resolver, _scenario(robot, goal, duration, obstacles), until=done, handoff=handoff)
-    return log, {'goal_reached': progress.reached, 'first_stall_s': first_stall[0] if first_stall else None}
+        log = run_scenario(
+            world,
+            resolver,
+            _scenario(robot, goal, duration, obstacles),
+            until=done,
+            follower=follower,
+            replan=replan,
+            max_replans=MAX_REPLANS,
+        )
+    status = {'goal_reached': progress.reached, 'first_stall_s': first_stall[0] if first_stall else None}
+    return log, dict(status, **planning)
 
 
 def _run_nodes(robot, run, goal, duration, obstacles):
@@ -343,8 +392,12 @@ def run_goal(
     ``params`` (resolver parameters) override those of :data:`METHOD_RUNS` and :data:`ROBOT_RUNS`.
     ``obstacles``: an obstacle file (name or path; '' for none), in the simulator and the
     controller. ``record``: a folder to write the run to (the module docstring says how).
-    ``plan`` (direct engine only): the planner plans the way to the goal first (:func:`planned`)
-    and the run tracks its hand-off, then the goal; a goal it finds no way to is not run.
+    ``plan`` (direct engine only): the planner plans the way to the goal first (:func:`planned`),
+    the run follows its hand-off at the robot's pace
+    (:class:`~wmm_control.planning.follow.PlanFollower`), then goes to the goal; when the robot
+    stalls on the way it is planned again from where the robot is. A goal the planner finds no
+    way to is not run (or the run ends where a plan again finds none): ``no_way``, unless the
+    run went into contact or past a limit (``failed``).
 
     Returns:
         dict: ``robot``, ``method``, ``goal`` (index), ``outcome`` (``converged`` | ``reported`` |
@@ -359,8 +412,9 @@ def run_goal(
         to clamp), ``cycle_s`` and ``cycle_cpu_s`` (the control cycle's wall and thread CPU
         time over the run's periods, :func:`cycle_stats`), ``why`` (the reason of a failure,
         else empty) and ``refused`` (why the resolver refused the goal and held the robot
-        still, else empty); with ``plan`` also ``planning_time_s``, ``no_way`` (its kind, else
-        None) and ``no_way_reason``.
+        still, else empty); with ``plan`` also ``planning_time_s`` (of every plan of the run),
+        ``replans`` (the plans from where the robot stalled, at most :data:`MAX_REPLANS`),
+        ``no_way`` (its kind, else None) and ``no_way_reason``.
     """
     cfg = load_robot(robot)
     duration = DURATION_S.get(cfg.name, 90.0) if duration is None else duration
@@ -369,11 +423,10 @@ def run_goal(
     if plan:
         if engine != 'direct':
             raise WmmError(f'the planner runs with the direct engine only, not {engine!r}')
-        handoff, planning = planned(cfg, goal, obstacles)
-        if handoff is None:
+        log, status = _run_direct(cfg, run, goal, duration, obstacles, plan=True)
+        planning = {k: status.pop(k) for k in ('planning_time_s', 'no_way', 'no_way_reason', 'replans')}
+        if log is None:
             log, status = _held(cfg, method, goal, '')
-        else:
-            log, status = _run_direct(cfg, run, goal, duration, obstacles, handoff)
     else:
         log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles)
     if not len(log):  # the goal was refused: the robot held still
@@ -397,7 +450,9 @@ def run_goal(
     depth, pair = run_contact(cfg, log.q_arm, log.base_pose, load_obstacles(obstacles))
     if depth > CONTACT_DEPTH:
         why.append(f'{pair} {depth * 100:.1f} cm into contact')
-    if status['goal_reached']:
+    if planning.get('no_way'):  # the planner found no way (at the start or from where the robot stalled)
+        outcome = 'no_way'
+    elif status['goal_reached']:
         outcome = 'converged'
     elif status['first_stall_s'] is not None:
         outcome = 'reported'
@@ -406,8 +461,6 @@ def run_goal(
         why.append(f'neither reached nor ever reported stalled in {duration:g} s')
     if why:
         outcome = 'failed'
-    if planning.get('no_way'):
-        outcome, why = 'no_way', []
     return {
         'robot': cfg.name,
         'method': method,
@@ -478,7 +531,7 @@ def cycle_stats(seconds: ArrayLike) -> dict[str, float] | None:
 def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str | Path = '') -> None:
     """Write the run ``log`` to ``path`` (``.npz``, the module docstring says what it holds)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = obstacle_file(obstacles).read_text() if obstacles else ''
+    text = obstacle_text(obstacles) if obstacles else ''
     np.savez_compressed(
         path,
         t=log.t,
@@ -494,7 +547,7 @@ def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str |
 
 def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
     """Per robot and method: ``runs``, ``converged``, ``reported``, ``failed``, ``no_way`` (the
-    planner found no way, ``--plan``), the worst final
+    planner found no way, ``--plan``), ``replans`` (``--plan``: over the runs), the worst final
     errors of the converged runs, the median and largest time to converge, and the worst use of
     every limit over all runs (``limit_use_max``: largest fraction of a velocity or acceleration
     limit; ``position_margin_min_rad``), the runs in contact (``in_contact``) and the deepest
@@ -522,6 +575,7 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
             'reported': sum(r['outcome'] == 'reported' for r in rows),
             'failed': sum(r['outcome'] == 'failed' for r in rows),
             'no_way': sum(r['outcome'] == 'no_way' for r in rows),
+            'replans': sum(r.get('replans') or 0 for r in rows),
             'worst_position_error_m': max((r['final_position_error_m'] for r in conv), default=None),
             'worst_orientation_error_rad': max((r['final_orientation_error_rad'] for r in conv), default=None),
             'median_time_s': float(np.median(times)) if times else None,

@@ -21,7 +21,21 @@ a scenario, ``--obstacles`` of ``wmm_randomized``: a path, or the name of a file
 * ``name``: optional (default ``obstacle_<i>``), unique.
 
 A file may also give ``goal_region: {centre: [x, y], radius: r}`` [m]: where ``wmm_randomized``
-draws the bases of its goals' configurations (:func:`load_goal_region`).
+draws the bases of its goals' configurations (:func:`load_goal_region`), and ``random_boxes``:
+boxes drawn by a seed beside the fixed obstacles (:func:`draw_boxes`)::
+
+    random_boxes: {count: 10, size: [0.3, 0.8], area: [0.8, 3.8, -1.8, 1.8],
+                   keep_clear: {centre: [0.0, 0.0], radius: 1.0}, floor: -0.4}
+
+* ``count`` boxes, each with its three edge lengths drawn uniformly in ``size`` = [min, max]
+  [m] (its height above z = 0; it reaches down to ``floor``, so that it stands on every robot's
+  floor), its centre uniformly in ``area`` = [x_min, x_max, y_min, y_max] [m] and its yaw
+  uniformly in (−π, π];
+* none within ``keep_clear``: a box is drawn again while its footprint's circumscribed circle
+  comes within ``radius`` [m] of ``centre`` (the start pose).
+
+The seed is the caller's (``wmm_randomized --seed``; 0 where none is given), so a draw is
+reproduced by its seed; :func:`obstacle_text` writes a seed's draw as a file of fixed obstacles.
 """
 
 from __future__ import annotations
@@ -32,8 +46,9 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+import yaml
 from wmm_control.errors import ConfigError
-from wmm_control.geometry import matrix_from_rpy, se3_from_planar
+from wmm_control.geometry import matrix_from_rpy, rotation_z, rpy_from_matrix, se3_from_planar
 from wmm_control.paths import config_path
 from wmm_control.robot_config import read_yaml
 
@@ -41,9 +56,12 @@ __all__ = [
     'Obstacle',
     'SHAPES',
     'around_base',
+    'draw_boxes',
+    'is_drawn',
     'load_goal_region',
     'load_obstacles',
     'obstacle_file',
+    'obstacle_text',
     'parse_obstacles',
 ]
 
@@ -176,9 +194,9 @@ def obstacle_file(name_or_path) -> Path:
     return Path(text) if text.endswith(('.yaml', '.yml')) else config_path('obstacles', f'{text}.yaml')
 
 
-def load_obstacles(name_or_path) -> tuple[Obstacle, ...]:
+def load_obstacles(name_or_path, seed: int = 0) -> tuple[Obstacle, ...]:
     """The obstacles of the file ``name_or_path`` (:func:`obstacle_file`; schema in the module
-    docstring); ``()`` for an empty name.
+    docstring), with its ``random_boxes`` drawn by ``seed``; ``()`` for an empty name.
 
     Raises:
         ConfigError: the file is missing, not YAML, or holds an invalid entry.
@@ -186,16 +204,97 @@ def load_obstacles(name_or_path) -> tuple[Obstacle, ...]:
     if not str(name_or_path):
         return ()
     path = obstacle_file(name_or_path)
-    return parse_obstacles(_document(path)['obstacles'], path.name)
+    doc = _document(path)
+    fixed = parse_obstacles(doc['obstacles'], path.name)
+    drawn = draw_boxes(doc['random_boxes'], seed, path.name) if 'random_boxes' in doc else ()
+    return fixed + drawn
+
+
+def is_drawn(name_or_path) -> bool:
+    """Whether the file ``name_or_path`` draws obstacles by a seed (``random_boxes``)."""
+    return bool(str(name_or_path)) and 'random_boxes' in _document(obstacle_file(name_or_path))
+
+
+def obstacle_text(name_or_path, seed: int = 0) -> str:
+    """The file ``name_or_path`` with its obstacles drawn by ``seed`` as fixed ones (YAML text):
+    what a simulator, a node or a record reads for that draw."""
+    path = obstacle_file(name_or_path)
+    doc = _document(path)
+    if 'random_boxes' not in doc:
+        return path.read_text()
+    entries = [
+        {
+            'name': o.name,
+            'shape': o.shape,
+            'size': [round(v, 6) for v in o.size],
+            'pose': [round(float(v), 6) + 0.0 for v in (*o.position, *rpy_from_matrix(o.rotation))],
+        }
+        for o in load_obstacles(path, seed)
+    ]
+    out = {'obstacles': entries}
+    if 'goal_region' in doc:
+        out['goal_region'] = doc['goal_region']
+    return f'# {path.name} drawn with seed {seed}\n' + yaml.safe_dump(
+        out, sort_keys=False, default_flow_style=None, width=120
+    )
+
+
+_BOXES = {'count', 'size', 'area', 'keep_clear', 'floor'}
+
+
+def draw_boxes(spec, seed: int, where: str = 'random_boxes') -> tuple[Obstacle, ...]:
+    """The boxes of a ``random_boxes`` entry ``spec`` drawn by ``seed`` (module docstring),
+    named ``box_<i>``.
+
+    Raises:
+        ConfigError: a key missing or unknown, or a bad number.
+    """
+    at = f'{where}: random_boxes'
+    if not isinstance(spec, dict) or set(spec) != _BOXES:
+        raise ConfigError(f'{at} must have exactly the keys {sorted(_BOXES)}, got {spec!r}')
+    count = spec['count']
+    if not isinstance(count, int) or isinstance(count, bool) or not 0 <= count <= 1000:
+        raise ConfigError(f'{at}.count must be an integer in [0, 1000], got {count!r}')
+    low, high = _numbers(spec['size'], (2,), f'{at}.size')
+    x0, x1, y0, y1 = _numbers(spec['area'], (4,), f'{at}.area')
+    floor = _numbers([spec['floor']], (1,), f'{at}.floor')[0]
+    clear = spec['keep_clear']
+    if not isinstance(clear, dict) or set(clear) != {'centre', 'radius'}:
+        raise ConfigError(f'{at}.keep_clear must be {{centre: [x, y], radius: r}}, got {clear!r}')
+    centre = np.array(_numbers(clear['centre'], (2,), f'{at}.keep_clear.centre'))
+    radius = _numbers([clear['radius']], (1,), f'{at}.keep_clear.radius')[0]
+    if not (0.0 < low <= high and x0 < x1 and y0 < y1 and radius >= 0.0 and floor < low):
+        raise ConfigError(
+            f'{at}: needs 0 < size[0] <= size[1], area x_min < x_max and y_min < y_max, '
+            f'keep_clear.radius >= 0 and floor below the boxes\' tops, got {spec!r}'
+        )
+    rng = np.random.default_rng(seed)
+    boxes: list[Obstacle] = []
+    while len(boxes) < count:
+        for _ in range(10_000):
+            sx, sy, height = rng.uniform(low, high, 3)
+            xy = rng.uniform((x0, y0), (x1, y1))
+            yaw = rng.uniform(-math.pi, math.pi)
+            if np.linalg.norm(xy - centre) - 0.5 * math.hypot(sx, sy) >= radius:
+                break
+        else:
+            raise ConfigError(f'{at}: no box of the area keeps clear of keep_clear')
+        position = np.array((xy[0], xy[1], 0.5 * (height + floor)))
+        boxes.append(
+            Obstacle(
+                f'box_{len(boxes)}', 'box', (float(sx), float(sy), float(height - floor)), position, rotation_z(yaw)
+            )
+        )
+    return tuple(boxes)
 
 
 def _document(path: Path) -> dict:
     doc = read_yaml(path, 'obstacle file')
     if not isinstance(doc, dict) or 'obstacles' not in doc:
         raise ConfigError(f'{path}: top-level key "obstacles" missing')
-    unknown = set(doc) - {'obstacles', 'goal_region'}
+    unknown = set(doc) - {'obstacles', 'goal_region', 'random_boxes'}
     if unknown:
-        raise ConfigError(f'{path}: unknown keys {sorted(unknown)} (known: obstacles, goal_region)')
+        raise ConfigError(f'{path}: unknown keys {sorted(unknown)} (known: obstacles, goal_region, random_boxes)')
     return doc
 
 

@@ -12,10 +12,11 @@ import math
 from collections.abc import Iterable
 
 import numpy as np
-from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, TwistStamped
+from builtin_interfaces.msg import Duration, Time
+from geometry_msgs.msg import PoseStamped, Transform, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
 
 __all__ = [
     'pose_values',
@@ -32,6 +33,8 @@ __all__ = [
     'set_planar_twist',
     'twist_stamped',
     'pose_stamped',
+    'target_pose_stamped',
+    'reference_message',
     'split_seconds',
     'stamp_from_seconds',
     'planar_covariance',
@@ -142,6 +145,41 @@ def pose_stamped(stamp: Time, frame: str, position, quat) -> PoseStamped:
     msg.header.stamp = stamp
     msg.header.frame_id = frame
     set_pose(msg.pose, position, quat)
+    return msg
+
+
+def target_pose_stamped(stamp: Time, frame: str, target) -> PoseStamped:
+    """A ``PoseStamped`` in ``frame`` of a :class:`~wmm_control.resolvers.PoseTarget`'s pose."""
+    from wmm_control.geometry import quaternion_from_matrix
+
+    return pose_stamped(stamp, frame, target.position, quaternion_from_matrix(target.rotation))
+
+
+def _twist(values) -> Twist:
+    msg = Twist()
+    set_twist(msg, values)
+    return msg
+
+
+def reference_message(target, frame: str, stamp: Time, t: float) -> MultiDOFJointTrajectory:
+    """A one-point ``MultiDOFJointTrajectory`` (an ``/ee_reference`` message) of a
+    :class:`~wmm_control.resolvers.PoseTarget` at time ``t`` [s] along its trajectory:
+    ``transforms[0]`` its pose, ``velocities[0]`` and ``accelerations[0]`` its twist and
+    acceleration (linear, angular; world axes)."""
+    from wmm_control.geometry import quaternion_from_matrix
+
+    msg = MultiDOFJointTrajectory()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame
+    msg.joint_names = ['end_effector']
+    point = MultiDOFJointTrajectoryPoint()
+    tf = Transform()
+    set_pose(tf, target.position, quaternion_from_matrix(target.rotation))
+    point.transforms = [tf]
+    point.velocities = [_twist(target.velocity)]
+    point.accelerations = [_twist(target.acceleration)]
+    point.time_from_start = Duration(**split_seconds(t))
+    msg.points = [point]
     return msg
 
 

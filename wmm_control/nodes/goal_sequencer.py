@@ -26,9 +26,9 @@ again, and one that jumps more than 10 s ahead skips to that time; both are logg
 import math
 from typing import Any
 
-from builtin_interfaces.msg import Duration, Time
-from geometry_msgs.msg import PoseStamped, Transform, Twist
-from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped
+from trajectory_msgs.msg import MultiDOFJointTrajectory
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
@@ -37,12 +37,11 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from wmm_control.experiments.scenario import Goal, load_scenario
 from wmm_control.kinematics import KinematicModel
 from wmm_control.geometry import matrix_from_rpy, quaternion_from_matrix
-from wmm_control.nodes.conversions import pose_stamped, set_pose, set_twist, split_seconds
+from wmm_control.nodes.conversions import pose_stamped, reference_message
 from wmm_control.nodes.parameters import Param, declare_parameters
 from wmm_control.nodes.qos import CLOCK_QOS, COMMAND_QOS
 from wmm_control.nodes.runner import guard_clock, run_node
 from wmm_control.nodes.sim_timing import SimTiming
-from wmm_control.resolvers.interface import PoseTarget
 
 __all__ = ['GoalSequencerNode', 'main']
 
@@ -52,29 +51,6 @@ PARAMS = (
     Param('scenario', 'Scenario name (config/scenarios/<name>.yaml) or a path to a scenario file.', read_only=True),
     Param('republish_period', 'Time [s] between re-publications of the goal in force; 0 = never.', lo=0.0, hi=3600.0),
 )
-
-
-def _twist(values):
-    msg = Twist()
-    set_twist(msg, values)
-    return msg
-
-
-def reference_message(target: PoseTarget, frame: str, stamp: Time, t: float) -> MultiDOFJointTrajectory:
-    """A one-point ``MultiDOFJointTrajectory`` of a :class:`~wmm_control.resolvers.PoseTarget` at time ``t``."""
-    msg = MultiDOFJointTrajectory()
-    msg.header.stamp = stamp
-    msg.header.frame_id = frame
-    msg.joint_names = ['end_effector']
-    point = MultiDOFJointTrajectoryPoint()
-    tf = Transform()
-    set_pose(tf, target.position, quaternion_from_matrix(target.rotation))
-    point.transforms = [tf]
-    point.velocities = [_twist(target.velocity)]
-    point.accelerations = [_twist(target.acceleration)]
-    point.time_from_start = Duration(**split_seconds(t))
-    msg.points = [point]
-    return msg
 
 
 def goal_message(goal: Goal, frame: str, stamp: Time) -> PoseStamped:

@@ -9,6 +9,7 @@ appear in the node YAML.
 """
 
 import array
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -34,6 +35,7 @@ __all__ = [
     'require_base',
     'parameter_error',
     'max_state_wait_param',
+    'defaults_elsewhere',
 ]
 
 
@@ -84,6 +86,17 @@ def max_state_wait_param() -> Param:
         '0: no limit. Not applied while the simulator steps in lockstep (it says so on sim/lockstep_timeout).',
         lo=0.0,
         hi=60.0,
+    )
+
+
+def defaults_elsewhere(specs: Sequence[Param], defaults: Mapping[str, Any]) -> tuple[Param, ...]:
+    """``specs``, each one named in ``defaults`` taking its default from there (its one home: a
+    parameter class's field, a constructor's signature) instead of the node YAML."""
+    return tuple(
+        dataclasses.replace(spec, default_from=lambda _values, d=defaults[spec.name]: d)
+        if spec.name in defaults
+        else spec
+        for spec in specs
     )
 
 

@@ -4,7 +4,14 @@ gains and options, with their defaults in the resolver parameter classes."""
 
 import dataclasses
 
-from wmm_control.nodes.parameters import Param, max_state_wait_param, robot_method, robot_param, robot_period
+from wmm_control.nodes.parameters import (
+    Param,
+    defaults_elsewhere,
+    max_state_wait_param,
+    robot_method,
+    robot_param,
+    robot_period,
+)
 from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP
 from wmm_control.resolvers import METHODS
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
@@ -230,9 +237,4 @@ def _method_defaults():
 _METHOD_DEFAULTS = _method_defaults()
 #: The node's parameters. The method's own (gains, thresholds, options) take their defaults
 #: from the resolver parameter classes; config/redundancy_resolver.yaml holds the node's.
-PARAMS = tuple(
-    dataclasses.replace(spec, default_from=lambda _values, d=_METHOD_DEFAULTS[spec.name]: d)
-    if spec.name in _METHOD_DEFAULTS
-    else spec
-    for spec in _SPECS
-)
+PARAMS = defaults_elsewhere(_SPECS, _METHOD_DEFAULTS)

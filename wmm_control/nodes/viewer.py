@@ -17,7 +17,9 @@ Subscribes:
   the base's course over the next second;
   ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``): the status panel;
   ``/obstacles`` (``visualization_msgs/MarkerArray``): obstacles drawn live, beside those of the
-  ``obstacles`` file (:mod:`wmm_control.nodes.obstacle_topic`).
+  ``obstacles`` file (:mod:`wmm_control.nodes.obstacle_topic`);
+  ``goal_planner/path`` (``nav_msgs/Path``, latched): the base path ``goal_planner`` plans, drawn
+  on the floor while it is in force (an empty path hides it).
 Publishes:
   ``/goal_pose`` (``geometry_msgs/PoseStamped``, frame ``world_frame``) when the goal handle is
   released (and at most every ``drag_publish_period`` during a drag), and the end effector's
@@ -42,7 +44,7 @@ import numpy as np
 import viser
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Pose, PoseStamped, Transform, TwistStamped
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import Odometry, Path
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
@@ -53,7 +55,7 @@ from visualization_msgs.msg import MarkerArray
 from wmm_control.errors import NonFiniteError
 from wmm_control.checks import Freshness
 from wmm_control.nodes.parameters import declare_parameters
-from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, STATE_SUB_QOS
+from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STATE_SUB_QOS
 from wmm_control.nodes.runner import guard_clock, run_node
 from wmm_control.nodes.stamps import seconds
 from wmm_control.nodes.conversions import planar_twist, pose_stamped, pose_values
@@ -136,6 +138,7 @@ class ViewerNode(Node):
         self.create_subscription(TwistStamped, 'base/reference', self._on_base_reference, COMMAND_QOS)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, DIAGNOSTICS_QOS)
         self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
+        self.create_subscription(Path, 'goal_planner/path', self._on_planned_path, LATCHED_QOS)
         self.timer = self.create_timer(p.update_period, self._tick, clock=self._steady)
         self.url = f'http://{p.host}:{browser.port}'
         served = (
@@ -174,6 +177,20 @@ class ViewerNode(Node):
     def _on_obstacles(self, msg: MarkerArray) -> None:
         if self.obstacles.take(msg, self.get_logger()) and self.browser is not None:
             self.browser.draw_obstacles(self.obstacles.obstacles)
+
+    def _on_planned_path(self, msg: Path) -> None:
+        if msg.header.frame_id != self.p.world_frame:
+            self.get_logger().warn(
+                f'goal_planner/path in frame {msg.header.frame_id!r}, not {self.p.world_frame!r}: not drawn',
+                throttle_duration_sec=5.0,
+            )
+            return
+        xy = np.array([(s.pose.position.x, s.pose.position.y) for s in msg.poses], dtype=float).reshape(-1, 2)
+        if not np.all(np.isfinite(xy)):
+            self.get_logger().warn('goal_planner/path with non-finite positions: not drawn', throttle_duration_sec=5.0)
+            return
+        if self.browser is not None:
+            self.browser.draw_planned_path(xy)
 
     def _on_joint_states(self, msg: JointState) -> None:
         if len(msg.position) != len(msg.name):

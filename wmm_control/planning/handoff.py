@@ -14,29 +14,26 @@ rigidly by the base: at each sample k of the :class:`~wmm_control.planning.BaseT
 
 These are ``/ee_reference`` points: every method tracks them as it tracks any trajectory, with
 its safety stage on, and after the last one the resolver is given the goal itself for the final
-whole-body approach (the stance's posture is the method's to find).
- ROS-free: the direct
+whole-body approach (the stance's posture is the method's to find). The points are given at the
+pace the robot keeps (:class:`~wmm_control.planning.follow.PlanFollower`), which compares the
+measured base with the planned base poses kept beside them. ROS-free: the direct
 engine's runs (``wmm_randomized --plan``) and a node publishing ``/ee_reference`` use the same
 points.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from wmm_control.geometry import rotation_z
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.planning.timing import BaseTrajectory
 from wmm_control.resolvers.interface import PoseTarget
 
 __all__ = ['Handoff']
-
-
-def _rz(theta: float) -> np.ndarray:
-    c, s = np.cos(theta), np.sin(theta)
-    return np.array(((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0)))
 
 
 @dataclass(frozen=True)
@@ -47,10 +44,12 @@ class Handoff:
         dt: [s] the period of the samples.
         points: one :class:`~wmm_control.resolvers.PoseTarget` per sample of the base
             trajectory, with its twist and acceleration (world axes).
+        base_poses: the planned base pose (x, y, θ) of each point [m, m, rad]. Shape (K, 3).
     """
 
     dt: float
     points: tuple[PoseTarget, ...]
+    base_poses: np.ndarray = field(compare=False)
 
     @classmethod
     def of(cls, model: KinematicModel, trajectory: BaseTrajectory, q_travel: ArrayLike) -> Handoff:
@@ -60,7 +59,7 @@ class Handoff:
         twists = []
         placements = []
         for pose, rate in zip(trajectory.poses, trajectory.rates):
-            turn = _rz(float(pose[2]))
+            turn = rotation_z(float(pose[2]))
             arm = turn @ offset
             position = arm + np.array((pose[0], pose[1], 0.0))
             linear = np.array((rate[0] - rate[2] * arm[1], rate[1] + rate[2] * arm[0], 0.0))
@@ -72,7 +71,9 @@ class Handoff:
         points = tuple(
             PoseTarget(p, r, velocity=v, acceleration=a) for (p, r), v, a in zip(placements, velocity, acceleration)
         )
-        return cls(float(trajectory.dt), points)
+        base_poses = np.array(trajectory.poses, dtype=float)
+        base_poses.flags.writeable = False
+        return cls(float(trajectory.dt), points, base_poses)
 
     @property
     def duration(self) -> float:

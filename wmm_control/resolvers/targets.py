@@ -34,7 +34,7 @@ from wmm_control.geometry import matrix_from_quaternion, unit_quaternion
 from wmm_control.resolvers.interface import PoseTarget
 from wmm_control.resolvers.progress import GoalProgress
 
-__all__ = ['GOAL', 'REFERENCE', 'LogEvent', 'LogThrottle', 'TargetManager', 'checked_quaternion']
+__all__ = ['GOAL', 'REFERENCE', 'LogEvent', 'LogThrottle', 'TargetManager', 'check_goal', 'checked_quaternion']
 
 GOAL = 'goal_pose'
 REFERENCE = 'ee_reference'
@@ -57,8 +57,8 @@ class LogThrottle:
     the caller's clock (``held`` 5 s, ``stalled`` every time, the others 1 s), each kind apart.
     """
 
-    INFO = ('accepted', 'tracking', 'reached')
-    INTERVALS = {'held': 5.0, 'stalled': 0.0}
+    INFO: tuple[str, ...] = ('accepted', 'tracking', 'reached')
+    INTERVALS: dict[str, float] = {'held': 5.0, 'stalled': 0.0}
     INTERVAL = 1.0
 
     def __init__(self) -> None:
@@ -83,6 +83,35 @@ def checked_quaternion(quat, topic) -> tuple[np.ndarray | None, list[LogEvent]]:
     if unit is None or abs(norm - 1.0) <= 1e-3:
         return unit, []
     return unit, [LogEvent('normalised', f'{topic} quaternion has norm {norm:.6g}: normalised')]
+
+
+def check_goal(
+    frame, pose, world_frame, max_goal_distance, workspace, base=None, obstacles=()
+) -> tuple[np.ndarray | None, str, list[LogEvent]]:
+    """The checks of a goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame`` (module docstring):
+    (its unit quaternion, '', events) when it passes, else (None, why not, events).
+
+    Args:
+        world_frame: the one frame accepted.
+        max_goal_distance: [m] from the world origin, on each axis.
+        workspace: the robot's :class:`~wmm_control.kinematics.workspace.Workspace`.
+        base: the base's pose (x, y, θ), or None (the body is not checked).
+        obstacles: a goal inside one is refused (world frame).
+    """
+    values = np.asarray(pose, dtype=float)
+    if frame != world_frame:
+        return None, f'frame {frame!r}, expected {world_frame!r}', []
+    if not np.all(np.isfinite(values)):
+        return None, f'non-finite values {values.tolist()}', []
+    if float(np.max(np.abs(values[:3]))) > max_goal_distance:
+        return None, f'position {values[:3].tolist()} is beyond max_goal_distance {max_goal_distance} m', []
+    impossible = workspace.impossible(values[:3], base, obstacles)
+    if impossible:
+        return None, f'position {values[:3].tolist()}: {impossible}', []
+    quat, events = checked_quaternion(values[3:], '/' + GOAL)
+    if quat is None:
+        return None, 'zero quaternion', events
+    return quat, '', events
 
 
 class TargetManager:
@@ -153,18 +182,11 @@ class TargetManager:
         """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``; ``base`` the base's pose
         (x, y, θ) while it is known (a goal inside the body is rejected then), else None."""
         values = np.asarray(pose, dtype=float)
-        if frame != self.world_frame:
-            return self.reject(f'frame {frame!r}, expected {self.world_frame!r}')
-        if not np.all(np.isfinite(values)):
-            return self.reject(f'non-finite values {values.tolist()}')
-        if float(np.max(np.abs(values[:3]))) > self.max_goal_distance:
-            return self.reject(f'position {values[:3].tolist()} is beyond max_goal_distance {self.max_goal_distance} m')
-        impossible = self.workspace.impossible(values[:3], base, self.obstacles)
-        if impossible:
-            return self.reject(f'position {values[:3].tolist()}: {impossible}')
-        quat, events = checked_quaternion(values[3:], '/' + GOAL)
+        quat, reason, events = check_goal(
+            frame, values, self.world_frame, self.max_goal_distance, self.workspace, base, self.obstacles
+        )
         if quat is None:
-            return events + self.reject('zero quaternion')
+            return events + self.reject(reason)
         key = tuple(np.round(np.concatenate((values[:3], quat)), 9))
         if key == self._goal_key:
             return events  # the same goal again (a sequencer re-publishing it)

@@ -2,7 +2,7 @@
 
 :class:`BrowserScene` serves the scene and the panel and keeps a handle on each thing drawn:
 the robot's shapes (:class:`~wmm_control.viewer.scene.RobotScene` gives their poses), the
-end effector's and the base's paths, the goal, the trajectory reference, the base's course,
+end effector's and the base's paths, the planner's base path, the goal, the trajectory reference, the base's course,
 the obstacles and the goal handle. The caller (the ``wmm_viewer`` node) says what to draw and
 when; the handle's drags and the "Hold here" button reach it through the callbacks it gives.
 Quaternions are (w, x, y, z), as viser takes them.
@@ -37,6 +37,7 @@ _BASE_TRAIL_COLOR = (40, 160, 60)
 _GOAL_COLOR = (220, 30, 120)
 _REFERENCE_COLOR = (130, 60, 200)
 _BASE_REFERENCE_COLOR = (240, 170, 0)
+_PLANNED_PATH_COLOR = (0, 170, 190)
 #: Heights [m] above the floor of the base's path and of its course (above the grid).
 _PATH_LIFT, _COURSE_LIFT = 0.005, 0.01
 
@@ -111,6 +112,9 @@ class BrowserScene:
         )
         self.base_path = server.scene.add_line_segments(
             '/paths/base', empty, _BASE_TRAIL_COLOR, thickness=4.0, thickness_units='screen'
+        )
+        self.planned_path = server.scene.add_line_segments(
+            '/paths/planned', empty, _PLANNED_PATH_COLOR, thickness=3.0, thickness_units='screen', visible=False
         )
         self.base_course = server.scene.add_line_segments(
             '/base_reference', empty, _BASE_REFERENCE_COLOR, thickness=6.0, thickness_units='screen', visible=False
@@ -220,6 +224,17 @@ class BrowserScene:
         start = np.array([base_position[0], base_position[1], self.ground_z + _COURSE_LIFT])
         self.base_course.points = np.stack((start, start + [velocity[0], velocity[1], 0.0]))[None]
         self.base_course.visible = True
+
+    def draw_planned_path(self, xy: np.ndarray) -> None:
+        """Draw the planner's base path through the points (x, y) [m] on the floor, in place of the
+        one drawn before; hide it when there are fewer than two."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        if len(xy) < 2:
+            self.planned_path.visible = False
+            return
+        points = np.column_stack((xy, np.full(len(xy), self.ground_z + _PATH_LIFT)))
+        self.planned_path.points = np.stack((points[:-1], points[1:]), axis=1)
+        self.planned_path.visible = True
 
     def show_goal(self, position: np.ndarray, wxyz: np.ndarray, move_handle: bool) -> None:
         """Draw the goal in force (and its text); the handle moves there when ``move_handle``."""

@@ -1,0 +1,149 @@
+"""GoalPursuit, the goal_planner node's decisions, ROS-free: goals checked as the resolver checks
+them, a goal within reach sent on unchanged, a plan's points then the goal, no way with the
+planner's reason, a plan made again when an obstacle comes onto the rest of the path or progress
+stalls, and the robot held whenever the pursuit stops or changes course."""
+
+import time
+
+import numpy as np
+import pytest
+
+from wmm_control.geometry import quaternion_from_matrix, rotation_z
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.obstacles import Obstacle, load_obstacles
+from wmm_control.planning.follow import FollowParams
+from wmm_control.planning.pursuit import GoalPursuit, PursuitState
+from wmm_control.robot_config import load_robot
+
+ROBOT = load_robot('steerable')
+START = np.asarray(ROBOT.start.base_pose, dtype=float)
+Q_ARM = np.asarray(ROBOT.start.arm, dtype=float)
+BEHIND_TABLE = np.array([2.4, -0.2, 1.0])
+
+
+def _start_ee():
+    model = KinematicModel(ROBOT)
+    model.update(START, Q_ARM)
+    return model.ee_placement_world()
+
+
+def pose(position, yaw=0.0):
+    rotation = rotation_z(yaw) @ _start_ee()[1]
+    return np.concatenate((position, quaternion_from_matrix(rotation)))
+
+
+@pytest.fixture
+def pursuit():
+    out = GoalPursuit(ROBOT, load_obstacles('table_pillar'), 'world', 50.0, FollowParams(stall_time=1.0), max_replans=1)
+    yield out
+    out.close()
+
+
+def settle(pursuit, base=START, timeout=30.0):
+    """Step (0.025 s each, the base standing at ``base``) until the plan is in; every step's output."""
+    steps = []
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        steps.append(pursuit.step(0.025, base, Q_ARM))
+        if pursuit.state is not PursuitState.PLANNING:
+            return steps
+        time.sleep(0.01)
+    raise AssertionError('no plan in time')
+
+
+def events(steps):
+    return [e for s in steps for e in s.events]
+
+
+def test_bad_goals_are_refused_with_the_resolvers_reasons_and_nothing_is_sent(pursuit):
+    for frame, values, reason in (
+        ('world', pose([np.nan, 0.0, 1.0]), 'non-finite'),
+        ('map', pose([1.0, 0.0, 1.0]), "frame 'map'"),
+        ('world', pose([0.0, 90.0, 1.0]), 'max_goal_distance'),
+        ('world', pose([1.0, 0.0, -1.0]), 'below the floor'),
+        ('world', np.array([1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]), 'zero quaternion'),
+    ):
+        said = pursuit.new_goal(frame, values)
+        assert pursuit.state is PursuitState.REJECTED and reason in said[-1].message
+        out = pursuit.step(0.025, START, Q_ARM)
+        assert out.reference is None and not out.forward_goal and out.hold is None  # nothing given yet: no hold
+    assert pursuit.counters.goals_rejected == 5 and pursuit.counters.plans == 0
+
+
+def test_a_goal_within_reach_is_sent_on_unchanged_and_the_same_goal_again_changes_nothing(pursuit):
+    near = pose(_start_ee()[0] + [0.1, 0.0, 0.0])
+    pursuit.new_goal('world', near)
+    steps = settle(pursuit)
+    assert pursuit.state is PursuitState.DIRECT and steps[-1].forward_goal
+    assert not any(s.reference is not None for s in steps) and steps[-1].path.shape == (0, 3)
+    assert pursuit.new_goal('world', near) == [] and pursuit.state is PursuitState.DIRECT
+    # a refused goal now holds the robot where its end effector is
+    pursuit.new_goal('world', pose([np.inf, 0.0, 1.0]))
+    hold = pursuit.step(0.025, START, Q_ARM).hold
+    assert hold is not None and hold.position == pytest.approx(_start_ee()[0])
+    assert pursuit.step(0.025, START, Q_ARM).hold is None  # once
+
+
+def test_a_goal_inside_the_table_has_no_way_with_the_planners_reason(pursuit):
+    pursuit.new_goal('world', pose([1.5, -0.2, 0.3]))
+    steps = settle(pursuit)
+    assert pursuit.state is PursuitState.NO_WAY and "obstacle 'table'" in pursuit.reason
+    assert not any(s.forward_goal or s.reference is not None for s in steps)
+    assert pursuit.status()[0] == 'warn' and 'no_way' in pursuit.status()[1]
+
+
+def test_a_base_that_keeps_to_the_plan_gets_its_points_then_the_goal(pursuit):
+    pursuit.new_goal('world', pose(BEHIND_TABLE, yaw=0.5 * np.pi))
+    steps = settle(pursuit)
+    assert pursuit.state is PursuitState.FOLLOWING
+    planned = steps[-1].path
+    assert len(planned) > 10 and planned[-1, 0] > 1.75
+    follower = pursuit.follower
+    out, points = None, 0
+    for _ in range(5 * len(planned)):  # the base where the plan's clock says it is
+        base = follower.handoff.base_poses[min(int(follower.clock / follower.handoff.dt), len(planned) - 1)]
+        out = pursuit.step(0.025, base, Q_ARM)
+        points += out.reference is not None
+        if out.forward_goal:
+            break
+    assert out.forward_goal and pursuit.state is PursuitState.APPROACH
+    assert points > 0.9 * len(planned)
+
+
+def test_an_obstacle_on_the_rest_of_the_path_makes_it_plan_again(pursuit):
+    pursuit.new_goal('world', pose(BEHIND_TABLE, yaw=0.5 * np.pi))
+    settle(pursuit)
+    ahead = pursuit.follower.remaining_poses()[200]
+    box = Obstacle('moved/1', 'box', (0.3, 0.3, 0.6), np.array([ahead[0], ahead[1], 0.3]), np.eye(3))
+    pursuit.step(0.025, START, Q_ARM)  # a point given: the resolver pursues it
+    pursuit.set_obstacles((*pursuit.obstacles, box))
+    steps = []
+    end = time.monotonic() + 10.0
+    while pursuit.state is PursuitState.FOLLOWING and time.monotonic() < end:
+        steps.append(pursuit.step(0.0, START, Q_ARM))
+        time.sleep(0.01)
+    said = [e.message for e in events(steps)]
+    assert any('from the planned path' in m and 'planning again' in m for m in said), said
+    assert any(s.hold is not None for s in steps)  # held while it plans again
+    steps = settle(pursuit)
+    assert pursuit.state is PursuitState.FOLLOWING
+    path = steps[-1].path
+    assert np.min(np.hypot(path[:, 0] - ahead[0], path[:, 1] - ahead[1])) > 0.2
+
+
+def test_progress_that_stalls_is_planned_again_then_the_goal_goes_to_the_resolver(pursuit):
+    pursuit.new_goal('world', pose(BEHIND_TABLE, yaw=0.5 * np.pi))
+    settle(pursuit)
+    said, forwarded = [], False
+    for _ in range(2):  # the base never moves: stalled after 1 s, planned again once, then the goal
+        for _ in range(400):
+            out = pursuit.step(0.025, START, Q_ARM)
+            said += [e.message for e in out.events]
+            forwarded = forwarded or out.forward_goal
+            if pursuit.state is not PursuitState.FOLLOWING:
+                break
+        if pursuit.state is PursuitState.PLANNING:
+            settle(pursuit)
+    assert any('progress stalled' in m and 'planning again' in m for m in said), said
+    assert pursuit.state is PursuitState.APPROACH and forwarded
+    assert any('after 1 plans made again: the goal goes to the resolver' in m for m in said), said

@@ -1,0 +1,245 @@
+"""``goal_planner``: between the user's ``/goal_pose`` and the resolver, a planned way round the obstacles.
+
+The user publishes a goal on ``/goal_pose`` as without the planner; ``redundancy_resolver`` is
+started with its ``goal_pose`` remapped to ``goal_planner/goal`` (``robot.launch.py
+planner:=true`` does it). Each goal is planned off the executor's thread
+(:class:`~wmm_control.planning.pursuit.GoalPursuit`, ROS-free; this module only wires topics to
+it): a goal within reach with nothing in the way goes on to the resolver unchanged on
+``~/goal``; otherwise the base path's points go to the resolver on ``/ee_reference``, one per
+``period``, at the pace the base keeps, then the goal itself on ``~/goal`` for the final
+approach. The planned base path is on ``~/path`` (latched), the state on ``/diagnostics`` and in
+the log. A goal the planner finds no way to is reported with the reason, and the robot is held
+where it is (its end effector's current pose sent as the goal). The plan is made again when
+progress stalls or an obstacle on ``/obstacles`` comes onto the rest of the path.
+
+Every topic, its type and frame, and the behaviour on bad input: ``docs/nodes.md`` (Planning
+round obstacles). Timing: the period's timer runs on the steady clock; when the simulator says it
+steps in lockstep (:mod:`~wmm_control.nodes.sim_timing`) each odometry message a period newer
+than the last tick drives it instead, and the inputs are aged by the simulation's time.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry, Path
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import MultiDOFJointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+from wmm_control.checks import Freshness
+from wmm_control.geometry import unit_quaternion, yaw_from_quaternion
+from wmm_control.nodes.conversions import (
+    odometry_values,
+    pose_values,
+    reference_message,
+    set_planar_pose,
+    target_pose_stamped,
+)
+from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, node_status
+from wmm_control.nodes.goal_planner_params import FOLLOW_PARAMS, PARAMS, PLANNER_PARAMS
+from wmm_control.nodes.inputs import JointSelector
+from wmm_control.nodes.obstacle_topic import ObstacleSet, describe
+from wmm_control.nodes.parameters import declare_parameters
+from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STATE_SUB_QOS
+from wmm_control.nodes.runner import guard_clock, run_node
+from wmm_control.nodes.sim_timing import SimTiming
+from wmm_control.nodes.stamps import seconds
+from wmm_control.planning.follow import FollowParams
+from wmm_control.planning.pursuit import GoalPursuit, PursuitLog, PursuitState
+from wmm_control.robot_config import load_robot
+
+__all__ = ['PARAMS', 'GoalPlannerNode', 'main']
+
+
+class GoalPlannerNode(Node):
+    """Wires ``/goal_pose``, ``/obstacles``, ``odom`` and ``joint_states`` to a
+    :class:`~wmm_control.planning.pursuit.GoalPursuit`, and its steps to the resolver's topics."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('goal_planner', **kwargs)
+        guard_clock(self)
+        p = self.p = declare_parameters(
+            self,
+            'goal_planner.yaml',
+            PARAMS,
+            on_change={
+                'state_timeout': self._set_state_timeout,
+                'max_goal_distance': lambda v: setattr(self.pursuit, 'max_goal_distance', float(v)),
+                'max_replans': lambda v: setattr(self.pursuit, 'max_replans', int(v)),
+            },
+        )
+        self.robot = load_robot(p.robot)
+        self.obstacles = ObstacleSet(p.obstacles, p.world_frame)
+        self.pursuit = GoalPursuit(
+            self.robot,
+            self.obstacles.obstacles,
+            p.world_frame,
+            p.max_goal_distance,
+            FollowParams(**{name: getattr(p, name) for name in FOLLOW_PARAMS}),
+            p.max_replans,
+            {name: getattr(p, name) for name in PLANNER_PARAMS},
+        )
+        self.arm = JointSelector(self.robot.arm.joints)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        #: the simulator's timing; a change starts the periods afresh on the clock now followed
+        self.timing = SimTiming(self, lambda _timeout: setattr(self, '_last_tick', None))
+        self.odom_fresh = Freshness(p.state_timeout)
+        self.joints_fresh = Freshness(p.state_timeout)
+        self._base: np.ndarray | None = None
+        self._q_arm: np.ndarray | None = None
+        self._sim_time = 0.0  # [s] the latest odometry's stamp: the time in lockstep
+        self._last_tick: float | None = None
+        self._goal_msg: PoseStamped | None = None
+        self._log_throttle = PursuitLog()
+        self._diagnostics_gate = DiagnosticsGate()
+        self.pub_reference = self.create_publisher(MultiDOFJointTrajectory, 'ee_reference', COMMAND_QOS)
+        self.pub_goal = self.create_publisher(PoseStamped, '~/goal', COMMAND_QOS)
+        self.pub_path = self.create_publisher(Path, '~/path', LATCHED_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.create_subscription(PoseStamped, 'goal_pose', self._on_goal, COMMAND_QOS)
+        self.create_subscription(MarkerArray, '/obstacles', self._on_obstacles, COMMAND_QOS)
+        self.create_subscription(Odometry, 'odom', self._on_odom, STATE_SUB_QOS)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, STATE_SUB_QOS)
+        self.create_timer(p.period, self._on_timer, clock=self._steady)
+        self._publish_path(np.zeros((0, 3)))
+        self.get_logger().info(
+            f'planner of robot {self.robot.name}: {describe(self.obstacles.obstacles)}; trajectory points every '
+            f'{p.period:g} s on {self.pub_reference.topic_name}, goals on {self.pub_goal.topic_name}; waiting for '
+            f'/goal_pose (frame {p.world_frame!r})'
+        )
+
+    def destroy_node(self) -> bool:
+        """Stop the planner's thread (a plan under way is finished: at most the path budget per
+        stance tried, and the stance search), then destroy the node."""
+        self.pursuit.close(timeout=self.p.budget * self.p.stances_tried + 5.0)
+        return super().destroy_node()
+
+    def _set_state_timeout(self, timeout: float) -> None:
+        self.odom_fresh.timeout = self.joints_fresh.timeout = float(timeout)
+
+    def _now(self) -> float:
+        """The time [s] by which the inputs are aged: the simulation's in lockstep, else the steady clock."""
+        return self._sim_time if self.timing.lockstep else seconds(self._steady)
+
+    def _log(self, events) -> None:
+        for level, message in self._log_throttle.lines(events, seconds(self._steady)):
+            if level == 'info':  # one call site per severity: rclpy refuses a change at one
+                self.get_logger().info(message)
+            else:
+                self.get_logger().warn(message)
+
+    # ------------------------------------------------------------------ inputs
+    def _on_goal(self, msg: PoseStamped) -> None:
+        events = self.pursuit.new_goal(msg.header.frame_id, pose_values(msg.pose))
+        if self.pursuit.state is PursuitState.PLANNING and self.pursuit.goal is not None:
+            self._goal_msg = msg
+        self._log(events)
+
+    def _on_obstacles(self, msg: MarkerArray) -> None:
+        logger = self.get_logger()
+        if not msg.markers:
+            logger.warn('ignored an empty /obstacles message: nothing to add or remove', throttle_duration_sec=1.0)
+            return
+        if len(msg.markers) > self.p.max_obstacles:
+            logger.warn(
+                f'rejected /obstacles: {len(msg.markers)} markers, more than max_obstacles {self.p.max_obstacles}; '
+                'the obstacles stay as they were',
+                throttle_duration_sec=1.0,
+            )
+            return
+        if self.obstacles.take(msg, logger):
+            self.pursuit.set_obstacles(self.obstacles.obstacles)
+
+    def _on_odom(self, msg: Odometry) -> None:
+        xy, quat, _ = odometry_values(msg)
+        unit = unit_quaternion(quat)[0] if np.all(np.isfinite(quat)) else None
+        if unit is None or not np.all(np.isfinite(xy)):
+            self.get_logger().warn(
+                f'rejected /odom: not a pose (position {xy.tolist()}, quaternion {quat.tolist()})',
+                throttle_duration_sec=1.0,
+            )
+            return
+        self._base = np.array((xy[0], xy[1], yaw_from_quaternion(unit)))
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self._sim_time = stamp
+        self.odom_fresh.mark(self._now())
+        if self.timing.lockstep and (
+            self._last_tick is None or not self._last_tick <= stamp < self._last_tick + self.p.period - 1e-9
+        ):
+            self._tick(stamp)
+
+    def _on_joint_states(self, msg: JointState) -> None:
+        q, _, reason = self.arm.read(msg)
+        if q is None:
+            self.get_logger().warn(f'rejected /joint_states {reason}', throttle_duration_sec=1.0)
+            return
+        self._q_arm = q
+        self.joints_fresh.mark(self._now())
+
+    # ------------------------------------------------------------------ the period
+    def _on_timer(self) -> None:
+        if not self.timing.lockstep:
+            self._tick(seconds(self._steady))
+
+    def _tick(self, now: float) -> None:
+        """One period at ``now`` [s] (the steady clock, or the simulation's time in lockstep)."""
+        dt = self.p.period if self._last_tick is None else min(max(now - self._last_tick, 0.0), 1.0)
+        self._last_tick = now
+        fresh = self.odom_fresh.fresh(self._now())
+        base = self._base if fresh else None
+        q_arm = self._q_arm if self.joints_fresh.fresh(self._now()) else None
+        if not fresh and self.pursuit.state is PursuitState.FOLLOWING:
+            self.get_logger().warn(
+                f'/odom older than state_timeout {self.p.state_timeout:g} s: no trajectory point (the resolver holds '
+                'its last one)',
+                throttle_duration_sec=2.0,
+            )
+        out = self.pursuit.step(dt, base, q_arm)
+        self._log(out.events)
+        stamp = self.get_clock().now().to_msg()
+        frame = self.p.world_frame
+        if out.hold is not None:
+            self.pub_goal.publish(target_pose_stamped(stamp, frame, out.hold))
+            position = np.round(out.hold.position, 3).tolist()
+            self.get_logger().info(f'holding the end effector where it is: {position}')
+        if out.forward_goal and self._goal_msg is not None:
+            self.pub_goal.publish(self._goal_msg)
+        if out.reference is not None:
+            follower = self.pursuit.follower
+            t = follower.clock if follower is not None else 0.0
+            self.pub_reference.publish(reference_message(out.reference, frame, stamp, t))
+        if out.path is not None:
+            self._publish_path(out.path)
+        if self._diagnostics_gate.due(seconds(self._steady), self.p.diagnostics_period):
+            level, message, values = self.pursuit.status()
+            values['odometry_fresh'] = fresh
+            self.pub_diag.publish(
+                diagnostic_array(stamp, [node_status(self, '', self.robot.name, level, message, values)])
+            )
+
+    def _publish_path(self, poses: np.ndarray) -> None:
+        """``~/path``: the planned base poses (x, y, θ), in the world frame (none: an empty path)."""
+        msg = Path()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.p.world_frame
+        for pose in poses:
+            stamped = PoseStamped()
+            stamped.header = msg.header
+            set_planar_pose(stamped.pose, pose)
+            msg.poses.append(stamped)
+        self.pub_path.publish(msg)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(GoalPlannerNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,317 @@
+"""Following a plan: the hand-off's points given at the pace the robot keeps.
+
+A :class:`~wmm_control.planning.handoff.Handoff` is timed for a base that follows it exactly.
+A real one lags: a steerable base re-steers its wheels at a turn before it moves, task sharing
+gives part of the motion to the arm, the safety stage slows the robot near an obstacle. Points
+given by the wall clock then run ahead of the robot, and the resolver, tracking the point, cuts
+the corner the path went round.
+
+:class:`PlanFollower` gives the points by the plan's own clock ``s`` [s], which advances at a
+rate ``r ∈ [0, 1]`` of the elapsed time set by how far the robot lags the plan at ``s``. A lag
+is taken as a fraction of the lead, ``e = max(‖Δp‖ / lead_distance, |Δθ| / lead_angle)`` (Δp
+the position's difference, Δθ the rotation's angle), and gives the pace
+
+    r(e) = clip((1 − e) / (1 − slow_from), 0, 1)
+
+(full pace while the lag is within ``slow_from`` of the lead, stopped at the lead). Two lags
+are taken:
+
+* the measured base's behind the planned base pose at ``s``, ``e_b``, against its own lead
+  (``base_lead_distance``, ``base_lead_angle``: the arm's posture while following may differ
+  from the travel posture the plan assumed, by a method's choice of how to share the motion);
+* with the measured end effector (``ee_position``, ``ee_rotation``), its lag behind the point
+  in force at ``s``, ``e_e``.
+
+``r* = min(r(e_e), max(r(e_b), base_floor))`` with the end effector, ``r* = r(e_b)`` without.
+So the point waits for the end effector, which every method servoes to it, and slows for the
+base down to ``base_floor`` of the pace, not to a stop: a method that moves the end effector
+partly with the arm (task sharing, or any whole-body one whose share of the base lags, as a
+steerable base's does while it re-steers) does not bring its base back onto the plan once the
+end effector is on its point, and a point that waited for it would wait for ever. (Stopping
+the clock, and so stalling and planning again, once the base lags two leads behind converged
+fewer runs: `panda_diff`'s base, which cannot move sideways, lags that far on most paths.) ``r`` rises
+towards ``r*`` by at most ``rate_slew`` per second (the point does not start at once) and falls
+to it at once: a period's step of the clock moves the point by at most ``(1 − e)`` of the room
+left to the lead when the plan's speed over a period is within ``(1 − slow_from)`` of the lead
+(1 m/s and 1 rad/s at 40 Hz with the defaults), so the robot is never more than the lead
+behind the point it is given, save what its own last period's motion adds. The point's twist is
+the planned one times ``r``, its acceleration times ``r²`` (the planned motion slowed down).
+
+A base that is ahead of the plan (it cut a corner, or the planned pose at ``s`` is behind it)
+pulls the clock forward: the follower keeps the last planned pose the measured base has passed
+(the nearest planned pose, in the lag's metric, from the last one passed up to ``lookahead``
+[s] ahead of ``s``), and ``s`` never lags it.
+
+Once ``s`` reaches the plan's end the target is the goal itself (:attr:`FollowState.APPROACH`):
+the method's final whole-body approach. While following, the follower is
+:attr:`FollowState.STALLED` when for ``stall_time`` the planned pose at ``s`` has not moved on
+by ``stall_distance`` or turned by ``stall_angle``, and the measured base has not come that
+much nearer to it (in distance or in heading): the robot is held off the plan (by an obstacle
+the plan did not know, by the safety stage; moving along the obstacle is no progress), and the
+caller plans again from where it is. It is following again as soon as either moves on.
+
+Pure and ROS-free: time is what :meth:`PlanFollower.step` is told.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from wmm_control.checks import as_finite_vector
+from wmm_control.errors import ConfigError
+from wmm_control.geometry import norm, rotation_angle, wrap_angle
+from wmm_control.planning.handoff import Handoff
+from wmm_control.resolvers.interface import PoseTarget
+
+__all__ = ['FollowParams', 'FollowState', 'FollowStep', 'PlanFollower']
+
+
+@dataclass(frozen=True)
+class FollowParams:
+    """Settings of :class:`PlanFollower` (module docstring).
+
+    Attributes:
+        lead_distance: [m] the end effector's lag behind its point at which the plan's clock stops.
+        lead_angle: [rad] the same for its orientation.
+        base_lead_distance: [m] the base's lag behind its planned pose at which the base's pace
+            is least (module docstring).
+        base_lead_angle: [rad] the same for its heading.
+        slow_from: the fraction of the lead, in [0, 1), up to which the clock keeps full pace.
+        base_floor: the pace, in [0, 1], the base's lag leaves the clock when the end effector
+            is measured.
+        rate_slew: [1/s] the most the clock's rate rises per second.
+        lookahead: [s] of the plan, ahead of its clock, searched for the pose the base has passed.
+        stall_time: [s] without progress (module docstring) before the follower is stalled.
+        stall_distance: [m] of motion that is progress.
+        stall_angle: [rad] of turn that is progress.
+
+    Raises:
+        ConfigError: a value out of its range.
+    """
+
+    lead_distance: float = 0.15
+    lead_angle: float = 0.35
+    base_lead_distance: float = 0.3
+    base_lead_angle: float = 0.6
+    slow_from: float = 0.5
+    base_floor: float = 0.25
+    rate_slew: float = 2.0
+    lookahead: float = 2.0
+    stall_time: float = 5.0
+    stall_distance: float = 0.02
+    stall_angle: float = 0.05
+
+    def __post_init__(self) -> None:
+        positive = (
+            'lead_distance',
+            'lead_angle',
+            'base_lead_distance',
+            'base_lead_angle',
+            'rate_slew',
+            'stall_time',
+            'stall_distance',
+            'stall_angle',
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+                raise ConfigError(f'FollowParams.{name} must be a finite number > 0, got {value!r}')
+        if not (isinstance(self.lookahead, (int, float)) and math.isfinite(self.lookahead) and self.lookahead >= 0.0):
+            raise ConfigError(f'FollowParams.lookahead must be a finite number >= 0 [s], got {self.lookahead!r}')
+        if not (isinstance(self.slow_from, (int, float)) and 0.0 <= self.slow_from < 1.0):
+            raise ConfigError(f'FollowParams.slow_from must be in [0, 1), got {self.slow_from!r}')
+        if not (isinstance(self.base_floor, (int, float)) and 0.0 <= self.base_floor <= 1.0):
+            raise ConfigError(f'FollowParams.base_floor must be in [0, 1], got {self.base_floor!r}')
+
+
+class FollowState(enum.Enum):
+    """Where the follower is."""
+
+    #: giving the plan's points
+    FOLLOWING = 'following'
+    #: the plan is done: the target is the goal
+    APPROACH = 'approach'
+    #: following, but neither the plan's clock nor the base has made progress for the stall time
+    STALLED = 'stalled'
+
+
+@dataclass(frozen=True)
+class FollowStep:
+    """What the follower gives for one period.
+
+    Attributes:
+        target: what to give the resolver: a point of the plan (a trajectory point), or the goal
+            once the plan is done.
+        state: :class:`FollowState`.
+        progress: the fraction of the plan's time done, in [0, 1].
+    """
+
+    target: PoseTarget
+    state: FollowState
+    progress: float
+
+
+class PlanFollower:
+    """Gives a hand-off's points at the pace of the measured base, then the goal (module
+    docstring).
+
+    Args:
+        handoff: the plan's points and planned base poses.
+        goal: the end-effector goal, given once the plan is done.
+        params: :class:`FollowParams`.
+    """
+
+    def __init__(self, handoff: Handoff, goal: PoseTarget, params: FollowParams = FollowParams()) -> None:
+        if len(handoff.base_poses) != len(handoff.points) or not handoff.points:
+            raise ConfigError('a hand-off needs one planned base pose per point, and at least one point')
+        self.handoff = handoff
+        self.goal = goal
+        self.params = params
+        self._clock = 0.0  # s [s]
+        self._rate = 0.0  # the clock's rate, starting from rest as the robot does
+        self._passed = 0  # the last planned sample the base has passed
+        self._idle = 0.0  # [s] without progress
+        self._anchor_plan: np.ndarray | None = None  # the planned pose at the last progress
+        self._anchor_lag = (math.inf, math.inf)  # the base's lag (distance, angle) then
+
+    @property
+    def clock(self) -> float:
+        """[s] the plan's time reached."""
+        return self._clock
+
+    @property
+    def rate(self) -> float:
+        """The plan's clock's current rate, in [0, 1]."""
+        return self._rate
+
+    def planned_pose(self, s: float | None = None) -> np.ndarray:
+        """The planned base pose (x, y, θ) at the plan's time ``s`` [s] (default: its clock),
+        interpolated between samples. Shape (3,)."""
+        poses, dt = self.handoff.base_poses, self.handoff.dt
+        if len(poses) == 1:
+            return poses[0].copy()
+        u = min(max((self._clock if s is None else s) / dt, 0.0), len(poses) - 1.0)
+        k = min(int(math.floor(u)), len(poses) - 2)
+        a, b = poses[k], poses[k + 1]
+        delta = b - a
+        delta[2] = wrap_angle(float(delta[2]))
+        return a + (u - k) * delta
+
+    def _lag(self, planned: np.ndarray, base: np.ndarray) -> np.ndarray:
+        """The lag of ``base`` behind the ``planned`` pose(s) as a fraction of the lead."""
+        p = self.params
+        planned = np.atleast_2d(planned)
+        distance = np.hypot(planned[:, 0] - base[0], planned[:, 1] - base[1])
+        angle = np.abs(wrap_angle(planned[:, 2] - base[2]))
+        return np.maximum(distance / p.base_lead_distance, angle / p.base_lead_angle)
+
+    @staticmethod
+    def _apart(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+        """(distance [m], heading difference [rad]) of two poses."""
+        return math.hypot(a[0] - b[0], a[1] - b[1]), abs(wrap_angle(float(a[2] - b[2])))
+
+    def _moved(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether two poses are a step of progress apart."""
+        distance, angle = self._apart(a, b)
+        return distance >= self.params.stall_distance or angle >= self.params.stall_angle
+
+    def _index(self, s: float) -> int:
+        """The sample in force at the plan's time ``s``."""
+        return min(int(math.floor(s / self.handoff.dt + 1e-9)), len(self.handoff.points) - 1)
+
+    def _ee_lag(self, k: int, ee: PoseTarget) -> float:
+        """The end effector's lag behind the point of sample ``k`` as a fraction of the lead."""
+        point, p = self.handoff.points[k], self.params
+        return max(
+            norm(point.position - ee.position) / p.lead_distance,
+            rotation_angle(point.rotation, ee.rotation) / p.lead_angle,
+        )
+
+    def _pace(self, lag: float, floor: float = 0.0) -> float:
+        return min(max((1.0 - lag) / (1.0 - self.params.slow_from), floor), 1.0)
+
+    def step(
+        self,
+        dt: float,
+        base_pose: ArrayLike,
+        ee_position: ArrayLike | None = None,
+        ee_rotation: ArrayLike | None = None,
+    ) -> FollowStep:
+        """Advance the plan's clock by the period ``dt`` [s] at the pace the robot keeps (its
+        measured base pose ``base_pose`` (x, y, θ) and, if given, end-effector pose
+        ``ee_position`` [m], ``ee_rotation`` (3, 3) in the world), and give what the resolver
+        tracks this period.
+
+        Raises:
+            ValueError: ``dt`` not a finite number ≥ 0, ``base_pose`` not three finite numbers,
+                an end-effector pose malformed or given by half.
+        """
+        if not (math.isfinite(dt) and dt >= 0.0):
+            raise ValueError(f'dt must be a finite number >= 0 [s], got {dt!r}')
+        base = as_finite_vector(base_pose, 3, 'base pose')
+        ee = None
+        if ee_position is not None and ee_rotation is not None:  # PoseTarget checks them
+            ee = PoseTarget(np.asarray(ee_position, dtype=float), np.asarray(ee_rotation, dtype=float))
+        elif ee_position is not None or ee_rotation is not None:
+            raise ValueError('the end effector is measured by its position and its rotation together')
+        p, handoff = self.params, self.handoff
+        end = handoff.duration
+        if self._clock >= end:
+            return FollowStep(self.goal, FollowState.APPROACH, 1.0)
+        # the base ahead of the plan pulls the clock forward
+        last = len(handoff.base_poses) - 1
+        given = self._index(self._clock)  # the point given last period
+        horizon = min(last, int(math.floor((self._clock + p.lookahead) / handoff.dt + 1e-9)))
+        window = handoff.base_poses[self._passed : horizon + 1]
+        if len(window):
+            self._passed += int(np.argmin(self._lag(window, base)))
+        self._clock = max(self._clock, self._passed * handoff.dt)
+        # the clock's pace from the lags behind the plan at it
+        base_lag = float(self._lag(self.planned_pose(self._clock), base)[0])
+        wanted = self._pace(base_lag)
+        if ee is not None:
+            wanted = min(self._pace(self._ee_lag(self._index(self._clock), ee)), max(wanted, p.base_floor))
+        self._rate = min(wanted, self._rate + p.rate_slew * dt)
+        before = self.planned_pose(self._clock)
+        clock = min(self._clock + self._rate * dt, end)
+        if ee is not None:  # no new point beyond the lead from the end effector (the samples' step)
+            k = self._index(clock)
+            while k > given and self._ee_lag(k, ee) > 1.0:
+                k -= 1
+            if clock > (k + 1.0 - 1e-6) * handoff.dt:  # held at sample k: the rate it moved at
+                clock = max(self._clock, (k + 1.0 - 1e-6) * handoff.dt)
+                self._rate = (clock - self._clock) / dt if dt > 0.0 else 0.0
+        self._clock = clock
+        if self._clock >= end:
+            return FollowStep(self.goal, FollowState.APPROACH, 1.0)
+        # progress since the last: the planned pose moved on, or the base came nearer to it
+        planned = self.planned_pose(self._clock)
+        lag = self._apart(planned, base)
+        if self._anchor_plan is None:
+            self._anchor_plan = before
+        closer = lag[0] <= self._anchor_lag[0] - p.stall_distance or lag[1] <= self._anchor_lag[1] - p.stall_angle
+        if self._moved(planned, self._anchor_plan) or closer:
+            self._anchor_plan, self._anchor_lag, self._idle = planned, lag, 0.0
+        else:
+            self._idle += dt
+        point = handoff.points[self._index(self._clock)]
+        target = PoseTarget(
+            point.position,
+            point.rotation,
+            velocity=self._rate * point.velocity,
+            acceleration=self._rate**2 * point.acceleration,
+        )
+        state = FollowState.STALLED if self._idle >= p.stall_time else FollowState.FOLLOWING
+        return FollowStep(target, state, self._clock / end)
+
+    def remaining_poses(self) -> np.ndarray:
+        """The planned base poses (x, y, θ) the base has not passed yet, from the one at the
+        plan's clock to the path's end (empty once the plan is done). Shape (N, 3)."""
+        if self._clock >= self.handoff.duration:
+            return np.zeros((0, 3))
+        return self.handoff.base_poses[self._index(self._clock) :].copy()

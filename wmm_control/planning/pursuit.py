@@ -1,0 +1,520 @@
+"""A goal pursued past what is in the way: the ``goal_planner`` node's logic, ROS-free.
+
+:class:`GoalPursuit` stands between the user's goals and the resolver. Each goal is checked as
+the resolver checks it (:func:`~wmm_control.resolvers.targets.check_goal`: frame, NaN/inf,
+``max_goal_distance``, the floor and the highest reach, a zero quaternion); a refused one is
+logged, and the robot is held where it is. An accepted one is planned
+(:class:`~wmm_control.planning.GoalPlanner`) from the base's pose, in a thread of its own
+(:class:`PlanWorker`): the caller's period never waits for a plan. The plan decides:
+
+* **direct**: the best stance is where the base stands (the arm reaches the goal from here,
+  clear of the obstacles): the goal goes to the resolver unchanged, as without the planner;
+* **following**: a base path to a stance elsewhere: its hand-off points
+  (:class:`~wmm_control.planning.handoff.Handoff`) are given one per period at the pace the
+  base keeps (:class:`~wmm_control.planning.follow.PlanFollower`), then the goal itself for the
+  resolver's final whole-body approach (**approach**);
+* **no way**: the planner's reason (the goal inside an obstacle, out of reach, no stance, no
+  path within the budget); nothing is forwarded and the robot is held.
+
+The follower paces the points by the measured base and end effector (forward kinematics of
+the base pose and arm joints). While following, the plan is made again from where the base is
+when the follower reports a stall, or when the obstacles change and the rest of the planned
+path (:meth:`PlanFollower.remaining_poses`) comes nearer an obstacle than the travel margin
+(checked by the worker, on the new obstacles); the arm then travels in the posture it has (the
+planner's own when that finds no way). Until the new plan comes the robot is held. After
+``max_replans`` such plans for a goal the goal goes to the resolver from where the robot is (the
+method's own approach), as ``wmm_randomized --plan`` does.
+
+**Holding** the robot is giving the resolver the end effector's current pose as its goal (what
+the viewer's "Hold here" does), from the measured base pose and arm joints; it is due whenever
+the resolver may be pursuing something this object gave it (a point, a goal) and the pursuit
+stops or changes course. It waits until both are known.
+
+Time is what :meth:`GoalPursuit.step` is told.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import queue
+import threading
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from wmm_control.geometry import matrix_from_quaternion
+from wmm_control.kinematics.model import KinematicModel
+from wmm_control.kinematics.obstacles import Obstacle
+from wmm_control.kinematics.workspace import Workspace
+from wmm_control.planning.follow import FollowParams, FollowState, PlanFollower
+from wmm_control.planning.handoff import Handoff
+from wmm_control.planning.planner import GoalPlanner, Plan
+from wmm_control.resolvers.interface import PoseTarget
+from wmm_control.resolvers.targets import LogEvent, LogThrottle, check_goal
+from wmm_control.robot_config import RobotConfig
+
+__all__ = ['GoalPursuit', 'PlanWorker', 'PursuitLog', 'PursuitState', 'PursuitStep', 'path_blocked']
+
+
+class PursuitState(str, Enum):
+    """Where the pursuit of the goal is."""
+
+    #: no goal yet
+    IDLE = 'idle'
+    #: a plan is being made (the robot held)
+    PLANNING = 'planning'
+    #: the plan's points go to the resolver
+    FOLLOWING = 'following'
+    #: the plan is done: the resolver has the goal for the final approach
+    APPROACH = 'approach'
+    #: within reach with nothing in the way: the goal went to the resolver unchanged
+    DIRECT = 'direct'
+    #: the planner found no way (the reason says why): the robot held
+    NO_WAY = 'no_way'
+    #: the goal was refused (the reason says why): the robot held
+    REJECTED = 'rejected'
+
+
+class PursuitLog(LogThrottle):
+    """:class:`~wmm_control.resolvers.targets.LogThrottle` with the pursuit's own kinds: the
+    course of a goal as information, the rest as throttled warnings."""
+
+    INFO = ('accepted', 'planning', 'planned', 'direct', 'approach')
+    INTERVALS = {'no_way': 0.0, 'replan': 0.0}
+
+
+@dataclass(frozen=True)
+class PursuitStep:
+    """What to send this period.
+
+    Attributes:
+        reference: the trajectory point for the resolver (``/ee_reference``), or None.
+        forward_goal: give the resolver the user's goal now, unchanged.
+        hold: a goal that holds the robot where it is (the end effector's pose now), or None.
+        path: the planned base poses (x, y, θ) when they changed (empty: no plan), else None.
+        events: what to log.
+    """
+
+    reference: PoseTarget | None = None
+    forward_goal: bool = False
+    hold: PoseTarget | None = None
+    path: np.ndarray | None = None
+    events: tuple[LogEvent, ...] = ()
+
+
+@dataclass(frozen=True)
+class _PlanJob:
+    ticket: int
+    version: int
+    obstacles: tuple[Obstacle, ...]
+    goal: PoseTarget
+    base_pose: np.ndarray
+    #: the arm's posture to travel in, first (the planner's own when that finds no way); None: its own
+    q_travel: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class _CheckJob:
+    ticket: int
+    version: int
+    obstacles: tuple[Obstacle, ...]
+    poses: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Planned:
+    ticket: int
+    version: int
+    plan: Plan
+    handoff: Handoff | None
+    here: bool
+
+
+@dataclass(frozen=True)
+class _Checked:
+    ticket: int
+    blocked: str
+
+
+@dataclass(frozen=True)
+class _Failed:
+    ticket: int
+    error: str
+
+
+def path_blocked(planner: GoalPlanner, poses: np.ndarray) -> str:
+    """Why the base poses (x, y, θ) ``poses`` of a path are no longer clear for ``planner`` (its
+    obstacles), '' when they are: the first pose nearer an obstacle than the travel margin, arm
+    in the travel posture (:class:`~wmm_control.planning.clearance.Travel`)."""
+    travel = planner.travel
+    for pose in np.asarray(poses, dtype=float).reshape(-1, 3):
+        d = travel.obstacle_clearance(pose)
+        if d < travel.margin:
+            return (
+                f'an obstacle is {d:.3f} m from the planned path at ({pose[0]:.2f}, {pose[1]:.2f}) m, '
+                f'within the travel margin {travel.margin:g} m'
+            )
+    return ''
+
+
+class PlanWorker:
+    """Runs plans and path checks one after the other in a thread of its own (daemon), so that
+    the caller's period never waits for them; :meth:`results` gives what is done.
+
+    Args:
+        robot: the robot.
+        options: keyword arguments of :class:`~wmm_control.planning.GoalPlanner` (margins, budget,
+            seed, ...).
+    """
+
+    def __init__(self, robot: RobotConfig, options: Mapping[str, Any] | None = None) -> None:
+        self.robot = robot
+        self.options = dict(options or {})
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._results: queue.SimpleQueue = queue.SimpleQueue()
+        self._planner: GoalPlanner | None = None
+        self._version = -1
+        #: the ticket of the job the caller waits for: others queued are skipped
+        self.wanted = 0
+        self._thread = threading.Thread(target=self._run, name='goal_planner_worker', daemon=True)
+        self._thread.start()
+
+    def submit(self, job: _PlanJob | _CheckJob) -> None:
+        """Queue ``job``."""
+        self._jobs.put(job)
+
+    def results(self) -> list:
+        """The jobs' results done since the last call, oldest first."""
+        out = []
+        while True:
+            try:
+                out.append(self._results.get_nowait())
+            except queue.Empty:
+                return out
+
+    def close(self, timeout: float | None = None) -> None:
+        """Stop: the jobs queued are dropped, the one under way is finished (an OMPL search
+        cannot be cut short), waited for up to ``timeout`` [s] (None: until it is done). A
+        process must not end while the thread is inside OMPL: the interpreter's finalization
+        then aborts it."""
+        self.wanted = -1
+        self._jobs.put(None)
+        self._thread.join(timeout)
+
+    def _planner_for(self, version: int, obstacles: tuple[Obstacle, ...]) -> GoalPlanner:
+        if self._planner is None or version != self._version:
+            self._planner = GoalPlanner(self.robot, obstacles, **self.options)
+            self._version = version
+        return self._planner
+
+    def _plan(self, planner: GoalPlanner, job: _PlanJob) -> tuple[Plan, np.ndarray]:
+        """The plan of ``job`` and the arm's travel posture it is for: ``job.q_travel`` when given,
+        and when that finds no way the planner's own (the planning times added)."""
+        goal, own = job.goal, planner.travel.q_arm
+        if job.q_travel is None:
+            return planner.plan(goal.position, goal.rotation, job.base_pose), own
+        planner.set_travel_posture(job.q_travel)
+        try:
+            plan = planner.plan(goal.position, goal.rotation, job.base_pose)
+        finally:
+            planner.set_travel_posture(own)
+        if plan.trajectory is not None:
+            return plan, job.q_travel
+        second = planner.plan(goal.position, goal.rotation, job.base_pose)
+        return dataclasses.replace(second, planning_time=plan.planning_time + second.planning_time), own
+
+    def _run(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            if job.ticket != self.wanted:
+                continue  # given up before it started
+            try:
+                planner = self._planner_for(job.version, job.obstacles)
+                if isinstance(job, _CheckJob):
+                    self._results.put(_Checked(job.ticket, path_blocked(planner, job.poses)))
+                    continue
+                plan, travel = self._plan(planner, job)
+                here = plan.stance is not None and np.array_equal(plan.stance.base_pose, job.base_pose)
+                handoff = None
+                if plan.trajectory is not None and not here:
+                    handoff = Handoff.of(planner.model, plan.trajectory, travel)
+                self._results.put(_Planned(job.ticket, job.version, plan, handoff, here))
+            except Exception as exc:  # a bug or a bad robot: reported, and the worker lives on
+                self._results.put(_Failed(job.ticket, f'{type(exc).__name__}: {exc}'))
+
+
+@dataclass
+class _Counters:
+    goals: int = 0
+    goals_rejected: int = 0
+    plans: int = 0
+    replans: int = 0
+    no_way: int = 0
+    points: int = 0
+
+
+class GoalPursuit:
+    """The pursuit of the user's goals for one robot (module docstring).
+
+    Args:
+        robot: the robot.
+        obstacles: the obstacles at the start (world frame); :meth:`set_obstacles` changes them.
+        world_frame: the frame of the goals.
+        max_goal_distance: [m] goals farther from the world origin (on an axis) are refused.
+        follow: the :class:`~wmm_control.planning.follow.FollowParams` (default: its defaults).
+        max_replans: plans made again for one goal (a stall, an obstacle on the path) before the
+            goal goes to the resolver from where the robot is.
+        planner: keyword arguments of :class:`~wmm_control.planning.GoalPlanner`.
+    """
+
+    def __init__(
+        self,
+        robot: RobotConfig,
+        obstacles: Iterable[Obstacle],
+        world_frame: str,
+        max_goal_distance: float,
+        follow: FollowParams | None = None,
+        max_replans: int = 3,
+        planner: Mapping[str, Any] | None = None,
+    ) -> None:
+        self.robot = robot
+        self.model = KinematicModel(robot)
+        self.workspace = Workspace(self.model)
+        self.world_frame = world_frame
+        self.max_goal_distance = float(max_goal_distance)
+        self.follow = follow if follow is not None else FollowParams()
+        self.max_replans = int(max_replans)
+        self.worker = PlanWorker(robot, planner)
+        self.obstacles = tuple(obstacles)
+        self.version = 0  # of the obstacles
+        self.state = PursuitState.IDLE
+        self.reason = ''
+        self.goal: PoseTarget | None = None
+        self.follower: PlanFollower | None = None
+        self.progress = 0.0
+        self.planning_time = math.nan
+        self.replans = 0  # of the goal in force
+        self.counters = _Counters()
+        self._key: tuple | None = None
+        self._ticket = 0  # of the plan in force (or awaited); results of others are dropped
+        self._plan_due = ''  # why a plan is due at the next step ('' none)
+        self._engaged = False  # the resolver may pursue something given by this object
+        self._hold_due = False
+        self._path: np.ndarray | None = None
+        self._no_way_version = -1  # of the obstacles when the goal in force got no way
+
+    def close(self, timeout: float | None = None) -> None:
+        """Stop the worker, waiting up to ``timeout`` [s] for a plan under way (None: until done)."""
+        self.worker.close(timeout)
+
+    # ------------------------------------------------------------------ inputs
+    def new_goal(self, frame: str, pose: ArrayLike) -> list[LogEvent]:
+        """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame`` from the user."""
+        values = np.asarray(pose, dtype=float)
+        quat, reason, events = check_goal(frame, values, self.world_frame, self.max_goal_distance, self.workspace)
+        if quat is None:
+            self.counters.goals_rejected += 1
+            self._stop(PursuitState.REJECTED, reason)
+            self._key = None
+            return events + [LogEvent('rejected', f'rejected goal_pose: {reason}; holding still')]
+        key = tuple(np.round(np.concatenate((values[:3], quat)), 9))
+        if key == self._key and not (self.state is PursuitState.NO_WAY and self._no_way_version != self.version):
+            return events  # the same goal again (a sequencer re-publishing it)
+        self._key = key
+        self.counters.goals += 1
+        self.goal = PoseTarget(values[:3], matrix_from_quaternion(quat))
+        self.replans = 0
+        self._plan_due = 'new goal'
+        self._stop(PursuitState.PLANNING, '')
+        return events + [
+            LogEvent(
+                'accepted',
+                f'new goal: position {np.round(values[:3], 4).tolist()}, quaternion (x, y, z, w) '
+                f'{np.round(quat, 4).tolist()}: planning',
+            )
+        ]
+
+    def set_obstacles(self, obstacles: Iterable[Obstacle]) -> None:
+        """The obstacles changed (world frame): the rest of a path followed is checked on them."""
+        self.obstacles = tuple(obstacles)
+        self.version += 1
+        if self.state is PursuitState.FOLLOWING and self.follower is not None:
+            self.worker.submit(_CheckJob(self._ticket, self.version, self.obstacles, self.follower.remaining_poses()))
+
+    # ------------------------------------------------------------------ the period
+    def step(self, dt: float, base_pose: ArrayLike | None, q_arm: ArrayLike | None) -> PursuitStep:
+        """One period of ``dt`` [s]: what to send, from the measured base pose (x, y, θ) and arm
+        joints (None while they are not known, or stale: then no point is given, no plan started
+        and no hold sent)."""
+        events: list[LogEvent] = []
+        base = None if base_pose is None else np.asarray(base_pose, dtype=float)
+        forward = self._take_results(events, base)
+        reference = None
+        arm = None if q_arm is None else np.asarray(q_arm, dtype=float)
+        ee = self._end_effector(base, arm)
+        if self.state is PursuitState.FOLLOWING and self.follower is not None and base is not None:
+            step = self.follower.step(dt, base, *(ee if ee is not None else (None, None)))
+            self.progress = step.progress
+            if step.state is FollowState.APPROACH:
+                self.state = PursuitState.APPROACH
+                forward = True
+                events.append(LogEvent('approach', 'the planned path is done: the goal goes to the resolver'))
+            elif step.state is FollowState.STALLED:
+                forward = self._replan(events, 'progress stalled on the planned path', base)
+            else:
+                reference = step.target
+                self._engaged = True
+                self.counters.points += 1
+        if forward or reference is not None:
+            self._engaged = True
+            self._hold_due = False  # what is sent now replaces a hold
+        if self._plan_due and base is not None:
+            self._submit_plan(events, base, arm)
+        hold = None
+        if self._hold_due and ee is not None:
+            hold = PoseTarget(*ee)
+            self._hold_due = self._engaged = False
+        path, self._path = self._path, None
+        return PursuitStep(reference, forward, hold, path, tuple(events))
+
+    def _end_effector(self, base: np.ndarray | None, q_arm: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """(position, rotation) of the end effector at the base pose and arm joints, or None."""
+        if base is None or q_arm is None:
+            return None
+        self.model.update(base, q_arm)
+        position, rotation = self.model.ee_placement_world()
+        return np.array(position, dtype=float), np.array(rotation, dtype=float)
+
+    def _stop(self, state: PursuitState, reason: str) -> None:
+        """Stop pursuing what was pursued: no plan followed, a hold due if the resolver may be
+        pursuing something of ours, results of plans under way dropped."""
+        self.state, self.reason = state, reason
+        self.follower = None
+        self.progress = 0.0
+        self._ticket += 1
+        self.worker.wanted = self._ticket
+        if self._engaged:
+            self._hold_due = True
+        if state is not PursuitState.PLANNING:
+            self._plan_due = ''
+        self._path = np.zeros((0, 3))
+
+    def _no_way(self, events: list[LogEvent], reason: str) -> None:
+        self.counters.no_way += 1
+        self._no_way_version = self.version
+        self._stop(PursuitState.NO_WAY, reason)
+        events.append(LogEvent('no_way', f'no way to the goal: {reason}; holding still'))
+
+    def _replan(self, events: list[LogEvent], why: str, base: np.ndarray) -> bool:
+        """Plan again from ``base`` for ``why``; after ``max_replans`` the goal goes to the resolver
+        from where the robot is instead (True: forward it now), as ``wmm_randomized --plan`` does."""
+        if self.replans >= self.max_replans:
+            self.follower = None
+            self.state, self.reason = PursuitState.APPROACH, ''
+            events.append(
+                LogEvent(
+                    'approach',
+                    f'{why}, after {self.replans} plans made again: the goal goes to the resolver from where the '
+                    'robot is',
+                )
+            )
+            return True
+        self.replans += 1
+        self.counters.replans += 1
+        self._plan_due = why
+        self._stop(PursuitState.PLANNING, '')
+        events.append(
+            LogEvent('replan', f'{why}: planning again from where the base is ({self.replans} of {self.max_replans})')
+        )
+        return False
+
+    def _submit_plan(self, events: list[LogEvent], base: np.ndarray, q_arm: np.ndarray | None) -> None:
+        """Queue the plan due: a plan made again lets the arm travel in the posture it has (the
+        first point where the end effector is), the planner's own when that finds no way."""
+        assert self.goal is not None
+        why, self._plan_due = self._plan_due, ''
+        q_travel = q_arm.copy() if self.replans > 0 and q_arm is not None else None
+        self.worker.submit(_PlanJob(self._ticket, self.version, self.obstacles, self.goal, base.copy(), q_travel))
+        self.counters.plans += 1
+        events.append(LogEvent('planning', f'planning ({why}) from the base at {np.round(base, 3).tolist()}'))
+
+    def _take_results(self, events: list[LogEvent], base: np.ndarray | None) -> bool:
+        """Take the worker's results; True when the goal is to be forwarded now (direct)."""
+        forward = False
+        for result in self.worker.results():
+            if result.ticket != self._ticket:
+                continue  # for a goal or a plan given up meanwhile
+            if isinstance(result, _Failed):
+                self._no_way(events, f'the planner failed ({result.error})')
+            elif isinstance(result, _Checked):
+                if result.blocked and self.state is PursuitState.FOLLOWING and base is not None:
+                    forward = self._replan(events, result.blocked, base) or forward
+            else:
+                forward = self._planned(events, result) or forward
+        return forward
+
+    def _planned(self, events: list[LogEvent], result: _Planned) -> bool:
+        plan = result.plan
+        self.planning_time = plan.planning_time
+        if plan.no_way is not None or plan.trajectory is None:
+            self._no_way(events, plan.reason or 'no plan')
+            return False
+        if result.here:
+            self.state, self.reason = PursuitState.DIRECT, ''
+            self._path = np.zeros((0, 3))
+            events.append(
+                LogEvent(
+                    'direct',
+                    f'the goal is within reach with nothing in the way: sent to the resolver unchanged '
+                    f'(planned in {plan.planning_time:.3f} s)',
+                )
+            )
+            return True
+        assert result.handoff is not None and self.goal is not None
+        self.follower = PlanFollower(result.handoff, self.goal, self.follow)
+        self.state, self.reason, self.progress = PursuitState.FOLLOWING, '', 0.0
+        poses = plan.trajectory.poses
+        self._path = poses
+        length = float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))) if len(poses) > 1 else 0.0
+        stance = plan.stance.base_pose if plan.stance is not None else poses[-1]
+        events.append(
+            LogEvent(
+                'planned',
+                f'planned in {plan.planning_time:.3f} s: the base drives {length:.2f} m to '
+                f'{np.round(stance, 3).tolist()} in {plan.trajectory.duration:.1f} s, then the goal',
+            )
+        )
+        if result.version != self.version:  # the obstacles changed while it was planned
+            self.worker.submit(_CheckJob(self._ticket, self.version, self.obstacles, self.follower.remaining_poses()))
+        return False
+
+    # ------------------------------------------------------------------ report
+    def status(self) -> tuple[str, str, dict]:
+        """(level 'ok' or 'warn', message, values) for ``/diagnostics``."""
+        level = 'warn' if self.state in (PursuitState.NO_WAY, PursuitState.REJECTED) else 'ok'
+        message = self.state.value + (f': {self.reason}' if self.reason else '')
+        c = self.counters
+        values = {
+            'state': self.state.value,
+            'reason': self.reason,
+            'goal': [] if self.goal is None else self.goal.position.tolist(),
+            'progress': self.progress,
+            'replans_of_goal': self.replans,
+            'goals': c.goals,
+            'goals_rejected': c.goals_rejected,
+            'plans': c.plans,
+            'replans': c.replans,
+            'no_way': c.no_way,
+            'points': c.points,
+            'obstacles': len(self.obstacles),
+        }
+        if math.isfinite(self.planning_time):  # none before the first plan
+            values['planning_time_s'] = self.planning_time
+        return level, message, values
