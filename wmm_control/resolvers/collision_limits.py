@@ -98,7 +98,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from wmm_control.geometry import rotation_z
-from wmm_control.kinematics.collision import FLOOR, NearPairs
+from wmm_control.kinematics.collision import NearPairs
 from wmm_control.resolvers.constraints import TOLERANCE, Box, Constraint
 
 __all__ = ['Pairs', 'VelocityDampers', 'BaseRows', 'TURN_SHARE', 'PATH_SPEED']
@@ -115,6 +115,8 @@ _PARTS = tuple(
     np.array(part, dtype=bool) for part in ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1))
 )
 _LINEAR = np.array([1.0, 1.0, 0.0])
+#: The dampers' constraints, in the order of the pairs' kinds.
+_KINDS = ('self', 'floor', 'obstacle')
 
 
 @dataclass(frozen=True)
@@ -134,6 +136,8 @@ class Pairs:
         axes: indices into (vx, vy, ω) of the command's base entries.
         to_base: the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for the
             world frame's rates. Shape (3, 3).
+        kinds: ``(kind, pairs)`` in order: the robot against itself (``self``), the floor
+            (``floor``), obstacles (``obstacle``); the pairs come in that order.
     """
 
     rows: np.ndarray
@@ -144,6 +148,7 @@ class Pairs:
     floor: np.ndarray
     axes: tuple[int, ...]
     to_base: np.ndarray
+    kinds: tuple[tuple[str, int], ...]
 
     @property
     def body(self) -> np.ndarray:
@@ -152,14 +157,14 @@ class Pairs:
         return self.moved & ~self.rows[:, len(self.axes) :].any(axis=1)
 
     def on_base(
-        self, base: np.ndarray, name: str, shift: ArrayLike = 0.0, which: np.ndarray | None = None
-    ) -> Constraint:
+        self, base: np.ndarray, shift: ArrayLike = 0.0, which: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The rows of the pairs ``which`` (default: the ones the base moves) again, with the base
         part ``base`` (over (vx, vy, ω) in the command's terms, one row per such pair) and the
-        bound plus ``shift``."""
+        bound plus ``shift``: ``(rows, bound)``, rows ``rows · q̇ ≥ bound``."""
         which = self.moved if which is None else which
         rows = np.hstack((base[:, self.axes], self.rows[which, len(self.axes) :]))
-        return Constraint.from_lower(rows, self.bound[which] + shift, name)
+        return rows, self.bound[which] + shift
 
 
 def linear_axes(axes, base_acceleration) -> tuple[list[int], float]:
@@ -190,31 +195,31 @@ class VelocityDampers:
 
     def pairs(self, near: NearPairs, axes: tuple[int, ...], to_base: np.ndarray, base_twist=None) -> Pairs:
         """The rows and bounds of the pairs ``near`` over a command whose base entries are
-        ``axes`` (through ``to_base``); ``base_twist`` (vx, vy, ω): the base's twist when it
-        is not part of the command, whose share moves the bounds."""
-        base_full = near.base_jacobian
+        ``axes`` (through ``to_base``), the robot's own pairs first, then those with the floor,
+        then those with obstacles; ``base_twist`` (vx, vy, ω): the base's twist when it is not
+        part of the command, whose share moves the bounds."""
+        base_full, rate, distance = near.base_jacobian, near.rate_jacobian, near.distance
         moved = np.asarray(base_full.any(axis=1), dtype=bool)
-        rows = np.hstack(((base_full @ to_base)[:, axes], near.rate_jacobian))
-        distance = near.distance
+        floor = near.floor
+        kind = 2 * moved + floor
+        if (kind[1:] < kind[:-1]).any():
+            order = np.argsort(kind, kind='stable')
+            base_full, rate, distance = base_full[order], rate[order], distance[order]
+            moved, floor, kind = moved[order], floor[order], kind[order]
+        rows = np.hstack(((base_full @ to_base)[:, axes], rate))
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
             distance = distance - self.body_margin * (moved & ~rows[:, len(axes) :].any(axis=1))
         bound = -self._allowed(distance, rows, axes, moved)
         if base_twist is not None:
             bound = bound - base_full @ np.asarray(base_twist, dtype=float)
-        floor = np.fromiter((FLOOR in pair for pair in near.links), dtype=bool, count=len(near))
-        return Pairs(rows, bound, base_full, distance, moved, floor, tuple(axes), to_base)
+        counts = np.bincount(kind, minlength=3).tolist()
+        kinds = tuple((name, count) for name, count in zip(_KINDS, counts) if count)
+        return Pairs(rows, bound, base_full, distance, moved, floor, tuple(axes), to_base, kinds)
 
-    def constraints(self, pairs: Pairs) -> list[Constraint]:
-        """The dampers: ``self`` (the robot against itself), ``floor`` and ``obstacle``."""
-        out = []
-        for name, which in (
-            ('self', ~(pairs.moved | pairs.floor)),
-            ('floor', pairs.floor),
-            ('obstacle', pairs.moved),
-        ):
-            if which.any():
-                out.append(Constraint.from_lower(pairs.rows[which], pairs.bound[which], name))
-        return out
+    def constraints(self, pairs: Pairs) -> Constraint:
+        """The dampers, one row per pair: ``self`` (the robot against itself), ``floor`` and
+        ``obstacle``."""
+        return Constraint(-pairs.rows, -pairs.bound, 'dampers', pairs.kinds)
 
     def _allowed(self, distances, rows, axes, moved) -> np.ndarray:
         """Each pair's fastest allowed approach [m/s], braking no harder than the command's
@@ -350,7 +355,7 @@ class BaseRows:
         if norm < PATH_SPEED**2 or not pairs.moved.any():
             return Constraint.empty(n, 'base along path')
         along = (own[pairs.moved, None] * v0 / norm) @ pairs.to_base  # j_b v₀ v₀ᵀ / |v₀|²
-        return pairs.on_base(along, 'base along path')
+        return Constraint.from_lower(*pairs.on_base(along), 'base along path')
 
     def between(self, pairs: Pairs, v0) -> Constraint:
         """For each pair the base moves, the row at every corner of the box between the base's
@@ -365,11 +370,10 @@ class BaseRows:
             return Constraint.empty(n, 'base between')
         j = pairs.base[pairs.moved]
         measured = j * np.asarray(v0, dtype=float)  # each axis's share of the approach at v₀
-        corners = [
-            pairs.on_base((j * part) @ pairs.to_base, 'base between', -measured[:, ~part].sum(axis=1))
-            for part in _PARTS
-        ]
-        return Constraint.stack(corners, n, 'base between')
+        corners = [pairs.on_base((j * part) @ pairs.to_base, -measured[:, ~part].sum(axis=1)) for part in _PARTS]
+        return Constraint.from_lower(
+            np.vstack([rows for rows, _ in corners]), np.concatenate([bound for _, bound in corners]), 'base between'
+        )
 
     def after_turn(self, pairs: Pairs, v0, command, world_rates: bool) -> Constraint:
         """For each pair the base moves, the same row as the base will see it once it has turned
@@ -393,7 +397,7 @@ class BaseRows:
         if abs(turn) < TOLERANCE:
             return Constraint.empty(n, 'base after turn')
         ahead = pairs.base[pairs.moved] @ rotation_z(turn)  # rows R(−Δθ) j: jᵀ R(Δθ)
-        return pairs.on_base(ahead @ pairs.to_base, 'base after turn')
+        return Constraint.from_lower(*pairs.on_base(ahead @ pairs.to_base), 'base after turn')
 
     def without_turn(self, pairs: Pairs) -> Constraint:
         """For each pair of the base's own body (chassis, wheels: no arm joint moves it) and an
@@ -409,7 +413,7 @@ class BaseRows:
         if not turning.any():
             return Constraint.empty(n, 'base without turn')
         linear = pairs.base[turning] * _LINEAR
-        return pairs.on_base(linear @ pairs.to_base, 'base without turn', which=turning)
+        return Constraint.from_lower(*pairs.on_base(linear @ pairs.to_base, which=turning), 'base without turn')
 
     def turn_rate(self, pairs: Pairs, base_velocity) -> Constraint:
         """For each pair of the base's own body and an obstacle, a row on the turn rate: turning

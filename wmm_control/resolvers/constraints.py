@@ -71,7 +71,7 @@ class Constraint:
             raise ShapeError(f'constraint {self.name!r}: h must have shape ({G.shape[0]},), got {h.shape}')
         if not np.isfinite(G).all():
             raise NonFiniteError(f'constraint {self.name!r}: non-finite entries in G')
-        if np.isnan(h).any() or np.isneginf(h).any():
+        if not (h > -np.inf).all():  # NaN compares false too
             raise NonFiniteError(f'constraint {self.name!r}: NaN or -inf in h: {h.tolist()}')
         parts = tuple(self.parts) or ((self.name, G.shape[0]),)
         if sum(rows for _, rows in parts) != G.shape[0]:
@@ -79,6 +79,14 @@ class Constraint:
         object.__setattr__(self, 'G', G)
         object.__setattr__(self, 'h', h)
         object.__setattr__(self, 'parts', parts)
+
+    @classmethod
+    def _checked(cls, G: np.ndarray, h: np.ndarray, name: str, parts: tuple[tuple[str, int], ...]) -> Constraint:
+        """A constraint of rows taken from constraints already checked (stacked, selected)."""
+        out = object.__new__(cls)
+        for key, value in (('G', G), ('h', h), ('name', name), ('parts', parts)):
+            object.__setattr__(out, key, value)
+        return out
 
     @property
     def n(self) -> int:
@@ -91,7 +99,7 @@ class Constraint:
     @classmethod
     def empty(cls, n: int, name: str = 'constraint') -> Constraint:
         """No rows on a command of ``n`` entries."""
-        return cls(np.zeros((0, n)), np.zeros(0), name)
+        return cls._checked(np.zeros((0, n)), np.zeros(0), name, ((name, 0),))
 
     @classmethod
     def from_lower(cls, rows: ArrayLike, bound: ArrayLike, name: str = 'constraint') -> Constraint:
@@ -114,7 +122,9 @@ class Constraint:
         if not parts:
             return cls.empty(n, name)
         filled = [c for c in constraints if len(c)]
-        return cls(np.vstack([c.G for c in filled]), np.concatenate([c.h for c in filled]), name, parts)
+        if len(filled) == 1:
+            return cls._checked(filled[0].G, filled[0].h, name, parts)
+        return cls._checked(np.vstack([c.G for c in filled]), np.concatenate([c.h for c in filled]), name, parts)
 
     def row_names(self) -> np.ndarray:
         """The name of the part each row comes from. Shape (m,)."""
@@ -128,7 +138,7 @@ class Constraint:
         index = np.repeat(np.arange(len(self.parts)), [rows for _, rows in self.parts])
         kept = np.bincount(index[keep], minlength=len(self.parts))
         parts = _merged((name, int(rows)) for (name, _), rows in zip(self.parts, kept))
-        return Constraint(self.G[keep], self.h[keep], self.name, parts or ((self.name, 0),))
+        return Constraint._checked(self.G[keep], self.h[keep], self.name, parts or ((self.name, 0),))
 
     def residual(self, x: ArrayLike) -> np.ndarray:
         """``G x − h`` (≤ 0 where a row is met). Shape (m,)."""
@@ -184,9 +194,9 @@ class Box:
         lower, upper = np.asarray(self.lower, dtype=float), np.asarray(self.upper, dtype=float)
         if lower.ndim != 1 or lower.shape != upper.shape:
             raise ShapeError(f'box: lower and upper must be vectors of one shape, got {lower.shape} and {upper.shape}')
-        if np.isnan(lower).any() or np.isnan(upper).any():
-            raise NonFiniteError(f'box: NaN bounds: {lower.tolist()}, {upper.tolist()}')
-        if (lower > upper).any():
+        if not (lower <= upper).all():  # NaN compares false too
+            if np.isnan(lower).any() or np.isnan(upper).any():
+                raise NonFiniteError(f'box: NaN bounds: {lower.tolist()}, {upper.tolist()}')
             raise ValueError(f'box: lower above upper at entries {np.flatnonzero(lower > upper).tolist()}')
         object.__setattr__(self, 'lower', lower)
         object.__setattr__(self, 'upper', upper)
@@ -203,14 +213,21 @@ class Box:
         """The box with entries ``index`` held at ``value``."""
         lower, upper = self.lower.copy(), self.upper.copy()
         lower[index] = upper[index] = value
-        return Box(lower, upper)
+        if not (lower <= upper).all():
+            raise NonFiniteError(f'box: entries {index} held at NaN')
+        out = object.__new__(Box)
+        object.__setattr__(out, 'lower', lower)
+        object.__setattr__(out, 'upper', upper)
+        return out
 
     def greatest(self, G: np.ndarray) -> np.ndarray:
         """The greatest value of each row of ``G x`` over the box (inf where it is unbounded):
         a row ``G x ≤ h`` with ``greatest ≤ h`` holds all over the box."""
-        with np.errstate(invalid='ignore'):  # 0 × inf: an entry the row does not involve
+        if np.isfinite(self.lower).all() and np.isfinite(self.upper).all():
+            return np.maximum(G * self.lower, G * self.upper).sum(axis=1)
+        with np.errstate(invalid='ignore'):  # 0 × inf: an entry the row does not involve adds nothing
             values = np.maximum(G * self.lower, G * self.upper)
-            return np.nan_to_num(values, nan=0.0, posinf=np.inf, neginf=-np.inf).sum(axis=1)
+        return np.nan_to_num(values, nan=0.0, posinf=np.inf, neginf=-np.inf).sum(axis=1)
 
     def free(self) -> np.ndarray:
         """The entries the box leaves room on (lower < upper). Boolean, shape (n,)."""
