@@ -13,9 +13,9 @@ world frame's rates), then the arm's joints. Each checked pair closer than the l
 of the command (the base controller's, when only the arm is left to choose) moves each row's
 bound by its share.
 
-**Velocity dampers** (:class:`VelocityDampers`, constraints ``self``, ``floor``,
-``obstacle``). For each checked pair closer than the influence distance ``d_i`` the distance
-may shrink no faster than (Faverjon and Tournassoud's velocity damper)
+**Velocity dampers** (:class:`VelocityDampers`, one row per pair in the parts ``self``,
+``floor`` and ``obstacle``). For each checked pair closer than the influence distance ``d_i``
+the distance may shrink no faster than (Faverjon and Tournassoud's velocity damper)
 
     ḋ ≥ −ξ (d − d_s) / (d_i − d_s),
 
