@@ -100,7 +100,7 @@ from wmm_control.geometry import (
     yaw_from_quaternion,
 )
 from wmm_control.resources import loadable_urdf
-from wmm_control.robot_config import MecanumBase, RobotConfig, SteerableBase, load_robot
+from wmm_control.robot_config import RobotConfig, SteerableBase, load_robot
 
 from sim_bridge.client import OwnedClient
 from sim_bridge.collision import add_obstacle
@@ -169,7 +169,7 @@ class SimWorld(OwnedClient):
 
     def __init__(
         self,
-        robot: str | Path | RobotConfig = 'steerable',
+        robot: str | Path | RobotConfig,
         base_mode: str = 'kinematic',
         dt: float = 0.025,
         substeps: int = 10,
@@ -204,8 +204,9 @@ class SimWorld(OwnedClient):
         # the rolling model of the base: the steerable one closes on the steer angles and rates
         self._geom = SteerableGeometry.from_config(base) if isinstance(base, SteerableBase) else wheel_kinematics(cfg)
         self._steerable = isinstance(self._geom, SteerableGeometry)
-        # Mecanum wheels drive through their rollers (the tyre model of physics mode)
-        self._tyre = isinstance(base, MecanumBase)
+        # wheels that drive through free rollers (Mecanum): the tyre model of physics mode
+        self._roller = base.roller_axes.tolist()
+        self._tyre = bool(self._roller)
         self.command_groups = {'arm': tuple(cfg.arm.joints), **base.command_groups}
         self._r_wheel = base.wheel_radius
         self.joint_names = tuple(n for g in self.command_groups.values() for n in g)
@@ -395,9 +396,6 @@ class SimWorld(OwnedClient):
             )
             # Regularised Coulomb: damping c with 4 c h / m = 0.25 keeps the explicit step stable.
             self._tyre_c = 0.25 * mass / (4.0 * self._h)
-            # the axis (base frame, unit) of each wheel's roller on the floor: traction only along it
-            angles = self.robot.base.roller_angles  # a Mecanum base: self._tyre
-            self._roller = [(-math.sin(g), math.cos(g)) for g in angles.tolist()]
         self._place()
         zero = [0.0] * self._n
         p.setJointMotorControlArray(

@@ -22,7 +22,7 @@ from std_msgs.msg import Float64MultiArray
 from ros_helpers import held_up, overrides, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.base.mecanum import MecanumKinematics
-from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
+from wmm_control.experiments.ros_run import LOCKSTEP_TIMEOUT
 from wmm_control.nodes.conversions import twist_stamped
 from wmm_control.nodes.stamps import StampGate
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
@@ -315,13 +315,19 @@ def test_a_simulator_period_that_disagrees_with_the_controllers_is_reported(ros)
     ros.add(
         MecanumControllerNode(
             context=ros.context,
-            parameter_overrides=overrides(diagnostics_period=1e-9, **LOCKSTEP_WAITS['mecanum_controller']),
+            parameter_overrides=overrides(diagnostics_period=1e-9),
         )
     )
     ros.add(
         SimNode(
             context=ros.context,
-            parameter_overrides=overrides(robot='mecanum', timing='lockstep', lockstep_groups='wheel', period=0.05),
+            parameter_overrides=overrides(
+                robot='mecanum',
+                timing='lockstep',
+                lockstep_groups='wheel',
+                period=0.05,
+                lockstep_timeout=LOCKSTEP_TIMEOUT,
+            ),
         )
     )
     assert ros.spin_until(lambda: any('every 0.05 s' in w for w in probe.warnings), timeout=60.0)

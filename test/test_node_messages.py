@@ -10,7 +10,7 @@ from rclpy.qos import ReliabilityPolicy
 
 from ros_helpers import overrides
 from sim_bridge.node import SimNode
-from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
+from wmm_control.experiments.ros_run import LOCKSTEP_TIMEOUT
 from wmm_control.nodes.diagnostics import DiagnosticsGate
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
@@ -116,7 +116,6 @@ def test_diagnostics_keys_are_the_documented_ones(ros, robot):
                 robot=robot,
                 method='task_sharing' if robot == 'steerable' else 'amp',
                 diagnostics_period=0.05,
-                **LOCKSTEP_WAITS['redundancy_resolver'],
             ),
         )
     )
@@ -124,21 +123,22 @@ def test_diagnostics_keys_are_the_documented_ones(ros, robot):
         ros.add(
             SwmrControllerNode(
                 context=ros.context,
-                parameter_overrides=overrides(diagnostics_period=0.05, **LOCKSTEP_WAITS['swmr_controller']),
+                parameter_overrides=overrides(diagnostics_period=0.05),
             )
         )
     else:
         ros.add(
             MecanumControllerNode(
                 context=ros.context,
-                parameter_overrides=overrides(
-                    robot=robot, diagnostics_period=0.05, **LOCKSTEP_WAITS['mecanum_controller']
-                ),
+                parameter_overrides=overrides(robot=robot, diagnostics_period=0.05),
             )
         )
     sim = ros.add(
         SimNode(
-            context=ros.context, parameter_overrides=overrides(robot=robot, timing='lockstep', diagnostics_period=0.05)
+            context=ros.context,
+            parameter_overrides=overrides(
+                robot=robot, timing='lockstep', diagnostics_period=0.05, lockstep_timeout=LOCKSTEP_TIMEOUT
+            ),
         )
     )
     assert ros.spin_until(lambda: sim.world.time >= 0.3, timeout=30.0)  # no goal yet

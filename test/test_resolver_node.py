@@ -16,7 +16,7 @@ from ros_helpers import RosHarness, held_up, overrides, stamp_s
 from wmm_control.experiments.direct import run_scenario
 from sim_bridge.node import SimNode
 from sim_bridge.world import SimWorld
-from wmm_control.experiments.ros_run import LOCKSTEP_WAITS, run_with_nodes
+from wmm_control.experiments.ros_run import run_with_nodes
 from wmm_control.experiments.scenario import load_scenario
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
@@ -82,7 +82,7 @@ class Driver(Node):
 def system():
     ros = RosHarness()
     driver = ros.add(Driver(ros.context))
-    # the lockstep waits, but the node's own state timeout: a test here stops the joint states;
+    # the node's own state timeout (its waits follow the lockstep simulator's): a test here stops the joint states;
     # markers every 20 ms of wall time (the trail takes a point a tick, and the lockstep
     # simulation runs seconds of motion in about one second of wall time)
     ros.add(
@@ -91,11 +91,11 @@ def system():
             parameter_overrides=overrides(
                 diagnostics_period=1e-9,
                 markers_period=0.02,
-                **dict(LOCKSTEP_WAITS['redundancy_resolver'], state_timeout=0.2),
+                state_timeout=0.2,
             ),
         )
     )
-    ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller'])))
+    ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides()))
     sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep')))
     yield ros, driver, sim
     ros.close()
@@ -248,12 +248,10 @@ def test_the_goal_is_reached_with_wheel_contact_physics():
         ros.add(
             RedundancyResolverNode(
                 context=ros.context,
-                parameter_overrides=overrides(ee_feedback=feedback, **LOCKSTEP_WAITS['redundancy_resolver']),
+                parameter_overrides=overrides(ee_feedback=feedback),
             )
         )
-        ros.add(
-            SwmrControllerNode(context=ros.context, parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller']))
-        )
+        ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides()))
         ros.add(SimNode(context=ros.context, parameter_overrides=overrides(timing='lockstep', base_mode='physics')))
         goal = np.array([1.8, 0.6, 1.0])
         driver.goal(goal)
@@ -325,7 +323,6 @@ def test_amp_tracks_a_trajectory_on_ee_reference_with_the_base_still():
                     robot='mecanum',
                     method='amp',
                     ee_feedback='ground_truth',
-                    **LOCKSTEP_WAITS['redundancy_resolver'],
                 ),
             )
         )
@@ -374,14 +371,14 @@ def test_two_robots_side_by_side_in_their_own_namespaces():
                 RedundancyResolverNode(
                     context=ros.context,
                     cli_args=args,
-                    parameter_overrides=overrides(**LOCKSTEP_WAITS['redundancy_resolver']),
+                    parameter_overrides=overrides(),
                 )
             )
             ros.add(
                 SwmrControllerNode(
                     context=ros.context,
                     cli_args=args,
-                    parameter_overrides=overrides(**LOCKSTEP_WAITS['swmr_controller']),
+                    parameter_overrides=overrides(),
                 )
             )
             ros.add(SimNode(context=ros.context, cli_args=args, parameter_overrides=overrides(timing='lockstep')))

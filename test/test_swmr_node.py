@@ -17,7 +17,7 @@ from sim_bridge.node import SimNode
 from wmm_control.base import SwmrController
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import se2_twist
-from wmm_control.experiments.ros_run import LOCKSTEP_WAITS
+from wmm_control.experiments.ros_run import LOCKSTEP_TIMEOUT
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
 
 DT = 0.025
@@ -59,7 +59,9 @@ def run(ros, ref, seconds, controller_params=None, **sim_params):
     ros.add(
         SimNode(
             context=ros.context,
-            parameter_overrides=overrides(timing='lockstep', lockstep_groups='steer,drive', **sim_params),
+            parameter_overrides=overrides(
+                timing='lockstep', lockstep_groups='steer,drive', lockstep_timeout=LOCKSTEP_TIMEOUT, **sim_params
+            ),
         )
     )
     ros.add(SwmrControllerNode(context=ros.context, parameter_overrides=overrides(**(controller_params or {}))))
@@ -87,7 +89,7 @@ def test_reference_twist_is_tracked_within_one_percent(ros, ref):
         ros,
         lambda t: ref,
         8.0,
-        controller_params=dict(LOCKSTEP_WAITS['swmr_controller'], reference_timeout=2.0, joint_state_timeout=2.0),
+        controller_params=dict(reference_timeout=2.0, joint_state_timeout=2.0),
     )
     ref = np.array(ref)
     for msg in pub.truth[-40:]:  # the last second
@@ -100,7 +102,7 @@ def test_feasible_twist_is_what_the_base_executes_over_the_next_period(ros):
     def ref(t):
         return (0.4 * np.cos(0.6 * t), 0.3 * np.sin(0.4 * t), 0.4 * np.sin(0.7 * t))
 
-    pub = run(ros, ref, 6.0, controller_params=LOCKSTEP_WAITS['swmr_controller'])
+    pub = run(ros, ref, 6.0)
     poses = {round(stamp_s(m) / DT): pose2d(m) for m in pub.truth}
     worst, checked = 0.0, 0
     for k, feasible in pub.feasible.items():
@@ -436,7 +438,7 @@ def test_closing_the_loop_changes_nothing_in_the_kinematic_simulator(ros):
     def ref(t):
         return (0.4 * np.cos(0.6 * t), 0.3 * np.sin(0.4 * t), 0.4 * np.sin(0.7 * t))
 
-    pub = run(ros, ref, 6.0, controller_params=dict(LOCKSTEP_WAITS['swmr_controller'], reference_wait=0.5))
+    pub = run(ros, ref, 6.0, controller_params=dict(reference_wait=0.5))
     node = next(n for n in ros.nodes if isinstance(n, SwmrControllerNode))
     offline = SwmrController(node.controller.geometry, node.controller.params)
     steer = np.array(pub.steer[:200])
@@ -447,8 +449,7 @@ def test_closing_the_loop_changes_nothing_in_the_kinematic_simulator(ros):
 
 @pytest.mark.parametrize('ref', [(1e308, 0.0, 0.0), (0.0, 1e200, 0.0)], ids=['vx-1e308', 'vy-1e200'])
 def test_huge_finite_references_drive_the_base_at_its_limit(ros, ref):
-    # the lockstep waits: on a loaded machine a late answer is dropped and the simulator steps on
-    pub = run(ros, lambda t: ref, 4.0, controller_params=LOCKSTEP_WAITS['swmr_controller'])
+    pub = run(ros, lambda t: ref, 4.0)
     direction = np.sign(ref)
     assert all(np.all(np.isfinite(v)) for v in pub.feasible.values())
     assert all(np.all(np.isfinite(v)) for v in pub.steer)

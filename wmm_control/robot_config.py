@@ -225,6 +225,13 @@ class BaseSection(ABC):
         """The joints whose links roll on the floor (the drive or wheel joints)."""
 
     @property
+    def roller_axes(self) -> np.ndarray:
+        """The axis (x, y) in the base frame, unit, of the free roller each rolling joint's wheel
+        touches the floor with: its traction acts along that axis only (a simulator's tyre
+        model). Empty, shape (0, 2), for wheels that grip the floor with their whole tread."""
+        return np.zeros((0, 2))
+
+    @property
     def joints(self) -> tuple:
         """Every wheel-side joint name, in command order (the groups one after the other)."""
         return tuple(name for names in self.command_groups.values() for name in names)
@@ -323,6 +330,12 @@ class MecanumBase(FixedWheelBase):
     roller_angles: np.ndarray
 
     family: ClassVar[str] = 'mecanum'
+
+    @property
+    def roller_axes(self) -> np.ndarray:
+        """(−sin γ_i, cos γ_i): the axle's +y turned by γ_i. Shape (N, 2)."""
+        angles = np.asarray(self.roller_angles, dtype=float)
+        return np.column_stack((-np.sin(angles), np.cos(angles)))
 
 
 @dataclass(frozen=True)
@@ -784,7 +797,7 @@ def resolve_robot_yaml(robot: str | Path) -> Path:
     )
 
 
-def load_robot(robot: str | Path | RobotConfig = 'steerable') -> RobotConfig:
+def load_robot(robot: str | Path | RobotConfig) -> RobotConfig:
     """Load and validate a robot description.
 
     Args:

@@ -31,7 +31,14 @@ from wmm_control.base.wheel_controller import WheelController
 from wmm_control.errors import ConfigError
 from wmm_control.robot_config import DifferentialBase, MecanumBase, RobotConfig, SteerableBase
 
-__all__ = ['BaseCommand', 'BaseController', 'SteerableBaseController', 'WheelBaseController', 'make_base_controller']
+__all__ = [
+    'BaseCommand',
+    'BaseController',
+    'SteerableBaseController',
+    'WheelBaseController',
+    'base_controller_class',
+    'make_base_controller',
+]
 
 #: Joint values per command group: group name → array in the group's joint order.
 Groups = Mapping[str, np.ndarray]
@@ -102,6 +109,11 @@ class BaseController(Protocol):
     def describe(self) -> str:
         """One line on the controller and its limits (for the start-up log)."""
 
+    @classmethod
+    def default_lag(cls, robot: RobotConfig) -> float:
+        """τ [s] of this controller on ``robot`` at the robot YAML's defaults: the ``lag`` an
+        instance made without overrides has."""
+
 
 class SteerableBaseController:
     """:class:`BaseController` of a steerable base: :class:`SwmrController` (Sorour §IV).
@@ -121,6 +133,11 @@ class SteerableBaseController:
         self.rate_limits: Mapping[str, Any] = {'steer': p.steer_rate_limit, 'drive': p.drive_rate_limit}
         self.velocity_limit = np.array(p.base_velocity_limit, dtype=float)
         self.lag = p.lag
+
+    @classmethod
+    def default_lag(cls, robot: RobotConfig) -> float:
+        """:attr:`SwmrParams.lag` (1/K_p + 1/λ) at the parameters' defaults."""
+        return SwmrParams.from_robot_config(robot).lag
 
     @classmethod
     def from_robot_config(cls, robot: RobotConfig, dt: float, **overrides: Any) -> Self:
@@ -187,8 +204,19 @@ class WheelBaseController:
         self.velocity_limit = np.array(controller.params.velocity_limit, dtype=float)
 
     @classmethod
-    def from_robot_config(cls, robot: RobotConfig, dt: float) -> Self:
-        """Wheel map, joints and limits from a Mecanum or differential robot."""
+    def default_lag(cls, robot: RobotConfig) -> float:
+        """0: the wheel controller tracks its reference within its acceleration limits."""
+        return cls.lag
+
+    @classmethod
+    def from_robot_config(cls, robot: RobotConfig, dt: float, **overrides: Any) -> Self:
+        """Wheel map, joints and limits from a Mecanum or differential robot.
+
+        Raises:
+            ConfigError: any ``overrides`` (the wheel controller has no parameters to change).
+        """
+        if overrides:
+            raise ConfigError(f'robot {robot.name!r} has a {robot.base.family} base: no parameters {sorted(overrides)}')
         controller = WheelController.from_robot_config(robot, dt)
         # a Mecanum or differential base: WheelController.from_robot_config has raised for any other
         return cls(controller, robot.base)  # type: ignore[arg-type]
@@ -235,9 +263,19 @@ def make_base_controller(
     Raises:
         ConfigError: overrides for a wheeled base, or a base of no known family.
     """
+    return base_controller_class(robot).from_robot_config(robot, dt, **overrides)
+
+
+def base_controller_class(robot: RobotConfig) -> type[SteerableBaseController] | type[WheelBaseController]:
+    """The :class:`BaseController` class that drives ``robot``'s base: the one place that maps a
+    base family to its controller.
+
+    Raises:
+        ConfigError: a base of no known family.
+    """
     match robot.base:
         case SteerableBase():
-            return SteerableBaseController.from_robot_config(robot, dt, **overrides)
-        case MecanumBase() | DifferentialBase() if not overrides:
-            return WheelBaseController.from_robot_config(robot, dt)
-    raise ConfigError(f'robot {robot.name!r} has a {robot.base.family} base: no parameters {sorted(overrides)}')
+            return SteerableBaseController
+        case MecanumBase() | DifferentialBase():
+            return WheelBaseController
+    raise ConfigError(f'robot {robot.name!r} has a base of no known family: {type(robot.base).__name__}')

@@ -32,12 +32,11 @@ from wmm_control.experiments.scenario import Scenario, resolver_parameters
 from wmm_control.nodes.conversions import odometry_pose, planar_twist, pose_rotation
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.base_controller import BaseControllerNode
-from wmm_control.nodes.base_controller_params import NODE_NAMES
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.resolvers.interface import ResolverCommand
 from wmm_control.robot_config import RobotConfig, load_robot
 
-__all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_WAITS']
+__all__ = ['run_with_nodes', 'Recorder', 'private_domain_id', 'LOCKSTEP_TIMEOUT']
 
 
 class Recorder(Node):
@@ -130,33 +129,14 @@ def _executor(context):
         return SingleThreadedExecutor(context=context)
 
 
-#: In lockstep nothing moves until every answer is in, so the nodes may wait as long as a loaded
-#: machine needs (the waits end as soon as the answer comes), and no input goes stale while it
-#: waits: the timeouts measured on the wall clock are far beyond any wait. The run does not
-#: depend on timing, also when other processes (the runs of ``wmm_experiment --jobs``) take the
-#: cores.
-LOCKSTEP_WAITS = {
-    'redundancy_resolver': {'compensation_timeout': 1.0, 'state_timeout': 30.0, 'max_state_wait': 0.0},
-    'swmr_controller': {
-        'reference_wait': 1.0,
-        'max_state_wait': 0.0,
-        'joint_state_timeout': 30.0,
-        'reference_timeout': 30.0,
-    },
-    'mecanum_controller': {
-        'reference_wait': 1.0,
-        'max_state_wait': 0.0,
-        'joint_state_timeout': 30.0,
-        'reference_timeout': 30.0,
-    },
-    'differential_controller': {
-        'reference_wait': 1.0,
-        'max_state_wait': 0.0,
-        'joint_state_timeout': 30.0,
-        'reference_timeout': 30.0,
-    },
-    'wmm_sim': {'command_timeout': 10.0, 'lockstep_timeout': 10.0},
-}
+#: [s] the wall time the simulator waits, in lockstep, for the commands that answer a state before
+#: it steps anyway. The other nodes learn it (``sim/lockstep_timeout``,
+#: :mod:`~wmm_control.nodes.sim_timing`): they age their inputs by the simulated time, answer every
+#: state however long it waited, wait for each other's answers as long as the simulator waits,
+#: and stop only when no state comes for their timeout plus this. Far beyond any period, so that
+#: the run does not depend on timing, also when other processes (the runs of ``wmm_experiment
+#: --jobs``) take the cores.
+LOCKSTEP_TIMEOUT = 10.0
 
 
 def private_domain_id(offset: int = 0) -> int:
@@ -206,13 +186,12 @@ def run_with_nodes(
         robot=str(robot.yaml_path),
         ee_feedback=feedback,
         markers_period=0.0,
-        **LOCKSTEP_WAITS['redundancy_resolver'],
     )
     if bag_path is not None:  # the bag gets every cycle's report (ψ, mode, scales) for offline analysis
         resolver_params['diagnostics_period'] = 1e-9
     sim_params = dict(scenario.sim or {})
     sim_params.update(
-        robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0, **LOCKSTEP_WAITS['wmm_sim']
+        robot=str(robot.yaml_path), timing='lockstep', diagnostics_period=0.0, lockstep_timeout=LOCKSTEP_TIMEOUT
     )
     if scenario.obstacles_file:
         sim_params['obstacles'] = resolver_params['obstacles'] = scenario.obstacles_file
@@ -243,9 +222,7 @@ def run_with_nodes(
             BaseControllerNode(
                 robot.base.family,
                 context=context,
-                parameter_overrides=params(
-                    dict(LOCKSTEP_WAITS[NODE_NAMES[robot.base.family]], robot=str(robot.yaml_path))
-                ),
+                parameter_overrides=params({'robot': str(robot.yaml_path)}),
             )
         )
         recorder = Recorder(context, robot, scenario, log)

@@ -101,6 +101,7 @@ class NearPairs:
             Shape (m, n_arm).
         base_jacobian: rows ``j_b`` [m/m, m/rad]: zero unless one of the two is fixed in the
             world (an obstacle). Shape (m, 3).
+        floor: which pairs are with the floor. Shape (m,), boolean.
     """
 
     distance: np.ndarray
@@ -108,6 +109,7 @@ class NearPairs:
     shapes: tuple[tuple[str, str], ...]
     rate_jacobian: np.ndarray
     base_jacobian: np.ndarray
+    floor: np.ndarray
 
     def __len__(self) -> int:
         return self.distance.size
@@ -121,6 +123,7 @@ class NearPairs:
             tuple(self.shapes[k] for k in index.tolist()),
             _frozen(self.rate_jacobian[index]),
             _frozen(self.base_jacobian[index]),
+            _frozen(self.floor[index]),
         )
 
 
@@ -295,10 +298,11 @@ class CollisionModel:
     def _tabulate_pairs(self):
         """Each checked pair's links, shapes and joints, looked up once (call again after adding pairs)."""
         objects = self.geom.geometryObjects
-        self._pair_links, self._pair_shapes, joints, robot, obstacle = [], [], [], [], []
+        self._pair_links, self._pair_shapes, joints, robot, obstacle, floor = [], [], [], [], [], []
         for pair in self.geom.collisionPairs:
             a, b = objects[pair.first], objects[pair.second]
             self._pair_links.append((self._link_of[pair.first], self._link_of[pair.second]))
+            floor.append(FLOOR in self._pair_links[-1])
             self._pair_shapes.append((a.name, b.name))
             joints.append((a.parentJoint, b.parentJoint))
             robot.append((pair.first not in self._fixed, pair.second not in self._fixed))
@@ -320,6 +324,8 @@ class CollisionModel:
         #: [pair]: the base's twist changes its distance (a robot shape and an obstacle); it leaves
         #: a pair on the robot as it is, and a shape's height over the floor
         self._pair_base_moves = np.array(obstacle, dtype=float)
+        #: [pair]: one side is the floor
+        self._pair_floor = np.array(floor, dtype=bool)
 
     @property
     def pairs(self) -> list[tuple[str, str]]:
@@ -470,6 +476,7 @@ class CollisionModel:
             tuple(self._pair_shapes[k] for k in near.tolist()),
             _frozen(rates),
             _frozen(base),
+            _frozen(self._pair_floor[near]),
         )
         return pairs, *closest
 
@@ -731,7 +738,14 @@ def _frozen(array: np.ndarray) -> np.ndarray:
 
 
 def _no_pairs(n_arm: int) -> NearPairs:
-    return NearPairs(_frozen(np.zeros(0)), (), (), _frozen(np.zeros((0, n_arm))), _frozen(np.zeros((0, 3))))
+    return NearPairs(
+        _frozen(np.zeros(0)),
+        (),
+        (),
+        _frozen(np.zeros((0, n_arm))),
+        _frozen(np.zeros((0, 3))),
+        _frozen(np.zeros(0, bool)),
+    )
 
 
 def _halfspace():

@@ -1,0 +1,217 @@
+"""Rows on a command (wmm_control.resolvers.constraints), and the safety stage as the command
+nearest the method's, in the task metric, under its limits' constraints."""
+
+import warnings
+
+import numpy as np
+import pytest
+import qpsolvers
+from scipy import sparse
+
+from wmm_control.errors import NonFiniteError, ShapeError
+from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.obstacles import load_obstacles
+from wmm_control.resolvers.constraints import Box, Constraint, nearest
+from wmm_control.resolvers.safety import SELF_WEIGHT, SafetyStage
+from wmm_control.robot_config import load_robot
+
+#: where the base is drawn near table_pillar's obstacles: (x, y, θ) low and high
+BASE_BOX = ((0.2, -1.6, -np.pi), (2.8, 1.6, np.pi))
+
+
+def _independent(metric, target, G, h, lower, upper):
+    """The QP solved by another solver (OSQP, tight tolerances) on the same stacked rows; None
+    where it finds no command that meets them (OSQP warns so, expected here)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')
+        return _osqp(metric, target, G, h, lower, upper)
+
+
+def _osqp(metric, target, G, h, lower, upper):
+    return qpsolvers.solve_qp(
+        sparse.csc_matrix(metric),
+        -metric @ target,
+        sparse.csc_matrix(G) if len(h) else None,
+        h if len(h) else None,
+        lb=lower,
+        ub=upper,
+        solver='osqp',
+        eps_abs=1e-10,
+        eps_rel=1e-10,
+        polishing=True,
+        verbose=False,
+        max_iter=400000,
+    )
+
+
+def test_a_stack_keeps_each_part_its_rows_and_its_name():
+    a = Constraint(np.eye(3)[:2], np.array([1.0, 2.0]), 'a')
+    b = Constraint(np.ones((1, 3)), np.array([0.5]), 'b')
+    stack = Constraint.stack([a, Constraint.empty(3, 'none'), b, a], 3, 'all')
+    assert stack.G.shape == (5, 3) and stack.h.tolist() == [1.0, 2.0, 0.5, 1.0, 2.0]
+    assert stack.parts == (('a', 2), ('b', 1), ('a', 2))
+    assert stack.counts() == {'a': 4, 'b': 1}
+    assert stack.row_names().tolist() == ['a', 'a', 'b', 'a', 'a']
+    # neighbours of one name merge: one limit's several blocks stay one part
+    assert Constraint.stack([a, a], 3).parts == (('a', 4),)
+    nothing = Constraint.stack([], 4, 'nothing')
+    assert nothing.G.shape == (0, 4) and len(nothing) == 0 and not nothing.violated(np.zeros(4)).any()
+
+
+def test_rows_kept_and_rows_binding_are_counted_per_part():
+    # x ≤ 1, y ≤ 1 ('box-ish'); x + y ≤ 1 ('sum')
+    rows = Constraint.stack(
+        [Constraint(np.eye(2), np.ones(2), 'each'), Constraint(np.ones((1, 2)), np.ones(1), 'sum')], 2
+    )
+    kept = rows.select(np.array([False, True, True]))
+    assert kept.parts == (('each', 1), ('sum', 1)) and kept.h.tolist() == [1.0, 1.0]
+    # at (1, 0): x ≤ 1 and x + y ≤ 1 bind, y ≤ 1 does not
+    assert rows.binding(np.array([1.0, 0.0])) == {'each': 1, 'sum': 1}
+    assert rows.violated(np.array([1.0, 0.5])).tolist() == [False, False, True]
+    assert Constraint.from_lower(np.eye(2), np.zeros(2)).violated(np.array([-1.0, 1.0])).tolist() == [True, False]
+
+
+@pytest.mark.parametrize(
+    'G, h, error',
+    [
+        (np.ones(3), np.ones(1), ShapeError),  # G not 2-D
+        (np.ones((2, 3)), np.ones(3), ShapeError),  # h of another length
+        (np.ones((2, 3)), np.ones((2, 1)), ShapeError),  # h not 1-D
+        (np.array([[1.0, np.nan]]), np.ones(1), NonFiniteError),
+        (np.array([[1.0, np.inf]]), np.ones(1), NonFiniteError),
+        (np.ones((1, 2)), np.array([np.nan]), NonFiniteError),
+        (np.ones((1, 2)), np.array([-np.inf]), NonFiniteError),  # a row no command meets
+    ],
+)
+def test_a_malformed_constraint_is_refused_with_its_name(G, h, error):
+    with pytest.raises(error, match='elbow'):
+        Constraint(G, h, 'elbow')
+
+
+def test_a_row_never_binding_may_have_no_bound_and_stacks_must_agree_on_the_command():
+    assert not Constraint(np.ones((1, 2)), np.array([np.inf])).violated(np.full(2, 1e300)).any()
+    with pytest.raises(ShapeError, match='on 2 entries'):
+        Constraint.stack([Constraint(np.ones((1, 2)), np.ones(1), 'x'), Constraint.empty(3)], 3)
+    with pytest.raises(ShapeError):
+        Constraint(np.ones((2, 2)), np.ones(2)).select(np.ones(3, dtype=bool))
+
+
+def test_a_box_is_checked():
+    with pytest.raises(ValueError, match='entries \\[1\\]'):
+        Box(np.zeros(2), np.array([1.0, -1.0]))
+    with pytest.raises(NonFiniteError):
+        Box(np.array([np.nan]), np.ones(1))
+    with pytest.raises(ShapeError):
+        Box(np.zeros(2), np.ones(3))
+    box = Box(np.array([-1.0, -np.inf]), np.array([1.0, np.inf]))
+    # the greatest value of a row over the box; an entry a row does not involve adds nothing
+    assert box.greatest(np.array([[2.0, 0.0], [-1.0, 0.0], [0.0, 1.0]])).tolist() == [2.0, 1.0, np.inf]
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_nearest_is_the_minimum_another_solver_finds(seed):
+    rng = np.random.default_rng(seed)
+    n, m = 9, 30
+    jac = rng.normal(size=(6, n))
+    metric = jac.T @ jac + 0.01 * np.diag(rng.uniform(0.5, 2.0, n))
+    target = rng.normal(size=n)
+    rows = Constraint(rng.normal(size=(m, n)), rng.uniform(0.05, 0.5, m), 'random')
+    box = Box(-np.full(n, 2.0), np.full(n, 2.0))
+    x, relaxed = nearest(target, metric, rows, box)
+    assert not relaxed  # 0 is strictly inside every row and the box
+    assert not rows.violated(x, 1e-8).any()
+    np.testing.assert_allclose(x, _independent(metric, target, rows.G, rows.h, box.lower, box.upper), atol=1e-6)
+
+
+def test_rows_that_conflict_within_the_box_are_met_as_far_as_it_allows():
+    # x ≥ 1 and x ≤ −1 cannot both hold: with both slacks at their linear cost whatever x, the
+    # answer minimises ½ (x − 0.3)² + ½ ((1 − x)² + (1 + x)²) (the slacks' quadratic term): x =
+    # 0.1, between the two rows; y, which no row involves, stays where it was asked
+    rows = Constraint(np.array([[-1.0, 0.0], [1.0, 0.0]]), np.array([-1.0, -1.0]), 'apart')
+    x, relaxed = nearest(np.array([0.3, 0.4]), np.eye(2), rows, Box(-np.ones(2), np.ones(2)))
+    assert relaxed
+    np.testing.assert_allclose(x, [0.1, 0.4], atol=1e-6)
+    # a row the box cannot meet: met as far as the box allows
+    x, relaxed = nearest(
+        np.zeros(2), np.eye(2), Constraint(np.array([[-1.0, 0.0]]), np.array([-5.0])), Box(-np.ones(2), np.ones(2))
+    )
+    assert relaxed and x == pytest.approx([1.0, 0.0])
+
+
+def _near_states(cfg, stage, count, rng):
+    """Arm postures near the body (base far from the obstacles) and base poses near the table
+    and the pillar, where some pair is within the look-ahead and none in contact."""
+    arm = cfg.arm
+    lo = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
+    hi = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
+    out = []
+    while len(out) < count:
+        if len(out) % 2:
+            q, pose = rng.uniform(lo, hi), np.array([-5.0, -5.0, 0.0])
+        else:
+            q, pose = np.asarray(cfg.start.arm, dtype=float), rng.uniform(*BASE_BOX)
+        near, closest, _ = stage.collision.within(q, stage.obstacle_lookahead, pose)
+        if closest > 0.0 and len(near):
+            out.append((q, pose))
+    return out
+
+
+@pytest.mark.parametrize('robot', ['steerable', 'mecanum'])
+def test_the_stage_answer_meets_every_row_and_is_the_nearest_in_the_task_metric(robot):
+    """At random states near the body and near obstacles, with the method's command drawn at
+    random within a random box: the stage's answer lies in the box, meets every row of the
+    cycle's constraints (unless they conflict in the box, then it says so), and is the minimum
+    of ½ (q̇ − q̇₀)ᵀ (JᵀJ + μ W) (q̇ − q̇₀) over them that another solver finds on the stacked
+    rows. Each way the base enters: the arm alone beside a moving base, the base's reference in
+    its own frame with its measured twist (a steerable base lags it), the world frame's rates."""
+    cfg = load_robot(robot)
+    rng = np.random.default_rng(7)
+    stage = SafetyStage.for_robot(cfg, obstacles=load_obstacles('table_pillar'), kinematics=KinematicModel(cfg))
+    axes = tuple(cfg.base.axes)
+    n_arm = cfg.arm.velocity.size
+    changed = relaxed = 0
+    kinds = {}
+    for k, (q, pose) in enumerate(_near_states(cfg, stage, 36, rng)):
+        mode = k % 3
+        kwargs = dict(base_pose=pose)
+        if mode == 0:
+            nb = 0
+            kwargs['base_twist'] = rng.uniform(-1.0, 1.0, 3) * cfg.base.velocity
+        else:
+            nb = len(axes)
+            kwargs.update(base_axes=axes, base_velocity=rng.uniform(-1.0, 1.0, 3) * cfg.base.velocity)
+            kwargs['world_rates'] = mode == 2
+        velocity = np.concatenate((cfg.base.velocity[list(axes)][:nb], cfg.arm.velocity))
+        command = rng.uniform(-1.0, 1.0, nb + n_arm) * velocity
+        lower = command - rng.uniform(0.0, 0.5, command.size) * velocity
+        upper = command + rng.uniform(0.0, 0.5, command.size) * velocity
+        jac, weights = rng.normal(size=(6, command.size)), rng.uniform(0.5, 2.0, command.size)
+        out = stage.filter(q, command, lower, upper, weights, task_jacobian=jac, **kwargs)
+        assert stage.last is out
+        rows = out.constraints
+        assert rows is not None and rows.n == command.size
+        for name, count in rows.counts().items():
+            kinds[name] = kinds.get(name, 0) + count
+        assert np.all(out.command >= lower - 1e-9) and np.all(out.command <= upper + 1e-9)
+        changed += out.changed
+        # a lagging base held on its path: its entries fixed, the rest nearest the method's
+        target, lo, hi = command.copy(), lower.copy(), upper.copy()
+        if out.held:
+            target[:nb] = lo[:nb] = hi[:nb] = out.command[:nb]
+        # a row on no entry the box leaves free (a pair of the base's body and an obstacle, the
+        # base not commanded or held) is what the base makes it: no command changes it
+        rows = rows.select((rows.G[:, hi > lo] != 0.0).any(axis=1))
+        metric = jac.T @ jac + SELF_WEIGHT * np.diag(weights)
+        reference = _independent(metric, target, rows.G, rows.h, lo, hi)
+        if out.relaxed:  # only where no command in the box meets every row
+            assert reference is None
+            relaxed += 1
+            continue
+        assert not rows.violated(out.command, 1e-7).any(), rows.row_names()[rows.violated(out.command, 1e-7)]
+        np.testing.assert_allclose(out.command, reference, atol=1e-5)
+    assert changed >= 12 and relaxed <= 18  # the rows shaped many answers, and met most in full
+    assert {'self', 'obstacle'} <= set(kinds)
+    if robot == 'steerable':  # a lagging base's rows
+        assert {'base along path', 'base between', 'base after turn'} <= set(kinds)
+    else:  # a base that tracks its reference
+        assert {'base without turn', 'base turn rate'} <= set(kinds)

@@ -1,0 +1,439 @@
+"""The safety stage's limits, each a :class:`~wmm_control.resolvers.constraints.Constraint` on
+the cycle's command: the velocity dampers that keep the arm off the robot's own body, off
+itself and off the floor, and the whole robot off obstacles (:class:`VelocityDampers`), and the
+rows of a base that lags its reference or turns (:class:`BaseRows`). The stage
+(:mod:`~wmm_control.resolvers.safety`) stacks them and sends the command nearest the method's
+under them.
+
+**The command and the pairs.** The command ``q̇`` holds the base's axes (when the method
+commands the base with it; :attr:`Pairs.axes` of (vx, vy, ω), in the base's frame or as the
+world frame's rates), then the arm's joints. Each checked pair closer than the look-ahead
+(:class:`~wmm_control.kinematics.collision.CollisionModel`) has its distance's rate
+``ḋ = j · q̇``: one linear row on the command (:class:`Pairs`). A base twist that is not part
+of the command (the base controller's, when only the arm is left to choose) moves each row's
+bound by its share.
+
+**Velocity dampers** (:class:`VelocityDampers`, one row per pair in the parts ``self``,
+``floor`` and ``obstacle``). For each checked pair closer than the influence distance ``d_i``
+the distance may shrink no faster than (Faverjon and Tournassoud's velocity damper)
+
+    ḋ ≥ −ξ (d − d_s) / (d_i − d_s),
+
+so the arm may approach at ``ξ`` at the influence distance, ever more slowly nearer, and not
+at all at the safety distance ``d_s`` (below it, the pair must move apart). An arm that
+arrives at ``d_i`` much faster than ``ξ`` cannot slow down to it at once within its
+acceleration limits, so a pair closer than the look-ahead distance ``d_b`` (≥ ``d_i``) also
+keeps its approach within what braking at ``a_b`` can stop before ``d_s``:
+
+    ḋ ≥ −√(2 a_b (d − d_s)),
+
+the stricter of the two where both hold. ``a_b`` is taken no larger than the deceleration the
+command's own acceleration limits can give that distance (``Σ_i |j_i| q̈_max,i`` over the arm's
+joints, plus ``|j_xy|`` times the slower of the base's linear axes: the pair's normal turns
+under a base that brakes, so both axes are not counted on at once): a Mecanum base that brakes
+at 0.025 m/s² is not counted on to stop at 1 m/s². With obstacles, whose distance the base's
+twist changes too, the look-ahead grows to the base's stopping distance from full speed
+(``d_s + v τ + v² / (2 min(a, a_b))``, ``v`` the norm of the linear axes' speed limits, since
+the base may drive on a diagonal, and ``a`` the deceleration its rows count on: the slower
+axis's limit, less the turn's share below) so that it brakes in time.
+
+**A base that lags its reference** (:class:`BaseRows`). The stage shapes the base's
+*reference*; a base whose twist follows its reference with a lag τ (a steerable base's ICR and
+twist controllers, ICṘ = λ (ICR* − ICR), ξ̈ = K_p (ξ̇* − ξ̇): lags in series, τ = 1/K_p + 1/λ,
+0.75 s on robot A; the running base controller's
+:attr:`~wmm_control.base.BaseController.lag`) drives on at about the reference of τ ago. One
+model of it, five kinds of row and one hold:
+
+- *braking after the lag* (in the dampers): a row the base moves (a pair with an obstacle)
+  counts on stopping within ``v τ + v² / (2 a_b)``,
+  ``ḋ ≥ −a_b (√(τ² + 2 (d − d_s) / a_b) − τ)``, its damper gain no steeper than ``1/τ``; and
+  the base's own body (chassis, wheels) keeps ``collision_lag_margin`` more than ``d_s`` from
+  obstacles: while its wheels steer from one ICR to another its twist sweeps through directions
+  that neither its reference nor its measured twist has (robot A spinning beside the pillar
+  approached it faster and faster for 0.3 s while its reference asked it away), which no lag
+  on each axis describes;
+- *held on its path* (:meth:`BaseRows.hold_on_path`): where the base's measured twist ``v₀``
+  already approaches a pair faster than allowed (it lagged, or a steerable base swept its
+  wheels round towards the obstacle while changing its ICR), the base is sent ``s v₀``, a
+  twist on its own path, which a steerable base follows by slowing its wheels without steering
+  them, with ``s`` low enough (down to −1, or lower where a pair must separate faster than the
+  base approaches it) to brake the approach within the room left, within the method's box;
+- ``base along path`` (:meth:`BaseRows.along_path`): the part of the reference along ``v₀``
+  meets the same row as the reference: a steerable base first drives on along its path at that
+  part while its wheels turn to the new one;
+- ``base between`` (:meth:`BaseRows.between`): the row at every corner of the box between the
+  measured twist and the reference, axis by axis (the base gets to its reference on each axis
+  at its own pace: a steerable base drives on along its wheels' heading, and turns, before it
+  has steered to a sideways reference);
+- ``base after turn`` (:meth:`BaseRows.after_turn`): the row against the pair's normal as the
+  base will see it after the turn it cannot stop at once (turned by ω τ, and for a reference in
+  the base's frame, which turns with it, by the turn's braking ω |ω| / (2 α) too).
+
+**A base that tracks its reference** (τ = 0: a wheeled base within its acceleration limits)
+has none of the above, and
+
+- ``base without turn`` (:meth:`BaseRows.without_turn`): for a pair of its own body (chassis,
+  wheels) and an obstacle, the row also holds without the turn's share: a turn that swings one
+  corner away for the moment cannot hide a linear approach faster than the base can stop.
+
+**Every base that turns while it drives** (its reference in its own frame):
+
+- ``base turn rate`` (:meth:`BaseRows.turn_rate`): a row on the turn rate keeps the turn from
+  turning the base's velocity towards an obstacle (at v ω, v its measured speed) by more than
+  :data:`TURN_SHARE` of the linear deceleration; the braking rows of a tracking base count on
+  the rest.
+
+At acceleration level (Xing's methods) the stage acts on the rates the method has integrated
+for this period, within its box of ``q̇_prev ± q̈_max T``: a row ``j · (q̇_prev + q̈ T) ≥ b``
+is the matching bound on the acceleration, ``j · q̈ ≥ (b − ḋ_prev) / T`` (the dampers
+discretised over the period, J̇'s share neglected).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from wmm_control.geometry import rotation_z
+from wmm_control.kinematics.collision import NearPairs
+from wmm_control.resolvers.constraints import TOLERANCE, Box, Constraint
+
+__all__ = ['Pairs', 'VelocityDampers', 'BaseRows', 'TURN_SHARE', 'PATH_SPEED']
+
+#: [m/s] a lagging base's measured twist below this tells no path (at rest).
+PATH_SPEED = 1e-4
+#: The share of a wheeled base's linear deceleration near obstacles that its turn may take
+#: (turning under a moving base turns its path, towards an obstacle too, and the linear axes
+#: must brake that); the dampers count on the rest.
+TURN_SHARE = 0.25
+#: The corners of the box between a lagging base's measured twist and its reference other than
+#: the reference itself: the axes (vx, vy, ω) on which each takes the reference.
+_PARTS = tuple(
+    np.array(part, dtype=bool) for part in ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1))
+)
+_LINEAR = np.array([1.0, 1.0, 0.0])
+#: The dampers' constraints, in the order of the pairs' kinds.
+_KINDS = ('self', 'floor', 'obstacle')
+
+
+@dataclass(frozen=True)
+class Pairs:
+    """The cycle's checked pairs over the command: pair ``k``'s rate is ``rows[k] · q̇`` (plus the
+    base's share when the base is not part of the command), and its damper asks
+    ``rows[k] · q̇ ≥ bound[k]``.
+
+    Attributes:
+        rows: over the command (the base's ``axes``, then the arm's joints). Shape (m, n).
+        bound: the dampers' bounds [m/s]. Shape (m,).
+        base: ``j_b`` over the base's twist (vx, vy, ω) in its own frame. Shape (m, 3).
+        distance: the distances the dampers brake to [m] (a lagging base's body margin taken
+            off its body's pairs). Shape (m,).
+        moved: the pairs the base's twist moves (with an obstacle). Shape (m,), boolean.
+        floor: the pairs with the floor. Shape (m,), boolean.
+        axes: indices into (vx, vy, ω) of the command's base entries.
+        to_base: the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for the
+            world frame's rates. Shape (3, 3).
+        kinds: ``(kind, pairs)`` in order: the robot against itself (``self``), the floor
+            (``floor``), obstacles (``obstacle``); the pairs come in that order.
+    """
+
+    rows: np.ndarray
+    bound: np.ndarray
+    base: np.ndarray
+    distance: np.ndarray
+    moved: np.ndarray
+    floor: np.ndarray
+    axes: tuple[int, ...]
+    to_base: np.ndarray
+    kinds: tuple[tuple[str, int], ...]
+
+    @property
+    def body(self) -> np.ndarray:
+        """The pairs of the base's own body (no arm joint moves them: chassis, wheels) and an
+        obstacle. Shape (m,), boolean."""
+        return self.moved & ~self.rows[:, len(self.axes) :].any(axis=1)
+
+    def on_base(
+        self, base: np.ndarray, shift: ArrayLike = 0.0, which: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The rows of the pairs ``which`` (default: the ones the base moves) again, with the base
+        part ``base`` (over (vx, vy, ω) in the command's terms, one row per such pair) and the
+        bound plus ``shift``: ``(rows, bound)``, rows ``rows · q̇ ≥ bound``."""
+        which = self.moved if which is None else which
+        rows = np.hstack((base[:, self.axes], self.rows[which, len(self.axes) :]))
+        return rows, self.bound[which] + shift
+
+
+def linear_axes(axes, base_acceleration) -> tuple[list[int], float]:
+    """The command's entries on the base's linear axes, and the slower axis's acceleration
+    limit [m/s²] (0 without them)."""
+    linear = [k for k, axis in enumerate(axes) if axis < 2]
+    return linear, (float(np.min(base_acceleration[[axes[k] for k in linear]])) if linear else 0.0)
+
+
+class VelocityDampers:
+    """The velocity dampers of the module docstring: one row per pair.
+
+    Args:
+        params: :class:`~wmm_control.resolvers.safety.SafetyParams`.
+        arm_acceleration: the arm joints' acceleration limits, or None (every row brakes at
+            ``collision_braking``).
+        base_acceleration: the base's limits on (vx, vy, ω). Shape (3,).
+        lag: τ [s] of the base.
+        body_margin: [m] the room the base's body keeps from obstacles beyond d_s.
+    """
+
+    def __init__(self, params, arm_acceleration, base_acceleration, lag: float, body_margin: float):
+        self.params = params
+        self.arm_acceleration = arm_acceleration
+        self.base_acceleration = base_acceleration
+        self.lag = lag
+        self.body_margin = body_margin
+
+    def pairs(self, near: NearPairs, axes: tuple[int, ...], to_base: np.ndarray, base_twist=None) -> Pairs:
+        """The rows and bounds of the pairs ``near`` over a command whose base entries are
+        ``axes`` (through ``to_base``), the robot's own pairs first, then those with the floor,
+        then those with obstacles; ``base_twist`` (vx, vy, ω): the base's twist when it is not
+        part of the command, whose share moves the bounds."""
+        base_full, rate, distance = near.base_jacobian, near.rate_jacobian, near.distance
+        moved = np.asarray(base_full.any(axis=1), dtype=bool)
+        floor = near.floor
+        kind = 2 * moved + floor
+        if (kind[1:] < kind[:-1]).any():
+            order = np.argsort(kind, kind='stable')
+            base_full, rate, distance = base_full[order], rate[order], distance[order]
+            moved, floor, kind = moved[order], floor[order], kind[order]
+        rows = np.hstack(((base_full @ to_base)[:, axes], rate))
+        if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
+            distance = distance - self.body_margin * (moved & ~rows[:, len(axes) :].any(axis=1))
+        bound = -self._allowed(distance, rows, axes, moved)
+        if base_twist is not None:
+            bound = bound - base_full @ np.asarray(base_twist, dtype=float)
+        counts = np.bincount(kind, minlength=3).tolist()
+        kinds = tuple((name, count) for name, count in zip(_KINDS, counts) if count)
+        return Pairs(rows, bound, base_full, distance, moved, floor, tuple(axes), to_base, kinds)
+
+    def constraints(self, pairs: Pairs) -> Constraint:
+        """The dampers, one row per pair: ``self`` (the robot against itself), ``floor`` and
+        ``obstacle``."""
+        return Constraint(-pairs.rows, -pairs.bound, 'dampers', pairs.kinds)
+
+    def _allowed(self, distances, rows, axes, moved) -> np.ndarray:
+        """Each pair's fastest allowed approach [m/s], braking no harder than the command's
+        acceleration limits can slow that distance. The base's turn rate is left out: turning
+        swings the near point aside for a moment, but does not stop a base that drives at an
+        obstacle."""
+        lags = np.where(moved, self.lag, 0.0)
+        if self.arm_acceleration is None:
+            return np.asarray(self.allowed_approach(distances, lag=lags))
+        nb = len(axes)
+        reach = np.abs(rows[:, nb:]) @ self.arm_acceleration
+        linear, slowest = linear_axes(axes, self.base_acceleration)
+        if linear:
+            # the base's linear axes brake the distance at no more than |j_xy| times the slower
+            # axis's limit, whichever way the pair's normal turns while it brakes (Σ |j_i| a_i
+            # would count on braking both axes at once along a normal that the base's turn, or
+            # its approach to another face, changes under it)
+            if 2 in axes and self.lag == 0.0:
+                slowest *= 1.0 - TURN_SHARE  # the rest is the turn's (BaseRows.turn_rate)
+            reach = reach + np.linalg.norm(rows[:, linear], axis=1) * slowest
+        return np.asarray(self.allowed_approach(distances, reach, lags))
+
+    def allowed_approach(
+        self, distance: ArrayLike, deceleration: ArrayLike = math.inf, lag: ArrayLike = 0.0
+    ) -> float | np.ndarray:
+        """The fastest a pair ``distance`` [m] apart may approach [m/s] (negative: it must
+        separate), its distance braking at no more than ``deceleration`` [m/s²] (and
+        ``collision_braking``) after a lag of ``lag`` [s]. Each argument a number or an array
+        (one entry per pair); the answer is a float for numbers, else an array."""
+        p = self.params
+        d_i, d_s = p.collision_influence, p.collision_safety
+        distance, deceleration, lag = np.broadcast_arrays(
+            *(np.asarray(v, dtype=float) for v in (distance, deceleration, lag))
+        )
+        a = np.minimum(p.collision_braking, deceleration)
+        room = np.maximum(distance - d_s, 0.0)
+        with np.errstate(divide='ignore', invalid='ignore', over='ignore'):  # a tiny a: inf, then min
+            braking = np.where(a > 0.0, a * (np.sqrt(lag * lag + 2.0 * room / a) - lag), 0.0)
+            gain = np.where(
+                lag > 0.0, np.minimum(p.collision_gain / (d_i - d_s), 1.0 / lag), p.collision_gain / (d_i - d_s)
+            )
+        damper = np.where(distance < d_i, gain * (distance - d_s), math.inf)
+        out = np.minimum(damper, braking)
+        return float(out) if out.ndim == 0 else out
+
+
+class BaseRows:
+    """The rows of a base that lags its reference or turns (the module docstring).
+
+    Args:
+        safety_distance: d_s [m].
+        base_acceleration: the base's limits on (vx, vy, ω) [m/s², rad/s²]. Shape (3,).
+        lag: τ [s] of the base.
+    """
+
+    def __init__(self, safety_distance: float, base_acceleration: np.ndarray, lag: float):
+        self.safety_distance = safety_distance
+        self.base_acceleration = base_acceleration
+        self.lag = lag
+
+    def constraints(
+        self, pairs: Pairs, command, box: Box, base_velocity=None, base_twist=None, world_rates=False
+    ) -> tuple[np.ndarray, Box, bool, list[Constraint]]:
+        """The cycle's base rows, and the command and box with the base held on its path where
+        it must be (:meth:`hold_on_path`): ``(command, box, held, constraints)``.
+
+        Args:
+            pairs: the cycle's :class:`Pairs`.
+            command, box: the method's command and the period's box.
+            base_velocity: the base's measured twist (vx, vy, ω), or None.
+            base_twist: the base's twist when it is not part of the command (then no base rows).
+            world_rates: the command's base entries are the world frame's (ẋ, ẏ, θ̇).
+        """
+        out: list[Constraint] = []
+        held = False
+        if base_twist is not None:
+            return command, box, held, out
+        axes = pairs.axes
+        if axes and base_velocity is not None and self.lag > 0.0:
+            v0 = np.asarray(base_velocity, dtype=float)
+            own = pairs.base @ v0  # the base's approach rates
+            command, box, held = self.hold_on_path(pairs, command, box, v0, own)
+            out += [
+                self.along_path(pairs, v0, own),
+                self.between(pairs, v0),
+                self.after_turn(pairs, v0, command, world_rates),
+            ]
+        if self.lag == 0.0:
+            # a base that tracks its reference: its linear approach must brake on its own (a
+            # lagging base's is held along its measured path above)
+            out.append(self.without_turn(pairs))
+        if pairs.moved.any() and not world_rates:
+            out.append(self.turn_rate(pairs, base_velocity))
+        return command, box, held, out
+
+    def hold_on_path(self, pairs: Pairs, command, box: Box, v0, own) -> tuple[np.ndarray, Box, bool]:
+        """A lagging base that already approaches a pair faster than allowed (its measured twist
+        ``v0``, approach rates ``own`` = j_b v₀, with the arm's share of ``command``) is sent
+        ``s v₀`` instead of its reference: the largest ``s`` in [−1, 1] that the pairs allow. That
+        twist lies on the base's own path (a steerable base keeps its ICR and only slows its
+        wheels: no re-steering, whose sweep would carry it on towards the obstacle), and the base
+        entries are held there in the box. Returns ``(command, box, held)``."""
+        axes, rows, bound = pairs.axes, pairs.rows, pairs.bound
+        nb = len(axes)
+        arm = rows[:, nb:] @ command[nb:]
+        approaching = pairs.moved & (own < -TOLERANCE)
+        if not (approaching & (own + arm < bound - TOLERANCE)).any():
+            return command, box, False
+        # the approach at the pair's bound once the base has settled at s v₀, and braking at
+        # K_p (1 − s) |ḋ_b| from now on strong enough to stop it within the room left
+        scale = settle = 1.0
+        for i in np.flatnonzero(approaching):
+            room = max(pairs.distance[i] - self.safety_distance, 1e-6)
+            settle = min(settle, (bound[i] - arm[i]) / own[i])
+            scale = min(scale, settle, 1.0 + own[i] * self.lag / (2.0 * room))
+        # back along the path at up to the speed it came, or as fast as a pair must separate (a
+        # base that crept inside the safety distance at a crawl must leave faster than it came)
+        scale = max(scale, min(-1.0, settle))
+        # the twist in the command's terms, v₀ᵀ R(θ)ᵀ = (R(θ) v₀)ᵀ (to_base is a rotation), within the
+        # method's box: the reference changes no faster than its own limits allow
+        target = np.clip((v0 @ pairs.to_base)[list(axes)] * scale, box.lower[:nb], box.upper[:nb])
+        command = command.copy()
+        command[:nb] = target
+        return command, box.hold(slice(0, nb), target), True
+
+    def along_path(self, pairs: Pairs, v0, own) -> Constraint:
+        """For each pair the base moves, the same row on the part of the reference along the
+        base's measured twist ``v0`` (``own`` = j_b v₀): a steerable base first moves along its
+        current path, at that part, while its wheels turn towards the reference's (a sideways
+        reference drives it on along its wheels' heading for a while, into what lies ahead)."""
+        n = pairs.rows.shape[1]
+        norm = float(v0 @ v0)
+        if norm < PATH_SPEED**2 or not pairs.moved.any():
+            return Constraint.empty(n, 'base along path')
+        along = (own[pairs.moved, None] * v0 / norm) @ pairs.to_base  # j_b v₀ v₀ᵀ / |v₀|²
+        return Constraint.from_lower(*pairs.on_base(along), 'base along path')
+
+    def between(self, pairs: Pairs, v0) -> Constraint:
+        """For each pair the base moves, the row at every corner of the box between the base's
+        measured twist ``v0`` and its reference, axis by axis (vx, vy, ω of its own frame): a
+        lagging base gets to its reference on each axis at its own pace (a steerable base drives
+        on along its wheels' heading, and turns, before it has steered to a sideways reference),
+        so a reference whose approach is a part towards the obstacle and a part away from it may
+        not count on the part that comes last. Each corner takes the reference on some axes and
+        ``v0`` on the others."""
+        n = pairs.rows.shape[1]
+        if not pairs.moved.any():
+            return Constraint.empty(n, 'base between')
+        j = pairs.base[pairs.moved]
+        measured = j * np.asarray(v0, dtype=float)  # each axis's share of the approach at v₀
+        corners = [pairs.on_base((j * part) @ pairs.to_base, -measured[:, ~part].sum(axis=1)) for part in _PARTS]
+        return Constraint.from_lower(
+            np.vstack([rows for rows, _ in corners]), np.concatenate([bound for _, bound in corners]), 'base between'
+        )
+
+    def after_turn(self, pairs: Pairs, v0, command, world_rates: bool) -> Constraint:
+        """For each pair the base moves, the same row as the base will see it once it has turned
+        on by Δθ: the pair's normal turns the other way in the base's frame (j_xy becomes
+        R(−Δθ) j_xy). A lagging base turning at ω (its measured twist ``v0``) drives at its
+        reference of τ ago: a reference in the world frame (``world_rates``) is driven turned by
+        Δθ = ω τ. A reference held in the base's frame turns with the base, which turns on for
+        its lag and then while the turn brakes at the base's limit α, whatever its reference
+        asks: Δθ = ω τ + ω |ω| / (2 α), ω the faster of the measured turn and the ``command``'s.
+        Without it, a reference that approaches at the bound now swings into the obstacle as the
+        turn goes on (robot A passing a table's corner while it turns)."""
+        axes, n = pairs.axes, pairs.rows.shape[1]
+        if 2 not in axes or not pairs.moved.any():
+            return Constraint.empty(n, 'base after turn')
+        if world_rates:
+            turn = float(v0[2]) * self.lag
+        else:
+            omega = max(float(v0[2]), float(command[axes.index(2)]), key=abs)
+            alpha = float(self.base_acceleration[2])
+            turn = omega * self.lag + (omega * abs(omega) / (2.0 * alpha) if alpha > 0.0 else 0.0)
+        if abs(turn) < TOLERANCE:
+            return Constraint.empty(n, 'base after turn')
+        ahead = pairs.base[pairs.moved] @ rotation_z(turn)  # rows R(−Δθ) j: jᵀ R(Δθ)
+        return Constraint.from_lower(*pairs.on_base(ahead @ pairs.to_base), 'base after turn')
+
+    def without_turn(self, pairs: Pairs) -> Constraint:
+        """For each pair of the base's own body (chassis, wheels: no arm joint moves it) and an
+        obstacle whose distance the base's turn changes, the same row without the turn's share:
+        the base's linear approach brakes as the row counts on even when the turn stops. Without
+        it, a turn that swings a corner away for the moment meets the row while the base drives
+        on at the obstacle faster than its linear acceleration limits can stop (and the next
+        corner swings in). The arm's pairs keep the turn: the arm brakes its own share fast."""
+        n = pairs.rows.shape[1]
+        if 2 not in pairs.axes:
+            return Constraint.empty(n, 'base without turn')
+        turning = pairs.body & (pairs.base[:, 2] != 0.0)
+        if not turning.any():
+            return Constraint.empty(n, 'base without turn')
+        linear = pairs.base[turning] * _LINEAR
+        return Constraint.from_lower(*pairs.on_base(linear @ pairs.to_base, which=turning), 'base without turn')
+
+    def turn_rate(self, pairs: Pairs, base_velocity) -> Constraint:
+        """For each pair of the base's own body and an obstacle, a row on the turn rate: turning
+        at ω while driving at ``v`` (the measured twist ``base_velocity``, base frame) turns the
+        pair's normal under the base's velocity, which changes the approach rate n · v at ω
+        (n_x v_y − n_y v_x) per second, towards the obstacle for one sign of ω. The linear axes
+        must brake that as well, so the turn may take no more than :data:`TURN_SHARE` of their
+        deceleration (the dampers count on the rest): a base driving past an obstacle may not
+        swing its path into it faster than it can brake."""
+        axes, n = pairs.axes, pairs.rows.shape[1]
+        linear, slowest = linear_axes(axes, self.base_acceleration)
+        if 2 not in axes or not linear or base_velocity is None:
+            return Constraint.empty(n, 'base turn rate')
+        body = pairs.body
+        base = pairs.base
+        v = np.asarray(base_velocity, dtype=float)
+        bend = base[body, 0] * v[1] - base[body, 1] * v[0]  # n_x v_y − n_y v_x
+        if not bend.any():
+            return Constraint.empty(n, 'base turn rate')
+        rows = np.zeros((int(body.sum()), n))
+        rows[:, axes.index(2)] = -bend
+        budget = TURN_SHARE * slowest * np.hypot(base[body, 0], base[body, 1])
+        return Constraint.from_lower(rows, -budget, 'base turn rate')
