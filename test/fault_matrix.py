@@ -27,7 +27,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import Odometry, Path
 from rcl_interfaces.msg import Log
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
@@ -35,6 +35,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import MultiDOFJointTrajectory
+from visualization_msgs.msg import Marker, MarkerArray
 
 from ros_helpers import ROSOUT_QOS, RosHarness
 from sim_bridge.node import SimNode
@@ -42,6 +43,7 @@ from sim_bridge.world import SimWorld
 from wmm_control.kinematics import KinematicModel
 from wmm_control.geometry import quaternion_from_matrix, twist_to_world
 from wmm_control.nodes.conversions import float_array, twist_stamped
+from wmm_control.nodes.goal_planner import GoalPlannerNode
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.base_controller import BaseControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
@@ -465,6 +467,63 @@ class ResolverRig(PlantRig):
         return msgs
 
 
+class PlannerRig(ResolverRig):
+    """``goal_planner``; the probe is the user and the state estimate: every cycle odometry, joint
+    states and a goal within reach with nothing in the way, two such goals in turn (each a new
+    one, planned and forwarded to the resolver on ``goal_planner/goal``, the cycle's answer)."""
+
+    family = 'planner'
+    column = 'goal_planner'
+
+    def __init__(self):
+        super().__init__('steerable', 'amp')
+        self.column = type(self).column
+        self._goals = 0
+
+    def make_node(self, overrides):
+        return GoalPlannerNode(
+            context=self.context,
+            parameter_overrides=[
+                Parameter('robot', value=self.config.name),
+                Parameter('diagnostics_period', value=PERIOD),
+                Parameter('state_timeout', value=1.0),  # not stale on a loaded machine
+                *overrides,
+            ],
+        )
+
+    def _watch_outputs(self):
+        def goal_values(m):
+            q = m.pose.orientation
+            return [m.pose.position.x, m.pose.position.y, m.pose.position.z, q.x, q.y, q.z, q.w]
+
+        self.watch('/goal_planner/goal', PoseStamped, goal_values)
+        self.watch(
+            '/ee_reference',
+            MultiDOFJointTrajectory,
+            lambda m: [v for p in m.points for t in p.transforms for v in (t.translation.x, t.translation.y)],
+        )
+        self.watch(
+            '/goal_planner/path', Path, lambda m: [v for s in m.poses for v in (s.pose.position.x, s.pose.position.y)]
+        )
+        self.probe.create_subscription(PoseStamped, '/goal_planner/goal', self._on_goal, 10)
+        self.watch_diagnostics()
+
+    def _on_goal(self, msg):
+        self._goals += 1
+
+    def _cycle_count(self):
+        return self._goals
+
+    def nominal(self, k):
+        # from ``goal``, to (0.05, 0 or 0.03, 0) m from the end effector: within reach, nothing in the way
+        offset = np.array([-0.25, -0.1 + 0.03 * (k % 2), 0.05])
+        return [
+            ('/odom', self.odometry(k)),
+            ('/joint_states', self.joint_state(k)),
+            ('/goal_pose', _pose(self.goal + offset, self.goal_rotation)),
+        ]
+
+
 class SequencerRig(Rig):
     """``goal_sequencer`` on sim time: the probe publishes ``/clock``, one period per cycle, and the
     goal in force comes back on every tick (``republish_period`` half a period)."""
@@ -521,6 +580,7 @@ RIGS = {
     'redundancy_resolver (A, task_sharing)': lambda: ResolverRig('steerable', 'task_sharing'),
     'redundancy_resolver (B, amp)': lambda: ResolverRig('mecanum', 'amp'),
     'goal_sequencer': SequencerRig,
+    'goal_planner': PlannerRig,
 }
 
 
@@ -714,6 +774,28 @@ def _set_reference(**fields):
     return _on('base/reference', change)
 
 
+def _obstacles(n, size=(0.3, 0.3, 0.3)):
+    """``/obstacles`` of ``n`` box markers of ``size``, in the world frame, far from the robot."""
+
+    def make(rig):
+        msg = MarkerArray()
+        for i in range(n):
+            m = Marker(ns='fault', id=i, type=Marker.CUBE, action=Marker.ADD)
+            m.header.frame_id = 'world'
+            m.pose.position.x, m.pose.position.y, m.pose.position.z = 20.0 + i % 100, 20.0 + i // 100, 0.5
+            m.pose.orientation.w = 1.0
+            m.scale.x, m.scale.y, m.scale.z = (float(v) for v in size)
+            msg.markers.append(m)
+        return '/obstacles', msg
+
+    return make
+
+
+def _stale_odometry(rig, msgs):
+    """The cycle without its odometry, and a pause longer than the state timeout."""
+    return [(t, m) for t, m in msgs if t != '/odom'] + [(None, 0.3)]
+
+
 @dataclass(frozen=True)
 class Kind:
     """One kind of bad input: what it is, and per node family the mutator and the expected outcome.
@@ -761,6 +843,7 @@ KINDS = [
     Kind(
         'NaN field',
         {
+            'planner': ('rejected', '/goal_pose position.x = NaN', _goal([math.nan, 0.0, 1.0])),
             'sim': ('rejected', 'arm command [NaN, ...]', _command(lambda r: 'arm', lambda n: [math.nan] * n)),
             'base': ('rejected', '/base/reference linear.x = NaN', _set_reference(linear_x=math.nan)),
             'resolver': ('rejected', '/goal_pose position.x = NaN', _goal([math.nan, 0.0, 1.0])),
@@ -769,6 +852,11 @@ KINDS = [
     Kind(
         '+inf field',
         {
+            'planner': (
+                'rejected',
+                '/odom position.x = inf',
+                _odom(lambda m: setattr(m.pose.pose.position, 'x', math.inf)),
+            ),
             'sim': ('rejected', 'steer/wheel command [inf, ...]', _command(_base_group, lambda n: [math.inf] * n)),
             'base': ('rejected', '/base/reference angular.z = inf', _set_reference(angular_z=math.inf)),
             'resolver': (
@@ -781,6 +869,7 @@ KINDS = [
     Kind(
         '-inf measured value',
         {
+            'planner': ('rejected', '/joint_states position of arm joint 1 = -inf', _set_joint('position', -math.inf)),
             'sim': ('rejected', 'drive/wheel command [-inf, ...]', _command(_last_group, lambda n: [-math.inf] * n)),
             'base': (
                 'rejected',
@@ -793,6 +882,7 @@ KINDS = [
     Kind(
         'finite absurd value (1e308)',
         {
+            'planner': ('rejected', '/goal_pose position.x = 1e308', _goal([1e308, 0.0, 1.0])),
             'sim': (
                 'corrected',
                 'arm command [1e308, ...] (clamped)',
@@ -816,6 +906,7 @@ KINDS = [
     Kind(
         'joint position 1e308',
         {
+            'planner': ('rejected', '/joint_states position of arm joint 1 = 1e308', _set_joint('position', 1e308)),
             'base': (
                 'rejected',
                 '/joint_states position of a steer/wheel joint = 1e308',
@@ -837,6 +928,11 @@ KINDS = [
     Kind(
         'zero quaternion (goal)',
         {
+            'planner': (
+                'rejected',
+                '/goal_pose orientation (0, 0, 0, 0)',
+                _goal_near((0, 0, 0), quat=(0.0, 0.0, 0.0, 0.0)),
+            ),
             'resolver': (
                 'rejected',
                 '/goal_pose orientation (0, 0, 0, 0)',
@@ -847,12 +943,18 @@ KINDS = [
     Kind(
         'zero quaternion (odometry)',
         {
+            'planner': ('rejected', '/odom orientation (0, 0, 0, 0)', _odom(_set_odom_quaternion(0.0, 0.0, 0.0, 0.0))),
             'resolver': ('rejected', '/odom orientation (0, 0, 0, 0)', _odom(_set_odom_quaternion(0.0, 0.0, 0.0, 0.0))),
         },
     ),
     Kind(
         'non-unit quaternion (goal)',
         {
+            'planner': (
+                'corrected',
+                '/goal_pose orientation of norm 2 (normalised)',
+                _goal_near((0, 0, 0), quat=(0.0, 0.0, 0.0, 2.0)),
+            ),
             'resolver': (
                 'corrected',
                 '/goal_pose orientation of norm 2 (normalised)',
@@ -873,6 +975,7 @@ KINDS = [
     Kind(
         'unknown frame_id',
         {
+            'planner': ('rejected', "/goal_pose frame 'map'", _goal_near((0, 0, 0), frame='map')),
             'base': ('rejected', "/base/reference frame 'map'", _set_reference(frame_id='map')),
             'resolver': ('rejected', "/goal_pose frame 'map'", _goal_near((0, 0, 0), frame='map')),
         },
@@ -880,6 +983,7 @@ KINDS = [
     Kind(
         'empty frame_id',
         {
+            'planner': ('rejected', "/goal_pose frame ''", _goal_near((0, 0, 0), frame='')),
             'base': ('corrected', "/base/reference frame '' (taken as base_link)", _set_reference(frame_id='')),
             'resolver': ('rejected', "/goal_pose frame ''", _goal_near((0, 0, 0), frame='')),
         },
@@ -888,7 +992,7 @@ KINDS = [
         'JointState empty',
         {
             f: ('rejected', '/joint_states without names or values', _js(lambda own, n, p, v: ([], [], [])))
-            for f in ('base', 'resolver')
+            for f in ('base', 'resolver', 'planner')
         },
     ),
     Kind(
@@ -899,7 +1003,7 @@ KINDS = [
                 '/joint_states with one position fewer than names',
                 _js(lambda own, n, p, v: (n, p[:-1], v)),
             )
-            for f in ('base', 'resolver')
+            for f in ('base', 'resolver', 'planner')
         },
     ),
     Kind(
@@ -910,14 +1014,14 @@ KINDS = [
                 '/joint_states with 2 velocities for all its names',
                 _js(lambda own, n, p, v: (n, p, v[:2])),
             )
-            for f in ('base', 'resolver')
+            for f in ('base', 'resolver', 'planner')
         },
     ),
     Kind(
         'JointState missing a joint',
         {
             f: ('rejected', "/joint_states without one of the node's joints", _js(_missing))
-            for f in ('base', 'resolver')
+            for f in ('base', 'resolver', 'planner')
         },
     ),
     Kind(
@@ -931,7 +1035,7 @@ KINDS = [
         'JointState duplicated name',
         {
             f: ('rejected', "/joint_states naming one of the node's joints twice (other value)", _js(_duplicated))
-            for f in ('base', 'resolver')
+            for f in ('base', 'resolver', 'planner')
         },
     ),
     Kind(
@@ -942,7 +1046,7 @@ KINDS = [
                 "/joint_states of joints 'foo', 'bar' only",
                 _js(lambda own, n, p, v: (['foo', 'bar'], [0.0, 1.0], [0.0, 0.0])),
             )
-            for f in ('base', 'resolver')
+            for f in ('base', 'resolver', 'planner')
         },
     ),
     Kind(
@@ -958,31 +1062,34 @@ KINDS = [
     Kind(
         'goal out of reach',
         {
-            'resolver': (
+            f: (
                 'rejected',
                 '/goal_pose 5 m above the floor',
                 _goal(lambda rig: [rig.goal[0], rig.goal[1], 5.0]),
             )
+            for f in ('resolver', 'planner')
         },
     ),
     Kind(
         'goal below the floor',
         {
-            'resolver': (
+            f: (
                 'rejected',
                 '/goal_pose 0.5 m below the floor',
                 _goal(lambda rig: [rig.goal[0], rig.goal[1], rig.config.ground_z - 0.5]),
             )
+            for f in ('resolver', 'planner')
         },
     ),
     Kind(
         'goal 100 m away',
         {
-            'resolver': (
+            f: (
                 'rejected',
                 '/goal_pose 100 m ahead (beyond max_goal_distance, 50 m)',
                 _goal_near((100.0, 0, 0)),
             )
+            for f in ('resolver', 'planner')
         },
     ),
     Kind(
@@ -1036,7 +1143,10 @@ KINDS = [
     Kind(
         'negative /clock',
         {
-            **{f: ('rejected', '/clock at -5 s (use_sim_time)', _add(_clock(-5))) for f in ('sim', 'base', 'resolver')},
+            **{
+                f: ('rejected', '/clock at -5 s (use_sim_time)', _add(_clock(-5)))
+                for f in ('sim', 'base', 'resolver', 'planner')
+            },
             'sequencer': ('rejected', '/clock at -5 s instead of the next time', _on('clock', _stamp(value=-5.0))),
         },
         start=(('use_sim_time', True),),
@@ -1046,7 +1156,7 @@ KINDS = [
         {
             **{
                 f: ('accepted', '/clock at 2^31 - 1 s (use_sim_time)', _add(_clock(2**31 - 1)))
-                for f in ('sim', 'base', 'resolver')
+                for f in ('sim', 'base', 'resolver', 'planner')
             },
             'sequencer': (
                 'restarts',
@@ -1062,6 +1172,30 @@ KINDS = [
             'base': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
             'resolver': ('skipped', 'every /joint_states delivered twice (a second publisher)', _twice),
         },
+    ),
+    Kind(
+        'obstacle of NaN size',
+        {
+            f: ('rejected', '/obstacles: a box of size (NaN, 0.5, 0.5)', _add(_obstacles(1, (math.nan, 0.5, 0.5))))
+            for f in ('sim', 'resolver', 'planner')
+        },
+    ),
+    Kind(
+        'obstacle of negative size',
+        {
+            f: ('rejected', '/obstacles: a box of size (-0.5, 0.5, 0.5)', _add(_obstacles(1, (-0.5, 0.5, 0.5))))
+            for f in ('sim', 'resolver', 'planner')
+        },
+    ),
+    Kind('obstacles: empty message', {'planner': ('rejected', '/obstacles without a marker', _add(_obstacles(0)))}),
+    Kind(
+        'obstacles: too many markers',
+        {'planner': ('rejected', '/obstacles of 1000 markers (max_obstacles 200)', _add(_obstacles(1000)))},
+    ),
+    Kind(
+        'stale odometry',
+        {'planner': ('rejected', 'no /odom for 0.3 s (state_timeout 0.25 s), goals still coming', _stale_odometry)},
+        start=(('state_timeout', 0.25),),
     ),
     Kind('out-of-range parameter', {}, param=_param_values_out_of_range),
     Kind('non-finite parameter', {}, param=_param_values_non_finite),

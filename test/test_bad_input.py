@@ -22,7 +22,7 @@ from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 
 def test_the_matrix_has_at_least_25_kinds_and_every_node_meets_some():
     assert len(fault_matrix.KINDS) >= 25
-    families = {'sim', 'base', 'resolver', 'sequencer'}
+    families = {'sim', 'base', 'resolver', 'sequencer', 'planner'}
     for family in families:
         applicable = [k for k in fault_matrix.KINDS if family in k.cases or k.param is not None]
         assert len(applicable) >= 6, family

@@ -84,6 +84,20 @@ def test_a_goal_within_reach_is_sent_on_unchanged_and_the_same_goal_again_change
     assert pursuit.step(0.025, START, Q_ARM).hold is None  # once
 
 
+def test_a_goal_waits_for_the_base_pose_and_says_so_and_a_nan_goal_leaves_no_nan_in_the_status(pursuit):
+    assert not pursuit.needs_base
+    pursuit.new_goal('world', pose(_start_ee()[0] + [0.1, 0.0, 0.0]))
+    for _ in range(3):  # stale odometry: no plan, and the pursuit says it needs the base's pose
+        out = pursuit.step(0.025, None, Q_ARM)
+        assert not out.forward_goal and pursuit.state is PursuitState.PLANNING and pursuit.needs_base
+    settle(pursuit)
+    assert pursuit.state is PursuitState.DIRECT and not pursuit.needs_base
+    pursuit.new_goal('world', pose([np.nan, 0.0, 1.0]))
+    assert not pursuit.needs_base
+    _, message, values = pursuit.status()
+    assert 'position.x' in values['reason'] and 'nan' not in (message + values['reason']).lower()
+
+
 def test_a_goal_inside_the_table_has_no_way_with_the_planners_reason(pursuit):
     pursuit.new_goal('world', pose([1.5, -0.2, 0.3]))
     steps = settle(pursuit)

@@ -195,11 +195,14 @@ class GoalPlannerNode(Node):
         fresh = self.odom_fresh.fresh(self._now())
         base = self._base if fresh else None
         q_arm = self._q_arm if self.joints_fresh.fresh(self._now()) else None
-        if not fresh and self.pursuit.state is PursuitState.FOLLOWING:
+        if not fresh and self.pursuit.needs_base:
+            waits = (
+                'no trajectory point (the resolver holds its last one)'
+                if self.pursuit.state is PursuitState.FOLLOWING
+                else 'the plan waits for it'
+            )
             self.get_logger().warn(
-                f'/odom older than state_timeout {self.p.state_timeout:g} s: no trajectory point (the resolver holds '
-                'its last one)',
-                throttle_duration_sec=2.0,
+                f'/odom older than state_timeout {self.p.state_timeout:g} s: {waits}', throttle_duration_sec=2.0
             )
         out = self.pursuit.step(dt, base, q_arm)
         self._log(out.events)

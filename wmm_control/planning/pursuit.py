@@ -496,6 +496,11 @@ class GoalPursuit:
         return False
 
     # ------------------------------------------------------------------ report
+    @property
+    def needs_base(self) -> bool:
+        """A plan is due or a path is followed: :meth:`step` does nothing for it without the base's pose."""
+        return bool(self._plan_due) or self.state is PursuitState.FOLLOWING
+
     def status(self) -> tuple[str, str, dict]:
         """(level 'ok' or 'warn', message, values) for ``/diagnostics``."""
         level = 'warn' if self.state in (PursuitState.NO_WAY, PursuitState.REJECTED) else 'ok'

@@ -37,6 +37,8 @@ from wmm_control.resolvers.progress import GoalProgress
 __all__ = ['GOAL', 'REFERENCE', 'LogEvent', 'LogThrottle', 'TargetManager', 'check_goal', 'checked_quaternion']
 
 GOAL = 'goal_pose'
+#: The fields of a goal's pose (x, y, z, qx, qy, qz, qw), for the reasons.
+POSE_FIELDS = tuple(f'position.{a}' for a in 'xyz') + tuple(f'orientation.{a}' for a in 'xyzw')
 REFERENCE = 'ee_reference'
 #: Largest entry of a trajectory point's twist or acceleration.
 MAX_REFERENCE_RATE = 1e3
@@ -102,7 +104,9 @@ def check_goal(
     if frame != world_frame:
         return None, f'frame {frame!r}, expected {world_frame!r}', []
     if not np.all(np.isfinite(values)):
-        return None, f'non-finite values {values.tolist()}', []
+        # The fields, not the values: a reason that quotes NaN would carry it on to /diagnostics.
+        bad = ', '.join(POSE_FIELDS[i] for i in np.flatnonzero(~np.isfinite(values)))
+        return None, f'non-finite values of {bad}', []
     if float(np.max(np.abs(values[:3]))) > max_goal_distance:
         return None, f'position {values[:3].tolist()} is beyond max_goal_distance {max_goal_distance} m', []
     impossible = workspace.impossible(values[:3], base, obstacles)
