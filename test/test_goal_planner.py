@@ -187,6 +187,33 @@ def test_a_goal_within_reach_goes_to_the_resolver_unchanged(system):
     assert probe.references == [] and probe.paths[-1].poses == []
 
 
+def test_a_goal_waits_for_the_resolver_to_subscribe_and_is_then_sent_once():
+    """A resolver that starts late (or is found late on a loaded machine) still gets the goal:
+    the planner holds it, says why, and sends it as soon as someone subscribes."""
+    ros = RosHarness()
+    try:
+        common = [Parameter('robot', value=ROBOT), Parameter('obstacles', value=OBSTACLES)]
+        planner = ros.add(GoalPlannerNode(context=ros.context, parameter_overrides=common))
+        ros.add(SimNode(context=ros.context, parameter_overrides=common))  # in real time: no commands needed
+        user = ros.probe('late_user')
+        logs, forwarded = [], []
+        user.create_subscription(Log, '/rosout', logs.append, ROSOUT_QOS)
+        goals = user.create_publisher(PoseStamped, '/goal_pose', 10)
+        assert ros.spin_until(lambda: planner._base is not None and planner._q_arm is not None, timeout=30.0)
+        sent = goal_msg(_start_ee()[0] + [0.1, 0.0, -0.05])
+        goals.publish(sent)
+        assert ros.spin_until(
+            lambda: any('nobody subscribes to /goal_planner/goal' in m.msg for m in logs), timeout=20.0
+        ), [m.msg for m in logs if m.name == 'goal_planner']
+        assert state(planner) == 'direct'
+        user.create_subscription(PoseStamped, '/goal_planner/goal', forwarded.append, 10)
+        assert ros.spin_until(lambda: forwarded, timeout=20.0)
+        ros.spin_for(0.5)
+        assert forwarded == [sent]
+    finally:
+        ros.close()
+
+
 def test_a_goal_inside_the_table_has_no_way_and_the_robot_is_held(system):
     ros, probe, planner, resolver, sim = system
     probe.goal_pub.publish(goal_msg([1.5, -0.2, 0.3]))

@@ -97,6 +97,8 @@ class GoalPlannerNode(Node):
         self._sim_time = 0.0  # [s] the latest odometry's stamp: the time in lockstep
         self._last_tick: float | None = None
         self._goal_msg: PoseStamped | None = None
+        #: the goal (or hold) for the resolver not yet sent: it waits until the resolver listens
+        self._goal_out: PoseStamped | None = None
         self._log_throttle = PursuitLog()
         self._diagnostics_gate = DiagnosticsGate()
         self.pub_reference = self.create_publisher(MultiDOFJointTrajectory, 'ee_reference', COMMAND_QOS)
@@ -209,11 +211,12 @@ class GoalPlannerNode(Node):
         stamp = self.get_clock().now().to_msg()
         frame = self.p.world_frame
         if out.hold is not None:
-            self.pub_goal.publish(target_pose_stamped(stamp, frame, out.hold))
+            self._goal_out = target_pose_stamped(stamp, frame, out.hold)
             position = np.round(out.hold.position, 3).tolist()
             self.get_logger().info(f'holding the end effector where it is: {position}')
         if out.forward_goal and self._goal_msg is not None:
-            self.pub_goal.publish(self._goal_msg)
+            self._goal_out = self._goal_msg
+        self._send_goal()
         if out.reference is not None:
             follower = self.pursuit.follower
             t = follower.clock if follower is not None else 0.0
@@ -226,6 +229,22 @@ class GoalPlannerNode(Node):
             self.pub_diag.publish(
                 diagnostic_array(stamp, [node_status(self, '', self.robot.name, level, message, values)])
             )
+
+    def _send_goal(self) -> None:
+        """Send the waiting goal once the resolver subscribes to it: a goal published before the
+        subscription is matched (the resolver starting, or slow discovery on a loaded machine)
+        would be lost, and a goal is sent only once."""
+        if self._goal_out is None:
+            return
+        if self.pub_goal.get_subscription_count() == 0:
+            self.get_logger().warn(
+                f'nobody subscribes to {self.pub_goal.topic_name} yet (is redundancy_resolver running, its '
+                'goal_pose remapped there?): the goal waits',
+                throttle_duration_sec=2.0,
+            )
+            return
+        self.pub_goal.publish(self._goal_out)
+        self._goal_out = None
 
     def _publish_path(self, poses: np.ndarray) -> None:
         """``~/path``: the planned base poses (x, y, θ), in the world frame (none: an empty path)."""
