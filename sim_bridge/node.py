@@ -5,8 +5,9 @@ joint order = the robot YAML's):
   ``/arm_controller/commands`` (7); robot A ``/steer_controller/commands`` and
   ``/drive_controller/commands`` (4 each); robot B ``/wheel_controller/commands`` (4);
   ``/obstacles`` (``visualization_msgs/MarkerArray``, frame ``world``): obstacles added and
-  removed live, beside those of the ``obstacles`` file (:mod:`wmm_control.nodes.obstacle_topic`):
-  static bodies of the simulated world.
+  removed live, beside those of the ``obstacles`` file: static bodies of the simulated world;
+  bad input (an empty message, more than ``max_obstacles`` markers, a bad marker) refused with a
+  warning (:mod:`wmm_control.nodes.obstacle_topic`).
 Publishes, every period:
   ``/joint_states`` (``sensor_msgs/JointState``: every simulated joint, position and velocity:
   the arm and base joints, then the joints held outside them, at the robot YAML's
@@ -148,7 +149,7 @@ class SimNode(Node):
         )
 
     def _on_obstacles(self, msg):
-        if self.obstacles.take(msg, self.get_logger()):
+        if self.obstacles.take(msg, self.get_logger(), self.p.max_obstacles):
             self.world.set_obstacles(self.obstacles.obstacles)
 
     def _set_wait_groups(self, text):

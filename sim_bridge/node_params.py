@@ -6,7 +6,7 @@ import math
 
 from sim_bridge.slip import SlipParams
 from sim_bridge.world import BASE_MODES, SimWorld
-from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP
+from wmm_control.nodes.obstacle_topic import obstacle_params
 from wmm_control.nodes.parameters import Param, robot_param, robot_period
 from wmm_control.robot_config import load_robot
 
@@ -97,7 +97,7 @@ PARAMS = (
         'frame_prefix', 'Prefix of the robot\'s frames in TF and odometry (e.g. r1/); world has none.', read_only=True
     ),
     Param('gui', 'Open the PyBullet GUI.', read_only=True),
-    Param('obstacles', OBSTACLE_PARAM_HELP, read_only=True),
+    *obstacle_params(),
 )
 
 

@@ -16,6 +16,7 @@ import fault_matrix
 import wmm_control.base.period as period_module
 import wmm_control.nodes.base_controller as node_module
 from ros_helpers import ROSOUT_QOS
+from wmm_control.nodes.obstacle_topic import ObstacleSet
 from wmm_control.nodes.stamps import StampGate
 from wmm_control.nodes.mecanum_controller import MecanumControllerNode
 
@@ -45,6 +46,15 @@ def test_the_matrix_sees_a_node_that_runs_a_cycle_per_duplicate(monkeypatch):
     kind = next(k for k in fault_matrix.KINDS if k.name == 'duplicated message')
     cell = fault_matrix.run_cell(fault_matrix.RIGS['mecanum_controller'], kind)
     assert cell.outcome == 'SILENT'
+
+
+def test_the_matrix_sees_a_node_that_takes_an_oversized_obstacle_message(monkeypatch):
+    """Without the limit the message's markers become obstacles (far from the robot: nothing else
+    shows it), and nothing is logged: the cell reads CHANGED."""
+    monkeypatch.setattr(ObstacleSet, 'take', lambda self, msg, logger, max_markers: self.apply(msg).changed)
+    kind = next(k for k in fault_matrix.KINDS if k.name == 'obstacles: too many markers')
+    cell = fault_matrix.run_cell(fault_matrix.RIGS['redundancy_resolver (B, amp)'], kind)
+    assert cell.outcome == 'CHANGED', cell
 
 
 def test_the_table_prints_one_row_per_kind_and_one_column_per_node():

@@ -3,6 +3,7 @@ the safety stage on the base, goals inside an obstacle, the /obstacles topic, th
 contact report, and the recorded runs."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -25,7 +26,7 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.kinematics.obstacles import load_obstacles, parse_obstacles
 from wmm_control.kinematics.workspace import Workspace
-from wmm_control.nodes.obstacle_topic import ObstacleSet
+from wmm_control.nodes.obstacle_topic import Applied, ObstacleSet, obstacle_from_marker
 from wmm_control.nodes.qos import LATCHED_QOS
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
@@ -47,7 +48,9 @@ BALLS = parse_obstacles(
     [
         ({'shape': 'cone', 'size': [1.0], 'pose': [0, 0, 0]}, 'shape must be one of'),
         ({'shape': 'box', 'size': [1.0, 1.0], 'pose': [0, 0, 0]}, 'takes 3 size entries'),
-        ({'shape': 'sphere', 'size': [0.0], 'pose': [0, 0, 0]}, 'finite and > 0'),
+        ({'shape': 'sphere', 'size': [0.0], 'pose': [0, 0, 0]}, 'finite, > 0 and at most 1000'),
+        ({'shape': 'box', 'size': [1.0, 2e3, 1.0], 'pose': [0, 0, 0]}, 'finite, > 0 and at most 1000'),
+        ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 1e15, 0]}, 'within ±1000 m'),
         ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0]}, 'expected 3 or 6 numbers'),
         ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0, float('nan')]}, 'finite'),
         ({'shape': 'sphere', 'size': [0.1], 'pose': [0, 0, 0], 'colour': 'red'}, 'unknown keys'),
@@ -337,7 +340,7 @@ def _marker(
 def test_markers_add_replace_and_delete_obstacles_and_bad_ones_are_rejected():
     obstacles = ObstacleSet('table_pillar', 'world')
     fixed = len(obstacles.obstacles)
-    changed, errors = obstacles.apply(
+    applied = obstacles.apply(
         MarkerArray(
             markers=[
                 _marker(Marker.CUBE, scale=(0.4, 0.6, 0.8)),
@@ -350,15 +353,123 @@ def test_markers_add_replace_and_delete_obstacles_and_bad_ones_are_rejected():
             ]
         )
     )
-    assert changed and len(obstacles.obstacles) == fixed + 3
+    assert applied.changed and len(obstacles.obstacles) == fixed + 3
+    errors = applied.rejected
     assert len(errors) == 4 and 'not an obstacle' in errors[0] and "'map'" in errors[1]
     box, ball, post = obstacles.obstacles[fixed:]
     assert (box.shape, box.size, ball.size, post.size) == ('box', (0.4, 0.6, 0.8), (0.1,), (0.15, 1.0))
-    assert obstacles.apply(MarkerArray(markers=[_marker(Marker.SPHERE, marker_id=1)])) == (False, [])
-    changed, _ = obstacles.apply(MarkerArray(markers=[_marker(Marker.SPHERE, Marker.DELETE, marker_id=1)]))
-    assert changed and len(obstacles.obstacles) == fixed + 2
+    assert obstacles.apply(MarkerArray(markers=[_marker(Marker.SPHERE, marker_id=1)])) == Applied(False)
+    applied = obstacles.apply(MarkerArray(markers=[_marker(Marker.SPHERE, Marker.DELETE, marker_id=1)]))
+    assert applied.changed and len(obstacles.obstacles) == fixed + 2
     obstacles.apply(MarkerArray(markers=[_marker(Marker.SPHERE, Marker.DELETEALL)]))
     assert len(obstacles.obstacles) == fixed, 'the file\'s obstacles stay'
+
+
+NAN = float('nan')
+
+
+@pytest.mark.parametrize(
+    'kind, changes, reason',
+    [
+        (Marker.CUBE, {'scale': (NAN, 0.2, 0.2)}, 'scale [nan, 0.2, 0.2] must be finite and > 0'),
+        # max() of the diameters would pass over a NaN or a negative entry that is not the first
+        (Marker.SPHERE, {'scale': (0.2, NAN, 0.2)}, 'must be finite and > 0'),
+        (Marker.CYLINDER, {'scale': (0.2, 0.2, -1.0)}, 'must be finite and > 0'),
+        (Marker.SPHERE, {'scale': (0.2, -0.3, 0.2)}, 'must be finite and > 0'),
+        (Marker.CUBE, {'scale': (0.2, 0.0, 0.2)}, 'must be finite and > 0'),
+        (Marker.CUBE, {'scale': (0.2, float('inf'), 0.2)}, 'must be finite and > 0'),
+        (Marker.CUBE, {'scale': (1e308, 1.0, 1.0)}, 'at most 1000'),
+        (Marker.SPHERE, {'scale': (1e5, 1e5, 1e5)}, 'at most 1000'),
+        (Marker.CUBE, {'position': (1e15, 0.0, 0.5)}, 'within ±1000 m'),
+        (Marker.CUBE, {'position': (0.0, NAN, 0.5)}, 'position must be 3 finite numbers'),
+        (Marker.CUBE, {'quat': (0.0, 0.0, 0.0, 0.0)}, 'finite, non-zero quaternion'),
+        (Marker.CUBE, {'quat': (0.0, 0.0, NAN, 1.0)}, 'finite, non-zero quaternion'),
+        (Marker.CUBE, {'frame': 'map'}, "frame 'map', expected 'world'"),
+        (Marker.CUBE, {'frame': ''}, "frame '', expected 'world'"),
+        (Marker.ARROW, {}, 'type 0 is not an obstacle'),
+        (42, {}, 'type 42 is not an obstacle'),
+    ],
+)
+def test_a_bad_marker_is_rejected_with_its_reason(kind, changes, reason):
+    with pytest.raises(ConfigError, match=re.escape(reason)):
+        obstacle_from_marker(_marker(kind, marker_id=7, **changes), 'world')
+
+
+def test_a_quaternion_off_unit_norm_is_normalised_with_a_note_and_the_obstacle_kept():
+    """Dropping the obstacle would leave the robot free to drive into it; the pose is what the
+    publisher meant up to the norm (a goal's quaternion is taken the same way)."""
+    half = math.sqrt(0.5)
+    obstacle, note = obstacle_from_marker(_marker(Marker.CUBE, quat=(0.0, 0.0, 2 * half, 2 * half)), 'world')
+    assert note == 'marker test/0: quaternion has norm 2: normalised'
+    np.testing.assert_allclose(obstacle.rotation, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12)
+    _, note = obstacle_from_marker(_marker(Marker.CUBE, quat=(0.0, 0.0, 0.0, 1.0 + 1e-4)), 'world')
+    assert note == ''  # round-off: not worth a warning
+
+
+class _Log:
+    """A node logger's warn and info, recorded."""
+
+    def __init__(self):
+        self.warnings, self.infos = [], []
+
+    def warn(self, message, throttle_duration_sec=None):
+        assert throttle_duration_sec, 'every warning about /obstacles is throttled'
+        self.warnings.append(message)
+
+    def info(self, message):
+        self.infos.append(message)
+
+
+def test_an_empty_or_oversized_message_is_refused_with_a_warning_and_the_obstacles_stay():
+    obstacles = ObstacleSet('table_pillar', 'world')
+    log = _Log()
+    assert obstacles.take(MarkerArray(markers=[_marker(Marker.CUBE, marker_id=1)]), log, 3)
+    kept = obstacles.obstacles
+    assert not obstacles.take(MarkerArray(), log, 3)
+    assert log.warnings == ['ignored an empty /obstacles message: nothing to add or remove']
+    # four markers over a limit of three: none applied, not even the DELETEALL among them
+    four = [_marker(Marker.SPHERE, marker_id=i) for i in (2, 3, 4)] + [_marker(Marker.CUBE, Marker.DELETEALL)]
+    assert not obstacles.take(MarkerArray(markers=four), log, 3)
+    assert log.warnings[1] == (
+        'rejected /obstacles: 4 markers, more than max_obstacles 3; the obstacles stay as they were'
+    )
+    assert len(obstacles.obstacles) == len(kept) and all(a is b for a, b in zip(obstacles.obstacles, kept))
+    # at the limit it is taken
+    assert obstacles.take(MarkerArray(markers=four[:3]), log, 3)
+    assert len(obstacles.obstacles) == len(kept) + 3 and log.infos[-1].startswith('now 6 obstacles')
+
+
+def test_the_rejected_markers_of_a_message_make_one_warning_naming_the_first_three():
+    obstacles = ObstacleSet('', 'world')
+    log = _Log()
+    bad = [_marker(Marker.CUBE, marker_id=i, scale=(NAN, 1.0, 1.0)) for i in range(5)]
+    good = _marker(Marker.CUBE, marker_id=9, quat=(0.0, 0.0, 0.0, 3.0))
+    assert obstacles.take(MarkerArray(markers=[*bad, good]), log, 200)
+    rejected, normalised = log.warnings
+    assert rejected.startswith('rejected /obstacles marker test/0: scale [nan, 1.0, 1.0]')
+    assert 'marker test/2' in rejected and 'marker test/3' not in rejected and rejected.endswith('(and 2 more markers)')
+    assert normalised == '/obstacles marker test/9: quaternion has norm 3: normalised'
+    assert [o.name for o in obstacles.obstacles] == ['test/9']
+
+
+def test_every_node_that_takes_obstacles_declares_max_obstacles_with_the_same_default():
+    from sim_bridge.node_params import PARAMS as SIM
+    from wmm_control.nodes.goal_planner_params import PARAMS as PLANNER
+    from wmm_control.nodes.parameters import load_defaults
+    from wmm_control.nodes.redundancy_resolver_params import PARAMS as RESOLVER
+    from wmm_control.nodes.viewer_params import PARAMS as VIEWER
+
+    defaults = {}
+    for node, params in {
+        'wmm_sim': SIM,
+        'redundancy_resolver': RESOLVER,
+        'goal_planner': PLANNER,
+        'wmm_viewer': VIEWER,
+    }.items():
+        names = [spec.name for spec in params]
+        assert 'obstacles' in names and 'max_obstacles' in names, node
+        defaults[node] = load_defaults(f'{node}.yaml', node)['max_obstacles']
+    assert len(set(defaults.values())) == 1, defaults
 
 
 def test_the_nodes_take_obstacles_live_reject_goals_inside_them_and_the_simulator_reports_contact():

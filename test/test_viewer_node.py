@@ -7,6 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
+from rclpy.parameter import Parameter
 
 from rcl_interfaces.msg import Log
 
@@ -165,10 +166,14 @@ def test_two_robots_in_namespaces_the_viewer_of_one_draws_that_robot_only(ros):
     assert view._ee[0] == pytest.approx(pos, abs=1e-6)
 
 
-def test_obstacles_of_the_file_and_the_topic_are_drawn_where_they_are(ros):
+def test_obstacles_of_the_file_and_the_topic_are_drawn_where_they_are_and_bad_messages_change_nothing(ros):
     from visualization_msgs.msg import Marker, MarkerArray
 
-    view = viewer(ros, obstacles='table_pillar')
+    view = viewer(ros, obstacles='table_pillar', max_obstacles=3)
+    warnings = []
+    ros.add(ros_node(ros, 'log_listener')).create_subscription(
+        Log, '/rosout', lambda m: warnings.append(m.msg) if m.level >= Log.WARN else None, ROSOUT_QOS
+    )
     assert [h.name for h in view.browser.obstacle_handles] == ['/obstacles/table', '/obstacles/pillar']
     assert np.asarray(view.browser.obstacle_handles[0].position) == pytest.approx([1.5, -0.2, -0.1])
     publisher = ros.add(ros_node(ros, 'obstacle_publisher')).create_publisher(MarkerArray, '/obstacles', 10)
@@ -181,6 +186,26 @@ def test_obstacles_of_the_file_and_the_topic_are_drawn_where_they_are(ros):
     publisher.publish(MarkerArray(markers=[marker]))
     assert ros.spin_until(lambda: len(view.browser.obstacle_handles) == 3, timeout=5)
     assert np.asarray(view.browser.obstacle_handles[2].position) == pytest.approx([2.0, 0.0, 0.0])
+    # an empty message and one of more than max_obstacles markers: refused, with warnings; nothing redrawn
+    drawn, kept = list(view.browser.obstacle_handles), view.obstacles.obstacles
+    publisher.publish(MarkerArray())
+    moved = []
+    for i in range(4):
+        m = Marker()
+        m.header.frame_id, m.ns, m.id, m.type, m.action = 'world', 'live', 10 + i, Marker.SPHERE, Marker.ADD
+        m.scale.x = m.scale.y = m.scale.z = 0.3
+        m.pose.position.x, m.pose.orientation.w = 5.0 + i, 1.0
+        moved.append(m)
+    publisher.publish(MarkerArray(markers=moved))
+    wanted = ('empty /obstacles message', '4 markers, more than max_obstacles 3')
+    assert ros.spin_until(lambda: all(any(w in line for line in warnings) for w in wanted), timeout=5), warnings
+    assert view.browser.obstacle_handles == drawn and view.obstacles.obstacles == kept
+    assert np.asarray(view.browser.obstacle_handles[2].position) == pytest.approx([2.0, 0.0, 0.0])
+    # the limit is live: raised at run time, the same message is taken
+    assert view.set_parameters([Parameter('max_obstacles', value=4)])[0].successful
+    assert not view.set_parameters([Parameter('max_obstacles', value=0)])[0].successful
+    publisher.publish(MarkerArray(markers=moved))
+    assert ros.spin_until(lambda: len(view.browser.obstacle_handles) == 7, timeout=5)
 
 
 @pytest.mark.parametrize(

@@ -20,6 +20,11 @@ a scenario, ``--obstacles`` of ``wmm_randomized``: a path, or the name of a file
   pitch, yaw]`` [m, rad] (RPY as in URDF: fixed axes x, y, z).
 * ``name``: optional (default ``obstacle_<i>``), unique.
 
+Every size entry is finite and > 0, and it and every coordinate of the centre at most
+:data:`MAX_EXTENT` (1 km): far beyond it the simulator's single-precision geometry and the
+distances lose the robot's scale (a 1 m box 1e15 m away was measured 1 m from the robot), so a
+larger one is refused rather than taken wrongly.
+
 A file may also give ``goal_region: {centre: [x, y], radius: r}`` [m]: where ``wmm_randomized``
 draws the bases of its goals' configurations (:func:`load_goal_region`), and ``random_boxes``:
 boxes drawn by a seed beside the fixed obstacles (:func:`draw_boxes`)::
@@ -53,6 +58,7 @@ from wmm_control.paths import config_path
 from wmm_control.robot_config import read_yaml
 
 __all__ = [
+    'MAX_EXTENT',
     'Obstacle',
     'SHAPES',
     'around_base',
@@ -67,6 +73,8 @@ __all__ = [
 
 #: The shapes an obstacle may have, with the number of ``size`` entries of each.
 SHAPES = {'box': 3, 'sphere': 1, 'cylinder': 2}
+#: [m] the largest size entry and centre coordinate of an obstacle (module docstring).
+MAX_EXTENT = 1000.0
 
 
 @dataclass(frozen=True)
@@ -94,14 +102,18 @@ class Obstacle:
             raise ConfigError(
                 f'obstacle {self.name!r}: a {self.shape} takes {SHAPES[self.shape]} size entries, got {list(self.size)}'
             )
-        if not all(math.isfinite(v) and v > 0.0 for v in self.size):
+        if not all(math.isfinite(v) and 0.0 < v <= MAX_EXTENT for v in self.size):
             raise ConfigError(
-                f'obstacle {self.name!r}: every size entry must be finite and > 0 [m], got {list(self.size)}'
+                f'obstacle {self.name!r}: every size entry must be finite, > 0 and at most {MAX_EXTENT:g} [m], '
+                f'got {list(self.size)}'
             )
         position = np.asarray(self.position, dtype=float)
         rotation = np.asarray(self.rotation, dtype=float)
-        if position.shape != (3,) or not np.all(np.isfinite(position)):
-            raise ConfigError(f'obstacle {self.name!r}: position must be 3 finite numbers, got {self.position!r}')
+        if position.shape != (3,) or not np.all(np.isfinite(position)) or np.max(np.abs(position)) > MAX_EXTENT:
+            raise ConfigError(
+                f'obstacle {self.name!r}: position must be 3 finite numbers, each within ±{MAX_EXTENT:g} m, '
+                f'got {self.position!r}'
+            )
         if rotation.shape != (3, 3) or not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
             raise ConfigError(f'obstacle {self.name!r}: rotation must be a rotation matrix')
         object.__setattr__(self, 'position', position)

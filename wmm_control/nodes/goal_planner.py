@@ -145,18 +145,7 @@ class GoalPlannerNode(Node):
         self._log(events)
 
     def _on_obstacles(self, msg: MarkerArray) -> None:
-        logger = self.get_logger()
-        if not msg.markers:
-            logger.warn('ignored an empty /obstacles message: nothing to add or remove', throttle_duration_sec=1.0)
-            return
-        if len(msg.markers) > self.p.max_obstacles:
-            logger.warn(
-                f'rejected /obstacles: {len(msg.markers)} markers, more than max_obstacles {self.p.max_obstacles}; '
-                'the obstacles stay as they were',
-                throttle_duration_sec=1.0,
-            )
-            return
-        if self.obstacles.take(msg, logger):
+        if self.obstacles.take(msg, self.get_logger(), self.p.max_obstacles):
             self.pursuit.set_obstacles(self.obstacles.obstacles)
 
     def _on_odom(self, msg: Odometry) -> None:

@@ -6,7 +6,7 @@ with their defaults in ``config/goal_planner.yaml``; the planner's, with their d
 import dataclasses
 import inspect
 
-from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP
+from wmm_control.nodes.obstacle_topic import obstacle_params
 from wmm_control.nodes.parameters import Param, defaults_elsewhere, robot_param, robot_period
 from wmm_control.planning.follow import FollowParams
 from wmm_control.planning.planner import GoalPlanner
@@ -28,7 +28,7 @@ _SPECS = (
         read_only=True,
         default_from=robot_period,
     ),
-    Param('obstacles', OBSTACLE_PARAM_HELP, read_only=True),
+    *obstacle_params(),
     Param(
         'world_frame',
         'Frame of /goal_pose, /obstacles, ~/path and of what the node sends the resolver (the odometry is taken '
@@ -43,12 +43,6 @@ _SPECS = (
         hi=60.0,
     ),
     Param('max_goal_distance', 'Goals farther than this from the world origin are rejected [m].', lo=1.0, hi=1e6),
-    Param(
-        'max_obstacles',
-        'An /obstacles message with more markers than this is rejected whole (the planner\'s checks grow with them).',
-        lo=1,
-        hi=100000,
-    ),
     Param(
         'max_replans',
         'Plans made again for one goal (progress stalled, an obstacle moved onto the path); after them the goal '

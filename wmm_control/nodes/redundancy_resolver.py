@@ -221,7 +221,7 @@ class RedundancyResolverNode(Node):
         self.period.set_obstacles(self.obstacles.obstacles)
 
     def _on_obstacles(self, msg):
-        if self.obstacles.take(msg, self.get_logger()):
+        if self.obstacles.take(msg, self.get_logger(), self.p.max_obstacles):
             self._set_obstacles()
 
     def _on_base_lag(self, msg):

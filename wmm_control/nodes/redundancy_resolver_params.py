@@ -12,7 +12,7 @@ from wmm_control.nodes.parameters import (
     robot_param,
     robot_period,
 )
-from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP
+from wmm_control.nodes.obstacle_topic import obstacle_params
 from wmm_control.resolvers import METHODS
 from wmm_control.resolvers.pose_servo import ORIENTATION_ERRORS
 
@@ -169,7 +169,7 @@ _SPECS = (
         choices=('odometry', 'ground_truth'),
         read_only=True,
     ),
-    Param('obstacles', OBSTACLE_PARAM_HELP, read_only=True),
+    *obstacle_params(),
     Param('world_frame', 'Frame of /goal_pose, /ee_pose and /obstacles.', read_only=True),
     Param('base_frame', 'Frame of /base/reference and /base/feasible_twist.', read_only=True),
     Param(

@@ -17,7 +17,8 @@ Subscribes:
   the base's course over the next second;
   ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``): the status panel;
   ``/obstacles`` (``visualization_msgs/MarkerArray``): obstacles drawn live, beside those of the
-  ``obstacles`` file (:mod:`wmm_control.nodes.obstacle_topic`);
+  ``obstacles`` file; bad input (an empty message, more than ``max_obstacles`` markers, a bad
+  marker) refused with a warning (:mod:`wmm_control.nodes.obstacle_topic`);
   ``goal_planner/path`` (``nav_msgs/Path``, latched): the base path ``goal_planner`` plans, drawn
   on the floor while it is in force (an empty path hides it).
 Publishes:
@@ -175,7 +176,7 @@ class ViewerNode(Node):
         self.base.set_timeout(timeout)
 
     def _on_obstacles(self, msg: MarkerArray) -> None:
-        if self.obstacles.take(msg, self.get_logger()) and self.browser is not None:
+        if self.obstacles.take(msg, self.get_logger(), self.p.max_obstacles) and self.browser is not None:
             self.browser.draw_obstacles(self.obstacles.obstacles)
 
     def _on_planned_path(self, msg: Path) -> None:

@@ -3,7 +3,7 @@
 
 from types import SimpleNamespace
 
-from wmm_control.nodes.obstacle_topic import OBSTACLE_PARAM_HELP
+from wmm_control.nodes.obstacle_topic import obstacle_params
 from wmm_control.nodes.parameters import Param, robot_param
 
 __all__ = ['PARAMS', 'check']
@@ -26,7 +26,7 @@ PARAMS = (
         'port', 'HTTP port of the viewer; when it is taken, the next free one (logged).', lo=1, hi=65535, read_only=True
     ),
     Param('world_frame', 'Frame of /goal_pose, /ee_reference and /obstacles.', read_only=True),
-    Param('obstacles', OBSTACLE_PARAM_HELP, read_only=True),
+    *obstacle_params(),
     Param(
         'update_period',
         'Steady time [s] between two scene updates sent to the browser.',
