@@ -14,6 +14,11 @@ table and the pillar, those in contact left out. Each obstacle adds a pair per l
 with an obstacle adds the rows of a base that brakes (and, for a lagging base, of its path,
 the corners of the box between its measured twist and the reference, and its turn).
 
+Each line ends with the cost of counting the answer's binding limits
+(:class:`~wmm_control.resolvers.safety.SafetyCounts`: what a cycle adds for the resolver's
+``/diagnostics`` and a run's summary), over the answers a QP gave (the others cost a look at
+a field).
+
     python benchmarks/bench_safety.py [--configurations 300]
 """
 
@@ -30,15 +35,24 @@ sys.path.insert(0, str(ROOT))  # run from a source checkout
 from wmm_control.geometry import rotation_z  # noqa: E402
 from wmm_control.kinematics import KinematicModel  # noqa: E402
 from wmm_control.kinematics.obstacles import load_obstacles  # noqa: E402
-from wmm_control.resolvers.safety import SafetyStage  # noqa: E402
+from wmm_control.resolvers.safety import SafetyCounts, SafetyStage  # noqa: E402
 from wmm_control.robot_config import load_robot, robot_names  # noqa: E402
 
 
-def _figures(times):
+def _figures(times, digits=0):
     if not times:
         return '—'
     us = np.array(times) * 1e6
-    return f'median {np.median(us):6.0f} µs, p99 {np.percentile(us, 99):6.0f} µs ({len(us)} cycles)'
+    return f'median {np.median(us):6.{digits}f} µs, p99 {np.percentile(us, 99):6.{digits}f} µs ({len(us)} cycles)'
+
+
+def _counted(counts, out, times):
+    """Count the answer ``out`` in ``counts``, timed into ``times`` when a QP gave it (else
+    there is nothing to look into)."""
+    t0 = time.perf_counter()
+    counts.add(out)
+    if out.multipliers is not None:
+        times.append(time.perf_counter() - t0)
 
 
 def main(argv=None):
@@ -53,7 +67,8 @@ def main(argv=None):
         rng = np.random.default_rng(0)
         lower = np.where(np.isfinite(arm.position_lower), arm.position_lower, -np.pi)
         upper = np.where(np.isfinite(arm.position_upper), arm.position_upper, np.pi)
-        passed, solved = [], []
+        passed, solved, counting = [], [], []
+        counts = SafetyCounts()
         for q in rng.uniform(lower, upper, size=(args.configurations, lower.size)):
             command = 0.5 * rng.normal(size=lower.size)
             model.update(robot.start.base_pose, q)
@@ -68,7 +83,11 @@ def main(argv=None):
                 task_jacobian=jacobian,
             )
             (solved if out.changed else passed).append(time.perf_counter() - t0)
-        print(f'{name:12s} {len(stage.collision.pairs):4d} pairs   passed: {_figures(passed)}   QP: {_figures(solved)}')
+            _counted(counts, out, counting)
+        print(
+            f'{name:12s} {len(stage.collision.pairs):4d} pairs   passed: {_figures(passed)}   QP: {_figures(solved)}'
+            f'   counting: {_figures(counting, 1)}'
+        )
     print('with table_pillar, the base in the command:')
     for name in robot_names():
         _with_obstacles(load_robot(name), args.configurations)
@@ -81,7 +100,8 @@ def _with_obstacles(robot, count):
     arm, axes = robot.arm, list(robot.base.axes)
     limit = np.concatenate((robot.base.velocity[axes], arm.velocity))
     rng = np.random.default_rng(0)
-    passed, solved, rows = [], [], []
+    passed, solved, rows, counting = [], [], [], []
+    counts = SafetyCounts()
     while len(passed) + len(solved) < count:
         pose = rng.uniform((0.2, -1.6, -np.pi), (2.8, 1.6, np.pi))
         q = np.array(robot.start.arm)
@@ -106,9 +126,10 @@ def _with_obstacles(robot, count):
         )
         (solved if out.changed else passed).append(time.perf_counter() - t0)
         rows.append(out.active)
+        _counted(counts, out, counting)
     print(
         f'{robot.name:12s} {len(stage.collision.pairs):4d} pairs, {np.median(rows):3.0f} within the look-ahead '
-        f'(median)   passed: {_figures(passed)}   QP: {_figures(solved)}'
+        f'(median)   passed: {_figures(passed)}   QP: {_figures(solved)}   counting: {_figures(counting, 1)}'
     )
 
 

@@ -18,7 +18,8 @@ Base motion (``base_mode``)
     ``resetBasePositionAndOrientation`` and ``stepSimulation`` is never called.
     Arm, steer, drive and wheel joints integrate their commanded rates exactly
     (``q += q̇ dt``; arm joints stop at their position limits, counted). The base twist
-    comes from the exact rolling model of the base (robot A:
+    comes from the exact rolling model of the base
+    (:meth:`~wmm_control.robot_config.BaseSection.rolling_model`; robot A:
     ``SteerableGeometry.twist_from_wheels``, least squares over rolling + no-side-slip;
     robot B: Xing eq. 16 ``MecanumKinematics.twist_from_wheels``) and the pose is
     integrated with the SE(2) exponential, the twist held constant in the base frame.
@@ -87,8 +88,6 @@ import pinocchio as pin
 import pybullet as p
 from numpy.typing import ArrayLike
 
-from wmm_control.base.wheel_controller import wheel_kinematics
-from wmm_control.base.steerable_kinematics import SteerableGeometry
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.geometry import (
@@ -100,7 +99,7 @@ from wmm_control.geometry import (
     yaw_from_quaternion,
 )
 from wmm_control.resources import loadable_urdf
-from wmm_control.robot_config import RobotConfig, SteerableBase, load_robot
+from wmm_control.robot_config import RobotConfig, load_robot
 
 from sim_bridge.client import OwnedClient
 from sim_bridge.collision import add_obstacle
@@ -201,9 +200,9 @@ class SimWorld(OwnedClient):
             )
         cfg = self.robot
         base = cfg.base
-        # the rolling model of the base: the steerable one closes on the steer angles and rates
-        self._geom = SteerableGeometry.from_config(base) if isinstance(base, SteerableBase) else wheel_kinematics(cfg)
-        self._steerable = isinstance(self._geom, SteerableGeometry)
+        # the rolling model of the base: with steer joints, it closes on their angles and rates
+        self._geom = base.rolling_model()
+        self._steerable = 'steer' in base.command_groups
         # wheels that drive through free rollers (Mecanum): the tyre model of physics mode
         self._roller = base.roller_axes.tolist()
         self._tyre = bool(self._roller)

@@ -11,8 +11,9 @@ from scipy import sparse
 from wmm_control.errors import NonFiniteError, ShapeError
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import load_obstacles
+from wmm_control.resolvers.collision_limits import LIMITS
 from wmm_control.resolvers.constraints import Box, Constraint, nearest
-from wmm_control.resolvers.safety import SELF_WEIGHT, SafetyStage
+from wmm_control.resolvers.safety import SELF_WEIGHT, SafetyCounts, SafetyResult, SafetyStage
 from wmm_control.robot_config import load_robot
 
 #: where the base is drawn near table_pillar's obstacles: (x, y, θ) low and high
@@ -69,6 +70,54 @@ def test_rows_kept_and_rows_binding_are_counted_per_part():
     assert rows.binding(np.array([1.0, 0.0])) == {'each': 1, 'sum': 1}
     assert rows.violated(np.array([1.0, 0.5])).tolist() == [False, False, True]
     assert Constraint.from_lower(np.eye(2), np.zeros(2)).violated(np.array([-1.0, 1.0])).tolist() == [True, False]
+    # a row broken binds; nearness is measured along the row, in the command's units: 2x ≤ 2
+    # at x = 1 - 1e-7 is 1e-7 from its boundary (its residual 2e-7)
+    assert rows.binding(np.array([2.0, 0.0])) == {'each': 1, 'sum': 1}
+    scaled = Constraint(np.array([[2.0, 0.0]]), np.array([2.0]), 'scaled')
+    assert scaled.binding(np.array([1.0 - 1e-7, 0.0]), tolerance=1.5e-7) == {'scaled': 1}
+    assert scaled.binding(np.array([1.0 - 2e-7, 0.0]), tolerance=1.5e-7) == {'scaled': 0}
+
+
+def test_a_row_on_no_entry_never_binds():
+    # the round-off row of a pair no entry moves (G ~ 1e-17, h ~ 1e-9) and an exact zero row
+    # are met at equality to within 1e-6, yet shape nothing
+    rows = Constraint.stack(
+        [
+            Constraint(np.array([[3e-17, -2e-17]]), np.array([5e-9]), 'rigid'),
+            Constraint(np.zeros((1, 2)), np.zeros(1), 'none'),
+            Constraint(np.array([[1.0, 1.0]]), np.array([1.0]), 'sum'),
+        ],
+        2,
+    )
+    assert rows.binding(np.array([0.5, 0.5])) == {'rigid': 0, 'none': 0, 'sum': 1}
+
+
+def _answer(binding, qp=True, relaxed=False, held=False):
+    """A stage's answer on two entries with a row of each limit of ``binding`` (name → whether
+    its multiplier in the QP is positive); ``qp`` False: none ran (the command met every row)."""
+    parts = [Constraint(np.array([[1.0, 0.0]]), np.array([1.0]), name) for name, _ in binding]
+    multipliers = np.array([0.5 if bound else 0.0 for _, bound in binding]) if qp else None
+    rows = Constraint.stack(parts, 2)
+    return SafetyResult(np.array([1.0, 0.0]), 0.05, 'a/b', 1, qp or held, rows, relaxed, held, multipliers)
+
+
+def test_safety_counts_count_a_cycle_once_per_limit_that_shaped_the_command():
+    counts = SafetyCounts()
+    assert set(counts.values()) == {f'binding_{n.replace(" ", "_")}' for n in LIMITS} | {
+        'relaxed_cycles',
+        'base_held_cycles',
+    }
+    assert not any(counts.values().values())
+    counts.add(_answer([('obstacle', True), ('self', False)]))
+    counts.add(_answer([('obstacle', True), ('base along path', True)], relaxed=True, held=True))
+    # the compensated arm command of that cycle: the obstacle again (counted once), the floor new
+    counts.add(_answer([('obstacle', True), ('floor', True)], relaxed=True), same_cycle=True)
+    counts.add(_answer([('obstacle', True)], qp=False))  # no QP ran: shaped by none, whatever it meets
+    counts.add(None)
+    values = counts.values()
+    assert values['binding_obstacle'] == 2 and values['binding_self'] == 0
+    assert values['binding_base_along_path'] == 1 and values['binding_floor'] == 1
+    assert values['relaxed_cycles'] == 1 and values['base_held_cycles'] == 1
 
 
 @pytest.mark.parametrize(
@@ -117,10 +166,17 @@ def test_nearest_is_the_minimum_another_solver_finds(seed):
     target = rng.normal(size=n)
     rows = Constraint(rng.normal(size=(m, n)), rng.uniform(0.05, 0.5, m), 'random')
     box = Box(-np.full(n, 2.0), np.full(n, 2.0))
-    x, relaxed = nearest(target, metric, rows, box)
+    x, relaxed, multipliers = nearest(target, metric, rows, box)
     assert not relaxed  # 0 is strictly inside every row and the box
     assert not rows.violated(x, 1e-8).any()
     np.testing.assert_allclose(x, _independent(metric, target, rows.G, rows.h, box.lower, box.upper), atol=1e-6)
+    # the rows that shape the answer: met at equality; the others dropped, it stays; the first
+    # of them dropped, it moves
+    shaping = multipliers > 1e-9
+    assert shaping.any() and np.all(np.abs(rows.residual(x)[shaping]) < 1e-8)
+    np.testing.assert_allclose(nearest(target, metric, rows.select(shaping), box).command, x, atol=1e-6)
+    first = shaping & (np.cumsum(shaping) == 1)
+    assert not np.allclose(nearest(target, metric, rows.select(~first), box).command, x, atol=1e-6)
 
 
 def test_rows_that_conflict_within_the_box_are_met_as_far_as_it_allows():
@@ -128,11 +184,11 @@ def test_rows_that_conflict_within_the_box_are_met_as_far_as_it_allows():
     # answer minimises ½ (x − 0.3)² + ½ ((1 − x)² + (1 + x)²) (the slacks' quadratic term): x =
     # 0.1, between the two rows; y, which no row involves, stays where it was asked
     rows = Constraint(np.array([[-1.0, 0.0], [1.0, 0.0]]), np.array([-1.0, -1.0]), 'apart')
-    x, relaxed = nearest(np.array([0.3, 0.4]), np.eye(2), rows, Box(-np.ones(2), np.ones(2)))
-    assert relaxed
+    x, relaxed, multipliers = nearest(np.array([0.3, 0.4]), np.eye(2), rows, Box(-np.ones(2), np.ones(2)))
+    assert relaxed and (multipliers > 0.0).all(), 'both rows broken: both shape the answer'
     np.testing.assert_allclose(x, [0.1, 0.4], atol=1e-6)
     # a row the box cannot meet: met as far as the box allows
-    x, relaxed = nearest(
+    x, relaxed, _ = nearest(
         np.zeros(2), np.eye(2), Constraint(np.array([[-1.0, 0.0]]), np.array([-5.0])), Box(-np.ones(2), np.ones(2))
     )
     assert relaxed and x == pytest.approx([1.0, 0.0])

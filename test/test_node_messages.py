@@ -70,6 +70,17 @@ RESOLVER_ALWAYS = {
     'joint_states_skipped',
     'measured_period_s',
     'obstacles',
+    # the safety stage's counts (SafetyCounts)
+    'binding_self',
+    'binding_floor',
+    'binding_obstacle',
+    'binding_base_along_path',
+    'binding_base_between',
+    'binding_base_after_turn',
+    'binding_base_without_turn',
+    'binding_base_turn_rate',
+    'relaxed_cycles',
+    'base_held_cycles',
 }
 RESOLVER_GOAL = {
     'method',

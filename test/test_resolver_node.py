@@ -13,6 +13,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from ros_helpers import RosHarness, held_up, overrides, stamp_s
+from wmm_control.cli.experiment import summarize_runs
 from wmm_control.experiments.direct import run_scenario
 from sim_bridge.node import SimNode
 from sim_bridge.world import SimWorld
@@ -573,5 +574,77 @@ def test_a_cycle_held_up_past_max_state_wait_publishes_no_answer(where):
         driver.state()
         assert ros.spin_until(lambda: len(driver.arm) > arm, timeout=5.0), 'the next state is answered'
         assert np.all(np.isfinite(driver.arm[-1])) and np.any(driver.arm[-1])
+    finally:
+        ros.close()
+
+
+WALL_YAML = """obstacles:
+  - {name: wall, shape: box, size: [0.1, 1.0, 2.0], pose: [0.71, 0.0, 1.0]}
+"""
+WALL_GOAL_YAML = """scenario:
+  name: behind_the_wall
+  robot: mecanum
+  frame: world
+  duration: 2.0
+  obstacles: wall.yaml
+  goals:
+    - {t: 0.0, pose: [1.3, 0.0, 0.5, 0.0, pi/2, 0.0]}
+"""
+
+
+def test_diagnostics_and_the_direct_run_name_the_limit_that_binds(tmp_path):
+    """A wall 1 cm ahead of the arm of robot B (within the safety distance d_s = 2 cm) and a
+    goal beyond it: the safety stage's obstacle rows take the arm away from the wall instead of
+    towards the goal, and both engines count the cycles in which they did, under the same keys;
+    no other limit shapes the command there."""
+    (tmp_path / 'wall.yaml').write_text(WALL_YAML)
+    path = tmp_path / 'behind_the_wall.yaml'
+    path.write_text(WALL_GOAL_YAML)
+    scenario = load_scenario(str(path))
+    goal = scenario.goals[0].pose[:3]
+    counted = ('relaxed_cycles', 'base_held_cycles')
+
+    world = SimWorld('mecanum', obstacles=scenario.obstacles)
+    try:
+        direct = run_scenario(world, make_resolver('amp', 'mecanum'), scenario)
+    finally:
+        world.close()
+    counts = direct.safety_counts
+    assert counts['binding_obstacle'] > 0, counts
+    assert all(v == 0 for k, v in counts.items() if k != 'binding_obstacle'), counts
+    # and the run's summary (metrics.json) carries them
+    summary = summarize_runs(scenario, [{'name': 'amp', 'method': 'amp'}], {'amp': direct}, engine='direct')
+    assert summary['runs']['amp']['safety_counts'] == counts
+
+    robot = load_robot('mecanum')
+    ros = RosHarness()
+    try:
+        driver = ros.add(HandDriver(ros.context, robot))
+        node = ros.add(
+            RedundancyResolverNode(
+                context=ros.context,
+                parameter_overrides=overrides(
+                    robot='mecanum',
+                    method='amp',
+                    obstacles=str(tmp_path / 'wall.yaml'),
+                    diagnostics_period=1e-9,
+                    state_timeout=10.0,
+                ),
+            )
+        )
+        ros.spin_for(0.3)
+        driver.goal(goal, (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5)))  # the scenario's: pitch π/2
+        ros.spin_for(0.1)
+        for k in range(10):
+            driver.state()
+            assert ros.spin_until(lambda k=k: len(driver.arm) > k, timeout=5.0)
+        ros.spin_for(0.1)
+        cycles = node.counters['cycles']
+        assert cycles >= 5  # the first states may come before their odometry: no cycle
+        values = driver.diag[-1][2]
+        shown = {k: int(v) for k, v in values.items() if k.startswith('binding_') or k in counted}
+        assert set(shown) == set(counts), 'the same keys on /diagnostics as in the direct run'
+        assert shown['binding_obstacle'] == cycles, shown
+        assert all(v == 0 for k, v in shown.items() if k != 'binding_obstacle'), shown
     finally:
         ros.close()

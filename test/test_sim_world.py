@@ -169,6 +169,20 @@ def test_mecanum_strafe_and_arc_follow_eq16(world_b):
     np.testing.assert_allclose(world_b.base_pose(), expected, atol=1e-9)
 
 
+def test_a_differential_base_drives_and_turns_by_its_two_wheels():
+    # its rolling model comes from its base section: equal rates drive along x at r φ̇,
+    # opposite ones turn on the spot at 2 r φ̇ / track
+    robot = load_robot('panda_diff')
+    r, track = robot.base.wheel_radius, robot.base.track
+    with SimWorld(robot) as world:
+        world.set_command('wheel', [2.0, 2.0])
+        run(world, 1.0)
+        np.testing.assert_allclose(world.base_pose(), [2.0 * r, 0.0, 0.0], atol=1e-9)
+        world.set_command('wheel', [-1.0, 1.0])  # left back, right forward: counter-clockwise
+        run(world, 1.0)
+        np.testing.assert_allclose(world.base_pose(), [2.0 * r, 0.0, 2.0 * r / track], atol=1e-9)
+
+
 # ----------------------------------------------------------------------------- odometry and slip
 def drive_a_pattern(world):
     """Steer (sub-stepped path), drive along an arc, then straight."""

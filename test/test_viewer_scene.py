@@ -253,6 +253,11 @@ def test_the_status_panel_shows_what_the_diagnostics_say():
                 'clearance_m': '0.04321',
                 'closest_pair': 'arm_link_7/chassis_link',
                 'collision_changed': 'True',
+                'binding_self': '2',
+                'binding_floor': '0',
+                'binding_obstacle': '37',
+                'binding_base_along_path': '5',
+                'relaxed_cycles': '1',
             },
             received=9.0,
         )
@@ -273,11 +278,17 @@ def test_the_status_panel_shows_what_the_diagnostics_say():
         '| clearance [m] | 0.04321 |',
         '| closest pair | arm_link_7/chassis_link |',
         '| avoiding contact | True |',
+        '| limits that shaped it [cycles] | obstacle 37, base along path 5, self 2 |',
+        '| limits relaxed [cycles] | 1 |',
         '| command age [s] | inf |',
         'WARN, 10 s old: no fresh command (zero velocity)',
     ):
         assert shown in text, shown
-    assert 'arm_command' not in text
+    assert 'arm_command' not in text and 'floor' not in text
+    # no limit bound yet: said so; a status without the counts has no such row
+    board.update(NodeStatus('redundancy_resolver', 0, 'no goal', {'binding_obstacle': '0'}, received=10.0))
+    assert '| limits that shaped it [cycles] | none |' in board.markdown(10.0)
+    assert 'limits that shaped it' not in board.markdown(10.0).split('**swmr_controller**')[1]
     # A newer status of the same name replaces the old one.
     board.update(NodeStatus('swmr_controller', 0, 'tracking', {'status': 'tracking'}, received=10.0))
     assert 'solver_failure' not in board.markdown(10.0) and len(board) == 3

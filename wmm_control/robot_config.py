@@ -46,7 +46,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import yaml
@@ -55,6 +55,11 @@ from wmm_control.errors import ConfigError
 from wmm_control.paths import config_path
 from wmm_control.resources import check_resources, yaml_package_dirs
 from wmm_control.urdf import MOVING_TYPES, UrdfTree
+
+if TYPE_CHECKING:  # the rolling models read a base section: imported where they are built
+    from wmm_control.base.differential import DifferentialKinematics
+    from wmm_control.base.mecanum import MecanumKinematics
+    from wmm_control.base.steerable_kinematics import SteerableGeometry
 
 __all__ = [
     'ArmConfig',
@@ -224,6 +229,11 @@ class BaseSection(ABC):
     def rolling_joints(self) -> tuple:
         """The joints whose links roll on the floor (the drive or wheel joints)."""
 
+    @abstractmethod
+    def rolling_model(self) -> SteerableGeometry | MecanumKinematics | DifferentialKinematics:
+        """The map from the rolling joints' motion to the base's twist (vx, vy, ω): the
+        base's rolling model, which a simulator's odometry and kinematic mode integrate."""
+
     @property
     def roller_axes(self) -> np.ndarray:
         """The axis (x, y) in the base frame, unit, of the free roller each rolling joint's wheel
@@ -285,6 +295,12 @@ class SteerableBase(BaseSection):
     def rolling_joints(self) -> tuple:
         return self.drive_joints
 
+    def rolling_model(self) -> SteerableGeometry:
+        """The modules' geometry (its twist from the steer angles and rates and the drive rates)."""
+        from wmm_control.base.steerable_kinematics import SteerableGeometry
+
+        return SteerableGeometry.from_config(self)
+
 
 @dataclass(frozen=True)
 class FixedWheelBase(BaseSection):
@@ -313,6 +329,10 @@ class FixedWheelBase(BaseSection):
     def rolling_joints(self) -> tuple:
         return self.wheel_joints
 
+    @abstractmethod
+    def rolling_model(self) -> MecanumKinematics | DifferentialKinematics:
+        """The wheel map (its twist from the wheel rates)."""
+
 
 @dataclass(frozen=True)
 class MecanumBase(FixedWheelBase):
@@ -337,6 +357,12 @@ class MecanumBase(FixedWheelBase):
         angles = np.asarray(self.roller_angles, dtype=float)
         return np.column_stack((-np.sin(angles), np.cos(angles)))
 
+    def rolling_model(self) -> MecanumKinematics:
+        """Xing eq (16)'s wheel map (its twist from the wheel rates)."""
+        from wmm_control.base.mecanum import MecanumKinematics
+
+        return MecanumKinematics.from_config(self)
+
 
 @dataclass(frozen=True)
 class DifferentialBase(FixedWheelBase):
@@ -350,6 +376,12 @@ class DifferentialBase(FixedWheelBase):
 
     family: ClassVar[str] = 'differential'
     axes: ClassVar[tuple[int, ...]] = (0, 2)
+
+    def rolling_model(self) -> DifferentialKinematics:
+        """The two wheels' map (its twist from the wheel rates)."""
+        from wmm_control.base.differential import DifferentialKinematics
+
+        return DifferentialKinematics.from_config(self)
 
 
 #: A robot's base: one of the three families, told apart by ``family``.

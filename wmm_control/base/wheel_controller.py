@@ -36,7 +36,7 @@ from wmm_control.base.mecanum import MecanumKinematics
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import scale_into_limits
-from wmm_control.robot_config import DifferentialBase, MecanumBase, RobotConfig
+from wmm_control.robot_config import DifferentialBase, FixedWheelBase, MecanumBase, RobotConfig
 
 __all__ = ['WheelParams', 'WheelOutput', 'WheelController', 'wheel_kinematics']
 
@@ -47,11 +47,8 @@ def wheel_kinematics(robot: RobotConfig) -> MecanumKinematics | DifferentialKine
     Raises:
         ConfigError: the robot's base is of another family.
     """
-    match robot.base:
-        case MecanumBase():
-            return MecanumKinematics.from_config(robot.base)
-        case DifferentialBase():
-            return DifferentialKinematics.from_config(robot.base)
+    if isinstance(robot.base, FixedWheelBase):
+        return robot.base.rolling_model()
     raise ConfigError(f'robot {robot.name!r} has a {robot.base.family} base, not a Mecanum or differential one')
 
 

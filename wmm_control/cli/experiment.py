@@ -283,6 +283,8 @@ def summarize_runs(
             # and the periods in which it changed the method's arm command
             'clearance_min_m': float(np.min(log.clearance)),
             'collision_changed_periods': int(np.count_nonzero(log.collision_changed)),
+            # the cycles in which each of its limits bound, as the resolver's /diagnostics reports them
+            'safety_counts': log.safety_counts,
         }
         if bag_dir is not None and engine == 'nodes':
             entry['recording'] = str(bag_path(bag_dir, run['name']))

@@ -124,4 +124,6 @@ def run_scenario(
     refusals = [e.message for e in loop.events if e.kind == 'rejected']
     log.refused = refusals[-1] if refusals else ''
     log.sim_counters = {g: dict(c) for g, c in world.counters.items()}
+    # the cycles in which each limit of the safety stage shaped the command, as the resolver node's /diagnostics
+    log.safety_counts = loop.cycle.resolver_period.safety_counts.values()
     return log.freeze()

@@ -105,6 +105,8 @@ class RunLog:
         self.rows: dict[str, Any] = {c: [] for c in self.COLUMNS}
         self.wall_time_s = 0.0
         self.sim_counters: dict | None = None  # the simulator's command counters per group (clamped, rejected, ...)
+        # the resolver's safety-stage counts (SafetyCounts.values(): cycles each limit bound, ...)
+        self.safety_counts: dict | None = None
         self.final_status: dict | None = None  # nodes engine: the goal's state after the resolver's last cycle
         self.first_stall_s: float | None = None  # nodes engine: when the resolver first found the goal stalled [s]
         self.refused = ''  # direct engine: why the last target refused was (the robot held still then)

@@ -265,6 +265,7 @@ def run_with_nodes(
         log.final_status = recorder.final_status
         log.first_stall_s = recorder.first_stall_s
         log.sim_counters = {g: dict(c) for g, c in sim.world.counters.items()}  # what /diagnostics reports
+        log.safety_counts = resolver.period.safety_counts.values()  # what the resolver's /diagnostics reports
     finally:
         for node in nodes:
             executor.remove_node(node)

@@ -101,7 +101,7 @@ from wmm_control.geometry import rotation_z
 from wmm_control.kinematics.collision import NearPairs
 from wmm_control.resolvers.constraints import TOLERANCE, Box, Constraint
 
-__all__ = ['Pairs', 'VelocityDampers', 'BaseRows', 'TURN_SHARE', 'PATH_SPEED']
+__all__ = ['Pairs', 'VelocityDampers', 'BaseRows', 'LIMITS', 'TURN_SHARE', 'PATH_SPEED']
 
 #: [m/s] a lagging base's measured twist below this tells no path (at rest).
 PATH_SPEED = 1e-4
@@ -117,6 +117,17 @@ _PARTS = tuple(
 _LINEAR = np.array([1.0, 1.0, 0.0])
 #: The dampers' constraints, in the order of the pairs' kinds.
 _KINDS = ('self', 'floor', 'obstacle')
+#: The base's constraints (:class:`BaseRows`).
+_ALONG, _BETWEEN, _AFTER, _WITHOUT, _TURN = (
+    'base along path',
+    'base between',
+    'base after turn',
+    'base without turn',
+    'base turn rate',
+)
+#: The name of every limit's constraint (:attr:`~wmm_control.resolvers.constraints.Constraint.name`):
+#: what the safety stage's diagnostics count.
+LIMITS = (*_KINDS, _ALONG, _BETWEEN, _AFTER, _WITHOUT, _TURN)
 
 
 @dataclass(frozen=True)
@@ -353,9 +364,9 @@ class BaseRows:
         n = pairs.rows.shape[1]
         norm = float(v0 @ v0)
         if norm < PATH_SPEED**2 or not pairs.moved.any():
-            return Constraint.empty(n, 'base along path')
+            return Constraint.empty(n, _ALONG)
         along = (own[pairs.moved, None] * v0 / norm) @ pairs.to_base  # j_b v₀ v₀ᵀ / |v₀|²
-        return Constraint.from_lower(*pairs.on_base(along), 'base along path')
+        return Constraint.from_lower(*pairs.on_base(along), _ALONG)
 
     def between(self, pairs: Pairs, v0) -> Constraint:
         """For each pair the base moves, the row at every corner of the box between the base's
@@ -367,12 +378,12 @@ class BaseRows:
         ``v0`` on the others."""
         n = pairs.rows.shape[1]
         if not pairs.moved.any():
-            return Constraint.empty(n, 'base between')
+            return Constraint.empty(n, _BETWEEN)
         j = pairs.base[pairs.moved]
         measured = j * np.asarray(v0, dtype=float)  # each axis's share of the approach at v₀
         corners = [pairs.on_base((j * part) @ pairs.to_base, -measured[:, ~part].sum(axis=1)) for part in _PARTS]
         return Constraint.from_lower(
-            np.vstack([rows for rows, _ in corners]), np.concatenate([bound for _, bound in corners]), 'base between'
+            np.vstack([rows for rows, _ in corners]), np.concatenate([bound for _, bound in corners]), _BETWEEN
         )
 
     def after_turn(self, pairs: Pairs, v0, command, world_rates: bool) -> Constraint:
@@ -387,7 +398,7 @@ class BaseRows:
         turn goes on (robot A passing a table's corner while it turns)."""
         axes, n = pairs.axes, pairs.rows.shape[1]
         if 2 not in axes or not pairs.moved.any():
-            return Constraint.empty(n, 'base after turn')
+            return Constraint.empty(n, _AFTER)
         if world_rates:
             turn = float(v0[2]) * self.lag
         else:
@@ -395,9 +406,9 @@ class BaseRows:
             alpha = float(self.base_acceleration[2])
             turn = omega * self.lag + (omega * abs(omega) / (2.0 * alpha) if alpha > 0.0 else 0.0)
         if abs(turn) < TOLERANCE:
-            return Constraint.empty(n, 'base after turn')
+            return Constraint.empty(n, _AFTER)
         ahead = pairs.base[pairs.moved] @ rotation_z(turn)  # rows R(−Δθ) j: jᵀ R(Δθ)
-        return Constraint.from_lower(*pairs.on_base(ahead @ pairs.to_base), 'base after turn')
+        return Constraint.from_lower(*pairs.on_base(ahead @ pairs.to_base), _AFTER)
 
     def without_turn(self, pairs: Pairs) -> Constraint:
         """For each pair of the base's own body (chassis, wheels: no arm joint moves it) and an
@@ -408,12 +419,12 @@ class BaseRows:
         corner swings in). The arm's pairs keep the turn: the arm brakes its own share fast."""
         n = pairs.rows.shape[1]
         if 2 not in pairs.axes:
-            return Constraint.empty(n, 'base without turn')
+            return Constraint.empty(n, _WITHOUT)
         turning = pairs.body & (pairs.base[:, 2] != 0.0)
         if not turning.any():
-            return Constraint.empty(n, 'base without turn')
+            return Constraint.empty(n, _WITHOUT)
         linear = pairs.base[turning] * _LINEAR
-        return Constraint.from_lower(*pairs.on_base(linear @ pairs.to_base, which=turning), 'base without turn')
+        return Constraint.from_lower(*pairs.on_base(linear @ pairs.to_base, which=turning), _WITHOUT)
 
     def turn_rate(self, pairs: Pairs, base_velocity) -> Constraint:
         """For each pair of the base's own body and an obstacle, a row on the turn rate: turning
@@ -426,14 +437,14 @@ class BaseRows:
         axes, n = pairs.axes, pairs.rows.shape[1]
         linear, slowest = linear_axes(axes, self.base_acceleration)
         if 2 not in axes or not linear or base_velocity is None:
-            return Constraint.empty(n, 'base turn rate')
+            return Constraint.empty(n, _TURN)
         body = pairs.body
         base = pairs.base
         v = np.asarray(base_velocity, dtype=float)
         bend = base[body, 0] * v[1] - base[body, 1] * v[0]  # n_x v_y − n_y v_x
         if not bend.any():
-            return Constraint.empty(n, 'base turn rate')
+            return Constraint.empty(n, _TURN)
         rows = np.zeros((int(body.sum()), n))
         rows[:, axes.index(2)] = -bend
         budget = TURN_SHARE * slowest * np.hypot(base[body, 0], base[body, 1])
-        return Constraint.from_lower(rows, -budget, 'base turn rate')
+        return Constraint.from_lower(rows, -budget, _TURN)

@@ -12,8 +12,11 @@ within the box, the same solver takes the problem again with a slack per row.
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from itertools import accumulate
+from typing import NamedTuple
 
 import numpy as np
 import qpsolvers
@@ -21,7 +24,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.errors import NonFiniteError, ShapeError
 
-__all__ = ['Constraint', 'Box', 'nearest', 'QP_SOLVER', 'SLACK_COST', 'SLACK_WEIGHT', 'TOLERANCE']
+__all__ = ['Constraint', 'Box', 'Nearest', 'nearest', 'QP_SOLVER', 'SLACK_COST', 'SLACK_WEIGHT', 'TOLERANCE']
 
 #: The QP solver (:mod:`qpsolvers`' name). DAQP, a dual active-set method in C, solves these
 #: dense QPs (the command's few entries, up to a few hundred rows) to rounding; on this machine
@@ -149,11 +152,22 @@ class Constraint:
         return self.residual(x) > tolerance
 
     def binding(self, x: ArrayLike, tolerance: float = 1e-6) -> dict[str, int]:
-        """How many rows of each part ``x`` meets at equality or breaks (within ``tolerance``):
-        the limits that shape the answer."""
-        active = self.residual(x) >= -tolerance
-        names = self.row_names()
-        return {name: int(np.count_nonzero(active & (names == name))) for name, _ in self.parts}
+        """How many rows of each part ``x`` meets at equality or breaks. A row binds when ``x``
+        is within ``tolerance`` of its boundary or beyond it, measured in the command's units
+        (its residual over the norm of its ``G`` row); a row on no entry (``G`` within
+        :data:`TOLERANCE` of zero, round-off of a pair no entry moves) never binds."""
+        norms = np.sqrt(np.einsum('ij,ij->i', self.G, self.G))
+        return self.per_part(np.flatnonzero((norms > TOLERANCE) & (self.residual(x) >= -tolerance * norms)))
+
+    def per_part(self, rows: ArrayLike) -> dict[str, int]:
+        """How many of the rows ``rows`` (indices, each once) each part holds."""
+        out = {name: 0 for name, _ in self.parts}
+        indices = np.asarray(rows, dtype=int).tolist()
+        if indices:
+            ends = list(accumulate(count for _, count in self.parts))
+            for i in indices:
+                out[self.parts[bisect_right(ends, i)][0]] += 1
+        return out
 
     def counts(self) -> dict[str, int]:
         """Rows per part."""
@@ -234,7 +248,23 @@ class Box:
         return self.upper > self.lower
 
 
-def nearest(target: ArrayLike, metric: ArrayLike, constraint: Constraint, box: Box, solver: str = QP_SOLVER):
+class Nearest(NamedTuple):
+    """What :func:`nearest` answers.
+
+    Attributes:
+        command: the command, within the box. Shape (n,).
+        relaxed: the slack was needed (no command in the box meets every row).
+        multipliers: each row's Lagrange multiplier (≥ 0; for the problem with slack, the
+            rows' own): above zero where the row shapes the answer (without it the answer
+            would differ), zero where it does not. Shape (m,).
+    """
+
+    command: np.ndarray
+    relaxed: bool
+    multipliers: np.ndarray
+
+
+def nearest(target: ArrayLike, metric: ArrayLike, constraint: Constraint, box: Box, solver: str = QP_SOLVER) -> Nearest:
     """The command nearest ``target`` in the metric ``metric``, under ``constraint`` and within
     ``box``:
 
@@ -245,10 +275,10 @@ def nearest(target: ArrayLike, metric: ArrayLike, constraint: Constraint, box: B
     problem again over ``(x, s)`` with a slack ``s ≥ 0`` per row (``G x − s ≤ h``, cost
     :data:`SLACK_COST` per unit and :data:`SLACK_WEIGHT` quadratic): the rows met as far as the
     box allows. Where that fails too (an empty box, a failed solver), the point of the box
-    nearest zero: stop as hard as the box allows.
+    nearest zero: stop as hard as the box allows (no row's multiplier then).
 
     Returns:
-        ``(x, relaxed)``: the command (within the box) and whether the slack was needed.
+        :class:`Nearest`: ``(command, relaxed, multipliers)``.
     """
     x0 = np.asarray(target, dtype=float)
     H = np.asarray(metric, dtype=float)
@@ -262,7 +292,7 @@ def nearest(target: ArrayLike, metric: ArrayLike, constraint: Constraint, box: B
     hard = qpsolvers.Problem(H, linear, constraint.G, constraint.h, lb=box.lower, ub=box.upper)
     answer = qpsolvers.solve_problem(hard, solver=solver)
     if answer.found and answer.x is not None and np.all(np.isfinite(answer.x)):
-        return box.clip(answer.x), False
+        return Nearest(box.clip(answer.x), False, _multipliers(answer.z, m))
     cost = np.zeros((n + m, n + m))
     cost[:n, :n] = H
     cost[n:, n:] = SLACK_WEIGHT * np.eye(m)
@@ -276,5 +306,12 @@ def nearest(target: ArrayLike, metric: ArrayLike, constraint: Constraint, box: B
     )
     answer = qpsolvers.solve_problem(relaxed, solver=solver)
     if not (answer.found and answer.x is not None and np.all(np.isfinite(answer.x))):
-        return box.clip(np.zeros(n)), True
-    return box.clip(answer.x[:n]), True
+        return Nearest(box.clip(np.zeros(n)), True, np.zeros(m))
+    return Nearest(box.clip(answer.x[:n]), True, _multipliers(answer.z, m))
+
+
+def _multipliers(z, m: int) -> np.ndarray:
+    """The rows' multipliers of a solver's answer (zero where it gives none or a NaN)."""
+    if z is None:
+        return np.zeros(m)
+    return np.nan_to_num(np.maximum(np.asarray(z, dtype=float)[:m], 0.0))

@@ -16,6 +16,10 @@ and the base controller's lag. Then, per period (Sorour Fig 4):
    compensated for the base's checked answer (Sorour eq 14), or as it is when no valid answer
    came (counted in ``compensation_dropped``).
 
+Each cycle's safety-stage answers (the plan's, and the compensated arm command's) are counted
+per limit in :attr:`ResolverPeriod.safety_counts` (:class:`~wmm_control.resolvers.safety.SafetyCounts`):
+which limits shaped the commands since start.
+
 Time is an argument (seconds of the caller's clock), never read here.
 """
 
@@ -32,6 +36,7 @@ from wmm_control.paths import load_defaults
 from wmm_control.resolvers.exchange import CompensationExchange
 from wmm_control.resolvers.inputs import LatestInputs, MeasuredInputs
 from wmm_control.resolvers.interface import Resolver, ResolverCommand
+from wmm_control.resolvers.safety import SafetyCounts, SafetyResult
 from wmm_control.resolvers.targets import LogEvent, TargetManager
 
 __all__ = ['Plan', 'ResolverPeriod', 'ResolverSettings']
@@ -112,6 +117,7 @@ class ResolverPeriod:
         latest: the :class:`~wmm_control.resolvers.inputs.LatestInputs`.
         exchange: the :class:`~wmm_control.resolvers.exchange.CompensationExchange`.
         cycles, stale_cycles: periods planned, and periods held for a missing or stale input.
+        safety_counts: the cycles in which each limit of the safety stage shaped the command.
     """
 
     def __init__(self, resolver: Resolver, period: float, settings: ResolverSettings | None = None) -> None:
@@ -138,6 +144,8 @@ class ResolverPeriod:
         self.latest = LatestInputs(self.inputs, s.state_timeout, s.ground_truth)
         self.exchange = CompensationExchange(resolver)
         self.cycles = self.stale_cycles = 0
+        self.safety_counts = SafetyCounts()
+        self._planned: SafetyResult | None = None  # the safety stage's answer of the cycle's plan
 
     # ------------------------------------------------------------------ inputs
     def goal(self, frame: str, pose: ArrayLike, now: float) -> list[LogEvent]:
@@ -181,6 +189,8 @@ class ResolverPeriod:
         if target is None:  # not after the check above; for the type checker
             return Plan(None, events, '')
         command = self.resolver.step(state, target)
+        self._planned = self.resolver.safety.last
+        self.safety_counts.add(self._planned)
         # judged against the target the command was computed for (a new goal may come in
         # before the arm command goes out)
         events += self.targets.judge(command.diagnostics)
@@ -208,7 +218,12 @@ class ResolverPeriod:
         """Phase 3: (the held arm command, its stamp), compensated for the base's answer
         ``feasible_twist`` (checked with :meth:`feasible_twist` first) when it is given, else
         as it is (counted in ``compensation_dropped``)."""
-        return self.exchange.finish(feasible_twist)
+        out = self.exchange.finish(feasible_twist)
+        answer = self.resolver.safety.last
+        if answer is not self._planned:  # the compensated arm command went through the stage again
+            self.safety_counts.add(answer, same_cycle=True)
+            self._planned = answer
+        return out
 
     @property
     def counters(self) -> dict:
@@ -219,4 +234,5 @@ class ResolverPeriod:
             'goals_rejected': self.targets.rejected,
             'compensation_dropped': self.exchange.dropped,
             'stale_cycles': self.stale_cycles,
+            **self.safety_counts.values(),
         }

@@ -32,7 +32,9 @@ for it.
 When no pair is within the look-ahead, or the command already meets every row, it passes through
 unchanged: a method runs as its paper has it until the arm nears the body. The cycle's rows stay
 with the answer (:attr:`SafetyResult.constraints`; :meth:`SafetyResult.binding` counts the rows
-of each limit that shape it).
+of each limit that shape it), and :class:`SafetyCounts` counts, over a run, the cycles in which
+each limit shaped the command (the resolver's ``/diagnostics`` and the direct engine's run
+summary).
 """
 
 from __future__ import annotations
@@ -47,10 +49,10 @@ from wmm_control.base.contract import base_controller_class
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import rotation_z
 from wmm_control.kinematics.collision import CollisionModel
-from wmm_control.resolvers.collision_limits import TURN_SHARE, BaseRows, VelocityDampers
+from wmm_control.resolvers.collision_limits import LIMITS, TURN_SHARE, BaseRows, VelocityDampers
 from wmm_control.resolvers.constraints import TOLERANCE, Box, Constraint, nearest
 
-__all__ = ['SafetyParams', 'SafetyResult', 'SafetyStage', 'base_lag']
+__all__ = ['SafetyCounts', 'SafetyParams', 'SafetyResult', 'SafetyStage', 'base_lag']
 
 #: μ: the weight of the command's own change against the end effector's (with a task Jacobian).
 SELF_WEIGHT = 1e-2
@@ -123,6 +125,9 @@ class SafetyResult:
         relaxed: the rows conflicted within the box and were met as far as it allows.
         held: a lagging base was held on its path (its entries fixed in the box,
             :meth:`~wmm_control.resolvers.collision_limits.BaseRows.hold_on_path`).
+        multipliers: each row's Lagrange multiplier in the cycle's QP (:func:`nearest`; zero
+            for a row the QP did not take), None when no QP ran (the command met every row).
+            Shape (m,), as ``constraints``.
     """
 
     command: np.ndarray
@@ -133,11 +138,59 @@ class SafetyResult:
     constraints: Constraint | None = None
     relaxed: bool = False
     held: bool = False
+    multipliers: np.ndarray | None = None
 
-    def binding(self, tolerance: float = 1e-6) -> dict[str, int]:
-        """Rows per limit that the command meets at equality or breaks (within ``tolerance``):
-        the limits that shaped it (empty without rows)."""
-        return {} if self.constraints is None else self.constraints.binding(self.command, tolerance)
+    def binding(self) -> dict[str, int]:
+        """Rows per limit that shaped the command: a multiplier above :data:`TOLERANCE` in the
+        cycle's QP (met at equality, or broken where the rows were relaxed, and needed: without
+        the row the answer would differ). Empty when no QP ran."""
+        if self.constraints is None or self.multipliers is None:
+            return {}
+        return self.constraints.per_part(np.flatnonzero(self.multipliers > TOLERANCE))
+
+
+class SafetyCounts:
+    """The cycles since start in which each limit of the safety stage shaped the command: one
+    :class:`SafetyResult` a cycle (:meth:`add`), the counts as flat ``key → cycles`` values
+    (:meth:`values`) that ``/diagnostics`` and a run's summary carry alike.
+
+    Attributes:
+        binding: limit name (:data:`~wmm_control.resolvers.collision_limits.LIMITS`) → cycles in
+            which a row of that limit shaped the command (:meth:`SafetyResult.binding`).
+        relaxed: cycles whose rows conflicted within the box (:attr:`SafetyResult.relaxed`).
+        held: cycles in which a lagging base was held on its path (:attr:`SafetyResult.held`).
+    """
+
+    def __init__(self) -> None:
+        self.binding = dict.fromkeys(LIMITS, 0)
+        self.relaxed = self.held = 0
+        self._cycle: tuple[set[str], bool, bool] = (set(), False, False)
+
+    def add(self, result: SafetyResult | None, same_cycle: bool = False) -> None:
+        """Count ``result``, the stage's answer of a cycle (None: it gave none). ``same_cycle``:
+        a further answer of the cycle counted last (a compensated arm command filtered again):
+        what it adds to that cycle's counts, a limit that bound in both counted once."""
+        names, relaxed, held = self._cycle if same_cycle else (set(), False, False)
+        if result is not None:
+            if result.multipliers is not None:  # else no QP ran: no limit shaped the command
+                for name, rows in result.binding().items():
+                    if rows and name not in names:
+                        names.add(name)
+                        self.binding[name] = self.binding.get(name, 0) + 1
+            if result.relaxed and not relaxed:
+                self.relaxed += 1
+            if result.held and not held:
+                self.held += 1
+            relaxed, held = relaxed or result.relaxed, held or result.held
+        self._cycle = (names, relaxed, held)
+
+    def values(self) -> dict[str, int]:
+        """``binding_<limit>`` (its name's spaces as underscores) per limit, ``relaxed_cycles``
+        and ``base_held_cycles``."""
+        out = {'binding_' + name.replace(' ', '_'): cycles for name, cycles in self.binding.items()}
+        out['relaxed_cycles'] = self.relaxed
+        out['base_held_cycles'] = self.held
+        return out
 
 
 class SafetyStage:
@@ -319,11 +372,11 @@ class SafetyStage:
         # so does a row that every command in the box meets (the box alone keeps it)
         movable = (rows.G[:, box.free()] != 0.0).any(axis=1)
         use = movable & (box.greatest(rows.G) > rows.h + TOLERANCE)
-        solved, relaxed = box.clip(command), False
+        solved, relaxed, multipliers = box.clip(command), False, np.zeros(len(rows))
         if use.any():
-            solved, relaxed = nearest(command, metric, rows.select(use), box)
+            solved, relaxed, multipliers[use] = nearest(command, metric, rows.select(use), box)
         changed = held or not np.array_equal(solved, command)
-        return SafetyResult(solved, clearance, label, len(near), changed, rows, relaxed, held)
+        return SafetyResult(solved, clearance, label, len(near), changed, rows, relaxed, held, multipliers)
 
 
 def base_lag(robot) -> float:

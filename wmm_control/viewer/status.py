@@ -4,7 +4,8 @@ Each node's status (one ``DiagnosticStatus`` per node; the simulator has one per
 group and one for the simulation) is kept by name, newest first replaced. The panel shows,
 per status, its level and message and the keys a user watches (:data:`KEYS`): the resolver's
 method, mode, ψ, task scale (α of AMP), σ_min, errors, goal reached or stalled, the safety
-stage's clearance, closest pair and whether it changed the command, and cycle time;
+stage's clearance, closest pair, whether it changed the command and the limits that shaped it
+(with the cycles each did, of the ``binding_<limit>`` counts), and cycle time;
 the base controllers' status, solve time and rejected or stale inputs; the simulator's command
 watchdogs (a group whose commands timed out is held at zero velocity) and real-time factor.
 """
@@ -19,7 +20,8 @@ __all__ = ['NodeStatus', 'StatusBoard', 'KEYS', 'LEVELS']
 #: ``DiagnosticStatus.level`` → word.
 LEVELS = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
 
-#: Keys shown, with their labels, in this order (keys a status lacks are left out).
+#: Keys shown, with their labels, in this order (keys a status lacks are left out); ``binding_``
+#: stands for the ``binding_<limit>`` counts, one row of those above zero (:func:`_binding`).
 KEYS = (
     ('method', 'method'),
     ('mode', 'mode'),
@@ -33,6 +35,8 @@ KEYS = (
     ('clearance_m', 'clearance [m]'),
     ('closest_pair', 'closest pair'),
     ('collision_changed', 'avoiding contact'),
+    ('binding_', 'limits that shaped it [cycles]'),
+    ('relaxed_cycles', 'limits relaxed [cycles]'),
     ('cycle_time_us', 'cycle time [µs]'),
     ('status', 'status'),
     ('route', 'route'),
@@ -52,6 +56,18 @@ KEYS = (
     ('sim_time_s', 'sim time [s]'),
     ('real_time_factor', 'real-time factor'),
 )
+
+
+def _binding(values: dict[str, str]) -> str | None:
+    """The ``binding_<limit>`` counts above zero as ``limit cycles, ...``, most first ('none'
+    when no limit bound; None when the status has no such counts)."""
+    counts = [
+        (key[len('binding_') :].replace('_', ' '), value) for key, value in values.items() if key.startswith('binding_')
+    ]
+    if not counts:
+        return None
+    bound = sorted(((int(v), name) for name, v in counts if v.isdigit() and int(v) > 0), reverse=True)
+    return ', '.join(f'{name} {cycles}' for cycles, name in bound) or 'none'
 
 
 def _cell(value: str) -> str:
@@ -118,7 +134,11 @@ class StatusBoard:
             age = now - status.received
             if age > stale_after:
                 level = f'{level}, {age:.0f} s old'
-            rows = [f'| {label} | {_cell(status.values[key])} |' for key, label in KEYS if key in status.values]
+            rows = []
+            for key, label in KEYS:
+                value = _binding(status.values) if key == 'binding_' else status.values.get(key)
+                if value is not None:
+                    rows.append(f'| {label} | {_cell(value)} |')
             table = '\n'.join(['| | |', '|---|---|', *rows]) if rows else ''
             message = status.message.replace('|', '\\|') or '—'
             sections.append(f'**{name}** — {level}: {message}\n\n{table}'.rstrip())
