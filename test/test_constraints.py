@@ -51,7 +51,6 @@ def test_a_stack_keeps_each_part_its_rows_and_its_name():
     stack = Constraint.stack([a, Constraint.empty(3, 'none'), b, a], 3, 'all')
     assert stack.G.shape == (5, 3) and stack.h.tolist() == [1.0, 2.0, 0.5, 1.0, 2.0]
     assert stack.parts == (('a', 2), ('b', 1), ('a', 2))
-    assert stack.counts() == {'a': 4, 'b': 1}
     assert stack.row_names().tolist() == ['a', 'a', 'b', 'a', 'a']
     # neighbours of one name merge: one limit's several blocks stay one part
     assert Constraint.stack([a, a], 3).parts == (('a', 4),)
@@ -246,7 +245,7 @@ def test_the_stage_answer_meets_every_row_and_is_the_nearest_in_the_task_metric(
         assert stage.last is out
         rows = out.constraints
         assert rows is not None and rows.n == command.size
-        for name, count in rows.counts().items():
+        for name, count in rows.parts:
             kinds[name] = kinds.get(name, 0) + count
         assert np.all(out.command >= lower - 1e-9) and np.all(out.command <= upper + 1e-9)
         changed += out.changed

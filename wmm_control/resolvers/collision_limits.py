@@ -143,7 +143,6 @@ class Pairs:
         distance: the distances the dampers brake to [m] (a lagging base's body margin taken
             off its body's pairs). Shape (m,).
         moved: the pairs the base's twist moves (with an obstacle). Shape (m,), boolean.
-        floor: the pairs with the floor. Shape (m,), boolean.
         axes: indices into (vx, vy, ω) of the command's base entries.
         to_base: the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for the
             world frame's rates. Shape (3, 3).
@@ -156,7 +155,6 @@ class Pairs:
     base: np.ndarray
     distance: np.ndarray
     moved: np.ndarray
-    floor: np.ndarray
     axes: tuple[int, ...]
     to_base: np.ndarray
     kinds: tuple[tuple[str, int], ...]
@@ -211,12 +209,11 @@ class VelocityDampers:
         part of the command, whose share moves the bounds."""
         base_full, rate, distance = near.base_jacobian, near.rate_jacobian, near.distance
         moved = np.asarray(base_full.any(axis=1), dtype=bool)
-        floor = near.floor
-        kind = 2 * moved + floor
+        kind = 2 * moved + near.floor
         if (kind[1:] < kind[:-1]).any():
             order = np.argsort(kind, kind='stable')
             base_full, rate, distance = base_full[order], rate[order], distance[order]
-            moved, floor, kind = moved[order], floor[order], kind[order]
+            moved, kind = moved[order], kind[order]
         rows = np.hstack(((base_full @ to_base)[:, axes], rate))
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
             distance = distance - self.body_margin * (moved & ~rows[:, len(axes) :].any(axis=1))
@@ -225,7 +222,7 @@ class VelocityDampers:
             bound = bound - base_full @ np.asarray(base_twist, dtype=float)
         counts = np.bincount(kind, minlength=3).tolist()
         kinds = tuple((name, count) for name, count in zip(_KINDS, counts) if count)
-        return Pairs(rows, bound, base_full, distance, moved, floor, tuple(axes), to_base, kinds)
+        return Pairs(rows, bound, base_full, distance, moved, tuple(axes), to_base, kinds)
 
     def constraints(self, pairs: Pairs) -> Constraint:
         """The dampers, one row per pair: ``self`` (the robot against itself), ``floor`` and

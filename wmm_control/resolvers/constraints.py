@@ -169,13 +169,6 @@ class Constraint:
                 out[self.parts[bisect_right(ends, i)][0]] += 1
         return out
 
-    def counts(self) -> dict[str, int]:
-        """Rows per part."""
-        out: dict[str, int] = {}
-        for name, rows in self.parts:
-            out[name] = out.get(name, 0) + rows
-        return out
-
 
 def _merged(parts) -> tuple[tuple[str, int], ...]:
     """``parts`` without the empty ones, neighbours of one name merged."""
