@@ -143,6 +143,8 @@ class Pairs:
         distance: the distances the dampers brake to [m] (a lagging base's body margin taken
             off its body's pairs). Shape (m,).
         moved: the pairs the base's twist moves (with an obstacle). Shape (m,), boolean.
+        body: the pairs of the base's own body (no arm joint moves them: chassis, wheels) and an
+            obstacle. Shape (m,), boolean.
         axes: indices into (vx, vy, ω) of the command's base entries.
         to_base: the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for the
             world frame's rates. Shape (3, 3).
@@ -155,15 +157,10 @@ class Pairs:
     base: np.ndarray
     distance: np.ndarray
     moved: np.ndarray
+    body: np.ndarray
     axes: tuple[int, ...]
     to_base: np.ndarray
     kinds: tuple[tuple[str, int], ...]
-
-    @property
-    def body(self) -> np.ndarray:
-        """The pairs of the base's own body (no arm joint moves them: chassis, wheels) and an
-        obstacle. Shape (m,), boolean."""
-        return self.moved & ~self.rows[:, len(self.axes) :].any(axis=1)
 
     def on_base(
         self, base: np.ndarray, shift: ArrayLike = 0.0, which: np.ndarray | None = None
@@ -215,14 +212,15 @@ class VelocityDampers:
             base_full, rate, distance = base_full[order], rate[order], distance[order]
             moved, kind = moved[order], kind[order]
         rows = np.hstack(((base_full @ to_base)[:, axes], rate))
+        body = moved & ~rows[:, len(axes) :].any(axis=1)
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
-            distance = distance - self.body_margin * (moved & ~rows[:, len(axes) :].any(axis=1))
+            distance = distance - self.body_margin * body
         bound = -self._allowed(distance, rows, axes, moved)
         if base_twist is not None:
             bound = bound - base_full @ np.asarray(base_twist, dtype=float)
         counts = np.bincount(kind, minlength=3).tolist()
         kinds = tuple((name, count) for name, count in zip(_KINDS, counts) if count)
-        return Pairs(rows, bound, base_full, distance, moved, tuple(axes), to_base, kinds)
+        return Pairs(rows, bound, base_full, distance, moved, body, tuple(axes), to_base, kinds)
 
     def constraints(self, pairs: Pairs) -> Constraint:
         """The dampers, one row per pair: ``self`` (the robot against itself), ``floor`` and
