@@ -461,7 +461,7 @@ class GoalPursuit:
         self.state, self.reason, self.progress = PursuitState.FOLLOWING, '', 0.0
         poses = plan.trajectory.poses
         self._path = poses
-        length = float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))) if len(poses) > 1 else 0.0
+        length = float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T)))
         stance = plan.stance.base_pose if plan.stance is not None else poses[-1]
         events.append(
             LogEvent(

@@ -336,11 +336,9 @@ class BaseRows:
             return command, box, False
         # the approach at the pair's bound once the base has settled at s v₀, and braking at
         # K_p (1 − s) |ḋ_b| from now on strong enough to stop it within the room left
-        scale = settle = 1.0
-        for i in np.flatnonzero(approaching):
-            room = max(pairs.distance[i] - self.safety_distance, 1e-6)
-            settle = min(settle, (bound[i] - arm[i]) / own[i])
-            scale = min(scale, settle, 1.0 + own[i] * self.lag / (2.0 * room))
+        room = np.maximum(pairs.distance[approaching] - self.safety_distance, 1e-6)
+        settle = min(1.0, float(np.min((bound - arm)[approaching] / own[approaching])))
+        scale = min(settle, float(np.min(1.0 + own[approaching] * self.lag / (2.0 * room))))
         # back along the path at up to the speed it came, or as fast as a pair must separate (a
         # base that crept inside the safety distance at a crawl must leave faster than it came)
         scale = max(scale, min(-1.0, settle))

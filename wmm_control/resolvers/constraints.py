@@ -220,12 +220,7 @@ class Box:
         """The box with entries ``index`` held at ``value``."""
         lower, upper = self.lower.copy(), self.upper.copy()
         lower[index] = upper[index] = value
-        if not (lower <= upper).all():
-            raise NonFiniteError(f'box: entries {index} held at NaN')
-        out = object.__new__(Box)
-        object.__setattr__(out, 'lower', lower)
-        object.__setattr__(out, 'upper', upper)
-        return out
+        return Box(lower, upper)
 
     def greatest(self, G: np.ndarray) -> np.ndarray:
         """The greatest value of each row of ``G x`` over the box (inf where it is unbounded):
