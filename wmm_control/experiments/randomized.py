@@ -27,7 +27,8 @@ independent of the controllers' distance model); a run that goes more than
   drives (the arm's, then the steer and drive joints or the wheels);
 * ``q``, shape (K, J): their positions [rad or m] at the start of each period;
 * ``goal_pose``, shape (6,): the goal [x, y, z, roll, pitch, yaw], world frame [m, rad];
-* ``obstacles``: the obstacle file's text ('' without obstacles);
+* ``obstacles``: the obstacle file's text, its ``random_boxes`` drawn as fixed obstacles
+  (:func:`~wmm_control.kinematics.obstacles.obstacle_text`; '' without obstacles);
 * ``cycle_s``, ``cycle_cpu_s``, shape (K,): each period's control cycle (the method with its
   safety stage, the base controller and the compensation, not the simulator's step), wall
   time (``time.perf_counter``) and CPU time of its thread (``time.thread_time``) [s]; NaN
@@ -398,7 +399,7 @@ def run_goal(
     Returns:
         dict: ``robot``, ``method``, ``goal`` (index), ``outcome`` (``converged`` | ``reported`` |
         ``failed``, or ``no_way`` with ``plan``: the planner's reason in ``no_way_reason``, the
-        robot held still), ``time_s`` (simulated), ``time_to_reach_s`` (first entry into the
+        robot held still, or stopped where a plan from where it stalled found none), ``time_s`` (simulated), ``time_to_reach_s`` (first entry into the
         tolerance, null: never), ``final_position_error_m``, ``final_orientation_error_rad``,
         ``first_stall_s`` (when the goal was first reported stalled, null: never),
         ``limits_exceeded`` (:func:`~wmm_control.experiments.metrics.run_limit_report`),

@@ -56,8 +56,9 @@ MAX_REFERENCE_RATE = 1e3
 
 @dataclass(frozen=True)
 class LogEvent:
-    """Something to log: ``kind`` (accepted, tracking, normalised, rejected, held, reached,
-    stalled) and its ``message``."""
+    """Something to log: ``kind`` (:class:`TargetManager`'s accepted, tracking, normalised,
+    rejected, held, reached, stalled; :class:`~wmm_control.planning.pursuit.PursuitLog` lists
+    the goal planner's) and its ``message``."""
 
     kind: str
     message: str
