@@ -129,10 +129,6 @@ class Constraint:
             return cls._checked(filled[0].G, filled[0].h, name, parts)
         return cls._checked(np.vstack([c.G for c in filled]), np.concatenate([c.h for c in filled]), name, parts)
 
-    def row_names(self) -> np.ndarray:
-        """The name of the part each row comes from. Shape (m,)."""
-        return np.repeat(np.array([name for name, _ in self.parts], dtype=object), [rows for _, rows in self.parts])
-
     def select(self, keep: ArrayLike) -> Constraint:
         """The rows where the boolean array ``keep`` (shape (m,)) is true, parts kept."""
         keep = np.asarray(keep, dtype=bool)
