@@ -12,10 +12,8 @@ within the box, the same solver takes the problem again with a slack per row.
 
 from __future__ import annotations
 
-from bisect import bisect_right
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from itertools import accumulate
 from typing import NamedTuple
 
 import numpy as np
@@ -134,8 +132,7 @@ class Constraint:
         keep = np.asarray(keep, dtype=bool)
         if keep.shape != (len(self),):
             raise ShapeError(f'constraint {self.name!r}: keep must have shape ({len(self)},), got {keep.shape}')
-        index = np.repeat(np.arange(len(self.parts)), [rows for _, rows in self.parts])
-        kept = np.bincount(index[keep], minlength=len(self.parts))
+        kept = np.bincount(self._part_of_rows()[keep], minlength=len(self.parts))
         parts = _merged((name, int(rows)) for (name, _), rows in zip(self.parts, kept))
         return Constraint._checked(self.G[keep], self.h[keep], self.name, parts or ((self.name, 0),))
 
@@ -157,13 +154,15 @@ class Constraint:
 
     def per_part(self, rows: ArrayLike) -> dict[str, int]:
         """How many of the rows ``rows`` (indices, each once) each part holds."""
+        held = np.bincount(self._part_of_rows()[np.asarray(rows, dtype=int)], minlength=len(self.parts))
         out = {name: 0 for name, _ in self.parts}
-        indices = np.asarray(rows, dtype=int).tolist()
-        if indices:
-            ends = list(accumulate(count for _, count in self.parts))
-            for i in indices:
-                out[self.parts[bisect_right(ends, i)][0]] += 1
+        for (name, _), count in zip(self.parts, held.tolist()):
+            out[name] += count
         return out
+
+    def _part_of_rows(self) -> np.ndarray:
+        """The index into :attr:`parts` of each row's part. Shape (m,)."""
+        return np.repeat(np.arange(len(self.parts)), [rows for _, rows in self.parts])
 
 
 def _merged(parts) -> tuple[tuple[str, int], ...]:
