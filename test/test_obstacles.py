@@ -303,8 +303,8 @@ def test_a_slow_braking_base_is_not_let_on_at_an_obstacle_because_its_turn_swing
     j, distance = within.base_jacobian[k], within.distance[k]
     slowest = float(np.min(robot.base.acceleration[:2]))
     # the linear approach is beyond what the base can stop from; with the turn, the row holds
-    assert j[:2] @ twist[:2] < -stage.allowed_approach(distance, np.linalg.norm(j[:2]) * slowest)
-    assert j @ twist >= -stage.allowed_approach(distance, np.linalg.norm(j[:2]) * slowest)
+    assert j[:2] @ twist[:2] < -stage.dampers.allowed_approach(distance, np.linalg.norm(j[:2]) * slowest)
+    assert j @ twist >= -stage.dampers.allowed_approach(distance, np.linalg.norm(j[:2]) * slowest)
     out = stage.filter(q, np.concatenate((twist, np.zeros(q.size))), lower, upper, base_pose=pose, base_axes=(0, 1, 2))
     assert out.changed
     braked = j[:2] @ out.command[:2] - j[:2] @ twist[:2]

@@ -14,14 +14,14 @@ this process, and prints per robot and method: runs, converged, reported (stalle
 and the worst use of any velocity or acceleration limit; then the control cycle's thread CPU
 and wall time per period (the largest p99 of a run and the longest cycle). ``--indices`` runs
 only those goals of the draw (one run again, say). ``--obstacles`` puts an obstacle file's obstacles
-(:mod:`wmm_control.kinematics.obstacles`) in the simulator and the controller, and draws the
+(:mod:`wmm_control.kinematics.obstacles`; its ``random_boxes`` drawn by ``--seed``) in the simulator and the controller, and draws the
 goals clear of them (in the file's ``goal_region``, if it has one); every period's clearance
 is checked on the simulator's geometry. ``--plan`` (direct engine only) plans the way to each
-goal round the obstacles first (:mod:`wmm_control.planning`), the run tracks it and then the
-goal; a goal the planner finds no way to counts as "no way", with its reason, not as
-failed. ``--record DIR`` writes each run as
-``DIR/<robot>_<method>_<goal>.npz`` (:mod:`wmm_control.experiments.randomized` documents the
-arrays). ``--sweep NAME=V1,V2,...`` (repeatable) runs the goals with every value of a resolver
+goal round the obstacles first (:mod:`wmm_control.planning`), the run follows it at the robot's
+pace (planned again from where the robot stalls) and then goes to the goal; a goal the planner
+finds no way to counts as "no way", with its reason, not as failed. ``--record DIR`` writes
+each run as ``DIR/<robot>_<method>_<goal>.npz`` (:mod:`wmm_control.experiments.randomized`
+documents the arrays). ``--sweep NAME=V1,V2,...`` (repeatable) runs the goals with every value of a resolver
 parameter (every combination of several; :mod:`wmm_control.experiments.sweep`), prints one
 table per value, and with ``--out`` plots the converged share and the time to converge against
 the value beside it (``<out>_sweep.png``). ``--jobs`` runs that many runs at once, in separate

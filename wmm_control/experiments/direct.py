@@ -43,13 +43,13 @@ def run_scenario(
             (not those of a plan's points): the run ends early when it returns True.
         follower: a plan to follow first (:class:`~wmm_control.planning.follow.PlanFollower`):
             its point every period, at the pace of the measured base and end effector, from the
-            start; the
-            scenario's goals once it is in its final approach.
+            start; the scenario's goals once it is in its final approach.
         replan: with ``follower``, ``replan(base_pose, q_arm)``, called when the follower
-            stalls, with the measured base pose (x, y, θ) and arm joints: the follower of a new plan from there, or None
-            when there is none (the run ends). At most ``max_replans`` times; when the follower
-            stalls after them the scenario's goals are given from where the robot is (the
-            method's own approach, judged as without a plan).
+            stalls, with the measured base pose (x, y, θ) and arm joints: the follower of a new
+            plan from there, or None when there is none (the run ends).
+        max_replans: the most calls of ``replan`` in a run; when the follower stalls after them
+            the scenario's goals are given from where the robot is (the method's own approach,
+            judged as without a plan).
 
     Returns:
         The frozen :class:`~wmm_control.experiments.metrics.RunLog`.

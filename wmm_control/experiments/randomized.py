@@ -27,7 +27,8 @@ independent of the controllers' distance model); a run that goes more than
   drives (the arm's, then the steer and drive joints or the wheels);
 * ``q``, shape (K, J): their positions [rad or m] at the start of each period;
 * ``goal_pose``, shape (6,): the goal [x, y, z, roll, pitch, yaw], world frame [m, rad];
-* ``obstacles``: the obstacle file's text ('' without obstacles);
+* ``obstacles``: the obstacle file's text, its ``random_boxes`` drawn as fixed obstacles
+  (:func:`~wmm_control.kinematics.obstacles.obstacle_text`; '' without obstacles);
 * ``cycle_s``, ``cycle_cpu_s``, shape (K,): each period's control cycle (the method with its
   safety stage, the base controller and the compensation, not the simulator's step), wall
   time (``time.perf_counter``) and CPU time of its thread (``time.thread_time``) [s]; NaN
@@ -233,20 +234,22 @@ def planned(
     obstacles: str | Path = '',
     base_pose: ArrayLike | None = None,
     planner: GoalPlanner | None = None,
+    q_travel: ArrayLike | None = None,
 ) -> tuple[Handoff | None, dict]:
     """The plan of ``wmm_randomized --plan`` for ``goal`` among the obstacles of the file
     ``obstacles``, from ``base_pose`` (default: the robot's start pose), by ``planner`` (default:
-    a new :class:`~wmm_control.planning.GoalPlanner` of the robot among those obstacles): (its
-    hand-off, or None when the planner found no way; ``{'planning_time_s', 'no_way',
-    'no_way_reason'}``, the last two None with a plan)."""
+    a new :class:`~wmm_control.planning.GoalPlanner` of the robot among those obstacles), the arm
+    travelling in ``q_travel`` (:meth:`~wmm_control.planning.GoalPlanner.plan_in_posture`; None:
+    the planner's travel posture): (its hand-off, or None when the planner found no way;
+    ``{'planning_time_s', 'no_way', 'no_way_reason'}``, the last two None with a plan)."""
     planner = GoalPlanner(robot, load_obstacles(obstacles)) if planner is None else planner
     target = Goal(0.0, 0.0, goal.pose).target
     start = robot.start.base_pose if base_pose is None else np.asarray(base_pose, dtype=float)
-    plan = planner.plan(target.position, target.rotation, start)
+    plan, travel = planner.plan_in_posture(target.position, target.rotation, start, q_travel)
     info = {'planning_time_s': plan.planning_time, 'no_way': None, 'no_way_reason': None}
     if plan.trajectory is None:
         return None, dict(info, no_way=plan.no_way.value if plan.no_way else 'no_way', no_way_reason=plan.reason)
-    return Handoff.of(planner.model, plan.trajectory, planner.travel.q_arm), info
+    return Handoff.of(planner.model, plan.trajectory, travel), info
 
 
 def _run_direct(robot, run, goal, duration, obstacles, plan=False):
@@ -279,17 +282,11 @@ def _run_direct(robot, run, goal, duration, obstacles, plan=False):
         if handoff is None:
             return None, planning
         follower = PlanFollower(handoff, target)
-        travel = planner.travel.q_arm
 
         def replan(base_pose, q_arm):
             # the arm travels as it is now (the plan's first point is where the end effector is);
             # when that finds no way, in the planner's own travel posture
-            planner.set_travel_posture(q_arm)
-            again, info = planned(robot, goal, obstacles, base_pose, planner)
-            if again is None:
-                planner.set_travel_posture(travel)
-                again, second = planned(robot, goal, obstacles, base_pose, planner)
-                info = dict(second, planning_time_s=info['planning_time_s'] + second['planning_time_s'])
+            again, info = planned(robot, goal, obstacles, base_pose, planner, q_arm)
             planning['replans'] += 1
             planning['planning_time_s'] += info['planning_time_s']
             if again is None:
@@ -402,7 +399,7 @@ def run_goal(
     Returns:
         dict: ``robot``, ``method``, ``goal`` (index), ``outcome`` (``converged`` | ``reported`` |
         ``failed``, or ``no_way`` with ``plan``: the planner's reason in ``no_way_reason``, the
-        robot held still), ``time_s`` (simulated), ``time_to_reach_s`` (first entry into the
+        robot held still, or stopped where a plan from where it stalled found none), ``time_s`` (simulated), ``time_to_reach_s`` (first entry into the
         tolerance, null: never), ``final_position_error_m``, ``final_orientation_error_rad``,
         ``first_stall_s`` (when the goal was first reported stalled, null: never),
         ``limits_exceeded`` (:func:`~wmm_control.experiments.metrics.run_limit_report`),

@@ -66,6 +66,7 @@ from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import norm, rotation_angle, wrap_angle
 from wmm_control.planning.handoff import Handoff
+from wmm_control.planning.timing import LinearPiece
 from wmm_control.resolvers.interface import PoseTarget
 
 __all__ = ['FollowParams', 'FollowState', 'FollowStep', 'PlanFollower']
@@ -191,16 +192,13 @@ class PlanFollower:
 
     def planned_pose(self, s: float | None = None) -> np.ndarray:
         """The planned base pose (x, y, θ) at the plan's time ``s`` [s] (default: its clock),
-        interpolated between samples. Shape (3,)."""
+        interpolated between samples (the heading the short way). Shape (3,)."""
         poses, dt = self.handoff.base_poses, self.handoff.dt
         if len(poses) == 1:
             return poses[0].copy()
         u = min(max((self._clock if s is None else s) / dt, 0.0), len(poses) - 1.0)
         k = min(int(math.floor(u)), len(poses) - 2)
-        a, b = poses[k], poses[k + 1]
-        delta = b - a
-        delta[2] = wrap_angle(float(delta[2]))
-        return a + (u - k) * delta
+        return LinearPiece(poses[k], poses[k + 1]).pose(u - k)
 
     def _lag(self, planned: np.ndarray, base: np.ndarray) -> np.ndarray:
         """The lag of ``base`` behind the ``planned`` pose(s) as a fraction of the lead."""
@@ -264,10 +262,8 @@ class PlanFollower:
         if self._clock >= end:
             return FollowStep(self.goal, FollowState.APPROACH, 1.0)
         # the base ahead of the plan pulls the clock forward
-        last = len(handoff.base_poses) - 1
         given = self._index(self._clock)  # the point given last period
-        horizon = min(last, int(math.floor((self._clock + p.lookahead) / handoff.dt + 1e-9)))
-        window = handoff.base_poses[self._passed : horizon + 1]
+        window = handoff.base_poses[self._passed : self._index(self._clock + p.lookahead) + 1]
         if len(window):
             self._passed += int(np.argmin(self._lag(window, base)))
         self._clock = max(self._clock, self._passed * handoff.dt)

@@ -79,9 +79,3 @@ class Handoff:
     def duration(self) -> float:
         """[s] from the first point to the last."""
         return self.dt * (len(self.points) - 1)
-
-    def point(self, t: float) -> PoseTarget | None:
-        """The point in force at ``t`` [s] from the start (the sample at or before it), None
-        once the trajectory has ended (after its last sample's period)."""
-        k = int(np.floor(t / self.dt + 1e-9))
-        return self.points[k] if 0 <= k < len(self.points) else None

@@ -35,7 +35,6 @@ Time is what :meth:`GoalPursuit.step` is told.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import queue
 import threading
@@ -55,7 +54,7 @@ from wmm_control.planning.follow import FollowParams, FollowState, PlanFollower
 from wmm_control.planning.handoff import Handoff
 from wmm_control.planning.planner import GoalPlanner, Plan
 from wmm_control.resolvers.interface import PoseTarget
-from wmm_control.resolvers.targets import LogEvent, LogThrottle, check_goal
+from wmm_control.resolvers.targets import LogEvent, LogThrottle, check_goal, goal_key, goal_text
 from wmm_control.robot_config import RobotConfig
 
 __all__ = ['GoalPursuit', 'PlanWorker', 'PursuitLog', 'PursuitState', 'PursuitStep', 'path_blocked']
@@ -212,22 +211,6 @@ class PlanWorker:
             self._version = version
         return self._planner
 
-    def _plan(self, planner: GoalPlanner, job: _PlanJob) -> tuple[Plan, np.ndarray]:
-        """The plan of ``job`` and the arm's travel posture it is for: ``job.q_travel`` when given,
-        and when that finds no way the planner's own (the planning times added)."""
-        goal, own = job.goal, planner.travel.q_arm
-        if job.q_travel is None:
-            return planner.plan(goal.position, goal.rotation, job.base_pose), own
-        planner.set_travel_posture(job.q_travel)
-        try:
-            plan = planner.plan(goal.position, goal.rotation, job.base_pose)
-        finally:
-            planner.set_travel_posture(own)
-        if plan.trajectory is not None:
-            return plan, job.q_travel
-        second = planner.plan(goal.position, goal.rotation, job.base_pose)
-        return dataclasses.replace(second, planning_time=plan.planning_time + second.planning_time), own
-
     def _run(self) -> None:
         while True:
             job = self._jobs.get()
@@ -240,7 +223,9 @@ class PlanWorker:
                 if isinstance(job, _CheckJob):
                     self._results.put(_Checked(job.ticket, path_blocked(planner, job.poses)))
                     continue
-                plan, travel = self._plan(planner, job)
+                plan, travel = planner.plan_in_posture(
+                    job.goal.position, job.goal.rotation, job.base_pose, job.q_travel
+                )
                 here = plan.stance is not None and np.array_equal(plan.stance.base_pose, job.base_pose)
                 handoff = None
                 if plan.trajectory is not None and not here:
@@ -324,7 +309,7 @@ class GoalPursuit:
             self._stop(PursuitState.REJECTED, reason)
             self._key = None
             return events + [LogEvent('rejected', f'rejected goal_pose: {reason}; holding still')]
-        key = tuple(np.round(np.concatenate((values[:3], quat)), 9))
+        key = goal_key(values[:3], quat)
         if key == self._key and not (self.state is PursuitState.NO_WAY and self._no_way_version != self.version):
             return events  # the same goal again (a sequencer re-publishing it)
         self._key = key
@@ -333,13 +318,7 @@ class GoalPursuit:
         self.replans = 0
         self._plan_due = 'new goal'
         self._stop(PursuitState.PLANNING, '')
-        return events + [
-            LogEvent(
-                'accepted',
-                f'new goal: position {np.round(values[:3], 4).tolist()}, quaternion (x, y, z, w) '
-                f'{np.round(quat, 4).tolist()}: planning',
-            )
-        ]
+        return events + [LogEvent('accepted', f'new goal: {goal_text(values[:3], quat)}: planning')]
 
     def set_obstacles(self, obstacles: Iterable[Obstacle]) -> None:
         """The obstacles changed (world frame): the rest of a path followed is checked on them."""
@@ -482,7 +461,7 @@ class GoalPursuit:
         self.state, self.reason, self.progress = PursuitState.FOLLOWING, '', 0.0
         poses = plan.trajectory.poses
         self._path = poses
-        length = float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))) if len(poses) > 1 else 0.0
+        length = float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T)))
         stance = plan.stance.base_pose if plan.stance is not None else poses[-1]
         events.append(
             LogEvent(

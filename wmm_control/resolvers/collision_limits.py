@@ -143,7 +143,8 @@ class Pairs:
         distance: the distances the dampers brake to [m] (a lagging base's body margin taken
             off its body's pairs). Shape (m,).
         moved: the pairs the base's twist moves (with an obstacle). Shape (m,), boolean.
-        floor: the pairs with the floor. Shape (m,), boolean.
+        body: the pairs of the base's own body (no arm joint moves them: chassis, wheels) and an
+            obstacle. Shape (m,), boolean.
         axes: indices into (vx, vy, ω) of the command's base entries.
         to_base: the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for the
             world frame's rates. Shape (3, 3).
@@ -156,16 +157,10 @@ class Pairs:
     base: np.ndarray
     distance: np.ndarray
     moved: np.ndarray
-    floor: np.ndarray
+    body: np.ndarray
     axes: tuple[int, ...]
     to_base: np.ndarray
     kinds: tuple[tuple[str, int], ...]
-
-    @property
-    def body(self) -> np.ndarray:
-        """The pairs of the base's own body (no arm joint moves them: chassis, wheels) and an
-        obstacle. Shape (m,), boolean."""
-        return self.moved & ~self.rows[:, len(self.axes) :].any(axis=1)
 
     def on_base(
         self, base: np.ndarray, shift: ArrayLike = 0.0, which: np.ndarray | None = None
@@ -211,21 +206,21 @@ class VelocityDampers:
         part of the command, whose share moves the bounds."""
         base_full, rate, distance = near.base_jacobian, near.rate_jacobian, near.distance
         moved = np.asarray(base_full.any(axis=1), dtype=bool)
-        floor = near.floor
-        kind = 2 * moved + floor
+        kind = 2 * moved + near.floor
         if (kind[1:] < kind[:-1]).any():
             order = np.argsort(kind, kind='stable')
             base_full, rate, distance = base_full[order], rate[order], distance[order]
-            moved, floor, kind = moved[order], floor[order], kind[order]
+            moved, kind = moved[order], kind[order]
         rows = np.hstack(((base_full @ to_base)[:, axes], rate))
+        body = moved & ~rows[:, len(axes) :].any(axis=1)
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
-            distance = distance - self.body_margin * (moved & ~rows[:, len(axes) :].any(axis=1))
+            distance = distance - self.body_margin * body
         bound = -self._allowed(distance, rows, axes, moved)
         if base_twist is not None:
             bound = bound - base_full @ np.asarray(base_twist, dtype=float)
         counts = np.bincount(kind, minlength=3).tolist()
         kinds = tuple((name, count) for name, count in zip(_KINDS, counts) if count)
-        return Pairs(rows, bound, base_full, distance, moved, floor, tuple(axes), to_base, kinds)
+        return Pairs(rows, bound, base_full, distance, moved, body, tuple(axes), to_base, kinds)
 
     def constraints(self, pairs: Pairs) -> Constraint:
         """The dampers, one row per pair: ``self`` (the robot against itself), ``floor`` and
@@ -341,11 +336,9 @@ class BaseRows:
             return command, box, False
         # the approach at the pair's bound once the base has settled at s v₀, and braking at
         # K_p (1 − s) |ḋ_b| from now on strong enough to stop it within the room left
-        scale = settle = 1.0
-        for i in np.flatnonzero(approaching):
-            room = max(pairs.distance[i] - self.safety_distance, 1e-6)
-            settle = min(settle, (bound[i] - arm[i]) / own[i])
-            scale = min(scale, settle, 1.0 + own[i] * self.lag / (2.0 * room))
+        room = np.maximum(pairs.distance[approaching] - self.safety_distance, 1e-6)
+        settle = min(1.0, float(np.min((bound - arm)[approaching] / own[approaching])))
+        scale = min(settle, float(np.min(1.0 + own[approaching] * self.lag / (2.0 * room))))
         # back along the path at up to the speed it came, or as fast as a pair must separate (a
         # base that crept inside the safety distance at a crawl must leave faster than it came)
         scale = max(scale, min(-1.0, settle))

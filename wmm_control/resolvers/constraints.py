@@ -12,10 +12,8 @@ within the box, the same solver takes the problem again with a slack per row.
 
 from __future__ import annotations
 
-from bisect import bisect_right
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from itertools import accumulate
 from typing import NamedTuple
 
 import numpy as np
@@ -129,17 +127,12 @@ class Constraint:
             return cls._checked(filled[0].G, filled[0].h, name, parts)
         return cls._checked(np.vstack([c.G for c in filled]), np.concatenate([c.h for c in filled]), name, parts)
 
-    def row_names(self) -> np.ndarray:
-        """The name of the part each row comes from. Shape (m,)."""
-        return np.repeat(np.array([name for name, _ in self.parts], dtype=object), [rows for _, rows in self.parts])
-
     def select(self, keep: ArrayLike) -> Constraint:
         """The rows where the boolean array ``keep`` (shape (m,)) is true, parts kept."""
         keep = np.asarray(keep, dtype=bool)
         if keep.shape != (len(self),):
             raise ShapeError(f'constraint {self.name!r}: keep must have shape ({len(self)},), got {keep.shape}')
-        index = np.repeat(np.arange(len(self.parts)), [rows for _, rows in self.parts])
-        kept = np.bincount(index[keep], minlength=len(self.parts))
+        kept = np.bincount(self._part_of_rows()[keep], minlength=len(self.parts))
         parts = _merged((name, int(rows)) for (name, _), rows in zip(self.parts, kept))
         return Constraint._checked(self.G[keep], self.h[keep], self.name, parts or ((self.name, 0),))
 
@@ -161,20 +154,15 @@ class Constraint:
 
     def per_part(self, rows: ArrayLike) -> dict[str, int]:
         """How many of the rows ``rows`` (indices, each once) each part holds."""
+        held = np.bincount(self._part_of_rows()[np.asarray(rows, dtype=int)], minlength=len(self.parts))
         out = {name: 0 for name, _ in self.parts}
-        indices = np.asarray(rows, dtype=int).tolist()
-        if indices:
-            ends = list(accumulate(count for _, count in self.parts))
-            for i in indices:
-                out[self.parts[bisect_right(ends, i)][0]] += 1
+        for (name, _), count in zip(self.parts, held.tolist()):
+            out[name] += count
         return out
 
-    def counts(self) -> dict[str, int]:
-        """Rows per part."""
-        out: dict[str, int] = {}
-        for name, rows in self.parts:
-            out[name] = out.get(name, 0) + rows
-        return out
+    def _part_of_rows(self) -> np.ndarray:
+        """The index into :attr:`parts` of each row's part. Shape (m,)."""
+        return np.repeat(np.arange(len(self.parts)), [rows for _, rows in self.parts])
 
 
 def _merged(parts) -> tuple[tuple[str, int], ...]:
@@ -227,12 +215,7 @@ class Box:
         """The box with entries ``index`` held at ``value``."""
         lower, upper = self.lower.copy(), self.upper.copy()
         lower[index] = upper[index] = value
-        if not (lower <= upper).all():
-            raise NonFiniteError(f'box: entries {index} held at NaN')
-        out = object.__new__(Box)
-        object.__setattr__(out, 'lower', lower)
-        object.__setattr__(out, 'upper', upper)
-        return out
+        return Box(lower, upper)
 
     def greatest(self, G: np.ndarray) -> np.ndarray:
         """The greatest value of each row of ``G x`` over the box (inf where it is unbounded):

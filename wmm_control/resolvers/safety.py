@@ -43,7 +43,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from wmm_control.base.contract import base_controller_class
 from wmm_control.errors import ConfigError
@@ -278,12 +277,6 @@ class SafetyStage:
     def set_obstacles(self, obstacles) -> None:
         """Keep the robot off ``obstacles`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`) from now on."""
         self.collision.set_obstacles(obstacles)
-
-    def allowed_approach(
-        self, distance: ArrayLike, deceleration: ArrayLike = math.inf, lag: ArrayLike = 0.0
-    ) -> float | np.ndarray:
-        """:meth:`~wmm_control.resolvers.collision_limits.VelocityDampers.allowed_approach`."""
-        return self.dampers.allowed_approach(distance, deceleration, lag)
 
     def filter(
         self,

@@ -34,7 +34,17 @@ from wmm_control.geometry import matrix_from_quaternion, unit_quaternion
 from wmm_control.resolvers.interface import PoseTarget
 from wmm_control.resolvers.progress import GoalProgress
 
-__all__ = ['GOAL', 'REFERENCE', 'LogEvent', 'LogThrottle', 'TargetManager', 'check_goal', 'checked_quaternion']
+__all__ = [
+    'GOAL',
+    'REFERENCE',
+    'LogEvent',
+    'LogThrottle',
+    'TargetManager',
+    'check_goal',
+    'checked_quaternion',
+    'goal_key',
+    'goal_text',
+]
 
 GOAL = 'goal_pose'
 #: The fields of a goal's pose (x, y, z, qx, qy, qz, qw), for the reasons.
@@ -46,8 +56,9 @@ MAX_REFERENCE_RATE = 1e3
 
 @dataclass(frozen=True)
 class LogEvent:
-    """Something to log: ``kind`` (accepted, tracking, normalised, rejected, held, reached,
-    stalled) and its ``message``."""
+    """Something to log: ``kind`` (:class:`TargetManager`'s accepted, tracking, normalised,
+    rejected, held, reached, stalled; :class:`~wmm_control.planning.pursuit.PursuitLog` lists
+    the goal planner's) and its ``message``."""
 
     kind: str
     message: str
@@ -116,6 +127,17 @@ def check_goal(
     if quat is None:
         return None, 'zero quaternion', events
     return quat, '', events
+
+
+def goal_key(position, quat) -> tuple:
+    """What tells a goal from another: its position and unit quaternion (x, y, z, w) to 1e-9 (the
+    same goal re-published has the same key)."""
+    return tuple(np.round(np.concatenate((position, quat)), 9))
+
+
+def goal_text(position, quat) -> str:
+    """A goal's position and unit quaternion (x, y, z, w) for a log."""
+    return f'position {np.round(position, 4).tolist()}, quaternion (x, y, z, w) {np.round(quat, 4).tolist()}'
 
 
 class TargetManager:
@@ -191,7 +213,7 @@ class TargetManager:
         )
         if quat is None:
             return events + self.reject(reason)
-        key = tuple(np.round(np.concatenate((values[:3], quat)), 9))
+        key = goal_key(values[:3], quat)
         if key == self._goal_key:
             return events  # the same goal again (a sequencer re-publishing it)
         self.target = PoseTarget(values[:3], matrix_from_quaternion(quat))
@@ -199,13 +221,7 @@ class TargetManager:
         self.tracking = False
         self._start()
         self.goals += 1
-        return events + [
-            LogEvent(
-                'accepted',
-                f'new goal: position {np.round(values[:3], 4).tolist()}, '
-                f'quaternion (x, y, z, w) {np.round(quat, 4).tolist()}',
-            )
-        ]
+        return events + [LogEvent('accepted', f'new goal: {goal_text(values[:3], quat)}')]
 
     def trajectory_point(self, frame, pose, velocity, acceleration, now, base=None) -> list[LogEvent]:
         """A trajectory point received at ``now`` [s]: ``pose`` as a goal's (None: the message

@@ -24,7 +24,7 @@ import viser
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.geometry import quaternion_from_matrix
-from wmm_control.viewer.scene import ScenePoses, Shape, Trail, wxyz_from_xyzw
+from wmm_control.viewer.scene import ScenePoses, Shape, Trail, segments, wxyz_from_xyzw
 
 __all__ = ['BrowserScene', 'CAMERA_LOOK_AT', 'CAMERA_POSITION', 'local_only']
 
@@ -233,7 +233,7 @@ class BrowserScene:
             self.planned_path.visible = False
             return
         points = np.column_stack((xy, np.full(len(xy), self.ground_z + _PATH_LIFT)))
-        self.planned_path.points = np.stack((points[:-1], points[1:]), axis=1)
+        self.planned_path.points = segments(points)
         self.planned_path.visible = True
 
     def show_goal(self, position: np.ndarray, wxyz: np.ndarray, move_handle: bool) -> None:

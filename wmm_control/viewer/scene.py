@@ -37,6 +37,7 @@ __all__ = [
     'RobotScene',
     'ScenePoses',
     'Trail',
+    'segments',
     'unit_wxyz',
     'finite_pose',
     'wxyz_from_xyzw',
@@ -306,6 +307,11 @@ class Trail:
         return self._points.copy()
 
     def segments(self) -> np.ndarray:
-        """Consecutive points as line segments. Shape (n − 1, 2, 3)."""
-        pts = self._points
-        return np.stack((pts[:-1], pts[1:]), axis=1) if len(pts) > 1 else np.zeros((0, 2, 3))
+        """Consecutive points as line segments (:func:`segments`). Shape (n − 1, 2, 3)."""
+        return segments(self._points)
+
+
+def segments(points: np.ndarray) -> np.ndarray:
+    """The line segments between consecutive ``points`` (shape (n, 3)), none for fewer than two.
+    Shape (max(n − 1, 0), 2, 3)."""
+    return np.stack((points[:-1], points[1:]), axis=1)
