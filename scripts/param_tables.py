@@ -20,7 +20,6 @@ The node modules are imported (their specs are module-level objects); no node is
 """
 
 import argparse
-import dataclasses
 import difflib
 import importlib
 import re
@@ -32,15 +31,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a source checkout
 
 from wmm_control.nodes.parameters import load_defaults  # noqa: E402
-from wmm_control.resolvers import METHODS  # noqa: E402
 
 #: The pages that hold the tables (the viewer's is on its own page).
 DOCS = (ROOT / 'docs' / 'nodes.md', ROOT / 'docs' / 'viewer.md')
 #: A console script of setup.py: ``'name = module:function'``.
 _ENTRY = re.compile(r"'(\w+) = ([\w.]+):\w+'")
 _BLOCK = re.compile(r'(<!-- params:([\w-]+) -->\n)(.*?)(<!-- /params -->)', re.S)
-#: The fields of the resolver parameter classes: their home is the class, not the node YAML.
-_METHOD_FIELDS = frozenset(f.name for _, cls in METHODS.values() for f in dataclasses.fields(cls))
 
 
 def node_params():
@@ -77,8 +73,8 @@ def _default(exe, spec, values):
     if spec.default_from is None:
         return values[spec.name], ''
     value = spec.default_from(SimpleNamespace(**values))
-    if exe == 'redundancy_resolver' and spec.name in _METHOD_FIELDS:
-        return value, 'resolver class'
+    if spec.default_home:
+        return value, spec.default_home
     return value, f'robot YAML of `{values.get("robot", "?")}`'
 
 

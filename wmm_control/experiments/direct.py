@@ -11,7 +11,7 @@ from sim_bridge.world import SimWorld
 from wmm_control.cycle import steady_heap
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.scenario import Scenario
-from wmm_control.planning.follow import FollowState, PlanFollower
+from wmm_control.planning.follow import MAX_REPLANS, FollowState, PlanFollower
 from wmm_control.resolvers.interface import Resolver, ResolverDiagnostics
 
 __all__ = ['run_scenario']
@@ -27,7 +27,7 @@ def run_scenario(
     until: Callable[[ResolverDiagnostics], bool] | None = None,
     follower: PlanFollower | None = None,
     replan: Callable[[np.ndarray, np.ndarray], PlanFollower | None] | None = None,
-    max_replans: int = 3,
+    max_replans: int = MAX_REPLANS,
 ) -> RunLog:
     """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
 

@@ -73,7 +73,7 @@ from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_ob
 from wmm_control.geometry import rotation_angle, rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
 from wmm_control.planning import GoalPlanner
-from wmm_control.planning.follow import PlanFollower
+from wmm_control.planning.follow import MAX_REPLANS, PlanFollower
 from wmm_control.planning.handoff import Handoff
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
@@ -94,7 +94,6 @@ __all__ = [
     'COLLISION_MARGIN',
     'CONTACT_DEPTH',
     'SETTLE_S',
-    'MAX_REPLANS',
     'goal_settings',
     'run_contact',
     'write_record',
@@ -134,8 +133,6 @@ COLLISION_MARGIN = 0.02
 CONTACT_DEPTH = 0.001
 #: A direct run ends once the goal has been held this long [s].
 SETTLE_S = 2.0
-#: With ``plan``, the most times a run plans again from where the robot stalled.
-MAX_REPLANS = 3
 
 
 @dataclass(frozen=True)

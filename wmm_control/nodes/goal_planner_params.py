@@ -1,14 +1,15 @@
 """The parameters of ``goal_planner`` (:mod:`wmm_control.nodes.goal_planner`): the node's own,
 with their defaults in ``config/goal_planner.yaml``; the planner's, with their defaults in
 :class:`~wmm_control.planning.GoalPlanner`'s signature; the follower's, with their defaults in
-:class:`~wmm_control.planning.follow.FollowParams`; the period from the robot YAML."""
+:class:`~wmm_control.planning.follow.FollowParams` (and ``max_replans`` from
+:data:`~wmm_control.planning.follow.MAX_REPLANS`); the period from the robot YAML."""
 
 import dataclasses
 import inspect
 
 from wmm_control.nodes.obstacle_topic import obstacle_params
 from wmm_control.nodes.parameters import Param, defaults_elsewhere, robot_param, robot_period
-from wmm_control.planning.follow import FollowParams
+from wmm_control.planning.follow import MAX_REPLANS, FollowParams
 from wmm_control.planning.planner import GoalPlanner
 
 __all__ = ['PARAMS', 'PLANNER_PARAMS', 'FOLLOW_PARAMS']
@@ -124,14 +125,15 @@ _SPECS = (
 )
 
 
-def _class_defaults() -> dict:
-    """The default of every planner and follower parameter, from its one home: GoalPlanner's
-    signature, FollowParams' fields."""
-    signature = inspect.signature(GoalPlanner.__init__).parameters
-    out = {name: signature[name].default for name in PLANNER_PARAMS}
-    out.update({f.name: f.default for f in dataclasses.fields(FollowParams)})
-    return out
-
-
-#: The node's parameters (module docstring).
-PARAMS = defaults_elsewhere(_SPECS, _class_defaults())
+_SIGNATURE = inspect.signature(GoalPlanner.__init__).parameters
+#: The node's parameters (module docstring): the planner's and the follower's take their defaults
+#: from their one home, GoalPlanner's signature, FollowParams' fields and MAX_REPLANS.
+PARAMS = defaults_elsewhere(
+    defaults_elsewhere(
+        defaults_elsewhere(_SPECS, {name: _SIGNATURE[name].default for name in PLANNER_PARAMS}, '`GoalPlanner`'),
+        {f.name: f.default for f in dataclasses.fields(FollowParams)},
+        '`FollowParams`',
+    ),
+    {'max_replans': MAX_REPLANS},
+    '`MAX_REPLANS`',
+)

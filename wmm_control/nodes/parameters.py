@@ -61,6 +61,9 @@ class Param:
     read_only: bool = False
     size: tuple | None = None
     default_from: Callable[..., Any] | None = None
+    #: where ``default_from`` takes the default from, as the parameter tables name it ('' : the
+    #: robot YAML)
+    default_home: str = ''
 
 
 def robot_param(description: str = '') -> Param:
@@ -89,11 +92,12 @@ def max_state_wait_param() -> Param:
     )
 
 
-def defaults_elsewhere(specs: Sequence[Param], defaults: Mapping[str, Any]) -> tuple[Param, ...]:
+def defaults_elsewhere(specs: Sequence[Param], defaults: Mapping[str, Any], home: str) -> tuple[Param, ...]:
     """``specs``, each one named in ``defaults`` taking its default from there (its one home: a
-    parameter class's field, a constructor's signature) instead of the node YAML."""
+    parameter class's field, a constructor's signature), named ``home`` in the parameter tables,
+    instead of the node YAML."""
     return tuple(
-        dataclasses.replace(spec, default_from=lambda _values, d=defaults[spec.name]: d)
+        dataclasses.replace(spec, default_from=lambda _values, d=defaults[spec.name]: d, default_home=home)
         if spec.name in defaults
         else spec
         for spec in specs

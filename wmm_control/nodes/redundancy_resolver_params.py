@@ -237,4 +237,4 @@ def _method_defaults():
 _METHOD_DEFAULTS = _method_defaults()
 #: The node's parameters. The method's own (gains, thresholds, options) take their defaults
 #: from the resolver parameter classes; config/redundancy_resolver.yaml holds the node's.
-PARAMS = defaults_elsewhere(_SPECS, _METHOD_DEFAULTS)
+PARAMS = defaults_elsewhere(_SPECS, _METHOD_DEFAULTS, 'resolver class')

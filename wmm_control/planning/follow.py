@@ -69,7 +69,11 @@ from wmm_control.planning.handoff import Handoff
 from wmm_control.planning.timing import LinearPiece
 from wmm_control.resolvers.interface import PoseTarget
 
-__all__ = ['FollowParams', 'FollowState', 'FollowStep', 'PlanFollower']
+__all__ = ['FollowParams', 'FollowState', 'FollowStep', 'PlanFollower', 'MAX_REPLANS']
+
+#: The default of how many times one goal is planned again after the robot stalled on its plan
+#: (the direct engine, ``wmm_randomized --plan`` and the ``goal_planner`` node's ``max_replans``).
+MAX_REPLANS = 3
 
 
 @dataclass(frozen=True)

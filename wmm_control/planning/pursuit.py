@@ -50,7 +50,7 @@ from wmm_control.geometry import matrix_from_quaternion
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.kinematics.workspace import Workspace
-from wmm_control.planning.follow import FollowParams, FollowState, PlanFollower
+from wmm_control.planning.follow import MAX_REPLANS, FollowParams, FollowState, PlanFollower
 from wmm_control.planning.handoff import Handoff
 from wmm_control.planning.planner import GoalPlanner, Plan
 from wmm_control.resolvers.interface import PoseTarget
@@ -266,7 +266,7 @@ class GoalPursuit:
         world_frame: str,
         max_goal_distance: float,
         follow: FollowParams | None = None,
-        max_replans: int = 3,
+        max_replans: int = MAX_REPLANS,
         planner: Mapping[str, Any] | None = None,
     ) -> None:
         self.robot = robot
