@@ -1,4 +1,4 @@
-"""``/diagnostics`` messages of the nodes."""
+"""``/diagnostics`` messages of the nodes, and their log lines of goal events."""
 
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -8,7 +8,18 @@ import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-__all__ = ['diagnostic_status', 'node_status', 'diagnostic_array', 'DiagnosticsGate']
+__all__ = ['diagnostic_status', 'node_status', 'diagnostic_array', 'DiagnosticsGate', 'log_lines']
+
+
+def log_lines(node: 'rclpy.node.Node', lines: Iterable[tuple[str, str]]) -> None:
+    """Log ``(level, message)`` pairs (a :class:`~wmm_control.resolvers.targets.LogThrottle`'s
+    lines): 'info' as information, any other level as a warning, through ``node``'s logger."""
+    logger = node.get_logger()
+    for level, message in lines:
+        if level == 'info':  # one call site per severity: rclpy refuses a change at one
+            logger.info(message)
+        else:
+            logger.warn(message)
 
 
 def diagnostic_status(

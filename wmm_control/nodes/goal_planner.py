@@ -42,7 +42,7 @@ from wmm_control.nodes.conversions import (
     set_planar_pose,
     target_pose_stamped,
 )
-from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, node_status
+from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, log_lines, node_status
 from wmm_control.nodes.goal_planner_params import FOLLOW_PARAMS, PARAMS, PLANNER_PARAMS
 from wmm_control.nodes.inputs import JointSelector
 from wmm_control.nodes.obstacle_topic import ObstacleSet, describe
@@ -131,11 +131,7 @@ class GoalPlannerNode(Node):
         return self._sim_time if self.timing.lockstep else seconds(self._steady)
 
     def _log(self, events) -> None:
-        for level, message in self._log_throttle.lines(events, seconds(self._steady)):
-            if level == 'info':  # one call site per severity: rclpy refuses a change at one
-                self.get_logger().info(message)
-            else:
-                self.get_logger().warn(message)
+        log_lines(self, self._log_throttle.lines(events, seconds(self._steady)))
 
     # ------------------------------------------------------------------ inputs
     def _on_goal(self, msg: PoseStamped) -> None:

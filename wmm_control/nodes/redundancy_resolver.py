@@ -50,7 +50,7 @@ from visualization_msgs.msg import MarkerArray
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, node_status
+from wmm_control.nodes.diagnostics import DiagnosticsGate, diagnostic_array, log_lines, node_status
 from wmm_control.nodes.inputs import JointSelector, JointStateWatchdog
 from wmm_control.nodes.parameters import declare_parameters
 from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STATE_SUB_QOS
@@ -198,11 +198,7 @@ class RedundancyResolverNode(Node):
         return self.watchdog.now(self._steady)
 
     def _log(self, events):
-        for level, message in self._throttle.lines(events, seconds(self._steady) if events else 0.0):
-            if level == 'info':  # one call site per severity: rclpy refuses a change at one
-                self.get_logger().info(message)
-            else:
-                self.get_logger().warn(message)
+        log_lines(self, self._throttle.lines(events, seconds(self._steady) if events else 0.0))
 
     # ------------------------------------------------------------------ inputs
     def _on_goal(self, msg):
