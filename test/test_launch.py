@@ -30,7 +30,7 @@ pytestmark = pytest.mark.skipif(
     not _launch_available(), reason='the ros2 command line and ros2 launch are not installed in this venv'
 )
 
-from test_packaging import install_tree, installed_env  # noqa: E402,F401  (the colcon install tree fixture)
+from test_packaging import installed_env  # noqa: E402
 
 
 def _goal(robot):
@@ -128,7 +128,7 @@ CASES = [
 
 @pytest.mark.parametrize('launch_file, args, robots, nodes', CASES, ids=[c[0] + ' ' + ' '.join(c[1]) for c in CASES])
 def test_the_launch_file_brings_up_a_system_that_reaches_a_goal_and_stops_cleanly_on_ctrl_c(
-    install_tree,  # noqa: F811
+    install_tree,
     launch_file,
     args,
     robots,

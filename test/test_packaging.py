@@ -10,14 +10,12 @@ import math
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
-COLCON = Path(sys.executable).with_name('colcon')
 
 
 def console_scripts(prefix):
@@ -25,33 +23,6 @@ def console_scripts(prefix):
     parser = configparser.ConfigParser()
     parser.read(next(prefix.glob('lib/python3*/site-packages/wmm_control*.egg-info/entry_points.txt')))
     return sorted(parser['console_scripts'])
-
-
-@pytest.fixture(scope='module')
-def install_tree(tmp_path_factory):
-    if not COLCON.exists():
-        pytest.fail(f'colcon not found next to {sys.executable}: run the README set-up')
-    work = tmp_path_factory.mktemp('colcon')
-    result = subprocess.run(
-        [
-            str(COLCON),
-            '--log-base',
-            str(work / 'log'),
-            'build',
-            '--base-paths',
-            str(REPO),
-            '--build-base',
-            str(work / 'build'),
-            '--install-base',
-            str(work / 'install'),
-        ],
-        cwd=work,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stdout + result.stderr
-    return work / 'install' / 'wmm_control'
 
 
 def installed_env(prefix):
