@@ -46,6 +46,7 @@ def test_every_console_script_is_installed_under_lib_and_starts(install_tree):
     names = console_scripts(install_tree)
     assert 'wmm_model' in names
     env = installed_env(install_tree)
+    nodes = []
     for name in names:
         exe = install_tree / 'lib' / 'wmm_control' / name
         assert exe.is_file() and os.access(exe, os.X_OK), exe
@@ -74,17 +75,53 @@ def test_every_console_script_is_installed_under_lib_and_starts(install_tree):
                 f'urdf: {install_tree / "share" / "wmm_control" / "config" / "robots" / "mecanum.urdf"}' in out.stdout
             )
             continue
-        # A node: it must come up and keep running until interrupted, then exit cleanly.
-        proc = subprocess.Popen([str(exe)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        try:
-            time.sleep(4.0)
-            assert proc.poll() is None, f'{name} exited early:\n{proc.stdout.read()}'
-            proc.send_signal(signal.SIGINT)
-            proc.wait(timeout=30)
-        finally:
+        nodes.append(name)
+    # Every node, its executable's name: it must come up (its node on the ROS graph of a domain of
+    # this test alone) and keep running until interrupted, then exit cleanly. Started together.
+    assert len(nodes) >= 8, nodes
+    _nodes_come_up_and_stop_cleanly(install_tree, nodes)
+
+
+def _nodes_come_up_and_stop_cleanly(install_tree, names):
+    import rclpy
+
+    domain = 100 + (os.getpid() + 53) % 100
+    env = dict(installed_env(install_tree), ROS_DOMAIN_ID=str(domain))
+    procs = {
+        name: subprocess.Popen(
+            [str(install_tree / 'lib' / 'wmm_control' / name)],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for name in names
+    }
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    probe = rclpy.create_node('console_script_probe', context=context)
+    try:
+        end = time.monotonic() + 120.0
+        up = set()
+        while time.monotonic() < end and up != set(names):
+            up = set(probe.get_node_names()) & set(names)
+            if any(proc.poll() is not None for proc in procs.values()):
+                break
+            time.sleep(0.1)
+        for pause in (0.0, 1.0):  # when all are up, and a second later (the last to come up running a while too)
+            time.sleep(pause)
+            for name, proc in procs.items():
+                assert proc.poll() is None, f'{name} exited early:\n{proc.communicate()[0]}'
+            assert up == set(names), f'not on the graph: {sorted(set(names) - up)}'
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown(context=context)
+        for proc in procs.values():  # interrupted together, as at the end of a launch
             if proc.poll() is None:
-                proc.kill()
-        assert proc.returncode == 0, f'{name} exit code {proc.returncode}:\n{proc.stdout.read()}'
+                proc.send_signal(signal.SIGINT)
+        results = {name: _stop(proc) for name, proc in procs.items()}
+    for name, (code, out) in results.items():
+        assert code == 0, f'{name} exit code {code}:\n{out}'
 
 
 def test_wmm_model_reports_a_clear_error_for_an_unknown_robot(install_tree):
