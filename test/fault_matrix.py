@@ -23,6 +23,7 @@ The probe records every output topic of the node and its ``/rosout``. A cell pas
 import gc
 import math
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -574,12 +575,12 @@ class SequencerRig(Rig):
 
 #: The columns of the table, each a factory of its rig.
 RIGS = {
-    'wmm_sim (A)': lambda: SimRig('steerable'),
-    'wmm_sim (B)': lambda: SimRig('mecanum'),
-    'swmr_controller': lambda: BaseControllerRig('steerable'),
-    'mecanum_controller': lambda: BaseControllerRig('mecanum'),
-    'redundancy_resolver (A, task_sharing)': lambda: ResolverRig('steerable', 'task_sharing'),
-    'redundancy_resolver (B, amp)': lambda: ResolverRig('mecanum', 'amp'),
+    'wmm_sim (A)': partial(SimRig, 'steerable'),
+    'wmm_sim (B)': partial(SimRig, 'mecanum'),
+    'swmr_controller': partial(BaseControllerRig, 'steerable'),
+    'mecanum_controller': partial(BaseControllerRig, 'mecanum'),
+    'redundancy_resolver (A, task_sharing)': partial(ResolverRig, 'steerable', 'task_sharing'),
+    'redundancy_resolver (B, amp)': partial(ResolverRig, 'mecanum', 'amp'),
     'goal_sequencer': SequencerRig,
     'goal_planner': PlannerRig,
 }
@@ -1297,7 +1298,10 @@ def _harm(rig, run, after):
 
 
 def run_cell(rig_factory, kind):
-    """Run one kind on one node; a :class:`Cell`."""
+    """Run one kind on one node; a :class:`Cell`. ``rig_factory``: a :class:`Rig` subclass, or a
+    ``functools.partial`` of one (:data:`RIGS`)."""
+    if kind.param is None and kind.cases.get(getattr(rig_factory, 'func', rig_factory).family) is None:
+        return Cell('n/a')  # no node made for a kind that does not apply to it
     rig = rig_factory()
     try:
         if kind.param is not None:
