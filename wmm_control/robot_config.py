@@ -52,7 +52,7 @@ import numpy as np
 import yaml
 
 from wmm_control.errors import ConfigError
-from wmm_control.paths import config_path
+from wmm_control.paths import config_path, parse_yaml
 from wmm_control.resources import check_resources, yaml_package_dirs
 from wmm_control.urdf import MOVING_TYPES, UrdfTree
 
@@ -791,7 +791,7 @@ def read_yaml(path: Path, what: str) -> Any:
     if not path.is_file():
         raise ConfigError(f'{what} not found: {path}')
     try:
-        return yaml.safe_load(path.read_text())
+        return parse_yaml(path.read_text())
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise ConfigError(f'{path}: not valid YAML: {str(exc).splitlines()[0] if str(exc) else exc}') from exc
 
