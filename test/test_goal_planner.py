@@ -14,7 +14,7 @@ from rclpy.parameter import Parameter
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ros_helpers import ROSOUT_QOS, RosHarness, pose2d
+from ros_helpers import ROSOUT_QOS, RosHarness, pose2d, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.geometry import matrix_from_quaternion, quaternion_from_matrix, rotation_angle, rotation_z
 from wmm_control.kinematics import KinematicModel
@@ -280,13 +280,26 @@ def test_bad_goals_and_obstacles_are_rejected_with_a_reason_and_the_robot_held(s
     # a goal within reach still goes through; a bad one then holds the robot where it is
     probe.goal_pub.publish(goal_msg(near))
     assert ros.spin_until(lambda: state(planner) == 'direct' and len(probe.forwarded) == 1, timeout=30.0)
-    ros.spin_for(0.5)
+    before = probe.ee_position()
+    assert ros.spin_until(lambda: np.linalg.norm(probe.ee_position() - before) > 0.02, timeout=10.0)  # on its way
     probe.goal_pub.publish(goal_msg([np.inf, 0.0, 1.0]))
     assert ros.spin_until(lambda: len(probe.forwarded) == 2, timeout=10.0)
     assert finite_output(probe)
     hold = pose_values(probe.forwarded[-1].pose)[:3]
     assert np.linalg.norm(hold - probe.ee_position()) < 0.02  # held where the end effector is
-    assert pose2d(probe.truth[-1])[:2] == pytest.approx([0.0, 0.0], abs=0.02)
+
+    # held on its way to the goal 0.1 m ahead: the base brakes (about 1 cm past the hold), the end
+    # effector comes back to the hold, and both come to rest there within 3 s of simulated time
+    def spin_simulated(seconds):
+        until = stamp_s(probe.truth[-1]) + seconds
+        assert ros.spin_until(lambda: stamp_s(probe.truth[-1]) >= until, timeout=10.0 * seconds)
+
+    spin_simulated(3.0)
+    base = pose2d(probe.truth[-1])
+    spin_simulated(0.5)
+    assert np.linalg.norm(hold - probe.ee_position()) < 0.01
+    assert pose2d(probe.truth[-1])[:2] == pytest.approx(base[:2], abs=0.002)
+    assert np.linalg.norm(probe.ee_position() - near) > 0.03
 
 
 def test_a_box_put_onto_the_rest_of_the_path_makes_it_plan_again_round_it(system):
