@@ -186,8 +186,7 @@ def test_a_worker_node_killed_mid_study_loses_no_run(two_nodes, tmp_path):
             for pid in busy:
                 seen.setdefault(pid, now)
             # Killed mid-run: a worker's first task spends its first seconds importing the study's
-            # modules, before the task counts its start (a task killed then is run again, but
-            # not counted as retried); a run takes several seconds more.
+            # modules, and a run takes several seconds more.
             if any(now - seen[pid] >= BUSY_BEFORE_KILL_S for pid in busy):
                 workers = [p for p, (pp, _) in procs.items() if pp == node[0]]
                 for pid in (node[0], *workers):

@@ -139,14 +139,18 @@ class _Attempts:
         return sum(n - 1 for n in self.starts.values())
 
 
-def _task(fn: Callable[[Any], Any], job: Any, index: int, attempts: Any) -> Any:
+def _task(fn: bytes, job: Any, index: int, attempts: Any) -> Any:
+    """Count this start of task ``index``, then run ``fn`` (pickled) on ``job``. The function is
+    unpickled only after the count, since that imports its module (the study's: seconds on a
+    cold worker), and a worker that dies on the way is then counted as retried as well."""
     import ray
+    from ray import cloudpickle
 
     try:
         ray.get(attempts.start.remote(index))
     except ray.exceptions.RayError:
         pass  # the count is lost with the head node; the run goes on
-    return fn(job)
+    return cloudpickle.loads(fn)(job)
 
 
 def _retried(ray: Any, attempts: Any, before: int) -> int:
@@ -174,7 +178,10 @@ def run_tasks(
     """
     attempts = ray.remote(num_cpus=0, resources={'node:__internal_head__': 0.001})(_Attempts).remote()
     task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(_task)
-    pending = {task.remote(fn, job, i, attempts): i for i, job in enumerate(jobs)}
+    from ray import cloudpickle
+
+    pickled = ray.put(cloudpickle.dumps(fn))  # once, shared by the tasks
+    pending = {task.remote(pickled, job, i, attempts): i for i, job in enumerate(jobs)}
     retried = 0
     while pending:
         ready, _ = ray.wait(list(pending), num_returns=1, timeout=POLL_S)
