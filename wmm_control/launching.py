@@ -22,24 +22,17 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from wmm_control.base.period import NODE_NAMES
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics.obstacles import load_obstacles, obstacle_file
 from wmm_control.robot_config import load_robot
 
 __all__ = [
-    'BASE_CONTROLLERS',
     'robot_nodes',
     'robot_launch_description',
     'two_robots_launch_description',
     'common_arguments',
 ]
-
-#: The base controller executable of each base family.
-BASE_CONTROLLERS = {
-    'steerable': 'swmr_controller',
-    'mecanum': 'mecanum_controller',
-    'differential': 'differential_controller',
-}
 
 
 def _flag(context: LaunchContext, name: str) -> bool:
@@ -104,7 +97,7 @@ def robot_nodes(
     resolver_remap = [('goal_pose', 'goal_planner/goal')] if planner else []
     executables = [
         ('wmm_sim', {'frame_prefix': f'{namespace}/' if namespace else '', 'obstacles': obstacles}, []),
-        (BASE_CONTROLLERS[config.base.family], {}, []),
+        (NODE_NAMES[config.base.family], {}, []),
         ('redundancy_resolver', {'obstacles': obstacles}, resolver_remap),
     ]
     if planner:
