@@ -39,6 +39,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+from wmm_control.experiments.ros_run import private_domain_id
 from wmm_control.nodes.parameters import load_defaults
 from wmm_control.robot_config import load_robot
 
@@ -153,7 +154,7 @@ class System:
     """The three processes and the recorder, on a domain of this test alone."""
 
     def __init__(self):
-        self.domain = 100 + (os.getpid() + 37) % 100
+        self.domain = private_domain_id(37)
         self.env = dict(os.environ, ROS_DOMAIN_ID=str(self.domain))
         self.procs = {}
         self.context = rclpy.Context()

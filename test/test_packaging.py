@@ -85,7 +85,9 @@ def test_every_console_script_is_installed_under_lib_and_starts(install_tree):
 def _nodes_come_up_and_stop_cleanly(install_tree, names):
     import rclpy
 
-    domain = 100 + (os.getpid() + 53) % 100
+    from wmm_control.experiments.ros_run import private_domain_id
+
+    domain = private_domain_id(53)
     env = dict(installed_env(install_tree), ROS_DOMAIN_ID=str(domain))
     procs = {
         name: subprocess.Popen(
@@ -176,7 +178,9 @@ def _run_system(install_tree, system, goals):
     import rclpy
     from geometry_msgs.msg import PoseStamped
 
-    domain = 100 + os.getpid() % 100
+    from wmm_control.experiments.ros_run import private_domain_id
+
+    domain = private_domain_id(54)
     env = dict(installed_env(install_tree), ROS_DOMAIN_ID=str(domain))
     procs = {
         name: subprocess.Popen(
