@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import wmm_control.cli.randomized as randomized_cli
+import wmm_control.experiments.randomized as study
 from wmm_control.cli.experiment import main as experiment_main
 from wmm_control.cli.randomized import main as randomized_main, sweep_plot_path
 
@@ -235,24 +235,22 @@ def test_a_sweep_runs_the_grid_and_resumes_only_what_is_missing(tmp_path, capfd,
     partial = dict(document, runs=document['runs'][:3])
     out.write_text(json.dumps(partial))
     calls = []
-    run_goal = randomized_cli.run_goal
-    monkeypatch.setattr(
-        randomized_cli, 'run_goal', lambda *a, **k: calls.append((a[2].index, k['params'])) or run_goal(*a, **k)
-    )
+    run_goal = study.run_goal
+    monkeypatch.setattr(study, 'run_goal', lambda *a, **k: calls.append((a[2].index, k['params'])) or run_goal(*a, **k))
     resumed = _study([*argv, '--resume'], out)
     assert calls == [(1, points[1])]
     assert _without_timing(resumed) == _without_timing(document)
 
 
 def test_a_run_that_raises_is_recorded_failed_with_its_error(tmp_path, monkeypatch):
-    run_goal = randomized_cli.run_goal
+    run_goal = study.run_goal
 
     def broken(robot, method, goal, **kw):
         if goal.index == 1:
             raise FloatingPointError('a fault of this run alone')
         return run_goal(robot, method, goal, **kw)
 
-    monkeypatch.setattr(randomized_cli, 'run_goal', broken)
+    monkeypatch.setattr(study, 'run_goal', broken)
     document = _study(SWEEP, tmp_path / 'raised.json', code=1)
     ok, raised = document['runs']
     assert ok['outcome'] == 'converged' and raised['outcome'] == 'failed'
@@ -281,7 +279,7 @@ def test_a_run_that_raises_is_recorded_failed_with_its_error(tmp_path, monkeypat
     ],
 )
 def test_bad_input_is_one_line_and_exit_2_before_any_run(argv, line, capfd, monkeypatch):
-    monkeypatch.setattr(randomized_cli, 'run_goal', lambda *a, **k: pytest.fail('a run started'))
+    monkeypatch.setattr(study, 'run_goal', lambda *a, **k: pytest.fail('a run started'))
     port = _free_port()
     argv = [a.format(port=port) for a in argv]
     assert randomized_main([*SWEEP, *argv]) == 2
@@ -291,7 +289,7 @@ def test_bad_input_is_one_line_and_exit_2_before_any_run(argv, line, capfd, monk
 
 
 def test_ray_not_installed_is_one_line_and_exit_2(capfd, monkeypatch):
-    monkeypatch.setattr(randomized_cli, 'run_goal', lambda *a, **k: pytest.fail('a run started'))
+    monkeypatch.setattr(study, 'run_goal', lambda *a, **k: pytest.fail('a run started'))
     monkeypatch.setitem(sys.modules, 'ray', None)  # import ray raises ImportError
     assert randomized_main([*SWEEP, '--cluster', 'ray']) == 2
     assert capfd.readouterr().err.strip().splitlines()[-1] == (
@@ -305,7 +303,7 @@ def test_ray_not_installed_is_one_line_and_exit_2(capfd, monkeypatch):
 def test_ray_auto_without_a_cluster_is_one_line_and_exit_2(capfd, monkeypatch, tmp_path):
     """``RAY_ADDRESS`` names a port nothing listens on; then, unset, no Ray runs on this machine
     (Ray's ``auto`` would find any that does)."""
-    monkeypatch.setattr(randomized_cli, 'run_goal', lambda *a, **k: pytest.fail('a run started'))
+    monkeypatch.setattr(study, 'run_goal', lambda *a, **k: pytest.fail('a run started'))
     port = _free_port()
     monkeypatch.setenv('RAY_ADDRESS', f'127.0.0.1:{port}')
     assert randomized_main([*SWEEP, '--cluster', 'ray:auto']) == 2

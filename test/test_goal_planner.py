@@ -2,7 +2,8 @@
 simulator, the base controller and the resolver (its goal_pose remapped to goal_planner/goal),
 the simulator in lockstep: a goal behind the table is reached by driving round it, a goal within
 reach goes to the resolver unchanged, bad input is rejected with the robot held, a goal inside
-the table gets "no way", and a box put onto the rest of the path makes it plan again."""
+the table gets "no way", and a box put onto the rest of the path makes it plan again; alone,
+the planner refuses bad odometry as the resolver does and plans from none of it."""
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ from ros_helpers import ROSOUT_QOS, RosHarness, pose2d, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.geometry import matrix_from_quaternion, quaternion_from_matrix, rotation_angle, rotation_z
 from wmm_control.kinematics import KinematicModel
-from wmm_control.nodes.conversions import pose_values
+from wmm_control.nodes.conversions import pose_values, set_planar_pose
 from wmm_control.nodes.goal_planner import GoalPlannerNode
 from wmm_control.nodes.qos import LATCHED_QOS
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
@@ -317,3 +318,60 @@ def test_a_box_put_onto_the_rest_of_the_path_makes_it_plan_again_round_it(system
     reached = reach(ros, probe, planner, resolver, BEHIND_TABLE, goal_rotation(BEHIND_TABLE_YAW))
     assert reached, (planner.pursuit.status(), probe.lines())
     assert sim.contact.values['contact_periods'] == 0, sim.contact.values
+
+
+def test_bad_odometry_is_rejected_as_the_resolver_rejects_it_and_no_plan_starts_from_it():
+    """/odom with NaN, beyond max_goal_distance, with a twist beyond ten times the base limits or
+    a zero quaternion is refused with the resolver's reason in the log; a goal then waits for good
+    odometry and is planned from that pose, never from a refused one."""
+    ros = RosHarness()
+    try:
+        common = [Parameter('robot', value=ROBOT), Parameter('obstacles', value=OBSTACLES)]
+        planner = ros.add(GoalPlannerNode(context=ros.context, parameter_overrides=common))
+        user = ros.probe('odom_user')
+        logs = []
+        user.create_subscription(Log, '/rosout', logs.append, ROSOUT_QOS)
+        odom_pub = user.create_publisher(Odometry, '/odom', 10)
+        goals = user.create_publisher(PoseStamped, '/goal_pose', 10)
+
+        def lines():
+            return [m.msg for m in logs if m.name == 'goal_planner']
+
+        def odometry(x, y, yaw=0.0, quat=None, vx=0.0):
+            msg = Odometry()
+            msg.header.frame_id = 'world'
+            set_planar_pose(msg.pose.pose, (x, y, yaw))
+            if quat is not None:
+                o = msg.pose.pose.orientation
+                o.x, o.y, o.z, o.w = quat
+            msg.twist.twist.linear.x = vx
+            return msg
+
+        bad = {
+            'rejected /odom with non-finite values': odometry(np.nan, 0.0),
+            'rejected /odom at (80, 0): beyond max_goal_distance 50.0 m': odometry(80.0, 0.0),
+            'rejected /odom with twist [100.0, 0.0, 0.0] beyond 10 times the base velocity limits': odometry(
+                0.0, 0.0, vx=100.0
+            ),
+            'rejected /odom with a zero quaternion': odometry(0.0, 0.0, quat=(0.0, 0.0, 0.0, 0.0)),
+        }
+        sending = [None]
+        user.create_timer(0.02, lambda: sending[0] is not None and odom_pub.publish(sending[0]))
+        assert ros.spin_until(lambda: odom_pub.get_subscription_count() > 0, timeout=10.0)
+        goals.publish(goal_msg(_start_ee()[0] + [0.1, 0.0, -0.05]))
+        for msg in bad.values():
+            sending[0] = msg
+            ros.spin_for(0.3)
+        assert ros.spin_until(lambda: all(any(k in line for line in lines()) for k in bad), timeout=5.0), lines()
+        assert planner._base is None and state(planner) == 'planning' and planner.pursuit.counters.plans == 0
+        assert any('the plan waits for it' in line for line in lines()), lines()
+        # good odometry: the plan starts from its pose
+        sending[0] = odometry(0.4, -0.3, 0.5)
+        assert ros.spin_until(lambda: planner.pursuit.counters.plans == 1, timeout=10.0), lines()
+        assert planner._base == pytest.approx([0.4, -0.3, 0.5])
+        assert ros.spin_until(
+            lambda: any('planning (new goal) from the base at [0.4, -0.3, 0.5]' in line for line in lines()),
+            timeout=5.0,
+        ), lines()
+    finally:
+        ros.close()

@@ -281,6 +281,22 @@ def test_a_lagging_base_already_too_fast_for_an_obstacle_is_braked_along_its_own
     assert plain.command[0] > allowed and abs(plain.command[1]) < 0.05
 
 
+def test_an_obstacle_is_looked_at_from_where_the_dampers_let_the_base_on_at_full_speed():
+    """The stage looks as far as the pair at which its dampers first let the base approach at
+    full speed (its diagonal): nearer, they slow it; with and without the base's lag."""
+    for name, lag in (('steerable', None), ('steerable', 0.0), ('mecanum', None)):
+        robot = load_robot(name)
+        stage = SafetyStage.for_robot(robot)
+        if lag is not None:
+            stage.set_base_lag(lag)
+        dampers = stage.dampers
+        speed = math.hypot(*robot.base.velocity[:2])
+        distance = stage.obstacle_lookahead - stage.body_margin
+        _, brake = dampers.linear_braking(robot.base.axes)
+        assert dampers.allowed_approach(distance, brake, stage.base_lag) == pytest.approx(speed)
+        assert dampers.allowed_approach(0.9 * distance, brake, stage.base_lag) < 0.95 * speed
+
+
 def test_a_slow_braking_base_is_not_let_on_at_an_obstacle_because_its_turn_swings_a_corner_away():
     """Robot B brakes at 0.025 m/s² along x and y, but turns at 1.5 rad/s². Driving at a pillar
     beside its front corner faster than it can stop from, while turning, the turn keeps the

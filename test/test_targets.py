@@ -292,7 +292,7 @@ def test_the_state_is_made_of_the_latest_inputs_while_they_are_fresh(inputs):
     latest.odometry((1.0, 2.0), IDENTITY, (0.1, 0.0, 0.0), now=1.0)
     state, reason = latest.state(q, dq, 1.2)
     assert reason == '' and state.base_pose.tolist() == [1.0, 2.0, 0.0] and state.ee_position is None
-    assert latest.last_state[0].tolist() == [1.0, 2.0, 0.0] and latest.base_pose(1.2).tolist() == [1, 2, 0]
+    assert latest.last_state.base_pose.tolist() == [1.0, 2.0, 0.0] and latest.base_pose(1.2).tolist() == [1, 2, 0]
     assert latest.state(q, dq, 1.6) == (None, 'no fresh /odom') and latest.base_pose(1.6) is None
     latest.set_timeout(1.0)
     assert latest.state(q, dq, 1.6)[0] is not None

@@ -2,10 +2,14 @@
 
 The core (kinematics, base controllers, resolvers) is ROS-free; the rclpy nodes live in
 ``wmm_control.nodes`` and the simulator in the sibling package ``sim_bridge``.
+
+``RobotConfig`` and ``load_robot`` are imported when first asked for: importing a submodule
+(a command-line tool's ``--help``, say) loads no kinematics library.
 """
 
+from typing import Any
+
 from wmm_control.errors import ConfigError, NonFiniteError, ShapeError, UnknownFrameError, WmmError
-from wmm_control.robot_config import RobotConfig, load_robot
 
 __all__ = [
     'ConfigError',
@@ -16,3 +20,11 @@ __all__ = [
     'RobotConfig',
     'load_robot',
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name in ('RobotConfig', 'load_robot'):
+        from wmm_control import robot_config
+
+        return getattr(robot_config, name)
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

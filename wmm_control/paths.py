@@ -17,7 +17,7 @@ from wmm_control.errors import ConfigError
 PACKAGE = 'wmm_control'
 _SOURCE_ROOT = Path(__file__).resolve().parent.parent
 
-__all__ = ['share_dir', 'config_path', 'parse_yaml', 'load_defaults']
+__all__ = ['share_dir', 'config_path', 'robot_names', 'parse_yaml', 'load_defaults']
 
 
 def _candidates():
@@ -46,6 +46,11 @@ def share_dir() -> Path:
 def config_path(*parts: str) -> Path:
     """Path of a file under ``config/``, e.g. ``config_path('robots', 'steerable.yaml')``."""
     return share_dir().joinpath('config', *parts)
+
+
+def robot_names() -> list[str]:
+    """The robots shipped in ``config/robots`` (YAML stems), sorted."""
+    return sorted(p.stem for p in config_path('robots').glob('*.yaml'))
 
 
 def parse_yaml(text: str) -> Any:

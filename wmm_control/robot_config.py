@@ -52,7 +52,7 @@ import numpy as np
 import yaml
 
 from wmm_control.errors import ConfigError
-from wmm_control.paths import config_path, parse_yaml
+from wmm_control.paths import config_path, parse_yaml, robot_names
 from wmm_control.resources import check_resources, yaml_package_dirs
 from wmm_control.urdf import MOVING_TYPES, UrdfTree
 
@@ -808,11 +808,6 @@ def read_yaml_section(path: Path, key: str, what: str) -> dict:
     if not isinstance(raw, dict):
         raise ConfigError(f'{path}: top-level key "{key}" missing')
     return raw
-
-
-def robot_names() -> list[str]:
-    """The robots shipped in ``config/robots`` (YAML stems), sorted."""
-    return sorted(p.stem for p in config_path('robots').glob('*.yaml'))
 
 
 def resolve_robot_yaml(robot: str | Path) -> Path:

@@ -25,6 +25,8 @@ the text of ``<PAGE stem>_intro.md`` beside it, if there is one, first (``bash s
 run`` writes docs/results.md so, after docs/results_intro.md).
 """
 
+from __future__ import annotations
+
 import argparse
 import dataclasses
 import gc
@@ -38,30 +40,21 @@ from collections.abc import Iterable, Mapping
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
 
-from wmm_control.experiments.direct import run_scenario
-from sim_bridge.slip import SlipParams
-from sim_bridge.world import SimWorld
+# only what the arguments need: the simulator, ROS, the kinematics and the resolvers are
+# imported where they are used, once the arguments are parsed (--help and a bad argument answer
+# at once)
 from wmm_control.errors import WmmError
 from wmm_control.experiments.cluster import CLUSTER_HELP, files_of, in_order, ray_session, run_tasks, write_files
 from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
-from wmm_control.experiments.report import write_report
-from wmm_control.experiments.metrics import (
-    METRIC_KEYS,
-    TRAJECTORY_METRIC_KEYS,
-    RunLog,
-    goal_metrics,
-    run_limit_report,
-    trajectory_metrics,
-)
-from wmm_control.experiments.ros_run import private_domain_id, run_with_nodes
-from wmm_control.experiments.scenario import Scenario, load_scenario, resolver_parameters
-from wmm_control.kinematics import KinematicModel
-from wmm_control.resolvers import TaskSharingParams, make_resolver
+
+if TYPE_CHECKING:
+    from wmm_control.experiments.metrics import RunLog
+    from wmm_control.experiments.scenario import Scenario
 
 __all__ = [
     'main',
@@ -92,6 +85,12 @@ DT = 0.025
 
 
 def _run_direct(scenario, run, progress):
+    from sim_bridge.slip import SlipParams
+    from sim_bridge.world import SimWorld
+    from wmm_control.experiments.direct import run_scenario
+    from wmm_control.experiments.scenario import resolver_parameters
+    from wmm_control.resolvers import make_resolver
+
     sim = dict(scenario.sim or {})
     slip = SlipParams(
         gain=float(sim.get('slip_gain', 0.0)),
@@ -152,6 +151,8 @@ def simulate(job):
             bar.update(min(dt, max(bar.total - bar.n, 0.0)))
 
         if job.engine == 'nodes':
+            from wmm_control.experiments.ros_run import run_with_nodes
+
             log = run_with_nodes(
                 scenario,
                 run,
@@ -240,6 +241,8 @@ def _jobs_of(scenario, selected, engine, bag_dir, view_port, progress, workers, 
     numbers the jobs across scenarios)."""
     if workers == 1:
         return [RunJob(scenario, run, engine, bag_dir, view_port, progress) for run in selected]
+    from wmm_control.experiments.ros_run import private_domain_id
+
     return [
         RunJob(
             scenario,
@@ -263,6 +266,15 @@ def summarize_runs(
 ) -> dict:
     """The ``metrics.json`` content of the runs ``selected`` of ``scenario``, simulated into
     ``logs`` (run name -> RunLog)."""
+    from wmm_control.experiments.metrics import (
+        METRIC_KEYS,
+        TRAJECTORY_METRIC_KEYS,
+        run_limit_report,
+        trajectory_metrics,
+    )
+    from wmm_control.experiments.scenario import resolver_parameters
+    from wmm_control.kinematics import KinematicModel
+
     model = KinematicModel(scenario.robot)
     robot = model.config
     summary_runs = {}
@@ -310,6 +322,9 @@ def summarize_runs(
 
 def _goal_summary(log, scenario, model, run, dt):
     """Per-goal metrics of a run of a goals scenario, with its totals."""
+    from wmm_control.experiments.metrics import goal_metrics
+    from wmm_control.resolvers import TaskSharingParams
+
     goals = goal_metrics(
         log, scenario, model, run.get('r_fm', TaskSharingParams().r_fm), model.config.arm.dexterous, dt
     )
@@ -401,6 +416,7 @@ def _figures(scenario, logs, summary, out):
     """The figures of a run: Sorour's Figs 5–7 for goals, Xing's for a trajectory."""
     # matplotlib is paid for only when figures are written (not by --help nor --no-figures)
     from wmm_control.experiments.figures import write_figures, write_tracking_figures
+    from wmm_control.kinematics import KinematicModel
 
     plotted = {r['name']: logs[r['name']] for r in scenario.runs if r['name'] in logs and r.get('plot', True)}
     if not plotted:
@@ -557,6 +573,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error('--view shows one run at a time: drop --jobs or give --jobs 1')
     if args.jobs is None:
         args.jobs = 1 if args.view else default_jobs()
+    from wmm_control.experiments.report import write_report
+    from wmm_control.experiments.scenario import load_scenario
+
     try:
         names = [args.scenario] if args.scenario else (list(MAIN_JOB) if args.name == 'all' else [args.name])
         plans = []

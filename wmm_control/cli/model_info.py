@@ -3,15 +3,19 @@
 Usage: ``wmm_model [--robot steerable|mecanum|A|B|PATH] [--arm q1 ... q7] [--base x y θ]``
 """
 
+from __future__ import annotations
+
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+# the kinematics (pinocchio) are imported where they are used, once the arguments are parsed
 from wmm_control.errors import WmmError
-from wmm_control.kinematics import KinematicModel
-from wmm_control.robot_config import Base, DifferentialBase, MecanumBase, SteerableBase
-from wmm_control.urdf import UrdfTree
+
+if TYPE_CHECKING:
+    from wmm_control.robot_config import Base
 
 __all__ = ['main', 'describe']
 
@@ -24,6 +28,8 @@ def _fmt(values, digits=4):
 
 def _describe_base(base: Base) -> str:
     """One line on the base's geometry and wheel limits."""
+    from wmm_control.robot_config import DifferentialBase, MecanumBase, SteerableBase
+
     match base:
         case SteerableBase():
             return (
@@ -63,6 +69,8 @@ def describe(model, base_pose, q_arm):
             f'{a.velocity[i]:>8.3f}{a.acceleration[i]:>8.3f}   {unit}'
         )
     if cfg.held_joints:
+        from wmm_control.urdf import UrdfTree
+
         tree = UrdfTree(cfg.urdf_path)
         width = max(16, *(len(name) + 1 for name in cfg.held_joints))
         lines.append(f'{"held joint":<{width}}{"at":>9}   unit (held_joints: outside the arm and the base)')
@@ -103,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--arm', type=float, nargs='+', metavar='Q', help='arm joints [rad] (default: start state)')
     parser.add_argument('--base', type=float, nargs=3, metavar='X', help='base x y θ (default: start state)')
     args = parser.parse_args(argv)
+    from wmm_control.kinematics import KinematicModel
+
     try:
         model = KinematicModel(args.robot)
         cfg = model.config

@@ -48,13 +48,14 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+# only what the arguments need: the study's modules (the kinematics, the simulator, ROS) are
+# imported where they are used, once the arguments are parsed (--help and a bad argument answer
+# at once)
 from wmm_control.errors import WmmError
 from wmm_control.experiments.cluster import CLUSTER_HELP, files_of, ray_session, run_tasks, write_files
 from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
-from wmm_control.experiments.randomized import METHOD_RUNS, ROBOT_RUNS, run_goal, sample_goals, summarize
-from wmm_control.experiments.sweep import check_point, parse_sweeps, plot_sweep, point_label, sweep_grid
-from wmm_control.kinematics.obstacles import is_drawn, obstacle_file, obstacle_text
-from wmm_control.robot_config import load_robot, robot_names
+from wmm_control.experiments.method_runs import METHOD_RUNS, ROBOT_RUNS
+from wmm_control.paths import robot_names
 
 __all__ = ['main', 'format_summary', 'format_cycle_times']
 
@@ -131,6 +132,8 @@ def _indices(text, goals):
 
 def _raised(robot, method, goal, exc):
     """The record of a run that raised ``exc``: failed, with its error."""
+    from wmm_control.robot_config import load_robot
+
     return {
         'robot': load_robot(robot).name,
         'method': method,
@@ -144,11 +147,13 @@ def _raised(robot, method, goal, exc):
 def _run_one(job, options):
     """One run, wherever it runs: ``(its record, {name: bytes} of its --record file)``. A run
     that raises is a failed record (never retried: it would raise again)."""
+    from wmm_control.experiments import randomized as study
+
     robot, method, goal, point = job
     with tempfile.TemporaryDirectory() as tmp:
         try:
             params = {**options['params'], **point}
-            result = run_goal(
+            result = study.run_goal(
                 robot, method, goal, **dict(options, params=params, record=tmp if options['record'] else None)
             )
         except Exception as exc:
@@ -167,6 +172,8 @@ def _lost(job, why):
 
 def _key(run):
     """What tells a run from the others of a study (its point of a sweep included)."""
+    from wmm_control.experiments.sweep import point_label
+
     return run['robot'], run['method'], run['goal'], point_label(run.get('sweep', {}))
 
 
@@ -183,6 +190,8 @@ def _run_all(jobs, options, workers, session):
 
 def _summary(results, points):
     """The summary rows of ``--out``: per robot and method (and point of the sweep, if any)."""
+    from wmm_control.experiments.randomized import summarize
+
     rows = []
     for point in points:
         runs = [r for r in results if r.get('sweep', {}) == point]
@@ -281,6 +290,11 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(args, robots, methods, cleanup) -> int:
     from tqdm import tqdm
+
+    from wmm_control.experiments.randomized import sample_goals, summarize
+    from wmm_control.experiments.sweep import check_point, parse_sweeps, plot_sweep, point_label, sweep_grid
+    from wmm_control.kinematics.obstacles import is_drawn, obstacle_file, obstacle_text
+    from wmm_control.robot_config import load_robot
 
     try:
         unknown = sorted(set(methods) - set(METHOD_RUNS))
@@ -384,6 +398,8 @@ def sweep_plot_path(out: str | Path) -> Path:
 
 
 def _at(run):
+    from wmm_control.experiments.sweep import point_label
+
     return f' ({point_label(run["sweep"])})' if run.get('sweep') else ''
 
 

@@ -71,11 +71,7 @@ def run_scenario(
             if follower is not None:  # the planned way there first, as /ee_reference points
                 state = loop.state()
                 pose = state.base_pose
-                if state.ee_position is not None:  # measured; else forward kinematics of the state
-                    ee_position, ee_rotation = state.ee_position, state.ee_rotation
-                else:
-                    resolver.model.update(pose, state.q_arm)
-                    ee_position, ee_rotation = resolver.model.ee_placement_world()
+                ee_position, ee_rotation = state.ee_placement(resolver.model, update=True)
                 following = follower.step(world.dt, pose, ee_position, ee_rotation)
                 if following.state is FollowState.STALLED and replan is not None:
                     if replans >= max_replans:  # no more plans: the goal from where the robot is

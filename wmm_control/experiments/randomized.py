@@ -66,6 +66,7 @@ from wmm_control.experiments.direct import run_scenario
 from sim_bridge.collision import SelfCollisionChecker
 from sim_bridge.world import SimWorld
 from wmm_control.experiments.metrics import RunLog, run_limit_report
+from wmm_control.experiments.method_runs import METHOD_RUNS, ROBOT_RUNS
 from wmm_control.experiments.ros_run import run_with_nodes
 from wmm_control.experiments.scenario import Goal, Scenario, load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
@@ -102,26 +103,6 @@ __all__ = [
 
 #: The robots, by name.
 ROBOTS = ('steerable', 'mecanum')
-#: The run entry of each method (resolver parameters; the others are the node's defaults).
-#: The goals are arbitrary poses: the acceleration-level methods track all six rows
-#: (``rows: full``), and the velocity-level methods take the orientation error as a log map
-#: (the RPY difference of Sorour eq (12) is singular at pitch ±π/2, where robot B starts) and
-#: hold a joint at its braking bound while the others take its share of the task
-#: (``hold_joint_limits``; clipped out instead, the end effector can stay put for tens of
-#: seconds).
-METHOD_RUNS: dict[str, dict[str, Any]] = {
-    'pinv': {'method': 'pinv', 'orientation_error': 'log', 'hold_joint_limits': True},
-    'task_sharing': {'method': 'task_sharing', 'orientation_error': 'log', 'hold_joint_limits': True},
-    'amp': {'method': 'amp', 'rows': 'full'},
-    'traditional': {'method': 'traditional', 'rows': 'full'},
-}
-#: Per robot, parameters added to a method's run entry. Robot B's base accelerates at
-#: 0.025 m/s² (Xing Table 1): with the velocity-level methods the arm takes over the share of
-#: the task the base cannot follow (``arm_takeover``) instead of the whole body slowing to the
-#: base's pace.
-ROBOT_RUNS: dict[str, dict[str, dict[str, Any]]] = {
-    'mecanum': {'pinv': {'arm_takeover': True}, 'task_sharing': {'arm_takeover': True}}
-}
 #: Longest run per robot [s] (90 s for any other): robot B's base accelerates at 0.025 m/s² (Xing Table 1). Long
 #: enough for the slowest approach that never stalls (robot A: amp, 64 s; robot B: amp, 128 s).
 DURATION_S = {'steerable': 90.0, 'mecanum': 180.0, 'ur_mecanum': 90.0, 'panda_diff': 90.0}

@@ -33,8 +33,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from wmm_control.checks import Freshness
-from wmm_control.geometry import unit_quaternion, yaw_from_quaternion
+from wmm_control.checks import PLAUSIBLE_FACTOR, Freshness
 from wmm_control.nodes.conversions import (
     odometry_values,
     pose_values,
@@ -53,6 +52,7 @@ from wmm_control.nodes.sim_timing import SimTiming
 from wmm_control.nodes.stamps import seconds
 from wmm_control.planning.follow import FollowParams
 from wmm_control.planning.pursuit import GoalPursuit, PursuitLog, PursuitState
+from wmm_control.resolvers.inputs import MeasuredInputs
 from wmm_control.robot_config import load_robot
 
 __all__ = ['PARAMS', 'GoalPlannerNode', 'main']
@@ -71,7 +71,7 @@ class GoalPlannerNode(Node):
             PARAMS,
             on_change={
                 'state_timeout': self._set_state_timeout,
-                'max_goal_distance': lambda v: setattr(self.pursuit, 'max_goal_distance', float(v)),
+                'max_goal_distance': self._set_max_goal_distance,
                 'max_replans': lambda v: setattr(self.pursuit, 'max_replans', int(v)),
             },
         )
@@ -86,6 +86,8 @@ class GoalPlannerNode(Node):
             p.max_replans,
             {name: getattr(p, name) for name in PLANNER_PARAMS},
         )
+        #: the odometry's checks, the resolver's own
+        self.inputs = MeasuredInputs(p.world_frame, p.max_goal_distance, self.robot.base.velocity, PLAUSIBLE_FACTOR)
         self.arm = JointSelector(self.robot.arm.joints)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         #: the simulator's timing; a change starts the periods afresh on the clock now followed
@@ -123,6 +125,9 @@ class GoalPlannerNode(Node):
         self.pursuit.close(timeout=self.p.budget * self.p.stances_tried + 5.0)
         return super().destroy_node()
 
+    def _set_max_goal_distance(self, distance: float) -> None:
+        self.pursuit.max_goal_distance = self.inputs.max_distance = float(distance)
+
     def _set_state_timeout(self, timeout: float) -> None:
         self.odom_fresh.timeout = self.joints_fresh.timeout = float(timeout)
 
@@ -145,15 +150,11 @@ class GoalPlannerNode(Node):
             self.pursuit.set_obstacles(self.obstacles.obstacles)
 
     def _on_odom(self, msg: Odometry) -> None:
-        xy, quat, _ = odometry_values(msg)
-        unit = unit_quaternion(quat)[0] if np.all(np.isfinite(quat)) else None
-        if unit is None or not np.all(np.isfinite(xy)):
-            self.get_logger().warn(
-                f'rejected /odom: not a pose (position {xy.tolist()}, quaternion {quat.tolist()})',
-                throttle_duration_sec=1.0,
-            )
+        odom, events = self.inputs.odometry(*odometry_values(msg))
+        self._log(events)
+        if odom is None:
             return
-        self._base = np.array((xy[0], xy[1], yaw_from_quaternion(unit)))
+        self._base = odom[0]
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         self._sim_time = stamp
         self.odom_fresh.mark(self._now())

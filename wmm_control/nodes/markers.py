@@ -130,18 +130,15 @@ class ResolverMarkers:
         """The MarkerArray of this instant.
 
         Args:
-            last_state: (base pose (x, y, θ), arm positions, (ee position, rotation) or None) of
-                the resolver's last cycle, or None before one.
+            last_state: the :class:`~wmm_control.resolvers.RobotState` of the resolver's last
+                cycle, or None before one.
             target: the :class:`~wmm_control.resolvers.PoseTarget` pursued, or None.
             tracking: the target is a trajectory point (drawn as the reference, not the goal).
         """
         base = None
         if last_state is not None:
-            base, q_arm, ee = last_state
-            if ee is None:
-                self._model.update(base, q_arm)
-                ee = self._model.ee_placement_world()
-            self.trail.add(ee[0])
+            base = last_state.base_pose
+            self.trail.add(last_state.ee_placement(self._model, update=True)[0])
         pose = None if target is None else (target.position, target.rotation)
         return self.markers.build(
             stamp, None if tracking else pose, pose if tracking else None, self.trail.points, base

@@ -164,10 +164,7 @@ class AccelerationResolver(Resolver):
             model.update(state.base_pose, state.q_arm, to_world @ qd[:nb], qd[nb:])
         else:
             model.update(state.base_pose, state.q_arm, qd[:3], qd[3:])
-        if state.ee_position is None:
-            pos, rot = model.ee_placement_world()
-        else:
-            pos, rot = state.ee_position, state.ee_rotation  # type: ignore[assignment]  # a RobotState holds both or neither
+        pos, rot = state.ee_placement(model)
         ref = self._reference(target, pos, rot)
         jac = model.jacobian_world()
         drift = model.jdot_qdot()

@@ -237,16 +237,35 @@ class VelocityDampers:
             return np.asarray(self.allowed_approach(distances, lag=lags))
         nb = len(axes)
         reach = np.abs(rows[:, nb:]) @ self.arm_acceleration
-        linear, slowest = linear_axes(axes, self.base_acceleration)
+        linear, slowest = self.linear_braking(axes)
         if linear:
-            # the base's linear axes brake the distance at no more than |j_xy| times the slower
-            # axis's limit, whichever way the pair's normal turns while it brakes (Σ |j_i| a_i
-            # would count on braking both axes at once along a normal that the base's turn, or
-            # its approach to another face, changes under it)
-            if 2 in axes and self.lag == 0.0:
-                slowest *= 1.0 - TURN_SHARE  # the rest is the turn's (BaseRows.turn_rate)
+            # the base's linear axes brake the distance at no more than |j_xy| times that,
+            # whichever way the pair's normal turns while it brakes (Σ |j_i| a_i would count on
+            # braking both axes at once along a normal that the base's turn, or its approach to
+            # another face, changes under it)
             reach = reach + np.linalg.norm(rows[:, linear], axis=1) * slowest
         return np.asarray(self.allowed_approach(distances, reach, lags))
+
+    def linear_braking(self, axes) -> tuple[list[int], float]:
+        """The command's entries on the base's linear axes (its entries ``axes`` of (vx, vy, ω)),
+        and the deceleration [m/s²] the rows count on along them: the slower axis's limit, less
+        the turn's share where the base tracks its reference and turns (the rest is the turn's:
+        :meth:`BaseRows.turn_rate`); 0 without linear axes."""
+        linear, slowest = linear_axes(axes, self.base_acceleration)
+        if linear and 2 in axes and self.lag == 0.0:
+            slowest *= 1.0 - TURN_SHARE
+        return linear, slowest
+
+    def stopping_distance(self, speed: float, deceleration: float) -> float:
+        """The nearest a pair that the base moves may be [m] and still approach at ``speed``
+        [m/s] (:meth:`allowed_approach`'s braking, inverted): d_s, then the way the base goes
+        on at that speed for its lag, then the way it takes to stop, braking at ``deceleration``
+        [m/s²] and no harder than ``collision_braking``."""
+        p = self.params
+        if speed == 0.0:
+            return p.collision_safety
+        a = min(p.collision_braking, deceleration)
+        return p.collision_safety + speed * self.lag + (speed * speed / (2.0 * a) if a > 0.0 else math.inf)
 
     def allowed_approach(
         self, distance: ArrayLike, deceleration: ArrayLike = math.inf, lag: ArrayLike = 0.0

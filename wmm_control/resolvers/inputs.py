@@ -110,7 +110,7 @@ class LatestInputs:
     Attributes:
         odom: ((x, y, θ), twist (vx, vy, ω)) of the latest odometry, or None.
         ee: (position, rotation) of the latest end-effector pose, or None.
-        last_state: (base pose, arm positions, ee or None) of the last state made, or None.
+        last_state: the last :class:`RobotState` made, or None.
     """
 
     def __init__(self, checks: MeasuredInputs, timeout: float, ground_truth: bool) -> None:
@@ -119,7 +119,7 @@ class LatestInputs:
         self.fresh = {k: Freshness(timeout) for k in ('odom', 'ee_pose')}
         self.odom: tuple[np.ndarray, np.ndarray] | None = None
         self.ee: tuple[np.ndarray, np.ndarray] | None = None
-        self.last_state: tuple | None = None
+        self.last_state: RobotState | None = None
 
     def set_timeout(self, timeout: float) -> None:
         """Judge both inputs by a new ``timeout`` [s] from now on."""
@@ -157,7 +157,7 @@ class LatestInputs:
                 return None, 'no fresh /ee_pose'
             ee = self.ee
         pose, twist = self.odom
-        self.last_state = (pose, q, ee)
-        return RobotState(
+        self.last_state = RobotState(
             pose, twist, q, dq, ee_position=None if ee is None else ee[0], ee_rotation=None if ee is None else ee[1]
-        ), ''
+        )
+        return self.last_state, ''

@@ -87,6 +87,22 @@ class RobotState:
             object.__setattr__(self, 'ee_position', as_finite_vector(self.ee_position, 3, 'ee_position'))
             object.__setattr__(self, 'ee_rotation', _rotation(self.ee_rotation, 'ee_rotation'))
 
+    def ee_placement(self, model: 'KinematicModel', *, update: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """The end effector's position (3,) [m] and rotation (3, 3) in the world: the measured
+        pose when the state carries one, else forward kinematics of ``model``.
+
+        Args:
+            model: the robot's kinematic model, already updated at this state's base pose and
+                arm joints unless ``update``.
+            update: run the model's forward kinematics at this state first when there is no
+                measured pose (the model is left alone when there is one).
+        """
+        if self.ee_position is not None and self.ee_rotation is not None:  # both or neither
+            return self.ee_position, self.ee_rotation
+        if update:
+            model.update(self.base_pose, self.q_arm)
+        return model.ee_placement_world()
+
 
 @dataclass(frozen=True)
 class PoseTarget:

@@ -239,10 +239,7 @@ class PoseServoResolver(Resolver):
         p = self.params
         model = self.model
         model.update(state.base_pose, state.q_arm)
-        if state.ee_position is None:
-            pos, rot = model.ee_placement_world()
-        else:
-            pos, rot = state.ee_position, state.ee_rotation  # type: ignore[assignment]  # a RobotState holds both or neither
+        pos, rot = state.ee_placement(model)
         b_r_w = rotation_z(state.base_pose[2]).T
         e_pos = target.position - pos
         e_rot = rotation_error(target.rotation, rot)

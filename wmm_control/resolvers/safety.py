@@ -48,7 +48,7 @@ from wmm_control.base.contract import base_controller_class
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import rotation_z
 from wmm_control.kinematics.collision import CollisionModel
-from wmm_control.resolvers.collision_limits import LIMITS, TURN_SHARE, BaseRows, VelocityDampers
+from wmm_control.resolvers.collision_limits import LIMITS, BaseRows, VelocityDampers
 from wmm_control.resolvers.constraints import TOLERANCE, Box, Constraint, nearest
 
 __all__ = ['SafetyCounts', 'SafetyParams', 'SafetyResult', 'SafetyStage', 'base_lag']
@@ -253,26 +253,21 @@ class SafetyStage:
             raise ConfigError(f'base_lag must be finite and >= 0, got {base_lag}')
         self.base_lag = float(base_lag)
         params = self.params
-        stopping = 0.0
-        if self._base_velocity is not None and self._base_acc.any():
-            linear = [k for k in range(2) if self._base_acc[k] > 0.0]
-            if linear:
-                # from full speed on every linear axis at once (a diagonal is faster than either
-                # axis), braking as its rows count on (VelocityDampers): the slower axis's limit,
-                # less the turn's share where the base tracks without lag, and no harder than a_b
-                speed = float(np.linalg.norm(self._base_velocity[linear]))
-                brake = float(np.min(self._base_acc[linear]))
-                if self.base_lag == 0.0:
-                    brake *= 1.0 - TURN_SHARE
-                brake = min(brake, params.collision_braking)
-                stopping = speed * self.base_lag + speed * speed / (2.0 * brake)
         #: [m] the room a lagging base's body keeps from obstacles beyond d_s
         self.body_margin = params.collision_lag_margin if self.base_lag > 0.0 else 0.0
-        #: [m] how far an obstacle is looked at: the base's stopping distance from full speed
-        self.obstacle_lookahead = max(params.collision_lookahead, params.collision_safety + self.body_margin + stopping)
         #: the limits, with this lag
         self.dampers = VelocityDampers(params, self._arm_acc, self._base_acc, self.base_lag, self.body_margin)
         self.base_rows = BaseRows(params.collision_safety, self._base_acc, self.base_lag)
+        # from full speed on every linear axis at once (a diagonal is faster than either axis),
+        # braking as the dampers' rows count on, on the axes the base can accelerate
+        axes = tuple(int(k) for k in np.flatnonzero(self._base_acc > 0.0))
+        linear, brake = self.dampers.linear_braking(axes)
+        on = [axes[k] for k in linear]
+        speed = 0.0 if self._base_velocity is None else float(np.linalg.norm(self._base_velocity[on]))
+        #: [m] how far an obstacle is looked at: the base's stopping distance from full speed
+        self.obstacle_lookahead = max(
+            params.collision_lookahead, self.body_margin + self.dampers.stopping_distance(speed, brake)
+        )
 
     def set_obstacles(self, obstacles) -> None:
         """Keep the robot off ``obstacles`` (:class:`~wmm_control.kinematics.obstacles.Obstacle`) from now on."""
