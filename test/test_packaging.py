@@ -142,6 +142,8 @@ def _stop(proc):
     try:
         out, _ = proc.communicate(timeout=30)
     except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)  # its threads' stacks into the output: where it hangs
+        time.sleep(1.0)
         proc.kill()
         out, _ = proc.communicate()
     return proc.returncode, out

@@ -1,6 +1,7 @@
 """A node's process: main() (:func:`run_node`), its executor, signals, and a guard on ``/clock``."""
 
 import atexit
+import faulthandler
 import os
 import signal
 import threading
@@ -89,9 +90,12 @@ def run_node(
     teardown are only noted (``ros2 launch`` sends SIGINT twice); the previous handlers come
     back once the context is shut down, and from the interpreter's exit on both signals are
     ignored (:func:`_ignore_stop_signals_at_exit`). The process uses Fast DDS's UDP transport
-    alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS`` is set.
+    alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS`` is set. SIGUSR1
+    writes every thread's Python stack to stderr (``kill -USR1 <pid>``: where a node hangs).
     """
     os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', FASTDDS_TRANSPORTS)
+    if hasattr(faulthandler, 'register'):  # a node that hangs shows where: kill -USR1 <pid>
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:  # the command line: a --params-file that cannot be read, a bad rule
