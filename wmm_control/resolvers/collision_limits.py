@@ -168,10 +168,12 @@ class Pairs:
         bound plus ``shift``: ``(rows, bound)``, rows ``rows · q̇ ≥ bound``. ``base`` of shape
         (c, k, 3) and ``shift`` of shape (c, k) give ``c`` such sets of rows, one after the other."""
         which = self.moved if which is None else which
-        part = base[..., self.axes]
-        arm = self.rows[which, len(self.axes) :]
-        rows = np.concatenate((part, np.broadcast_to(arm, (*part.shape[:-1], arm.shape[1]))), axis=-1)
-        return rows.reshape(-1, rows.shape[-1]), (self.bound[which] + shift).reshape(-1)
+        nb = len(self.axes)
+        part = base[..., self.axes].reshape(-1, nb)
+        arm = self.rows[which, nb:]
+        if base.ndim == 3:  # the arm's part again for each set
+            arm = np.tile(arm, (base.shape[0], 1))
+        return np.hstack((part, arm)), (self.bound[which] + shift).reshape(-1)
 
 
 def linear_axes(axes, base_acceleration) -> tuple[list[int], float]:
@@ -258,16 +260,14 @@ class VelocityDampers:
         (one entry per pair); the answer is a float for numbers, else an array."""
         p = self.params
         d_i, d_s = p.collision_influence, p.collision_safety
-        distance, deceleration, lag = np.broadcast_arrays(
-            *(np.asarray(v, dtype=float) for v in (distance, deceleration, lag))
-        )
+        distance = np.asarray(distance, dtype=float)
+        lag = np.asarray(lag, dtype=float)
         a = np.minimum(p.collision_braking, deceleration)
         room = np.maximum(distance - d_s, 0.0)
         with np.errstate(divide='ignore', invalid='ignore', over='ignore'):  # a tiny a: inf, then min
             braking = np.where(a > 0.0, a * (np.sqrt(lag * lag + 2.0 * room / a) - lag), 0.0)
-            gain = np.where(
-                lag > 0.0, np.minimum(p.collision_gain / (d_i - d_s), 1.0 / lag), p.collision_gain / (d_i - d_s)
-            )
+            slope = p.collision_gain / (d_i - d_s)
+            gain = np.where(lag > 0.0, np.minimum(slope, 1.0 / lag), slope)
         damper = np.where(distance < d_i, gain * (distance - d_s), math.inf)
         out = np.minimum(damper, braking)
         return float(out) if out.ndim == 0 else out
