@@ -383,7 +383,7 @@ class CollisionModel:
             everything[pair.first, pair.second] = True
         return everything
 
-    def _distances_within(self, q, reach, subset=None) -> np.ndarray:
+    def _distances_within(self, q, reach, subset=None) -> tuple[np.ndarray, np.ndarray]:
         """Each checked pair's distance at the configuration ``q`` (:meth:`_configuration`): exact for the pairs whose
         bounding spheres are closer than ``reach`` [m] (one for every pair, or an array of one
         per pair; the broad phase, over every pair in one numpy expression); for the others,
@@ -466,24 +466,26 @@ class CollisionModel:
         near = np.flatnonzero(dists < reach)
         if not near.size:
             return _no_pairs(n_arm), *closest
-        # each pair's nearest points, on a and on b, and coal's normal (from the first shape to
-        # the second): [pair, (a, b, normal), xyz], in one array built once
-        results = [self._results[k] for k in near.tolist()]
-        found = np.array([(r.getNearestPoint1(), r.getNearestPoint2(), r.normal) for r in results])
-        points, normals = found[:, :2].transpose(1, 0, 2), found[:, 2]
+        points, normals = np.empty((2, near.size, 3)), np.empty((near.size, 3))
+        for i, k in enumerate(near.tolist()):  # each pair's nearest points, on a and on b
+            result = self._results[k]
+            points[0, i], points[1, i] = result.getNearestPoint1(), result.getNearestPoint2()
+            normals[i] = result.normal  # coal's: from the first shape to the second
         # ḋ = n · (v_b − v_a); a point p fixed to a joint moves at v = v₀ + ω × p, (v₀, ω) the
         # spatial velocity of a column of the joint Jacobians (world frame) that the kinematic
         # model's update computed, so n · v = n · v₀ + (p × n) · ω
+        jacobians = self.kinematics.data.J
         moment = np.cross(points, normals)
-        # [side, pair, joint rate]: n · v₀ + (p × n) · ω over every column of the Jacobians
-        speeds = np.concatenate((np.broadcast_to(normals, moment.shape), moment), axis=2) @ self.kinematics.data.J
-        along = speeds[:, :, self._idx_v]  # the arm's joint rates
+        twists = jacobians[:, self._idx_v]  # (v₀, ω) per arm joint rate
+        along = normals @ twists[:3] + moment @ twists[3:]
         along *= self._moved_by[self._pair_joints[near].T]  # only the arm joints that move p
         rates = along[1] - along[0]
         # the planar root's columns, over the world frame's (ẋ, ẏ, θ̇), move every point of the
         # robot; the floor and the obstacles stay put. Between two points of the robot they
         # cancel, and against the floor they are zero (the base moves parallel to it).
-        sides = speeds[:, :, :N_BASE] * self._pair_on_robot[near].T[:, :, None]
+        root = jacobians[:, :N_BASE]
+        sides = normals @ root[:3] + moment @ root[3:]
+        sides *= self._pair_on_robot[near].T[:, :, None]
         world = (sides[1] - sides[0]) * self._pair_base_moves[near, None]
         # over the base's twist (vx, vy, ω) in its own frame: (ẋ, ẏ, θ̇) = R(θ) (vx, vy, ω)
         base = world @ rotation_z(q[2])
