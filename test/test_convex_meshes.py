@@ -151,7 +151,7 @@ def test_the_broad_phase_holds_the_hulls_of_a_real_description(tiago_robots):
     for _ in range(30):
         q = model._configuration(lower[idx] + (upper[idx] - lower[idx]) * rng.random(idx.size))
         exact = model._distances(q)
-        within = model._distances_within(q, 0.10)
+        within, _ = model._distances_within(q, 0.10)
         near = exact < 0.10
         # to EPA's tolerance (1e-6 m): an overlap's depth varies that much from one call to the next
         np.testing.assert_allclose(within[near], exact[near], atol=1e-6)

@@ -147,6 +147,34 @@ def test_distances_asked_again_follow_new_obstacles_and_a_moved_base():
         assert distance == pytest.approx(near[links] - 0.2, abs=0.05)
 
 
+@pytest.mark.parametrize('name', ['steerable', 'mecanum'])
+def test_robot_pairs_come_within_their_own_reach_and_the_closest_distance_is_kept(name):
+    """The safety stage looks metres ahead at obstacles for a lagging base but only its arm's
+    look-ahead at the robot's own pairs: asked with that shorter reach for the pairs without an
+    obstacle, the answer holds the same obstacle pairs at the same distances, the robot's pairs
+    within that reach only, and the same closest distance."""
+    robot = load_robot(name)
+    obstacles = load_obstacles('table_pillar')
+    names = {o.name for o in obstacles}
+    model = CollisionModel.from_robot(robot, obstacles=obstacles)
+    rng = np.random.default_rng(5)
+    left_out = 0
+    for _ in range(10):
+        q = np.array(robot.start.arm) + rng.uniform(-0.5, 0.5, len(robot.start.arm))
+        base = rng.uniform((0.2, -1.6, -np.pi), (2.8, 1.6, np.pi))
+        every, closest, pair = model.within(q, 3.0, base)
+        asked, closest_asked, pair_asked = model.within(q, 3.0, base, robot_influence=0.3)
+        assert closest_asked == pytest.approx(closest, abs=1e-6) and pair_asked == pair
+        kept = [k for k, links in enumerate(every.links) if names & set(links) or every.distance[k] < 0.3]
+        left_out += len(every) - len(kept)
+        assert asked.shapes == tuple(every.shapes[k] for k in kept)
+        np.testing.assert_allclose(asked.distance, every.distance[kept], atol=1e-6)
+        # (their rows are those pairs' rows: a face against a face has many nearest points, and
+        # GJK, started from its last answer, may pick another one each time it is asked)
+        assert asked.rate_jacobian.shape == (len(kept), len(q)) and asked.base_jacobian.shape == (len(kept), 3)
+    assert left_out, 'some robot pair between 0.3 and 3 m'
+
+
 def test_a_base_driving_at_an_obstacle_is_slowed_to_what_it_can_brake():
     robot = load_robot('mecanum')
     # its base brakes at 0.025 m/s² per axis, of which the turn may take a quarter: 3.33 m from

@@ -244,7 +244,7 @@ def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, pa
         postures.append(q)
         sigmas.append(model.sigma_min('full'))
         # exact below HOME_CLEARANCE, a lower bound above it
-        distances.append(clearance._distances_within(clearance._configuration(q), HOME_CLEARANCE))
+        distances.append(clearance._distances_within(clearance._configuration(q), HOME_CLEARANCE)[0])
     if postures:
         dist = np.array(distances).reshape(len(postures), -1)
         need = np.where(dist.max(axis=0, initial=-np.inf) >= HOME_CLEARANCE, HOME_CLEARANCE, SAFETY)

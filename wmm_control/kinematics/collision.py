@@ -321,9 +321,11 @@ class CollisionModel:
         self._sphere_offset = [k for k, c in enumerate(self._sphere_centre) if c.any()]
         #: [pair, side]: that side is on the robot (moves with the base), not the floor or an obstacle
         self._pair_on_robot = np.array(robot, dtype=float).reshape(-1, 2)
+        #: [pair]: a robot shape and an obstacle
+        self._pair_obstacle = np.array(obstacle, dtype=bool)
         #: [pair]: the base's twist changes its distance (a robot shape and an obstacle); it leaves
         #: a pair on the robot as it is, and a shape's height over the floor
-        self._pair_base_moves = np.array(obstacle, dtype=float)
+        self._pair_base_moves = self._pair_obstacle.astype(float)
         #: [pair]: one side is the floor
         self._pair_floor = np.array(floor, dtype=bool)
 
@@ -381,12 +383,16 @@ class CollisionModel:
             everything[pair.first, pair.second] = True
         return everything
 
-    def _distances_within(self, q, reach: float, subset=None) -> np.ndarray:
+    def _distances_within(self, q, reach, subset=None) -> tuple[np.ndarray, np.ndarray]:
         """Each checked pair's distance at the configuration ``q`` (:meth:`_configuration`): exact for the pairs whose
-        bounding spheres are closer than ``reach`` [m] (the broad phase, over every pair in one
-        numpy expression); for the others, the gap between their spheres, a lower bound above
-        ``reach``, with coal's narrow phase skipped.
-        With ``subset`` (a boolean array over the pairs), only those pairs are exact."""
+        bounding spheres are closer than ``reach`` [m] (one for every pair, or an array of one
+        per pair; the broad phase, over every pair in one numpy expression); for the others,
+        the gap between their spheres, a lower bound above ``reach``, with coal's narrow phase
+        skipped.
+        With ``subset`` (a boolean array over the pairs), only those pairs are exact.
+
+        Returns:
+            ``(distances, exact)``: which distances coal computed (boolean). Shape (pairs,) each."""
         geom, geom_data = self.geom, self.geom_data
         self._place(q)
         placements = geom_data.oMg
@@ -406,7 +412,7 @@ class CollisionModel:
         dists = gap
         results = self._results
         dists[near] = [results[k].min_distance for k in np.flatnonzero(near).tolist()]
-        return dists
+        return dists, near
 
     def closest(self, q_arm, base_pose=None) -> tuple[float, tuple[str, str] | None]:
         """``(distance [m], (link a, link b))`` of the closest checked pair at arm joints
@@ -418,33 +424,46 @@ class CollisionModel:
         k = int(np.argmin(dists))
         return float(dists[k]), self._pair_links[k]
 
-    def within(self, q_arm, influence: float, base_pose=None) -> tuple[NearPairs, float, tuple[str, str] | None]:
+    def within(
+        self, q_arm, influence: float, base_pose=None, robot_influence: float | None = None
+    ) -> tuple[NearPairs, float, tuple[str, str] | None]:
         """The pairs closer than ``influence`` [m] at ``q_arm`` (and base pose ``base_pose`` (x,
         y, θ), needed with obstacles), with their rate Jacobians, and the closest pair's
         distance and names (``inf, None`` when no pair is checked). Only the pairs whose
         bounding spheres are closer than ``influence`` go to coal's narrow phase: the closest
         distance is exact when it is below ``influence``, else a lower bound (the gap between
-        two bounding spheres)."""
+        two bounding spheres). With ``robot_influence`` [m] (at most ``influence``), a pair
+        without an obstacle (two shapes of the robot, or one and the floor) is in the answer
+        only when closer than it; the closest distance is the same."""
         # the same question again (a method's second pass in one period: eq (14)'s compensation)
         # gets the same answer without the distances and Jacobians computed again
         key = (
             np.asarray(q_arm, dtype=float).tobytes(),
             None if base_pose is None else np.asarray(base_pose, dtype=float).tobytes(),
             float(influence),
+            None if robot_influence is None else float(robot_influence),
         )
         if key != self._within_memo[0]:
-            self._within_memo = (key, self._within(q_arm, influence, base_pose))
+            self._within_memo = (key, self._within(q_arm, influence, base_pose, robot_influence))
         return self._within_memo[1]
 
-    def _within(self, q_arm, influence, base_pose):
+    def _within(self, q_arm, influence, base_pose, robot_influence):
         n_arm = self.n_arm
         if not self._results:
             return _no_pairs(n_arm), float('inf'), None
         q = self._state(q_arm, base_pose)
-        dists = self._distances_within(q, influence)
+        reach = influence
+        if robot_influence is not None:  # coal's narrow phase and the rows only for the pairs asked for
+            reach = np.where(self._pair_obstacle, influence, min(float(robot_influence), influence))
+        dists, exact = self._distances_within(q, reach)
         k_min = int(np.argmin(dists))
+        if not exact[k_min] and dists[k_min] < influence:
+            # the closest is the bound of a pair the narrow phase left out: the distances of
+            # every pair within ``influence``, as the closest distance promises
+            dists, exact = self._distances_within(q, influence)
+            k_min = int(np.argmin(dists))
         closest = (float(dists[k_min]), self._pair_links[k_min])
-        near = np.flatnonzero(dists < influence)
+        near = np.flatnonzero(dists < reach)
         if not near.size:
             return _no_pairs(n_arm), *closest
         points, normals = np.empty((2, near.size, 3)), np.empty((near.size, 3))
@@ -649,7 +668,7 @@ def _sample_pairs(model, tree, arm_joints, pairs, distances, samples, seed):
         if not open_pairs[has_shapes].any():
             break
         q = model._configuration(lower + (upper - lower) * rng.random(len(joints)))
-        dists = model._distances_within(q, influence, subset=open_pairs[of_shape])
+        dists, _ = model._distances_within(q, influence, subset=open_pairs[of_shape])
         nearest = np.full(len(pairs), np.inf)
         np.minimum.at(nearest, of_shape, dists)
         ever_near |= nearest < influence

@@ -111,9 +111,7 @@ PATH_SPEED = 1e-4
 TURN_SHARE = 0.25
 #: The corners of the box between a lagging base's measured twist and its reference other than
 #: the reference itself: the axes (vx, vy, ω) on which each takes the reference.
-_PARTS = tuple(
-    np.array(part, dtype=bool) for part in ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1))
-)
+_PARTS = np.array(((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1)), dtype=float)
 _LINEAR = np.array([1.0, 1.0, 0.0])
 #: The dampers' constraints, in the order of the pairs' kinds.
 _KINDS = ('self', 'floor', 'obstacle')
@@ -167,10 +165,15 @@ class Pairs:
     ) -> tuple[np.ndarray, np.ndarray]:
         """The rows of the pairs ``which`` (default: the ones the base moves) again, with the base
         part ``base`` (over (vx, vy, ω) in the command's terms, one row per such pair) and the
-        bound plus ``shift``: ``(rows, bound)``, rows ``rows · q̇ ≥ bound``."""
+        bound plus ``shift``: ``(rows, bound)``, rows ``rows · q̇ ≥ bound``. ``base`` of shape
+        (c, k, 3) and ``shift`` of shape (c, k) give ``c`` such sets of rows, one after the other."""
         which = self.moved if which is None else which
-        rows = np.hstack((base[:, self.axes], self.rows[which, len(self.axes) :]))
-        return rows, self.bound[which] + shift
+        nb = len(self.axes)
+        part = base[..., self.axes].reshape(-1, nb)
+        arm = self.rows[which, nb:]
+        if base.ndim == 3:  # the arm's part again for each set
+            arm = np.tile(arm, (base.shape[0], 1))
+        return np.hstack((part, arm)), (self.bound[which] + shift).reshape(-1)
 
 
 def linear_axes(axes, base_acceleration) -> tuple[list[int], float]:
@@ -276,16 +279,14 @@ class VelocityDampers:
         (one entry per pair); the answer is a float for numbers, else an array."""
         p = self.params
         d_i, d_s = p.collision_influence, p.collision_safety
-        distance, deceleration, lag = np.broadcast_arrays(
-            *(np.asarray(v, dtype=float) for v in (distance, deceleration, lag))
-        )
+        distance = np.asarray(distance, dtype=float)
+        lag = np.asarray(lag, dtype=float)
         a = np.minimum(p.collision_braking, deceleration)
         room = np.maximum(distance - d_s, 0.0)
         with np.errstate(divide='ignore', invalid='ignore', over='ignore'):  # a tiny a: inf, then min
             braking = np.where(a > 0.0, a * (np.sqrt(lag * lag + 2.0 * room / a) - lag), 0.0)
-            gain = np.where(
-                lag > 0.0, np.minimum(p.collision_gain / (d_i - d_s), 1.0 / lag), p.collision_gain / (d_i - d_s)
-            )
+            slope = p.collision_gain / (d_i - d_s)
+            gain = np.where(lag > 0.0, np.minimum(slope, 1.0 / lag), slope)
         damper = np.where(distance < d_i, gain * (distance - d_s), math.inf)
         out = np.minimum(damper, braking)
         return float(out) if out.ndim == 0 else out
@@ -393,10 +394,9 @@ class BaseRows:
             return Constraint.empty(n, _BETWEEN)
         j = pairs.base[pairs.moved]
         measured = j * np.asarray(v0, dtype=float)  # each axis's share of the approach at v₀
-        corners = [pairs.on_base((j * part) @ pairs.to_base, -measured[:, ~part].sum(axis=1)) for part in _PARTS]
-        return Constraint.from_lower(
-            np.vstack([rows for rows, _ in corners]), np.concatenate([bound for _, bound in corners]), _BETWEEN
-        )
+        # [corner, pair]: the reference's share on the corner's axes, v₀'s on the others
+        base = (j * _PARTS[:, None, :]) @ pairs.to_base
+        return Constraint.from_lower(*pairs.on_base(base, -(measured @ (1.0 - _PARTS).T).T), _BETWEEN)
 
     def after_turn(self, pairs: Pairs, v0, command, world_rates: bool) -> Constraint:
         """For each pair the base moves, the same row as the base will see it once it has turned

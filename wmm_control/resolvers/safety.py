@@ -331,8 +331,8 @@ class SafetyStage:
             return SafetyResult(command, math.inf, '', 0, False)
         d_b = p.collision_lookahead
         reach = self.obstacle_lookahead if self.collision.obstacles else d_b
-        near, clearance, names = self.collision.within(q_arm, reach, base_pose)
         # a pair the base cannot move (no obstacle in it) is constrained within the arm's look-ahead only
+        near, clearance, names = self.collision.within(q_arm, reach, base_pose, robot_influence=d_b)
         keep = near.base_jacobian.any(axis=1) | (near.distance < d_b)
         if not keep.all():
             near = near.select(keep)
