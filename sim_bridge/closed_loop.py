@@ -166,12 +166,16 @@ class ClosedLoop:
 
     def submit(self, target: PoseTarget, tracking: bool = False) -> None:
         """Give the cycle ``target``: a goal, or with ``tracking`` a point of a trajectory (its
-        velocity and acceleration the feedforward), as ``/goal_pose`` and ``/ee_reference``
-        would carry it."""
+        velocity and acceleration the feedforward, and a followed plan's base with it), as
+        ``/goal_pose`` and ``/ee_reference`` would carry it."""
         period, now = self.cycle.resolver_period, self.world.time
         pose = np.concatenate((target.position, quaternion_from_matrix(target.rotation)))
         if tracking:
-            self.events += period.trajectory_point(self.world_frame, pose, target.velocity, target.acceleration, now)
+            base = target.base
+            planned = None if base is None else (base.pose, base.rates, base.acceleration)
+            self.events += period.trajectory_point(
+                self.world_frame, pose, target.velocity, target.acceleration, now, planned
+            )
         else:
             self.events += period.goal(self.world_frame, pose, now)
 

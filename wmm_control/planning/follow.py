@@ -37,6 +37,12 @@ left to the lead when the plan's speed over a period is within ``(1 − slow_fro
 behind the point it is given, save what its own last period's motion adds. The point's twist is
 the planned one times ``r``, its acceleration times ``r²`` (the planned motion slowed down).
 
+The point carries the planned base pose of its sample (``hold_base``,
+:class:`~wmm_control.resolvers.interface.BaseReference`; its rates times ``r``, accelerations
+times ``r²``): every method pulls the base towards it below the end effector's task, so the
+base is held to the plan rather than left where the method's sharing of the motion puts it
+(``docs/methods.md``, the planner's section).
+
 A base that is ahead of the plan (it cut a corner, or the planned pose at ``s`` is behind it)
 pulls the clock forward: the follower keeps the last planned pose the measured base has passed
 (the nearest planned pose, in the lag's metric, from the last one passed up to ``lookahead``
@@ -67,7 +73,7 @@ from wmm_control.errors import ConfigError
 from wmm_control.geometry import norm, rotation_angle, wrap_angle
 from wmm_control.planning.handoff import Handoff
 from wmm_control.planning.timing import LinearPiece
-from wmm_control.resolvers.interface import PoseTarget
+from wmm_control.resolvers.interface import BaseReference, PoseTarget
 
 __all__ = ['FollowParams', 'FollowState', 'FollowStep', 'PlanFollower', 'MAX_REPLANS']
 
@@ -94,6 +100,8 @@ class FollowParams:
         stall_time: [s] without progress (module docstring) before the follower is stalled.
         stall_distance: [m] of motion that is progress.
         stall_angle: [rad] of turn that is progress.
+        hold_base: give the point's planned base with it (module docstring): the methods
+            hold the base to the plan; False gives the end effector's point alone.
 
     Raises:
         ConfigError: a value out of its range.
@@ -110,6 +118,7 @@ class FollowParams:
     stall_time: float = 5.0
     stall_distance: float = 0.02
     stall_angle: float = 0.05
+    hold_base: bool = True
 
     def __post_init__(self) -> None:
         positive = (
@@ -130,6 +139,8 @@ class FollowParams:
             raise ConfigError(f'FollowParams.lookahead must be a finite number >= 0 [s], got {self.lookahead!r}')
         if not (isinstance(self.slow_from, (int, float)) and 0.0 <= self.slow_from < 1.0):
             raise ConfigError(f'FollowParams.slow_from must be in [0, 1), got {self.slow_from!r}')
+        if not isinstance(self.hold_base, bool):
+            raise ConfigError(f'FollowParams.hold_base must be True or False, got {self.hold_base!r}')
         if not (isinstance(self.base_floor, (int, float)) and 0.0 <= self.base_floor <= 1.0):
             raise ConfigError(f'FollowParams.base_floor must be in [0, 1], got {self.base_floor!r}')
 
@@ -300,11 +311,17 @@ class PlanFollower:
         else:
             self._idle += dt
         point = handoff.points[self._index(self._clock)]
+        planned_base = None
+        if p.hold_base and point.base is not None:  # the planned base, slowed as the point is
+            planned_base = BaseReference(
+                point.base.pose, self._rate * point.base.rates, self._rate**2 * point.base.acceleration
+            )
         target = PoseTarget(
             point.position,
             point.rotation,
             velocity=self._rate * point.velocity,
             acceleration=self._rate**2 * point.acceleration,
+            base=planned_base,
         )
         state = FollowState.STALLED if self._idle >= p.stall_time else FollowState.FOLLOWING
         return FollowStep(target, state, self._clock / end)

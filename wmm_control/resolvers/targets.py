@@ -15,6 +15,8 @@ trajectory held, and how the goal fares. ``redundancy_resolver`` wires its topic
   axes), checked as goals are (a twist or acceleration entry beyond 1e3 is rejected too). The
   latest of a goal and a point is the target. A trajectory whose last point is older than
   ``timeout`` is held as a set-point at that point's pose (:meth:`TargetManager.current`).
+  A point may carry a followed plan's base (its planned pose, rates and accelerations,
+  checked as the point is), which the methods hold the base to below the end effector's task.
 
 Time is an argument (seconds of a steady clock), never read here. Each call answers with
 :class:`LogEvent` s for the node to log: ``accepted`` (a new goal), ``tracking`` (a
@@ -31,7 +33,7 @@ import numpy as np
 
 from wmm_control.checks import Freshness
 from wmm_control.geometry import matrix_from_quaternion, unit_quaternion
-from wmm_control.resolvers.interface import PoseTarget
+from wmm_control.resolvers.interface import BaseReference, PoseTarget
 from wmm_control.resolvers.progress import GoalProgress
 
 __all__ = [
@@ -223,9 +225,14 @@ class TargetManager:
         self.goals += 1
         return events + [LogEvent('accepted', f'new goal: {goal_text(values[:3], quat)}')]
 
-    def trajectory_point(self, frame, pose, velocity, acceleration, now, base=None) -> list[LogEvent]:
+    def trajectory_point(
+        self, frame, pose, velocity, acceleration, now, base=None, planned_base=None
+    ) -> list[LogEvent]:
         """A trajectory point received at ``now`` [s]: ``pose`` as a goal's (None: the message
-        had no point), ``velocity`` and ``acceleration`` (linear, angular; world axes)."""
+        had no point), ``velocity`` and ``acceleration`` (linear, angular; world axes);
+        ``planned_base``: a followed plan's base with it, (pose (x, y, θ), world rates, world
+        accelerations) (:class:`~wmm_control.resolvers.interface.BaseReference`), or None.
+        ``base`` is the measured base pose (x, y, θ) of the checks."""
         if frame != self.world_frame:
             return self.reject(f'frame {frame!r}, expected {self.world_frame!r}', REFERENCE)
         if pose is None:
@@ -241,13 +248,26 @@ class TargetManager:
         impossible = self.workspace.impossible(pose[:3], base, self.obstacles)
         if impossible:
             return self.reject(f'position {pose[:3].tolist()}: {impossible}', REFERENCE)
+        planned = None
+        if planned_base is not None:
+            values = [np.asarray(v, dtype=float) for v in planned_base]
+            if len(values) != 3 or any(v.shape != (3,) for v in values):
+                return self.reject('a planned base needs a pose (x, y, θ), its rates and accelerations', REFERENCE)
+            if not all(np.all(np.isfinite(v)) for v in values):
+                return self.reject('non-finite values of the planned base', REFERENCE)
+            if (
+                float(np.max(np.abs(values[0][:2]))) > self.max_goal_distance
+                or float(np.max(np.abs(np.concatenate(values[1:])))) > MAX_REFERENCE_RATE
+            ):
+                return self.reject('planned base beyond max_goal_distance, or its rates beyond 1e3', REFERENCE)
+            planned = BaseReference(*values)
         quat, events = checked_quaternion(pose[3:], '/' + REFERENCE)
         if quat is None:
             return events + self.reject('zero quaternion', REFERENCE)
         if not self.tracking:
             events.append(LogEvent('tracking', 'tracking /ee_reference'))
             self._start()
-        self.target = PoseTarget(pose[:3], matrix_from_quaternion(quat), velocity=vel, acceleration=acc)
+        self.target = PoseTarget(pose[:3], matrix_from_quaternion(quat), velocity=vel, acceleration=acc, base=planned)
         self._goal_key = None
         self.tracking = True
         self.reference.mark(now)
