@@ -170,14 +170,14 @@ class ClosedLoop:
         ``/goal_pose`` and ``/ee_reference`` would carry it."""
         period, now = self.cycle.resolver_period, self.world.time
         pose = np.concatenate((target.position, quaternion_from_matrix(target.rotation)))
+        base = target.base
+        planned = None if base is None else (base.pose, base.rates, base.acceleration)
         if tracking:
-            base = target.base
-            planned = None if base is None else (base.pose, base.rates, base.acceleration)
             self.events += period.trajectory_point(
                 self.world_frame, pose, target.velocity, target.acceleration, now, planned
             )
         else:
-            self.events += period.goal(self.world_frame, pose, now)
+            self.events += period.goal(self.world_frame, pose, now, planned)
 
     def step(self, target: PoseTarget | None = None, tracking: bool | None = None) -> CycleRecord:
         """One period, towards ``target`` (:class:`~wmm_control.resolvers.PoseTarget`, given

@@ -183,6 +183,16 @@ def test_a_followed_plan_s_base_comes_with_its_point_checked_as_the_point_is(tar
     assert targets.target.base is None
 
 
+def test_a_goal_after_a_plan_holds_the_stance_as_its_base(targets):
+    stance = (np.array((0.3, 0.1, 0.2)), np.zeros(3), np.zeros(3))
+    assert kinds(targets.goal('world', [1.5, 0.3, 1.0, *IDENTITY], None, planned_base=stance)) == ['accepted']
+    assert np.allclose(targets.target.base.pose, stance[0])
+    bad = (np.array((0.3, math.inf, 0.2)), np.zeros(3), np.zeros(3))
+    events = targets.goal('world', [1.5, 0.4, 1.0, *IDENTITY], None, planned_base=bad)
+    assert kinds(events) == ['rejected'] and 'non-finite values of the planned base' in events[0].message
+    assert kinds(goal(targets)) == ['accepted'] and targets.target.base is None
+
+
 def test_a_goal_is_reached_once_and_a_stall_is_told_once_until_progress(targets):
     goal(targets)
     events = [targets.judge(diag(0.5 * 0.5**k)) for k in range(12)]

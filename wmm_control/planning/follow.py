@@ -49,7 +49,11 @@ pulls the clock forward: the follower keeps the last planned pose the measured b
 [s] ahead of ``s``), and ``s`` never lags it.
 
 Once ``s`` reaches the plan's end the target is the goal itself (:attr:`FollowState.APPROACH`):
-the method's final whole-body approach. While following, the follower is
+the method's final whole-body approach, with the plan's last base pose (the stance, from which
+the goal is reachable with margin from the obstacles) held as the base's reference
+(:attr:`PlanFollower.approach`; with ``hold_base``): a method whose secondary task would move
+the base (task sharing's posture pull) otherwise drives it from the stance into the safety
+stage's hold. While following, the follower is
 :attr:`FollowState.STALLED` when for ``stall_time`` the planned pose at ``s`` has not moved on
 by ``stall_distance`` or turned by ``stall_angle``, and the measured base has not come that
 much nearer to it (in distance or in heading): the robot is held off the plan (by an obstacle
@@ -63,7 +67,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -196,6 +200,15 @@ class PlanFollower:
         self._anchor_lag = (math.inf, math.inf)  # the base's lag (distance, angle) then
 
     @property
+    def approach(self) -> PoseTarget:
+        """The target of the final approach: the goal, with the plan's last base pose (the
+        stance, at rest) as its base when ``hold_base`` (module docstring)."""
+        last = self.handoff.points[-1].base
+        if not self.params.hold_base or last is None:
+            return self.goal
+        return replace(self.goal, base=BaseReference(last.pose))
+
+    @property
     def clock(self) -> float:
         """[s] the plan's time reached."""
         return self._clock
@@ -275,7 +288,7 @@ class PlanFollower:
         p, handoff = self.params, self.handoff
         end = handoff.duration
         if self._clock >= end:
-            return FollowStep(self.goal, FollowState.APPROACH, 1.0)
+            return FollowStep(self.approach, FollowState.APPROACH, 1.0)
         # the base ahead of the plan pulls the clock forward
         given = self._index(self._clock)  # the point given last period
         window = handoff.base_poses[self._passed : self._index(self._clock + p.lookahead) + 1]
@@ -299,7 +312,7 @@ class PlanFollower:
                 self._rate = (clock - self._clock) / dt if dt > 0.0 else 0.0
         self._clock = clock
         if self._clock >= end:
-            return FollowStep(self.goal, FollowState.APPROACH, 1.0)
+            return FollowStep(self.approach, FollowState.APPROACH, 1.0)
         # progress since the last: the planned pose moved on, or the base came nearer to it
         planned = self.planned_pose(self._clock)
         lag = self._apart(planned, base)

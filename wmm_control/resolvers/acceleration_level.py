@@ -194,10 +194,10 @@ class AccelerationResolver(Resolver):
         target_err = np.concatenate((target.position - pos, rotation_error(target.rotation, rot)))
         base_follow = None
         if target.base is not None:
-            ref = target.base
+            planned = target.base
             rates = to_world @ qd[:nb] if self._unicycle else qd[:3]
             gains_p, gains_d = self._kp[[0, 1, 5]], self._kd[[0, 1, 5]]
-            world = ref.acceleration + gains_d * (ref.rates - rates) + gains_p * ref.error(state.base_pose)
+            world = planned.acceleration + gains_d * (planned.rates - rates) + gains_p * planned.error(state.base_pose)
             base_follow = to_world.T @ world if self._unicycle else world
         return {
             'jac': jac[rows],

@@ -148,9 +148,10 @@ class ResolverPeriod:
         self._planned: SafetyResult | None = None  # the safety stage's answer of the cycle's plan
 
     # ------------------------------------------------------------------ inputs
-    def goal(self, frame: str, pose: ArrayLike, now: float) -> list[LogEvent]:
-        """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``, received at ``now`` [s]."""
-        return self.targets.goal(frame, pose, self.latest.base_pose(now))
+    def goal(self, frame: str, pose: ArrayLike, now: float, planned_base=None) -> list[LogEvent]:
+        """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``, received at ``now`` [s], with
+        where a followed plan left the base, or None (:meth:`TargetManager.goal`)."""
+        return self.targets.goal(frame, pose, self.latest.base_pose(now), planned_base)
 
     def trajectory_point(
         self, frame: str, pose, velocity, acceleration, now: float, planned_base=None

@@ -206,19 +206,41 @@ class TargetManager:
         self.tracking = False
         return [LogEvent('rejected', f'rejected {topic}: {reason}; holding still')]
 
-    def goal(self, frame, pose, base=None) -> list[LogEvent]:
+    def _planned_base(self, planned_base) -> tuple[BaseReference | None, str]:
+        """(a followed plan's base (pose, rates, accelerations) as a :class:`BaseReference`, or
+        None when there is none; '' or why it is refused)."""
+        if planned_base is None:
+            return None, ''
+        values = [np.asarray(v, dtype=float) for v in planned_base]
+        if len(values) != 3 or any(v.shape != (3,) for v in values):
+            return None, 'a planned base needs a pose (x, y, θ), its rates and accelerations'
+        if not all(np.all(np.isfinite(v)) for v in values):
+            return None, 'non-finite values of the planned base'
+        if (
+            float(np.max(np.abs(values[0][:2]))) > self.max_goal_distance
+            or float(np.max(np.abs(np.concatenate(values[1:])))) > MAX_REFERENCE_RATE
+        ):
+            return None, 'planned base beyond max_goal_distance, or its rates beyond 1e3'
+        return BaseReference(*values), ''
+
+    def goal(self, frame, pose, base=None, planned_base=None) -> list[LogEvent]:
         """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``; ``base`` the base's pose
-        (x, y, θ) while it is known (a goal inside the body is rejected then), else None."""
+        (x, y, θ) while it is known (a goal inside the body is rejected then), else None;
+        ``planned_base`` where a followed plan left the base for the final approach
+        (:meth:`trajectory_point`), or None."""
         values = np.asarray(pose, dtype=float)
         quat, reason, events = check_goal(
             frame, values, self.world_frame, self.max_goal_distance, self.workspace, base, self.obstacles
         )
         if quat is None:
             return events + self.reject(reason)
+        planned, why = self._planned_base(planned_base)
+        if why:
+            return events + self.reject(why)
         key = goal_key(values[:3], quat)
         if key == self._goal_key:
             return events  # the same goal again (a sequencer re-publishing it)
-        self.target = PoseTarget(values[:3], matrix_from_quaternion(quat))
+        self.target = PoseTarget(values[:3], matrix_from_quaternion(quat), base=planned)
         self._goal_key = key
         self.tracking = False
         self._start()
@@ -248,19 +270,9 @@ class TargetManager:
         impossible = self.workspace.impossible(pose[:3], base, self.obstacles)
         if impossible:
             return self.reject(f'position {pose[:3].tolist()}: {impossible}', REFERENCE)
-        planned = None
-        if planned_base is not None:
-            values = [np.asarray(v, dtype=float) for v in planned_base]
-            if len(values) != 3 or any(v.shape != (3,) for v in values):
-                return self.reject('a planned base needs a pose (x, y, θ), its rates and accelerations', REFERENCE)
-            if not all(np.all(np.isfinite(v)) for v in values):
-                return self.reject('non-finite values of the planned base', REFERENCE)
-            if (
-                float(np.max(np.abs(values[0][:2]))) > self.max_goal_distance
-                or float(np.max(np.abs(np.concatenate(values[1:])))) > MAX_REFERENCE_RATE
-            ):
-                return self.reject('planned base beyond max_goal_distance, or its rates beyond 1e3', REFERENCE)
-            planned = BaseReference(*values)
+        planned, why = self._planned_base(planned_base)
+        if why:
+            return self.reject(why, REFERENCE)
         quat, events = checked_quaternion(pose[3:], '/' + REFERENCE)
         if quat is None:
             return events + self.reject('zero quaternion', REFERENCE)
