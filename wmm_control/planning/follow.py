@@ -27,7 +27,9 @@ So the point waits for the end effector, which every method servoes to it, and s
 base down to ``base_floor`` of the pace, not to a stop: a method that moves the end effector
 partly with the arm (task sharing, or any whole-body one whose share of the base lags, as a
 steerable base's does while it re-steers) does not bring its base back onto the plan once the
-end effector is on its point, and a point that waited for it would wait for ever. (Stopping
+end effector is on its point, given the point alone, and a point that waited for it would wait
+for ever (with ``hold_base`` it is pulled back, but only in what the end effector's task leaves
+free). (Stopping
 the clock, and so stalling and planning again, once the base lags two leads behind converged
 fewer runs: `panda_diff`'s base, which cannot move sideways, lags that far on most paths.) ``r`` rises
 towards ``r*`` by at most ``rate_slew`` per second (the point does not start at once) and falls
