@@ -171,7 +171,9 @@ class ClosedLoop:
         period, now = self.cycle.resolver_period, self.world.time
         pose = np.concatenate((target.position, quaternion_from_matrix(target.rotation)))
         base = target.base
-        planned = None if base is None else (base.pose, base.rates, base.acceleration)
+        planned = None
+        if base is not None:
+            planned = (base.pose, base.rates, base.acceleration) + (() if base.arm is None else (base.arm,))
         if tracking:
             self.events += period.trajectory_point(
                 self.world_frame, pose, target.velocity, target.acceleration, now, planned

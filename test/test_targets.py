@@ -167,6 +167,8 @@ def test_a_bad_trajectory_point_is_rejected(targets, pose, velocity, reason):
         ((np.array((0.3, 0.1, 0.2)), np.array((1e4, 0.0, 0.0)), np.zeros(3)), 'its rates beyond 1e3'),
         ((np.array((80.0, 0.1, 0.2)), np.zeros(3), np.zeros(3)), 'planned base beyond max_goal_distance'),
         ((np.zeros(2), np.zeros(3), np.zeros(3)), 'a planned base needs a pose'),
+        ((np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(6)), 'a planned arm posture needs 7 joint positions'),
+        ((np.zeros(3), np.zeros(3), np.zeros(3), np.full(7, math.nan)), 'non-finite values of the planned base'),
     ],
 )
 def test_a_followed_plan_s_base_comes_with_its_point_checked_as_the_point_is(targets, planned, reason):

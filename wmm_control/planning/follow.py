@@ -329,7 +329,7 @@ class PlanFollower:
         planned_base = None
         if p.hold_base and point.base is not None:  # the planned base, slowed as the point is
             planned_base = BaseReference(
-                point.base.pose, self._rate * point.base.rates, self._rate**2 * point.base.acceleration
+                point.base.pose, self._rate * point.base.rates, self._rate**2 * point.base.acceleration, point.base.arm
             )
         target = PoseTarget(
             point.position,

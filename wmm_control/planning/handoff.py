@@ -11,9 +11,9 @@ rigidly by the base: at each sample k of the :class:`~wmm_control.planning.BaseT
   effector);
 * acceleration: the forward difference of those twists over the period (zero at the last
   sample, where the base has stopped);
-* base: the planned base pose itself, its world rates and their forward difference
-  (:class:`~wmm_control.resolvers.interface.BaseReference`): the methods hold the base to the
-  plan below the end effector's task.
+* base: the planned base pose itself, its world rates and their forward difference, and the
+  travel posture (:class:`~wmm_control.resolvers.interface.BaseReference`): the methods hold
+  the base to the plan below the end effector's task.
 
 These are ``/ee_reference`` points: every method tracks them as it tracks any trajectory, with
 its safety stage on, and after the last one the resolver is given the goal itself for the final
@@ -58,7 +58,8 @@ class Handoff:
     @classmethod
     def of(cls, model: KinematicModel, trajectory: BaseTrajectory, q_travel: ArrayLike) -> Handoff:
         """The hand-off of ``trajectory`` with the arm of ``model``'s robot at ``q_travel``."""
-        model.update(np.zeros(3), np.asarray(q_travel, dtype=float))
+        travel = np.asarray(q_travel, dtype=float)
+        model.update(np.zeros(3), travel)
         offset, rotation = (np.asarray(v, dtype=float) for v in model.ee_placement_world())
         twists = []
         placements = []
@@ -77,7 +78,7 @@ class Handoff:
         base_acceleration = np.zeros_like(base_rates)
         base_acceleration[:-1] = np.diff(base_rates, axis=0) / trajectory.dt
         points = tuple(
-            PoseTarget(p, r, velocity=v, acceleration=a, base=BaseReference(pose, rate, base_a))
+            PoseTarget(p, r, velocity=v, acceleration=a, base=BaseReference(pose, rate, base_a, travel))
             for (p, r), v, a, pose, rate, base_a in zip(
                 placements, velocity, acceleration, base_poses, base_rates, base_acceleration
             )

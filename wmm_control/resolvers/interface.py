@@ -106,6 +106,8 @@ class BaseReference:
         pose: the planned base pose (x, y, θ) in the world [m, m, rad]. Shape (3,).
         rates: its planned world rates (ẋ, ẏ, θ̇) [m/s, m/s, rad/s]. Shape (3,).
         acceleration: its planned world accelerations (ẍ, ÿ, θ̈) [m/s², m/s², rad/s²]. Shape (3,).
+        arm: the arm's posture the plan assumed with it (its travel posture) [rad or m], or None
+            (the final approach: the posture is the method's to find). Shape (n,).
 
     Raises:
         ShapeError, NonFiniteError: a wrong size or a NaN/inf entry.
@@ -114,8 +116,11 @@ class BaseReference:
     pose: np.ndarray
     rates: np.ndarray = field(default_factory=lambda: np.zeros(3))
     acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    arm: np.ndarray | None = None
 
     def __post_init__(self):
+        if self.arm is not None:
+            object.__setattr__(self, 'arm', as_finite_vector(self.arm, None, 'base reference arm posture'))
         object.__setattr__(self, 'pose', as_finite_vector(self.pose, 3, 'base reference pose'))
         object.__setattr__(self, 'rates', as_finite_vector(self.rates, 3, 'base reference rates'))
         object.__setattr__(self, 'acceleration', as_finite_vector(self.acceleration, 3, 'base reference acceleration'))

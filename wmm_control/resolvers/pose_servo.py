@@ -366,14 +366,22 @@ class PoseServoResolver(Resolver):
         ).qdd
 
     # ------------------------------------------------------------------ null space
-    def base_pull(self, state: RobotState, reference: BaseReference) -> np.ndarray:
+    #: whether a followed plan's pull includes its arm posture (a method without a posture task
+    #: of its own; :meth:`base_pull`)
+    pulls_arm_to_plan = False
+
+    def base_pull(self, state: RobotState, reference: BaseReference, arm: bool = False) -> np.ndarray:
         """The secondary task of a followed plan's base (module docstring): ``z`` over u, the
         base's entries ``ᵇR_w (ξ̇_plan + λ_p (ξ_plan − ξ))`` (eq 12's law on the base's planned
-        pose, its rates as feedforward) on the axes it follows, the arm's zero. Shape (n_b + n,)."""
+        pose, its rates as feedforward) on the axes it follows; the arm's ``λ_p (q_a,plan − q_a)``
+        with ``arm`` and the plan's arm posture given (the travel posture), else zero.
+        Shape (n_b + n,)."""
         theta = float(state.base_pose[2])
         world = reference.rates + self.params.lambda_p * reference.error(state.base_pose)
         z = np.zeros(self.n)
         z[: self.n_base] = twist_to_base(theta, world)[list(self.base_axes)]
+        if arm and reference.arm is not None and reference.arm.shape == (self.n_arm,):
+            z[self.n_base :] = self.params.lambda_p * (reference.arm - state.q_arm)
         return z
 
     def null_motion(self, jac: np.ndarray, task: np.ndarray, q_arm: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -422,7 +430,7 @@ class PoseServoResolver(Resolver):
         """
         t0 = time.perf_counter()
         jac, p_ref, e_pos, angle = self.task_reference(state, target)
-        pull = None if target.base is None else self.base_pull(state, target.base)
+        pull = None if target.base is None else self.base_pull(state, target.base, self.pulls_arm_to_plan)
         task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull)
         nb = self.n_base
         self._position[nb:] = state.q_arm

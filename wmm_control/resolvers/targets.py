@@ -207,18 +207,20 @@ class TargetManager:
         return [LogEvent('rejected', f'rejected {topic}: {reason}; holding still')]
 
     def _planned_base(self, planned_base) -> tuple[BaseReference | None, str]:
-        """(a followed plan's base (pose, rates, accelerations) as a :class:`BaseReference`, or
-        None when there is none; '' or why it is refused)."""
+        """(a followed plan's base (pose, rates, accelerations[, the arm's travel posture]) as a
+        :class:`BaseReference`, or None when there is none; '' or why it is refused)."""
         if planned_base is None:
             return None, ''
         values = [np.asarray(v, dtype=float) for v in planned_base]
-        if len(values) != 3 or any(v.shape != (3,) for v in values):
+        if len(values) not in (3, 4) or any(v.shape != (3,) for v in values[:3]):
             return None, 'a planned base needs a pose (x, y, θ), its rates and accelerations'
+        if len(values) == 4 and values[3].shape != (self.workspace.n_arm,):
+            return None, f'a planned arm posture needs {self.workspace.n_arm} joint positions'
         if not all(np.all(np.isfinite(v)) for v in values):
             return None, 'non-finite values of the planned base'
         if (
             float(np.max(np.abs(values[0][:2]))) > self.max_goal_distance
-            or float(np.max(np.abs(np.concatenate(values[1:])))) > MAX_REFERENCE_RATE
+            or float(np.max(np.abs(np.concatenate(values[1:3])))) > MAX_REFERENCE_RATE
         ):
             return None, 'planned base beyond max_goal_distance, or its rates beyond 1e3'
         return BaseReference(*values), ''
