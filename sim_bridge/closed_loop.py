@@ -166,14 +166,20 @@ class ClosedLoop:
 
     def submit(self, target: PoseTarget, tracking: bool = False) -> None:
         """Give the cycle ``target``: a goal, or with ``tracking`` a point of a trajectory (its
-        velocity and acceleration the feedforward), as ``/goal_pose`` and ``/ee_reference``
-        would carry it."""
+        velocity and acceleration the feedforward, and a followed plan's base with it), as
+        ``/goal_pose`` and ``/ee_reference`` would carry it."""
         period, now = self.cycle.resolver_period, self.world.time
         pose = np.concatenate((target.position, quaternion_from_matrix(target.rotation)))
+        base = target.base
+        planned = None
+        if base is not None:
+            planned = (base.pose, base.rates, base.acceleration) + (() if base.arm is None else (base.arm,))
         if tracking:
-            self.events += period.trajectory_point(self.world_frame, pose, target.velocity, target.acceleration, now)
+            self.events += period.trajectory_point(
+                self.world_frame, pose, target.velocity, target.acceleration, now, planned
+            )
         else:
-            self.events += period.goal(self.world_frame, pose, now)
+            self.events += period.goal(self.world_frame, pose, now, planned)
 
     def step(self, target: PoseTarget | None = None, tracking: bool | None = None) -> CycleRecord:
         """One period, towards ``target`` (:class:`~wmm_control.resolvers.PoseTarget`, given

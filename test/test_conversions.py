@@ -16,7 +16,9 @@ from wmm_control.nodes.conversions import (
     planar_covariance,
     pose_stamped,
     pose_rotation,
+    planned_base_values,
     pose_values,
+    reference_message,
     set_planar_pose,
     set_planar_twist,
     set_pose,
@@ -100,3 +102,26 @@ def test_a_pose_stamped_carries_its_stamp_frame_and_pose():
     msg = pose_stamped(stamp_from_seconds(2.5), 'world', (1.0, 2.0, 3.0), (0.0, 0.0, 1.0, 0.0))
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id) == (2, 500_000_000, 'world')
     np.testing.assert_allclose(pose_values(msg.pose), [1.0, 2.0, 3.0, 0.0, 0.0, 1.0, 0.0])
+
+
+def test_an_ee_reference_carries_a_followed_plan_s_base_and_gives_it_back():
+    from wmm_control.resolvers.interface import BaseReference, PoseTarget
+
+    base = BaseReference(np.array((1.2, -0.4, 2.9)), np.array((0.3, -0.1, 0.5)), np.array((0.05, 0.0, -0.2)))
+    target = PoseTarget(np.array((1.5, 0.3, 1.0)), matrix_from_rpy((0.1, 0.2, 0.3)), velocity=np.ones(6), base=base)
+    msg = reference_message(target, 'world', stamp_from_seconds(1.5), 0.25)
+    assert list(msg.joint_names) == ['end_effector', 'base'] and len(msg.points[0].transforms) == 2
+    pose, rates, acceleration = planned_base_values(msg)
+    assert (
+        np.allclose(pose, base.pose) and np.allclose(rates, base.rates) and np.allclose(acceleration, base.acceleration)
+    )
+    # the end effector's point is as it was
+    assert np.allclose(pose_values(msg.points[0].transforms[0])[:3], target.position)
+    assert np.allclose(twist_values(msg.points[0].velocities[0]), 1.0)
+    # without a base: one joint, and none given back
+    alone = reference_message(PoseTarget(target.position, target.rotation), 'world', stamp_from_seconds(1.5), 0.25)
+    assert list(alone.joint_names) == ['end_effector'] and planned_base_values(alone) is None
+    # a zero quaternion gives a heading of NaN, which the resolver rejects as non-finite
+    msg.points[0].transforms[1].rotation.w = 0.0
+    msg.points[0].transforms[1].rotation.z = 0.0
+    assert math.isnan(planned_base_values(msg)[0][2])

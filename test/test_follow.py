@@ -77,9 +77,17 @@ def test_the_clock_waits_for_a_base_that_lags_and_catches_up_when_it_follows(pla
         assert 0.0 <= step.progress <= 1.0
     assert steps * dt > handoff.duration - waited - dt
     assert follower.rate == pytest.approx(1.0)
-    # the plan done: the goal, for good
-    assert step.target is goal and step.progress == 1.0
-    assert follower.step(dt, base).target is goal and follower.remaining_poses().shape == (0, 3)
+    # the plan done: the goal, for good, with the plan's last base pose (the stance) held at rest
+    assert step.progress == 1.0 and follower.remaining_poses().shape == (0, 3)
+    for target in (step.target, follower.step(dt, base).target):
+        assert np.array_equal(target.position, goal.position) and np.array_equal(target.rotation, goal.rotation)
+        assert not np.any(target.velocity) and np.allclose(target.base.pose, handoff.base_poses[-1])
+        assert not np.any(target.base.rates) and not np.any(target.base.acceleration)
+    # without hold_base, the goal itself
+    alone = PlanFollower(handoff, goal, FollowParams(hold_base=False))
+    while (step := alone.step(dt, alone.planned_pose())).state is not FollowState.APPROACH:
+        pass
+    assert step.target is goal
 
 
 def _ee(handoff, k):

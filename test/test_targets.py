@@ -160,6 +160,41 @@ def test_a_bad_trajectory_point_is_rejected(targets, pose, velocity, reason):
     assert targets.target is None and not targets.tracking
 
 
+@pytest.mark.parametrize(
+    'planned, reason',
+    [
+        ((np.array((0.3, math.nan, 0.2)), np.zeros(3), np.zeros(3)), 'non-finite values of the planned base'),
+        ((np.array((0.3, 0.1, 0.2)), np.array((1e4, 0.0, 0.0)), np.zeros(3)), 'its rates beyond 1e3'),
+        ((np.array((80.0, 0.1, 0.2)), np.zeros(3), np.zeros(3)), 'planned base beyond max_goal_distance'),
+        ((np.zeros(2), np.zeros(3), np.zeros(3)), 'a planned base needs a pose'),
+        ((np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(6)), 'a planned arm posture needs 7 joint positions'),
+        ((np.zeros(3), np.zeros(3), np.zeros(3), np.full(7, math.nan)), 'non-finite values of the planned base'),
+    ],
+)
+def test_a_followed_plan_s_base_comes_with_its_point_checked_as_the_point_is(targets, planned, reason):
+    good = (np.array((0.3, 0.1, 0.2)), np.array((0.5, 0.0, 0.1)), np.zeros(3))
+    targets.trajectory_point('world', [1.5, 0.3, 1.0, *IDENTITY], np.zeros(6), np.zeros(6), 1.0, planned_base=good)
+    assert np.allclose(targets.target.base.pose, good[0]) and np.allclose(targets.target.base.rates, good[1])
+    events = targets.trajectory_point(
+        'world', [1.5, 0.3, 1.0, *IDENTITY], np.zeros(6), np.zeros(6), 1.1, planned_base=planned
+    )
+    assert kinds(events) == ['rejected'] and reason in events[0].message
+    assert 'nan' not in events[0].message.lower() and targets.target is None
+    # a point without one: the target has none (the methods as the papers have them)
+    point(targets, 1.2)
+    assert targets.target.base is None
+
+
+def test_a_goal_after_a_plan_holds_the_stance_as_its_base(targets):
+    stance = (np.array((0.3, 0.1, 0.2)), np.zeros(3), np.zeros(3))
+    assert kinds(targets.goal('world', [1.5, 0.3, 1.0, *IDENTITY], None, planned_base=stance)) == ['accepted']
+    assert np.allclose(targets.target.base.pose, stance[0])
+    bad = (np.array((0.3, math.inf, 0.2)), np.zeros(3), np.zeros(3))
+    events = targets.goal('world', [1.5, 0.4, 1.0, *IDENTITY], None, planned_base=bad)
+    assert kinds(events) == ['rejected'] and 'non-finite values of the planned base' in events[0].message
+    assert kinds(goal(targets)) == ['accepted'] and targets.target.base is None
+
+
 def test_a_goal_is_reached_once_and_a_stall_is_told_once_until_progress(targets):
     goal(targets)
     events = [targets.judge(diag(0.5 * 0.5**k)) for k in range(12)]

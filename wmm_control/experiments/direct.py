@@ -4,6 +4,7 @@ on a :class:`~sim_bridge.world.SimWorld`, no ROS in between, logged as a
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 from sim_bridge.closed_loop import ClosedLoop
@@ -43,7 +44,8 @@ def run_scenario(
             (not those of a plan's points): the run ends early when it returns True.
         follower: a plan to follow first (:class:`~wmm_control.planning.follow.PlanFollower`):
             its point every period, at the pace of the measured base and end effector, from the
-            start; the scenario's goals once it is in its final approach.
+            start; the scenario's goals once it is in its final approach, with the plan's
+            last base pose held (:attr:`~wmm_control.planning.follow.PlanFollower.approach`).
         replan: with ``follower``, ``replan(base_pose, q_arm)``, called when the follower
             stalls, with the measured base pose (x, y, θ) and arm joints: the follower of a new
             plan from there, or None when there is none (the run ends).
@@ -64,6 +66,7 @@ def run_scenario(
     t0 = time.perf_counter()
     submitted = None
     replans = 0
+    approach_base = None
     with steady_heap():  # no full pass of the garbage collector walks the models mid-run
         for _ in range(n):
             gi = scenario.goal_index(world.time)
@@ -82,6 +85,8 @@ def run_scenario(
                         if follower is None:  # no way from here
                             break
                         following = follower.step(0.0, pose)
+                if following is not None and following.state is FollowState.APPROACH:
+                    approach_base = following.target.base  # the stance held in the final approach
                 if following is None or following.state is FollowState.APPROACH:
                     follower = following = None
             if following is not None:
@@ -89,7 +94,12 @@ def run_scenario(
             elif reference is not None:  # a trajectory: a point every period, as goal_sequencer publishes it
                 rec = loop.step(scenario.target(world.time, reference), tracking=True)
             else:  # goals: each when its time comes, as goal_sequencer publishes them
-                rec = loop.step(scenario.target(world.time, reference) if gi != submitted else None, tracking=False)
+                goal = None
+                if gi != submitted:
+                    goal = scenario.target(world.time, reference)
+                    if approach_base is not None:  # after a plan: its approach holds the stance
+                        goal = replace(goal, base=approach_base)
+                rec = loop.step(goal, tracking=False)
                 submitted = gi
             cmd = rec.command
             if cmd is None:  # the target was refused (loop.events say why): the robot held, as the

@@ -51,10 +51,12 @@ class Workspace:
         floor_z: world height of the floor [m].
         max_height: no end-effector position is higher [m] (world z; the base is planar).
         boxes: ``(name, rotation (3, 3), centre (3,), half extents (3,))`` in the base frame.
+        n_arm: the arm's number of joints (of a posture given with a target).
     """
 
     def __init__(self, model: KinematicModel) -> None:
         self.floor_z = float(model.config.ground_z)
+        self.n_arm = int(model.n_arm)
         pm = model.model
         arm = list(range(2, pm.njoints))
         ee = pm.frames[model.frame_id(model.ee_frame)]

@@ -34,7 +34,9 @@ __all__ = [
     'twist_stamped',
     'pose_stamped',
     'target_pose_stamped',
+    'REFERENCE_JOINTS',
     'reference_message',
+    'planned_base_values',
     'split_seconds',
     'stamp_from_seconds',
     'planar_covariance',
@@ -161,26 +163,63 @@ def _twist(values) -> Twist:
     return msg
 
 
+#: The ``joint_names`` of an ``/ee_reference`` message: the end effector, then, when a plan is
+#: followed, its planned base (:func:`reference_message`).
+REFERENCE_JOINTS = ('end_effector', 'base')
+
+
 def reference_message(target, frame: str, stamp: Time, t: float) -> MultiDOFJointTrajectory:
     """A one-point ``MultiDOFJointTrajectory`` (an ``/ee_reference`` message) of a
     :class:`~wmm_control.resolvers.PoseTarget` at time ``t`` [s] along its trajectory:
     ``transforms[0]`` its pose, ``velocities[0]`` and ``accelerations[0]`` its twist and
-    acceleration (linear, angular; world axes)."""
+    acceleration (linear, angular; world axes); with a followed plan's base (``target.base``)
+    a second joint ``base``: its planned pose (x, y, 0; yaw), its world rates (ẋ, ẏ in linear,
+    θ̇ in angular z) and accelerations (:func:`planned_base_values`)."""
     from wmm_control.geometry import quaternion_from_matrix
 
     msg = MultiDOFJointTrajectory()
     msg.header.stamp = stamp
     msg.header.frame_id = frame
-    msg.joint_names = ['end_effector']
+    msg.joint_names = list(REFERENCE_JOINTS[:1])
     point = MultiDOFJointTrajectoryPoint()
     tf = Transform()
     set_pose(tf, target.position, quaternion_from_matrix(target.rotation))
     point.transforms = [tf]
     point.velocities = [_twist(target.velocity)]
     point.accelerations = [_twist(target.acceleration)]
+    if target.base is not None:
+        msg.joint_names = list(REFERENCE_JOINTS)
+        base = Transform()
+        set_planar_pose(base, target.base.pose)
+        rates, acceleration = Twist(), Twist()
+        set_planar_twist(rates, target.base.rates)
+        set_planar_twist(acceleration, target.base.acceleration)
+        point.transforms.append(base)
+        point.velocities.append(rates)
+        point.accelerations.append(acceleration)
     point.time_from_start = Duration(**split_seconds(t))
     msg.points = [point]
     return msg
+
+
+def planned_base_values(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(pose (x, y, θ), world rates, world accelerations) of the planned base of an
+    ``/ee_reference`` message's first point (its joint ``base``, :func:`reference_message`), or
+    None when it has none. Missing rates or accelerations are zero."""
+    from wmm_control.geometry import unit_quaternion, yaw_from_quaternion
+
+    if not msg.points or list(msg.joint_names[:2]) != list(REFERENCE_JOINTS):
+        return None
+    point = msg.points[0]
+    if len(point.transforms) < 2:
+        return None
+    values = pose_values(point.transforms[1])
+    unit = unit_quaternion(values[3:])[0] if np.all(np.isfinite(values[3:])) else None
+    yaw = math.nan if unit is None else yaw_from_quaternion(unit)  # NaN: rejected as non-finite
+    pose = np.array([values[0], values[1], yaw])
+    rates = planar_twist(point.velocities[1]) if len(point.velocities) > 1 else np.zeros(3)
+    acceleration = planar_twist(point.accelerations[1]) if len(point.accelerations) > 1 else np.zeros(3)
+    return pose, rates, acceleration
 
 
 def split_seconds(seconds: float) -> dict:

@@ -61,6 +61,7 @@ from wmm_control.nodes.conversions import (
     float_array,
     odometry_values,
     planar_twist,
+    planned_base_values,
     pose_values,
     twist_stamped,
     twist_values,
@@ -211,7 +212,8 @@ class RedundancyResolverNode(Node):
             pose = pose_values(point.transforms[0])
             vel = twist_values(point.velocities[0]) if point.velocities else np.zeros(6)
             acc = twist_values(point.accelerations[0]) if point.accelerations else np.zeros(6)
-        self._log(self.period.trajectory_point(msg.header.frame_id, pose, vel, acc, self._now()))
+        planned = planned_base_values(msg)  # a followed plan's base, or None
+        self._log(self.period.trajectory_point(msg.header.frame_id, pose, vel, acc, self._now(), planned))
 
     def _set_obstacles(self):
         self.period.set_obstacles(self.obstacles.obstacles)

@@ -27,7 +27,9 @@ So the point waits for the end effector, which every method servoes to it, and s
 base down to ``base_floor`` of the pace, not to a stop: a method that moves the end effector
 partly with the arm (task sharing, or any whole-body one whose share of the base lags, as a
 steerable base's does while it re-steers) does not bring its base back onto the plan once the
-end effector is on its point, and a point that waited for it would wait for ever. (Stopping
+end effector is on its point, given the point alone, and a point that waited for it would wait
+for ever (with ``hold_base`` it is pulled back, but only in what the end effector's task leaves
+free). (Stopping
 the clock, and so stalling and planning again, once the base lags two leads behind converged
 fewer runs: `panda_diff`'s base, which cannot move sideways, lags that far on most paths.) ``r`` rises
 towards ``r*`` by at most ``rate_slew`` per second (the point does not start at once) and falls
@@ -37,13 +39,23 @@ left to the lead when the plan's speed over a period is within ``(1 − slow_fro
 behind the point it is given, save what its own last period's motion adds. The point's twist is
 the planned one times ``r``, its acceleration times ``r²`` (the planned motion slowed down).
 
+The point carries the planned base pose of its sample (``hold_base``,
+:class:`~wmm_control.resolvers.interface.BaseReference`; its rates times ``r``, accelerations
+times ``r²``): every method pulls the base towards it below the end effector's task, so the
+base is held to the plan rather than left where the method's sharing of the motion puts it
+(``docs/methods.md``, the planner's section).
+
 A base that is ahead of the plan (it cut a corner, or the planned pose at ``s`` is behind it)
 pulls the clock forward: the follower keeps the last planned pose the measured base has passed
 (the nearest planned pose, in the lag's metric, from the last one passed up to ``lookahead``
 [s] ahead of ``s``), and ``s`` never lags it.
 
 Once ``s`` reaches the plan's end the target is the goal itself (:attr:`FollowState.APPROACH`):
-the method's final whole-body approach. While following, the follower is
+the method's final whole-body approach, with the plan's last base pose (the stance, from which
+the goal is reachable with margin from the obstacles) held as the base's reference
+(:attr:`PlanFollower.approach`; with ``hold_base``): a method whose secondary task would move
+the base (task sharing's posture pull) otherwise drives it from the stance into the safety
+stage's hold. While following, the follower is
 :attr:`FollowState.STALLED` when for ``stall_time`` the planned pose at ``s`` has not moved on
 by ``stall_distance`` or turned by ``stall_angle``, and the measured base has not come that
 much nearer to it (in distance or in heading): the robot is held off the plan (by an obstacle
@@ -57,7 +69,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -67,7 +79,7 @@ from wmm_control.errors import ConfigError
 from wmm_control.geometry import norm, rotation_angle, wrap_angle
 from wmm_control.planning.handoff import Handoff
 from wmm_control.planning.timing import LinearPiece
-from wmm_control.resolvers.interface import PoseTarget
+from wmm_control.resolvers.interface import BaseReference, PoseTarget
 
 __all__ = ['FollowParams', 'FollowState', 'FollowStep', 'PlanFollower', 'MAX_REPLANS']
 
@@ -94,6 +106,8 @@ class FollowParams:
         stall_time: [s] without progress (module docstring) before the follower is stalled.
         stall_distance: [m] of motion that is progress.
         stall_angle: [rad] of turn that is progress.
+        hold_base: give the point's planned base with it (module docstring): the methods
+            hold the base to the plan; False gives the end effector's point alone.
 
     Raises:
         ConfigError: a value out of its range.
@@ -110,6 +124,7 @@ class FollowParams:
     stall_time: float = 5.0
     stall_distance: float = 0.02
     stall_angle: float = 0.05
+    hold_base: bool = True
 
     def __post_init__(self) -> None:
         positive = (
@@ -130,6 +145,8 @@ class FollowParams:
             raise ConfigError(f'FollowParams.lookahead must be a finite number >= 0 [s], got {self.lookahead!r}')
         if not (isinstance(self.slow_from, (int, float)) and 0.0 <= self.slow_from < 1.0):
             raise ConfigError(f'FollowParams.slow_from must be in [0, 1), got {self.slow_from!r}')
+        if not isinstance(self.hold_base, bool):
+            raise ConfigError(f'FollowParams.hold_base must be True or False, got {self.hold_base!r}')
         if not (isinstance(self.base_floor, (int, float)) and 0.0 <= self.base_floor <= 1.0):
             raise ConfigError(f'FollowParams.base_floor must be in [0, 1], got {self.base_floor!r}')
 
@@ -183,6 +200,15 @@ class PlanFollower:
         self._idle = 0.0  # [s] without progress
         self._anchor_plan: np.ndarray | None = None  # the planned pose at the last progress
         self._anchor_lag = (math.inf, math.inf)  # the base's lag (distance, angle) then
+
+    @property
+    def approach(self) -> PoseTarget:
+        """The target of the final approach: the goal, with the plan's last base pose (the
+        stance, at rest) as its base when ``hold_base`` (module docstring)."""
+        last = self.handoff.points[-1].base
+        if not self.params.hold_base or last is None:
+            return self.goal
+        return replace(self.goal, base=BaseReference(last.pose))
 
     @property
     def clock(self) -> float:
@@ -264,7 +290,7 @@ class PlanFollower:
         p, handoff = self.params, self.handoff
         end = handoff.duration
         if self._clock >= end:
-            return FollowStep(self.goal, FollowState.APPROACH, 1.0)
+            return FollowStep(self.approach, FollowState.APPROACH, 1.0)
         # the base ahead of the plan pulls the clock forward
         given = self._index(self._clock)  # the point given last period
         window = handoff.base_poses[self._passed : self._index(self._clock + p.lookahead) + 1]
@@ -288,7 +314,7 @@ class PlanFollower:
                 self._rate = (clock - self._clock) / dt if dt > 0.0 else 0.0
         self._clock = clock
         if self._clock >= end:
-            return FollowStep(self.goal, FollowState.APPROACH, 1.0)
+            return FollowStep(self.approach, FollowState.APPROACH, 1.0)
         # progress since the last: the planned pose moved on, or the base came nearer to it
         planned = self.planned_pose(self._clock)
         lag = self._apart(planned, base)
@@ -300,11 +326,17 @@ class PlanFollower:
         else:
             self._idle += dt
         point = handoff.points[self._index(self._clock)]
+        planned_base = None
+        if p.hold_base and point.base is not None:  # the planned base, slowed as the point is
+            planned_base = BaseReference(
+                point.base.pose, self._rate * point.base.rates, self._rate**2 * point.base.acceleration, point.base.arm
+            )
         target = PoseTarget(
             point.position,
             point.rotation,
             velocity=self._rate * point.velocity,
             acceleration=self._rate**2 * point.acceleration,
+            base=planned_base,
         )
         state = FollowState.STALLED if self._idle >= p.stall_time else FollowState.FOLLOWING
         return FollowStep(target, state, self._clock / end)

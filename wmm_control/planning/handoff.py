@@ -10,7 +10,10 @@ rigidly by the base: at each sample k of the :class:`~wmm_control.planning.BaseT
   (ẋ, ẏ, θ̇) the trajectory's world rates at the sample (the base's twist carried to the end
   effector);
 * acceleration: the forward difference of those twists over the period (zero at the last
-  sample, where the base has stopped).
+  sample, where the base has stopped);
+* base: the planned base pose itself, its world rates and their forward difference, and the
+  travel posture (:class:`~wmm_control.resolvers.interface.BaseReference`): the methods hold
+  the base to the plan below the end effector's task.
 
 These are ``/ee_reference`` points: every method tracks them as it tracks any trajectory, with
 its safety stage on, and after the last one the resolver is given the goal itself for the final
@@ -31,7 +34,7 @@ from numpy.typing import ArrayLike
 from wmm_control.geometry import rotation_z
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.planning.timing import BaseTrajectory
-from wmm_control.resolvers.interface import PoseTarget
+from wmm_control.resolvers.interface import BaseReference, PoseTarget
 
 __all__ = ['Handoff']
 
@@ -43,7 +46,8 @@ class Handoff:
     Attributes:
         dt: [s] the period of the samples.
         points: one :class:`~wmm_control.resolvers.PoseTarget` per sample of the base
-            trajectory, with its twist and acceleration (world axes).
+            trajectory, with its twist and acceleration (world axes) and its planned base
+            (``base``).
         base_poses: the planned base pose (x, y, θ) of each point [m, m, rad]. Shape (K, 3).
     """
 
@@ -54,7 +58,8 @@ class Handoff:
     @classmethod
     def of(cls, model: KinematicModel, trajectory: BaseTrajectory, q_travel: ArrayLike) -> Handoff:
         """The hand-off of ``trajectory`` with the arm of ``model``'s robot at ``q_travel``."""
-        model.update(np.zeros(3), np.asarray(q_travel, dtype=float))
+        travel = np.asarray(q_travel, dtype=float)
+        model.update(np.zeros(3), travel)
         offset, rotation = (np.asarray(v, dtype=float) for v in model.ee_placement_world())
         twists = []
         placements = []
@@ -68,10 +73,16 @@ class Handoff:
         velocity = np.array(twists)
         acceleration = np.zeros_like(velocity)
         acceleration[:-1] = np.diff(velocity, axis=0) / trajectory.dt
-        points = tuple(
-            PoseTarget(p, r, velocity=v, acceleration=a) for (p, r), v, a in zip(placements, velocity, acceleration)
-        )
         base_poses = np.array(trajectory.poses, dtype=float)
+        base_rates = np.array(trajectory.rates, dtype=float)
+        base_acceleration = np.zeros_like(base_rates)
+        base_acceleration[:-1] = np.diff(base_rates, axis=0) / trajectory.dt
+        points = tuple(
+            PoseTarget(p, r, velocity=v, acceleration=a, base=BaseReference(pose, rate, base_a, travel))
+            for (p, r), v, a, pose, rate, base_a in zip(
+                placements, velocity, acceleration, base_poses, base_rates, base_acceleration
+            )
+        )
         base_poses.flags.writeable = False
         return cls(float(trajectory.dt), points, base_poses)
 

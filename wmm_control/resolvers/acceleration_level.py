@@ -24,6 +24,13 @@ every step below is the same over u = (u_b, q̇_m)). Each period:
 A set-point target (zero velocity and acceleration) becomes a smooth trajectory
 (:class:`~wmm_control.resolvers.setpoint_trajectory.SetpointTrajectory`); a trajectory point
 is tracked as given.
+
+A followed plan's base (:class:`~wmm_control.resolvers.interface.BaseReference` on the target,
+not in the papers): eq (23)'s law on the base's planned pose,
+``ξ̈* = ξ̈_plan + K_d (ξ̇_plan − ξ̇) + K_p (ξ_plan − ξ)`` (world rates; the position gains on x and
+y, the orientation gains on θ; a differential base takes its part along its heading,
+``u̇_b* = Tᵀ ξ̈*``), is ``task['base_follow']`` (None without a plan), which each method gives
+the base in its own way (:mod:`~wmm_control.resolvers.amp`, :mod:`~wmm_control.resolvers.traditional`).
 """
 
 import time
@@ -146,7 +153,8 @@ class AccelerationResolver(Resolver):
             joint acceleration bounds (n_b + n,), ``brake_lower``/``brake_upper`` those of the
             braking before a position limit alone, ``qd`` (n_b + n,), ``position_error`` [m],
             ``orientation_error`` [rad], ``sigma`` σ_min of the arm's task rows, ``sigma_position``
-            that of its position rows.
+            that of its position rows, ``base_follow`` the base's accelerations towards a
+            followed plan's pose (n_b,) or None (module docstring).
         """
         p = self.params
         model = self.model
@@ -181,6 +189,13 @@ class AccelerationResolver(Resolver):
         sigma = model.sigma_min(self.params.rows)
         sigma_position = sigma if rows.stop == 3 else model.sigma_min('position')
         target_err = np.concatenate((target.position - pos, rotation_error(target.rotation, rot)))
+        base_follow = None
+        if target.base is not None:
+            planned = target.base
+            rates = to_world @ qd[:nb] if self._unicycle else qd[:3]
+            gains_p, gains_d = self._kp[[0, 1, 5]], self._kd[[0, 1, 5]]
+            world = planned.acceleration + gains_d * (planned.rates - rates) + gains_p * planned.error(state.base_pose)
+            base_follow = to_world.T @ world if self._unicycle else world
         return {
             'jac': jac[rows],
             'xdd': xdd[rows],
@@ -197,6 +212,7 @@ class AccelerationResolver(Resolver):
             'orientation_error': float(np.linalg.norm(target_err[3:])),
             'sigma': sigma,
             'sigma_position': sigma_position,
+            'base_follow': base_follow,
         }
 
     def manipulability_acceleration(self, qd: np.ndarray) -> np.ndarray:
@@ -282,8 +298,12 @@ class AccelerationResolver(Resolver):
         )
         return ResolverCommand(arm_velocity=qd[self.n_base :].copy(), base_twist=base.copy(), diagnostics=diag)
 
-    def _tertiary(self, task, qdd, active, active_pinv):
+    def _tertiary(self, task, qdd, active, active_pinv, follow=False):
         """Eqs (10)–(11): ``β P_A q̈_A`` with ``P_A = [I − ((I − S) P_N)⁺] P_N``, β keeping the bounds.
+
+        With ``follow``, a followed plan's base accelerations (``task['base_follow']``, less
+        the base's share of ``qdd``) join ``q̈_A`` (not in the paper); without manipulability
+        (``manipulability`` off) they are all of it.
 
         ``P_A`` is the orthogonal projector onto the motions that leave the task alone
         (``J x = 0``, the null space of ``P_N``) and move no joint outside the active set S
@@ -301,7 +321,10 @@ class AccelerationResolver(Resolver):
             (q̈_t (n_b + n,), β).
         """
         cols = np.flatnonzero(active)
-        q_a = self.manipulability_acceleration(task['qd'])[cols]
+        objective = self.manipulability_acceleration(task['qd']) if self.params.manipulability else np.zeros(self.n)
+        if follow:
+            objective[: self.n_base] += task['base_follow'] - qdd[: self.n_base]
+        q_a = objective[cols]
         q_t = np.zeros(self.n)
         q_t[cols] = q_a - active_pinv @ (task['jac'][:, cols] @ q_a)
         beta, _ = largest_step(qdd, q_t, task['lower'], task['upper'])

@@ -13,6 +13,14 @@ Each period (on top of :mod:`~wmm_control.resolvers.acceleration_level`):
    infeasible.
 3. The tertiary objective, eqs (10)–(13): the manipulability gradient projected by P_A,
    scaled by β ≤ 1 to keep the bounds.
+
+Following a plan (a :class:`~wmm_control.resolvers.interface.BaseReference` on the target; not
+in the paper, and nothing changes without one): the plan has already decided that the base
+moves, so while the base is out of the task its accelerations are those that track the planned
+base pose (``task['base_follow']``, eq (23)'s law on the base, within its bounds) instead of
+eq (15)'s stop, and the arm does the end effector's task around that motion, as it does around
+the stop. With the base in the task (step 2) the same accelerations join the tertiary
+objective, projected by P_A: what the task leaves free brings the base back onto the plan.
 """
 
 from dataclasses import dataclass
@@ -91,12 +99,14 @@ class AmpResolver(AccelerationResolver):
             return sigma
         return sigma + self.params.sigma_lookahead * min(sigma - last, 0.0) / self.params.dt
 
-    def _base_stop(self, task):
-        """Eq (15): the base's accelerations while it is out of the task: full braking to rest."""
+    def _base_out_of_task(self, task):
+        """The base's accelerations while it is out of the task: eq (15)'s full braking to
+        rest, or a followed plan's tracking (module docstring), within its bounds."""
         qd, lo, hi = task['qd'], task['lower'], task['upper']
         held = np.zeros(len(qd))
         nb = self.n_base
-        held[:nb] = np.clip(-qd[:nb] / self.params.dt, lo[:nb], hi[:nb])
+        wanted = -qd[:nb] / self.params.dt if task['base_follow'] is None else task['base_follow']
+        held[:nb] = np.clip(wanted, lo[:nb], hi[:nb])
         return held
 
     def _accelerations(self, task):
@@ -115,7 +125,7 @@ class AmpResolver(AccelerationResolver):
                 task['lower'],
                 task['upper'],
                 arm_only,
-                self._base_stop(task),
+                self._base_out_of_task(task),
                 p.rcond,
             )
             if sns.alpha < 1.0:
@@ -133,15 +143,18 @@ class AmpResolver(AccelerationResolver):
             )
         qdd, alpha, active, saturated = sns.qdd, sns.alpha, sns.active, sns.saturated
         beta = 1.0
-        if p.manipulability and sns.pinv is not None:
-            q_t, beta = self._tertiary(task, qdd, active, sns.pinv)
-            qdd = qdd + q_t
         base_on = bool(np.any(active[: self.n_base]))
-        mode = (
-            f'base active ({reason})'
-            if base_on
-            else ('base stopping' if np.any(task['qd'][: self.n_base]) else 'arm only')
-        )
+        follow = task['base_follow'] is not None and base_on
+        if (p.manipulability or follow) and sns.pinv is not None:
+            q_t, beta = self._tertiary(task, qdd, active, sns.pinv, follow)
+            qdd = qdd + q_t
+        if base_on:
+            mode = f'base active ({reason})'
+        elif task['base_follow'] is not None:
+            mode = 'base on the plan'
+        else:
+            mode = 'base stopping' if np.any(task['qd'][: self.n_base]) else 'arm only'
+
         return qdd, {
             'mode': mode,
             'psi': 0.0 if base_on else 1.0,

@@ -20,14 +20,22 @@ from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ShapeError
-from wmm_control.geometry import matrix_from_rpy
+from wmm_control.geometry import matrix_from_rpy, wrap_angle
 
 if TYPE_CHECKING:
     from wmm_control.kinematics import KinematicModel
     from wmm_control.kinematics.obstacles import Obstacle
     from wmm_control.resolvers.safety import SafetyStage
 
-__all__ = ['RobotState', 'PoseTarget', 'ResolverDiagnostics', 'ResolverCommand', 'Resolver', 'base_twist_of']
+__all__ = [
+    'RobotState',
+    'BaseReference',
+    'PoseTarget',
+    'ResolverDiagnostics',
+    'ResolverCommand',
+    'Resolver',
+    'base_twist_of',
+]
 
 
 def base_twist_of(values: ArrayLike, axes: Iterable[int]) -> np.ndarray:
@@ -105,6 +113,44 @@ class RobotState:
 
 
 @dataclass(frozen=True)
+class BaseReference:
+    """Where a followed plan has the base at a point of its end-effector trajectory: a
+    secondary target, below the end effector's (not in the papers; the methods' use of it is
+    in ``docs/methods.md``, the planner's section).
+
+    Attributes:
+        pose: the planned base pose (x, y, θ) in the world [m, m, rad]. Shape (3,).
+        rates: its planned world rates (ẋ, ẏ, θ̇) [m/s, m/s, rad/s]. Shape (3,).
+        acceleration: its planned world accelerations (ẍ, ÿ, θ̈) [m/s², m/s², rad/s²]. Shape (3,).
+        arm: the arm's posture the plan assumed with it (its travel posture) [rad or m], or None
+            (the final approach: the posture is the method's to find). Shape (n,).
+
+    Raises:
+        ShapeError, NonFiniteError: a wrong size or a NaN/inf entry.
+    """
+
+    pose: np.ndarray
+    rates: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    arm: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.arm is not None:
+            object.__setattr__(self, 'arm', as_finite_vector(self.arm, None, 'base reference arm posture'))
+        object.__setattr__(self, 'pose', as_finite_vector(self.pose, 3, 'base reference pose'))
+        object.__setattr__(self, 'rates', as_finite_vector(self.rates, 3, 'base reference rates'))
+        object.__setattr__(self, 'acceleration', as_finite_vector(self.acceleration, 3, 'base reference acceleration'))
+
+    def error(self, base_pose: ArrayLike) -> np.ndarray:
+        """The planned pose less ``base_pose`` (x, y, θ), the heading's difference wrapped to
+        (−π, π] [m, m, rad]. Shape (3,)."""
+        base = np.asarray(base_pose, dtype=float)
+        out = self.pose - base
+        out[2] = wrap_angle(float(out[2]))
+        return out
+
+
+@dataclass(frozen=True)
 class PoseTarget:
     """An end-effector target in the world frame: a set-point, or a point of a trajectory.
 
@@ -114,12 +160,15 @@ class PoseTarget:
         velocity: desired twist (linear, angular) [m/s, rad/s], world axes; zero for a
             set-point. The velocity-level methods use it as feedforward. Shape (6,).
         acceleration: desired (linear, angular) acceleration [m/s², rad/s²]. Shape (6,).
+        base: where a followed plan has the base (:class:`BaseReference`), or None (a goal or
+            a trajectory point alone: the methods exactly as the papers have them).
     """
 
     position: np.ndarray
     rotation: np.ndarray
     velocity: np.ndarray = field(default_factory=lambda: np.zeros(6))
     acceleration: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    base: BaseReference | None = None
 
     def __post_init__(self):
         object.__setattr__(self, 'position', as_finite_vector(self.position, 3, 'target position'))

@@ -148,13 +148,19 @@ class ResolverPeriod:
         self._planned: SafetyResult | None = None  # the safety stage's answer of the cycle's plan
 
     # ------------------------------------------------------------------ inputs
-    def goal(self, frame: str, pose: ArrayLike, now: float) -> list[LogEvent]:
-        """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``, received at ``now`` [s]."""
-        return self.targets.goal(frame, pose, self.latest.base_pose(now))
+    def goal(self, frame: str, pose: ArrayLike, now: float, planned_base=None) -> list[LogEvent]:
+        """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``, received at ``now`` [s], with
+        where a followed plan left the base, or None (:meth:`TargetManager.goal`)."""
+        return self.targets.goal(frame, pose, self.latest.base_pose(now), planned_base)
 
-    def trajectory_point(self, frame: str, pose, velocity, acceleration, now: float) -> list[LogEvent]:
-        """A trajectory point received at ``now`` [s] (:meth:`TargetManager.trajectory_point`)."""
-        return self.targets.trajectory_point(frame, pose, velocity, acceleration, now, self.latest.base_pose(now))
+    def trajectory_point(
+        self, frame: str, pose, velocity, acceleration, now: float, planned_base=None
+    ) -> list[LogEvent]:
+        """A trajectory point received at ``now`` [s], with a followed plan's base or None
+        (:meth:`TargetManager.trajectory_point`)."""
+        return self.targets.trajectory_point(
+            frame, pose, velocity, acceleration, now, self.latest.base_pose(now), planned_base
+        )
 
     def odometry(self, xy, quat, twist, now: float) -> list[LogEvent]:
         """The base's odometry received at ``now`` [s] (:meth:`LatestInputs.odometry`)."""

@@ -1,7 +1,9 @@
 """The whole-body damped pseudo-inverse: Sorour eq (8), the baseline.
 
 ``u = Jᵀ (J Jᵀ + ρ² I)⁻¹ ṗ_ref`` with ṗ_ref the eq (12) pose controller: the minimum-norm
-joint velocity, base and arm moving together, no null-space task and no compensation. ρ is
+joint velocity, base and arm moving together, no null-space task and no compensation (save a
+followed plan's base pull, :meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.base_pull`,
+with the arm pulled towards the plan's travel posture beside it, at the gain λ_p). ρ is
 Table I's 0.001 away from singularities (see :func:`~wmm_control.resolvers.pose_servo.singularity_damping`).
 """
 
@@ -29,9 +31,13 @@ class PinvResolver(PoseServoResolver):
     """
 
     name = 'pinv'
+    pulls_arm_to_plan = True  # no posture task of its own: a followed plan's travel posture
 
     def __init__(self, robot: str | Path | RobotConfig | KinematicModel, params: PinvParams | None = None) -> None:
         super().__init__(robot, params if params is not None else PinvParams())
 
-    def _resolve(self, jac, p_ref, e_pos, state):
-        return self.solve_task(jac, p_ref, state.q_arm), None, 'whole_body', 1.0
+    def _resolve(self, jac, p_ref, e_pos, state, pull):
+        task = self.solve_task(jac, p_ref, state.q_arm)
+        # a followed plan's pull (not in the paper; :meth:`base_pull`), in the null space
+        null = None if pull is None else self.null_motion(jac, task, state.q_arm, pull)
+        return task, null, 'whole_body', 1.0

@@ -2,8 +2,16 @@
 
 Sorour §II–III: the proportional pose controller of eq (12), the augmented Jacobian J_mm of
 eq (7), the limits of the whole command, and the arm compensation of eq (14). A subclass
-supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state) -> (u_task, u_null, mode,
-ψ)``, the task part and the null-space part, which gives way first to the limits.
+supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull) -> (u_task, u_null,
+mode, ψ)``, the task part and the null-space part, which gives way first to the limits.
+
+A followed plan's base (:class:`~wmm_control.resolvers.interface.BaseReference` on the target,
+not in the paper): the base is pulled towards its planned pose by a secondary task in the null
+space of the end effector's, ``z_b = ᵇR_w (ξ̇_plan + λ_p (ξ_plan − ξ))`` over the base's axes
+(:meth:`PoseServoResolver.base_pull`), projected as eq (13)'s posture pull is
+(:meth:`PoseServoResolver.null_motion`): the end effector's task keeps its priority, and
+what it leaves free brings the base back onto the plan with the arm making up the difference.
+Without a base reference nothing changes.
 
 Joint space. The paper's base coordinates are the 6-vector q̇_b = (ẋ, ẏ, 0, 0, 0, ω) (eq 3)
 with J_b = I₆ (eq 2); three columns of ``M_RPY H J_b`` are then identically zero, and every
@@ -42,9 +50,11 @@ from wmm_control.geometry import (
     rotation_z,
     rpy_from_matrix,
     rpy_rate_map,
+    twist_to_base,
     wrap_angle,
 )
 from wmm_control.resolvers.interface import (
+    BaseReference,
     PoseTarget,
     Resolver,
     ResolverCommand,
@@ -94,6 +104,7 @@ class PoseServoParams(SafetyParams):
         arm_takeover: where the base's acceleration limit holds back its share of the task,
             the other joints take it over (not in the paper; see
             :meth:`PoseServoResolver.solve_task`).
+        pinv_tolerance: relative singular-value cut-off of the null-space projector's J⁺.
     """
 
     dt: float = 0.025
@@ -108,6 +119,7 @@ class PoseServoParams(SafetyParams):
     max_damping: float = 0.1
     hold_joint_limits: bool = False
     arm_takeover: bool = False
+    pinv_tolerance: float = 1e-6
 
     #: numeric fields that may be zero (the others must be > 0)
     _allow_zero: ClassVar[tuple[str, ...]] = ('max_damping',)
@@ -350,10 +362,60 @@ class PoseServoResolver(Resolver):
             scale=False,
         ).qdd
 
+    # ------------------------------------------------------------------ null space
+    #: whether a followed plan's pull includes its arm posture (a method without a posture task
+    #: of its own; :meth:`base_pull`)
+    pulls_arm_to_plan = False
+
+    def base_pull(self, state: RobotState, reference: BaseReference, arm: bool = False) -> np.ndarray:
+        """The secondary task of a followed plan's base (module docstring): ``z`` over u, the
+        base's entries ``ᵇR_w (ξ̇_plan + λ_p (ξ_plan − ξ))`` (eq 12's law on the base's planned
+        pose, its rates as feedforward) on the axes it follows; the arm's ``λ_p (q_a,plan − q_a)``
+        with ``arm`` and the plan's arm posture given (the travel posture), else zero.
+        Shape (n_b + n,)."""
+        theta = float(state.base_pose[2])
+        world = reference.rates + self.params.lambda_p * reference.error(state.base_pose)
+        z = np.zeros(self.n)
+        z[: self.n_base] = twist_to_base(theta, world)[list(self.base_axes)]
+        if arm and reference.arm is not None and reference.arm.shape == (self.n_arm,):
+            z[self.n_base :] = self.params.lambda_p * (reference.arm - state.q_arm)
+        return z
+
+    def null_motion(self, jac: np.ndarray, task: np.ndarray, q_arm: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """``(I − J⁺J) z``, kept clear of the braking bounds: the secondary task ``z`` in the
+        null space of the end effector's (Sorour eqs 9 and 13), with the undamped
+        Moore–Penrose J⁺ (SVD, relative tolerance ``pinv_tolerance``).
+
+        A joint that the motion would drive past its braking bound (Xing eqs 7–8) is held
+        still by adding its selection row to J and projecting again, so the motion stays in
+        the null space of the task (the end effector does not move) instead of being
+        clipped out of it. Shape (n_b + n,).
+        """
+        p = self.params
+        n, nb = self.n, self.n_base
+        self._position[nb:] = q_arm
+        down, up = self.limits.braking_rates(self._position)
+        # the room the task leaves, 1e-12 tolerance included; checked on Python floats below
+        # (for 10 entries a loop costs less than the half-dozen numpy calls of a mask)
+        lower, upper = (-down - task - 1e-12).tolist(), (up - task + 1e-12).tolist()
+        held = [False] * n
+        rows = jac
+        for _ in range(self.n_arm):
+            # (I − J⁺J) z: J⁺(J z) is the minimum-norm least-squares solution of J x = J z
+            null = z - np.linalg.lstsq(rows, rows @ z, rcond=p.pinv_tolerance)[0]
+            over = [i for i, x in enumerate(null.tolist()) if not held[i] and (x < lower[i] or x > upper[i])]
+            if not over:
+                return null
+            for i in over:
+                held[i] = True
+            rows = np.vstack((jac, np.eye(n)[held]))
+        return np.zeros(n)
+
     # ------------------------------------------------------------------ step
     @abstractmethod
-    def _resolve(self, jac, p_ref, e_pos, state):
-        """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ)``."""
+    def _resolve(self, jac, p_ref, e_pos, state, pull):
+        """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ)``;
+        ``pull`` is :meth:`base_pull` of a followed plan's base, or None, for the null space."""
 
     def step(self, state: RobotState, target: PoseTarget) -> ResolverCommand:
         """One period: eq (12), the method's inversion, then the limits.
@@ -365,7 +427,8 @@ class PoseServoResolver(Resolver):
         """
         t0 = time.perf_counter()
         jac, p_ref, e_pos, angle = self.task_reference(state, target)
-        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state)
+        pull = None if target.base is None else self.base_pull(state, target.base, self.pulls_arm_to_plan)
+        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull)
         nb = self.n_base
         self._position[nb:] = state.q_arm
         lim = self.limits.apply(task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null)

@@ -15,6 +15,8 @@ trajectory held, and how the goal fares. ``redundancy_resolver`` wires its topic
   axes), checked as goals are (a twist or acceleration entry beyond 1e3 is rejected too). The
   latest of a goal and a point is the target. A trajectory whose last point is older than
   ``timeout`` is held as a set-point at that point's pose (:meth:`TargetManager.current`).
+  A point may carry a followed plan's base (its planned pose, rates and accelerations,
+  checked as the point is), which the methods hold the base to below the end effector's task.
 
 Time is an argument (seconds of a steady clock), never read here. Each call answers with
 :class:`LogEvent` s for the node to log: ``accepted`` (a new goal), ``tracking`` (a
@@ -31,7 +33,7 @@ import numpy as np
 
 from wmm_control.checks import Freshness
 from wmm_control.geometry import matrix_from_quaternion, unit_quaternion
-from wmm_control.resolvers.interface import PoseTarget
+from wmm_control.resolvers.interface import BaseReference, PoseTarget
 from wmm_control.resolvers.progress import GoalProgress
 
 __all__ = [
@@ -204,28 +206,57 @@ class TargetManager:
         self.tracking = False
         return [LogEvent('rejected', f'rejected {topic}: {reason}; holding still')]
 
-    def goal(self, frame, pose, base=None) -> list[LogEvent]:
+    def _planned_base(self, planned_base) -> tuple[BaseReference | None, str]:
+        """(a followed plan's base (pose, rates, accelerations[, the arm's travel posture]) as a
+        :class:`BaseReference`, or None when there is none; '' or why it is refused)."""
+        if planned_base is None:
+            return None, ''
+        values = [np.asarray(v, dtype=float) for v in planned_base]
+        if len(values) not in (3, 4) or any(v.shape != (3,) for v in values[:3]):
+            return None, 'a planned base needs a pose (x, y, θ), its rates and accelerations'
+        if len(values) == 4 and values[3].shape != (self.workspace.n_arm,):
+            return None, f'a planned arm posture needs {self.workspace.n_arm} joint positions'
+        if not all(np.all(np.isfinite(v)) for v in values):
+            return None, 'non-finite values of the planned base'
+        if (
+            float(np.max(np.abs(values[0][:2]))) > self.max_goal_distance
+            or float(np.max(np.abs(np.concatenate(values[1:3])))) > MAX_REFERENCE_RATE
+        ):
+            return None, 'planned base beyond max_goal_distance, or its rates beyond 1e3'
+        return BaseReference(*values), ''
+
+    def goal(self, frame, pose, base=None, planned_base=None) -> list[LogEvent]:
         """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``; ``base`` the base's pose
-        (x, y, θ) while it is known (a goal inside the body is rejected then), else None."""
+        (x, y, θ) while it is known (a goal inside the body is rejected then), else None;
+        ``planned_base`` where a followed plan left the base for the final approach
+        (:meth:`trajectory_point`), or None."""
         values = np.asarray(pose, dtype=float)
         quat, reason, events = check_goal(
             frame, values, self.world_frame, self.max_goal_distance, self.workspace, base, self.obstacles
         )
         if quat is None:
             return events + self.reject(reason)
+        planned, why = self._planned_base(planned_base)
+        if why:
+            return events + self.reject(why)
         key = goal_key(values[:3], quat)
         if key == self._goal_key:
             return events  # the same goal again (a sequencer re-publishing it)
-        self.target = PoseTarget(values[:3], matrix_from_quaternion(quat))
+        self.target = PoseTarget(values[:3], matrix_from_quaternion(quat), base=planned)
         self._goal_key = key
         self.tracking = False
         self._start()
         self.goals += 1
         return events + [LogEvent('accepted', f'new goal: {goal_text(values[:3], quat)}')]
 
-    def trajectory_point(self, frame, pose, velocity, acceleration, now, base=None) -> list[LogEvent]:
+    def trajectory_point(
+        self, frame, pose, velocity, acceleration, now, base=None, planned_base=None
+    ) -> list[LogEvent]:
         """A trajectory point received at ``now`` [s]: ``pose`` as a goal's (None: the message
-        had no point), ``velocity`` and ``acceleration`` (linear, angular; world axes)."""
+        had no point), ``velocity`` and ``acceleration`` (linear, angular; world axes);
+        ``planned_base``: a followed plan's base with it, (pose (x, y, θ), world rates, world
+        accelerations) (:class:`~wmm_control.resolvers.interface.BaseReference`), or None.
+        ``base`` is the measured base pose (x, y, θ) of the checks."""
         if frame != self.world_frame:
             return self.reject(f'frame {frame!r}, expected {self.world_frame!r}', REFERENCE)
         if pose is None:
@@ -241,13 +272,16 @@ class TargetManager:
         impossible = self.workspace.impossible(pose[:3], base, self.obstacles)
         if impossible:
             return self.reject(f'position {pose[:3].tolist()}: {impossible}', REFERENCE)
+        planned, why = self._planned_base(planned_base)
+        if why:
+            return self.reject(why, REFERENCE)
         quat, events = checked_quaternion(pose[3:], '/' + REFERENCE)
         if quat is None:
             return events + self.reject('zero quaternion', REFERENCE)
         if not self.tracking:
             events.append(LogEvent('tracking', 'tracking /ee_reference'))
             self._start()
-        self.target = PoseTarget(pose[:3], matrix_from_quaternion(quat), velocity=vel, acceleration=acc)
+        self.target = PoseTarget(pose[:3], matrix_from_quaternion(quat), velocity=vel, acceleration=acc, base=planned)
         self._goal_key = None
         self.tracking = True
         self.reference.mark(now)

@@ -15,7 +15,9 @@ Each period:
 3. The null-space pull of eqs (9) and (13): ``λ_dex (I − J⁺J) z_dex``,
    ``z_dex = (0, −(q_a − q_a,dex))``, with the undamped Moore–Penrose J⁺ (SVD, relative
    tolerance ``pinv_tolerance``). It spans the base too: in fine manipulation the base may
-   still move to restore the dexterous arm pose, keeping the end effector still.
+   still move to restore the dexterous arm pose, keeping the end effector still. A followed
+   plan's base pull (:meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.base_pull`,
+   not in the paper) joins ``z`` there.
 4. The whole command scaled into the limits (:mod:`wmm_control.resolvers.limits`).
 5. Eq (14) in :meth:`TaskSharingResolver.compensate`, when the base controller has answered
    with the feasible twist q̇_bf of this period: the arm takes over the base's predicted
@@ -61,7 +63,6 @@ class TaskSharingParams(PoseServoParams):
         lambda_dex: gain of the null-space pull to the dexterous arm pose [1/s].
         compensation: apply eq (14) when :meth:`TaskSharingResolver.compensate` is called.
         psi_rate: largest change of ψ per second [1/s]; 0 lets ψ jump as eq (11) does.
-        pinv_tolerance: relative singular-value cut-off of the null-space projector's J⁺.
     """
 
     r_fm: float = 0.25
@@ -69,7 +70,6 @@ class TaskSharingParams(PoseServoParams):
     lambda_dex: float = 3.5
     compensation: bool = True
     psi_rate: float = 0.0
-    pinv_tolerance: float = 1e-6
 
     _allow_zero = PoseServoParams._allow_zero + ('psi_rate', 'lambda_dex')
 
@@ -120,43 +120,16 @@ class TaskSharingResolver(PoseServoResolver):
             self._psi += min(step, max(-step, target - self._psi))
         return self._psi, MODES[target]
 
-    def _resolve(self, jac, p_ref, e_pos, state):
+    def _resolve(self, jac, p_ref, e_pos, state, pull):
         psi, mode = self._share(norm(e_pos))
         activation = np.empty(self.n)
         activation[: self.n_base] = 1.0 - psi
         activation[self.n_base :] = psi
         task = self.solve_task(jac, p_ref, state.q_arm, activation)
-        return task, self._null_motion(jac, task, state.q_arm), mode, psi
-
-    def _null_motion(self, jac, task, q_arm):
-        """Eqs (9) and (13): ``λ_dex (I − J⁺J) z_dex``, kept clear of the braking bounds.
-
-        A joint that the pull would drive past its braking bound (Xing eqs 7–8) is held
-        still by adding its selection row to J and projecting again, so the motion stays in
-        the null space of the task (the end effector does not move) instead of being
-        clipped out of it. Shape (n_b + n,).
-        """
-        p = self.params
-        n, nb = self.n, self.n_base
-        z = np.zeros(n)
-        z[nb:] = p.lambda_dex * (self.q_dex - q_arm)
-        self._position[nb:] = q_arm
-        down, up = self.limits.braking_rates(self._position)
-        # the room the task leaves, 1e-12 tolerance included; checked on Python floats below
-        # (for 10 entries a loop costs less than the half-dozen numpy calls of a mask)
-        lower, upper = (-down - task - 1e-12).tolist(), (up - task + 1e-12).tolist()
-        held = [False] * n
-        rows = jac
-        for _ in range(self.n_arm):
-            # (I − J⁺J) z: J⁺(J z) is the minimum-norm least-squares solution of J x = J z
-            null = z - np.linalg.lstsq(rows, rows @ z, rcond=p.pinv_tolerance)[0]
-            over = [i for i, x in enumerate(null.tolist()) if not held[i] and (x < lower[i] or x > upper[i])]
-            if not over:
-                return null
-            for i in over:
-                held[i] = True
-            rows = np.vstack((jac, np.eye(n)[held]))
-        return np.zeros(n)
+        # eqs (9) and (13): λ_dex (I − J⁺J) z_dex, with a followed plan's base pull beside it
+        z = np.zeros(self.n) if pull is None else pull.copy()
+        z[self.n_base :] += self.params.lambda_dex * (self.q_dex - state.q_arm)
+        return task, self.null_motion(jac, task, state.q_arm, z), mode, psi
 
     def compensate(self, command: ResolverCommand, feasible_twist: ArrayLike) -> ResolverCommand:
         """Eq (14): add ``J_a⁺ M_RPY H J_b (q̇_ref(b) − q̇_bf)`` to the arm command.

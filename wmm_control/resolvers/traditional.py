@@ -7,6 +7,11 @@ keeping its direction), as every method of this package keeps the limits. (Scale
 for a joint that rests on its position limit with the task pulling it further, the
 accelerations would all be zero, and the whole robot would coast on at its rates of the
 moment.)
+
+Following a plan (a :class:`~wmm_control.resolvers.interface.BaseReference` on the target; not
+in the paper, and nothing changes without one): the base's accelerations towards its planned
+pose (``task['base_follow']``, less the base's share of the task's solution) join q̈_A in the
+null space, so what the task leaves free brings the base back onto the plan.
 """
 
 from dataclasses import dataclass
@@ -41,8 +46,11 @@ class TraditionalResolver(AccelerationResolver):
         jac = task['jac']
         j_pinv = np.linalg.pinv(jac, rcond=self.params.rcond)
         qdd = j_pinv @ (task['xdd'] - task['drift'])
-        if self.params.manipulability:
-            q_a = self.manipulability_acceleration(task['qd'])
+        follow = task['base_follow']
+        if self.params.manipulability or follow is not None:
+            q_a = self.manipulability_acceleration(task['qd']) if self.params.manipulability else np.zeros(len(qdd))
+            if follow is not None:
+                q_a[: len(follow)] += follow - qdd[: len(follow)]
             qdd = qdd + q_a - j_pinv @ (jac @ q_a)  # + (I − J⁺J) q̈_A
         lo, hi = task['lower'], task['upper']
         # position limits joint by joint: a joint resting on its limit would otherwise take the

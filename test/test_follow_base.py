@@ -1,0 +1,103 @@
+"""The base held to a followed plan: each point carries its planned base pose
+(:class:`~wmm_control.resolvers.interface.BaseReference`), checked on its way to the method as
+the point is, and every method pulls the base towards it below the end effector's task.
+
+The plan is `panda_diff`'s: a quarter turn in place, then 1.2 m straight ahead, timed by the
+planner's own timing (no search, no obstacles). Given the end effector's points alone, `amp`
+turns the arm rather than the base (the arm alone can follow a point swinging round the base's
+axis), and the base falls more than the follower's lead behind the plan; with the planned base
+every method keeps its base within the lead, and the goal at the plan's end is reached.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from sim_bridge.world import SimWorld
+
+from wmm_control.experiments.direct import run_scenario
+from wmm_control.experiments.randomized import METHOD_RUNS, RandomGoal, _scenario
+from wmm_control.experiments.scenario import resolver_parameters
+from wmm_control.geometry import rpy_from_matrix, wrap_angle
+from wmm_control.kinematics import KinematicModel
+from wmm_control.planning.follow import FollowParams, FollowState, PlanFollower
+from wmm_control.planning.handoff import Handoff
+from wmm_control.planning.timing import TwistPiece, time_path
+from wmm_control.resolvers import make_resolver
+from wmm_control.resolvers.interface import BaseReference, PoseTarget
+from wmm_control.robot_config import load_robot
+
+PARAMS = FollowParams()
+
+
+@pytest.fixture(scope='module')
+def turn_then_straight():
+    """(robot, hand-off, goal): a quarter turn in place, then 1.2 m along the new heading."""
+    cfg = load_robot('panda_diff')
+    turned = np.array((0.0, 0.0, 0.5 * math.pi))
+    pieces = [TwistPiece(np.zeros(3), np.array((0.0, 0.0, 0.5 * math.pi))), TwistPiece(turned, np.array((1.2, 0, 0)))]
+    handoff = Handoff.of(KinematicModel(cfg), time_path(pieces, cfg.base, cfg.period), cfg.start.arm)
+    last = handoff.points[-1]
+    goal = RandomGoal(
+        0, handoff.base_poses[-1], cfg.start.arm, np.concatenate((last.position, rpy_from_matrix(last.rotation))), 1
+    )
+    return cfg, handoff, goal
+
+
+class _Watched(PlanFollower):
+    """A follower that keeps the base's lag behind its planned pose, as a fraction of the lead."""
+
+    lags: list
+
+    def step(self, dt, base_pose, ee_position=None, ee_rotation=None):
+        out = super().step(dt, base_pose, ee_position, ee_rotation)
+        if dt > 0.0 and out.state is not FollowState.APPROACH:
+            planned, base = self.planned_pose(), np.asarray(base_pose)
+            distance = math.hypot(planned[0] - base[0], planned[1] - base[1])
+            angle = abs(wrap_angle(float(planned[2] - base[2])))
+            self.lags.append(max(distance / PARAMS.base_lead_distance, angle / PARAMS.base_lead_angle))
+        return out
+
+
+def _follow(cfg, handoff, goal, method, hold_base):
+    """(the base's lags behind the plan while following, the run's log)."""
+    target = PoseTarget(handoff.points[-1].position, handoff.points[-1].rotation)
+    follower = _Watched(handoff, target, FollowParams(hold_base=hold_base))
+    follower.lags = []
+    resolver = make_resolver(method, cfg, **resolver_parameters(METHOD_RUNS[method]))
+    with SimWorld(cfg, base_mode='kinematic') as world:
+        log = run_scenario(world, resolver, _scenario(cfg, goal, handoff.duration + 8.0, ''), follower=follower)
+    return np.array(follower.lags), log, target
+
+
+def test_the_points_carry_the_planned_base_with_its_rates_and_accelerations(turn_then_straight):
+    _, handoff, _ = turn_then_straight
+    bases = [p.base for p in handoff.points]
+    assert all(isinstance(b, BaseReference) for b in bases)
+    assert np.allclose([b.pose for b in bases], handoff.base_poses)
+    rates = np.array([b.rates for b in bases])
+    assert np.max(np.abs(rates[:, 2])) > 0.5 and np.max(np.hypot(rates[:, 0], rates[:, 1])) > 0.3  # turns, then drives
+    assert np.allclose([b.acceleration for b in bases[:-1]], np.diff(rates, axis=0) / handoff.dt)
+    # the follower gives them slowed as the point is; without hold_base it gives the point alone
+    follower = PlanFollower(handoff, PoseTarget(handoff.points[-1].position, handoff.points[-1].rotation))
+    given = follower.step(0.1, handoff.base_poses[0]).target
+    k = int(follower.clock / handoff.dt)  # the sample in force
+    assert given.base is not None and np.allclose(given.base.rates, follower.rate * handoff.points[k].base.rates)
+    alone = PlanFollower(handoff, follower.goal, FollowParams(hold_base=False)).step(0.1, handoff.base_poses[0])
+    assert alone.target.base is None
+
+
+def test_amp_turns_the_arm_instead_of_the_base_without_the_planned_base(turn_then_straight):
+    """What the planned base is for: with the points alone the base falls behind the plan."""
+    cfg, handoff, goal = turn_then_straight
+    lags, _, _ = _follow(cfg, handoff, goal, 'amp', hold_base=False)
+    assert lags.max() > 1.0
+
+
+@pytest.mark.parametrize('method', ['amp', 'pinv', 'task_sharing', 'traditional'])
+def test_every_method_keeps_its_base_within_the_lead_of_the_plan_and_reaches_the_goal(turn_then_straight, method):
+    cfg, handoff, goal = turn_then_straight
+    lags, log, target = _follow(cfg, handoff, goal, method, hold_base=True)
+    assert len(lags) >= len(handoff.points) - 1  # followed to the end
+    assert lags.max() < 1.0, f'{method}: the base {lags.max():.2f} leads behind the plan'
+    assert np.linalg.norm(log.ee_position[-1] - target.position) < 0.01
