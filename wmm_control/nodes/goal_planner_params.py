@@ -122,6 +122,12 @@ _SPECS = (
     ),
     Param('stall_distance', 'Motion [m] that counts as progress (follower).', lo=1e-4, hi=10.0, read_only=True),
     Param('stall_angle', 'Turn [rad] that counts as progress (follower).', lo=1e-4, hi=6.3, read_only=True),
+    Param(
+        'hold_base',
+        'Send each point\'s planned base pose with it on /ee_reference (joint "base"): the methods pull the base '
+        'towards the plan below the end effector\'s task (follower).',
+        read_only=True,
+    ),
 )
 
 
