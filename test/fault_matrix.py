@@ -766,6 +766,16 @@ def _reference_with_nan_base(rig):
     return ('/ee_reference', msg)
 
 
+def _reference_without_a_posture_joint(rig):
+    """An ``/ee_reference`` point of a followed plan whose travel posture names one arm joint fewer."""
+    arm = rig.config.arm.joints
+    posture = np.array([rig.q[n] for n in arm])
+    target = PoseTarget(rig.goal, rig.goal_rotation, base=BaseReference(rig.base_pose, arm=posture))
+    msg = reference_message(target, 'world', Time(), 0.0, arm)
+    msg.joint_names = msg.joint_names[:-1]
+    return ('/ee_reference', msg)
+
+
 def _feasible(value):
     def mutate(rig, msgs):
         rig.feasible_twist = np.asarray(value, dtype=float)
@@ -1113,6 +1123,16 @@ KINDS = [
     Kind(
         'planned base NaN',
         {'resolver': ('rejected', "/ee_reference's planned base x = NaN", _add(_reference_with_nan_base))},
+    ),
+    Kind(
+        'planned posture short',
+        {
+            'resolver': (
+                'rejected',
+                "/ee_reference's travel posture without its last arm joint",
+                _add(_reference_without_a_posture_joint),
+            )
+        },
     ),
     Kind(
         'feasible twist 1e308',
