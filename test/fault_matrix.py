@@ -44,11 +44,12 @@ from sim_bridge.node import SimNode
 from sim_bridge.world import SimWorld
 from wmm_control.kinematics import KinematicModel
 from wmm_control.geometry import quaternion_from_matrix, twist_to_world
-from wmm_control.nodes.conversions import float_array, twist_stamped
+from wmm_control.nodes.conversions import float_array, reference_message, twist_stamped
 from wmm_control.nodes.goal_planner import GoalPlannerNode
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.base_controller import BaseControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
+from wmm_control.resolvers.interface import BaseReference, PoseTarget
 from wmm_control.robot_config import load_robot
 
 __all__ = ['KINDS', 'RIGS', 'FAILURES', 'run_cell', 'run_matrix', 'format_table']
@@ -756,6 +757,25 @@ def _empty_reference(rig):
     return ('/ee_reference', msg)
 
 
+def _reference_with_nan_base(rig):
+    """An ``/ee_reference`` point at the goal (what ``goal_planner`` sends in a plan's final
+    approach) whose planned base (joint ``base``) has x = NaN."""
+    target = PoseTarget(rig.goal, rig.goal_rotation, base=BaseReference(rig.base_pose))
+    msg = reference_message(target, 'world', Time(), 0.0)
+    msg.points[0].transforms[1].translation.x = math.nan
+    return ('/ee_reference', msg)
+
+
+def _reference_without_a_posture_joint(rig):
+    """An ``/ee_reference`` point of a followed plan whose travel posture names one arm joint fewer."""
+    arm = rig.config.arm.joints
+    posture = np.array([rig.q[n] for n in arm])
+    target = PoseTarget(rig.goal, rig.goal_rotation, base=BaseReference(rig.base_pose, arm=posture))
+    msg = reference_message(target, 'world', Time(), 0.0, arm)
+    msg.joint_names = msg.joint_names[:-1]
+    return ('/ee_reference', msg)
+
+
 def _feasible(value):
     def mutate(rig, msgs):
         rig.feasible_twist = np.asarray(value, dtype=float)
@@ -1099,6 +1119,20 @@ KINDS = [
     ),
     Kind(
         'trajectory without points', {'resolver': ('rejected', '/ee_reference with no point', _add(_empty_reference))}
+    ),
+    Kind(
+        'planned base NaN',
+        {'resolver': ('rejected', "/ee_reference's planned base x = NaN", _add(_reference_with_nan_base))},
+    ),
+    Kind(
+        'planned posture short',
+        {
+            'resolver': (
+                'rejected',
+                "/ee_reference's travel posture without its last arm joint",
+                _add(_reference_without_a_posture_joint),
+            )
+        },
     ),
     Kind(
         'feasible twist 1e308',

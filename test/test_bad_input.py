@@ -6,6 +6,7 @@ limits, the node still answers afterwards, and a throttled warning that says wha
 (or, for valid input in another layout, the very same commands).
 """
 
+import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import Log
@@ -55,6 +56,25 @@ def test_the_matrix_sees_a_node_that_takes_an_oversized_obstacle_message(monkeyp
     kind = next(k for k in fault_matrix.KINDS if k.name == 'obstacles: too many markers')
     cell = fault_matrix.run_cell(fault_matrix.RIGS['redundancy_resolver (B, amp)'], kind)
     assert cell.outcome == 'CHANGED', cell
+
+
+@pytest.mark.parametrize('column', ['redundancy_resolver (A, task_sharing)', 'redundancy_resolver (B, amp)'])
+def test_a_nan_planned_base_on_ee_reference_is_rejected_and_the_robot_held(column):
+    """A plan's point with a NaN base (joint ``base`` of /ee_reference): the point is refused with
+    the reason logged, the resolver pursues nothing and commands zero, and nothing NaN goes out."""
+    kind = next(k for k in fault_matrix.KINDS if k.name == 'planned base NaN')
+    _, _, mutate = kind.cases['resolver']
+    rig = fault_matrix.RIGS[column]()
+    try:
+        result, failed = fault_matrix._harm(rig, lambda: fault_matrix._run_steps(rig, mutate), 'the bad input')
+        assert failed is None, failed  # no crash, no NaN or inf on any output, alive afterwards
+        warnings = [m.msg for m in rig.logs if m.level >= Log.WARN]
+        assert any('rejected ee_reference: non-finite values of the planned base' in w for w in warnings), warnings
+        assert rig.node.target is None
+        commands = [v for topic, v in rig.records[-6:]]  # the cycles after it: arm and base commands
+        assert len(commands) == 6 and all(np.all(v == 0.0) for v in commands), commands
+    finally:
+        rig.close()
 
 
 def test_the_table_prints_one_row_per_kind_and_one_column_per_node():

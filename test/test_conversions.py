@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pytest
 from geometry_msgs.msg import Pose, PoseStamped, Transform, Twist
 from nav_msgs.msg import Odometry
 
@@ -125,3 +126,32 @@ def test_an_ee_reference_carries_a_followed_plan_s_base_and_gives_it_back():
     msg.points[0].transforms[1].rotation.w = 0.0
     msg.points[0].transforms[1].rotation.z = 0.0
     assert math.isnan(planned_base_values(msg)[0][2])
+
+
+def test_an_ee_reference_carries_the_plan_s_travel_posture_by_joint_name():
+    from wmm_control.resolvers.interface import BaseReference, PoseTarget
+
+    joints = ('j1', 'j2', 'j3')
+    posture = np.array((0.3, -1.2, 6.0))  # beyond ±π: a position, not an angle of a rotation
+    base = BaseReference(np.array((1.2, -0.4, 2.9)), np.array((0.3, -0.1, 0.5)), np.zeros(3), posture)
+    target = PoseTarget(np.array((1.5, 0.3, 1.0)), np.eye(3), base=base)
+    msg = reference_message(target, 'world', stamp_from_seconds(1.5), 0.25, joints)
+    assert list(msg.joint_names) == ['end_effector', 'base', *joints]
+    assert len(msg.points[0].transforms) == len(msg.points[0].velocities) == len(msg.points[0].accelerations) == 5
+    pose, rates, _, arm = planned_base_values(msg, joints)
+    assert np.allclose(pose, base.pose) and np.allclose(rates, base.rates) and np.allclose(arm, posture)
+    # read by name: in the arm's order whatever the message's
+    msg.joint_names = ['end_effector', 'base', 'j3', 'j1', 'j2']
+    assert np.allclose(planned_base_values(msg, joints)[3], (-1.2, 6.0, 0.3))
+    # a joint missing or named twice gives fewer positions than the arm has (the resolver rejects it)
+    msg.joint_names = ['end_effector', 'base', 'j1', 'j1', 'j2']
+    assert planned_base_values(msg, joints)[3].shape == (1,)
+    # a joint named without its transform: NaN (rejected as non-finite)
+    msg.joint_names = ['end_effector', 'base', *joints, 'j4']
+    assert math.isnan(planned_base_values(msg, (*joints, 'j4'))[3][3])
+    # a posture of another size than the joints named is a bug of the caller
+    with pytest.raises(ValueError, match='travel posture of 3 joints'):
+        reference_message(target, 'world', stamp_from_seconds(1.5), 0.25, joints[:2])
+    # no travel posture (the final approach): base alone
+    approach = PoseTarget(target.position, target.rotation, base=BaseReference(base.pose))
+    assert len(planned_base_values(reference_message(approach, 'world', stamp_from_seconds(1.5), 0.0, joints))) == 3

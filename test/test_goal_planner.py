@@ -19,7 +19,7 @@ from ros_helpers import ROSOUT_QOS, RosHarness, pose2d, stamp_s
 from sim_bridge.node import SimNode
 from wmm_control.geometry import matrix_from_quaternion, quaternion_from_matrix, rotation_angle, rotation_z
 from wmm_control.kinematics import KinematicModel
-from wmm_control.nodes.conversions import pose_values, set_planar_pose
+from wmm_control.nodes.conversions import planned_base_values, pose_values, set_planar_pose, twist_values
 from wmm_control.nodes.goal_planner import GoalPlannerNode
 from wmm_control.nodes.qos import LATCHED_QOS
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
@@ -159,10 +159,25 @@ def test_a_goal_behind_the_table_is_reached_round_it_without_contact(system):
         pose2d(probe.truth[-1]),
         planner._base,
     )
-    # the way there was the plan's points, then the user's goal itself
+    # the way there was the plan's points, then the user's goal itself as the last point, at rest,
+    # with the stance (the plan's last base pose) as its base, which the resolver holds and judges
+    # as a goal: the base is held at the stance in the final approach, and the arrival is reported
     assert len(probe.references) > 50 and finite_output(probe)
-    last = probe.forwarded[-1]
-    assert pose_values(last.pose) == pytest.approx(pose_values(sent.pose)) and last.header.frame_id == 'world'
+    # while following, each point carries the plan's travel posture, joint by joint, which the resolver takes
+    arm = list(load_robot(ROBOT).arm.joints)
+    travel = [planned_base_values(m, arm) for m in probe.references[:-1]]
+    assert all(list(m.joint_names) == ['end_effector', 'base', *arm] for m in probe.references[:-1])
+    assert all(len(t) == 4 and np.all(np.isfinite(t[3])) for t in travel)
+    last = probe.references[-1]
+    assert last.header.frame_id == 'world' and list(last.joint_names) == ['end_effector', 'base']
+    values = pose_values(last.points[0].transforms[0])
+    assert values[:3] == pytest.approx(BEHIND_TABLE, abs=1e-9)
+    assert rotation_angle(matrix_from_quaternion(values[3:]), goal_rotation(BEHIND_TABLE_YAW)) < 1e-6
+    assert twist_values(last.points[0].velocities[0]) == pytest.approx(np.zeros(6))
+    stance = np.array([(s.pose.position.x, s.pose.position.y) for s in probe.paths[-1].poses])[-1]
+    assert resolver.target.base is not None and resolver.target.base.pose[:2] == pytest.approx(stance, abs=1e-6)
+    assert resolver.target.base.rates == pytest.approx(np.zeros(3))
+    assert ros.spin_until(lambda: any('goal reached' in line for line in probe.lines('redundancy_resolver')), 5.0)
     # the base drove round the table, never into it (the simulator's own check)
     assert pose2d(probe.truth[-1])[0] > 1.75
     assert sim.contact.values['contact_periods'] == 0, sim.contact.values

@@ -117,11 +117,21 @@ def test_a_base_that_keeps_to_the_plan_gets_its_points_then_the_goal(pursuit):
     for _ in range(5 * len(planned)):  # the base where the plan's clock says it is
         base = follower.handoff.base_poses[min(int(follower.clock / follower.handoff.dt), len(planned) - 1)]
         out = pursuit.step(0.025, base, Q_ARM)
-        points += out.reference is not None
-        if out.forward_goal:
+        if pursuit.state is PursuitState.APPROACH:
             break
-    assert out.forward_goal and pursuit.state is PursuitState.APPROACH
-    assert points > 0.9 * len(planned)
+        points += out.reference is not None
+    assert pursuit.state is PursuitState.APPROACH and points > 0.9 * len(planned)
+    # the final approach: the goal itself, at rest, with the stance (the plan's last pose) as its base
+    approach = out.reference
+    assert approach is not None and not out.forward_goal
+    np.testing.assert_allclose(approach.position, BEHIND_TABLE)
+    np.testing.assert_allclose(approach.velocity, 0.0)
+    np.testing.assert_allclose(approach.base.pose, planned[-1])
+    np.testing.assert_allclose(approach.base.rates, 0.0)
+    assert approach.base.arm is None, "the stance's posture is the method's to find"
+    assert 'as the last point, with the stance' in ' '.join(e.message for e in out.events)
+    later = [pursuit.step(0.025, planned[-1], Q_ARM) for _ in range(5)]
+    assert all(s.reference is None and not s.forward_goal for s in later), 'sent once: the resolver holds it'
 
 
 def test_an_obstacle_on_the_rest_of_the_path_makes_it_plan_again(pursuit):

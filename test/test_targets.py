@@ -195,6 +195,32 @@ def test_a_goal_after_a_plan_holds_the_stance_as_its_base(targets):
     assert kinds(goal(targets)) == ['accepted'] and targets.target.base is None
 
 
+def test_a_plan_s_last_point_is_held_with_its_stance_and_judged_as_a_goal(targets):
+    """The final approach after a plan (goal_planner): the goal as the last point, at rest, with
+    the stance as its base; once no point follows it is held with the stance and reported reached."""
+    moving = (np.array((0.2, 0.1, 0.1)), np.array((0.4, 0.0, 0.1)), np.zeros(3), np.zeros(7))
+    targets.trajectory_point(
+        'world', [1.4, 0.3, 1.0, *IDENTITY], [0.4, 0, 0, 0, 0, 0.1], np.zeros(6), 1.0, None, moving
+    )
+    for _ in range(40):  # followed with a lag that never falls: no progress
+        targets.judge(diag(0.05))
+    stance = (np.array((0.3, 0.1, 0.2)), np.zeros(3), np.zeros(3))
+    targets.trajectory_point('world', [1.5, 0.3, 1.0, *IDENTITY], np.zeros(6), np.zeros(6), 1.1, None, stance)
+    target, events = targets.current(1.1 + TIMEOUT + 0.01)
+    assert kinds(events) == ['held'] and not targets.tracking
+    np.testing.assert_allclose(target.position, [1.5, 0.3, 1.0])
+    np.testing.assert_allclose(target.base.pose, stance[0])
+    np.testing.assert_allclose(target.base.rates, 0.0)
+    assert target.base.arm is None
+    # judged afresh: the approach (from 0.3 m, halving) is not a stall of the trajectory's lag
+    said = [(kinds(targets.judge(diag(0.3 * 0.5**k))), targets.progress.stalled) for k in range(10)]
+    assert not any(stalled for _, stalled in said) and [k for k, _ in said].count(['reached']) == 1
+    assert targets.progress.cycles == 10
+    # a held trajectory without a planned base has none
+    point(targets, 5.0)
+    assert targets.current(5.0 + TIMEOUT + 0.01)[0].base is None
+
+
 def test_a_goal_is_reached_once_and_a_stall_is_told_once_until_progress(targets):
     goal(targets)
     events = [targets.judge(diag(0.5 * 0.5**k)) for k in range(12)]

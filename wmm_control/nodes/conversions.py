@@ -164,17 +164,27 @@ def _twist(values) -> Twist:
 
 
 #: The ``joint_names`` of an ``/ee_reference`` message: the end effector, then, when a plan is
-#: followed, its planned base (:func:`reference_message`).
+#: followed, its planned base (:func:`reference_message`), and after them the arm's joints of the
+#: plan's travel posture, each by its own name.
 REFERENCE_JOINTS = ('end_effector', 'base')
 
 
-def reference_message(target, frame: str, stamp: Time, t: float) -> MultiDOFJointTrajectory:
+def reference_message(
+    target, frame: str, stamp: Time, t: float, arm_joints: Iterable[str] = ()
+) -> MultiDOFJointTrajectory:
     """A one-point ``MultiDOFJointTrajectory`` (an ``/ee_reference`` message) of a
     :class:`~wmm_control.resolvers.PoseTarget` at time ``t`` [s] along its trajectory:
     ``transforms[0]`` its pose, ``velocities[0]`` and ``accelerations[0]`` its twist and
     acceleration (linear, angular; world axes); with a followed plan's base (``target.base``)
     a second joint ``base``: its planned pose (x, y, 0; yaw), its world rates (ẋ, ẏ in linear,
-    θ̇ in angular z) and accelerations (:func:`planned_base_values`)."""
+    θ̇ in angular z) and accelerations; with the plan's travel posture (``target.base.arm``) one
+    joint more per arm joint, named ``arm_joints``, its position [rad or m] in
+    ``translation.x`` (the message has no scalar joints; rates and accelerations zero)
+    (:func:`planned_base_values` reads them back).
+
+    Raises:
+        ValueError: a travel posture whose size is not that of ``arm_joints``.
+    """
     from wmm_control.geometry import quaternion_from_matrix
 
     msg = MultiDOFJointTrajectory()
@@ -197,18 +207,34 @@ def reference_message(target, frame: str, stamp: Time, t: float) -> MultiDOFJoin
         point.transforms.append(base)
         point.velocities.append(rates)
         point.accelerations.append(acceleration)
+        if target.base.arm is not None:
+            names = list(arm_joints)
+            if len(names) != len(target.base.arm):
+                raise ValueError(f'a travel posture of {len(target.base.arm)} joints, named {names}')
+            msg.joint_names += names
+            for q in target.base.arm:
+                joint = Transform()
+                joint.translation.x = float(q)
+                joint.rotation.w = 1.0
+                point.transforms.append(joint)
+                point.velocities.append(Twist())
+                point.accelerations.append(Twist())
     point.time_from_start = Duration(**split_seconds(t))
     msg.points = [point]
     return msg
 
 
-def planned_base_values(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """(pose (x, y, θ), world rates, world accelerations) of the planned base of an
-    ``/ee_reference`` message's first point (its joint ``base``, :func:`reference_message`), or
-    None when it has none. Missing rates or accelerations are zero."""
+def planned_base_values(msg, arm_joints: Iterable[str] = ()) -> tuple[np.ndarray, ...] | None:
+    """(pose (x, y, θ), world rates, world accelerations[, travel posture]) of the planned base
+    of an ``/ee_reference`` message's first point (its joint ``base``, :func:`reference_message`),
+    or None when it has none. Missing rates or accelerations are zero. The travel posture is
+    given when the message names joints after ``base``: the positions of ``arm_joints`` in that
+    order, read by name (a joint missing, or one named twice, gives fewer positions than the arm
+    has, and one without its transform NaN: the resolver rejects both)."""
     from wmm_control.geometry import unit_quaternion, yaw_from_quaternion
 
-    if not msg.points or list(msg.joint_names[:2]) != list(REFERENCE_JOINTS):
+    names = list(msg.joint_names)
+    if not msg.points or names[:2] != list(REFERENCE_JOINTS):
         return None
     point = msg.points[0]
     if len(point.transforms) < 2:
@@ -219,7 +245,19 @@ def planned_base_values(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None
     pose = np.array([values[0], values[1], yaw])
     rates = planar_twist(point.velocities[1]) if len(point.velocities) > 1 else np.zeros(3)
     acceleration = planar_twist(point.accelerations[1]) if len(point.accelerations) > 1 else np.zeros(3)
-    return pose, rates, acceleration
+    extra = names[2:]
+    if not extra:
+        return pose, rates, acceleration
+    index = {name: 2 + k for k, name in enumerate(extra) if extra.count(name) == 1}
+    arm = np.array(
+        [
+            point.transforms[index[n]].translation.x if index[n] < len(point.transforms) else math.nan
+            for n in arm_joints
+            if n in index
+        ],
+        dtype=float,
+    )
+    return pose, rates, acceleration, arm
 
 
 def split_seconds(seconds: float) -> dict:

@@ -6,8 +6,10 @@ planner:=true`` does it). Each goal is planned off the executor's thread
 (:class:`~wmm_control.planning.pursuit.GoalPursuit`, ROS-free; this module only wires topics to
 it): a goal within reach with nothing in the way goes on to the resolver unchanged on
 ``~/goal``; otherwise the base path's points go to the resolver on ``/ee_reference``, one per
-``period``, at the pace the base keeps, then the goal itself on ``~/goal`` for the final
-approach. The planned base path is on ``~/path`` (latched), the state on ``/diagnostics`` and in
+``period``, at the pace the base keeps, then the goal itself for the final approach: on
+``/ee_reference`` as the last point, at rest, with the stance (the plan's last base pose) as its
+joint ``base``, which the resolver holds once no point follows and judges as a goal (on ``~/goal``
+without ``hold_base``). The planned base path is on ``~/path`` (latched), the state on ``/diagnostics`` and in
 the log. A goal the planner finds no way to is reported with the reason, and the robot is held
 where it is (its end effector's current pose sent as the goal). The plan is made again when
 progress stalls or an obstacle on ``/obstacles`` comes onto the rest of the path.
@@ -206,7 +208,7 @@ class GoalPlannerNode(Node):
         if out.reference is not None:
             follower = self.pursuit.follower
             t = follower.clock if follower is not None else 0.0
-            self.pub_reference.publish(reference_message(out.reference, frame, stamp, t))
+            self.pub_reference.publish(reference_message(out.reference, frame, stamp, t, self.robot.arm.joints))
         if out.path is not None:
             self._publish_path(out.path)
         if self._diagnostics_gate.due(seconds(self._steady), self.p.diagnostics_period):

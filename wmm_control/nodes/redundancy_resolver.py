@@ -212,7 +212,7 @@ class RedundancyResolverNode(Node):
             pose = pose_values(point.transforms[0])
             vel = twist_values(point.velocities[0]) if point.velocities else np.zeros(6)
             acc = twist_values(point.accelerations[0]) if point.accelerations else np.zeros(6)
-        planned = planned_base_values(msg)  # a followed plan's base, or None
+        planned = planned_base_values(msg, self.arm_joints)  # a followed plan's base (and posture), or None
         self._log(self.period.trajectory_point(msg.header.frame_id, pose, vel, acc, self._now(), planned))
 
     def _set_obstacles(self):

@@ -12,7 +12,13 @@ logged, and the robot is held where it is. An accepted one is planned
 * **following**: a base path to a stance elsewhere: its hand-off points
   (:class:`~wmm_control.planning.handoff.Handoff`) are given one per period at the pace the
   base keeps (:class:`~wmm_control.planning.follow.PlanFollower`), then the goal itself for the
-  resolver's final whole-body approach (**approach**);
+  resolver's final whole-body approach (**approach**): with ``hold_base`` as the last point
+  (:attr:`PursuitStep.reference`), at rest, with the plan's last base pose (the stance) as its
+  base (:attr:`PlanFollower.approach <wmm_control.planning.follow.PlanFollower.approach>`),
+  which the resolver holds once no point follows it and judges as a goal
+  (:meth:`TargetManager.current <wmm_control.resolvers.targets.TargetManager.current>`), so
+  that the base is held at the stance as in the direct engine; without ``hold_base`` the goal
+  alone (:attr:`PursuitStep.forward_goal`);
 * **no way**: the planner's reason (the goal inside an obstacle, out of reach, no stance, no
   path within the budget); nothing is forwarded and the robot is held.
 
@@ -92,7 +98,8 @@ class PursuitStep:
     """What to send this period.
 
     Attributes:
-        reference: the trajectory point for the resolver (``/ee_reference``), or None.
+        reference: the trajectory point for the resolver (``/ee_reference``), or None; the
+            final approach's goal, at rest with the stance as its base, once the plan is done.
         forward_goal: give the resolver the user's goal now, unchanged.
         hold: a goal that holds the robot where it is (the end effector's pose now), or None.
         path: the planned base poses (x, y, θ) when they changed (empty: no plan), else None.
@@ -343,8 +350,18 @@ class GoalPursuit:
             self.progress = step.progress
             if step.state is FollowState.APPROACH:
                 self.state = PursuitState.APPROACH
-                forward = True
-                events.append(LogEvent('approach', 'the planned path is done: the goal goes to the resolver'))
+                if step.target.base is None:  # without hold_base: the goal alone, as a goal
+                    forward = True
+                    events.append(LogEvent('approach', 'the planned path is done: the goal goes to the resolver'))
+                else:  # the goal as the last point, at rest, with the stance: the resolver holds it
+                    reference = step.target
+                    events.append(
+                        LogEvent(
+                            'approach',
+                            'the planned path is done: the goal goes to the resolver as the last point, with the '
+                            f'stance {np.round(step.target.base.pose, 3).tolist()} as its base',
+                        )
+                    )
             elif step.state is FollowState.STALLED:
                 forward = self._replan(events, 'progress stalled on the planned path', base)
             else:
