@@ -387,8 +387,11 @@ def scale_into_limits(vec: ArrayLike, limits: ArrayLike, rows: np.ndarray | None
     """
     vec = np.array(vec, dtype=float)
     limits = np.asarray(limits, dtype=float)
-    with np.errstate(over='ignore', invalid='ignore'):  # an overflow to inf (or NaN) is not within
-        image = np.abs(vec if rows is None else rows @ vec)
+    if rows is None:
+        image = np.abs(vec)
+    else:
+        with np.errstate(over='ignore', invalid='ignore'):  # an overflow to inf (or NaN) is not within
+            image = np.abs(rows @ vec)
     if (image <= limits).all():
         return vec, 1.0
     peak = float(np.max(np.abs(vec)))
@@ -415,13 +418,14 @@ def largest_step(
         not bind or is outside the mask, 0 where ``start`` is already out of bounds by more
         than 1e-9). Shape (n,).
     """
+    per = np.where(step > 0.0, upper, lower)
+    per -= start
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-        per = np.where(step > 0.0, upper - start, lower - start) / step
+        per /= step
     per[step == 0.0] = np.inf  # a zero step does not bind (nor does one of 1e-300: inf)
     np.maximum(per, 0.0, out=per)
-    beyond = (start > upper + 1e-9) | (start < lower - 1e-9)
-    if beyond.any():
-        per[beyond] = 0.0
+    if np.maximum(start - upper, lower - start).max(initial=-np.inf) > 1e-9:
+        per[(start > upper + 1e-9) | (start < lower - 1e-9)] = 0.0
     if mask is not None:
         per[~mask] = np.inf
     return float(min(1.0, per.min(initial=np.inf))), per

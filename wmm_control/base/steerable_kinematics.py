@@ -42,6 +42,7 @@ class SteerableGeometry:
     wheel_offset: float
     _maps: dict = field(init=False, repr=False, compare=False, default_factory=dict)
     _hip_sums: tuple = field(init=False, repr=False, compare=False, default=())
+    _columns: tuple = field(init=False, repr=False, compare=False, default=())
 
     def __post_init__(self):
         hips = np.asarray(self.hips, dtype=float)
@@ -54,6 +55,8 @@ class SteerableGeometry:
         hips = hips.copy()
         hips.flags.writeable = False
         object.__setattr__(self, 'hips', hips)
+        # hx, hy and ones, per module: contiguous vectors for the per-period products
+        object.__setattr__(self, '_columns', (hips[:, 0].copy(), hips[:, 1].copy(), np.ones(hips.shape[0])))
         object.__setattr__(
             self, '_hip_sums', (float(hips[:, 0].sum()), float(hips[:, 1].sum()), float((hips * hips).sum()))
         )
@@ -83,8 +86,8 @@ class SteerableGeometry:
             Shape (..., N, 3) for one kind, (..., 2N, 3) for both (f first).
         """
         c, s = np.cos(beta), np.sin(beta)
-        hx, hy = self.hips[:, 0], self.hips[:, 1]
-        n = self.n_wheels
+        hx, hy, _ = self._columns
+        n = hx.shape[0]
         out = np.empty(c.shape[:-1] + ((rolling + slip) * n, 3))
         if rolling:
             f = out[..., :n, :]
@@ -185,21 +188,21 @@ class SteerableGeometry:
         """
         c, s = np.cos(beta), np.sin(beta)
         n, d = self.n_wheels, self.wheel_offset
-        w = np.empty(c.shape + (3,))
-        w[..., 0], w[..., 1], w[..., 2] = c, s, self.hips[:, 0] * s - self.hips[:, 1] * c
+        hx, hy, ones = self._columns
         rhs = self.wheel_radius * phi_dot - d * beta_dot
-        sums = np.array((np.ones(n), rhs)) @ w  # (..., 2, 3): Σ(c, s, q) and Σ ρ (c, s, q)
+        # (Σ(c, s, q), Σ ρ (c, s, q)) as one product; floats for one set, arrays for several
+        sums = np.array((c, s, hx * s - hy * c)) @ np.array((ones, rhs)).T  # (3, ..., 2)
+        (s_c, r_c), (s_s, r_s), (s_q, r_q) = sums.tolist() if sums.ndim == 2 else np.moveaxis(sums, -1, 1)
         sum_hx, sum_hy, sum_h2 = self._hip_sums
-        n02 = d * sums[..., 0, 0] - sum_hy
-        n12 = d * sums[..., 0, 1] + sum_hx
-        n22 = n * d * d + sum_h2 + 2.0 * d * sums[..., 0, 2]
-        b0, b1 = sums[..., 1, 0], sums[..., 1, 1]
-        b2 = sums[..., 1, 2] + d * rhs.sum()
+        n02 = d * s_c - sum_hy
+        n12 = d * s_s + sum_hx
+        n22 = n * d * d + sum_h2 + 2.0 * d * s_q
+        b2 = r_q + d * float(rhs.sum())
         # Cramer's rule for [[N, 0, n02], [0, N, n12], [n02, n12, n22]] (det = N · det_2)
         det_2 = n * n22 - n12 * n12 - n02 * n02
-        if np.all(np.abs(det_2) > 1e-12 * n * np.maximum(n22, 1.0)):
-            w2 = (n * b2 - n02 * b0 - n12 * b1) / det_2  # ω
-            return np.array(((b0 - n02 * w2) / n, (b1 - n12 * w2) / n, w2)).T
+        if np.all(abs(det_2) > 1e-12 * n * np.maximum(n22, 1.0)):
+            w2 = (n * b2 - n02 * r_c - n12 * r_s) / det_2  # ω
+            return np.array(((r_c - n02 * w2) / n, (r_s - n12 * w2) / n, w2)).T
         a = self._rows(beta, rolling=True, slip=True)
         rhs2 = np.concatenate((rhs, np.zeros(n)))
         if a.ndim == 2:

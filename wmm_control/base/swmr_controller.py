@@ -100,6 +100,8 @@ _FEAS_TOL = 1e-9  # a normalised row violated by at most this counts as satisfie
 _HIP_TOL = 1e-9  # a hip velocity below this: the ICR sits on the hip
 ELASTIC_WEIGHT = 1e4
 _BOX_ROWS = np.eye(2)
+_EYE2 = np.eye(2)
+_EYE2.flags.writeable = False
 _ZERO2 = np.zeros(2)
 _ZERO2.flags.writeable = False
 _ZERO3 = np.zeros(3)
@@ -313,12 +315,17 @@ class IcrQp:
         return self._metric(1.0 / math.sqrt(1.0 + self.route_weight))
 
     def _metric(self, stretch: float) -> np.ndarray:
+        return self._metrics(stretch)[0]
+
+    def _metrics(self, stretch: float) -> tuple[np.ndarray, np.ndarray]:
+        """``I + (k − 1) n nᵀ`` for k = ``stretch`` and for k = 1/``stretch`` (n ⟂ x_ref)."""
         x0, x1 = self.x_ref.tolist()
         nn = math.hypot(x0, x1)
         if nn == 0.0 or self.route_weight == 0.0:
-            return np.eye(2)
-        n = np.array((-x1 / nn, x0 / nn))
-        return np.eye(2) + (stretch - 1.0) * np.outer(n, n)
+            return np.eye(2), np.eye(2)
+        n0, n1 = -x1 / nn, x0 / nn
+        outer = np.array(((n0 * n0, n0 * n1), (n1 * n0, n1 * n1)))
+        return _EYE2 + (stretch - 1.0) * outer, _EYE2 + (1.0 / stretch - 1.0) * outer
 
     def x_ref_feasible(self) -> bool:
         """True when ICR_ref lies in every wedge and in the box: it is then the optimum."""
@@ -447,12 +454,12 @@ class OsqpIcrSolver:
         y_ref = problem.x_ref
         s_inv = None
         if problem.route_weight > 0.0 and y_ref.any():
-            s_inv = problem.metric_inverse
+            metric, s_inv = problem._metrics(math.sqrt(1.0 + problem.route_weight))
             a = a @ s_inv
             norms = np.sqrt((a * a).sum(axis=1))
             a /= norms[:, None]
             lb, ub = np.maximum(lb / norms, -_INF), np.minimum(ub / norms, _INF)
-            y_ref = problem.metric @ y_ref
+            y_ref = metric @ y_ref
         y, status = self._run(self._osqp, -y_ref, a, lb, ub)
         if status in _OSQP_ACCEPTED or status not in _OSQP_ELASTIC:
             return QpResult(y if s_inv is None else s_inv @ y, _STATUS_NAME[status])
@@ -567,7 +574,9 @@ class SwmrController:
         self._row_maps = np.concatenate((self._hip_map, self._hip_map))
         self._hip_rows = np.concatenate((self._hip_map[:, 0], self._hip_map[:, 1]))  # (2N, 3): vx rows, vy rows
         points = np.column_stack((geometry.hips, np.full(n, p.icr_scale)))
-        self._hip_points = points / np.linalg.norm(points, axis=1)[:, None]
+        points /= np.linalg.norm(points, axis=1)[:, None]
+        self._hip_points = np.column_stack((points, np.ones(n)))  # (N, 4): the unit point, then 1
+        self._last_icr: tuple[bytes, np.ndarray] = (b'', _ZERO3)  # steer angles and their ICR
         self.reset(np.zeros(n))
 
     # ------------------------------------------------------------------ state
@@ -628,10 +637,16 @@ class SwmrController:
         return self._icr
 
     def _icr_of(self, beta: np.ndarray, like=None) -> Icr:
-        """ICR of steer angles β (Shape (N,)): :func:`icr_of_headings`, on the hemisphere of ``like``."""
-        return self._icr_proto._with_z_unchecked(
-            icr_of_headings(self.geometry.slip_rows(beta), self.params.icr_scale, like)
-        )
+        """ICR of steer angles β (Shape (N,)): :func:`icr_of_headings`, on the hemisphere of ``like``.
+
+        The last angles' ICR is kept: steering held at rest asks again for the same angles."""
+        key = beta.tobytes()
+        if key != self._last_icr[0]:
+            self._last_icr = (key, icr_of_headings(self.geometry.slip_rows(beta), self.params.icr_scale))
+        z = self._last_icr[1]
+        if like is not None and z @ like < 0.0:
+            z = -z
+        return self._icr_proto._with_z_unchecked(z)
 
     def _rate_interval(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-period steer-rate interval [rad/s]: |β̇| ≤ β̇_max and |β̇ − β̇_prev| ≤ β̈_max dt.
@@ -771,10 +786,19 @@ class SwmrController:
         if sin_theta < 1e-12:
             return False
         cos_theta = c0 * t0 + c1 * t1 + c2 * t2
-        off, hc, ht = np.array((normal, zc, zt)) @ self._hip_points.T
-        # the hip's foot on the route's great circle is a zc + b zt with a, b ≥ 0
-        between = (hc - ht * cos_theta >= 0.0) & (ht - hc * cos_theta >= 0.0)
-        return bool((between & (np.abs(off) < self.params.route_hip_distance * sin_theta)).any())
+        # per hip h (unit, homogeneous), all ≥ 0: its distance from the route's great circle
+        # within the band on either side, h·(zc − zt cos θ) and h·(zt − zc cos θ) (its foot on
+        # the circle is a zc + b zt with a, b ≥ 0)
+        band = self.params.route_hip_distance * sin_theta
+        tests = np.array(
+            (
+                (-normal[0], -normal[1], -normal[2], band),
+                (normal[0], normal[1], normal[2], band),
+                (c0 - t0 * cos_theta, c1 - t1 * cos_theta, c2 - t2 * cos_theta, 0.0),
+                (t0 - c0 * cos_theta, t1 - c1 * cos_theta, t2 - c2 * cos_theta, 0.0),
+            )
+        )
+        return bool((self._hip_points @ tests.T >= 0.0).all(axis=1).any())
 
     def _stopped(self, ref: np.ndarray) -> bool:
         """True when the reference (vx, vy, ω) is below ``stop_threshold``: stop, hold the angles."""
@@ -807,21 +831,22 @@ class SwmrController:
             Shape (N,).
         """
         n = self.geometry.n_wheels
-        v = self._hip_rows @ np.array((zc, zr, zt)).T  # (2N, 3): vx then vy of each hip at ICR_curr, _ref, *
-        along = np.cos(self._beta)[:, None] * v[:n] + np.sin(self._beta)[:, None] * v[n:]  # (N, 3)
-        sign = np.where(along > 0.0, 1.0, -1.0)
+        # hip velocities (vx rows, then vy rows) at ICR_curr, ICR_ref, ICR* and 2 ICR_curr − ICR_ref
+        v = self._hip_rows @ np.array((zc, zr, zt, zc + zc - zr)).T  # (2N, 4)
+        along = np.cos(self._beta)[:, None] * v[:n] + np.sin(self._beta)[:, None] * v[n:]  # (N, 4)
         decided = np.abs(along) > _HIP_TOL
-        sides = sign[:, 0]
+        sides = np.where(along[:, 0] > 0.0, 1.0, -1.0)
         if not decided[:, 0].all():  # ICR_curr on a hip: ICR_ref decides, then ICR*, else +1
+            sign = np.where(along > 0.0, 1.0, -1.0)
             sides = np.where(
                 decided[:, 0], sides, np.where(decided[:, 1], sign[:, 1], np.where(decided[:, 2], sign[:, 2], 1.0))
             )
         if mirror:
-            vc, step = v[:, 0], v[:, 1] - v[:, 0]
-            closer = vc * vc - step * step  # per hip: |v_c|² − |v_r − v_c|², x then y
-            near = (closer[:n] + closer[n:] <= 0.0) & decided[:, 1]
+            # per hip |v_c|² − |v_r − v_c|² = (2 v_c − v_r) · v_r
+            closer = (v[:, 3] * v[:, 1]).reshape(2, n).sum(axis=0)
+            near = (closer <= 0.0) & decided[:, 1]
             if near.any():
-                sides = np.where(near, sign[:, 1], sides)
+                sides = np.where(near, np.where(along[:, 1] > 0.0, 1.0, -1.0), sides)
         return sides
 
     def _solve(self, problem: IcrQp) -> _QpAnswer:

@@ -124,7 +124,7 @@ class CommandLimits:
         self._adt2 = np.tile(self._adt[self._bounded], 2)  # a dt of the entries below and above
         self._zero = np.zeros(n)
         self._neg_velocity = -self.velocity
-        self._last_braking: tuple[bytes, tuple[np.ndarray, np.ndarray]] = (b'', (self._zero, self._zero))
+        self._last_braking: tuple[bytes, tuple[np.ndarray, ...]] = (b'', (self._zero,) * 5)
 
     def braking_rates(self, position: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Largest rates towards the lower and upper position limits from which braking stops in time.
@@ -135,7 +135,7 @@ class CommandLimits:
         Returns:
             (down, up): non-negative rate bounds [unit/s]; inf where there is no limit. Shape (n,) each.
         """
-        down, up = self._braking(as_vector(position, self.n, 'position'))
+        down, up = self._braking(as_vector(position, self.n, 'position'))[:2]
         return down.copy(), up.copy()
 
     def box(self, position: ArrayLike, previous: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -149,9 +149,9 @@ class CommandLimits:
         Returns:
             (lower, upper, forced): Shape (n,) each; ``forced`` flags the entries above.
         """
-        down, up = self._braking(as_vector(position, self.n, 'position'))
+        braking = self._braking(as_vector(position, self.n, 'position'))
         previous = as_vector(previous, self.n, 'previous command')
-        return self._box(down, up, previous, previous - self._adt, previous + self._adt)
+        return self._box(braking, previous, previous - self._adt, previous + self._adt)
 
     @classmethod
     def for_robot(cls, robot: RobotConfig, dt: float) -> Self:
@@ -204,14 +204,15 @@ class CommandLimits:
         )
         primary = as_vector(primary, n, 'primary')
         secondary = self._zero if secondary is None else as_vector(secondary, n, 'secondary')
-        down, up = self._braking(as_vector(position, n, 'position'))
+        braking = self._braking(as_vector(position, n, 'position'))
+        neg_down, up = braking[2], braking[1]
         # 0. a non-finite entry is a request to stop
         limited = ~(np.isfinite(primary) & np.isfinite(secondary))
         if limited.any():
             primary, secondary = np.where(limited, 0.0, primary), np.where(limited, 0.0, secondary)
         # 1. braking, joint by joint: the primary part first, the secondary part in the room left
-        clipped = np.minimum(np.maximum(primary, -down), up)
-        sec = np.minimum(np.maximum(secondary, -down - clipped), up - clipped)
+        clipped = np.minimum(np.maximum(primary, neg_down), up)
+        sec = np.minimum(np.maximum(secondary, neg_down - clipped), up - clipped)
         limited |= (clipped != primary) | (sec != secondary)
         # 2. velocity: the whole command, uniformly (the braking bounds hold all the way to rest)
         s_v = _largest_step(self._zero, clipped + sec, self._neg_velocity, self.velocity, limited)
@@ -224,7 +225,7 @@ class CommandLimits:
         mid = previous + s_a * d_p
         s_s = _largest_step(mid, d_s, lo_a, hi_a, limited)
         # 4. the period's box, braking first where it conflicts with the acceleration limit
-        lo, hi, forced = self._box(down, up, previous, lo_a, hi_a)
+        lo, hi, forced = self._box(braking, previous, lo_a, hi_a)
         raw = mid + s_s * d_s
         command = np.minimum(np.maximum(raw, lo), hi)
         out_s = prev_s + s_s * d_s
@@ -244,7 +245,8 @@ class CommandLimits:
         )
 
     def _braking(self, position):
-        """:meth:`braking_rates` of a checked position vector: (down, up), not to be modified.
+        """:meth:`braking_rates` of a checked position vector, not to be modified: (down, up,
+        −down, and the velocity and braking interval ``max(−v, −down)``, ``min(v, up)``).
         The last answer is kept: a resolver asks several times a period at one position."""
         key = position.tobytes()
         if key == self._last_braking[0]:
@@ -257,13 +259,15 @@ class CommandLimits:
         rates = _braking_rate(distance, self._adt2, self.dt)
         down, up = np.full(self.n, np.inf), np.full(self.n, np.inf)
         down[i], up[i] = rates[: i.size], rates[i.size :]
-        self._last_braking = (key, (down, up))
-        return down, up
+        neg_down = -down
+        braking = (down, up, neg_down, np.maximum(self._neg_velocity, neg_down), np.minimum(self.velocity, up))
+        self._last_braking = (key, braking)
+        return braking
 
-    def _box(self, down, up, previous, lower_accel, upper_accel):
-        """:meth:`box` from the braking rates and the acceleration interval ``previous ∓ a dt``:
-        (lower, upper, forced)."""
-        lo_v, hi_v = np.maximum(-self.velocity, -down), np.minimum(self.velocity, up)
+    def _box(self, braking, previous, lower_accel, upper_accel):
+        """:meth:`box` from the braking rates (:meth:`_braking`) and the acceleration interval
+        ``previous ∓ a dt``: (lower, upper, forced)."""
+        lo_v, hi_v = braking[3], braking[4]
         lo, hi = np.maximum(lo_v, lower_accel), np.minimum(hi_v, upper_accel)
         forced = lo > hi
         if forced.any():
