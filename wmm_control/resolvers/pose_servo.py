@@ -2,7 +2,7 @@
 
 Sorour §II–III: the proportional pose controller of eq (12), the augmented Jacobian J_mm of
 eq (7), the limits of the whole command, and the arm compensation of eq (14). A subclass
-supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull) -> (u_task, u_null,
+supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull, stance) -> (u_task, u_null,
 mode, ψ)``, the task part and the null-space part, which gives way first to the limits.
 
 A followed plan's base (:class:`~wmm_control.resolvers.interface.BaseReference` on the target,
@@ -11,6 +11,8 @@ space of the end effector's, ``z_b = ᵇR_w (ξ̇_plan + λ_p (ξ_plan − ξ))`
 (:meth:`PoseServoResolver.base_pull`), projected as eq (13)'s posture pull is
 (:meth:`PoseServoResolver.null_motion`): the end effector's task keeps its priority, and
 what it leaves free brings the base back onto the plan with the arm making up the difference.
+At the stance (the final approach) a method's own posture pull ranks below it
+(:meth:`PoseServoResolver.secondary_motion`).
 Without a base reference nothing changes.
 
 Joint space. The paper's base coordinates are the 6-vector q̇_b = (ẋ, ẏ, 0, 0, 0, ω) (eq 3)
@@ -411,11 +413,44 @@ class PoseServoResolver(Resolver):
             rows = np.vstack((jac, np.eye(n)[held]))
         return np.zeros(n)
 
+    def secondary_motion(
+        self,
+        jac: np.ndarray,
+        task: np.ndarray,
+        q_arm: np.ndarray,
+        pull: np.ndarray | None,
+        posture: np.ndarray,
+        stance: bool = False,
+    ) -> np.ndarray:
+        """The method's posture pull ``posture`` (over u) and a followed plan's pull on the base
+        (:meth:`base_pull`, or None) in the null space of the end effector's task
+        (:meth:`null_motion`).
+
+        On the way (``stance`` False) the two are summed into one pull, the posture pull
+        spanning the base (Sorour eq 13: the base may move to restore the arm's posture). At
+        the stance (the final approach, :attr:`BaseReference.stance`) they are a stack of
+        tasks (Siciliano–Slotine): ``pull`` in the null space of the end effector's task, then
+        ``posture`` in the null space of the task and the base's axes together (the arm's
+        self-motion alone), in the room the two before it leave. The posture pull then can
+        neither move the base nor hold it off the stance: summed, the two found a balance short
+        of it, where the arm, given the whole task in fine manipulation, could not reach the
+        goal. Without ``pull``: ``null_motion(jac, task, q_arm, posture)``, the method as
+        written. Shape (n_b + n,).
+        """
+        if pull is None:
+            return self.null_motion(jac, task, q_arm, posture)
+        if not stance:
+            return self.null_motion(jac, task, q_arm, pull + posture)
+        first = self.null_motion(jac, task, q_arm, pull)
+        held_base = np.vstack((jac, np.eye(self.n)[: self.n_base]))
+        return first + self.null_motion(held_base, task + first, q_arm, posture)
+
     # ------------------------------------------------------------------ step
     @abstractmethod
-    def _resolve(self, jac, p_ref, e_pos, state, pull):
+    def _resolve(self, jac, p_ref, e_pos, state, pull, stance):
         """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ)``;
-        ``pull`` is :meth:`base_pull` of a followed plan's base, or None, for the null space."""
+        ``pull`` is :meth:`base_pull` of a followed plan's base, or None, for the null space,
+        ``stance`` that base's :attr:`~wmm_control.resolvers.interface.BaseReference.stance`."""
 
     def step(self, state: RobotState, target: PoseTarget) -> ResolverCommand:
         """One period: eq (12), the method's inversion, then the limits.
@@ -428,7 +463,8 @@ class PoseServoResolver(Resolver):
         t0 = time.perf_counter()
         jac, p_ref, e_pos, angle = self.task_reference(state, target)
         pull = None if target.base is None else self.base_pull(state, target.base, self.pulls_arm_to_plan)
-        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull)
+        stance = target.base is not None and target.base.stance
+        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull, stance)
         nb = self.n_base
         self._position[nb:] = state.q_arm
         lim = self.limits.apply(task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null)
