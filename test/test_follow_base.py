@@ -123,16 +123,16 @@ def _hold_the_hand_with_a_base_reference(cfg, reference, seconds):
 
 def test_at_the_stance_task_sharings_posture_pull_yields_to_the_base():
     """In the final approach the base's place (the stance) comes before the dexterous posture:
-    summed into one null-space pull the two balance with the base short of the stance; with
-    the stance first the base reaches it, the arm taking the posture the task leaves it, and
-    the end effector stays where it is in both."""
+    summed into one null-space pull the two balance with the base no nearer to the stance; with
+    the stance first the base reaches it, the arm taking the posture the task leaves it, and the
+    end effector (within the arm's reach from there) stays where it is in both."""
     cfg = load_robot('steerable')
-    offset = np.array((0.25, 0.15, 0.3))
+    offset = np.array((0.15, 0.1, 0.2))
     on_the_way, moved = _hold_the_hand_with_a_base_reference(cfg, lambda b: BaseReference(b + offset), 20.0)
-    assert moved < 1e-4 and np.linalg.norm(on_the_way[:2]) > 0.2  # summed: held off by the posture pull
+    assert moved < 1e-4 and np.linalg.norm(on_the_way[:2]) >= np.linalg.norm(offset[:2])
     at_stance, moved = _hold_the_hand_with_a_base_reference(cfg, lambda b: BaseReference(b + offset, stance=True), 20.0)
     assert moved < 1e-4
-    assert np.linalg.norm(at_stance[:2]) < 0.03 and abs(at_stance[2]) < 0.03
+    assert np.linalg.norm(at_stance[:2]) < 0.005 and abs(at_stance[2]) < 0.005
 
 
 def test_a_planned_base_given_with_a_goal_is_its_stance(turn_then_straight):
