@@ -18,13 +18,13 @@ from sim_bridge.world import SimWorld
 from wmm_control.experiments.direct import run_scenario
 from wmm_control.experiments.randomized import METHOD_RUNS, RandomGoal, _scenario
 from wmm_control.experiments.scenario import resolver_parameters
-from wmm_control.geometry import rpy_from_matrix, wrap_angle
+from wmm_control.geometry import rpy_from_matrix, se2_integrate, wrap_angle
 from wmm_control.kinematics import KinematicModel
 from wmm_control.planning.follow import FollowParams, FollowState, PlanFollower
 from wmm_control.planning.handoff import Handoff
 from wmm_control.planning.timing import TwistPiece, time_path
 from wmm_control.resolvers import make_resolver
-from wmm_control.resolvers.interface import BaseReference, PoseTarget
+from wmm_control.resolvers.interface import BaseReference, PoseTarget, RobotState
 from wmm_control.robot_config import load_robot
 
 PARAMS = FollowParams()
@@ -101,3 +101,45 @@ def test_every_method_keeps_its_base_within_the_lead_of_the_plan_and_reaches_the
     assert len(lags) >= len(handoff.points) - 1  # followed to the end
     assert lags.max() < 1.0, f'{method}: the base {lags.max():.2f} leads behind the plan'
     assert np.linalg.norm(log.ee_position[-1] - target.position) < 0.01
+
+
+def _hold_the_hand_with_a_base_reference(cfg, reference, seconds):
+    """(the base's error to ``reference`` after ``seconds`` of task sharing holding the end
+    effector where it starts, how far the end effector moved [m]): the commands integrated
+    kinematically from the robot's start, the base given ``reference``."""
+    resolver = make_resolver('task_sharing', cfg, **resolver_parameters(METHOD_RUNS['task_sharing']))
+    base, q = np.array(cfg.start.base_pose, dtype=float), np.array(cfg.start.arm, dtype=float)
+    start = RobotState(base, np.zeros(3), q, np.zeros_like(q))
+    position, rotation = start.ee_placement(resolver.model, update=True)
+    target = PoseTarget(position, rotation, base=reference(base))
+    state, dt = start, resolver.params.dt
+    for _ in range(int(seconds / dt)):
+        cmd = resolver.step(state, target)
+        pose = se2_integrate(state.base_pose, cmd.base_twist, dt)
+        state = RobotState(pose, cmd.base_twist, state.q_arm + dt * cmd.arm_velocity, cmd.arm_velocity)
+    moved = np.linalg.norm(state.ee_placement(resolver.model, update=True)[0] - position)
+    return target.base.error(state.base_pose), moved
+
+
+def test_at_the_stance_task_sharings_posture_pull_yields_to_the_base():
+    """In the final approach the base's place (the stance) comes before the dexterous posture:
+    summed into one null-space pull the two balance with the base no nearer to the stance; with
+    the stance first the base reaches it, the arm taking the posture the task leaves it, and the
+    end effector (within the arm's reach from there) stays where it is in both."""
+    cfg = load_robot('steerable')
+    offset = np.array((0.15, 0.1, 0.2))
+    on_the_way, moved = _hold_the_hand_with_a_base_reference(cfg, lambda b: BaseReference(b + offset), 20.0)
+    assert moved < 1e-4 and np.linalg.norm(on_the_way[:2]) >= np.linalg.norm(offset[:2])
+    at_stance, moved = _hold_the_hand_with_a_base_reference(cfg, lambda b: BaseReference(b + offset, stance=True), 20.0)
+    assert moved < 1e-4
+    assert np.linalg.norm(at_stance[:2]) < 0.005 and abs(at_stance[2]) < 0.005
+
+
+def test_a_planned_base_given_with_a_goal_is_its_stance(turn_then_straight):
+    """The follower's approach, and the resolver's goal input, mark the base as the stance;
+    the points of the way there do not."""
+    _, handoff, _ = turn_then_straight
+    follower = PlanFollower(handoff, PoseTarget(handoff.points[-1].position, handoff.points[-1].rotation))
+    assert follower.approach.base is not None and follower.approach.base.stance
+    assert np.allclose(follower.approach.base.pose, handoff.base_poses[-1])
+    assert not any(p.base.stance for p in handoff.points)

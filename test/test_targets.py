@@ -175,6 +175,7 @@ def test_a_followed_plan_s_base_comes_with_its_point_checked_as_the_point_is(tar
     good = (np.array((0.3, 0.1, 0.2)), np.array((0.5, 0.0, 0.1)), np.zeros(3))
     targets.trajectory_point('world', [1.5, 0.3, 1.0, *IDENTITY], np.zeros(6), np.zeros(6), 1.0, planned_base=good)
     assert np.allclose(targets.target.base.pose, good[0]) and np.allclose(targets.target.base.rates, good[1])
+    assert not targets.target.base.stance  # a point of the way there, not where the base stands
     events = targets.trajectory_point(
         'world', [1.5, 0.3, 1.0, *IDENTITY], np.zeros(6), np.zeros(6), 1.1, planned_base=planned
     )
@@ -188,7 +189,7 @@ def test_a_followed_plan_s_base_comes_with_its_point_checked_as_the_point_is(tar
 def test_a_goal_after_a_plan_holds_the_stance_as_its_base(targets):
     stance = (np.array((0.3, 0.1, 0.2)), np.zeros(3), np.zeros(3))
     assert kinds(targets.goal('world', [1.5, 0.3, 1.0, *IDENTITY], None, planned_base=stance)) == ['accepted']
-    assert np.allclose(targets.target.base.pose, stance[0])
+    assert np.allclose(targets.target.base.pose, stance[0]) and targets.target.base.stance
     bad = (np.array((0.3, math.inf, 0.2)), np.zeros(3), np.zeros(3))
     events = targets.goal('world', [1.5, 0.4, 1.0, *IDENTITY], None, planned_base=bad)
     assert kinds(events) == ['rejected'] and 'non-finite values of the planned base' in events[0].message

@@ -208,7 +208,7 @@ class PlanFollower:
         last = self.handoff.points[-1].base
         if not self.params.hold_base or last is None:
             return self.goal
-        return replace(self.goal, base=BaseReference(last.pose))
+        return replace(self.goal, base=BaseReference(last.pose, stance=True))
 
     @property
     def clock(self) -> float:

@@ -124,6 +124,9 @@ class BaseReference:
         acceleration: its planned world accelerations (ẍ, ÿ, θ̈) [m/s², m/s², rad/s²]. Shape (3,).
         arm: the arm's posture the plan assumed with it (its travel posture) [rad or m], or None
             (the final approach: the posture is the method's to find). Shape (n,).
+        stance: True for the base's place in the final approach, given with a goal (the plan's
+            last pose, at rest, from which the goal is reachable): a method's own posture task
+            yields to it there; False for a point of the way there.
 
     Raises:
         ShapeError, NonFiniteError: a wrong size or a NaN/inf entry.
@@ -133,6 +136,7 @@ class BaseReference:
     rates: np.ndarray = field(default_factory=lambda: np.zeros(3))
     acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
     arm: np.ndarray | None = None
+    stance: bool = False
 
     def __post_init__(self):
         if self.arm is not None:

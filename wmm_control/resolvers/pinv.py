@@ -36,7 +36,7 @@ class PinvResolver(PoseServoResolver):
     def __init__(self, robot: str | Path | RobotConfig | KinematicModel, params: PinvParams | None = None) -> None:
         super().__init__(robot, params if params is not None else PinvParams())
 
-    def _resolve(self, jac, p_ref, e_pos, state, pull):
+    def _resolve(self, jac, p_ref, e_pos, state, pull, stance):
         task = self.solve_task(jac, p_ref, state.q_arm)
         # a followed plan's pull (not in the paper; :meth:`base_pull`), in the null space
         null = None if pull is None else self.null_motion(jac, task, state.q_arm, pull)

@@ -2,7 +2,7 @@
 
 Sorour §II–III: the proportional pose controller of eq (12), the augmented Jacobian J_mm of
 eq (7), the limits of the whole command, and the arm compensation of eq (14). A subclass
-supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull) -> (u_task, u_null,
+supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull, stance) -> (u_task, u_null,
 mode, ψ)``, the task part and the null-space part, which gives way first to the limits.
 
 A followed plan's base (:class:`~wmm_control.resolvers.interface.BaseReference` on the target,
@@ -11,6 +11,8 @@ space of the end effector's, ``z_b = ᵇR_w (ξ̇_plan + λ_p (ξ_plan − ξ))`
 (:meth:`PoseServoResolver.base_pull`), projected as eq (13)'s posture pull is
 (:meth:`PoseServoResolver.null_motion`): the end effector's task keeps its priority, and
 what it leaves free brings the base back onto the plan with the arm making up the difference.
+At the stance (the final approach) a method's own posture pull ranks below it
+(:meth:`PoseServoResolver.secondary_motion`).
 Without a base reference nothing changes.
 
 Joint space. The paper's base coordinates are the 6-vector q̇_b = (ẋ, ẏ, 0, 0, 0, ω) (eq 3)
@@ -381,10 +383,24 @@ class PoseServoResolver(Resolver):
             z[self.n_base :] = self.params.lambda_p * (reference.arm - state.q_arm)
         return z
 
-    def null_motion(self, jac: np.ndarray, task: np.ndarray, q_arm: np.ndarray, z: np.ndarray) -> np.ndarray:
+    def null_motion(
+        self,
+        jac: np.ndarray,
+        task: np.ndarray,
+        q_arm: np.ndarray,
+        z: np.ndarray,
+        activation: np.ndarray | None = None,
+    ) -> np.ndarray:
         """``(I − J⁺J) z``, kept clear of the braking bounds: the secondary task ``z`` in the
         null space of the end effector's (Sorour eqs 9 and 13), with the undamped
         Moore–Penrose J⁺ (SVD, relative tolerance ``pinv_tolerance``).
+
+        With ``activation`` (the diagonal of A, as :func:`damped_pinv` takes it) the projector
+        is the weighted one, ``I − A Jᵀ (J A Jᵀ)⁺ J``: the correction that keeps the end effector
+        still is made by the entries active in the task alone, in proportion to their
+        activation; an entry out of the task (A = 0) keeps its part of ``z`` whole. Where the
+        active entries cannot make up for it (an arm stretched out at its elbow's singularity)
+        the end effector moves with ``z``, and the task sees it next period.
 
         A joint that the motion would drive past its braking bound (Xing eqs 7–8) is held
         still by adding its selection row to J and projecting again, so the motion stays in
@@ -400,9 +416,14 @@ class PoseServoResolver(Resolver):
         lower, upper = (-down - task - 1e-12).tolist(), (up - task + 1e-12).tolist()
         held = [False] * n
         rows = jac
+        weights = None if activation is None else np.sqrt(activation)
         for _ in range(self.n_arm):
             # (I − J⁺J) z: J⁺(J z) is the minimum-norm least-squares solution of J x = J z
-            null = z - np.linalg.lstsq(rows, rows @ z, rcond=p.pinv_tolerance)[0]
+            # (weighted: x = A^½ y, y that of J A^½ y = J z)
+            if weights is None:
+                null = z - np.linalg.lstsq(rows, rows @ z, rcond=p.pinv_tolerance)[0]
+            else:
+                null = z - weights * np.linalg.lstsq(rows * weights, rows @ z, rcond=p.pinv_tolerance)[0]
             over = [i for i, x in enumerate(null.tolist()) if not held[i] and (x < lower[i] or x > upper[i])]
             if not over:
                 return null
@@ -411,11 +432,47 @@ class PoseServoResolver(Resolver):
             rows = np.vstack((jac, np.eye(n)[held]))
         return np.zeros(n)
 
+    def secondary_motion(
+        self,
+        jac: np.ndarray,
+        task: np.ndarray,
+        q_arm: np.ndarray,
+        pull: np.ndarray | None,
+        posture: np.ndarray,
+        stance: bool = False,
+        activation: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """The method's posture pull ``posture`` (over u) and a followed plan's pull on the base
+        (:meth:`base_pull`, or None) in the null space of the end effector's task
+        (:meth:`null_motion`).
+
+        On the way (``stance`` False) the two are summed into one pull, the posture pull
+        spanning the base (Sorour eq 13: the base may move to restore the arm's posture). At
+        the stance (the final approach, :attr:`BaseReference.stance`) they are a stack of
+        tasks (Siciliano–Slotine): ``pull`` in the null space of the end effector's task as the
+        method shares it (weighted by ``activation``, :meth:`null_motion`: a base out of the
+        task follows its pull, the arm making up for it), then ``posture`` in the null space of
+        the task and the base's axes together (the arm's self-motion alone), in the room the
+        two before it leave. The posture pull then can
+        neither move the base nor hold it off the stance: summed, the two found a balance short
+        of it, where the arm, given the whole task in fine manipulation, could not reach the
+        goal. Without ``pull``: ``null_motion(jac, task, q_arm, posture)``, the method as
+        written. Shape (n_b + n,).
+        """
+        if pull is None:
+            return self.null_motion(jac, task, q_arm, posture)
+        if not stance:
+            return self.null_motion(jac, task, q_arm, pull + posture)
+        first = self.null_motion(jac, task, q_arm, pull, activation)
+        held_base = np.vstack((jac, np.eye(self.n)[: self.n_base]))
+        return first + self.null_motion(held_base, task + first, q_arm, posture)
+
     # ------------------------------------------------------------------ step
     @abstractmethod
-    def _resolve(self, jac, p_ref, e_pos, state, pull):
+    def _resolve(self, jac, p_ref, e_pos, state, pull, stance):
         """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ)``;
-        ``pull`` is :meth:`base_pull` of a followed plan's base, or None, for the null space."""
+        ``pull`` is :meth:`base_pull` of a followed plan's base, or None, for the null space,
+        ``stance`` that base's :attr:`~wmm_control.resolvers.interface.BaseReference.stance`."""
 
     def step(self, state: RobotState, target: PoseTarget) -> ResolverCommand:
         """One period: eq (12), the method's inversion, then the limits.
@@ -428,7 +485,8 @@ class PoseServoResolver(Resolver):
         t0 = time.perf_counter()
         jac, p_ref, e_pos, angle = self.task_reference(state, target)
         pull = None if target.base is None else self.base_pull(state, target.base, self.pulls_arm_to_plan)
-        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull)
+        stance = target.base is not None and target.base.stance
+        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull, stance)
         nb = self.n_base
         self._position[nb:] = state.q_arm
         lim = self.limits.apply(task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null)

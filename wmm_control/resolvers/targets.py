@@ -30,7 +30,7 @@ commands computed for the target (:meth:`TargetManager.judge`).
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -226,7 +226,7 @@ class TargetManager:
             or float(np.max(np.abs(np.concatenate(values[1:3])))) > MAX_REFERENCE_RATE
         ):
             return None, 'planned base beyond max_goal_distance, or its rates beyond 1e3'
-        return BaseReference(*values), ''
+        return BaseReference(values[0], values[1], values[2], values[3] if len(values) == 4 else None), ''
 
     def goal(self, frame, pose, base=None, planned_base=None) -> list[LogEvent]:
         """A goal ``pose`` (x, y, z, qx, qy, qz, qw) in ``frame``; ``base`` the base's pose
@@ -245,7 +245,9 @@ class TargetManager:
         key = goal_key(values[:3], quat)
         if key == self._goal_key:
             return events  # the same goal again (a sequencer re-publishing it)
-        self.target = PoseTarget(values[:3], matrix_from_quaternion(quat), base=planned)
+        # a planned base given with a goal is where the base stands for it (its stance)
+        stance = None if planned is None else replace(planned, stance=True)
+        self.target = PoseTarget(values[:3], matrix_from_quaternion(quat), base=stance)
         self._goal_key = key
         self.tracking = False
         self._start()

@@ -17,7 +17,9 @@ Each period:
    tolerance ``pinv_tolerance``). It spans the base too: in fine manipulation the base may
    still move to restore the dexterous arm pose, keeping the end effector still. A followed
    plan's base pull (:meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.base_pull`,
-   not in the paper) joins ``z`` there.
+   not in the paper) joins ``z`` there; at the stance, in the final approach, it takes priority:
+   the posture pull then moves the arm alone, in the null space of the task and the base
+   (:meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.secondary_motion`).
 4. The whole command scaled into the limits (:mod:`wmm_control.resolvers.limits`).
 5. Eq (14) in :meth:`TaskSharingResolver.compensate`, when the base controller has answered
    with the feasible twist q̇_bf of this period: the arm takes over the base's predicted
@@ -120,16 +122,16 @@ class TaskSharingResolver(PoseServoResolver):
             self._psi += min(step, max(-step, target - self._psi))
         return self._psi, MODES[target]
 
-    def _resolve(self, jac, p_ref, e_pos, state, pull):
+    def _resolve(self, jac, p_ref, e_pos, state, pull, stance):
         psi, mode = self._share(norm(e_pos))
         activation = np.empty(self.n)
         activation[: self.n_base] = 1.0 - psi
         activation[self.n_base :] = psi
         task = self.solve_task(jac, p_ref, state.q_arm, activation)
-        # eqs (9) and (13): λ_dex (I − J⁺J) z_dex, with a followed plan's base pull beside it
-        z = np.zeros(self.n) if pull is None else pull.copy()
-        z[self.n_base :] += self.params.lambda_dex * (self.q_dex - state.q_arm)
-        return task, self.null_motion(jac, task, state.q_arm, z), mode, psi
+        # eqs (9) and (13): λ_dex (I − J⁺J) z_dex, with a followed plan's base pull
+        z = np.zeros(self.n)
+        z[self.n_base :] = self.params.lambda_dex * (self.q_dex - state.q_arm)
+        return task, self.secondary_motion(jac, task, state.q_arm, pull, z, stance, activation), mode, psi
 
     def compensate(self, command: ResolverCommand, feasible_twist: ArrayLike) -> ResolverCommand:
         """Eq (14): add ``J_a⁺ M_RPY H J_b (q̇_ref(b) − q̇_bf)`` to the arm command.
