@@ -211,6 +211,7 @@ def test_a_plan_s_last_point_is_held_with_its_stance_and_judged_as_a_goal(target
     assert kinds(events) == ['held'] and not targets.tracking
     np.testing.assert_allclose(target.position, [1.5, 0.3, 1.0])
     np.testing.assert_allclose(target.base.pose, stance[0])
+    assert target.base.stance  # as a goal given with the stance: the methods put it first
     np.testing.assert_allclose(target.base.rates, 0.0)
     assert target.base.arm is None
     # judged afresh: the approach (from 0.3 m, halving) is not a stall of the trajectory's lag

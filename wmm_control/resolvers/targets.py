@@ -17,8 +17,8 @@ trajectory held, and how the goal fares. ``redundancy_resolver`` wires its topic
   ``timeout`` is held as a set-point at that point's pose (:meth:`TargetManager.current`).
   A point may carry a followed plan's base (its planned pose, rates and accelerations,
   checked as the point is), which the methods hold the base to below the end effector's task;
-  a held point keeps its planned pose, at rest, and is judged as a goal from then on (its
-  progress afresh, ``reached`` reported): so a plan's final approach, sent as the goal at rest
+  a held point keeps its planned pose, at rest, as its stance, and is judged as a goal from
+  then on (its progress afresh, ``reached`` reported): so a plan's final approach, sent as the goal at rest
   with the stance as its base and then no more points, reaches the methods with the stance.
 
 Time is an argument (seconds of a steady clock), never read here. Each call answers with
@@ -296,13 +296,15 @@ class TargetManager:
     def current(self, now) -> tuple[PoseTarget | None, list[LogEvent]]:
         """The target of a cycle at ``now`` [s]: a trajectory whose last point is older than
         the timeout is held at that point's pose, a set-point from then on, with its planned
-        base (if any) held at rest; the set-point is judged as a goal from then on (its
+        base (if any) held at rest as the stance; the set-point is judged as a goal from then on (its
         progress afresh, its arrival reported). A followed plan's final approach comes so: the
         goal as the last point, at rest, with the stance as its base."""
         if self.tracking and self.target is not None and not self.reference.fresh(now):
             base = self.target.base
             self.target = PoseTarget(
-                self.target.position, self.target.rotation, base=None if base is None else BaseReference(base.pose)
+                self.target.position,
+                self.target.rotation,
+                base=None if base is None else BaseReference(base.pose, stance=True),
             )
             self.tracking = False
             self._start()
