@@ -5,7 +5,9 @@ Prints figures, asserts nothing.
 the method (``step``, with the safety stage every method runs, then ``compensate`` where the
 method uses it) and the robot's base controller (``make_base_controller``, open on its own
 state: no measured wheel positions). Each cycle is timed on the wall clock
-(``time.perf_counter``) and on the thread's CPU clock (``time.thread_time``).
+(``time.perf_counter``) and on the thread's CPU clock (``time.thread_time``), with the heap
+kept as both engines keep it while they run periods (``wmm_control.cycle.steady_heap``: no
+full pass of the garbage collector inside a period; pink is timed the same way).
 
 **The states**, ``--states`` of each kind per robot (the same ones for every method):
 
@@ -73,7 +75,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # the benchmarks' shar
 
 from shared import TIAGO, PinkStep, closed_loop_states, pink_installed, set_up_tiago, tiago_share  # noqa: E402
 from wmm_control.base import make_base_controller  # noqa: E402
-from wmm_control.cycle import Cycle  # noqa: E402
+from wmm_control.cycle import Cycle, steady_heap  # noqa: E402
 from wmm_control.geometry import quaternion_from_matrix, quaternion_from_yaw  # noqa: E402
 from wmm_control.kinematics.workspace import Workspace  # noqa: E402
 from wmm_control.kinematics import KinematicModel  # noqa: E402
@@ -212,17 +214,18 @@ def time_cycles(cfg, method, kind, samples):
     resolver.reset()
     cycle.base_controller.reset()
     times = np.empty((2, len(samples)))
-    for k, s in enumerate(samples):
-        if s.previous is not None:
-            _feed(cycle, s.previous, s.target, now)
-            _step(cycle, s.previous, now)
+    with steady_heap():  # as both engines run their periods: no full pass of the collector inside
+        for k, s in enumerate(samples):
+            if s.previous is not None:
+                _feed(cycle, s.previous, s.target, now)
+                _step(cycle, s.previous, now)
+                now += cfg.period
+            _feed(cycle, s.state, s.target, now)
+            w0, c0 = time.perf_counter(), time.thread_time()
+            _step(cycle, s.state, now)
+            c1, w1 = time.thread_time(), time.perf_counter()
             now += cfg.period
-        _feed(cycle, s.state, s.target, now)
-        w0, c0 = time.perf_counter(), time.thread_time()
-        _step(cycle, s.state, now)
-        c1, w1 = time.thread_time(), time.perf_counter()
-        now += cfg.period
-        times[:, k] = w1 - w0, c1 - c0
+            times[:, k] = w1 - w0, c1 - c0
     return times
 
 
@@ -235,16 +238,17 @@ def time_pink(step, samples):
         step.set_target(s.target.position, s.target.rotation)
         step.solve()
     times, failed = np.empty((3, len(samples))), 0
-    for k, s in enumerate(samples):
-        q = step.configuration(s.state.base_pose, s.state.q_arm)
-        w0, c0 = time.perf_counter(), time.thread_time()
-        step.update(q)
-        step.set_target(s.target.position, s.target.rotation)
-        w1 = time.perf_counter()
-        velocity = step.solve()
-        c2, w2 = time.thread_time(), time.perf_counter()
-        times[:, k] = w2 - w0, c2 - c0, w2 - w1
-        failed += velocity is None
+    with steady_heap():  # the same heap as the cycles are timed with
+        for k, s in enumerate(samples):
+            q = step.configuration(s.state.base_pose, s.state.q_arm)
+            w0, c0 = time.perf_counter(), time.thread_time()
+            step.update(q)
+            step.set_target(s.target.position, s.target.rotation)
+            w1 = time.perf_counter()
+            velocity = step.solve()
+            c2, w2 = time.thread_time(), time.perf_counter()
+            times[:, k] = w2 - w0, c2 - c0, w2 - w1
+            failed += velocity is None
     return times, failed
 
 
