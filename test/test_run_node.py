@@ -100,3 +100,48 @@ def test_a_second_signal_during_teardown_neither_aborts_nor_prints_a_traceback(f
     out = ''.join(lines)
     assert proc.returncode == 0, f'exit {proc.returncode}:\n{out}'
     assert 'Traceback' not in out and 'terminate called' not in out, out
+
+
+_STUCK = """
+import atexit, os, signal, sys, time
+import rclpy
+from wmm_control.nodes.runner import run_node
+
+if sys.argv[1] == 'exit':
+    atexit.register(time.sleep, 60.0)  # runs after run_node's own exit handler: the exit is stuck
+
+class Stuck(rclpy.node.Node):
+    def destroy_node(self):
+        if sys.argv[1] == 'teardown':
+            time.sleep(60.0)  # the teardown is stuck
+        return super().destroy_node()
+
+def factory():
+    node = Stuck('stuck_probe')
+    node.create_timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT))
+    return node
+
+raise SystemExit(run_node(factory))
+"""
+
+
+@pytest.mark.parametrize(
+    'where, code, within', [('teardown', 0, 'TEARDOWN_LIMIT'), ('exit', 1, 'EXIT_LIMIT')], ids=['teardown', 'exit']
+)
+def test_a_stop_stuck_in_the_teardown_or_the_exit_ends_with_every_stack_written(where, code, within):
+    """A node whose teardown (or the interpreter's exit after it) does not finish, as a middleware
+    stuck on a lock does, leaves within its limit after Ctrl-C, telling where each thread was,
+    instead of waiting for ``ros2 launch``'s SIGKILL. A stuck teardown still exits 0: the node
+    stopped; a stuck exit gives 1."""
+    from wmm_control.nodes import runner
+
+    limit = getattr(runner, within)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(private_domain_id()))
+    began = time.monotonic()
+    proc = subprocess.run(
+        [sys.executable, '-c', _STUCK, where], env=env, capture_output=True, text=True, timeout=limit + 40.0
+    )
+    took = time.monotonic() - began
+    assert proc.returncode == code, proc.stderr
+    assert took >= limit, took  # (a stop that never ends fails at subprocess.run's timeout)
+    assert ('destroy_node' if where == 'teardown' else 'most recent call first') in proc.stderr, proc.stderr

@@ -4,6 +4,7 @@ import atexit
 import faulthandler
 import os
 import signal
+import sys
 import threading
 from collections.abc import Callable
 
@@ -75,6 +76,15 @@ def guard_clock(node: Node) -> None:
 #: (measured, see docs/robustness.md), which fired their watchdogs; over UDP it never did.
 FASTDDS_TRANSPORTS = 'UDPv4'
 
+#: [s] the teardown after a stop (the executor, the node, the context) may take before the
+#: process leaves without the rest (every thread's stack written to stderr first), exit code 0:
+#: the node has stopped; a teardown stuck in the middleware must not need ``ros2 launch``'s
+#: SIGKILL, 15 s after Ctrl-C, to end it.
+TEARDOWN_LIMIT = 3.0
+#: [s] the interpreter's exit may take (the middleware's destructors) before the process leaves
+#: with code 1, every thread's stack written to stderr (:func:`faulthandler.dump_traceback_later`).
+EXIT_LIMIT = 8.0
+
 
 def run_node(
     node_factory: Callable[[], Node],
@@ -90,7 +100,9 @@ def run_node(
     teardown are only noted (``ros2 launch`` sends SIGINT twice); the previous handlers come
     back once the context is shut down, and from the interpreter's exit on both signals are
     ignored (:func:`_ignore_stop_signals_at_exit`). The process uses Fast DDS's UDP transport
-    alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS`` is set. SIGUSR1
+    alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS`` is set. The teardown
+    has :data:`TEARDOWN_LIMIT` seconds, and with ``args`` None (the process's own command line)
+    the interpreter's exit :data:`EXIT_LIMIT`. SIGUSR1
     writes every thread's Python stack to stderr (``kill -USR1 <pid>``: where a node hangs).
     """
     os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', FASTDDS_TRANSPORTS)
@@ -108,7 +120,7 @@ def run_node(
             sig: signal.signal(sig, lambda signum, _frame: stop.append(signum))
             for sig in (signal.SIGINT, signal.SIGTERM)
         }
-    _ignore_stop_signals_at_exit()
+    _ignore_stop_signals_at_exit(exit_deadline=args is None)
     node = executor = None
     try:
         node = node_factory()
@@ -131,6 +143,7 @@ def run_node(
         # The executor goes first, here: left to the garbage collector after the handlers are back,
         # the events executor ran pending callbacks from its destructor, where a signal then raised
         # KeyboardInterrupt inside rclpy (an abort under ``ros2 launch``).
+        deadline = _teardown_deadline(TEARDOWN_LIMIT)
         try:
             if executor is not None:
                 executor.shutdown()
@@ -139,21 +152,43 @@ def run_node(
                 node.destroy_node()
             rclpy.try_shutdown()
         finally:
+            deadline.cancel()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
     return 0
 
 
+def _teardown_deadline(limit: float) -> threading.Timer:
+    """A timer that, unless cancelled within ``limit`` [s], writes every thread's stack to
+    stderr and ends the process with code 0 (:data:`TEARDOWN_LIMIT`)."""
+
+    def expire() -> None:
+        sys.stderr.write(
+            f'[wmm_control] the teardown did not finish within {limit:g} s after the stop; leaving without '
+            'the rest (every thread\'s stack follows)\n'
+        )
+        faulthandler.dump_traceback(sys.stderr, all_threads=True)
+        sys.stderr.flush()
+        os._exit(0)
+
+    timer = threading.Timer(limit, expire)
+    timer.daemon = True
+    timer.start()
+    return timer
+
+
 _EXIT_GUARD: list[bool] = []
 
 
-def _ignore_stop_signals_at_exit():
+def _ignore_stop_signals_at_exit(exit_deadline: bool) -> None:
     """From the interpreter's exit on, ignore SIGINT and SIGTERM (registered once, by :func:`run_node`).
 
     After ``main()`` returns, the interpreter's finalization (the middleware's destructors) takes
     a few tenths of a second, during which Python resets SIGINT to the system default: a second
     Ctrl-C then killed the process (exit -2) although the node had stopped cleanly. Python keeps
-    an ignored signal ignored through its finalization.
+    an ignored signal ignored through its finalization. With ``exit_deadline`` (a node's process,
+    its command line from ``sys.argv``; not a node run inside another program, such as a test),
+    an exit stuck in the middleware, which ignored signals cannot end, gets :data:`EXIT_LIMIT`.
     """
     if _EXIT_GUARD or threading.current_thread() is not threading.main_thread():
         return
@@ -162,5 +197,7 @@ def _ignore_stop_signals_at_exit():
     def ignore() -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, signal.SIG_IGN)
+        if exit_deadline:
+            faulthandler.dump_traceback_later(EXIT_LIMIT, exit=True)
 
     atexit.register(ignore)

@@ -69,7 +69,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -208,7 +208,7 @@ class PlanFollower:
         last = self.handoff.points[-1].base
         if not self.params.hold_base or last is None:
             return self.goal
-        return replace(self.goal, base=BaseReference(last.pose, stance=True))
+        return PoseTarget.goal(self.goal.position, self.goal.rotation, last.pose)
 
     @property
     def clock(self) -> float:

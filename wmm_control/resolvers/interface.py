@@ -174,6 +174,16 @@ class PoseTarget:
     acceleration: np.ndarray = field(default_factory=lambda: np.zeros(6))
     base: BaseReference | None = None
 
+    @classmethod
+    def goal(cls, position: ArrayLike, rotation: ArrayLike, stance: ArrayLike | None = None) -> Self:
+        """A goal: the end effector at rest at ``position``, ``rotation``; with ``stance``
+        (x, y, θ) [m, m, rad], the base's place for it, at rest (a :class:`BaseReference` marked
+        ``stance``, without an arm posture: the posture is the method's to find). The one place a
+        stance is made: a goal given with a planned base, a held plan point, a plan's final
+        approach."""
+        base = None if stance is None else BaseReference(np.asarray(stance, dtype=float), stance=True)
+        return cls(position, rotation, base=base)  # type: ignore[arg-type]  # validated on construction
+
     def __post_init__(self):
         object.__setattr__(self, 'position', as_finite_vector(self.position, 3, 'target position'))
         object.__setattr__(self, 'rotation', _rotation(self.rotation, 'target rotation'))

@@ -30,7 +30,7 @@ commands computed for the target (:meth:`TargetManager.judge`).
 """
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -246,8 +246,9 @@ class TargetManager:
         if key == self._goal_key:
             return events  # the same goal again (a sequencer re-publishing it)
         # a planned base given with a goal is where the base stands for it (its stance)
-        stance = None if planned is None else replace(planned, stance=True)
-        self.target = PoseTarget(values[:3], matrix_from_quaternion(quat), base=stance)
+        self.target = PoseTarget.goal(
+            values[:3], matrix_from_quaternion(quat), None if planned is None else planned.pose
+        )
         self._goal_key = key
         self.tracking = False
         self._start()
@@ -301,10 +302,8 @@ class TargetManager:
         goal as the last point, at rest, with the stance as its base."""
         if self.tracking and self.target is not None and not self.reference.fresh(now):
             base = self.target.base
-            self.target = PoseTarget(
-                self.target.position,
-                self.target.rotation,
-                base=None if base is None else BaseReference(base.pose, stance=True),
+            self.target = PoseTarget.goal(
+                self.target.position, self.target.rotation, None if base is None else base.pose
             )
             self.tracking = False
             self._start()
