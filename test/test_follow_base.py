@@ -22,9 +22,11 @@ from wmm_control.geometry import rpy_from_matrix, se2_integrate, wrap_angle
 from wmm_control.kinematics import KinematicModel
 from wmm_control.planning.follow import FollowParams, FollowState, PlanFollower
 from wmm_control.planning.handoff import Handoff
+from wmm_control.planning.pursuit import GoalPursuit
 from wmm_control.planning.timing import TwistPiece, time_path
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import BaseReference, PoseTarget, RobotState
+from wmm_control.resolvers.period import ResolverSettings
 from wmm_control.robot_config import load_robot
 
 PARAMS = FollowParams()
@@ -65,8 +67,12 @@ def _follow(cfg, handoff, goal, method, hold_base):
     follower = _Watched(handoff, target, FollowParams(hold_base=hold_base))
     follower.lags = []
     resolver = make_resolver(method, cfg, **resolver_parameters(METHOD_RUNS[method]))
+    settings = ResolverSettings.defaults()
+    pursuit = GoalPursuit(cfg, (), settings.world_frame, settings.max_goal_distance, threaded=False)
+    pursuit.follow_plan(follower)
     with SimWorld(cfg, base_mode='kinematic') as world:
-        log = run_scenario(world, resolver, _scenario(cfg, goal, handoff.duration + 8.0, ''), follower=follower)
+        log = run_scenario(world, resolver, _scenario(cfg, goal, handoff.duration + 8.0, ''), pursuit=pursuit)
+    assert pursuit.counters.replans == 0  # the given plan, followed to its end
     return np.array(follower.lags), log, target
 
 

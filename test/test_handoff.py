@@ -103,6 +103,8 @@ def test_a_plan_through_the_table_stalls_and_the_replan_from_where_the_robot_sto
     from wmm_control.experiments.randomized import METHOD_RUNS, _scenario, run_contact
     from wmm_control.experiments.scenario import Goal, resolver_parameters
     from wmm_control.planning.follow import PlanFollower
+    from wmm_control.planning.pursuit import GoalPursuit
+    from wmm_control.resolvers.period import ResolverSettings
     from wmm_control.planning.timing import LinearPiece, time_path
     from wmm_control.resolvers import make_resolver
 
@@ -115,27 +117,69 @@ def test_a_plan_through_the_table_stalls_and_the_replan_from_where_the_robot_sto
     blind = Handoff.of(planner.model, straight, planner.travel.q_arm)
     replanned = []
 
-    def replan(base_pose, q_arm):
-        again = planner.plan(target.position, target.rotation, base_pose)
-        replanned.append((np.array(base_pose), again.no_way))
-        if again.trajectory is None:
-            return None
-        return PlanFollower(Handoff.of(planner.model, again.trajectory, planner.travel.q_arm), target)
+    class Pursuit(GoalPursuit):
+        def _replan(self, events, why, base):
+            replanned.append(np.array(base))
+            return super()._replan(events, why, base)
 
+    settings = ResolverSettings.defaults()
+    pursuit = Pursuit(
+        cfg, OBSTACLES, settings.world_frame, settings.max_goal_distance, planner={'budget': 30.0}, threaded=False
+    )
+    pursuit.follow_plan(PlanFollower(blind, target))
+    resolver = make_resolver('pinv', cfg, **resolver_parameters(METHOD_RUNS['pinv']))
+    with SimWorld(cfg, base_mode='kinematic') as world:
+        log = run_scenario(world, resolver, _scenario(cfg, goal, 90.0, 'table_pillar'), pursuit=pursuit)
+    assert len(replanned) == 1 and pursuit.counters.no_way == 0
+    # it stalled in front of the table, short of the stance
+    table = next(o for o in OBSTACLES if o.name == 'table')
+    assert replanned[0][0] < table.position[0]
+    # and got there round it, never in contact
+    error = np.linalg.norm(log.ee_position[-1] - target.position)
+    assert error < 0.01 and rotation_angle(target.rotation, log.ee_rotation[-1]) < 0.02
+    assert run_contact(cfg, log.q_arm, log.base_pose, OBSTACLES)[0] <= CONTACT_DEPTH
+
+
+def test_a_box_moved_onto_the_rest_of_the_path_is_driven_round_on_the_direct_engine(behind_the_table):
+    """The direct engine pursues a goal as goal_planner does (test_goal_planner puts a box on
+    the path on the node path): a box that appears on the rest of the planned path while the
+    robot follows it makes the pursuit plan again round it; the goal is reached, the robot
+    never in contact with the table, the pillar or the box."""
+    from sim_bridge.world import SimWorld
+    from wmm_control.experiments.direct import run_scenario
+    from wmm_control.experiments.randomized import METHOD_RUNS, _scenario, run_contact
+    from wmm_control.experiments.scenario import Goal, resolver_parameters
+    from wmm_control.kinematics.obstacles import Obstacle
+    from wmm_control.planning.pursuit import GoalPursuit, PursuitState
+    from wmm_control.resolvers import make_resolver
+    from wmm_control.resolvers.period import ResolverSettings
+
+    cfg, goal = behind_the_table
+    target = Goal(0.0, 0.0, goal.pose).target
+    options = {'budget': 30.0}  # every search done whatever the load: the pursuit plans this path too
+    plan = GoalPlanner(cfg, OBSTACLES, **options).plan(target.position, target.rotation, cfg.start.base_pose)
+    assert plan.trajectory is not None, plan.reason
+    poses = plan.trajectory.poses
+    x, y = poses[len(poses) * 2 // 3, :2]  # on the path, well ahead of the base at 2 s
+    box = Obstacle('box', 'box', (0.3, 0.3, 0.6), np.array([x, y, 0.3]), np.eye(3))
+    moved = (*OBSTACLES, box)
+    settings = ResolverSettings.defaults()
+    pursuit = GoalPursuit(
+        cfg, OBSTACLES, settings.world_frame, settings.max_goal_distance, planner=options, threaded=False
+    )
     resolver = make_resolver('pinv', cfg, **resolver_parameters(METHOD_RUNS['pinv']))
     with SimWorld(cfg, base_mode='kinematic') as world:
         log = run_scenario(
             world,
             resolver,
-            _scenario(cfg, goal, 90.0, "table_pillar"),
-            follower=PlanFollower(blind, target),
-            replan=replan,
+            _scenario(cfg, goal, 60.0, 'table_pillar'),
+            until=lambda d: d.position_error < 0.005 and d.orientation_error < 0.01,
+            pursuit=pursuit,
+            obstacle_changes=[(2.0, moved)],
         )
-    assert len(replanned) == 1 and replanned[0][1] is None
-    # it stalled in front of the table, short of the stance
-    table = next(o for o in OBSTACLES if o.name == 'table')
-    assert replanned[0][0][0] < table.position[0]
-    # and got there round it, never in contact
-    error = np.linalg.norm(log.ee_position[-1] - target.position)
-    assert error < 0.01 and rotation_angle(target.rotation, log.ee_rotation[-1]) < 0.02
-    assert run_contact(cfg, log.q_arm, log.base_pose, OBSTACLES)[0] <= CONTACT_DEPTH
+    assert pursuit.counters.replans >= 1 and pursuit.state is PursuitState.APPROACH, pursuit.status()
+    assert np.linalg.norm(log.ee_position[-1] - target.position) < 0.01
+    assert rotation_angle(target.rotation, log.ee_rotation[-1]) < 0.02
+    assert run_contact(cfg, log.q_arm, log.base_pose, moved)[0] <= CONTACT_DEPTH
+    # the base never came within the travel margin's reach of where the box stands
+    assert np.min(np.hypot(log.base_pose[:, 0] - x, log.base_pose[:, 1] - y)) > 0.3

@@ -3,16 +3,18 @@ on a :class:`~sim_bridge.world.SimWorld`, no ROS in between, logged as a
 :class:`~wmm_control.experiments.metrics.RunLog`."""
 
 import time
-from collections.abc import Callable
-from dataclasses import replace
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 from sim_bridge.closed_loop import ClosedLoop
 from sim_bridge.world import SimWorld
 from wmm_control.cycle import steady_heap
+from wmm_control.errors import ConfigError
 from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.scenario import Scenario
-from wmm_control.planning.follow import MAX_REPLANS, FollowState, PlanFollower
+from wmm_control.geometry import quaternion_from_matrix
+from wmm_control.kinematics.obstacles import Obstacle
+from wmm_control.planning.pursuit import GoalPursuit, PursuitState
 from wmm_control.resolvers.interface import Resolver, ResolverDiagnostics
 
 __all__ = ['run_scenario']
@@ -26,9 +28,8 @@ def run_scenario(
     label: str = '',
     progress: Callable[[int], object] | None = None,
     until: Callable[[ResolverDiagnostics], bool] | None = None,
-    follower: PlanFollower | None = None,
-    replan: Callable[[np.ndarray, np.ndarray], PlanFollower | None] | None = None,
-    max_replans: int = MAX_REPLANS,
+    pursuit: GoalPursuit | None = None,
+    obstacle_changes: Sequence[tuple[float, Iterable[Obstacle]]] = (),
 ) -> RunLog:
     """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
 
@@ -42,64 +43,61 @@ def run_scenario(
         until: optional callable ``until(diagnostics)``, given each period's
             :class:`~wmm_control.resolvers.ResolverDiagnostics` towards the scenario's goals
             (not those of a plan's points): the run ends early when it returns True.
-        follower: a plan to follow first (:class:`~wmm_control.planning.follow.PlanFollower`):
-            its point every period, at the pace of the measured base and end effector, from the
-            start; the scenario's goals once it is in its final approach, with the plan's
-            last base pose held (:attr:`~wmm_control.planning.follow.PlanFollower.approach`).
-        replan: with ``follower``, ``replan(base_pose, q_arm)``, called when the follower
-            stalls, with the measured base pose (x, y, θ) and arm joints: the follower of a new
-            plan from there, or None when there is none (the run ends).
-        max_replans: the most calls of ``replan`` in a run; when the follower stalls after them
-            the scenario's goals are given from where the robot is (the method's own approach,
-            judged as without a plan).
+        pursuit: the scenario's goals pursued past what is in the way, as ``goal_planner``
+            does (:class:`~wmm_control.planning.pursuit.GoalPursuit`, best made with
+            ``threaded=False``): each goal is given to it when its time comes, and each period
+            what it sends (a plan's point, the goal, a hold) goes to the cycle; the run ends when
+            it finds no way to the last goal. A plan given to it first
+            (:meth:`~wmm_control.planning.pursuit.GoalPursuit.follow_plan`) is followed from the start.
+        obstacle_changes: ``(t, obstacles)`` pairs: from ``t`` [s] on, the obstacles are these,
+            in the world, in the cycle and for the pursuit (an obstacle that moves).
 
     Returns:
         The frozen :class:`~wmm_control.experiments.metrics.RunLog`.
     """
+    if pursuit is not None and scenario.trajectory is not None:
+        raise ConfigError('a pursuit takes goals, not a trajectory: give the scenario goals')
     # the scenario's obstacles, in the world and in the controller's collision model
     world.set_obstacles(scenario.obstacles)
     loop = ClosedLoop(world, resolver, feedback=feedback)
     loop.set_obstacles(scenario.obstacles)
+    changes = sorted(((float(t), tuple(obstacles)) for t, obstacles in obstacle_changes), key=lambda c: c[0])
     log = RunLog(method=resolver.name, label=label, joint_names=world.joint_names)
     reference = scenario.reference(resolver.model) if scenario.trajectory is not None else None
     n = int(round(scenario.duration / world.dt))
     t0 = time.perf_counter()
     submitted = None
-    replans = 0
-    approach_base = None
     with steady_heap():  # no full pass of the garbage collector walks the models mid-run
         for _ in range(n):
+            while changes and changes[0][0] <= world.time + 1e-9:
+                obstacles = changes.pop(0)[1]
+                world.set_obstacles(obstacles)
+                loop.set_obstacles(obstacles)
+                if pursuit is not None:
+                    pursuit.set_obstacles(obstacles)
             gi = scenario.goal_index(world.time)
-            following = None
-            if follower is not None:  # the planned way there first, as /ee_reference points
+            towards_goal = True  # the diagnostics are towards the scenario's goal (not a plan's point)
+            if pursuit is not None:
+                if gi != submitted:
+                    goal = scenario.target(world.time, reference)
+                    pose = np.concatenate((goal.position, quaternion_from_matrix(goal.rotation)))
+                    pursuit.new_goal(loop.world_frame, pose)
+                    submitted = gi
+                if pursuit.state is PursuitState.NO_WAY and gi == len(scenario.goals) - 1:
+                    break  # no way to the last goal
                 state = loop.state()
-                pose = state.base_pose
-                ee_position, ee_rotation = state.ee_placement(resolver.model, update=True)
-                following = follower.step(world.dt, pose, ee_position, ee_rotation)
-                if following.state is FollowState.STALLED and replan is not None:
-                    if replans >= max_replans:  # no more plans: the goal from where the robot is
-                        following = None
-                    else:
-                        replans += 1
-                        follower = replan(pose, state.q_arm)
-                        if follower is None:  # no way from here
-                            break
-                        following = follower.step(0.0, pose)
-                if following is not None and following.state is FollowState.APPROACH:
-                    approach_base = following.target.base  # the stance held in the final approach
-                if following is None or following.state is FollowState.APPROACH:
-                    follower = following = None
-            if following is not None:
-                rec = loop.step(following.target, tracking=True)
+                step = pursuit.step(world.dt, state.base_pose, state.q_arm)
+                if step.reference is not None:  # a plan's point, or its final approach's goal
+                    rec = loop.step(step.reference, tracking=True)
+                elif step.forward_goal:
+                    rec = loop.step(pursuit.goal, tracking=False)
+                else:
+                    rec = loop.step(step.hold, tracking=False)
+                towards_goal = pursuit.state in (PursuitState.APPROACH, PursuitState.DIRECT)
             elif reference is not None:  # a trajectory: a point every period, as goal_sequencer publishes it
                 rec = loop.step(scenario.target(world.time, reference), tracking=True)
             else:  # goals: each when its time comes, as goal_sequencer publishes them
-                goal = None
-                if gi != submitted:
-                    goal = scenario.target(world.time, reference)
-                    if approach_base is not None:  # after a plan: its approach holds the stance
-                        goal = replace(goal, base=approach_base)
-                rec = loop.step(goal, tracking=False)
+                rec = loop.step(scenario.target(world.time, reference) if gi != submitted else None, tracking=False)
                 submitted = gi
             cmd = rec.command
             if cmd is None:  # the target was refused (loop.events say why): the robot held, as the
@@ -124,7 +122,7 @@ def run_scenario(
             )
             if progress is not None:
                 progress(1)
-            if until is not None and following is None and until(cmd.diagnostics):
+            if until is not None and towards_goal and until(cmd.diagnostics):
                 break
     log.wall_time_s = time.perf_counter() - t0
     refusals = [e.message for e in loop.events if e.kind == 'rejected']

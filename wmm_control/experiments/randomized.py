@@ -74,10 +74,11 @@ from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_ob
 from wmm_control.geometry import rotation_angle, rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
 from wmm_control.planning import GoalPlanner
-from wmm_control.planning.follow import MAX_REPLANS, PlanFollower
+from wmm_control.planning.pursuit import GoalPursuit, PursuitState
 from wmm_control.planning.handoff import Handoff
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
+from wmm_control.resolvers.period import ResolverSettings
 from wmm_control.resolvers.progress import GoalProgress
 from wmm_control.robot_config import RobotConfig, load_robot
 
@@ -231,10 +232,11 @@ def planned(
 
 
 def _run_direct(robot, run, goal, duration, obstacles, plan=False):
-    """A direct run; with ``plan`` the plan's way there is followed first (:func:`planned`,
-    :class:`~wmm_control.planning.follow.PlanFollower`), planned again from where the robot is
-    when it stalls (``MAX_REPLANS`` times at most), the arm travelling in the posture it has then
-    (in the planner's own when that finds no way)."""
+    """A direct run; with ``plan`` the goal is pursued as ``goal_planner`` pursues it
+    (:class:`~wmm_control.planning.pursuit.GoalPursuit`, its plans made within the period that
+    asks for them): the plan's way there first, planned again from where the robot is when it
+    stalls (``MAX_REPLANS`` times at most), then the goal. (None, planning) when the first plan
+    finds no way."""
     resolver = make_resolver(run['method'], robot, **resolver_parameters(run))
     tolerance, stall_time, ratio = goal_settings()
     progress = GoalProgress(tolerance, stall_time, resolver.params.dt, min_progress_ratio=ratio)
@@ -250,39 +252,27 @@ def _run_direct(robot, run, goal, duration, obstacles, plan=False):
         held[0] = held[0] + 1 if progress.reached else 0
         return held[0] >= settle
 
-    planning: dict = {}
-    follower = replan = None
+    pursuit = None
     if plan:
-        planner = GoalPlanner(robot, load_obstacles(obstacles))
-        target = Goal(0.0, 0.0, goal.pose).target
-        handoff, planning = planned(robot, goal, obstacles, planner=planner)
-        planning['replans'] = 0
-        if handoff is None:
-            return None, planning
-        follower = PlanFollower(handoff, target)
-
-        def replan(base_pose, q_arm):
-            # the arm travels as it is now (the plan's first point is where the end effector is);
-            # when that finds no way, in the planner's own travel posture
-            again, info = planned(robot, goal, obstacles, base_pose, planner, q_arm)
-            planning['replans'] += 1
-            planning['planning_time_s'] += info['planning_time_s']
-            if again is None:
-                planning.update(no_way=info['no_way'], no_way_reason=info['no_way_reason'])
-                return None
-            return PlanFollower(again, target)
-
-    with SimWorld(robot, base_mode='kinematic') as world:
-        log = run_scenario(
-            world,
-            resolver,
-            _scenario(robot, goal, duration, obstacles),
-            until=done,
-            follower=follower,
-            replan=replan,
-            max_replans=MAX_REPLANS,
+        settings = ResolverSettings.defaults()
+        pursuit = GoalPursuit(
+            robot, load_obstacles(obstacles), settings.world_frame, settings.max_goal_distance, threaded=False
         )
+    with SimWorld(robot, base_mode='kinematic') as world:
+        log = run_scenario(world, resolver, _scenario(robot, goal, duration, obstacles), until=done, pursuit=pursuit)
     status = {'goal_reached': progress.reached, 'first_stall_s': first_stall[0] if first_stall else None}
+    if pursuit is None:
+        return log, status
+    c = pursuit.counters
+    no_way = pursuit.state is PursuitState.NO_WAY
+    planning = {
+        'planning_time_s': c.planning_s,
+        'replans': c.replans,
+        'no_way': (pursuit.no_way_kind.value if pursuit.no_way_kind else 'no_way') if no_way else None,
+        'no_way_reason': pursuit.reason if no_way else None,
+    }
+    if no_way and c.plans == 1:
+        return None, planning
     return log, dict(status, **planning)
 
 

@@ -52,12 +52,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from wmm_control.geometry import matrix_from_quaternion
+from wmm_control.geometry import matrix_from_quaternion, quaternion_from_matrix
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.planning.follow import MAX_REPLANS, FollowParams, FollowState, PlanFollower
 from wmm_control.planning.handoff import Handoff
+from wmm_control.planning.outcome import NoWay
 from wmm_control.planning.planner import GoalPlanner, Plan
 from wmm_control.resolvers.interface import PoseTarget
 from wmm_control.resolvers.targets import LogEvent, LogThrottle, check_goal, goal_key, goal_text
@@ -178,7 +179,7 @@ class PlanWorker:
             seed, ...).
     """
 
-    def __init__(self, robot: RobotConfig, options: Mapping[str, Any] | None = None) -> None:
+    def __init__(self, robot: RobotConfig, options: Mapping[str, Any] | None = None, threaded: bool = True) -> None:
         self.robot = robot
         self.options = dict(options or {})
         self._jobs: queue.SimpleQueue = queue.SimpleQueue()
@@ -187,12 +188,17 @@ class PlanWorker:
         self._version = -1
         #: the ticket of the job the caller waits for: others queued are skipped
         self.wanted = 0
-        self._thread = threading.Thread(target=self._run, name='goal_planner_worker', daemon=True)
-        self._thread.start()
+        self._thread: threading.Thread | None = None
+        if threaded:
+            self._thread = threading.Thread(target=self._run, name='goal_planner_worker', daemon=True)
+            self._thread.start()
 
     def submit(self, job: _PlanJob | _CheckJob) -> None:
-        """Queue ``job``."""
-        self._jobs.put(job)
+        """Queue ``job``; without a thread, do it now (its result is there at :meth:`results`)."""
+        if self._thread is None:
+            self._do(job)
+        else:
+            self._jobs.put(job)
 
     def results(self) -> list:
         """The jobs' results done since the last call, oldest first."""
@@ -209,8 +215,9 @@ class PlanWorker:
         process must not end while the thread is inside OMPL: the interpreter's finalization
         then aborts it."""
         self.wanted = -1
-        self._jobs.put(None)
-        self._thread.join(timeout)
+        if self._thread is not None:
+            self._jobs.put(None)
+            self._thread.join(timeout)
 
     def _planner_for(self, version: int, obstacles: tuple[Obstacle, ...]) -> GoalPlanner:
         if self._planner is None or version != self._version:
@@ -223,23 +230,24 @@ class PlanWorker:
             job = self._jobs.get()
             if job is None:
                 return
-            if job.ticket != self.wanted:
-                continue  # given up before it started
-            try:
-                planner = self._planner_for(job.version, job.obstacles)
-                if isinstance(job, _CheckJob):
-                    self._results.put(_Checked(job.ticket, path_blocked(planner, job.poses)))
-                    continue
-                plan, travel = planner.plan_in_posture(
-                    job.goal.position, job.goal.rotation, job.base_pose, job.q_travel
-                )
-                here = plan.stance is not None and np.array_equal(plan.stance.base_pose, job.base_pose)
-                handoff = None
-                if plan.trajectory is not None and not here:
-                    handoff = Handoff.of(planner.model, plan.trajectory, travel)
-                self._results.put(_Planned(job.ticket, job.version, plan, handoff, here))
-            except Exception as exc:  # a bug or a bad robot: reported, and the worker lives on
-                self._results.put(_Failed(job.ticket, f'{type(exc).__name__}: {exc}'))
+            self._do(job)
+
+    def _do(self, job: _PlanJob | _CheckJob) -> None:
+        if job.ticket != self.wanted:
+            return  # given up before it started
+        try:
+            planner = self._planner_for(job.version, job.obstacles)
+            if isinstance(job, _CheckJob):
+                self._results.put(_Checked(job.ticket, path_blocked(planner, job.poses)))
+                return
+            plan, travel = planner.plan_in_posture(job.goal.position, job.goal.rotation, job.base_pose, job.q_travel)
+            here = plan.stance is not None and np.array_equal(plan.stance.base_pose, job.base_pose)
+            handoff = None
+            if plan.trajectory is not None and not here:
+                handoff = Handoff.of(planner.model, plan.trajectory, travel)
+            self._results.put(_Planned(job.ticket, job.version, plan, handoff, here))
+        except Exception as exc:  # a bug or a bad robot: reported, and the worker lives on
+            self._results.put(_Failed(job.ticket, f'{type(exc).__name__}: {exc}'))
 
 
 @dataclass
@@ -250,6 +258,8 @@ class _Counters:
     replans: int = 0
     no_way: int = 0
     points: int = 0
+    #: [s] the time of every plan made
+    planning_s: float = 0.0
 
 
 class GoalPursuit:
@@ -264,6 +274,10 @@ class GoalPursuit:
         max_replans: plans made again for one goal (a stall, an obstacle on the path) before the
             goal goes to the resolver from where the robot is.
         planner: keyword arguments of :class:`~wmm_control.planning.GoalPlanner`.
+        threaded: plan in a thread of the worker's own (a node: its period never waits); False:
+            a plan is made within the :meth:`step` that asks for it, and its result taken at the
+            next (the direct engine, which steps the simulation itself: the same runs whatever
+            the machine's load).
     """
 
     def __init__(
@@ -275,6 +289,7 @@ class GoalPursuit:
         follow: FollowParams | None = None,
         max_replans: int = MAX_REPLANS,
         planner: Mapping[str, Any] | None = None,
+        threaded: bool = True,
     ) -> None:
         self.robot = robot
         self.model = KinematicModel(robot)
@@ -283,11 +298,13 @@ class GoalPursuit:
         self.max_goal_distance = float(max_goal_distance)
         self.follow = follow if follow is not None else FollowParams()
         self.max_replans = int(max_replans)
-        self.worker = PlanWorker(robot, planner)
+        self.worker = PlanWorker(robot, planner, threaded)
         self.obstacles = tuple(obstacles)
         self.version = 0  # of the obstacles
         self.state = PursuitState.IDLE
         self.reason = ''
+        #: the kind of the last no way (its reason in :attr:`reason`), None before any
+        self.no_way_kind: NoWay | None = None
         self.goal: PoseTarget | None = None
         self.follower: PlanFollower | None = None
         self.progress = 0.0
@@ -326,6 +343,20 @@ class GoalPursuit:
         self._plan_due = 'new goal'
         self._stop(PursuitState.PLANNING, '')
         return events + [LogEvent('accepted', f'new goal: {goal_text(values[:3], quat)}: planning')]
+
+    def follow_plan(self, follower: PlanFollower) -> list[LogEvent]:
+        """Pursue ``follower``'s goal by its plan, made elsewhere (a study's, a test's), from the
+        next :meth:`step` on, as if the planner had made it: replanned as a plan of its own
+        would be. The same goal given to :meth:`new_goal` afterwards changes nothing."""
+        goal = follower.goal
+        self._stop(PursuitState.FOLLOWING, '')
+        self.goal = PoseTarget(goal.position, goal.rotation)
+        self._key = goal_key(goal.position, quaternion_from_matrix(goal.rotation))
+        self.counters.goals += 1
+        self.replans = 0
+        self.follower = follower
+        self._path = follower.remaining_poses()
+        return [LogEvent('planned', f'following a plan given for the goal {np.round(goal.position, 3).tolist()}')]
 
     def set_obstacles(self, obstacles: Iterable[Obstacle]) -> None:
         """The obstacles changed (world frame): the rest of a path followed is checked on them."""
@@ -459,7 +490,9 @@ class GoalPursuit:
     def _planned(self, events: list[LogEvent], result: _Planned) -> bool:
         plan = result.plan
         self.planning_time = plan.planning_time
+        self.counters.planning_s += plan.planning_time
         if plan.no_way is not None or plan.trajectory is None:
+            self.no_way_kind = plan.no_way
             self._no_way(events, plan.reason or 'no plan')
             return False
         if result.here:
