@@ -121,10 +121,21 @@ class GoalPlannerNode(Node):
             f'/goal_pose (frame {p.world_frame!r})'
         )
 
+    @property
+    def teardown_limit(self) -> float:
+        """[s] the teardown may take (:func:`~wmm_control.nodes.runner.run_node`): a plan under
+        way is finished first (:meth:`destroy_node`)."""
+        return self._close_timeout + 1.0
+
+    @property
+    def _close_timeout(self) -> float:
+        # at most the path budget per stance tried, and the stance search
+        return self.p.budget * self.p.stances_tried + 5.0
+
     def destroy_node(self) -> bool:
         """Stop the planner's thread (a plan under way is finished: at most the path budget per
         stance tried, and the stance search), then destroy the node."""
-        self.pursuit.close(timeout=self.p.budget * self.p.stances_tried + 5.0)
+        self.pursuit.close(timeout=self._close_timeout)
         return super().destroy_node()
 
     def _set_max_goal_distance(self, distance: float) -> None:

@@ -101,7 +101,7 @@ def run_node(
     back once the context is shut down, and from the interpreter's exit on both signals are
     ignored (:func:`_ignore_stop_signals_at_exit`). The process uses Fast DDS's UDP transport
     alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS`` is set. The teardown
-    has :data:`TEARDOWN_LIMIT` seconds, and with ``args`` None (the process's own command line)
+    has :data:`TEARDOWN_LIMIT` seconds (a node's ``teardown_limit`` attribute, if it has one), and with ``args`` None (the process's own command line)
     the interpreter's exit :data:`EXIT_LIMIT`. SIGUSR1
     writes every thread's Python stack to stderr (``kill -USR1 <pid>``: where a node hangs).
     """
@@ -143,7 +143,7 @@ def run_node(
         # The executor goes first, here: left to the garbage collector after the handlers are back,
         # the events executor ran pending callbacks from its destructor, where a signal then raised
         # KeyboardInterrupt inside rclpy (an abort under ``ros2 launch``).
-        deadline = _teardown_deadline(TEARDOWN_LIMIT)
+        deadline = _teardown_deadline(getattr(node, 'teardown_limit', TEARDOWN_LIMIT))
         try:
             if executor is not None:
                 executor.shutdown()
