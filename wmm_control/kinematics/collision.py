@@ -211,7 +211,9 @@ class CollisionModel:
         arm_ids = [model.getJointId(n) for n in arm_joints]
         self.n_arm = len(arm_ids)
         self._idx_q = [model.joints[j].idx_q for j in arm_ids]
-        self._idx_v = np.array([model.joints[j].idx_v for j in arm_ids])
+        idx_v = [model.joints[j].idx_v for j in arm_ids]
+        #: the joint Jacobians' columns the rates read: the planar root's (x, y, θ), then the arm's
+        self._columns = np.array([*range(N_BASE), *idx_v])
         moving_joints = set(arm_ids)
         for j in range(1, model.njoints):  # joints below an arm joint move with it
             if model.parents[j] in moving_joints:
@@ -318,6 +320,8 @@ class CollisionModel:
             self._sphere_centre.append(np.array(obj.geometry.aabb_center) if np.isfinite(r) else np.zeros(3))
             radius.append(r)
         self._sphere_radius = np.array(radius, dtype=float)
+        #: [pair]: the two bounding spheres' radii, summed (inf with the floor)
+        self._pair_radii = self._sphere_radius[self._pair_objects].sum(axis=1)
         self._sphere_offset = [k for k, c in enumerate(self._sphere_centre) if c.any()]
         #: [pair, side]: that side is on the robot (moves with the base), not the floor or an obstacle
         self._pair_on_robot = np.array(robot, dtype=float).reshape(-1, 2)
@@ -401,7 +405,7 @@ class CollisionModel:
             centres[k] = placements[k].act(self._sphere_centre[k])
         a, b = self._pair_objects[:, 0], self._pair_objects[:, 1]
         with np.errstate(invalid='ignore'):  # the floor's infinite sphere: −inf, NaN with another: checked
-            gap = np.linalg.norm(centres[a] - centres[b], axis=1) - self._sphere_radius[a] - self._sphere_radius[b]
+            gap = np.linalg.norm(centres[a] - centres[b], axis=1) - self._pair_radii
         near = ~(gap >= reach)
         if subset is not None:
             near &= subset
@@ -466,33 +470,31 @@ class CollisionModel:
         near = np.flatnonzero(dists < reach)
         if not near.size:
             return _no_pairs(n_arm), *closest
-        points, normals = np.empty((2, near.size, 3)), np.empty((near.size, 3))
-        for i, k in enumerate(near.tolist()):  # each pair's nearest points, on a and on b
-            result = self._results[k]
-            points[0, i], points[1, i] = result.getNearestPoint1(), result.getNearestPoint2()
-            normals[i] = result.normal  # coal's: from the first shape to the second
+        listed = near.tolist()
+        results = [self._results[k] for k in listed]
+        # each pair's nearest points, on a and on b, and coal's normal, from the first to the second
+        points = np.array([[r.getNearestPoint1() for r in results], [r.getNearestPoint2() for r in results]])
+        normals = np.array([r.normal for r in results])
         # ḋ = n · (v_b − v_a); a point p fixed to a joint moves at v = v₀ + ω × p, (v₀, ω) the
         # spatial velocity of a column of the joint Jacobians (world frame) that the kinematic
-        # model's update computed, so n · v = n · v₀ + (p × n) · ω
-        jacobians = self.kinematics.data.J
-        moment = np.cross(points, normals)
-        twists = jacobians[:, self._idx_v]  # (v₀, ω) per arm joint rate
-        along = normals @ twists[:3] + moment @ twists[3:]
+        # model's update computed, so n · v = n · v₀ + (p × n) · ω: over the planar root's
+        # columns, then the arm joints' rates
+        jacobians = self.kinematics.data.J[:, self._columns]
+        along = normals @ jacobians[:3] + np.cross(points, normals) @ jacobians[3:]
+        sides, along = along[:, :, :N_BASE], along[:, :, N_BASE:]
         along *= self._moved_by[self._pair_joints[near].T]  # only the arm joints that move p
         rates = along[1] - along[0]
         # the planar root's columns, over the world frame's (ẋ, ẏ, θ̇), move every point of the
         # robot; the floor and the obstacles stay put. Between two points of the robot they
         # cancel, and against the floor they are zero (the base moves parallel to it).
-        root = jacobians[:, :N_BASE]
-        sides = normals @ root[:3] + moment @ root[3:]
         sides *= self._pair_on_robot[near].T[:, :, None]
         world = (sides[1] - sides[0]) * self._pair_base_moves[near, None]
         # over the base's twist (vx, vy, ω) in its own frame: (ẋ, ẏ, θ̇) = R(θ) (vx, vy, ω)
         base = world @ rotation_z(q[2])
         pairs = NearPairs(
             _frozen(dists[near]),
-            tuple(self._pair_links[k] for k in near.tolist()),
-            tuple(self._pair_shapes[k] for k in near.tolist()),
+            tuple(self._pair_links[k] for k in listed),
+            tuple(self._pair_shapes[k] for k in listed),
             _frozen(rates),
             _frozen(base),
             _frozen(self._pair_floor[near]),

@@ -22,10 +22,10 @@ while the end effector holds its goal) rather than by whatever entry is cheapest
 backing away from the goal). Without ``J``, the nearest in ``W``.
 
 One QP through a maintained solver (:func:`~wmm_control.resolvers.constraints.nearest`,
-:mod:`qpsolvers` with DAQP) over the command's entries takes every row that some command in the
+DAQP) over the command's entries takes every row that some command in the
 box could break (a row the box alone keeps, or one on no entry the box leaves free, stays out).
 Where the box leaves no command that meets every row (the arm arrives faster than its
-acceleration limits can brake), the same solver takes the problem again with a slack per row of
+acceleration limits can brake), the same solver takes the problem again with the rows soft, a slack per row of
 high linear cost: the answer meets the rows as far as the box allows, and the stage never fails
 for it.
 
