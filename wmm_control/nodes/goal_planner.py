@@ -52,6 +52,7 @@ from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STA
 from wmm_control.nodes.runner import guard_clock, run_node
 from wmm_control.nodes.sim_timing import SimTiming
 from wmm_control.nodes.stamps import seconds
+from wmm_control.planning.base_path import ATTEMPTS
 from wmm_control.planning.follow import FollowParams
 from wmm_control.planning.pursuit import GoalPursuit, PursuitLog, PursuitState
 from wmm_control.resolvers.inputs import MeasuredInputs
@@ -122,9 +123,10 @@ class GoalPlannerNode(Node):
         )
 
     def destroy_node(self) -> bool:
-        """Stop the planner's thread (a plan under way is finished: at most the path budget per
-        stance tried, and the stance search), then destroy the node."""
-        self.pursuit.close(timeout=self.p.budget * self.p.stances_tried + 5.0)
+        """Stop the planner's thread (a plan under way is finished: at most the budget of each
+        search per stance tried, twice for a plan again in the arm's posture, and the stance
+        search), then destroy the node."""
+        self.pursuit.close(timeout=2 * self.p.budget * ATTEMPTS * self.p.stances_tried + 5.0)
         return super().destroy_node()
 
     def _set_max_goal_distance(self, distance: float) -> None:
