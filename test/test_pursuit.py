@@ -39,13 +39,12 @@ def pursuit():
     out.close()
 
 
-def settle(pursuit, base=START, timeout=120.0, q_arm=Q_ARM):
-    """Step (0.025 s each, the base standing at ``base``, the arm at ``q_arm``) until the plan is
-    in; every step's output."""
+def settle(pursuit, base=START, timeout=120.0):
+    """Step (0.025 s each, the base standing at ``base``) until the plan is in; every step's output."""
     steps = []
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        steps.append(pursuit.step(0.025, base, q_arm))
+        steps.append(pursuit.step(0.025, base, Q_ARM))
         if pursuit.state is not PursuitState.PLANNING:
             return steps
         time.sleep(0.01)
@@ -172,34 +171,3 @@ def test_progress_that_stalls_is_planned_again_then_the_goal_goes_to_the_resolve
     assert any('progress stalled' in m and 'planning again' in m for m in said), said
     assert pursuit.state is PursuitState.APPROACH and forwarded
     assert any('after 1 plans made again: the goal goes to the resolver' in m for m in said), said
-
-
-def test_a_plan_made_again_after_a_stall_brings_the_arm_back_to_the_travel_posture(pursuit):
-    """Stalled with the arm stretched out (a base that lagged while the arm followed the points),
-    the plan made again is for the arm in the planner's travel posture, not the stretched one:
-    its first point is the end effector in that posture at the base's pose, and the base it
-    carries holds that posture, so the resolver takes the arm back to it before the plan's clock
-    runs (a plan in the stretched posture kept the arm there, and it stalled again)."""
-    pursuit.new_goal('world', pose(BEHIND_TABLE, yaw=0.5 * np.pi))
-    settle(pursuit)
-    stretched = Q_ARM + np.array([0.0, 0.4, 0.0, 0.5, 0.0, 0.4, 0.0])
-    for _ in range(400):  # the base never moves: stalled after 1 s
-        out = pursuit.step(0.025, START, stretched)
-        if pursuit.state is PursuitState.PLANNING:
-            break
-    assert any('progress stalled' in e.message for e in out.events)
-    settle(pursuit, q_arm=stretched)
-    assert pursuit.state is PursuitState.FOLLOWING
-    first = pursuit.follower.handoff.points[0]
-    model = KinematicModel(ROBOT)
-    model.update(START, Q_ARM)
-    np.testing.assert_allclose(first.position, model.ee_placement_world()[0], atol=1e-9)
-    np.testing.assert_allclose(first.base.arm, Q_ARM)
-    np.testing.assert_allclose(first.base.pose, START, atol=1e-9)
-    # the follower gives that point and waits for the end effector, still where the arm is stretched
-    model.update(START, stretched)
-    assert np.linalg.norm(first.position - model.ee_placement_world()[0]) > 0.15
-    for _ in range(20):  # within the stall time
-        out = pursuit.step(0.025, START, stretched)
-    assert out.reference is not None and pursuit.follower.clock == 0.0
-    np.testing.assert_allclose(out.reference.position, first.position)

@@ -212,27 +212,29 @@ def planned(
     obstacles: str | Path = '',
     base_pose: ArrayLike | None = None,
     planner: GoalPlanner | None = None,
+    q_travel: ArrayLike | None = None,
 ) -> tuple[Handoff | None, dict]:
     """The plan of ``wmm_randomized --plan`` for ``goal`` among the obstacles of the file
     ``obstacles``, from ``base_pose`` (default: the robot's start pose), by ``planner`` (default:
     a new :class:`~wmm_control.planning.GoalPlanner` of the robot among those obstacles), the arm
-    in the planner's travel posture: (its hand-off, or None when the planner found no way;
+    travelling in ``q_travel`` (:meth:`~wmm_control.planning.GoalPlanner.plan_in_posture`; None:
+    the planner's travel posture): (its hand-off, or None when the planner found no way;
     ``{'planning_time_s', 'no_way', 'no_way_reason'}``, the last two None with a plan)."""
     planner = GoalPlanner(robot, load_obstacles(obstacles)) if planner is None else planner
     target = Goal(0.0, 0.0, goal.pose).target
     start = robot.start.base_pose if base_pose is None else np.asarray(base_pose, dtype=float)
-    plan = planner.plan(target.position, target.rotation, start)
+    plan, travel = planner.plan_in_posture(target.position, target.rotation, start, q_travel)
     info = {'planning_time_s': plan.planning_time, 'no_way': None, 'no_way_reason': None}
     if plan.trajectory is None:
         return None, dict(info, no_way=plan.no_way.value if plan.no_way else 'no_way', no_way_reason=plan.reason)
-    return Handoff.of(planner.model, plan.trajectory, planner.travel.q_arm), info
+    return Handoff.of(planner.model, plan.trajectory, travel), info
 
 
 def _run_direct(robot, run, goal, duration, obstacles, plan=False):
     """A direct run; with ``plan`` the plan's way there is followed first (:func:`planned`,
     :class:`~wmm_control.planning.follow.PlanFollower`), planned again from where the robot is
-    when it stalls (``MAX_REPLANS`` times at most), as the ``goal_planner`` node does
-    (:mod:`~wmm_control.planning.pursuit`: the arm in the planner's travel posture)."""
+    when it stalls (``MAX_REPLANS`` times at most), the arm travelling in the posture it has then
+    (in the planner's own when that finds no way)."""
     resolver = make_resolver(run['method'], robot, **resolver_parameters(run))
     tolerance, stall_time, ratio = goal_settings()
     progress = GoalProgress(tolerance, stall_time, resolver.params.dt, min_progress_ratio=ratio)
@@ -259,8 +261,10 @@ def _run_direct(robot, run, goal, duration, obstacles, plan=False):
             return None, planning
         follower = PlanFollower(handoff, target)
 
-        def replan(base_pose, _q_arm):
-            again, info = planned(robot, goal, obstacles, base_pose, planner)
+        def replan(base_pose, q_arm):
+            # the arm travels as it is now (the plan's first point is where the end effector is);
+            # when that finds no way, in the planner's own travel posture
+            again, info = planned(robot, goal, obstacles, base_pose, planner, q_arm)
             planning['replans'] += 1
             planning['planning_time_s'] += info['planning_time_s']
             if again is None:

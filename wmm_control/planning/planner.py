@@ -12,6 +12,7 @@ the stance both with it (the path's end) and with the arm at the goal.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -122,3 +123,27 @@ class GoalPlanner:
                 break
         assert path is not None
         return Plan(None, path, None, search, path.no_way, path.reason, time.perf_counter() - began)
+
+    def plan_in_posture(
+        self,
+        goal_position: ArrayLike,
+        goal_rotation: ArrayLike,
+        base_pose: Sequence[float] | np.ndarray,
+        q_travel: ArrayLike | None = None,
+    ) -> tuple[Plan, np.ndarray]:
+        """:meth:`plan` with the arm travelling in ``q_travel`` [rad or m] (None: the planner's own
+        travel posture), and in the planner's own when that finds no way (the planning times
+        added); the planner's own posture stays in force. Returns (the plan, the travel posture
+        it is for)."""
+        own = self.travel.q_arm
+        if q_travel is None:
+            return self.plan(goal_position, goal_rotation, base_pose), own
+        self.set_travel_posture(q_travel)
+        try:
+            plan = self.plan(goal_position, goal_rotation, base_pose)
+        finally:
+            self.set_travel_posture(own)
+        if plan.trajectory is not None:
+            return plan, np.asarray(q_travel, dtype=float)
+        second = self.plan(goal_position, goal_rotation, base_pose)
+        return dataclasses.replace(second, planning_time=plan.planning_time + second.planning_time), own

@@ -26,15 +26,8 @@ The follower paces the points by the measured base and end effector (forward kin
 the base pose and arm joints). While following, the plan is made again from where the base is
 when the follower reports a stall, or when the obstacles change and the rest of the planned
 path (:meth:`PlanFollower.remaining_poses`) comes nearer an obstacle than the travel margin
-(checked by the worker, on the new obstacles); the arm then travels in the planner's travel
-posture, as on the first plan: the new plan's first point is the end effector in that posture at
-the base's pose, which the resolver brings the arm back to before the plan's clock runs (the
-follower waits for the end effector). A plan in the posture the arm had where it stalled, often
-stretched towards a joint limit by a base that lagged, kept it there, and the robot stalled again
-on it (``mecanum``'s task sharing on ``table_pillar``: planned again in such a posture, the base
-left the new plan's start by 0.4 m within 5 s, the method's posture pull working against a plan
-that assumed the arm stayed as it was, and stalled again). Until the new plan comes the robot is
-held. After
+(checked by the worker, on the new obstacles); the arm then travels in the posture it has (the
+planner's own when that finds no way). Until the new plan comes the robot is held. After
 ``max_replans`` such plans for a goal the goal goes to the resolver from where the robot is (the
 method's own approach), as ``wmm_randomized --plan`` does.
 
@@ -127,6 +120,8 @@ class _PlanJob:
     obstacles: tuple[Obstacle, ...]
     goal: PoseTarget
     base_pose: np.ndarray
+    #: the arm's posture to travel in, first (the planner's own when that finds no way); None: its own
+    q_travel: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -235,11 +230,13 @@ class PlanWorker:
                 if isinstance(job, _CheckJob):
                     self._results.put(_Checked(job.ticket, path_blocked(planner, job.poses)))
                     continue
-                plan = planner.plan(job.goal.position, job.goal.rotation, job.base_pose)
+                plan, travel = planner.plan_in_posture(
+                    job.goal.position, job.goal.rotation, job.base_pose, job.q_travel
+                )
                 here = plan.stance is not None and np.array_equal(plan.stance.base_pose, job.base_pose)
                 handoff = None
                 if plan.trajectory is not None and not here:
-                    handoff = Handoff.of(planner.model, plan.trajectory, planner.travel.q_arm)
+                    handoff = Handoff.of(planner.model, plan.trajectory, travel)
                 self._results.put(_Planned(job.ticket, job.version, plan, handoff, here))
             except Exception as exc:  # a bug or a bad robot: reported, and the worker lives on
                 self._results.put(_Failed(job.ticket, f'{type(exc).__name__}: {exc}'))
@@ -375,7 +372,7 @@ class GoalPursuit:
             self._engaged = True
             self._hold_due = False  # what is sent now replaces a hold
         if self._plan_due and base is not None:
-            self._submit_plan(events, base)
+            self._submit_plan(events, base, arm)
         hold = None
         if self._hold_due and ee is not None:
             hold = PoseTarget(*ee)
@@ -434,12 +431,13 @@ class GoalPursuit:
         )
         return False
 
-    def _submit_plan(self, events: list[LogEvent], base: np.ndarray) -> None:
-        """Queue the plan due, from the base pose ``base``: a plan made again is the planner's
-        own, the arm in its travel posture (module docstring)."""
+    def _submit_plan(self, events: list[LogEvent], base: np.ndarray, q_arm: np.ndarray | None) -> None:
+        """Queue the plan due: a plan made again lets the arm travel in the posture it has (the
+        first point where the end effector is), the planner's own when that finds no way."""
         assert self.goal is not None
         why, self._plan_due = self._plan_due, ''
-        self.worker.submit(_PlanJob(self._ticket, self.version, self.obstacles, self.goal, base.copy()))
+        q_travel = q_arm.copy() if self.replans > 0 and q_arm is not None else None
+        self.worker.submit(_PlanJob(self._ticket, self.version, self.obstacles, self.goal, base.copy(), q_travel))
         self.counters.plans += 1
         events.append(LogEvent('planning', f'planning ({why}) from the base at {np.round(base, 3).tolist()}'))
 
