@@ -39,7 +39,7 @@ def pursuit():
     out.close()
 
 
-def settle(pursuit, base=START, timeout=30.0):
+def settle(pursuit, base=START, timeout=120.0):
     """Step (0.025 s each, the base standing at ``base``) until the plan is in; every step's output."""
     steps = []
     end = time.monotonic() + timeout

@@ -52,12 +52,18 @@ from wmm_control.nodes.qos import COMMAND_QOS, DIAGNOSTICS_QOS, LATCHED_QOS, STA
 from wmm_control.nodes.runner import guard_clock, run_node
 from wmm_control.nodes.sim_timing import SimTiming
 from wmm_control.nodes.stamps import seconds
+from wmm_control.planning.base_path import ATTEMPTS
 from wmm_control.planning.follow import FollowParams
 from wmm_control.planning.pursuit import GoalPursuit, PursuitLog, PursuitState
 from wmm_control.resolvers.inputs import MeasuredInputs
 from wmm_control.robot_config import load_robot
 
-__all__ = ['PARAMS', 'GoalPlannerNode', 'main']
+__all__ = ['PARAMS', 'PLAN_WAIT', 'GoalPlannerNode', 'main']
+
+#: [s] how long Ctrl-C waits for a plan under way (about 1 s on an idle machine); the process
+#: leaves without it after that and a second (the teardown's limit, ``run_node``), before
+#: ``ros2 launch`` escalates to SIGKILL 15 s after Ctrl-C.
+PLAN_WAIT = 10.0
 
 
 class GoalPlannerNode(Node):
@@ -129,12 +135,12 @@ class GoalPlannerNode(Node):
 
     @property
     def _close_timeout(self) -> float:
-        # at most the path budget per stance tried, and the stance search
-        return self.p.budget * self.p.stances_tried + 5.0
+        # a plan under way: about 1 s on an idle machine; ``budget`` caps each of its searches
+        return min(PLAN_WAIT, 2 * self.p.budget * ATTEMPTS * self.p.stances_tried + 5.0)
 
     def destroy_node(self) -> bool:
-        """Stop the planner's thread (a plan under way is finished: at most the path budget per
-        stance tried, and the stance search), then destroy the node."""
+        """Stop the planner's thread (a plan under way is finished, waited for up to
+        :data:`PLAN_WAIT`), then destroy the node."""
         self.pursuit.close(timeout=self._close_timeout)
         return super().destroy_node()
 

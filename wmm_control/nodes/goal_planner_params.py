@@ -61,7 +61,8 @@ _SPECS = (
     ),
     Param(
         'budget',
-        'Time budget [s] of the base path\'s search, per stance tried (planner).',
+        'Safety cap [s] on the wall time of each base path search; a search that reaches it ends the plan with '
+        '"no way" (planner).',
         lo=0.01,
         hi=60.0,
         read_only=True,

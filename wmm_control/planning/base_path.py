@@ -15,15 +15,33 @@ not only the checked ones, keeps ``margin``. A robot that starts nearer an obsta
 reactive controller may have stopped it there) first takes a way out: the nearest valid pose
 within 0.5 m (heading kept) that a motion reaches without coming nearer than it was, less
 ``step``; the path then starts with that motion. A straight motion from start to goal is tried
-first and, if valid, is the path. Else RRT-Connect searches ``attempts`` times within the time
-budget; each path is shortened by OMPL's path simplifier (vertex reduction, again after every
-segment is cut in eight so that corners can be cut, then close vertices collapsed; with the same
-checks), and the shortest is kept.
+first and, if valid, is the path. Else RRT-Connect searches ``attempts`` (4) times, each
+shortened by OMPL's path simplifier (vertex reduction, again after every segment is cut in eight
+so that corners can be cut, then close vertices collapsed; with the same checks), and the
+shortest is kept. A search ends when it finds a path or after ``iterations`` (200) iterations of
+its loop (one sample drawn, the trees extended towards it and joined); one that ends without a
+path ends the searches (the paths found before it kept). Every search runs: the number of
+searches, and so the path kept, does not depend on how fast the machine is. The wall-clock
+``budget`` is only a safety cap on each search: one that reaches it before its iterations ends
+the plan as :attr:`~wmm_control.planning.outcome.NoWay.TIMED_OUT`, with no path rather than one
+the machine's speed chose. (Before, the four searches shared one 2 s budget, counted with the
+simplifications, and the searches that did not fit in it were not made: on a loaded machine,
+or in a node's thread beside the control loop, fewer searches ran and the path was longer, and
+differed from run to run.) A ``table_pillar`` search takes 1–15 iterations, ``doorway`` and
+``clutter`` up to 90 (the shipped robots, 6–10 goals each); a robot walled in fails its 200 in
+about 1–3 s (``steerable``, ``panda_diff``, the machine loaded). The whole plan of a
+``table_pillar`` goal (stance search, searches, simplifications; ``benchmarks/bench_planning.py
+--goals 10``, both versions side by side on a loaded 2-core machine, load 4–6), median / p99 /
+max [s], with the shared budget → every search: ``mecanum`` 4.3 / 5.4 / 5.4 → 7.2 / 9.1 / 9.1,
+``panda_diff`` 5.1 / 8.3 / 8.3 → 14.7 / 22.2 / 22.6, ``steerable`` 3.8 / 6.4 / 6.4 → 10.4 / 15.1
+/ 15.1, ``ur_mecanum`` 3.5 / 4.1 / 4.1 → 6.2 / 9.6 / 9.7; the trajectories' median duration
+69.9 → 49.7 s, 16.5 → 13.4 s, 10.7 → 8.0 s, 21.9 → 14.6 s (the searches dropped before were the
+ones that found shorter paths). Most of a plan's time is the simplification's motion checks.
 
 Reproducible: OMPL draws the seed of every random generator it makes from one sequence,
-which :func:`ompl.util.RNG.setSeed` restarts; each plan makes its planner and simplifier anew
-after restarting it with ``seed``, so the same query with the same seed gives the same path (the
-budget aside: a plan cut short by it depends on the machine's speed). The sequence is one per
+which :func:`ompl.util.RNG.setSeed` restarts; each plan makes its planners and simplifiers anew
+after restarting it with ``seed``, so the same query with the same seed gives the same path,
+whatever the machine's speed (within the budget). The sequence is one per
 process: plans in two threads at once are not reproducible.
 
 :meth:`BasePathPlanner.plan` gives a :class:`BasePath`: the simplified waypoints and the path as
@@ -62,6 +80,12 @@ PADDING = 1.0
 _RS_PURE = 1e-7
 #: [m] stretches shorter than this at a Reeds–Shepp junction are not split further
 _RS_SPLIT = 1e-9
+#: RRT-Connect searches of one plan (module docstring)
+ATTEMPTS = 4
+#: the most iterations of one RRT-Connect search (module docstring)
+ITERATIONS = 200
+#: [s] the safety cap on one search's wall time (module docstring)
+BUDGET = 5.0
 #: [m] how far a robot that starts nearer an obstacle than the margin looks for a way out, nearest first
 ESCAPE = (0.1, 0.2, 0.35, 0.5)
 #: directions of the way out, evenly spread
@@ -100,6 +124,11 @@ class BasePath:
     def found(self) -> bool:
         """Whether there is a path."""
         return self.no_way is None
+
+    @classmethod
+    def none(cls, kind: NoWay, reason: str, began: float, planner: str = '') -> BasePath:
+        """No path, for ``reason``, of a plan begun at ``began`` (``time.perf_counter()``)."""
+        return cls(np.empty((0, 3)), (), kind, reason, time.perf_counter() - began, planner)
 
 
 def _pose(state) -> tuple[float, float, float]:
@@ -144,30 +173,57 @@ class _Motions(ob.MotionValidator):
         return travel.motion_valid(pose_at, self.sweep(a, b))
 
 
+class _Search:
+    """The termination condition of one RRT-Connect search (OMPL calls it once per iteration of
+    its loop, before the iteration): the search ends after ``iterations`` iterations, or, as a
+    safety cap on a machine too slow or loaded for them, once ``budget`` [s] have passed since it
+    began (:attr:`timed_out`)."""
+
+    def __init__(self, iterations: int, budget: float) -> None:
+        self.iterations = iterations
+        self.deadline = time.perf_counter() + budget
+        self.count = 0
+        self.timed_out = False
+
+    def __call__(self) -> bool:
+        if self.count >= self.iterations:
+            return True
+        if time.perf_counter() > self.deadline:
+            self.timed_out = True
+            return True
+        self.count += 1
+        return False
+
+
 class BasePathPlanner:
     """Base paths among the obstacles for one robot (module docstring).
 
     Args:
         base: the robot's base section (its family chooses the space, its limits ρ).
         travel: the robot driving in its travel posture.
-        budget: [s] counted from the plan's start, the time the searches may take (a search
-            begun within it is given what is left; the simplification of its path may end past it).
+        budget: [s] the safety cap on each search's wall time: a search that reaches it
+            (not its iterations) ends the plan with no path (module docstring).
         seed: > 0, OMPL's random seed for every plan.
         attempts: RRT-Connect searches (each simplified); the shortest path is kept.
         simplify_rounds: rounds of vertex reduction after each search.
+        iterations: the most iterations of each search (one sample drawn and each tree
+            extended towards it); a search that ends without a path ends the searches.
     """
 
     def __init__(
         self,
         base: BaseSection,
         travel: Travel,
-        budget: float = 2.0,
+        budget: float = BUDGET,
         seed: int = 1,
-        attempts: int = 4,
+        attempts: int = ATTEMPTS,
         simplify_rounds: int = 15,
+        iterations: int = ITERATIONS,
     ) -> None:
         if not budget > 0.0:
             raise ValueError(f'the time budget must be > 0 [s], got {budget}')
+        if int(iterations) < 1 or int(attempts) < 1:
+            raise ValueError(f'a plan needs at least one search of one iteration, got {attempts}, {iterations}')
         if int(seed) <= 0:
             raise ValueError(f'the seed must be > 0 (OMPL takes 0 for "random"), got {seed}')
         self.base = base
@@ -176,6 +232,7 @@ class BasePathPlanner:
         self.seed = int(seed)
         self.attempts = int(attempts)
         self.simplify_rounds = int(simplify_rounds)
+        self.iterations = int(iterations)
         self.rho = turning_radius(base) if base.family == 'differential' else None
 
     def _space(self, start: np.ndarray, goal: np.ndarray, obstacles: Sequence[Obstacle]):
@@ -198,16 +255,14 @@ class BasePathPlanner:
         goal = as_finite_vector(goal, 3, 'goal pose')
         travel = self.travel
 
-        def refused(kind: NoWay, reason: str) -> BasePath:
-            return BasePath(np.empty((0, 3)), (), kind, reason, time.perf_counter() - began, '')
-
         if np.array_equal(start, goal):  # there already: no motion to check
             return self._path([start, goal], None, began, 'direct')
         if not travel.valid(goal):
-            return refused(
+            return BasePath.none(
                 NoWay.NO_PATH,
                 f'the base at the stance would be {travel.obstacle_clearance(goal):.3f} m from an obstacle; '
                 f'the path keeps {travel.margin + travel.step:g} m',
+                began,
             )
         level = ou.getLogLevel()
         try:
@@ -230,47 +285,43 @@ class BasePathPlanner:
         if not self.travel.valid(start):
             out = self._escape(space, motions, start)
             if out is None:
-                return BasePath(
-                    np.empty((0, 3)),
-                    (),
+                return BasePath.none(
                     NoWay.START_BLOCKED,
                     f'the robot is {self.travel.obstacle_clearance(start):.3f} m from an obstacle where it '
                     f'stands, and no straight way out within {ESCAPE[-1]:g} m keeps that far',
-                    time.perf_counter() - began,
-                    '',
+                    began,
                 )
             before, a = [a], out
         if motions.checkMotion(a, b):
             return self._path([*before, a, b], space, began, 'direct')
         ou.RNG.setSeed(self.seed)  # every generator made from here on: see the module docstring
         best: tuple[float, list] | None = None
-        status = None
+        why = ''
         for _ in range(self.attempts):
-            left = self.budget - (time.perf_counter() - began)
-            if left <= 0.0:
-                break
+            search = _Search(self.iterations, self.budget)
             pdef = ob.ProblemDefinition(si)
             pdef.setStartAndGoalStates(a, b)
             planner = og.RRTConnect(si)
             planner.setProblemDefinition(pdef)
             planner.setup()
-            status = planner.solve(left)
+            status = planner.solve(ob.PlannerTerminationCondition(search))
+            if search.timed_out:  # the safety cap: no path rather than one the machine's speed chose
+                return BasePath.none(
+                    NoWay.TIMED_OUT,
+                    f'a base path search took longer than its {self.budget:g} s budget '
+                    f'(after {search.count} of at most {self.iterations} iterations)',
+                    began,
+                    'RRTConnect',
+                )
             if status.getStatus() != ob.PlannerStatus.PlannerStatusType.EXACT_SOLUTION:
+                why = f'in {self.iterations} iterations of a search ({status.asString()})'
                 break
             path = pdef.getSolutionPath()
             self._simplify(og.PathSimplifier(si), path)
             if best is None or path.length() < best[0]:
                 best = (path.length(), [_pose(path.getState(i)) for i in range(path.getStateCount())])
         if best is None:
-            why = status.asString() if status is not None else 'no time left'
-            return BasePath(
-                np.empty((0, 3)),
-                (),
-                NoWay.NO_PATH,
-                f'no base path found within {self.budget:g} s ({why})',
-                time.perf_counter() - began,
-                'RRTConnect',
-            )
+            return BasePath.none(NoWay.NO_PATH, f'no base path found ({why})', began, 'RRTConnect')
         states = list(before)
         for pose in best[1]:
             state = space.allocState()

@@ -19,5 +19,8 @@ class NoWay(str, Enum):
     #: the robot's current pose is not clear of the obstacles by the travel margin, and no
     #: short way out keeps the clearance it has
     START_BLOCKED = 'start_blocked'
-    #: no base path to any stance was found within the time budget
+    #: no base path to any stance was found within the searches' iterations
     NO_PATH = 'no_path'
+    #: a base path search reached its time budget, the safety cap on a machine too slow or
+    #: loaded for its iterations (no path rather than one the machine's speed chose)
+    TIMED_OUT = 'timed_out'

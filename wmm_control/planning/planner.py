@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle
-from wmm_control.planning.base_path import BasePath, BasePathPlanner
+from wmm_control.planning.base_path import BUDGET, BasePath, BasePathPlanner
 from wmm_control.planning.clearance import Clearance, Travel
 from wmm_control.planning.outcome import NoWay
 from wmm_control.planning.stance import Stance, StanceFinder, StanceParams, StanceSearch
@@ -66,7 +66,8 @@ class GoalPlanner:
             safety stage's influence distance, so that the dampers leave the path alone).
         step: [m] of the path's checks (:class:`~wmm_control.planning.clearance.Travel`).
         stance: :class:`~wmm_control.planning.stance.StanceParams`.
-        budget: [s] of the base path's search, per stance tried.
+        budget: [s] the safety cap on the wall time of each base path search
+            (:class:`~wmm_control.planning.base_path.BasePathPlanner`).
         seed: OMPL's seed (> 0).
         stances_tried: the most stances a plan tries a path to.
         fraction: of the base's limits the trajectory uses.
@@ -80,7 +81,7 @@ class GoalPlanner:
         travel_margin: float = 0.10,
         step: float = 0.01,
         stance: StanceParams | None = None,
-        budget: float = 2.0,
+        budget: float = BUDGET,
         seed: int = 1,
         stances_tried: int = 3,
         fraction: float = 0.95,
@@ -118,7 +119,7 @@ class GoalPlanner:
             if path.found:
                 trajectory = time_path(path.pieces, self.robot.base, self.robot.period, self.fraction)
                 return Plan(stance, path, trajectory, search, None, '', time.perf_counter() - began)
-            if path.no_way is NoWay.START_BLOCKED:
+            if path.no_way in (NoWay.START_BLOCKED, NoWay.TIMED_OUT):
                 break
         assert path is not None
         return Plan(None, path, None, search, path.no_way, path.reason, time.perf_counter() - began)
