@@ -73,9 +73,7 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file, obstacle_text
 from wmm_control.geometry import rotation_angle, rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
-from wmm_control.planning import GoalPlanner
 from wmm_control.planning.pursuit import GoalPursuit, PursuitState
-from wmm_control.planning.handoff import Handoff
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
 from wmm_control.resolvers.period import ResolverSettings
@@ -99,7 +97,6 @@ __all__ = [
     'goal_settings',
     'run_contact',
     'write_record',
-    'planned',
 ]
 
 #: The robots, by name.
@@ -205,30 +202,6 @@ def _scenario(robot, goal, duration, obstacles):
         obstacles_file=obstacles,
         obstacles=load_obstacles(obstacles),
     )
-
-
-def planned(
-    robot: RobotConfig,
-    goal: RandomGoal,
-    obstacles: str | Path = '',
-    base_pose: ArrayLike | None = None,
-    planner: GoalPlanner | None = None,
-    q_travel: ArrayLike | None = None,
-) -> tuple[Handoff | None, dict]:
-    """The plan of ``wmm_randomized --plan`` for ``goal`` among the obstacles of the file
-    ``obstacles``, from ``base_pose`` (default: the robot's start pose), by ``planner`` (default:
-    a new :class:`~wmm_control.planning.GoalPlanner` of the robot among those obstacles), the arm
-    travelling in ``q_travel`` (:meth:`~wmm_control.planning.GoalPlanner.plan_in_posture`; None:
-    the planner's travel posture): (its hand-off, or None when the planner found no way;
-    ``{'planning_time_s', 'no_way', 'no_way_reason'}``, the last two None with a plan)."""
-    planner = GoalPlanner(robot, load_obstacles(obstacles)) if planner is None else planner
-    target = Goal(0.0, 0.0, goal.pose).target
-    start = robot.start.base_pose if base_pose is None else np.asarray(base_pose, dtype=float)
-    plan, travel = planner.plan_in_posture(target.position, target.rotation, start, q_travel)
-    info = {'planning_time_s': plan.planning_time, 'no_way': None, 'no_way_reason': None}
-    if plan.trajectory is None:
-        return None, dict(info, no_way=plan.no_way.value if plan.no_way else 'no_way', no_way_reason=plan.reason)
-    return Handoff.of(planner.model, plan.trajectory, travel), info
 
 
 def _run_direct(robot, run, goal, duration, obstacles, plan=False):
@@ -357,8 +330,8 @@ def run_goal(
     ``params`` (resolver parameters) override those of :data:`METHOD_RUNS` and :data:`ROBOT_RUNS`.
     ``obstacles``: an obstacle file (name or path; '' for none), in the simulator and the
     controller. ``record``: a folder to write the run to (the module docstring says how).
-    ``plan`` (direct engine only): the planner plans the way to the goal first (:func:`planned`),
-    the run follows its hand-off at the robot's pace
+    ``plan`` (direct engine only): the planner plans the way to the goal first (as ``goal_planner`` does,
+    :class:`~wmm_control.planning.pursuit.GoalPursuit`), the run follows its hand-off at the robot's pace
     (:class:`~wmm_control.planning.follow.PlanFollower`), then goes to the goal; when the robot
     stalls on the way it is planned again from where the robot is. A goal the planner finds no
     way to is not run (or the run ends where a plan again finds none): ``no_way``, unless the

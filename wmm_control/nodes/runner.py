@@ -101,8 +101,9 @@ def run_node(
     back once the context is shut down, and from the interpreter's exit on both signals are
     ignored (:func:`_ignore_stop_signals_at_exit`). The process uses Fast DDS's UDP transport
     alone (:data:`FASTDDS_TRANSPORTS`) unless ``FASTDDS_BUILTIN_TRANSPORTS`` is set. The teardown
-    has :data:`TEARDOWN_LIMIT` seconds (a node's ``teardown_limit`` attribute, if it has one), and with ``args`` None (the process's own command line)
-    the interpreter's exit :data:`EXIT_LIMIT`. SIGUSR1
+    has :data:`TEARDOWN_LIMIT` seconds (a node's ``teardown_limit`` attribute, if it has one),
+    and with ``args`` None (the process's own command line) the interpreter's exit
+    :data:`EXIT_LIMIT`. SIGUSR1
     writes every thread's Python stack to stderr (``kill -USR1 <pid>``: where a node hangs).
     """
     os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', FASTDDS_TRANSPORTS)
