@@ -9,7 +9,6 @@ of those poses; the closed-loop runs against the simulator's own contact check.
 import numpy as np
 import pytest
 
-from wmm_control.errors import WmmError
 from wmm_control.experiments.randomized import CONTACT_DEPTH, RandomGoal, run_goal, sample_goals
 from wmm_control.geometry import matrix_from_rpy, rotation_angle
 from wmm_control.kinematics import KinematicModel
@@ -83,15 +82,21 @@ def test_a_goal_inside_the_table_is_no_way_with_its_reason_not_a_failure():
     assert "'table'" in result['no_way_reason'] and result['why'] == ''
 
 
-def test_the_plan_is_refused_with_the_nodes_engine(behind_the_table, capsys):
-    from wmm_control.cli.randomized import main
-
+def test_the_nodes_engine_plans_with_goal_planner_round_the_table_and_reports_no_way(behind_the_table):
+    """``--engine nodes --plan``: the goal_planner node between the goal and the resolver, as
+    ``robot.launch.py planner:=true`` wires it. The goal behind the table is reached round it; a
+    goal inside the table is no way, with its reason, and the robot is held."""
     cfg, goal = behind_the_table
-    with pytest.raises(WmmError, match='direct engine'):
-        run_goal(cfg, 'pinv', goal, engine='nodes', obstacles='table_pillar', plan=True)
-    args = ['--robots', 'steerable', '--methods', 'pinv', '--goals', '1', '--obstacles', 'table_pillar']
-    assert main([*args, '--engine', 'nodes', '--plan']) == 2
-    assert '--plan runs with the direct engine only' in capsys.readouterr().err
+    planned = run_goal(cfg, 'pinv', goal, engine='nodes', obstacles='table_pillar', duration=40.0, plan=True)
+    assert planned['outcome'] == 'converged', planned['why']
+    assert planned['contact_depth_m'] <= CONTACT_DEPTH and planned['no_way'] is None
+    assert planned['planning_time_s'] > 0.0
+    table = next(o for o in OBSTACLES if o.name == 'table')
+    position = table.position + np.array([0.0, 0.0, 0.5 * table.size[2] - 0.05])
+    inside = RandomGoal(0, np.zeros(3), cfg.start.arm, np.concatenate((position, np.zeros(3))), 1)
+    result = run_goal(cfg, 'pinv', inside, engine='nodes', obstacles='table_pillar', duration=5.0, plan=True)
+    assert result['outcome'] == 'no_way' and result['no_way'] == 'inside_obstacle'
+    assert "'table'" in result['no_way_reason'] and result['why'] == ''
 
 
 def test_a_plan_through_the_table_stalls_and_the_replan_from_where_the_robot_stopped_gets_there(behind_the_table):

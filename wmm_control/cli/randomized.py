@@ -16,7 +16,7 @@ and wall time per period (the largest p99 of a run and the longest cycle). ``--i
 only those goals of the draw (one run again, say). ``--obstacles`` puts an obstacle file's obstacles
 (:mod:`wmm_control.kinematics.obstacles`; its ``random_boxes`` drawn by ``--seed``) in the simulator and the controller, and draws the
 goals clear of them (in the file's ``goal_region``, if it has one); every period's clearance
-is checked on the simulator's geometry. ``--plan`` (direct engine only) plans the way to each
+is checked on the simulator's geometry. ``--plan`` plans the way to each
 goal round the obstacles first (:mod:`wmm_control.planning`), the run follows it at the robot's
 pace (planned again from where the robot stalls) and then goes to the goal; a goal the planner
 finds no way to counts as "no way", with its reason, not as failed. ``--record DIR`` writes
@@ -256,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         '--plan',
         action='store_true',
-        help='plan the way to each goal first (wmm_control.planning) and track it; direct engine only',
+        help='plan the way to each goal first (wmm_control.planning; the goal_planner node with --engine nodes) and track it',
     )
     parser.add_argument('--record', metavar='DIR', help='write each run to DIR/<robot>_<method>_<goal>.npz')
     parser.add_argument(
@@ -306,8 +306,6 @@ def _main(args, robots, methods, cleanup) -> int:
             )
         if args.resume and not args.out:
             raise WmmError('--resume needs --out')
-        if args.plan and args.engine != 'direct':
-            raise WmmError('--plan runs with the direct engine only for now (--engine direct)')
         params = dict(_param(text) for text in args.param)
         sweeps = parse_sweeps(args.sweep)
         points = sweep_grid(sweeps)

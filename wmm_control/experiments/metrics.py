@@ -109,6 +109,7 @@ class RunLog:
         self.safety_counts: dict | None = None
         self.final_status: dict | None = None  # nodes engine: the goal's state after the resolver's last cycle
         self.first_stall_s: float | None = None  # nodes engine: when the resolver first found the goal stalled [s]
+        self.planning: dict | None = None  # nodes engine with goal_planner: GoalPursuit.account()
         self.refused = ''  # direct engine: why the last target refused was (the robot held still then)
         self.frozen = False
 

@@ -61,7 +61,6 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
-from wmm_control.errors import WmmError
 from wmm_control.experiments.direct import run_scenario
 from sim_bridge.collision import SelfCollisionChecker
 from sim_bridge.world import SimWorld
@@ -73,7 +72,7 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file, obstacle_text
 from wmm_control.geometry import rotation_angle, rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
-from wmm_control.planning.pursuit import GoalPursuit, PursuitState
+from wmm_control.planning.pursuit import GoalPursuit
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
 from wmm_control.resolvers.period import ResolverSettings
@@ -236,20 +235,16 @@ def _run_direct(robot, run, goal, duration, obstacles, plan=False):
     status = {'goal_reached': progress.reached, 'first_stall_s': first_stall[0] if first_stall else None}
     if pursuit is None:
         return log, status
-    c = pursuit.counters
-    no_way = pursuit.state is PursuitState.NO_WAY
-    planning = {
-        'planning_time_s': c.planning_s,
-        'replans': c.replans,
-        'no_way': (pursuit.no_way_kind.value if pursuit.no_way_kind else 'no_way') if no_way else None,
-        'no_way_reason': pursuit.reason if no_way else None,
-    }
-    if no_way and c.plans == 1:
+    planning = pursuit.account()
+    if planning['no_way'] and planning['plans'] == 1:
         return None, planning
     return log, dict(status, **planning)
 
 
-def _run_nodes(robot, run, goal, duration, obstacles):
+def _run_nodes(robot, run, goal, duration, obstacles, plan=False):
+    """A run with every node in this process; with ``plan`` ``goal_planner`` between the goal and
+    the resolver (:func:`~wmm_control.experiments.ros_run.run_with_nodes`). (None, planning)
+    when the first plan finds no way."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / 'goal.yaml'
         path.write_text(
@@ -268,9 +263,15 @@ def _run_nodes(robot, run, goal, duration, obstacles):
         )
         scenario = load_scenario(path)
         entry = dict(run, name=run['method'], feedback='ground_truth')
-        log = run_with_nodes(scenario, entry)
-    status = log.final_status or {}
-    return log, {'goal_reached': status.get('goal_reached', False), 'first_stall_s': log.first_stall_s}
+        log = run_with_nodes(scenario, entry, planner=plan)
+    final = log.final_status or {}
+    status = {'goal_reached': final.get('goal_reached', False), 'first_stall_s': log.first_stall_s}
+    if not plan:
+        return log, status
+    planning = dict(log.planning or {})
+    if planning.get('no_way') and planning.get('plans') == 1:
+        return None, planning
+    return log, dict(status, **planning)
 
 
 def _limit_use(log, robot, dt):
@@ -330,8 +331,9 @@ def run_goal(
     ``params`` (resolver parameters) override those of :data:`METHOD_RUNS` and :data:`ROBOT_RUNS`.
     ``obstacles``: an obstacle file (name or path; '' for none), in the simulator and the
     controller. ``record``: a folder to write the run to (the module docstring says how).
-    ``plan`` (direct engine only): the planner plans the way to the goal first (as ``goal_planner`` does,
-    :class:`~wmm_control.planning.pursuit.GoalPursuit`), the run follows its hand-off at the robot's pace
+    ``plan``: the planner plans the way to the goal first (as ``goal_planner`` does,
+    :class:`~wmm_control.planning.pursuit.GoalPursuit`; with the nodes engine the node itself,
+    planning in its thread while the robot is held), the run follows its hand-off at the robot's pace
     (:class:`~wmm_control.planning.follow.PlanFollower`), then goes to the goal; when the robot
     stalls on the way it is planned again from where the robot is. A goal the planner finds no
     way to is not run (or the run ends where a plan again finds none): ``no_way``, unless the
@@ -357,16 +359,12 @@ def run_goal(
     cfg = load_robot(robot)
     duration = DURATION_S.get(cfg.name, 90.0) if duration is None else duration
     run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(cfg.name, {}).get(method, {}), **(params or {})}
+    log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles, plan=plan)
     planning: dict = {}
     if plan:
-        if engine != 'direct':
-            raise WmmError(f'the planner runs with the direct engine only, not {engine!r}')
-        log, status = _run_direct(cfg, run, goal, duration, obstacles, plan=True)
         planning = {k: status.pop(k) for k in ('planning_time_s', 'no_way', 'no_way_reason', 'replans')}
         if log is None:
             log, status = _held(cfg, method, goal, '')
-    else:
-        log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles)
     if not len(log):  # the goal was refused: the robot held still
         log, status = _held(cfg, method, goal, log.refused or 'goal refused by the resolver')
     if record is not None:

@@ -3,7 +3,9 @@
 The run has a ROS domain of its own (:func:`private_domain_id`). The simulator (``wmm_sim``, lockstep), the base controller (``swmr_controller`` for robot A,
 ``mecanum_controller`` for robot B),
 the ``redundancy_resolver`` and the ``goal_sequencer`` run on one executor with a private
-rclpy context, exactly as they run as separate processes. A recorder node listens to the
+rclpy context, exactly as they run as separate processes; with ``planner``, ``goal_planner``
+too, between the sequencer's ``/goal_pose`` and the resolver, as ``robot.launch.py planner:=true``
+wires it. A recorder node listens to the
 topics a user would watch (ground-truth end-effector pose and base pose, joint states,
 feasible twist), takes each resolver cycle from the resolver node (in this process, exact),
 and fills a :class:`~wmm_control.experiments.metrics.RunLog`, one row per control period.
@@ -30,6 +32,7 @@ from wmm_control.experiments.metrics import RunLog
 from wmm_control.experiments.recording import BagRecorder
 from wmm_control.experiments.scenario import Scenario, resolver_parameters
 from wmm_control.nodes.conversions import odometry_pose, planar_twist, pose_rotation
+from wmm_control.nodes.goal_planner import GoalPlannerNode
 from wmm_control.nodes.goal_sequencer import GoalSequencerNode
 from wmm_control.nodes.base_controller import BaseControllerNode
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
@@ -49,12 +52,24 @@ class Recorder(Node):
     resolver's cycle (the commands it sent, ψ, mode, scales, the goal's state) comes from the
     resolver node in this process (:meth:`observe`, one of its ``cycle_observers``), exact and
     without a ``/diagnostics`` message every period.
+
+    ``towards_goal`` (default: always) tells whether the resolver's target is the user's goal; the
+    goal's state (reached, stalled) is taken only then: with ``goal_planner`` the resolver tracks a
+    plan's points, or holds the robot while a plan is made, before the goal is handed over.
     """
 
-    def __init__(self, context: rclpy.Context, robot: RobotConfig, scenario: Scenario, log: RunLog) -> None:
+    def __init__(
+        self,
+        context: rclpy.Context,
+        robot: RobotConfig,
+        scenario: Scenario,
+        log: RunLog,
+        towards_goal: Callable[[], bool] | None = None,
+    ) -> None:
         super().__init__('experiment_recorder', context=context)
         self.scenario = scenario
         self.log = log
+        self.towards_goal = towards_goal
         self.arm_joints = robot.arm.joints
         self._index = None
         self._rows: dict[tuple[int, int], dict[str, Any]] = {}
@@ -93,6 +108,8 @@ class Recorder(Node):
         """The resolver's cycle stamped ``stamp`` (see ``RedundancyResolverNode.cycle_observers``)."""
         row = self._row(stamp)
         row['command'] = command
+        if self.towards_goal is not None and not self.towards_goal():
+            reached = stalled = False
         self.final_status = {'goal_reached': bool(reached), 'goal_stalled': bool(stalled)}
         if self.first_stall_s is None and stalled:
             self.first_stall_s = row['t']
@@ -155,6 +172,7 @@ def run_with_nodes(
     domain_id: int | None = None,
     bag_path: str | Path | None = None,
     view_port: int | None = None,
+    planner: bool = False,
 ) -> RunLog:
     """Run one entry of ``scenario.runs`` with every node in this process.
 
@@ -169,6 +187,9 @@ def run_with_nodes(
             ``/diagnostics`` every period among them; None records nothing.
         view_port: serve the live browser view of the run (``wmm_viewer``) on this HTTP port;
             None: no viewer.
+        planner: run ``goal_planner`` between the goals and the resolver (the scenario's
+            obstacles, the run's odometry); the goal counts as reached or stalled only once the
+            planner has handed it to the resolver, and ``planning`` holds the planner's account.
 
     Returns:
         The frozen :class:`RunLog` (``wall_time_s`` set).
@@ -210,13 +231,26 @@ def run_with_nodes(
     nodes: list[Node] = []
     executor = _executor(context)
     try:
-        remap = ['--ros-args', '-r', '/odom:=/ground_truth/odom'] if feedback == 'ground_truth' else []
+        remap = ['-r', '/odom:=/ground_truth/odom'] if feedback == 'ground_truth' else []
         nodes.append(
             GoalSequencerNode(
                 context=context, parameter_overrides=params({'scenario': str(scenario.path), 'use_sim_time': True})
             )
         )
-        resolver = RedundancyResolverNode(context=context, cli_args=remap, parameter_overrides=params(resolver_params))
+        goal_planner = None
+        if planner:  # as robot.launch.py planner:=true: the user's goals go to the planner
+            goal_planner = GoalPlannerNode(
+                context=context,
+                cli_args=['--ros-args', *remap],
+                parameter_overrides=params(
+                    {'robot': str(robot.yaml_path), 'obstacles': scenario.obstacles_file, 'diagnostics_period': 0.0}
+                ),
+            )
+            nodes.append(goal_planner)
+            remap = [*remap, '-r', 'goal_pose:=goal_planner/goal']
+        resolver = RedundancyResolverNode(
+            context=context, cli_args=['--ros-args', *remap], parameter_overrides=params(resolver_params)
+        )
         nodes.append(resolver)
         nodes.append(
             BaseControllerNode(
@@ -225,7 +259,9 @@ def run_with_nodes(
                 parameter_overrides=params({'robot': str(robot.yaml_path)}),
             )
         )
-        recorder = Recorder(context, robot, scenario, log)
+        recorder = Recorder(
+            context, robot, scenario, log, None if goal_planner is None else lambda: goal_planner.pursuit.goal_handed
+        )
         resolver.cycle_observers.append(recorder.observe)
         nodes.append(recorder)
         sim = SimNode(context=context, parameter_overrides=params(sim_params))
@@ -266,6 +302,8 @@ def run_with_nodes(
         log.first_stall_s = recorder.first_stall_s
         log.sim_counters = {g: dict(c) for g, c in sim.world.counters.items()}  # what /diagnostics reports
         log.safety_counts = resolver.period.safety_counts.values()  # what the resolver's /diagnostics reports
+        if goal_planner is not None:
+            log.planning = goal_planner.pursuit.account()
     finally:
         for node in nodes:
             executor.remove_node(node)

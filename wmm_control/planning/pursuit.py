@@ -552,3 +552,23 @@ class GoalPursuit:
         if math.isfinite(self.planning_time):  # none before the first plan
             values['planning_time_s'] = self.planning_time
         return level, message, values
+
+    @property
+    def goal_handed(self) -> bool:
+        """The resolver has the user's goal itself: the plan's final approach, or the goal sent
+        straight. Before that it tracks a plan's points, or holds the robot while one is made."""
+        return self.state in (PursuitState.APPROACH, PursuitState.DIRECT)
+
+    def account(self) -> dict:
+        """What the pursuit of a goal came to, for a study's row: ``planning_time_s`` (of every
+        plan), ``plans``, ``replans``, ``no_way`` (its kind when the pursuit ended with no way,
+        else None) and ``no_way_reason``."""
+        c = self.counters
+        no_way = self.state is PursuitState.NO_WAY
+        return {
+            'planning_time_s': c.planning_s,
+            'plans': c.plans,
+            'replans': c.replans,
+            'no_way': (self.no_way_kind.value if self.no_way_kind else 'no_way') if no_way else None,
+            'no_way_reason': self.reason if no_way else None,
+        }
