@@ -1,5 +1,6 @@
 """SWMR base controller (Sorour §IV): ICR representation, route, QP, limits, tracking, failure."""
 
+import dataclasses
 import importlib.util
 import itertools
 import math
@@ -343,6 +344,21 @@ def test_osqp_is_warm_started(geometry):
     assert solver.last_iterations < cold
     assert solver.last_iterations <= 25  # OSQP checks termination every 25
     np.testing.assert_allclose(again.x, first.x, atol=1e-5)
+
+
+def test_osqp_solves_each_problem_within_its_own_box(geometry):
+    """The solver sends the box's bounds only when they change: a tighter box, the same one again
+    and the first one back each give the optimum within that box."""
+    ctrl = make(geometry)
+    ctrl.reset(geometry.steer_angles_for_icr((0.0, 2.0)))
+    wide = ctrl.build_qp([0.0, 0.5, 0.0])
+    optimum = brute_force_qp(wide)
+    tight = dataclasses.replace(wide, box=0.5 * float(np.max(np.abs(optimum))))
+    assert np.max(np.abs(brute_force_qp(tight))) <= tight.box + 1e-9 < np.max(np.abs(optimum))
+    for qp in (wide, tight, tight, wide, tight):
+        x = ctrl.solver(qp).x
+        assert np.max(np.abs(x)) <= qp.box + 1e-6
+        np.testing.assert_allclose(x, brute_force_qp(qp), atol=1e-5)
 
 
 # ---------------------------------------------------------------- limits (property test)

@@ -409,6 +409,8 @@ class OsqpIcrSolver:
             verbose=False, polishing=False, warm_starting=True, eps_abs=eps, eps_rel=eps, max_iter=int(max_iter)
         )
         self._osqp = self._setup(np.eye(2), m, settings)
+        #: each instance's upper bounds as last sent (:meth:`_run` sends them only when they change)
+        self._upper: dict[osqp.OSQP, bytes] = {}
         # The elastic rows are normalised already; OSQP's Ruiz scaling, fighting the heavy weight
         # on s, would multiply its iteration count by ~15 (median ~2000, often max_iter).
         self._elastic = self._setup(np.diag([1.0, 1.0, ELASTIC_WEIGHT]), m + 1, dict(settings, scaling=0))
@@ -430,8 +432,16 @@ class OsqpIcrSolver:
     def _run(
         self, solver: osqp.OSQP, q: np.ndarray, a: np.ndarray, lb: np.ndarray, ub: np.ndarray
     ) -> tuple[np.ndarray, SolverStatus]:
-        """Update ``solver``'s q, A's values (``a`` dense, stored column-major), l, u and solve."""
-        solver.update(q=q, l=lb, u=ub, Ax=a.ravel(order='F'))
+        """Update ``solver``'s q, A's values (``a`` dense, stored column-major), l, u and solve.
+
+        u (the box's bounds, the others OSQP's infinity) changes only with the box: it is sent
+        only when it differs from what this instance holds."""
+        upper = ub.tobytes()
+        if self._upper.get(solver) == upper:
+            solver.update(q=q, l=lb, Ax=a.ravel(order='F'))
+        else:
+            solver.update(q=q, l=lb, u=ub, Ax=a.ravel(order='F'))
+            self._upper[solver] = upper
         res = solver.solve(raise_error=False)  # the status is handled here
         self.last_iterations = int(res.info.iter)
         return np.array(res.x, dtype=float), _STATUS[res.info.status_val]

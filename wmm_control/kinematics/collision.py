@@ -292,9 +292,11 @@ class CollisionModel:
             # GJK to 1e-9 m: at coal's default (1e-6) the nearest points of curved shapes (the
             # cylinders around the links) are off by degrees, and so is the rate of the distance
             request.gjk_tolerance = GJK_TOLERANCE
-        # each pair's result, looked up once: reading a field through these costs several times
-        # less than through the vector each time (they follow the vector's entries)
+        # each pair's result and each shape's placement, looked up once: reading a field through
+        # these costs several times less than through the vector each time (they follow the
+        # vector's entries)
         self._results = list(self.geom_data.distanceResults)
+        self._placements = list(self.geom_data.oMg)
         self._tabulate_pairs()
 
     def _tabulate_pairs(self):
@@ -399,7 +401,7 @@ class CollisionModel:
             ``(distances, exact)``: which distances coal computed (boolean). Shape (pairs,) each."""
         geom, geom_data = self.geom, self.geom_data
         self._place(q)
-        placements = geom_data.oMg
+        placements = self._placements
         centres = np.array([m.translation for m in placements])
         for k in self._sphere_offset:  # shapes whose bounding sphere is off their frame's origin (meshes)
             centres[k] = placements[k].act(self._sphere_centre[k])
@@ -471,16 +473,21 @@ class CollisionModel:
         if not near.size:
             return _no_pairs(n_arm), *closest
         listed = near.tolist()
-        results = [self._results[k] for k in listed]
-        # each pair's nearest points, on a and on b, and coal's normal, from the first to the second
-        points = np.array([[r.getNearestPoint1() for r in results], [r.getNearestPoint2() for r in results]])
-        normals = np.array([r.normal for r in results])
+        results = list(map(self._results.__getitem__, listed))
+        # each pair's nearest points, on a then on b, each with coal's normal, from the first to
+        # the second: rows k and m + k of pair k (one concatenation of the 3-vectors coal gives,
+        # cheaper than numpy.array on them; and one cross product over 2-D rows, cheaper than
+        # one that broadcasts)
+        m = near.size
+        points = np.concatenate([r.getNearestPoint1() for r in results] + [r.getNearestPoint2() for r in results])
+        normals = np.concatenate([r.normal for r in results] * 2)
+        points, normals = points.reshape(2 * m, 3), normals.reshape(2 * m, 3)
         # ḋ = n · (v_b − v_a); a point p fixed to a joint moves at v = v₀ + ω × p, (v₀, ω) the
         # spatial velocity of a column of the joint Jacobians (world frame) that the kinematic
         # model's update computed, so n · v = n · v₀ + (p × n) · ω: over the planar root's
         # columns, then the arm joints' rates
         jacobians = self.kinematics.data.J[:, self._columns]
-        along = normals @ jacobians[:3] + np.cross(points, normals) @ jacobians[3:]
+        along = (normals @ jacobians[:3] + np.cross(points, normals) @ jacobians[3:]).reshape(2, m, -1)
         sides, along = along[:, :, :N_BASE], along[:, :, N_BASE:]
         along *= self._moved_by[self._pair_joints[near].T]  # only the arm joints that move p
         rates = along[1] - along[0]
@@ -493,8 +500,8 @@ class CollisionModel:
         base = world @ rotation_z(q[2])
         pairs = NearPairs(
             _frozen(dists[near]),
-            tuple(self._pair_links[k] for k in listed),
-            tuple(self._pair_shapes[k] for k in listed),
+            tuple(map(self._pair_links.__getitem__, listed)),
+            tuple(map(self._pair_shapes.__getitem__, listed)),
             _frozen(rates),
             _frozen(base),
             _frozen(self._pair_floor[near]),

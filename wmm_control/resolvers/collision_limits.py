@@ -173,7 +173,7 @@ class Pairs:
         arm = self.rows[which, nb:]
         if base.ndim == 3:  # the arm's part again for each set
             arm = np.tile(arm, (base.shape[0], 1))
-        return np.hstack((part, arm)), (self.bound[which] + shift).reshape(-1)
+        return np.concatenate((part, arm), axis=1), (self.bound[which] + shift).reshape(-1)
 
 
 def linear_axes(axes, base_acceleration) -> tuple[list[int], float]:
@@ -214,7 +214,7 @@ class VelocityDampers:
             order = np.argsort(kind, kind='stable')
             base_full, rate, distance = base_full[order], rate[order], distance[order]
             moved, kind = moved[order], kind[order]
-        rows = np.hstack(((base_full @ to_base)[:, axes], rate))
+        rows = np.concatenate(((base_full @ to_base)[:, axes], rate), axis=1)
         body = moved & ~rows[:, len(axes) :].any(axis=1)
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
             distance = distance - self.body_margin * body
