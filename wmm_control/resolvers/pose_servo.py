@@ -9,7 +9,8 @@ A followed plan's base (:class:`~wmm_control.resolvers.interface.BaseReference` 
 not in the paper): the base is pulled towards its planned pose by a secondary task in the null
 space of the end effector's, ``z_b = ᵇR_w (ξ̇_plan + λ_p (ξ_plan − ξ))`` over the base's axes
 (:meth:`PoseServoResolver.base_pull`), projected as eq (13)'s posture pull is
-(:meth:`PoseServoResolver.null_motion`): the end effector's task keeps its priority, and
+(:meth:`PoseServoResolver.null_motion`; task sharing with its weighting,
+:meth:`PoseServoResolver.secondary_motion`): the end effector's task keeps its priority, and
 what it leaves free brings the base back onto the plan with the arm making up the difference.
 At the stance (the final approach) a method's own posture pull ranks below it
 (:meth:`PoseServoResolver.secondary_motion`).
@@ -446,8 +447,13 @@ class PoseServoResolver(Resolver):
         (:meth:`base_pull`, or None) in the null space of the end effector's task
         (:meth:`null_motion`).
 
-        On the way (``stance`` False) the two are summed into one pull, the posture pull
-        spanning the base (Sorour eq 13: the base may move to restore the arm's posture). At
+        On the way (``stance`` False) the two are summed into one pull, projected as the method
+        shares the task (weighted by ``activation``, :meth:`null_motion`): a base out of the task
+        (fine manipulation) follows the plan's pull whole, the arm making up for it, and the
+        posture pull moves what the task leaves free (the base too, in the measure it is in the
+        task, Sorour eq 13). Unweighted, the correction that keeps the end effector still was
+        made partly by the base itself, which followed only part of its pull: it lagged the plan,
+        and the arm carried the points until it folded (``mecanum``, ``docs/randomized.md``). At
         the stance (the final approach, :attr:`BaseReference.stance`) they are a stack of
         tasks (Siciliano–Slotine): ``pull`` in the null space of the end effector's task as the
         method shares it (weighted by ``activation``, :meth:`null_motion`: a base out of the
@@ -462,7 +468,7 @@ class PoseServoResolver(Resolver):
         if pull is None:
             return self.null_motion(jac, task, q_arm, posture)
         if not stance:
-            return self.null_motion(jac, task, q_arm, pull + posture)
+            return self.null_motion(jac, task, q_arm, pull + posture, activation)
         first = self.null_motion(jac, task, q_arm, pull, activation)
         held_base = np.vstack((jac, np.eye(self.n)[: self.n_base]))
         return first + self.null_motion(held_base, task + first, q_arm, posture)

@@ -17,7 +17,9 @@ Each period:
    tolerance ``pinv_tolerance``). It spans the base too: in fine manipulation the base may
    still move to restore the dexterous arm pose, keeping the end effector still. A followed
    plan's base pull (:meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.base_pull`,
-   not in the paper) joins ``z`` there; at the stance, in the final approach, it takes priority:
+   not in the paper) joins ``z`` there, the sum projected with eq (10)'s weighting (a base out of
+   the task follows the plan's pull whole, the arm making up for it); at the stance, in the
+   final approach, it takes priority:
    the posture pull then moves the arm alone, in the null space of the task and the base
    (:meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.secondary_motion`).
 4. The whole command scaled into the limits (:mod:`wmm_control.resolvers.limits`).
