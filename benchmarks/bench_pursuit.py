@@ -5,7 +5,9 @@ method. Prints figures, asserts nothing.
 
 Each period does what the node does: ``pursuit.step`` with the true base pose and arm joints,
 then the resolver's cycle with what it gave (a trajectory point, the goal, a hold). The world
-steps on while a plan is made (as a realtime simulator does). Per method: the outcome (reached,
+steps on while a plan is made, paced at real time then (a period of wall time per period, as a
+realtime simulator steps; unpaced, a held robot's periods are so cheap that a plan under load
+would take minutes of simulated time). Per method: the outcome (reached,
 with the simulated time; or the pursuit's state and the end effector's error at the end), the
 plans made, the planning time, and the wall time of ``pursuit.step`` (median / p99 / max [ms]),
 over every period and over the periods while the worker planned: the period does not wait for a
@@ -63,7 +65,10 @@ def run(robot, method, goal, yaw, duration, obstacles):
                 planning = pursuit.state is PursuitState.PLANNING
                 began = time.perf_counter()
                 out = pursuit.step(robot.period, world.base_pose(), q[arm])
-                (planning_step_s if planning else step_s).append(time.perf_counter() - began)
+                spent = time.perf_counter() - began
+                (planning_step_s if planning else step_s).append(spent)
+                if planning:  # the world at real time while the worker plans
+                    time.sleep(max(0.0, robot.period - spent))
                 given, tracking = None, None
                 if out.hold is not None:
                     given, tracking = out.hold, False
