@@ -262,6 +262,21 @@ def test_a_joint_next_to_its_limit_cannot_pass_it_in_one_period(robot):
     assert position[3] + out.command[3] * DT <= robot.arm.position_upper[0]
 
 
+@pytest.mark.parametrize('wrong', ['primary', 'position', 'previous', 'secondary', 'previous_secondary'])
+def test_limits_reject_vectors_of_the_wrong_length(robot, wrong):
+    lim = _limits(robot)
+    args = {
+        'primary': np.zeros(10),
+        'position': np.concatenate((np.zeros(3), robot.arm.dexterous)),
+        'previous': np.zeros(10),
+        'secondary': np.zeros(10),
+        'previous_secondary': np.zeros(10),
+    }
+    args[wrong] = np.zeros(9)
+    with pytest.raises(ShapeError, match='CommandLimits.apply'):
+        lim.apply(**args)
+
+
 def test_many_cycles_never_pass_a_limit_even_for_unreachable_goals(steerable_model, robot):
     """Integrate the arm and an ideal base for 600 periods towards goals, two of them unreachable."""
     rng = np.random.default_rng(3)

@@ -44,8 +44,8 @@ from typing import Self
 import numpy as np
 from numpy.typing import ArrayLike
 
-from wmm_control.checks import as_finite_vector, as_vector
-from wmm_control.errors import ConfigError
+from wmm_control.checks import as_vector
+from wmm_control.errors import ConfigError, ShapeError
 from wmm_control.geometry import largest_step
 from wmm_control.robot_config import RobotConfig
 
@@ -120,10 +120,18 @@ class CommandLimits:
         self.dt = float(dt)
         self.n = n
         self._adt = self.acceleration * self.dt
-        self._bounded = np.flatnonzero(np.isfinite(self.position_lower) | np.isfinite(self.position_upper))
-        self._adt2 = np.tile(self._adt[self._bounded], 2)  # a dt of the entries below and above
+        self._shape = (n,)
         self._zero = np.zeros(n)
+        self._inf = np.full(n, np.inf)
         self._neg_velocity = -self.velocity
+        # the entries with a position limit, twice: their distances below (position − lower) and
+        # above (−(position − upper), the same number as upper − position) in one array
+        bounded = np.flatnonzero(np.isfinite(self.position_lower) | np.isfinite(self.position_upper))
+        self._bounded = bounded
+        self._bounded2 = np.tile(bounded, 2)
+        self._limit2 = np.concatenate((self.position_lower[bounded], self.position_upper[bounded]))
+        self._sign2 = np.repeat((1.0, -1.0), bounded.size)
+        self._rate_constants = _BrakingConstants.of(np.tile(self._adt[bounded], 2), self.dt)
         self._last_braking: tuple[bytes, tuple[np.ndarray, ...]] = (b'', (self._zero,) * 5)
 
     def braking_rates(self, position: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -151,7 +159,8 @@ class CommandLimits:
         """
         braking = self._braking(as_vector(position, self.n, 'position'))
         previous = as_vector(previous, self.n, 'previous command')
-        return self._box(braking, previous, previous - self._adt, previous + self._adt)
+        lower, upper, forced = self._box(braking, previous, previous - self._adt, previous + self._adt)
+        return lower, upper, np.zeros(self.n, dtype=bool) if forced is None else forced
 
     @classmethod
     def for_robot(cls, robot: RobotConfig, dt: float) -> Self:
@@ -184,54 +193,73 @@ class CommandLimits:
     def apply(self, primary, position, previous, secondary=None, previous_secondary=None):
         """Bring ``primary + secondary`` into this period's bounds (see the module docstring).
 
+        The arguments are arrays of shape (n,) (any sequence of n numbers is taken); their
+        values are not checked again here, where a resolver calls this twice a period: the
+        positions are a checked :class:`~wmm_control.resolvers.interface.RobotState`'s, the
+        previous command and its secondary share an earlier result's.
+
         Args:
             primary: the command that matters most (the task). Shape (n,). Non-finite
                 entries are treated as a request to stop.
-            position: current positions. Shape (n,).
-            previous: last period's command. Shape (n,).
+            position: current positions (finite). Shape (n,).
+            previous: last period's command (finite: the result's ``command``). Shape (n,).
             secondary: the part that gives way first (null-space motion), default none.
-                Shape (n,).
+                Shape (n,). Non-finite entries are treated as a request to stop.
             previous_secondary: the secondary share of ``previous`` (the result's
                 ``secondary``), default zero. Shape (n,).
 
         Returns:
             :class:`LimitResult`.
+
+        Raises:
+            ShapeError: an argument that is not n numbers.
         """
-        n = self.n
-        previous = as_finite_vector(previous, n, 'previous command')
-        prev_s = (
-            self._zero if previous_secondary is None else as_finite_vector(previous_secondary, n, 'previous secondary')
-        )
-        primary = as_vector(primary, n, 'primary')
-        secondary = self._zero if secondary is None else as_vector(secondary, n, 'secondary')
-        braking = self._braking(as_vector(position, n, 'position'))
+        previous = np.asarray(previous, dtype=float)
+        prev_s = self._zero if previous_secondary is None else np.asarray(previous_secondary, dtype=float)
+        primary = np.asarray(primary, dtype=float)
+        secondary = self._zero if secondary is None else np.asarray(secondary, dtype=float)
+        position = np.asarray(position, dtype=float)
+        if not (primary.shape == secondary.shape == position.shape == previous.shape == prev_s.shape == self._shape):
+            raise ShapeError(
+                f'CommandLimits.apply: expected shape {self._shape} for primary, position, previous, secondary '
+                f'and previous_secondary, got {[np.shape(a) for a in (primary, position, previous, secondary, prev_s)]}'
+            )
+        braking = self._braking(position)
         neg_down, up = braking[2], braking[1]
         # 0. a non-finite entry is a request to stop
-        limited = ~(np.isfinite(primary) & np.isfinite(secondary))
-        if limited.any():
+        limited = np.isfinite(primary)
+        limited &= np.isfinite(secondary)
+        np.logical_not(limited, out=limited)
+        if np.count_nonzero(limited):
             primary, secondary = np.where(limited, 0.0, primary), np.where(limited, 0.0, secondary)
         # 1. braking, joint by joint: the primary part first, the secondary part in the room left
         clipped = np.minimum(np.maximum(primary, neg_down), up)
         sec = np.minimum(np.maximum(secondary, neg_down - clipped), up - clipped)
-        limited |= (clipped != primary) | (sec != secondary)
+        limited |= clipped != primary
+        limited |= sec != secondary
         # 2. velocity: the whole command, uniformly (the braking bounds hold all the way to rest)
-        s_v = _largest_step(self._zero, clipped + sec, self._neg_velocity, self.velocity, limited)
+        s_v = _largest_step(self._zero, clipped + sec, self._neg_velocity, self.velocity, limited, True)
         # 3. acceleration: the primary part's change first, the secondary part's in the room left;
         #    each part changes from its own share of the previous command (primary: u − u_s)
         lo_a, hi_a = previous - self._adt, previous + self._adt
-        d_p = s_v * clipped - (previous - prev_s)
-        d_s = s_v * sec - prev_s
-        s_a = _largest_step(previous, d_p, lo_a, hi_a, limited)
-        mid = previous + s_a * d_p
+        d_p = (s_v * clipped if s_v < 1.0 else clipped) - (previous - prev_s)
+        d_s = (s_v * sec if s_v < 1.0 else sec) - prev_s
+        s_a = _largest_step(previous, d_p, lo_a, hi_a, limited, True)  # previous ∓ a dt holds previous
+        mid = previous + (s_a * d_p if s_a < 1.0 else d_p)
         s_s = _largest_step(mid, d_s, lo_a, hi_a, limited)
+        moved = s_s * d_s if s_s < 1.0 else d_s
         # 4. the period's box, braking first where it conflicts with the acceleration limit
         lo, hi, forced = self._box(braking, previous, lo_a, hi_a)
-        raw = mid + s_s * d_s
+        raw = mid + moved
         command = np.minimum(np.maximum(raw, lo), hi)
-        out_s = prev_s + s_s * d_s
-        limited |= forced | (np.abs(command - raw) > 1e-12)
+        out_s = prev_s + moved
+        if forced is not None:
+            limited |= forced
+        clip = command - raw
+        np.abs(clip, out=clip)
+        limited |= clip > 1e-12
         share = 1.0
-        if secondary.any():
+        if np.count_nonzero(secondary):
             share = min(1.0, math.sqrt(out_s @ out_s) / max(math.sqrt(secondary @ secondary), 1e-300))
         return LimitResult(
             command=command,
@@ -239,7 +267,7 @@ class CommandLimits:
             scale=s_v,
             accel_scale=s_a,
             secondary_scale=share,
-            limited=tuple(np.flatnonzero(limited).tolist()),
+            limited=tuple(limited.nonzero()[0].tolist()),
             lower=lo,
             upper=hi,
         )
@@ -252,13 +280,14 @@ class CommandLimits:
         if key == self._last_braking[0]:
             return self._last_braking[1]
         # distances to the limits, of the entries that have one (NaN passes through np.maximum)
-        i = self._bounded
-        distance = np.maximum(
-            np.concatenate((position[i] - self.position_lower[i], self.position_upper[i] - position[i])), 0.0
-        )
-        rates = _braking_rate(distance, self._adt2, self.dt)
-        down, up = np.full(self.n, np.inf), np.full(self.n, np.inf)
-        down[i], up[i] = rates[: i.size], rates[i.size :]
+        distance = position[self._bounded2]
+        distance -= self._limit2
+        distance *= self._sign2
+        np.maximum(distance, 0.0, out=distance)
+        rates = _braking_rate(distance, self._rate_constants)
+        i, k = self._bounded, self._bounded.size
+        down, up = self._inf.copy(), self._inf.copy()
+        down[i], up[i] = rates[:k], rates[k:]
         neg_down = -down
         braking = (down, up, neg_down, np.maximum(self._neg_velocity, neg_down), np.minimum(self.velocity, up))
         self._last_braking = (key, braking)
@@ -266,19 +295,36 @@ class CommandLimits:
 
     def _box(self, braking, previous, lower_accel, upper_accel):
         """:meth:`box` from the braking rates (:meth:`_braking`) and the acceleration interval
-        ``previous ∓ a dt``: (lower, upper, forced)."""
+        ``previous ∓ a dt``: (lower, upper, forced), ``forced`` None where no entry is."""
         lo_v, hi_v = braking[3], braking[4]
         lo, hi = np.maximum(lo_v, lower_accel), np.minimum(hi_v, upper_accel)
         forced = lo > hi
-        if forced.any():
-            nearest = np.clip(previous, lo_v, hi_v)
-            lo, hi = np.where(forced, nearest, lo), np.where(forced, nearest, hi)
-        return lo, hi, forced
+        if not np.count_nonzero(forced):
+            return lo, hi, None
+        nearest = np.clip(previous, lo_v, hi_v)
+        return np.where(forced, nearest, lo), np.where(forced, nearest, hi), forced
 
 
-def _braking_rate(distance, adt, dt):
+@dataclass(frozen=True)
+class _BrakingConstants:
+    """What :func:`_braking_rate` needs of ``a dt`` (per entry) and ``dt``, computed once."""
+
+    adt: np.ndarray
+    half: np.ndarray  # a dt / 2
+    half_squared: np.ndarray
+    two_a: np.ndarray  # (2 / dt) a dt
+    dt: float
+
+    @classmethod
+    def of(cls, adt: np.ndarray, dt: float) -> '_BrakingConstants':
+        half = 0.5 * adt
+        return cls(adt, half, half * half, (2.0 / dt) * adt, dt)
+
+
+def _braking_rate(distance, c):
     """Largest rates v from which braking by a·dt per period, one period at a time, stops within
-    ``distance`` (arrays, element-wise; ``adt`` = a dt; an infinite distance gives inf).
+    ``distance`` (arrays, element-wise; ``c``: :class:`_BrakingConstants`; an infinite distance
+    gives inf).
 
     Braking from v covers ``dt (n + 1) v − a dt² n (n + 1)/2`` with ``n = ⌊v / (a dt)⌋`` (v, v − a dt,
     …, the last rate below a dt, then rest): piecewise linear in v, so on each piece
@@ -288,17 +334,31 @@ def _braking_rate(distance, adt, dt):
     within the next period's bound: braking always stays within the acceleration limit, and
     ``v dt ≤ D``. A distance of zero gives zero; NaN passes through.
     """
-    half = 0.5 * adt
-    with np.errstate(invalid='ignore'):
-        n = np.floor((np.sqrt(half * half + (2.0 / dt) * adt * distance) - half) / adt)
-        n[~np.isfinite(n)] = 0.0
-        n -= (n > 0.0) & ((distance / dt + half * n * (n + 1.0)) < n * (n + 1.0) * adt)  # one too high
-        return (distance / dt + half * n * (n + 1.0)) / (n + 1.0)
+    half = c.half
+    n = np.floor((np.sqrt(c.half_squared + c.two_a * distance) - half) / c.adt)
+    n[~np.isfinite(n)] = 0.0
+    per_dt = distance / c.dt
+    n1 = n + 1.0
+    n -= (n > 0.0) & ((per_dt + half * n * n1) < n * n1 * c.adt)  # one too high
+    n1 = n + 1.0
+    return (per_dt + half * n * n1) / n1
 
 
-def _largest_step(start, step, lower, upper, binding):
+def _largest_step(start, step, lower, upper, binding, inside=False):
     """:func:`~wmm_control.geometry.largest_step`; the entries whose bounds bind (when the
-    whole step does not fit) are set in the boolean array ``binding``."""
+    whole step does not fit) are set in the boolean array ``binding``.
+
+    The whole step is tried first: with ``start`` within its bounds (known when ``inside``,
+    checked otherwise), every entry's own ``(bound − start) / step`` is at least 1 exactly when
+    ``step`` lies within ``bound − start`` (a rounded quotient keeps its order with 1), so the
+    answer is then 1 without dividing."""
+    room_down, room_up = lower - start, upper - start
+    if inside:
+        out = (step < room_down) | (step > room_up)
+    else:
+        out = (room_down > np.minimum(step, 0.0)) | (room_up < np.maximum(step, 0.0))
+    if not np.count_nonzero(out):
+        return 1.0
     s, per = largest_step(start, step, lower, upper)
     if s < 1.0:
         binding |= per <= s + 1e-12
