@@ -235,7 +235,12 @@ def _run_direct(robot, run, goal, duration, obstacles, plan=False):
     status = {'goal_reached': progress.reached, 'first_stall_s': first_stall[0] if first_stall else None}
     if pursuit is None:
         return log, status
-    planning = pursuit.account()
+    return _with_account(log, status, pursuit.account())
+
+
+def _with_account(log, status: dict, planning: dict):
+    """A planned run's (log, status with the pursuit's ``planning`` account), or (None,
+    planning) when its first plan found no way (the run is then not counted as one)."""
     if planning['no_way'] and planning['plans'] == 1:
         return None, planning
     return log, dict(status, **planning)
@@ -268,10 +273,7 @@ def _run_nodes(robot, run, goal, duration, obstacles, plan=False):
     status = {'goal_reached': final.get('goal_reached', False), 'first_stall_s': log.first_stall_s}
     if not plan:
         return log, status
-    planning = dict(log.planning or {})
-    if planning.get('no_way') and planning.get('plans') == 1:
-        return None, planning
-    return log, dict(status, **planning)
+    return _with_account(log, status, log.planning)
 
 
 def _limit_use(log, robot, dt):
