@@ -81,6 +81,11 @@ FASTDDS_TRANSPORTS = 'UDPv4'
 #: the node has stopped; a teardown stuck in the middleware must not need ``ros2 launch``'s
 #: SIGKILL, 15 s after Ctrl-C, to end it.
 TEARDOWN_LIMIT = 3.0
+#: [s] after :data:`TEARDOWN_LIMIT`, when the teardown still holds the interpreter lock (a Fast
+#: DDS participant whose destruction waits on one of its own threads, seen once in many stops:
+#: the limit's timer, a Python thread, never ran), a timer outside Python ends the process with
+#: code 1, every thread's stack written to stderr first (:func:`faulthandler.dump_traceback_later`).
+TEARDOWN_BACKSTOP = 2.0
 #: [s] the interpreter's exit may take (the middleware's destructors) before the process leaves
 #: with code 1, every thread's stack written to stderr (:func:`faulthandler.dump_traceback_later`).
 EXIT_LIMIT = 8.0
@@ -154,6 +159,7 @@ def run_node(
             rclpy.try_shutdown()
         finally:
             deadline.cancel()
+            faulthandler.cancel_dump_traceback_later()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
     return 0
@@ -175,6 +181,8 @@ def _teardown_deadline(limit: float) -> threading.Timer:
     timer = threading.Timer(limit, expire)
     timer.daemon = True
     timer.start()
+    # The timer above needs the interpreter lock; this one does not (its own thread, in C).
+    faulthandler.dump_traceback_later(limit + TEARDOWN_BACKSTOP, exit=True)
     return timer
 
 
