@@ -6,6 +6,7 @@ model: the stance's arm reaches the goal (forward kinematics), the robot keeps i
 and all along the path, and the timed path stays within the base's limits and ends at the stance.
 """
 
+import dataclasses
 import math
 import time
 
@@ -302,3 +303,31 @@ def test_timed_se2_pieces_keep_every_axis_within_its_own_limits():
     # the turn and the translation use their limits: the slowest axis sets the pace, not a common one
     use = np.max(np.abs(rates), axis=0) / cfg.base.acceleration
     assert np.max(use) > 0.5
+
+
+def test_a_steerable_base_path_is_timed_within_its_wheels_steering_limits():
+    """Robot A's modules steer at 1 rad/s: a straight piece that turns the base's heading by
+    2.2 rad over 1.4 m swings a module's heading faster than that at the base's own limits; the
+    timing slows it until every module's heading (its hip's velocity direction, modulo π) keeps
+    within the steer rate and acceleration limits."""
+    from wmm_control.planning.timing import LinearPiece
+
+    cfg = load_robot('steerable')
+    base = cfg.base
+    pieces = [LinearPiece(np.array([1.435, -1.812, -0.713]), np.array([2.354, -0.75, 1.488]))]
+    rng = np.random.default_rng(7)
+    poses = np.cumsum(rng.uniform([-1.0, -1.0, -2.5], [1.0, 1.0, 2.5], size=(5, 3)), axis=0)
+    pieces += [LinearPiece(a, b) for a, b in zip(poses[:-1], poses[1:])]
+    for piece in pieces:
+        traj = time_path([piece], base, cfg.period)
+        moving = np.linalg.norm(traj.twists, axis=1) > 1e-9
+        headings = base.steer_headings(traj.twists[moving])
+        swing = wrap_angle(2.0 * np.diff(headings, axis=0)) / 2.0 / traj.dt  # modulo π
+        assert np.abs(swing).max() <= base.steer_rate_limit * 1.02, np.abs(swing).max()
+        assert np.all(np.abs(traj.twists) <= base.velocity + 1e-9)
+    # the first piece needs it: timed at the twist limits alone, a module swings faster
+    free = dataclasses.replace(base, steer_rate_limit=1e9, steer_accel_limit=1e9)
+    traj = time_path(pieces[:1], free, cfg.period)
+    headings = base.steer_headings(traj.twists[np.linalg.norm(traj.twists, axis=1) > 1e-9])
+    assert np.abs(wrap_angle(2.0 * np.diff(headings, axis=0)) / 2.0 / traj.dt).max() > 1.3 * base.steer_rate_limit
+    assert load_robot('mecanum').base.steer_headings(traj.twists).shape == (len(traj.twists), 0)

@@ -241,6 +241,18 @@ class BaseSection(ABC):
         model). Empty, shape (0, 2), for wheels that grip the floor with their whole tread."""
         return np.zeros((0, 2))
 
+    def steer_headings(self, twists: np.ndarray) -> np.ndarray:
+        """The heading [rad] each steered wheel must point along for each twist (vx, vy, ω)
+        (rows, base frame), defined modulo π (a wheel drives both ways); with the steer rate
+        and acceleration limits of :attr:`steer_limits`, what a base path's timing must leave
+        the steering time for. No columns for a base without steered wheels. Shape (K, N)."""
+        return np.zeros((len(twists), 0))
+
+    @property
+    def steer_limits(self) -> tuple[float, float]:
+        """(|β̇|, |β̈|) bounds of the steered wheels [rad/s, rad/s²] (:meth:`steer_headings`)."""
+        return math.inf, math.inf
+
     @property
     def joints(self) -> tuple:
         """Every wheel-side joint name, in command order (the groups one after the other)."""
@@ -300,6 +312,17 @@ class SteerableBase(BaseSection):
         from wmm_control.base.steerable_kinematics import SteerableGeometry
 
         return SteerableGeometry.from_config(self)
+
+    def steer_headings(self, twists: np.ndarray) -> np.ndarray:
+        """Each module's hip velocity direction (vx − ω hy, vy + ω hx) [rad] per twist: where
+        the ICR controller (Sorour §IV) steers the module, modulo π. Shape (K, N)."""
+        twists = np.asarray(twists, dtype=float).reshape(-1, 3)
+        vx, vy, wz = (twists[:, k, None] for k in range(3))
+        return np.arctan2(vy + wz * self.hips[:, 0], vx - wz * self.hips[:, 1])
+
+    @property
+    def steer_limits(self) -> tuple[float, float]:
+        return self.steer_rate_limit, self.steer_accel_limit
 
 
 @dataclass(frozen=True)

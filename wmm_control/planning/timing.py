@@ -39,6 +39,9 @@ from wmm_control.robot_config import BaseSection
 
 __all__ = ['BaseTrajectory', 'LinearPiece', 'Piece', 'TwistPiece', 'time_path']
 
+#: steps of λ over which a piece's steered wheel headings are differenced (:func:`_steer_bounds`)
+STEER_SAMPLES = 256
+
 _AXES = ('vx', 'vy', 'ω')
 
 
@@ -57,6 +60,11 @@ class Piece(Protocol):
     def rate_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(U, U'): bounds of |u_k| and |du_k/dλ| over λ ∈ [0, 1], u the twist (vx, vy, ω) in
         the base's frame per unit of λ. Shapes (3,), (3,)."""
+        ...
+
+    def unit_twists(self, lam: np.ndarray) -> np.ndarray:
+        """u(λ) at each λ of ``lam``: the twist (vx, vy, ω) in the base's frame per unit of λ.
+        Shape (K, 3)."""
         ...
 
 
@@ -79,6 +87,10 @@ class TwistPiece:
     def rate_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(|twist|, 0): the twist does not change."""
         return np.abs(self.twist), np.zeros(3)
+
+    def unit_twists(self, lam: np.ndarray) -> np.ndarray:
+        """The twist at every λ. Shape (K, 3)."""
+        return np.tile(np.asarray(self.twist, dtype=float), (len(lam), 1))
 
 
 def _max_abs_cos(lo: float, hi: float) -> float:
@@ -122,6 +134,13 @@ class LinearPiece:
         sin_max = _max_abs_cos(lo - 0.5 * math.pi, hi - 0.5 * math.pi)
         turn = abs(dth)
         return np.array((d * cos_max, d * sin_max, turn)), np.array((d * turn * sin_max, d * turn * cos_max, 0.0))
+
+    def unit_twists(self, lam: np.ndarray) -> np.ndarray:
+        """u(λ) = (d cos α, d sin α, Δθ), α = φ − θ(λ). Shape (K, 3)."""
+        dx, dy, dth = self.delta.tolist()
+        alpha = math.atan2(dy, dx) - float(self.start[2]) - dth * np.asarray(lam, dtype=float)
+        d = math.hypot(dx, dy)
+        return np.column_stack((d * np.cos(alpha), d * np.sin(alpha), np.full(len(alpha), dth)))
 
 
 @dataclass(frozen=True)
@@ -169,7 +188,23 @@ def _lam(t: float, duration: float, ramp: float, accel: float) -> float:
     return 0.5 * accel * ramp * ramp + peak * (t - ramp)
 
 
-def _speed_and_accel(piece: Piece, velocity: np.ndarray, acceleration: np.ndarray) -> tuple[float, float] | None:
+def _steer_bounds(piece: Piece, base: BaseSection) -> tuple[np.ndarray, np.ndarray]:
+    """(B, B'): bounds of |dβ_i/dλ| and |d²β_i/dλ²| over the piece, β_i each steered wheel's
+    heading (modulo π) for the twist u(λ) (:meth:`~wmm_control.robot_config.BaseSection.steer_headings`),
+    by differences over :data:`STEER_SAMPLES` steps of λ. Shapes (N,), (N,): empty without
+    steered wheels."""
+    lam = np.linspace(0.0, 1.0, STEER_SAMPLES + 1)
+    headings = base.steer_headings(piece.unit_twists(lam))
+    if not headings.shape[1]:
+        return np.zeros(0), np.zeros(0)
+    rate = wrap_angle(2.0 * np.diff(headings, axis=0)) * (0.5 * STEER_SAMPLES)  # each step modulo π
+    curvature = np.diff(rate, axis=0) * STEER_SAMPLES
+    return np.abs(rate).max(axis=0), np.abs(curvature).max(axis=0, initial=0.0)
+
+
+def _speed_and_accel(
+    piece: Piece, velocity: np.ndarray, acceleration: np.ndarray, base: BaseSection, fraction: float
+) -> tuple[float, float] | None:
     """(V, A) of the piece (module docstring); None for a piece that does not move."""
     bound, slope = piece.rate_bounds()
     scale = float(np.max(bound))
@@ -178,11 +213,19 @@ def _speed_and_accel(piece: Piece, velocity: np.ndarray, acceleration: np.ndarra
     moving = bound > 1e-12 * scale
     for k in np.flatnonzero(moving & ~(velocity > 0.0)).tolist():
         raise WmmError(f'the path needs {_AXES[k]} of the base, which it cannot follow (limit 0)')
-    speed = min(float(velocity[k] / bound[k]) for k in np.flatnonzero(moving).tolist())
-    for k in np.flatnonzero(slope > 0.0).tolist():
-        speed = min(speed, math.sqrt(acceleration[k] / (2.0 * slope[k])))
-    accel = min(float((acceleration[k] - slope[k] * speed**2) / bound[k]) for k in np.flatnonzero(moving).tolist())
-    return speed, accel
+    # the steered wheels' headings as further axes, within the steering's limits
+    steer_bound, steer_slope = _steer_bounds(piece, base)
+    steer_rate, steer_accel = base.steer_limits
+    steering = steer_bound > 0.0
+    bound = np.concatenate((bound[moving], steer_bound[steering]))
+    slope = np.concatenate((slope[moving], steer_slope[steering]))
+    velocity = np.concatenate((velocity[moving], np.full(int(steering.sum()), fraction * steer_rate)))
+    acceleration = np.concatenate((acceleration[moving], np.full(int(steering.sum()), fraction * steer_accel)))
+    speed = float((velocity / bound).min())
+    bent = slope > 0.0
+    if bent.any():
+        speed = min(speed, float(np.sqrt(acceleration[bent] / (2.0 * slope[bent])).min()))
+    return speed, float(((acceleration - slope * speed**2) / bound).min())
 
 
 def time_path(pieces, base: BaseSection, dt: float, fraction: float = 0.95) -> BaseTrajectory:
@@ -202,7 +245,7 @@ def time_path(pieces, base: BaseSection, dt: float, fraction: float = 0.95) -> B
     acceleration = fraction * np.asarray(base.acceleration, dtype=float)
     poses: list[np.ndarray] = []
     for piece in pieces:
-        limits = _speed_and_accel(piece, velocity, acceleration)
+        limits = _speed_and_accel(piece, velocity, acceleration, base, fraction)
         if limits is None:
             continue
         duration, ramp = _profile(*limits)
