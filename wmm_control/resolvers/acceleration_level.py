@@ -31,6 +31,9 @@ not in the papers): eq (23)'s law on the base's planned pose,
 y, the orientation gains on θ; a differential base takes its part along its heading,
 ``u̇_b* = Tᵀ ξ̈*``), is ``task['base_follow']`` (None without a plan), which each method gives
 the base in its own way (:mod:`~wmm_control.resolvers.amp`, :mod:`~wmm_control.resolvers.traditional`).
+The same law on the arm's joints towards the plan's travel posture (``BaseReference.arm``, given
+on the way, not in the approach; the orientation gains), ``q̈_a* = K_p (q_a,plan − q_a) − K_d q̇_a``,
+is ``task['arm_follow']`` (None without one), which the traditional planner uses.
 """
 
 import time
@@ -154,7 +157,8 @@ class AccelerationResolver(Resolver):
             braking before a position limit alone, ``qd`` (n_b + n,), ``position_error`` [m],
             ``orientation_error`` [rad], ``sigma`` σ_min of the arm's task rows, ``sigma_position``
             that of its position rows, ``base_follow`` the base's accelerations towards a
-            followed plan's pose (n_b,) or None (module docstring).
+            followed plan's pose (n_b,) or None, ``arm_follow`` the arm's towards the plan's
+            travel posture (n,) or None (module docstring).
         """
         p = self.params
         model = self.model
@@ -189,13 +193,15 @@ class AccelerationResolver(Resolver):
         sigma = model.sigma_min(self.params.rows)
         sigma_position = sigma if rows.stop == 3 else model.sigma_min('position')
         target_err = np.concatenate((target.position - pos, rotation_error(target.rotation, rot)))
-        base_follow = None
+        base_follow = arm_follow = None
         if target.base is not None:
             planned = target.base
             rates = to_world @ qd[:nb] if self._unicycle else qd[:3]
             gains_p, gains_d = self._kp[[0, 1, 5]], self._kd[[0, 1, 5]]
             world = planned.acceleration + gains_d * (planned.rates - rates) + gains_p * planned.error(state.base_pose)
             base_follow = to_world.T @ world if self._unicycle else world
+            if planned.arm is not None and planned.arm.shape == (self.model.n_arm,):
+                arm_follow = self._kp[5] * (planned.arm - state.q_arm) - self._kd[5] * qd[nb:]
         return {
             'jac': jac[rows],
             'xdd': xdd[rows],
@@ -213,6 +219,7 @@ class AccelerationResolver(Resolver):
             'sigma': sigma,
             'sigma_position': sigma_position,
             'base_follow': base_follow,
+            'arm_follow': arm_follow,
         }
 
     def manipulability_acceleration(self, qd: np.ndarray) -> np.ndarray:

@@ -10,8 +10,16 @@ moment.)
 
 Following a plan (a :class:`~wmm_control.resolvers.interface.BaseReference` on the target; not
 in the paper, and nothing changes without one): the base's accelerations towards its planned
-pose (``task['base_follow']``, less the base's share of the task's solution) join q̈_A in the
-null space, so what the task leaves free brings the base back onto the plan.
+pose (``task['base_follow']``) and, on the way, the arm's towards the plan's travel posture
+(``task['arm_follow']``), each clipped into this period's bounds and less that entry's share of
+the task's solution, join q̈_A in the null space, so what the task leaves free brings the base
+back onto the plan and the arm into the posture the plan was checked with. Within the bounds:
+eq (23)'s gains ask a base off its plan for more than it can do (robot B's, 0.025 m/s², for
+hundreds of times that), and the whole command, scaled into the bounds as one, would take the
+end effector's task down with it while the robot coasted on. The arm's pull: without it the
+null space held the base's pull and the manipulability objective alone, and the arm wandered
+while the base lagged (robot A, the randomized `table_pillar` goals: a joint on its limit, the
+elbow through its straight singularity), into a posture from which the approach stalled.
 """
 
 from dataclasses import dataclass
@@ -46,13 +54,16 @@ class TraditionalResolver(AccelerationResolver):
         jac = task['jac']
         j_pinv = np.linalg.pinv(jac, rcond=self.params.rcond)
         qdd = j_pinv @ (task['xdd'] - task['drift'])
+        lo, hi = task['lower'], task['upper']
         follow = task['base_follow']
         if self.params.manipulability or follow is not None:
             q_a = self.manipulability_acceleration(task['qd']) if self.params.manipulability else np.zeros(len(qdd))
             if follow is not None:
-                q_a[: len(follow)] += follow - qdd[: len(follow)]
+                nb = len(follow)
+                q_a[:nb] += np.clip(follow, lo[:nb], hi[:nb]) - qdd[:nb]
+                if task['arm_follow'] is not None:
+                    q_a[nb:] += np.clip(task['arm_follow'], lo[nb:], hi[nb:]) - qdd[nb:]
             qdd = qdd + q_a - j_pinv @ (jac @ q_a)  # + (I − J⁺J) q̈_A
-        lo, hi = task['lower'], task['upper']
         # position limits joint by joint: a joint resting on its limit would otherwise take the
         # whole body's scale to zero, and with zero accelerations the robot coasts on
         qdd = np.clip(qdd, task['brake_lower'], task['brake_upper'])
