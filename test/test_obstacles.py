@@ -31,6 +31,7 @@ from wmm_control.nodes.qos import LATCHED_QOS
 from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
 from wmm_control.resolvers import make_resolver
+from wmm_control.resolvers.limits import CommandLimits
 from wmm_control.resolvers.safety import SafetyStage
 from wmm_control.robot_config import load_robot
 
@@ -206,6 +207,28 @@ def test_a_base_driving_at_an_obstacle_is_slowed_to_what_it_can_brake():
     # the same base behind the pillar's far side (turned round) is not held back
     far = stage.filter(q, command, -box, box, base_pose=np.array([2.0, 0.0, 0.0]), base_axes=(0, 1, 2))
     assert not far.changed
+
+
+@pytest.mark.parametrize('pose, twist', [((0.0, 0.0, 0.0), (0.2, 0.0, 0.0)), ((0.5, 0.0, 0.0), (0.15, 0.0, 0.0))])
+def test_the_arm_alone_is_let_through_what_the_whole_command_was_with_the_base_at_its_twist(pose, twist):
+    """Eq (14)'s call: the base controller has answered with the twist the stage let through,
+    and only the arm is left to choose. Robot B drives at the table within its look-ahead (its
+    base brakes at 0.025 m/s², so that reaches metres): the arm command the stage let through
+    with that twist passes again unchanged. (Counting on the arm alone to brake the pairs the
+    base carries, the stage allowed the arm's first links no approach at all and drove joint 1
+    to the edge of its box, period after period: task sharing wound the arm round its shoulder
+    while following a plan past the table.)"""
+    robot = load_robot('mecanum')
+    stage = SafetyStage.for_robot(robot, obstacles=load_obstacles('table_pillar'))
+    q, pose = np.array(robot.start.arm), np.array(pose)
+    limits = CommandLimits.for_robot(robot, robot.period)
+    command = np.concatenate((twist, np.zeros(q.size)))
+    lower, upper, _ = limits.box(np.concatenate((np.zeros(3), q)), command)
+    whole = stage.filter(q, command, lower, upper, base_pose=pose, base_axes=(0, 1, 2), base_velocity=np.array(twist))
+    base, arm = whole.command[:3], whole.command[3:]
+    assert base[0] > 0.1, 'the base drives on at the table, braking as it can'
+    alone = stage.filter(q, arm, lower[3:], upper[3:], base_pose=pose, base_twist=base)
+    np.testing.assert_allclose(alone.command, arm, atol=1e-9)
 
 
 @pytest.mark.parametrize('method, index', [('task_sharing', 1), ('amp', 6)])

@@ -28,10 +28,13 @@ keeps its approach within what braking at ``a_b`` can stop before ``d_s``:
     ḋ ≥ −√(2 a_b (d − d_s)),
 
 the stricter of the two where both hold. ``a_b`` is taken no larger than the deceleration the
-command's own acceleration limits can give that distance (``Σ_i |j_i| q̈_max,i`` over the arm's
+robot's acceleration limits can give that distance (``Σ_i |j_i| q̈_max,i`` over the arm's
 joints, plus ``|j_xy|`` times the slower of the base's linear axes: the pair's normal turns
 under a base that brakes, so both axes are not counted on at once): a Mecanum base that brakes
-at 0.025 m/s² is not counted on to stop at 1 m/s². With obstacles, whose distance the base's
+at 0.025 m/s² is not counted on to stop at 1 m/s². The base's share counts whether or not its
+twist is part of the command: a twist given for the period (the base controller's answer, with
+only the arm left to choose) brakes from the next period on all the same, so a pair is allowed
+the same approach either way. With obstacles, whose distance the base's
 twist changes too, the look-ahead grows to the base's stopping distance from full speed
 (``d_s + v τ + v² / (2 min(a, a_b))``, ``v`` the norm of the linear axes' speed limits, since
 the base may drive on a diagonal, and ``a`` the deceleration its rows count on: the slower
@@ -199,6 +202,8 @@ class VelocityDampers:
         self.params = params
         self.arm_acceleration = arm_acceleration
         self.base_acceleration = base_acceleration
+        #: the base's axes, indices into (vx, vy, ω): those it can accelerate on
+        self.base_axes = tuple(int(k) for k in np.flatnonzero(np.asarray(base_acceleration) > 0.0))
         self.lag = lag
         self.body_margin = body_margin
 
@@ -218,7 +223,7 @@ class VelocityDampers:
         body = moved & ~rows[:, len(axes) :].any(axis=1)
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
             distance = distance - self.body_margin * body
-        bound = -self._allowed(distance, rows, axes, moved)
+        bound = -self._allowed(distance, rows[:, len(axes) :], base_full, moved)
         if base_twist is not None:
             bound = bound - base_full @ np.asarray(base_twist, dtype=float)
         counts = np.bincount(kind, minlength=3).tolist()
@@ -230,23 +235,29 @@ class VelocityDampers:
         ``obstacle``."""
         return Constraint(-pairs.rows, -pairs.bound, 'dampers', pairs.kinds)
 
-    def _allowed(self, distances, rows, axes, moved) -> np.ndarray:
-        """Each pair's fastest allowed approach [m/s], braking no harder than the command's
-        acceleration limits can slow that distance. The base's turn rate is left out: turning
-        swings the near point aside for a moment, but does not stop a base that drives at an
-        obstacle."""
+    def _allowed(self, distances, arm_rows, base_rows, moved) -> np.ndarray:
+        """Each pair's fastest allowed approach [m/s], braking no harder than the acceleration
+        limits can slow that distance: the arm's (``arm_rows``, over its joints) and the base's
+        linear axes (``base_rows``, over (vx, vy, ω)), whether or not the base is part of the
+        command: a base twist given for this period (the base controller's answer, eq 14's
+        call) brakes from the next period on as a base in the command does, so both calls allow
+        a pair the same approach. (Counting on the arm alone there, a pair the arm barely moves,
+        its first links, was allowed no approach at all while the base drove at an obstacle
+        within the look-ahead, and the stage wound the arm to cancel the base's approach at
+        them.) The base's turn rate is left out: turning swings the near point aside for a
+        moment, but does not stop a base that drives at an obstacle."""
         lags = np.where(moved, self.lag, 0.0)
         if self.arm_acceleration is None:
             return np.asarray(self.allowed_approach(distances, lag=lags))
-        nb = len(axes)
-        reach = np.abs(rows[:, nb:]) @ self.arm_acceleration
-        linear, slowest = self.linear_braking(axes)
+        reach = np.abs(arm_rows) @ self.arm_acceleration
+        linear, slowest = self.linear_braking(self.base_axes)
         if linear:
             # the base's linear axes brake the distance at no more than |j_xy| times that,
             # whichever way the pair's normal turns while it brakes (Σ |j_i| a_i would count on
             # braking both axes at once along a normal that the base's turn, or its approach to
             # another face, changes under it)
-            reach = reach + np.linalg.norm(rows[:, linear], axis=1) * slowest
+            columns = [self.base_axes[k] for k in linear]
+            reach = reach + np.linalg.norm(base_rows[:, columns], axis=1) * slowest
         return np.asarray(self.allowed_approach(distances, reach, lags))
 
     def linear_braking(self, axes) -> tuple[list[int], float]:

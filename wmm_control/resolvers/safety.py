@@ -260,7 +260,7 @@ class SafetyStage:
         self.base_rows = BaseRows(params.collision_safety, self._base_acc, self.base_lag)
         # from full speed on every linear axis at once (a diagonal is faster than either axis),
         # braking as the dampers' rows count on, on the axes the base can accelerate
-        axes = tuple(int(k) for k in np.flatnonzero(self._base_acc > 0.0))
+        axes = self.dampers.base_axes
         linear, brake = self.dampers.linear_braking(axes)
         on = [axes[k] for k in linear]
         speed = 0.0 if self._base_velocity is None else float(np.linalg.norm(self._base_velocity[on]))
