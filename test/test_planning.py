@@ -331,3 +331,31 @@ def test_a_steerable_base_path_is_timed_within_its_wheels_steering_limits():
     headings = base.steer_headings(traj.twists[np.linalg.norm(traj.twists, axis=1) > 1e-9])
     assert np.abs(wrap_angle(2.0 * np.diff(headings, axis=0)) / 2.0 / traj.dt).max() > 1.3 * base.steer_rate_limit
     assert load_robot('mecanum').base.steer_headings(traj.twists).shape == (len(traj.twists), 0)
+
+
+def test_a_robot_held_along_the_table_with_no_straight_way_out_turns_its_way_out(monkeypatch):
+    """Robot A stopped 4 cm beside the table, heading along it: no straight motion with the
+    heading kept reaches the margin without coming nearer; a way out that turns as it goes
+    does, and the path then keeps the
+    margin. (Seen after a stall in a realtime run: "no way" where there was one.)"""
+    from scipy.optimize import brentq
+
+    import wmm_control.planning.base_path as base_path
+
+    cfg = load_robot('steerable')
+    planner = GoalPlanner(cfg, OBSTACLES, budget=BUDGET)
+    travel = planner.travel
+    x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, math.pi / 2]) - 0.04, 0.0, 1.25, xtol=1e-5)
+    start = np.array([x, -0.2, math.pi / 2])
+    goal = sample_goals(cfg, 1, seed=0, obstacles='table_pillar')[0]
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), start)
+    assert plan.no_way is None, plan.reason
+    traj = plan.trajectory
+    assert np.allclose(traj.poses[0], start)
+    out = next(k for k, pose in enumerate(traj.poses) if np.allclose(pose, plan.path.waypoints[1]))
+    assert abs(wrap_angle(plan.path.waypoints[1][2] - start[2])) > 0.1  # the way out turns
+    for k, distance in _nearest_along(cfg, travel, traj):
+        assert distance >= (0.04 - travel.step if k < out else travel.margin) - ENGINES
+    monkeypatch.setattr(base_path, 'ESCAPE_TURNS', ())  # straight ways out only
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), start)
+    assert plan.no_way is NoWay.START_BLOCKED, plan.reason

@@ -14,7 +14,9 @@ states is checked by conservative advancement (:meth:`Travel.motion_valid`): eve
 not only the checked ones, keeps ``margin``. A robot that starts nearer an obstacle than that (a
 reactive controller may have stopped it there) first takes a way out: the nearest valid pose
 within 0.5 m (heading kept) that a motion reaches without coming nearer than it was, less
-``step``; the path then starts with that motion. A straight motion from start to goal is tried
+``step``, or, when there is none (held between two obstacles, or a differential base that cannot
+back out straight), one within 1 m whose motion also turns the heading (by up to π); the path then
+starts with that motion. A straight motion from start to goal is tried
 first and, if valid, is the path. Else RRT-Connect searches ``attempts`` (4) times, each
 shortened by OMPL's path simplifier (vertex reduction, again after every segment is cut in eight
 so that corners can be cut, then close vertices collapsed; with the same checks), and the
@@ -65,7 +67,7 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from wmm_control.checks import as_finite_vector
-from wmm_control.geometry import se2_twist
+from wmm_control.geometry import se2_twist, wrap_angle
 from wmm_control.kinematics.obstacles import Obstacle
 from wmm_control.planning.clearance import Travel
 from wmm_control.planning.outcome import NoWay
@@ -90,6 +92,11 @@ BUDGET = 5.0
 ESCAPE = (0.1, 0.2, 0.35, 0.5)
 #: directions of the way out, evenly spread
 ESCAPE_BEARINGS = 16
+#: when no straight way out keeps the heading: the turns [rad] a way out may make as it goes
+#: (a robot held between two obstacles, or a differential base that cannot back out straight),
+#: and how far it then looks [m]
+ESCAPE_TURNS = (math.pi / 4, -math.pi / 4, math.pi / 2, -math.pi / 2, math.pi)
+ESCAPE_TURNING = (*ESCAPE, 0.75, 1.0)
 
 
 def turning_radius(base: BaseSection) -> float:
@@ -333,7 +340,9 @@ class BasePathPlanner:
         """A state near ``start`` (which is not valid) that is valid and reached by a motion
         that keeps the start's clearance (less ``step``) all along: ``ESCAPE`` distances in
         ``ESCAPE_BEARINGS`` directions, heading kept, the nearest first and of those the
-        clearest; None when there is none (or the robot is within ``step`` of an obstacle)."""
+        clearest; when none, the same with the heading turned by each of ``ESCAPE_TURNS`` on
+        the way, out to ``ESCAPE_TURNING``; None when there is none (or the robot is within
+        ``step`` of an obstacle)."""
         travel = self.travel
         held = travel.obstacle_clearance(start) - travel.step
         if held <= 0.0:
@@ -341,19 +350,22 @@ class BasePathPlanner:
         relaxed = travel.with_margin(held)
         a = space.allocState()
         _set(a, start)
-        for distance in ESCAPE:
-            ways = []
-            for i in range(ESCAPE_BEARINGS):
-                bearing = 2.0 * math.pi * i / ESCAPE_BEARINGS
-                pose = start + distance * np.array((math.cos(bearing), math.sin(bearing), 0.0))
-                d = travel.obstacle_clearance(pose)
-                if d >= travel.margin + travel.step:
-                    b = space.allocState()
-                    _set(b, pose)
-                    if motions.valid(relaxed, a, b):
-                        ways.append((d, i, b))
-            if ways:
-                return max(ways, key=lambda way: (way[0], -way[1]))[2]
+        for turns, distances in (((0.0,), ESCAPE), (ESCAPE_TURNS, ESCAPE_TURNING)):
+            for distance in distances:
+                ways = []
+                for k, turn in enumerate(turns):
+                    for i in range(ESCAPE_BEARINGS):
+                        bearing = 2.0 * math.pi * i / ESCAPE_BEARINGS
+                        pose = start + np.array((distance * math.cos(bearing), distance * math.sin(bearing), turn))
+                        pose[2] = wrap_angle(float(pose[2]))
+                        d = travel.obstacle_clearance(pose)
+                        if d >= travel.margin + travel.step:
+                            b = space.allocState()
+                            _set(b, pose)
+                            if motions.valid(relaxed, a, b):
+                                ways.append((d, -k, -i, b))
+                if ways:
+                    return max(ways, key=lambda way: way[:3])[3]
         return None
 
     def _simplify(self, simplifier, path) -> None:
