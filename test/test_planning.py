@@ -213,16 +213,7 @@ def test_a_robot_stopped_near_the_table_backs_away_then_keeps_the_margin(robot):
     cfg = load_robot(robot)
     planner = GoalPlanner(cfg, OBSTACLES, budget=BUDGET)
     travel = planner.travel
-    x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, 0.0]) - 0.05, 0.0, 1.2, xtol=1e-5)
-    start = np.array([x, -0.2, 0.0])
-    goal = sample_goals(cfg, 1, seed=0, obstacles='table_pillar')[0]
-    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), start)
-    assert plan.no_way is None, plan.reason
-    traj = plan.trajectory
-    assert np.allclose(traj.poses[0], start)
-    out = next(k for k, pose in enumerate(traj.poses) if np.allclose(pose, plan.path.waypoints[1]))
-    for k, distance in _nearest_along(cfg, travel, traj):
-        assert distance >= (0.05 - travel.step if k < out else travel.margin) - ENGINES
+    goal, start, plan = _plan_from_beside_the_table(cfg, planner, 0.0, 0.05)
     # touching (within the check step): no way out that keeps its clearance
     x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, 0.0]) - 0.005, 0.0, 1.2, xtol=1e-5)
     plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), [x, -0.2, 0.0])
@@ -336,26 +327,34 @@ def test_a_steerable_base_path_is_timed_within_its_wheels_steering_limits():
 def test_a_robot_held_along_the_table_with_no_straight_way_out_turns_its_way_out(monkeypatch):
     """Robot A stopped 4 cm beside the table, heading along it: no straight motion with the
     heading kept reaches the margin without coming nearer; a way out that turns as it goes
-    does, and the path then keeps the
-    margin. (Seen after a stall in a realtime run: "no way" where there was one.)"""
-    from scipy.optimize import brentq
-
+    does, and the path then keeps the margin. (Seen after a stall in a realtime run: "no way"
+    where there was one.)"""
     import wmm_control.planning.base_path as base_path
 
     cfg = load_robot('steerable')
     planner = GoalPlanner(cfg, OBSTACLES, budget=BUDGET)
+    goal, start, plan = _plan_from_beside_the_table(cfg, planner, math.pi / 2, 0.04)
+    assert abs(wrap_angle(plan.path.waypoints[1][2] - start[2])) > 0.1  # the way out turns
+    monkeypatch.setattr(base_path, 'ESCAPE_TURNS', ())  # straight ways out only
+    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), start)
+    assert plan.no_way is NoWay.START_BLOCKED, plan.reason
+
+
+def _plan_from_beside_the_table(cfg, planner, heading, clearance):
+    """A plan to the first table_pillar goal from a base ``clearance`` [m] beside the table's
+    near side (y = −0.2, ``heading``), checked: it starts there, its way out comes no nearer
+    than that (less the check step), and the path keeps the margin after it. (goal, start, plan)."""
+    from scipy.optimize import brentq
+
     travel = planner.travel
-    x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, math.pi / 2]) - 0.04, 0.0, 1.25, xtol=1e-5)
-    start = np.array([x, -0.2, math.pi / 2])
+    x = brentq(lambda x: travel.obstacle_clearance([x, -0.2, heading]) - clearance, 0.0, 1.25, xtol=1e-5)
+    start = np.array([x, -0.2, heading])
     goal = sample_goals(cfg, 1, seed=0, obstacles='table_pillar')[0]
     plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), start)
     assert plan.no_way is None, plan.reason
     traj = plan.trajectory
     assert np.allclose(traj.poses[0], start)
     out = next(k for k, pose in enumerate(traj.poses) if np.allclose(pose, plan.path.waypoints[1]))
-    assert abs(wrap_angle(plan.path.waypoints[1][2] - start[2])) > 0.1  # the way out turns
     for k, distance in _nearest_along(cfg, travel, traj):
-        assert distance >= (0.04 - travel.step if k < out else travel.margin) - ENGINES
-    monkeypatch.setattr(base_path, 'ESCAPE_TURNS', ())  # straight ways out only
-    plan = planner.plan(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), start)
-    assert plan.no_way is NoWay.START_BLOCKED, plan.reason
+        assert distance >= (clearance - travel.step if k < out else travel.margin) - ENGINES
+    return goal, start, plan
