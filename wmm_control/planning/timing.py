@@ -202,10 +202,11 @@ def _steer_bounds(piece: Piece, base: BaseSection) -> tuple[np.ndarray, np.ndarr
     return np.abs(rate).max(axis=0), np.abs(curvature).max(axis=0, initial=0.0)
 
 
-def _speed_and_accel(
-    piece: Piece, velocity: np.ndarray, acceleration: np.ndarray, base: BaseSection, fraction: float
-) -> tuple[float, float] | None:
-    """(V, A) of the piece (module docstring); None for a piece that does not move."""
+def _speed_and_accel(piece: Piece, base: BaseSection, fraction: float) -> tuple[float, float] | None:
+    """(V, A) of the piece within ``fraction`` of ``base``'s limits (module docstring); None for a
+    piece that does not move."""
+    velocity = fraction * np.asarray(base.velocity, dtype=float)
+    acceleration = fraction * np.asarray(base.acceleration, dtype=float)
     bound, slope = piece.rate_bounds()
     scale = float(np.max(bound))
     if scale <= 0.0:
@@ -241,11 +242,9 @@ def time_path(pieces, base: BaseSection, dt: float, fraction: float = 0.95) -> B
     pieces = list(pieces)
     if not pieces:
         raise WmmError('a path without pieces has no timing')
-    velocity = fraction * np.asarray(base.velocity, dtype=float)
-    acceleration = fraction * np.asarray(base.acceleration, dtype=float)
     poses: list[np.ndarray] = []
     for piece in pieces:
-        limits = _speed_and_accel(piece, velocity, acceleration, base, fraction)
+        limits = _speed_and_accel(piece, base, fraction)
         if limits is None:
             continue
         duration, ramp = _profile(*limits)
