@@ -206,3 +206,30 @@ def test_traditional_plans_pull_does_not_slow_the_end_effectors_task():
     without, with_plan = rates
     assert without[2] > 1e-3
     assert with_plan[2] >= 0.99 * without[2]
+
+
+@pytest.mark.parametrize('planned', ['way', 'stance', None])
+def test_amp_leaves_the_base_to_the_plans_way_when_the_arm_nears_a_singularity(planned):
+    """AMP brings the base into the end effector's task when the arm nears a singularity (σ_m
+    below σ_m,min): as the paper has it without a plan, and at the stance of a plan's final
+    approach. On a plan's way the plan moves the base already, and the arm nears a singularity
+    there because the base lags its plan (robot A on `table_pillar`, the tool stretched ahead
+    of a base that had not turned with the plan): the base stays on the plan and the arm does the
+    task around it while it can. Here σ_m,min is set above the start posture's σ_m (0.22), the
+    planned pose 0.2 m ahead and moving on."""
+    cfg = load_robot('steerable')
+    resolver = make_resolver('amp', cfg, sigma_min=0.4)
+    base = np.array(cfg.start.base_pose, dtype=float)
+    state = RobotState(base, np.zeros(3), cfg.start.arm, np.zeros(len(cfg.start.arm)))
+    position, rotation = state.ee_placement(resolver.model, update=True)
+    reference = None
+    if planned is not None:
+        ahead = base + np.array((0.2, 0.0, 0.0))
+        reference = BaseReference(ahead, np.array((0.3, 0.0, 0.0)), stance=planned == 'stance')
+    cmd = resolver.step(state, PoseTarget(position, rotation, base=reference))
+    mode = cmd.diagnostics.mode
+    if planned == 'way':
+        assert mode == 'base on the plan'
+        assert cmd.base_twist[0] > 0.0  # towards the planned pose, the arm holding the hand
+    else:
+        assert mode == 'base active (singularity)'

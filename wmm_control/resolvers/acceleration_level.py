@@ -157,7 +157,8 @@ class AccelerationResolver(Resolver):
             braking before a position limit alone, ``qd`` (n_b + n,), ``position_error`` [m],
             ``orientation_error`` [rad], ``sigma`` σ_min of the arm's task rows, ``sigma_position``
             that of its position rows, ``base_follow`` the base's accelerations towards a
-            followed plan's pose (n_b,) or None, ``arm_follow`` the arm's towards the plan's
+            followed plan's pose (n_b,) or None, ``on_the_way`` whether that pose is a point of
+            the plan's way (not the stance of its final approach), ``arm_follow`` the arm's towards the plan's
             travel posture (n,) or None (module docstring).
         """
         p = self.params
@@ -219,6 +220,7 @@ class AccelerationResolver(Resolver):
             'sigma': sigma,
             'sigma_position': sigma_position,
             'base_follow': base_follow,
+            'on_the_way': target.base is not None and not target.base.stance,
             'arm_follow': arm_follow,
         }
 

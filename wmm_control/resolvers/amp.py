@@ -21,6 +21,9 @@ base pose (``task['base_follow']``, eq (23)'s law on the base, within its bounds
 eq (15)'s stop, and the arm does the end effector's task around that motion, as it does around
 the stop. With the base in the task (step 2) the same accelerations join the tertiary
 objective, projected by P_A: what the task leaves free brings the base back onto the plan.
+On the plan's way (not at the stance of its final approach) the singularity test of step 2
+does not activate the base: the arm nears a singularity there because the base lags the plan,
+and the base stays on the plan until the arm alone cannot do the task (α < 1).
 """
 
 from dataclasses import dataclass
@@ -115,7 +118,8 @@ class AmpResolver(AccelerationResolver):
         arm_only = np.ones(n, dtype=bool)
         arm_only[: self.n_base] = False
         sigma = self._anticipated_sigma(task['sigma_position'] if p.sigma_rows == 'position' else task['sigma'])
-        singular = p.singularity_avoidance and sigma < p.sigma_min
+        # on a plan's way the base joins the task only when the arm alone cannot do it (module docstring)
+        singular = p.singularity_avoidance and sigma < p.sigma_min and not task['on_the_way']
         reason = 'singularity' if singular else ''
         if not singular:
             sns = sns_accelerations(
