@@ -42,6 +42,35 @@ def test_install_tree_has_the_ament_layout(install_tree):
             assert (share / 'wmm_control' / src.relative_to(REPO)).is_file(), src
 
 
+def test_package_xml_is_a_valid_manifest_of_an_ament_python_package():
+    """package.xml is well-formed XML (a ``--`` inside a comment is not) and says ament_python:
+    else colcon takes the package for a plain Python one and its install never registers the
+    package with the ament index (below)."""
+    import xml.etree.ElementTree as ElementTree
+
+    root = ElementTree.parse(REPO / 'package.xml').getroot()
+    assert root.tag == 'package' and root.findtext('name') == 'wmm_control'
+    assert root.findtext('export/build_type') == 'ament_python'
+
+
+def test_sourcing_the_install_registers_the_package_for_ros2_run(install_tree):
+    """``source install/setup.bash`` puts the package's prefix on AMENT_PREFIX_PATH, where
+    ``ros2 run`` and ``ros2 launch`` look for it (colcon's hook for an ament package: built as a
+    plain Python package, the install set PYTHONPATH alone and ``ros2 run wmm_control`` found
+    no package)."""
+    env = {k: v for k, v in os.environ.items() if k not in ('AMENT_PREFIX_PATH', 'COLCON_PREFIX_PATH')}
+    setup = install_tree.parent / 'setup.bash'
+    out = subprocess.run(
+        ['bash', '-c', f'source "{setup}" && echo "$AMENT_PREFIX_PATH"'],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 0, out.stderr
+    assert str(install_tree) in out.stdout.strip().split(os.pathsep), out.stdout + out.stderr
+
+
 def test_every_console_script_is_installed_under_lib_and_starts(install_tree):
     names = console_scripts(install_tree)
     assert 'wmm_model' in names
