@@ -135,8 +135,9 @@ def test_a_plan_through_the_table_stalls_and_the_replan_from_where_the_robot_sto
     resolver = make_resolver('pinv', cfg, **resolver_parameters(METHOD_RUNS['pinv']))
     with SimWorld(cfg, base_mode='kinematic') as world:
         log = run_scenario(world, resolver, _scenario(cfg, goal, 90.0, 'table_pillar'), pursuit=pursuit)
-    assert len(replanned) == 1 and pursuit.counters.no_way == 0
-    # it stalled in front of the table, short of the stance
+    # it stalled first in front of the table, short of the stance (and may stall again on the
+    # way round, where the robot lags the plan at the table's corner: it plans again from there)
+    assert replanned and pursuit.counters.no_way == 0
     table = next(o for o in OBSTACLES if o.name == 'table')
     assert replanned[0][0] < table.position[0]
     # and got there round it, never in contact
