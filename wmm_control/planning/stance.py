@@ -4,7 +4,8 @@
 the horizontal reach left at the goal's height (the arm's length from its first joint, as
 :class:`~wmm_control.kinematics.workspace.Workspace` bounds it), at evenly spaced bearings (the
 first one on the side of the robot's current pose), each with the base heading towards the goal
-and turned from it by a few offsets. A candidate counts when
+and turned from it by a few offsets, and facing away from it (an arm mounted ahead of the base's
+centre may reach a goal clear of the obstacles only back over the base). A candidate counts when
 
 1. the base there, arm in the travel posture, is clear of the obstacles by the travel margin
    (:class:`~wmm_control.planning.clearance.Travel`: the base path must be able to end there);
@@ -81,7 +82,7 @@ class StanceParams:
     limit_margin: float = 0.02
     rings: tuple[float, ...] = (0.45, 0.6, 0.3, 0.75, 0.15)
     bearings: int = 16
-    heading_offsets: tuple[float, ...] = (0.0, math.pi / 6, -math.pi / 6, math.pi / 3, -math.pi / 3)
+    heading_offsets: tuple[float, ...] = (0.0, math.pi / 6, -math.pi / 6, math.pi / 3, -math.pi / 3, math.pi)
     wanted: int = 4
     restarts: int = 2
     clearance_weight: float = 1.0
