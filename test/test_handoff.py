@@ -9,7 +9,8 @@ of those poses; the closed-loop runs against the simulator's own contact check.
 import numpy as np
 import pytest
 
-from wmm_control.experiments.randomized import CONTACT_DEPTH, RandomGoal, run_goal, sample_goals
+from wmm_control.cli.randomized import format_no_way, format_summary
+from wmm_control.experiments.randomized import CONTACT_DEPTH, RandomGoal, run_goal, sample_goals, summarize
 from wmm_control.geometry import matrix_from_rpy, rotation_angle
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import load_obstacles
@@ -80,6 +81,14 @@ def test_a_goal_inside_the_table_is_no_way_with_its_reason_not_a_failure():
     result = run_goal(cfg, 'pinv', goal, obstacles='table_pillar', plan=True)
     assert result['outcome'] == 'no_way' and result['no_way'] == 'inside_obstacle'
     assert "'table'" in result['no_way_reason'] and result['why'] == ''
+    # checked apart from the planner, counted by the check's verdict, shown with it
+    check = result['no_way_check']
+    assert check['verdict'] == 'confirmed' and "'table'" in check['evidence']
+    assert result['no_way_from'] == pytest.approx(list(cfg.start.base_pose))
+    row = summarize([result])[(cfg.name, 'pinv')]
+    assert row['no_way'] == row['no_way_confirmed'] == 1 and row['no_way_refuted'] == row['no_way_unchecked'] == 0
+    assert '| 1 (1 / 0 / 0) |' in format_summary(summarize([result]))
+    assert 'check confirmed' in format_no_way([result])
 
 
 def test_the_nodes_engine_plans_with_goal_planner_round_the_table_and_reports_no_way(behind_the_table):
@@ -97,6 +106,7 @@ def test_the_nodes_engine_plans_with_goal_planner_round_the_table_and_reports_no
     result = run_goal(cfg, 'pinv', inside, engine='nodes', obstacles='table_pillar', duration=5.0, plan=True)
     assert result['outcome'] == 'no_way' and result['no_way'] == 'inside_obstacle'
     assert "'table'" in result['no_way_reason'] and result['why'] == ''
+    assert result['no_way_check']['verdict'] == 'confirmed'
 
 
 def test_a_plan_through_the_table_stalls_and_the_replan_from_where_the_robot_stopped_gets_there(behind_the_table):

@@ -204,6 +204,22 @@ def test_a_goal_the_arm_reaches_from_nowhere_gets_no_stance():
     assert plan.reason.startswith('no stance')
 
 
+def test_a_goal_the_arm_reaches_clear_only_back_over_the_base_gets_a_stance():
+    """Robot C's first clutter goal: every stance facing it, or turned from it by up to 60°,
+    brings the arm within 2 cm of its own links; facing away, the arm reaching back over the
+    base, it is clear."""
+    cfg = load_robot('ur_mecanum')
+    planner = GoalPlanner(cfg, load_obstacles('clutter'))
+    goal = sample_goals(cfg, 1, seed=0, obstacles='clutter')[0]
+    search = planner.stances.find(goal.pose[:3], matrix_from_rpy(goal.pose[3:]), cfg.start.base_pose)
+    assert search.no_way is None, search.reason
+    params = planner.stances.params
+    for stance in search.stances:
+        assert stance.clearance >= params.stance_margin and stance.body_clearance >= params.body_margin
+    facing = np.arctan2(*(goal.pose[1::-1] - search.stances[0].base_pose[1::-1]))
+    assert abs(wrap_angle(search.stances[0].base_pose[2] - facing)) > math.pi / 2
+
+
 @pytest.mark.parametrize('robot', ['steerable', 'panda_diff'])
 def test_a_robot_stopped_near_the_table_backs_away_then_keeps_the_margin(robot):
     """Where a reactive controller leaves it: facing the table 5 cm from it. The path first takes

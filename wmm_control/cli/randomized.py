@@ -19,7 +19,10 @@ goals clear of them (in the file's ``goal_region``, if it has one); every period
 is checked on the simulator's geometry. ``--plan`` plans the way to each
 goal round the obstacles first (:mod:`wmm_control.planning`), the run follows it at the robot's
 pace (planned again from where the robot stalls) and then goes to the goal; a goal the planner
-finds no way to counts as "no way", with its reason, not as failed. ``--record DIR`` writes
+finds no way to counts as "no way", with its reason, not as failed, and that verdict is checked
+apart from the planner's search (:func:`~wmm_control.planning.no_way_check.confirm_no_way`):
+the table counts the "no way" runs confirmed, refuted and unchecked, and a line per run gives
+its reason and the check's evidence. ``--record DIR`` writes
 each run as ``DIR/<robot>_<method>_<goal>.npz`` (:mod:`wmm_control.experiments.randomized`
 documents the arrays). ``--sweep NAME=V1,V2,...`` (repeatable) runs the goals with every value of a resolver
 parameter (every combination of several; :mod:`wmm_control.experiments.sweep`), prints one
@@ -57,7 +60,7 @@ from wmm_control.experiments.jobs import default_jobs, jobs_argument, run_jobs
 from wmm_control.experiments.method_runs import METHOD_RUNS, ROBOT_RUNS
 from wmm_control.paths import robot_names
 
-__all__ = ['main', 'format_summary', 'format_cycle_times']
+__all__ = ['main', 'format_summary', 'format_cycle_times', 'format_no_way']
 
 
 def _f(value, fmt):
@@ -67,7 +70,8 @@ def _f(value, fmt):
 def format_summary(table: Mapping[tuple[str, str], Mapping[str, Any]]) -> str:
     """The summary of :func:`~wmm_control.experiments.randomized.summarize` as a Markdown table."""
     lines = [
-        '| robot | method | runs | converged | reported | failed | no way | worst error [mm / rad] '
+        '| robot | method | runs | converged | reported | failed | no way (confirmed / refuted / unchecked) '
+        '| worst error [mm / rad] '
         '| time to converge, median / max [s] | largest use of a limit | closest joint to a limit [rad] '
         '| in contact | deepest contact [mm] |',
         '|---|---|---|---|---|---|---|---|---|---|---|---|---|',
@@ -79,10 +83,32 @@ def format_summary(table: Mapping[tuple[str, str], Mapping[str, Any]]) -> str:
         )
         lines.append(
             f'| {robot} | {method} | {s["runs"]} | {s["converged"]} | {s["reported"]} | {s["failed"]} '
-            f'| {s.get("no_way", 0)} '
+            f'| {_no_way(s)} '
             f'| {err} | {_f(s["median_time_s"], ".1f")} / {_f(s["max_time_s"], ".1f")} '
             f'| {_f(s["limit_use_max"], ".3f")} | {_f(s["position_margin_min_rad"], ".3f")} '
             f'| {s["in_contact"]} | {s["deepest_contact_m"] * 1e3:.1f} |'
+        )
+    return '\n'.join(lines)
+
+
+def _no_way(s):
+    """A summary's "no way" cell: the count, and by the check's verdict when there are any."""
+    count = s.get('no_way', 0)
+    if not count:
+        return '0'
+    return f'{count} ({s.get("no_way_confirmed", 0)} / {s.get("no_way_refuted", 0)} / {s.get("no_way_unchecked", 0)})'
+
+
+def format_no_way(results) -> str:
+    """One line per "no way" run: its reason and what the check of it found."""
+    lines = []
+    for r in results:
+        if r['outcome'] != 'no_way':
+            continue
+        check = r.get('no_way_check') or {}
+        lines.append(
+            f'NO WAY: {r["robot"]} {r["method"]} goal {r["goal"]}{_at(r)}: {r.get("no_way_reason")}; check '
+            f'{check.get("verdict", "missing")}: {check.get("evidence", "")}'
         )
     return '\n'.join(lines)
 
@@ -378,6 +404,9 @@ def _main(args, robots, methods, cleanup) -> int:
         print(format_summary(table))
         print(f'\nControl cycle per period (method, safety stage, base controller; engine {args.engine}):')
         print(format_cycle_times(table))
+    no_way = format_no_way(results)
+    if no_way:
+        print(no_way)
     failed = [r for r in results if r['outcome'] == 'failed']
     for r in failed:
         print(f'FAILED: {r["robot"]} {r["method"]} goal {r["goal"]}{_at(r)}: {r["why"]}')

@@ -70,8 +70,10 @@ from wmm_control.experiments.ros_run import run_with_nodes
 from wmm_control.experiments.scenario import Goal, Scenario, load_scenario, resolver_parameters
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle, load_goal_region, load_obstacles, obstacle_file, obstacle_text
-from wmm_control.geometry import rotation_angle, rpy_from_matrix
+from wmm_control.geometry import matrix_from_rpy, rotation_angle, rpy_from_matrix
 from wmm_control.nodes.parameters import load_defaults
+from wmm_control.planning import GoalPlanner, NoWay
+from wmm_control.planning.no_way_check import NoWayCheck, Verdict, confirm_no_way
 from wmm_control.planning.pursuit import GoalPursuit
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
@@ -96,6 +98,7 @@ __all__ = [
     'goal_settings',
     'run_contact',
     'write_record',
+    'no_way_check',
 ]
 
 #: The robots, by name.
@@ -356,7 +359,10 @@ def run_goal(
         else empty) and ``refused`` (why the resolver refused the goal and held the robot
         still, else empty); with ``plan`` also ``planning_time_s`` (of every plan of the run),
         ``replans`` (the plans from where the robot stalled, at most :data:`MAX_REPLANS`),
-        ``no_way`` (its kind, else None) and ``no_way_reason``.
+        ``no_way`` (its kind, else None), ``no_way_reason``, ``no_way_from`` (the base pose the
+        plan that found no way was made from) and, for a ``no_way`` run, ``no_way_check``
+        (:func:`no_way_check`: ``verdict`` confirmed | refuted | unchecked, ``evidence``, the
+        stance that refutes it, ...).
     """
     cfg = load_robot(robot)
     duration = DURATION_S.get(cfg.name, 90.0) if duration is None else duration
@@ -364,7 +370,7 @@ def run_goal(
     log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles, plan=plan)
     planning: dict = {}
     if plan:
-        planning = {k: status.pop(k) for k in ('planning_time_s', 'no_way', 'no_way_reason', 'replans')}
+        planning = {k: status.pop(k) for k in ('planning_time_s', 'no_way', 'no_way_reason', 'no_way_from', 'replans')}
         if log is None:
             log, status = _held(cfg, method, goal, '')
     if not len(log):  # the goal was refused: the robot held still
@@ -399,6 +405,8 @@ def run_goal(
         why.append(f'neither reached nor ever reported stalled in {duration:g} s')
     if why:
         outcome = 'failed'
+    if outcome == 'no_way':
+        planning['no_way_check'] = no_way_check(cfg, goal, obstacles, planning)
     return {
         'robot': cfg.name,
         'method': method,
@@ -420,6 +428,19 @@ def run_goal(
         'refused': status.get('refused', ''),
         **planning,
     }
+
+
+def no_way_check(cfg: RobotConfig, goal: RandomGoal, obstacles: str | Path, planning: Mapping[str, Any]) -> dict:
+    """The check of a run's "no way" (:func:`~wmm_control.planning.no_way_check.confirm_no_way`,
+    with the planner's defaults, as the runs plan) for the goal ``goal`` among the obstacles of
+    the file ``obstacles``, the robot where the plan that found none was made
+    (``planning['no_way_from']``): its :meth:`~wmm_control.planning.no_way_check.NoWayCheck.as_dict`.
+    Unchecked when the planner gave no kind (it failed)."""
+    kind, where = planning.get('no_way'), planning.get('no_way_from')
+    if kind not in {k.value for k in NoWay} or where is None:
+        return NoWayCheck(Verdict.UNCHECKED, f'the planner gave no reason to check ({kind})').as_dict()
+    planner = GoalPlanner(cfg, load_obstacles(obstacles))
+    return confirm_no_way(planner, goal.pose[:3], matrix_from_rpy(goal.pose[3:]), kind, where).as_dict()
 
 
 def _held(cfg: RobotConfig, method: str, goal: RandomGoal, refused: str) -> tuple[RunLog, dict]:
@@ -485,7 +506,8 @@ def write_record(path: Path, log: RunLog, goal_pose: ArrayLike, obstacles: str |
 
 def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
     """Per robot and method: ``runs``, ``converged``, ``reported``, ``failed``, ``no_way`` (the
-    planner found no way, ``--plan``), ``replans`` (``--plan``: over the runs), the worst final
+    planner found no way, ``--plan``) and of those ``no_way_confirmed``, ``no_way_refuted`` and
+    ``no_way_unchecked`` (by their :func:`no_way_check`), ``replans`` (``--plan``: over the runs), the worst final
     errors of the converged runs, the median and largest time to converge, and the worst use of
     every limit over all runs (``limit_use_max``: largest fraction of a velocity or acceleration
     limit; ``position_margin_min_rad``), the runs in contact (``in_contact``) and the deepest
@@ -513,6 +535,13 @@ def summarize(results: Iterable[Mapping[str, Any]]) -> dict:
             'reported': sum(r['outcome'] == 'reported' for r in rows),
             'failed': sum(r['outcome'] == 'failed' for r in rows),
             'no_way': sum(r['outcome'] == 'no_way' for r in rows),
+            **{
+                f'no_way_{verdict.value}': sum(
+                    r['outcome'] == 'no_way' and (r.get('no_way_check') or {}).get('verdict') == verdict.value
+                    for r in rows
+                )
+                for verdict in Verdict
+            },
             'replans': sum(r.get('replans') or 0 for r in rows),
             'worst_position_error_m': max((r['final_position_error_m'] for r in conv), default=None),
             'worst_orientation_error_rad': max((r['final_orientation_error_rad'] for r in conv), default=None),

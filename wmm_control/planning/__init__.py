@@ -6,6 +6,7 @@ from wmm_control.planning.base_path import BasePath, BasePathPlanner
 from wmm_control.planning.clearance import Clearance, Travel
 from wmm_control.planning.outcome import NoWay
 from wmm_control.planning.planner import GoalPlanner, Plan
+from wmm_control.planning.no_way_check import NoWayCheck, Verdict, confirm_no_way
 from wmm_control.planning.stance import Stance, StanceFinder, StanceParams, StanceSearch
 from wmm_control.planning.timing import BaseTrajectory, time_path
 
@@ -16,11 +17,14 @@ __all__ = [
     'Clearance',
     'GoalPlanner',
     'NoWay',
+    'NoWayCheck',
     'Plan',
     'Stance',
     'StanceFinder',
     'StanceParams',
     'StanceSearch',
     'Travel',
+    'Verdict',
+    'confirm_no_way',
     'time_path',
 ]

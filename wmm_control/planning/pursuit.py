@@ -318,6 +318,7 @@ class GoalPursuit:
         self._hold_due = False
         self._path: np.ndarray | None = None
         self._no_way_version = -1  # of the obstacles when the goal in force got no way
+        self._planned_from: np.ndarray | None = None  # the base pose of the last plan asked for
 
     def close(self, timeout: float | None = None) -> None:
         """Stop the worker, waiting up to ``timeout`` [s] for a plan under way (None: until done)."""
@@ -468,6 +469,7 @@ class GoalPursuit:
         assert self.goal is not None
         why, self._plan_due = self._plan_due, ''
         q_travel = q_arm.copy() if self.replans > 0 and q_arm is not None else None
+        self._planned_from = base.copy()
         self.worker.submit(_PlanJob(self._ticket, self.version, self.obstacles, self.goal, base.copy(), q_travel))
         self.counters.plans += 1
         events.append(LogEvent('planning', f'planning ({why}) from the base at {np.round(base, 3).tolist()}'))
@@ -562,7 +564,8 @@ class GoalPursuit:
     def account(self) -> dict:
         """What the pursuit of a goal came to, for a study's row: ``planning_time_s`` (of every
         plan), ``plans``, ``replans``, ``no_way`` (its kind when the pursuit ended with no way,
-        else None) and ``no_way_reason``."""
+        else None), ``no_way_reason`` and ``no_way_from`` (the base pose (x, y, θ) the plan that
+        found no way was made from, else None)."""
         c = self.counters
         no_way = self.state is PursuitState.NO_WAY
         return {
@@ -571,4 +574,5 @@ class GoalPursuit:
             'replans': c.replans,
             'no_way': (self.no_way_kind.value if self.no_way_kind else 'no_way') if no_way else None,
             'no_way_reason': self.reason if no_way else None,
+            'no_way_from': self._planned_from.tolist() if no_way and self._planned_from is not None else None,
         }

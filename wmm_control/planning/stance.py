@@ -4,7 +4,8 @@
 the horizontal reach left at the goal's height (the arm's length from its first joint, as
 :class:`~wmm_control.kinematics.workspace.Workspace` bounds it), at evenly spaced bearings (the
 first one on the side of the robot's current pose), each with the base heading towards the goal
-and turned from it by a few offsets. A candidate counts when
+and turned from it by a few offsets, and facing away from it (an arm mounted ahead of the base's
+centre may reach a goal clear of the obstacles only back over the base). A candidate counts when
 
 1. the base there, arm in the travel posture, is clear of the obstacles by the travel margin
    (:class:`~wmm_control.planning.clearance.Travel`: the base path must be able to end there);
@@ -81,7 +82,7 @@ class StanceParams:
     limit_margin: float = 0.02
     rings: tuple[float, ...] = (0.45, 0.6, 0.3, 0.75, 0.15)
     bearings: int = 16
-    heading_offsets: tuple[float, ...] = (0.0, math.pi / 6, -math.pi / 6, math.pi / 3, -math.pi / 3)
+    heading_offsets: tuple[float, ...] = (0.0, math.pi / 6, -math.pi / 6, math.pi / 3, -math.pi / 3, math.pi)
     wanted: int = 4
     restarts: int = 2
     clearance_weight: float = 1.0
@@ -170,6 +171,12 @@ class StanceFinder:
         clearance: its clearance among the obstacles.
         travel: the robot driving in its travel posture (the stance's base must be valid there).
         params: :class:`StanceParams`.
+
+    Attributes:
+        lower, upper: the arm's position limits less ``limit_margin`` [rad or m] (±inf: none).
+        root: the arm's first joint in the base frame [m], the centre of its reach. Shape (3,).
+        reach: [m] the most the end effector can be from the first joint (the links' lengths
+            stacked, :class:`~wmm_control.kinematics.workspace.Workspace`).
     """
 
     def __init__(
@@ -182,12 +189,12 @@ class StanceFinder:
         self.workspace = Workspace(model)
         arm = model.config.arm
         margin = self.params.limit_margin
-        self._lower = np.where(np.isfinite(arm.position_lower), arm.position_lower + margin, -np.inf)
-        self._upper = np.where(np.isfinite(arm.position_upper), arm.position_upper - margin, np.inf)
+        self.lower = np.where(np.isfinite(arm.position_lower), arm.position_lower + margin, -np.inf)
+        self.upper = np.where(np.isfinite(arm.position_upper), arm.position_upper - margin, np.inf)
         # the arm's first joint in the base frame: the centre of its reach
         model.update(np.zeros(3), travel.q_arm)
-        self._root = model.arm_points_world()[0].copy()
-        self.reach = self.workspace.max_height - float(self._root[2])
+        self.root = model.arm_points_world()[0].copy()
+        self.reach = self.workspace.max_height - float(self.root[2])
 
     def _seeds(self):
         """The arm postures the inverse kinematics starts from, pass by pass: the travel posture,
@@ -195,10 +202,10 @@ class StanceFinder:
         yield self.travel.q_arm
         rng = np.random.default_rng(0)
         arm = self.model.config.arm
-        lower = np.where(np.isfinite(self._lower), self._lower, -math.pi)
-        upper = np.where(np.isfinite(self._upper), self._upper, math.pi)
+        lower = np.where(np.isfinite(self.lower), self.lower, -math.pi)
+        upper = np.where(np.isfinite(self.upper), self.upper, math.pi)
         for i in range(self.params.restarts):
-            yield np.clip(arm.dexterous, self._lower, self._upper) if i == 0 else rng.uniform(lower, upper)
+            yield np.clip(arm.dexterous, self.lower, self.upper) if i == 0 else rng.uniform(lower, upper)
 
     def refuse(self, goal_position: np.ndarray) -> tuple[NoWay, str] | None:
         """Why no stance can reach a goal at ``goal_position`` whatever the base does, or None."""
@@ -214,9 +221,9 @@ class StanceFinder:
         why = self.workspace.impossible(goal_position)
         if why:
             return NoWay.OUT_OF_REACH, f'the goal is out of reach: {why}'
-        if abs(float(goal_position[2]) - float(self._root[2])) > self.reach:
+        if abs(float(goal_position[2]) - float(self.root[2])) > self.reach:
             return NoWay.OUT_OF_REACH, (
-                f'the goal is out of reach: {abs(goal_position[2] - self._root[2]):.3f} m from the height of '
+                f'the goal is out of reach: {abs(goal_position[2] - self.root[2]):.3f} m from the height of '
                 f"the arm's first joint, which reaches {self.reach:.3f} m at most"
             )
         return None
@@ -225,7 +232,7 @@ class StanceFinder:
         """The base poses to try for a goal at ``goal_position``, in order: ``base_pose`` (x, y,
         θ), where the robot is, then the samples, the first bearing on its side."""
         p = self.params
-        dz = float(goal_position[2]) - float(self._root[2])
+        dz = float(goal_position[2]) - float(self.root[2])
         horizontal = math.sqrt(max(self.reach**2 - dz**2, 0.0))
         goal_xy = np.asarray(goal_position[:2], dtype=float)
         away = base_pose[:2] - goal_xy
@@ -238,7 +245,7 @@ class StanceFinder:
                     r = fraction * horizontal
                     root = goal_xy + r * np.array((math.cos(bearing), math.sin(bearing)))
                     heading = math.remainder(bearing + math.pi + offset, 2.0 * math.pi)
-                    base_xy = root - rotation_2d(heading) @ self._root[:2]
+                    base_xy = root - rotation_2d(heading) @ self.root[:2]
                     out.append(np.array((base_xy[0], base_xy[1], heading)))
         return out
 
@@ -267,7 +274,7 @@ class StanceFinder:
                 if not clear[i]:
                     continue
                 q, pos_err, rot_err = solve_arm_ik(
-                    self.model, base, seed, goal_position, goal_rotation, self._lower, self._upper, p
+                    self.model, base, seed, goal_position, goal_rotation, self.lower, self.upper, p
                 )
                 if pos_err > p.position_tolerance or rot_err > p.orientation_tolerance:
                     continue
