@@ -223,3 +223,36 @@ def test_bad_steps_are_rejected(plan):
     with pytest.raises(ValueError):
         follower.step(0.01, np.zeros(3), (0.0, math.inf, 0.0), np.eye(3))
     assert follower.clock == 0.0
+
+
+def test_the_arm_moving_to_the_stances_posture_is_progress_and_an_arm_held_is_not():
+    """After the path the base rests at the stance while the arm moves to the stance's posture
+    (:meth:`Handoff.of` with ``q_stance``), longer than the stall time here: the points moving
+    on are progress, and the follower hands over to the goal with that posture. An end effector
+    that does not follow them stalls."""
+    cfg = load_robot('steerable')
+    trajectory = time_path([LinearPiece(np.zeros(3), np.array((0.5, 0.0, 0.0)))], cfg.base, cfg.period)
+    q_stance = cfg.start.arm + 1.0
+    handoff = Handoff.of(KinematicModel(cfg), trajectory, cfg.start.arm, q_stance, fraction=0.05)
+    motion = handoff.duration - trajectory.duration
+    assert motion > PARAMS.stall_time + 1.0
+    goal = PoseTarget(handoff.points[-1].position, handoff.points[-1].rotation)
+    dt = handoff.dt
+    follower = PlanFollower(handoff, goal, PARAMS)
+    step = follower.step(dt, np.zeros(3), *_ee(handoff, 0))
+    for _ in range(int(3.0 * handoff.duration / dt)):
+        assert step.state is FollowState.FOLLOWING
+        k = int(np.argmin([np.linalg.norm(p.position - step.target.position) for p in handoff.points]))
+        step = follower.step(dt, follower.planned_pose(), *_ee(handoff, k))
+        if step.state is FollowState.APPROACH:
+            break
+    assert step.state is FollowState.APPROACH
+    assert step.target.base.stance and np.array_equal(step.target.base.arm, q_stance)
+    # the end effector held where the path ends: the arm's motion stalls within the stall time
+    held = PlanFollower(handoff, goal, PARAMS)
+    end = len(trajectory.poses) - 1
+    states = []
+    for _ in range(int((handoff.duration + PARAMS.stall_time) / dt)):
+        k = min(int(round(held.clock / dt)), end)
+        states.append(held.step(dt, held.planned_pose(), *_ee(handoff, k)).state)
+    assert FollowState.APPROACH not in states and states[-1] is FollowState.STALLED

@@ -125,8 +125,8 @@ _SPECS = (
     Param('stall_angle', 'Turn [rad] that counts as progress (follower).', lo=1e-4, hi=6.3, read_only=True),
     Param(
         'hold_base',
-        'Send each point\'s planned base pose (joint "base") and the travel posture with it on /ee_reference, '
-        'and the final approach\'s goal there as the last point with the stance: the methods pull the base '
+        'Send each point\'s planned base pose (joint "base") and the arm\'s posture with it on /ee_reference, '
+        'and the final approach\'s goal there as the last point with the stance and its posture: the methods pull the base '
         'towards the plan, and hold it at the stance, below the end effector\'s task (follower); false: '
         'the points alone, the goal on ~/goal.',
         read_only=True,

@@ -50,17 +50,21 @@ pulls the clock forward: the follower keeps the last planned pose the measured b
 (the nearest planned pose, in the lag's metric, from the last one passed up to ``lookahead``
 [s] ahead of ``s``), and ``s`` never lags it.
 
-Once ``s`` reaches the plan's end the target is the goal itself (:attr:`FollowState.APPROACH`):
-the method's final whole-body approach, with the plan's last base pose (the stance, from which
-the goal is reachable with margin from the obstacles) held as the base's reference
-(:attr:`PlanFollower.approach`; with ``hold_base``): a method whose secondary task would move
-the base (task sharing's posture pull) otherwise drives it from the stance into the safety
-stage's hold. While following, the follower is
-:attr:`FollowState.STALLED` when for ``stall_time`` the planned pose at ``s`` has not moved on
-by ``stall_distance`` or turned by ``stall_angle``, and the measured base has not come that
-much nearer to it (in distance or in heading): the robot is held off the plan (by an obstacle
-the plan did not know, by the safety stage; moving along the obstacle is no progress), and the
-caller plans again from where it is. It is following again as soon as either moves on.
+A hand-off made with the stance's arm posture ends with the arm's motion to it, the base at
+rest at the stance (:meth:`~wmm_control.planning.handoff.Handoff.of`): its points are given
+like the others. Once ``s`` reaches the plan's end the target is the goal itself
+(:attr:`FollowState.APPROACH`): the method's final whole-body approach, with the plan's last
+base pose (the stance, from which the goal is reachable with margin from the obstacles) held as
+the base's reference and the stance's arm posture as the arm's (:attr:`PlanFollower.approach`;
+with ``hold_base``): a method whose secondary task would move the base (task sharing's posture
+pull) otherwise drives it from the stance into the safety stage's hold. While following, the
+follower is :attr:`FollowState.STALLED` when for ``stall_time`` the planned pose at ``s`` has
+not moved on by ``stall_distance`` or turned by ``stall_angle`` (nor, in the arm's motion after
+the path, the planned arm posture by ``stall_angle`` on a joint), and the
+measured base has not come that much nearer to the planned pose (in distance or in heading):
+the robot is held off the plan (by an obstacle the plan did not know, by the safety stage;
+moving along the obstacle is no progress), and the caller plans again from where it is. It is
+following again as soon as either moves on.
 
 Pure and ROS-free: time is what :meth:`PlanFollower.step` is told.
 """
@@ -199,16 +203,18 @@ class PlanFollower:
         self._passed = 0  # the last planned sample the base has passed
         self._idle = 0.0  # [s] without progress
         self._anchor_plan: np.ndarray | None = None  # the planned pose at the last progress
+        self._anchor_point = 0  # the sample of the point given then
         self._anchor_lag = (math.inf, math.inf)  # the base's lag (distance, angle) then
 
     @property
     def approach(self) -> PoseTarget:
         """The target of the final approach: the goal, with the plan's last base pose (the
-        stance, at rest) as its base when ``hold_base`` (module docstring)."""
+        stance, at rest) as its base and the stance's arm posture (``handoff.stance_arm``) when
+        ``hold_base`` (module docstring)."""
         last = self.handoff.points[-1].base
         if not self.params.hold_base or last is None:
             return self.goal
-        return PoseTarget.goal(self.goal.position, self.goal.rotation, last.pose)
+        return PoseTarget.goal(self.goal.position, self.goal.rotation, last.pose, self.handoff.stance_arm)
 
     @property
     def clock(self) -> float:
@@ -247,6 +253,15 @@ class PlanFollower:
         """Whether two poses are a step of progress apart."""
         distance, angle = self._apart(a, b)
         return distance >= self.params.stall_distance or angle >= self.params.stall_angle
+
+    def _posture_moved(self, k: int, anchor: int) -> bool:
+        """Whether the planned arm postures of samples ``k`` and ``anchor`` are a step of progress
+        apart (a joint by ``stall_angle``: the arm's motion to the stance's posture, the base at
+        rest, may move the end effector little)."""
+        a, b = self.handoff.points[k].base, self.handoff.points[anchor].base
+        if a is None or b is None or a.arm is None or b.arm is None:
+            return False
+        return float(np.max(np.abs(a.arm - b.arm))) >= self.params.stall_angle
 
     def _index(self, s: float) -> int:
         """The sample in force at the plan's time ``s``."""
@@ -315,17 +330,19 @@ class PlanFollower:
         self._clock = clock
         if self._clock >= end:
             return FollowStep(self.approach, FollowState.APPROACH, 1.0)
-        # progress since the last: the planned pose moved on, or the base came nearer to it
+        # progress since the last: the planned pose or the point moved on, or the base came nearer
         planned = self.planned_pose(self._clock)
+        k = self._index(self._clock)
         lag = self._apart(planned, base)
         if self._anchor_plan is None:
-            self._anchor_plan = before
+            self._anchor_plan, self._anchor_point = before, given
         closer = lag[0] <= self._anchor_lag[0] - p.stall_distance or lag[1] <= self._anchor_lag[1] - p.stall_angle
-        if self._moved(planned, self._anchor_plan) or closer:
-            self._anchor_plan, self._anchor_lag, self._idle = planned, lag, 0.0
+        arm = k > self.handoff.path_end and self._posture_moved(k, self._anchor_point)  # the arm's motion
+        if self._moved(planned, self._anchor_plan) or arm or closer:
+            self._anchor_plan, self._anchor_point, self._anchor_lag, self._idle = planned, k, lag, 0.0
         else:
             self._idle += dt
-        point = handoff.points[self._index(self._clock)]
+        point = handoff.points[k]
         planned_base = None
         if p.hold_base and point.base is not None:  # the planned base, slowed as the point is
             planned_base = BaseReference(
