@@ -201,6 +201,8 @@ def test_a_slow_base_is_not_stalled(plan):
         {'stall_time': 0.0},
         {'stall_distance': -1.0},
         {'lookahead': -1.0},
+        {'settle_distance': 0.0},
+        {'settle_time': math.inf},
         {'lead_distance': 'far'},
     ],
 )
@@ -223,3 +225,80 @@ def test_bad_steps_are_rejected(plan):
     with pytest.raises(ValueError):
         follower.step(0.01, np.zeros(3), (0.0, math.inf, 0.0), np.eye(3))
     assert follower.clock == 0.0
+
+
+def test_the_arm_moving_to_the_stances_posture_is_progress_and_an_arm_held_is_not():
+    """After the path the base rests at the stance while the arm moves to the stance's posture
+    (:meth:`Handoff.of` with ``q_stance``), longer than the stall time here: the points moving
+    on are progress, and the follower hands over to the goal with that posture. An end effector
+    that does not follow them stalls."""
+    cfg = load_robot('steerable')
+    trajectory = time_path([LinearPiece(np.zeros(3), np.array((0.5, 0.0, 0.0)))], cfg.base, cfg.period)
+    q_stance = cfg.start.arm + 1.0
+    handoff = Handoff.of(KinematicModel(cfg), trajectory, cfg.start.arm, q_stance, fraction=0.05)
+    motion = handoff.duration - trajectory.duration
+    assert motion > PARAMS.stall_time + 1.0
+    goal = PoseTarget(handoff.points[-1].position, handoff.points[-1].rotation)
+    dt = handoff.dt
+    follower = PlanFollower(handoff, goal, PARAMS)
+    step = follower.step(dt, np.zeros(3), *_ee(handoff, 0))
+    for _ in range(int(3.0 * handoff.duration / dt)):
+        assert step.state is FollowState.FOLLOWING
+        k = int(np.argmin([np.linalg.norm(p.position - step.target.position) for p in handoff.points]))
+        step = follower.step(dt, follower.planned_pose(), *_ee(handoff, k))
+        if step.state is FollowState.APPROACH:
+            break
+    assert step.state is FollowState.APPROACH
+    assert step.target.base.stance and np.array_equal(step.target.base.arm, q_stance)
+    # the end effector held where the path ends: the arm's motion stalls within the stall time
+    held = PlanFollower(handoff, goal, PARAMS)
+    end = len(trajectory.poses) - 1
+    states = []
+    for _ in range(int((handoff.duration + PARAMS.stall_time) / dt)):
+        k = min(int(round(held.clock / dt)), end)
+        states.append(held.step(dt, held.planned_pose(), *_ee(handoff, k)).state)
+    assert FollowState.APPROACH not in states and states[-1] is FollowState.STALLED
+
+
+def test_the_arms_motion_to_the_stances_posture_waits_for_the_base_at_rest_at_the_stance():
+    """A base that reaches the path's end short of the stance, then coasts through it, holds the
+    plan's clock at the arm's motion's first point (not stalled, however long within
+    ``settle_time``); at rest there the arm's motion goes on; a base kept off the stance goes to
+    the final approach without it after ``settle_time``."""
+    cfg = load_robot('steerable')
+    trajectory = time_path([LinearPiece(np.zeros(3), np.array((0.5, 0.0, 0.0)))], cfg.base, cfg.period)
+    handoff = Handoff.of(KinematicModel(cfg), trajectory, cfg.start.arm, cfg.start.arm + 1.0, fraction=0.05)
+    goal = PoseTarget(handoff.points[-1].position, handoff.points[-1].rotation)
+    dt, start = handoff.dt, handoff.path_end * handoff.dt
+    stance = handoff.base_poses[handoff.path_end]
+    short = stance - (0.25, 0.0, 0.0)
+    patient = FollowParams(settle_time=3.0 * PARAMS.stall_time)
+
+    def to_the_path_end(params):
+        follower = PlanFollower(handoff, goal, params)
+        while follower.clock < start - 0.2:
+            follower.step(dt, follower.planned_pose())
+        return follower
+
+    follower = to_the_path_end(patient)
+    for _ in range(int(1.5 * PARAMS.stall_time / dt)):  # short of the stance, at rest
+        assert follower.step(dt, short).state is FollowState.FOLLOWING
+    assert follower.clock == pytest.approx(start)
+    base = short.copy()
+    for _ in range(int(0.5 / 0.1 / dt)):  # coasting through the stance at 0.1 m/s
+        base = base + (0.1 * dt, 0.0, 0.0)
+        assert follower.step(dt, base).state is FollowState.FOLLOWING
+        assert follower.clock == pytest.approx(start)
+    for _ in range(int(2.0 / dt)):  # back at rest at the stance: the arm's motion goes on
+        step = follower.step(dt, stance)
+    assert follower.clock > start and step.state is FollowState.FOLLOWING
+    assert not np.array_equal(step.target.base.arm, cfg.start.arm)
+    # a base kept off the stance: the arm's motion waits for settle_time, then the final approach
+    held = to_the_path_end(PARAMS)
+    waited = 0.0
+    while (step := held.step(dt, short)).state is not FollowState.APPROACH:
+        assert held.clock == pytest.approx(start, abs=0.2)
+        waited += dt
+        assert waited < PARAMS.settle_time + 1.0
+    assert waited > PARAMS.settle_time - 0.2 - dt
+    assert np.array_equal(step.target.base.arm, cfg.start.arm + 1.0)

@@ -160,16 +160,20 @@ def test_a_goal_behind_the_table_is_reached_round_it_without_contact(system):
         planner._base,
     )
     # the way there was the plan's points, then the user's goal itself as the last point, at rest,
-    # with the stance (the plan's last base pose) as its base, which the resolver holds and judges
-    # as a goal: the base is held at the stance in the final approach, and the arrival is reported
+    # with the stance (the plan's last base pose) and the stance's arm posture as its base, which
+    # the resolver holds and judges as a goal: the base is held at the stance in the final
+    # approach, and the arrival is reported
     assert len(probe.references) > 50 and finite_output(probe)
-    # while following, each point carries the plan's travel posture, joint by joint, which the resolver takes
+    # each point carries the plan's arm posture (the travel posture, then the arm's motion to the
+    # stance's), joint by joint, which the resolver takes
     arm = list(load_robot(ROBOT).arm.joints)
     travel = [planned_base_values(m, arm) for m in probe.references[:-1]]
     assert all(list(m.joint_names) == ['end_effector', 'base', *arm] for m in probe.references[:-1])
     assert all(len(t) == 4 and np.all(np.isfinite(t[3])) for t in travel)
     last = probe.references[-1]
-    assert last.header.frame_id == 'world' and list(last.joint_names) == ['end_effector', 'base']
+    assert last.header.frame_id == 'world' and list(last.joint_names) == ['end_effector', 'base', *arm]
+    posture = planned_base_values(last, arm)[3]
+    assert np.allclose(posture, planner.pursuit.follower.handoff.stance_arm, atol=1e-9)
     values = pose_values(last.points[0].transforms[0])
     assert values[:3] == pytest.approx(BEHIND_TABLE, abs=1e-9)
     assert rotation_angle(matrix_from_quaternion(values[3:]), goal_rotation(BEHIND_TABLE_YAW)) < 1e-6
@@ -177,6 +181,7 @@ def test_a_goal_behind_the_table_is_reached_round_it_without_contact(system):
     stance = np.array([(s.pose.position.x, s.pose.position.y) for s in probe.paths[-1].poses])[-1]
     assert resolver.target.base is not None and resolver.target.base.pose[:2] == pytest.approx(stance, abs=1e-6)
     assert resolver.target.base.rates == pytest.approx(np.zeros(3))
+    assert resolver.target.base.stance and np.allclose(resolver.target.base.arm, posture)
     assert ros.spin_until(lambda: any('goal reached' in line for line in probe.lines('redundancy_resolver')), 5.0)
     # the base drove round the table, never into it (the simulator's own check)
     assert pose2d(probe.truth[-1])[0] > 1.75

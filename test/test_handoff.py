@@ -15,7 +15,9 @@ from wmm_control.geometry import matrix_from_rpy, rotation_angle
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.obstacles import load_obstacles
 from wmm_control.planning import GoalPlanner
-from wmm_control.planning.handoff import Handoff
+from wmm_control.planning.follow import PlanFollower
+from wmm_control.planning.handoff import ARM_EE_SPEED, ARM_FRACTION, Handoff
+from wmm_control.resolvers.interface import PoseTarget
 from wmm_control.robot_config import load_robot
 
 OBSTACLES = load_obstacles('table_pillar')
@@ -61,6 +63,64 @@ def test_the_points_are_the_forward_kinematics_of_the_planned_base_poses(behind_
     acceleration = np.array([p.acceleration for p in handoff.points])
     assert np.allclose(acceleration[:-1], np.diff(velocity, axis=0) / traj.dt)
     assert not np.any(velocity[-1]) and not np.any(acceleration[-1])
+
+
+def test_after_the_path_the_arm_moves_to_the_stances_posture_with_the_base_at_rest(behind_the_table):
+    """With the stance's posture the hand-off goes on after the path: the base at rest at the
+    stance, the arm on the straight joint-space motion from the travel posture to the stance's,
+    within ``ARM_FRACTION`` of its limits and the end effector within ``ARM_EE_SPEED``, each point the forward kinematics of the two; the final
+    approach gives the goal with the stance and that posture."""
+    cfg, goal = behind_the_table
+    planner = GoalPlanner(cfg, OBSTACLES, budget=30.0)
+    rotation = matrix_from_rpy(goal.pose[3:])
+    plan = planner.plan(goal.pose[:3], rotation, cfg.start.base_pose)
+    assert plan.trajectory is not None and plan.stance is not None, plan.reason
+    q_travel, q_stance = planner.travel.q_arm, plan.stance.q_arm
+    path = Handoff.of(planner.model, plan.trajectory, q_travel)
+    handoff = Handoff.of(planner.model, plan.trajectory, q_travel, q_stance)
+    k = len(path.points)
+    assert len(handoff.points) > k and np.array_equal(handoff.stance_arm, q_stance)
+    for a, b in zip(path.points[:-1], handoff.points):  # the way there as without it
+        assert np.array_equal(a.position, b.position) and np.array_equal(a.velocity, b.velocity)
+    rest = handoff.points[k - 1 :]
+    arms = np.array([p.base.arm for p in rest])
+    assert np.allclose(arms[0], q_travel) and np.allclose(arms[-1], q_stance)
+    assert np.allclose(handoff.base_poses[k - 1 :], plan.trajectory.poses[-1])
+    assert all(not np.any(p.base.rates) and not np.any(p.base.acceleration) for p in rest)
+    # a straight motion in joint space, within the fraction of the arm's limits
+    along = (arms - q_travel) @ (q_stance - q_travel) / np.dot(q_stance - q_travel, q_stance - q_travel)
+    assert np.allclose(arms, q_travel + along[:, None] * (q_stance - q_travel), atol=1e-9)
+    assert np.all(np.diff(along) >= 0.0)
+    rates = np.diff(arms, axis=0) / handoff.dt
+    assert np.all(np.abs(rates) <= ARM_FRACTION * cfg.arm.velocity + 1e-9)
+    assert np.all(np.abs(np.diff(rates, axis=0)) / handoff.dt <= ARM_FRACTION * cfg.arm.acceleration + 1e-6)
+    # the end effector at the pace of a set-point's trajectory (its twist bounded on a few samples)
+    twists = np.array([p.velocity for p in rest])
+    assert np.max(np.linalg.norm(twists[:, :3], axis=1)) <= 1.05 * ARM_EE_SPEED[0]
+    assert np.max(np.linalg.norm(twists[:, 3:], axis=1)) <= 1.05 * ARM_EE_SPEED[1]
+    model = KinematicModel(cfg)
+    for point, q in zip(rest, arms):
+        model.update(plan.trajectory.poses[-1], q)
+        position, orientation = model.ee_placement_world()
+        assert np.allclose(point.position, position, atol=1e-9) and rotation_angle(point.rotation, orientation) < 1e-9
+    # the last point reaches the goal within the stance's tolerances, at rest
+    assert np.linalg.norm(rest[-1].position - goal.pose[:3]) <= planner.stances.params.position_tolerance + 1e-9
+    assert not np.any(rest[-1].velocity) and not np.any(rest[-1].acceleration)
+    approach = PlanFollower(handoff, PoseTarget(goal.pose[:3], rotation)).approach
+    assert approach.base is not None and approach.base.stance and np.array_equal(approach.base.arm, q_stance)
+
+
+def test_the_wrist_takes_the_branch_of_the_stance():
+    """`panda_diff`'s goal 1 of the randomized `clutter` draw: the stance's posture has the
+    wrist turned over (joint 5 near −2.35 rad, joint 6 near 0.16); from the travel posture
+    (joint 6 at 1.57) the end effector's task alone drove joint 6 onto its limit, 0.2 m from the
+    goal, and a pull towards the stance's posture in the null space could not turn it over. The
+    arm's motion to the stance's posture takes it there, and the goal is reached."""
+    cfg = load_robot('panda_diff')
+    goal = sample_goals(cfg, 2, seed=0, obstacles='clutter')[1]
+    result = run_goal(cfg, 'pinv', goal, obstacles='clutter', duration=20.0, plan=True)
+    assert result['outcome'] == 'converged', (result['final_position_error_m'], result['why'])
+    assert result['contact_depth_m'] <= CONTACT_DEPTH and result['replans'] == 0
 
 
 def test_a_goal_behind_the_table_is_reached_with_the_plan_and_not_without(behind_the_table):

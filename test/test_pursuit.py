@@ -114,21 +114,24 @@ def test_a_base_that_keeps_to_the_plan_gets_its_points_then_the_goal(pursuit):
     assert len(planned) > 10 and planned[-1, 0] > 1.75
     follower = pursuit.follower
     out, points = None, 0
-    for _ in range(5 * len(planned)):  # the base where the plan's clock says it is
-        base = follower.handoff.base_poses[min(int(follower.clock / follower.handoff.dt), len(planned) - 1)]
-        out = pursuit.step(0.025, base, Q_ARM)
+    handoff = follower.handoff
+    for _ in range(5 * len(handoff.points)):  # the base and the arm where the plan's clock says they are
+        k = min(int(follower.clock / handoff.dt), len(handoff.points) - 1)
+        out = pursuit.step(0.025, handoff.base_poses[k], handoff.points[k].base.arm)
         if pursuit.state is PursuitState.APPROACH:
             break
         points += out.reference is not None
-    assert pursuit.state is PursuitState.APPROACH and points > 0.9 * len(planned)
-    # the final approach: the goal itself, at rest, with the stance (the plan's last pose) as its base
+    assert pursuit.state is PursuitState.APPROACH and points > 0.9 * len(handoff.points)
+    # the final approach: the goal itself, at rest, with the stance (the plan's last pose) as its
+    # base and the arm's posture there (the last point's: the arm's motion to it came after the path)
     approach = out.reference
     assert approach is not None and not out.forward_goal
     np.testing.assert_allclose(approach.position, BEHIND_TABLE)
     np.testing.assert_allclose(approach.velocity, 0.0)
     np.testing.assert_allclose(approach.base.pose, planned[-1])
     np.testing.assert_allclose(approach.base.rates, 0.0)
-    assert approach.base.arm is None, "the stance's posture is the method's to find"
+    assert len(handoff.points) > len(planned) and np.array_equal(approach.base.arm, handoff.stance_arm)
+    np.testing.assert_allclose(handoff.points[-1].base.arm, handoff.stance_arm)
     assert 'as the last point, with the stance' in ' '.join(e.message for e in out.events)
     later = [pursuit.step(0.025, planned[-1], Q_ARM) for _ in range(5)]
     assert all(s.reference is None and not s.forward_goal for s in later), 'sent once: the resolver holds it'

@@ -190,6 +190,10 @@ def test_a_goal_after_a_plan_holds_the_stance_as_its_base(targets):
     stance = (np.array((0.3, 0.1, 0.2)), np.zeros(3), np.zeros(3))
     assert kinds(targets.goal('world', [1.5, 0.3, 1.0, *IDENTITY], None, planned_base=stance)) == ['accepted']
     assert np.allclose(targets.target.base.pose, stance[0]) and targets.target.base.stance
+    assert targets.target.base.arm is None
+    posture = stance + (np.linspace(-0.5, 0.5, 7),)  # with the arm's posture at the stance
+    assert kinds(targets.goal('world', [1.5, 0.2, 1.0, *IDENTITY], None, planned_base=posture)) == ['accepted']
+    assert targets.target.base.stance and np.array_equal(targets.target.base.arm, posture[3])
     bad = (np.array((0.3, math.inf, 0.2)), np.zeros(3), np.zeros(3))
     events = targets.goal('world', [1.5, 0.4, 1.0, *IDENTITY], None, planned_base=bad)
     assert kinds(events) == ['rejected'] and 'non-finite values of the planned base' in events[0].message
@@ -198,14 +202,15 @@ def test_a_goal_after_a_plan_holds_the_stance_as_its_base(targets):
 
 def test_a_plan_s_last_point_is_held_with_its_stance_and_judged_as_a_goal(targets):
     """The final approach after a plan (goal_planner): the goal as the last point, at rest, with
-    the stance as its base; once no point follows it is held with the stance and reported reached."""
+    the stance and the arm's posture there as its base; once no point follows it is held with
+    them and reported reached."""
     moving = (np.array((0.2, 0.1, 0.1)), np.array((0.4, 0.0, 0.1)), np.zeros(3), np.zeros(7))
     targets.trajectory_point(
         'world', [1.4, 0.3, 1.0, *IDENTITY], [0.4, 0, 0, 0, 0, 0.1], np.zeros(6), 1.0, None, moving
     )
     for _ in range(40):  # followed with a lag that never falls: no progress
         targets.judge(diag(0.05))
-    stance = (np.array((0.3, 0.1, 0.2)), np.zeros(3), np.zeros(3))
+    stance = (np.array((0.3, 0.1, 0.2)), np.zeros(3), np.zeros(3), np.linspace(-0.5, 0.5, 7))
     targets.trajectory_point('world', [1.5, 0.3, 1.0, *IDENTITY], np.zeros(6), np.zeros(6), 1.1, None, stance)
     target, events = targets.current(1.1 + TIMEOUT + 0.01)
     assert kinds(events) == ['held'] and not targets.tracking
@@ -213,7 +218,7 @@ def test_a_plan_s_last_point_is_held_with_its_stance_and_judged_as_a_goal(target
     np.testing.assert_allclose(target.base.pose, stance[0])
     assert target.base.stance  # as a goal given with the stance: the methods put it first
     np.testing.assert_allclose(target.base.rates, 0.0)
-    assert target.base.arm is None
+    np.testing.assert_array_equal(target.base.arm, stance[3])  # the stance's posture kept
     # judged afresh: the approach (from 0.3 m, halving) is not a stall of the trajectory's lag
     said = [(kinds(targets.judge(diag(0.3 * 0.5**k))), targets.progress.stalled) for k in range(10)]
     assert not any(stalled for _, stalled in said) and [k for k, _ in said].count(['reached']) == 1

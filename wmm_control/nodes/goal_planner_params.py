@@ -124,9 +124,32 @@ _SPECS = (
     Param('stall_distance', 'Motion [m] that counts as progress (follower).', lo=1e-4, hi=10.0, read_only=True),
     Param('stall_angle', 'Turn [rad] that counts as progress (follower).', lo=1e-4, hi=6.3, read_only=True),
     Param(
+        'settle_distance',
+        'Distance [m] from the stance within which, moving slower than this per second, the base is at '
+        'rest there and the arm\'s motion to the stance\'s posture starts (follower).',
+        lo=1e-4,
+        hi=10.0,
+        read_only=True,
+    ),
+    Param(
+        'settle_angle',
+        'The same for the heading [rad] and its rate [rad/s] (follower).',
+        lo=1e-4,
+        hi=6.3,
+        read_only=True,
+    ),
+    Param(
+        'settle_time',
+        'Time [s] the arm\'s motion to the stance\'s posture waits at most for the base at rest; then the final '
+        'approach follows without it (follower).',
+        lo=0.0,
+        hi=600.0,
+        read_only=True,
+    ),
+    Param(
         'hold_base',
-        'Send each point\'s planned base pose (joint "base") and the travel posture with it on /ee_reference, '
-        'and the final approach\'s goal there as the last point with the stance: the methods pull the base '
+        'Send each point\'s planned base pose (joint "base") and the arm\'s posture with it on /ee_reference, '
+        'and the final approach\'s goal there as the last point with the stance and its posture: the methods pull the base '
         'towards the plan, and hold it at the stance, below the end effector\'s task (follower); false: '
         'the points alone, the goal on ~/goal.',
         read_only=True,

@@ -50,17 +50,29 @@ pulls the clock forward: the follower keeps the last planned pose the measured b
 (the nearest planned pose, in the lag's metric, from the last one passed up to ``lookahead``
 [s] ahead of ``s``), and ``s`` never lags it.
 
-Once ``s`` reaches the plan's end the target is the goal itself (:attr:`FollowState.APPROACH`):
-the method's final whole-body approach, with the plan's last base pose (the stance, from which
-the goal is reachable with margin from the obstacles) held as the base's reference
-(:attr:`PlanFollower.approach`; with ``hold_base``): a method whose secondary task would move
-the base (task sharing's posture pull) otherwise drives it from the stance into the safety
-stage's hold. While following, the follower is
-:attr:`FollowState.STALLED` when for ``stall_time`` the planned pose at ``s`` has not moved on
-by ``stall_distance`` or turned by ``stall_angle``, and the measured base has not come that
-much nearer to it (in distance or in heading): the robot is held off the plan (by an obstacle
-the plan did not know, by the safety stage; moving along the obstacle is no progress), and the
-caller plans again from where it is. It is following again as soon as either moves on.
+A hand-off made with the stance's arm posture ends with the arm's motion to it, the base at
+rest at the stance (:meth:`~wmm_control.planning.handoff.Handoff.of`): its points are given
+like the others, once the measured base is at rest at the stance (within ``settle_distance``
+and ``settle_angle`` of it, moving slower than that per second): until then the clock is held
+at the motion's first point, which holds the base to the stance, for at most ``settle_time``;
+a base not at rest there by then goes to the final approach without the arm's motion. A base
+that accelerates slowly (robot B's, 0.025 m/s²) may reach the path's end short of the stance and
+still moving, and swing about it: the arm's motion begun then leaves the end effector behind its
+points, the follower stalls and the plan made again from there goes astray. Once ``s`` reaches
+the plan's end the target is the goal itself
+(:attr:`FollowState.APPROACH`): the method's final whole-body approach, with the plan's last
+base pose (the stance, from which the goal is reachable with margin from the obstacles) held as
+the base's reference and the stance's arm posture as the arm's (:attr:`PlanFollower.approach`;
+with ``hold_base``): a method whose secondary task would move the base (task sharing's posture
+pull) otherwise drives it from the stance into the safety stage's hold. While following, the
+follower is :attr:`FollowState.STALLED` when for ``stall_time`` the planned pose at ``s`` has
+not moved on by ``stall_distance`` or turned by ``stall_angle`` (nor, in the arm's motion after
+the path, the planned arm posture by ``stall_angle`` on a joint), and the
+measured base has not come that much nearer to the planned pose (in distance or in heading):
+the robot is held off the plan (by an obstacle the plan did not know, by the safety stage;
+moving along the obstacle is no progress), and the caller plans again from where it is. It is
+following again as soon as either moves on. Waiting for the base at rest at the stance is not a
+stall.
 
 Pure and ROS-free: time is what :meth:`PlanFollower.step` is told.
 """
@@ -106,6 +118,12 @@ class FollowParams:
         stall_time: [s] without progress (module docstring) before the follower is stalled.
         stall_distance: [m] of motion that is progress.
         stall_angle: [rad] of turn that is progress.
+        settle_distance: [m] from the stance within which, moving slower than this per second,
+            the base is at rest there: the arm's motion to the stance's posture starts then
+            (module docstring).
+        settle_angle: [rad] the same for its heading (and [rad/s] its turn rate).
+        settle_time: [s] the arm's motion waits at most for the base to be at rest; then the
+            final approach follows without it.
         hold_base: give the point's planned base with it (module docstring): the methods
             hold the base to the plan; False gives the end effector's point alone.
 
@@ -124,6 +142,9 @@ class FollowParams:
     stall_time: float = 5.0
     stall_distance: float = 0.02
     stall_angle: float = 0.05
+    settle_distance: float = 0.03
+    settle_angle: float = 0.05
+    settle_time: float = 5.0
     hold_base: bool = True
 
     def __post_init__(self) -> None:
@@ -136,13 +157,17 @@ class FollowParams:
             'stall_time',
             'stall_distance',
             'stall_angle',
+            'settle_distance',
+            'settle_angle',
         )
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
                 raise ConfigError(f'FollowParams.{name} must be a finite number > 0, got {value!r}')
-        if not (isinstance(self.lookahead, (int, float)) and math.isfinite(self.lookahead) and self.lookahead >= 0.0):
-            raise ConfigError(f'FollowParams.lookahead must be a finite number >= 0 [s], got {self.lookahead!r}')
+        for name in ('lookahead', 'settle_time'):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+                raise ConfigError(f'FollowParams.{name} must be a finite number >= 0 [s], got {value!r}')
         if not (isinstance(self.slow_from, (int, float)) and 0.0 <= self.slow_from < 1.0):
             raise ConfigError(f'FollowParams.slow_from must be in [0, 1), got {self.slow_from!r}')
         if not isinstance(self.hold_base, bool):
@@ -199,16 +224,21 @@ class PlanFollower:
         self._passed = 0  # the last planned sample the base has passed
         self._idle = 0.0  # [s] without progress
         self._anchor_plan: np.ndarray | None = None  # the planned pose at the last progress
+        self._anchor_point = 0  # the sample of the point given then
         self._anchor_lag = (math.inf, math.inf)  # the base's lag (distance, angle) then
+        self._previous: np.ndarray | None = None  # the base measured the period before
+        self._settling = 0.0  # [s] the arm's motion has waited for the base to be at rest
+        self._arm_begun = False  # the base was at rest at the stance: the arm's motion goes on
 
     @property
     def approach(self) -> PoseTarget:
         """The target of the final approach: the goal, with the plan's last base pose (the
-        stance, at rest) as its base when ``hold_base`` (module docstring)."""
+        stance, at rest) as its base and the stance's arm posture (``handoff.stance_arm``) when
+        ``hold_base`` (module docstring)."""
         last = self.handoff.points[-1].base
         if not self.params.hold_base or last is None:
             return self.goal
-        return PoseTarget.goal(self.goal.position, self.goal.rotation, last.pose)
+        return PoseTarget.goal(self.goal.position, self.goal.rotation, last.pose, self.handoff.stance_arm)
 
     @property
     def clock(self) -> float:
@@ -247,6 +277,26 @@ class PlanFollower:
         """Whether two poses are a step of progress apart."""
         distance, angle = self._apart(a, b)
         return distance >= self.params.stall_distance or angle >= self.params.stall_angle
+
+    def _posture_moved(self, k: int, anchor: int) -> bool:
+        """Whether the planned arm postures of samples ``k`` and ``anchor`` are a step of progress
+        apart (a joint by ``stall_angle``: the arm's motion to the stance's posture, the base at
+        rest, may move the end effector little)."""
+        a, b = self.handoff.points[k].base, self.handoff.points[anchor].base
+        if a is None or b is None or a.arm is None or b.arm is None:
+            return False
+        return float(np.max(np.abs(a.arm - b.arm))) >= self.params.stall_angle
+
+    def _settled(self, base: np.ndarray, dt: float) -> bool:
+        """Whether the measured ``base`` is at rest at the stance (the path's end): within
+        ``settle_distance`` and ``settle_angle`` of it, and moved less than that per second since
+        the period before."""
+        p = self.params
+        distance, angle = self._apart(self.handoff.base_poses[self.handoff.path_end], base)
+        if distance > p.settle_distance or angle > p.settle_angle or self._previous is None:
+            return False
+        moved, turned = self._apart(base, self._previous)
+        return moved <= p.settle_distance * dt and turned <= p.settle_angle * dt
 
     def _index(self, s: float) -> int:
         """The sample in force at the plan's time ``s``."""
@@ -312,20 +362,34 @@ class PlanFollower:
             if clock > (k + 1.0 - 1e-6) * handoff.dt:  # held at sample k: the rate it moved at
                 clock = max(self._clock, (k + 1.0 - 1e-6) * handoff.dt)
                 self._rate = (clock - self._clock) / dt if dt > 0.0 else 0.0
+        # the arm's motion to the stance's posture waits for the base at rest there (or settle_time)
+        settling = not self._arm_begun and handoff.path_end < len(handoff.points) - 1
+        settling = settling and self._index(clock) >= handoff.path_end  # held there by any rule
+        if settling and self._settled(base, dt):
+            self._arm_begun, settling = True, False
+        elif settling and self._settling < p.settle_time:
+            clock = min(clock, handoff.path_end * handoff.dt)
+            self._rate = 0.0
+            self._settling += dt
+        elif settling:  # never at rest there: the final approach without the arm's motion
+            clock, settling = end, False
+        self._previous = base
         self._clock = clock
         if self._clock >= end:
             return FollowStep(self.approach, FollowState.APPROACH, 1.0)
-        # progress since the last: the planned pose moved on, or the base came nearer to it
+        # progress since the last: the planned pose or the point moved on, or the base came nearer
         planned = self.planned_pose(self._clock)
+        k = self._index(self._clock)
         lag = self._apart(planned, base)
         if self._anchor_plan is None:
-            self._anchor_plan = before
+            self._anchor_plan, self._anchor_point = before, given
         closer = lag[0] <= self._anchor_lag[0] - p.stall_distance or lag[1] <= self._anchor_lag[1] - p.stall_angle
-        if self._moved(planned, self._anchor_plan) or closer:
-            self._anchor_plan, self._anchor_lag, self._idle = planned, lag, 0.0
+        arm = k > self.handoff.path_end and self._posture_moved(k, self._anchor_point)  # the arm's motion
+        if self._moved(planned, self._anchor_plan) or arm or closer or settling:
+            self._anchor_plan, self._anchor_point, self._anchor_lag, self._idle = planned, k, lag, 0.0
         else:
             self._idle += dt
-        point = handoff.points[self._index(self._clock)]
+        point = handoff.points[k]
         planned_base = None
         if p.hold_base and point.base is not None:  # the planned base, slowed as the point is
             planned_base = BaseReference(

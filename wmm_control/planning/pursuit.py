@@ -10,11 +10,12 @@ logged, and the robot is held where it is. An accepted one is planned
 * **direct**: the best stance is where the base stands (the arm reaches the goal from here,
   clear of the obstacles): the goal goes to the resolver unchanged, as without the planner;
 * **following**: a base path to a stance elsewhere: its hand-off points
-  (:class:`~wmm_control.planning.handoff.Handoff`) are given one per period at the pace the
-  base keeps (:class:`~wmm_control.planning.follow.PlanFollower`), then the goal itself for the
+  (:class:`~wmm_control.planning.handoff.Handoff`, the arm's motion to the stance's posture at
+  their end) are given one per period at the pace the robot keeps
+  (:class:`~wmm_control.planning.follow.PlanFollower`), then the goal itself for the
   resolver's final whole-body approach (**approach**): with ``hold_base`` as the last point
-  (:attr:`PursuitStep.reference`), at rest, with the plan's last base pose (the stance) as its
-  base (:attr:`PlanFollower.approach <wmm_control.planning.follow.PlanFollower.approach>`),
+  (:attr:`PursuitStep.reference`), at rest, with the plan's last base pose (the stance) and the
+  stance's arm posture as its base (:attr:`PlanFollower.approach <wmm_control.planning.follow.PlanFollower.approach>`),
   which the resolver holds once no point follows it and judges as a goal
   (:meth:`TargetManager.current <wmm_control.resolvers.targets.TargetManager.current>`), so
   that the base is held at the stance as in the direct engine; without ``hold_base`` the goal
@@ -244,7 +245,8 @@ class PlanWorker:
             here = plan.stance is not None and np.array_equal(plan.stance.base_pose, job.base_pose)
             handoff = None
             if plan.trajectory is not None and not here:
-                handoff = Handoff.of(planner.model, plan.trajectory, travel)
+                stance = None if plan.stance is None else plan.stance.q_arm
+                handoff = Handoff.of(planner.model, plan.trajectory, travel, stance)
             self._results.put(_Planned(job.ticket, job.version, plan, handoff, here))
         except Exception as exc:  # a bug or a bad robot: reported, and the worker lives on
             self._results.put(_Failed(job.ticket, f'{type(exc).__name__}: {exc}'))

@@ -20,6 +20,9 @@ them), V and A are the largest for which, on every axis k the base follows,
 it). A piece's duration is rounded up to whole control periods by slowing it down (time scaled by
 c ≥ 1 scales the twists by 1/c and their rates by 1/c²), so each piece starts and ends on a sample.
 
+:func:`joint_motion` times the arm's straight joint-space motion (to the stance's posture, after
+the path) on the same profile, within a fraction of the arm's joint limits.
+
 :class:`BaseTrajectory` holds the samples: each period's pose, and the twist that takes the base
 from it to the next sample's pose in one period (the SE(2) logarithm: what a base integrating a
 constant twist over the period does), in the base's frame and as world rates (ẋ, ẏ, θ̇).
@@ -32,12 +35,13 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wmm_control.errors import WmmError
 from wmm_control.geometry import se2_integrate, se2_twist, twist_to_world, wrap_angle
 from wmm_control.robot_config import BaseSection
 
-__all__ = ['BaseTrajectory', 'LinearPiece', 'Piece', 'TwistPiece', 'time_path']
+__all__ = ['BaseTrajectory', 'LinearPiece', 'Piece', 'TwistPiece', 'joint_motion', 'time_path']
 
 #: steps of λ over which a piece's steered wheel headings are differenced (:func:`_steer_bounds`)
 STEER_SAMPLES = 256
@@ -188,6 +192,44 @@ def _lam(t: float, duration: float, ramp: float, accel: float) -> float:
     return 0.5 * accel * ramp * ramp + peak * (t - ramp)
 
 
+def _samples(speed: float, accel: float, dt: float) -> np.ndarray:
+    """λ every ``dt`` [s] of the profile of :func:`_profile`, its duration rounded up to whole
+    periods by slowing it down, from 0 to 1 (both included)."""
+    duration, ramp = _profile(speed, accel)
+    periods = max(1, math.ceil(duration / dt - 1e-9))
+    stretch = periods * dt / duration  # ≥ 1: slowed to whole periods
+    return np.array([_lam(k * dt / stretch, duration, ramp, accel) for k in range(periods)] + [1.0])
+
+
+def joint_motion(
+    q_from: ArrayLike,
+    q_to: ArrayLike,
+    velocity: ArrayLike,
+    acceleration: ArrayLike,
+    dt: float,
+    fraction: float,
+    max_speed: float = math.inf,
+    max_accel: float = math.inf,
+) -> np.ndarray:
+    """The straight joint-space motion from ``q_from`` to ``q_to`` sampled every ``dt`` [s]:
+    ``q_from + λ (q_to − q_from)``, λ on the trapezoidal profile of a piece (module docstring)
+    at the largest speed and acceleration within ``fraction`` of the joints' ``velocity`` and
+    ``acceleration`` limits and within ``max_speed`` and ``max_accel`` of λ itself [1/s, 1/s²]
+    (further bounds: the end effector's), its duration rounded up to whole periods. Shape
+    (K + 1, n), the first row ``q_from``, the last ``q_to``; one row when they are equal."""
+    start, end = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
+    delta = np.abs(end - start)
+    moving = delta > 0.0
+    if not moving.any():
+        return start[None, :].copy()
+    speed = min(float((fraction * np.asarray(velocity, dtype=float)[moving] / delta[moving]).min()), max_speed)
+    accel = min(float((fraction * np.asarray(acceleration, dtype=float)[moving] / delta[moving]).min()), max_accel)
+    lam = _samples(speed, accel, dt)
+    out = start + lam[:, None] * (end - start)
+    out[-1] = end
+    return out
+
+
 def _steer_bounds(piece: Piece, base: BaseSection) -> tuple[np.ndarray, np.ndarray]:
     """(B, B'): bounds of |dβ_i/dλ| and |d²β_i/dλ²| over the piece, β_i each steered wheel's
     heading (modulo π) for the twist u(λ) (:meth:`~wmm_control.robot_config.BaseSection.steer_headings`),
@@ -247,10 +289,7 @@ def time_path(pieces, base: BaseSection, dt: float, fraction: float = 0.95) -> B
         limits = _speed_and_accel(piece, base, fraction)
         if limits is None:
             continue
-        duration, ramp = _profile(*limits)
-        periods = max(1, math.ceil(duration / dt - 1e-9))
-        stretch = periods * dt / duration  # ≥ 1: the piece slowed to whole periods
-        poses += [piece.pose(_lam(k * dt / stretch, duration, ramp, limits[1])) for k in range(periods)]
+        poses += [piece.pose(lam) for lam in _samples(*limits, dt)[:-1]]
     poses.append(pieces[-1].pose(1.0))
     out = np.array(poses)
     twists = np.zeros_like(out)

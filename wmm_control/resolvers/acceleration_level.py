@@ -31,8 +31,9 @@ not in the papers): eq (23)'s law on the base's planned pose,
 y, the orientation gains on θ; a differential base takes its part along its heading,
 ``u̇_b* = Tᵀ ξ̈*``), is ``task['base_follow']`` (None without a plan), which each method gives
 the base in its own way (:mod:`~wmm_control.resolvers.amp`, :mod:`~wmm_control.resolvers.traditional`).
-The same law on the arm's joints towards the plan's travel posture (``BaseReference.arm``, given
-on the way, not in the approach; the orientation gains), ``q̈_a* = K_p (q_a,plan − q_a) − K_d q̇_a``,
+The same law on the arm's joints towards the plan's arm posture (``BaseReference.arm``: the travel
+posture on the way, the stance's posture on the arm's way to it and in the final approach; the
+orientation gains), ``q̈_a* = K_p (q_a,plan − q_a) − K_d q̇_a``,
 is ``task['arm_follow']`` (None without one), which the traditional planner uses.
 """
 
@@ -158,8 +159,8 @@ class AccelerationResolver(Resolver):
             ``orientation_error`` [rad], ``sigma`` σ_min of the arm's task rows, ``sigma_position``
             that of its position rows, ``base_follow`` the base's accelerations towards a
             followed plan's pose (n_b,) or None, ``on_the_way`` whether that pose is a point of
-            the plan's way (not the stance of its final approach), ``arm_follow`` the arm's towards the plan's
-            travel posture (n,) or None (module docstring).
+            the plan's way (not the stance of its final approach), ``arm_follow`` the arm's towards
+            the plan's arm posture (n,) or None (module docstring).
         """
         p = self.params
         model = self.model

@@ -122,8 +122,9 @@ class BaseReference:
         pose: the planned base pose (x, y, θ) in the world [m, m, rad]. Shape (3,).
         rates: its planned world rates (ẋ, ẏ, θ̇) [m/s, m/s, rad/s]. Shape (3,).
         acceleration: its planned world accelerations (ẍ, ÿ, θ̈) [m/s², m/s², rad/s²]. Shape (3,).
-        arm: the arm's posture the plan assumed with it (its travel posture) [rad or m], or None
-            (the final approach: the posture is the method's to find). Shape (n,).
+        arm: the arm's posture the plan assumed with it [rad or m]: on the way its travel
+            posture, at the stance the posture its inverse kinematics reached the goal with (the
+            branch the stance was chosen for); None: the method's own. Shape (n,).
         stance: True for the base's place in the final approach, given with a goal (the plan's
             last pose, at rest, from which the goal is reachable): a method's own posture task
             yields to it there; False for a point of the way there.
@@ -175,13 +176,19 @@ class PoseTarget:
     base: BaseReference | None = None
 
     @classmethod
-    def goal(cls, position: ArrayLike, rotation: ArrayLike, stance: ArrayLike | None = None) -> Self:
+    def goal(
+        cls, position: ArrayLike, rotation: ArrayLike, stance: ArrayLike | None = None, arm: ArrayLike | None = None
+    ) -> Self:
         """A goal: the end effector at rest at ``position``, ``rotation``; with ``stance``
         (x, y, θ) [m, m, rad], the base's place for it, at rest (a :class:`BaseReference` marked
-        ``stance``, without an arm posture: the posture is the method's to find). The one place a
-        stance is made: a goal given with a planned base, a held plan point, a plan's final
-        approach."""
-        base = None if stance is None else BaseReference(np.asarray(stance, dtype=float), stance=True)
+        ``stance``), and ``arm`` the arm's posture there [rad or m] (the stance's inverse
+        kinematics), or None (the posture is the method's to find). The one place a stance is
+        made: a goal given with a planned base, a held plan point, a plan's final approach."""
+        base = None
+        if stance is not None:
+            base = BaseReference(
+                np.asarray(stance, dtype=float), arm=None if arm is None else np.asarray(arm, dtype=float), stance=True
+            )
         return cls(position, rotation, base=base)  # type: ignore[arg-type]  # validated on construction
 
     def __post_init__(self):

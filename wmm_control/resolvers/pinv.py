@@ -3,7 +3,7 @@
 ``u = Jᵀ (J Jᵀ + ρ² I)⁻¹ ṗ_ref`` with ṗ_ref the eq (12) pose controller: the minimum-norm
 joint velocity, base and arm moving together, no null-space task and no compensation (save a
 followed plan's base pull, :meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.base_pull`,
-with the arm pulled towards the plan's travel posture beside it, at the gain λ_p). ρ is
+with the arm pulled towards the plan's arm posture beside it, at the gain λ_p). ρ is
 Table I's 0.001 away from singularities (see :func:`~wmm_control.resolvers.pose_servo.singularity_damping`).
 """
 
@@ -31,7 +31,7 @@ class PinvResolver(PoseServoResolver):
     """
 
     name = 'pinv'
-    pulls_arm_to_plan = True  # no posture task of its own: a followed plan's travel posture
+    pulls_arm_to_plan = True  # no posture task of its own: a followed plan's arm posture
 
     def __init__(self, robot: str | Path | RobotConfig | KinematicModel, params: PinvParams | None = None) -> None:
         super().__init__(robot, params if params is not None else PinvParams())

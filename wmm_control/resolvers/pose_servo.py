@@ -374,7 +374,7 @@ class PoseServoResolver(Resolver):
         """The secondary task of a followed plan's base (module docstring): ``z`` over u, the
         base's entries ``ᵇR_w (ξ̇_plan + λ_p (ξ_plan − ξ))`` (eq 12's law on the base's planned
         pose, its rates as feedforward) on the axes it follows; the arm's ``λ_p (q_a,plan − q_a)``
-        with ``arm`` and the plan's arm posture given (the travel posture), else zero.
+        with ``arm`` and the plan's arm posture given (the travel posture, or the stance's), else zero.
         Shape (n_b + n,)."""
         theta = float(state.base_pose[2])
         world = reference.rates + self.params.lambda_p * reference.error(state.base_pose)

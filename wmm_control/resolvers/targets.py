@@ -210,7 +210,7 @@ class TargetManager:
         return [LogEvent('rejected', f'rejected {topic}: {reason}; holding still')]
 
     def _planned_base(self, planned_base) -> tuple[BaseReference | None, str]:
-        """(a followed plan's base (pose, rates, accelerations[, the arm's travel posture]) as a
+        """(a followed plan's base (pose, rates, accelerations[, the arm's posture]) as a
         :class:`BaseReference`, or None when there is none; '' or why it is refused)."""
         if planned_base is None:
             return None, ''
@@ -247,7 +247,10 @@ class TargetManager:
             return events  # the same goal again (a sequencer re-publishing it)
         # a planned base given with a goal is where the base stands for it (its stance)
         self.target = PoseTarget.goal(
-            values[:3], matrix_from_quaternion(quat), None if planned is None else planned.pose
+            values[:3],
+            matrix_from_quaternion(quat),
+            None if planned is None else planned.pose,
+            None if planned is None else planned.arm,
         )
         self._goal_key = key
         self.tracking = False
@@ -303,7 +306,10 @@ class TargetManager:
         if self.tracking and self.target is not None and not self.reference.fresh(now):
             base = self.target.base
             self.target = PoseTarget.goal(
-                self.target.position, self.target.rotation, None if base is None else base.pose
+                self.target.position,
+                self.target.rotation,
+                None if base is None else base.pose,
+                None if base is None else base.arm,
             )
             self.tracking = False
             self._start()

@@ -10,8 +10,8 @@ moment.)
 
 Following a plan (a :class:`~wmm_control.resolvers.interface.BaseReference` on the target; not
 in the paper, and nothing changes without one): the base's accelerations towards its planned
-pose (``task['base_follow']``) and, on the way, the arm's towards the plan's travel posture
-(``task['arm_follow']``), each clipped into this period's bounds and less that entry's share of
+pose (``task['base_follow']``) and the arm's towards the plan's arm posture (the travel posture,
+then the stance's; ``task['arm_follow']``), each clipped into this period's bounds and less that entry's share of
 the task's solution, join q̈_A in the null space, so what the task leaves free brings the base
 back onto the plan and the arm into the posture the plan was checked with. Within the bounds:
 eq (23)'s gains ask a base off its plan for more than it can do (robot B's, 0.025 m/s², for
