@@ -97,7 +97,11 @@ class GoalProgress:
         self._best = [math.inf, math.inf]  # best (position, orientation) error of the goal
         self._held = [math.inf, math.inf]  # held (position, orientation) error of the goal
         self._block = [0.0, 0.0]  # largest errors of the stride under way
-        self._blocks: deque[list[float]] = deque()  # ...and of the strides before it, a window's worth
+        # ...and of the strides before it, a window's worth: ``_kept`` strides, numbered from
+        # ``_first``; for each error, a deque of (stride number, error) with the errors falling
+        # from its head, the window's largest at the head (a sliding maximum)
+        self._first, self._kept = 0, 0
+        self._peaks: tuple[deque[tuple[int, float]], ...] = (deque(), deque())
         self._last_reached: int | None = None
         self._last_moving: int | None = None  # the last cycle whose target still moved
         self._gathering_pace = True
@@ -128,21 +132,28 @@ class GoalProgress:
         if not self._cycles or self.cycles - self._cycles[-1] >= self._stride:
             self._cycles.append(self.cycles)
             self._samples.append((tuple(best), tuple(self._held)))
-            self._blocks.append(self._block)
+            number = self._first + self._kept
+            for peaks, value in zip(self._peaks, self._block):
+                while peaks and peaks[-1][1] <= value:
+                    peaks.pop()
+                peaks.append((number, value))
+            self._kept += 1
             self._block = [0.0, 0.0]
         while len(self._cycles) > 1 and self._cycles[1] <= self.cycles - 2 * self._window:
             self._cycles.popleft()
             self._samples.popleft()
-        while len(self._blocks) * self._stride > self._window:
-            self._blocks.popleft()
+        while self._kept * self._stride > self._window:
+            self._first += 1
+            self._kept -= 1
+        for peaks in self._peaks:
+            while peaks and peaks[0][0] < self._first:
+                peaks.popleft()
         self.stalled = not self.reached and not self._progress(window_max)
 
     def _window_max(self):
         """The largest (position, orientation) errors of about the last ``stall_time``."""
-        pos, ori = self._block
-        for p, o in self._blocks:
-            pos, ori = max(pos, p), max(ori, o)
-        return pos, ori
+        (pos, ori), (peak_pos, peak_ori) = self._block, self._peaks
+        return max(pos, peak_pos[0][1] if peak_pos else 0.0), max(ori, peak_ori[0][1] if peak_ori else 0.0)
 
     def _at(self, cycle):
         """(best, held) errors at the latest sample not after ``cycle`` (the oldest sample kept
