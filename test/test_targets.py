@@ -102,6 +102,25 @@ def test_a_goal_inside_the_body_or_an_obstacle_is_rejected(targets):
     assert kinds(goal(targets, (2.5, 0.0, 1.0), base=base)) == ['accepted']
 
 
+def test_a_target_with_a_planned_base_is_checked_against_the_body_where_the_base_is_planned(targets):
+    """A plan's point, or its final approach's goal with the stance, is met with the base at its
+    planned pose: the body is checked there, not where the base is now. Checked at the measured
+    pose, robot B's final approach to a goal 0.12 m below its base frame, with the base over the
+    goal at the path's end, was refused, and the robot held there for the rest of the run."""
+    here, there = np.zeros(3), np.array([3.0, 0.0, 0.0])
+    planned = (there, np.zeros(3), np.zeros(3))
+    under_here, under_there = [0.0, 0.0, 0.3, *IDENTITY], [3.0, 0.0, 0.3, *IDENTITY]
+    assert targets.workspace.impossible(under_here[:3], here)  # inside the body where the base is
+    events = targets.trajectory_point('world', under_here, np.zeros(6), np.zeros(6), 1.0, here, planned)
+    assert kinds(events) == ['tracking']
+    assert kinds(targets.goal('world', under_here, here, planned_base=planned)) == ['accepted']
+    for events in (
+        targets.trajectory_point('world', under_there, np.zeros(6), np.zeros(6), 2.0, here, planned),
+        targets.goal('world', under_there, here, planned_base=planned),
+    ):
+        assert kinds(events) == ['rejected'] and "inside the robot's own body" in events[0].message
+
+
 def test_a_non_unit_quaternion_is_normalised_with_a_note(targets):
     q = np.array([0.0, 0.0, math.sin(0.2), math.cos(0.2)]) * 3.0
     events = goal(targets, quat=q)

@@ -8,7 +8,8 @@ trajectory held, and how the goal fares. ``redundancy_resolver`` wires its topic
   from the world origin, or where :meth:`Workspace.impossible
   <wmm_control.kinematics.workspace.Workspace.impossible>` says no motion reaches it (below
   the floor, above the highest the end effector can reach, inside the base's body at its
-  current pose, inside an obstacle) is rejected with its reason, and the target is then none
+  current pose, or at the planned base's pose of a goal or point that carries one, inside an
+  obstacle) is rejected with its reason, and the target is then none
   (the robot holds still). A non-unit quaternion is normalised with a note. The same goal
   again (a sequencer re-publishing it) changes nothing: the goal is not restarted;
 * **trajectory points** (``/ee_reference``): a pose with its twist and acceleration (world
@@ -234,12 +235,18 @@ class TargetManager:
         ``planned_base`` where a followed plan left the base for the final approach
         (:meth:`trajectory_point`), or None."""
         values = np.asarray(pose, dtype=float)
+        planned, why = self._planned_base(planned_base)
         quat, reason, events = check_goal(
-            frame, values, self.world_frame, self.max_goal_distance, self.workspace, base, self.obstacles
+            frame,
+            values,
+            self.world_frame,
+            self.max_goal_distance,
+            self.workspace,
+            _body_at(base, planned),
+            self.obstacles,
         )
         if quat is None:
             return events + self.reject(reason)
-        planned, why = self._planned_base(planned_base)
         if why:
             return events + self.reject(why)
         key = goal_key(values[:3], quat)
@@ -278,12 +285,12 @@ class TargetManager:
             or float(np.max(np.abs(np.concatenate((vel, acc))))) > MAX_REFERENCE_RATE
         ):
             return self.reject('beyond max_goal_distance, or a twist or acceleration beyond 1e3', REFERENCE)
-        impossible = self.workspace.impossible(pose[:3], base, self.obstacles)
-        if impossible:
-            return self.reject(f'position {pose[:3].tolist()}: {impossible}', REFERENCE)
         planned, why = self._planned_base(planned_base)
         if why:
             return self.reject(why, REFERENCE)
+        impossible = self.workspace.impossible(pose[:3], _body_at(base, planned), self.obstacles)
+        if impossible:
+            return self.reject(f'position {pose[:3].tolist()}: {impossible}', REFERENCE)
         quat, events = checked_quaternion(pose[3:], '/' + REFERENCE)
         if quat is None:
             return events + self.reject('zero quaternion', REFERENCE)
@@ -399,3 +406,11 @@ class TargetManager:
         self._stall_logged = False
         self._reached_logged = False
         self._cycles = 0
+
+
+def _body_at(base, planned: BaseReference | None):
+    """The base pose a target is checked against the body at: a followed plan's base where
+    there is one (where the base will be when the point is to be met: at the end of a path
+    that ends beside a low goal the base may stand over it, and the goal of the final approach,
+    checked there, was refused and the robot held for good), else the measured ``base``."""
+    return base if planned is None else planned.pose
