@@ -112,11 +112,11 @@ def test_every_method_keeps_its_base_within_the_lead_of_the_plan_and_reaches_the
     assert np.linalg.norm(log.ee_position[-1] - target.position) < 0.01
 
 
-def _hold_the_hand_with_a_base_reference(cfg, reference, seconds):
-    """(the base's error to ``reference`` after ``seconds`` of task sharing holding the end
+def _hold_the_hand_with_a_base_reference(cfg, reference, seconds, method='task_sharing'):
+    """(the base's error to ``reference`` after ``seconds`` of ``method`` holding the end
     effector where it starts, how far the end effector moved [m]): the commands integrated
     kinematically from the robot's start, the base given ``reference``."""
-    resolver = make_resolver('task_sharing', cfg, **resolver_parameters(METHOD_RUNS['task_sharing']))
+    resolver = make_resolver(method, cfg, **resolver_parameters(METHOD_RUNS[method]))
     base, q = np.array(cfg.start.base_pose, dtype=float), np.array(cfg.start.arm, dtype=float)
     start = RobotState(base, np.zeros(3), q, np.zeros_like(q))
     position, rotation = start.ee_placement(resolver.model, update=True)
@@ -143,6 +143,40 @@ def test_task_sharing_brings_its_base_onto_the_planned_pose_with_the_hand_still(
     error, moved = _hold_the_hand_with_a_base_reference(cfg, lambda b: BaseReference(b + offset, stance=stance), 20.0)
     assert moved < 1e-4
     assert np.linalg.norm(error[:2]) < 0.005 and abs(error[2]) < 0.005
+
+
+@pytest.mark.parametrize('robot', ['steerable', 'panda_diff'])
+def test_pinv_brings_its_base_onto_the_planned_pose_with_the_hand_still(robot):
+    """pinv projects the plan's pull with the arm alone making up for it: the base follows its
+    pull whole, the end effector held still. Projected without the weighting, the correction
+    that keeps the end effector still took most of the base's turn back out of the pull."""
+    cfg = load_robot(robot)
+    offset = np.array((0.15, 0.1, 0.2)) if 1 in cfg.base.axes else np.array((0.15, 0.0, 0.2))
+    error, moved = _hold_the_hand_with_a_base_reference(cfg, lambda b: BaseReference(b + offset), 20.0, 'pinv')
+    assert moved < 1e-3
+    assert abs(error[2]) < 0.005
+    assert np.linalg.norm(error[:2]) < (0.005 if 1 in cfg.base.axes else 0.15 * math.sin(0.2) + 0.005)
+
+
+@pytest.mark.parametrize('direction', [1.0, -1.0])
+def test_a_differential_base_is_steered_back_onto_the_plans_line(direction):
+    """`panda_diff` (no sideways axis) starts 0.1 m beside a plan that drives 3 m straight ahead
+    (or backs up 3 m): pinv's pull turns the base back onto the plan's line as it goes, the end
+    effector on its points. Without the steering the offset stayed 0.1 m, and backing up, with the
+    pull projected without the weighting, the base swung off the plan (0.5 m, 1.3 rad)."""
+    cfg = load_robot('panda_diff')
+    path = [TwistPiece(np.zeros(3), np.array((3.0 * direction, 0.0, 0.0)))]
+    handoff = Handoff.of(KinematicModel(cfg), time_path(path, cfg.base, cfg.period), cfg.start.arm)
+    resolver = make_resolver('pinv', cfg, **resolver_parameters(METHOD_RUNS['pinv']))
+    q = np.array(cfg.start.arm, dtype=float)
+    state, dt = RobotState(np.array((0.0, 0.1, 0.0)), np.zeros(3), q, np.zeros_like(q)), resolver.params.dt
+    for point in handoff.points:  # one a period, as the plan's clock gives them at full pace
+        cmd = resolver.step(state, point)
+        pose = se2_integrate(state.base_pose, cmd.base_twist, dt)
+        state = RobotState(pose, cmd.base_twist, state.q_arm + dt * cmd.arm_velocity, cmd.arm_velocity)
+    error = point.base.error(state.base_pose)
+    assert abs(error[1]) < 0.03 and abs(error[0]) < 0.01 and abs(error[2]) < 0.02
+    assert np.linalg.norm(state.ee_placement(resolver.model, update=True)[0] - point.position) < 0.005
 
 
 def test_a_planned_base_given_with_a_goal_is_its_stance(turn_then_straight):
