@@ -172,6 +172,34 @@ def test_stalled_after_the_stall_time_without_motion_and_not_before(plan):
     assert follower.step(dt, moved).state is FollowState.FOLLOWING
 
 
+def test_a_base_held_behind_while_the_end_effector_keeps_on_its_point_is_stalled(plan):
+    handoff, goal = plan
+    follower = PlanFollower(handoff, goal, PARAMS)
+    dt = handoff.dt
+    base = handoff.base_poses[0]
+    # the base is held where it starts (by an obstacle the plan did not know, by the safety
+    # stage) while the arm keeps the end effector on its point: the clock creeps on at the
+    # base's floor, which is no progress once the base is a lead behind the planned pose
+    behind = None
+    for i in range(int(handoff.duration / (PARAMS.base_floor * dt))):
+        k = min(int(math.floor(follower.clock / dt + 1e-9)), len(handoff.points) - 1)
+        step = follower.step(dt, base, *_ee(handoff, k))
+        assert step.state is not FollowState.APPROACH, 'crept to the plan\'s end without a stall'
+        lag = _lag(follower.planned_pose(), base)
+        if behind is None and max(lag[0] / PARAMS.base_lead_distance, lag[1] / PARAMS.base_lead_angle) >= 1.0:
+            behind = i
+        if step.state is FollowState.STALLED:
+            break
+    assert step.state is FollowState.STALLED, 'never stalled'
+    # within the stall time of falling a lead behind (the last step of progress a little before)
+    assert behind is not None and PARAMS.stall_time - 0.5 <= (i - behind + 1) * dt <= PARAMS.stall_time + 2.0 * dt
+    assert follower.clock > 0.0 and follower.rate > 0.0  # the clock was still creeping
+    # the base moving on along the plan is progress again
+    k = min(int(math.floor(follower.clock / dt + 1e-9)), len(handoff.points) - 1)
+    ahead = handoff.base_poses[int(round(0.5 / dt))]
+    assert follower.step(dt, ahead, *_ee(handoff, k)).state is FollowState.FOLLOWING
+
+
 def test_a_slow_base_is_not_stalled(plan):
     handoff, goal = plan
     follower = PlanFollower(handoff, goal, PARAMS)

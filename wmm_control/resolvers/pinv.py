@@ -3,10 +3,20 @@
 ``u = Jᵀ (J Jᵀ + ρ² I)⁻¹ ṗ_ref`` with ṗ_ref the eq (12) pose controller: the minimum-norm
 joint velocity, base and arm moving together, no null-space task and no compensation (save a
 followed plan's base pull, :meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.base_pull`,
-which the base takes whole in place of its share of the task, the arm making up for it in the
-task's null space, and below it the arm's pull towards the plan's arm posture, at the gain λ_p,
-in the null space of the task and the base: projected together, the arm's pull drove the base
-off the plan, `docs/methods.md`). ρ is
+with the arm pulled towards the plan's arm posture beside it, at the gain λ_p). On a followed
+plan's way (a point whose planned base is not the stance) the arm does the task and the base
+follows the pull: ``u = A Jᵀ (J A Jᵀ + ρ² I)⁻¹ ṗ_ref + P_A z``, A the activation with the base's
+entries zero and the arm's one, P_A the projector weighted by it
+(:meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.null_motion`): the base's command is
+its pull (the plan's rates and the correction onto the planned pose), the arm makes up for what
+that does at the end effector. Whole-body with the pull in the null space of the task
+(``I − J⁺J``), the correction that keeps the end effector still took most of a base's turn back
+out of the pull (a turn of the base swings the end effector, and the minimum-norm correction
+shares that with the base itself), and the task's own share turned the base the other way:
+`panda_diff`'s base, which cannot move sideways, came out of its turns 0.2–0.4 rad off its
+plan's heading, drifted sideways into the safety stage's hold at the pillar of `table_pillar`
+and stayed there (``docs/methods.md``, the planner's section). At the stance (the final
+approach) pinv is whole-body, the stance's pull in the null space, as before. ρ is
 Table I's 0.001 away from singularities (see :func:`~wmm_control.resolvers.pose_servo.singularity_damping`).
 """
 
@@ -40,20 +50,15 @@ class PinvResolver(PoseServoResolver):
 
     def __init__(self, robot: str | Path | RobotConfig | KinematicModel, params: PinvParams | None = None) -> None:
         super().__init__(robot, params if params is not None else PinvParams())
-        # the diagonal of A for the base's pull: the base out of the correction that keeps the
-        # end effector still (:meth:`null_motion`)
-        self._base_out = np.concatenate((np.zeros(self.n_base), np.ones(self.n_arm)))
+        #: the activation on a followed plan's way: the arm alone does the task and makes up for the pull
+        self._arm_only = np.concatenate((np.zeros(self.n_base), np.ones(self.n_arm)))
 
     def _resolve(self, jac, p_ref, e_pos, state, pull, stance):
-        task = self.solve_task(jac, p_ref, state.q_arm)
-        if pull is None:
-            return task, None, 'whole_body', 1.0
-        # a followed plan's pull (not in the paper; :meth:`base_pull`): the base takes its pull
-        # whole, in place of its share of the task, the arm making up for it in the task's null
-        # space; the arm's pull to the plan's posture ranks below, in the null space of the task
-        # and the base together (stacked as at the stance, :meth:`secondary_motion`)
-        nb = self.n_base
-        base, arm = np.zeros_like(pull), pull.copy()
-        base[:nb], arm[:nb] = pull[:nb] - task[:nb], 0.0
-        null = self.secondary_motion(jac, task, state.q_arm, base, arm, stance=True, activation=self._base_out)
-        return task, null, 'whole_body', 1.0
+        if pull is None or stance:
+            task = self.solve_task(jac, p_ref, state.q_arm)
+            null = None if pull is None else self.null_motion(jac, task, state.q_arm, pull)
+            return task, null, 'whole_body', 1.0
+        # a followed plan's way (not in the paper; :meth:`base_pull`): the arm does the task, the
+        # base follows the pull (module docstring)
+        task = self.solve_task(jac, p_ref, state.q_arm, self._arm_only)
+        return task, self.null_motion(jac, task, state.q_arm, pull, self._arm_only), 'whole_body', 1.0

@@ -215,6 +215,10 @@ class PoseServoResolver(Resolver):
         config = self.model.config
         #: indices of (vx, vy, ω) the base can follow; u = (those, q̇_a)
         self.base_axes = config.base.axes
+        #: k_y of a base without a sideways axis (:meth:`base_pull`) [1/m²]
+        self._lateral_gain = 0.0
+        if 1 not in self.base_axes and 2 in self.base_axes and config.base.velocity[0] > 0.0:
+            self._lateral_gain = params.lambda_p**2 / (4.0 * float(config.base.velocity[0]) ** 2)
         self.n_base = len(self.base_axes)
         self.n_arm = self.model.n_arm
         self.n = self.n_base + self.n_arm
@@ -381,13 +385,30 @@ class PoseServoResolver(Resolver):
         asked for speeds it cannot stop from, and comes onto the pose instead of running past it
         (0.18 m past a pose 0.39 m away under the law alone). The arm's ``λ_p (q_a,plan − q_a)``
         with ``arm`` and the plan's arm posture given (the travel posture, or the stance's), else
-        zero. Shape (n_b + n,)."""
+        zero.
+
+        A base without a sideways axis (differential) cannot follow the pull's sideways part; its
+        turn then also steers it back onto the plan's line (Kanayama et al. 1990's tracking law):
+        ``ω += k_y v_r e_y``, ``v_r`` the plan's forward speed (its rates in the planned pose's
+        frame: negative backing up, zero turning in place or at rest), ``e_y`` the planned pose's
+        sideways offset in the base's frame, ``k_y = λ_p² / (4 v_max²)`` (``v_max`` the base's
+        speed limit): along a straight line at v_r the offset obeys ``ë_y + λ_p ė_y + k_y v_r² e_y
+        = 0``, critically damped at the top speed, overdamped below it. Without it the pull held the
+        heading to the plan's and left a sideways offset as it was (``docs/methods.md``).
+        Shape (n_b + n,)."""
         theta = float(state.base_pose[2])
         error = twist_to_base(theta, reference.error(state.base_pose))
         size = np.abs(error)
         feedback = np.copysign(np.minimum(self.params.lambda_p * size, np.sqrt(self._base_braking * size)), error)
+        body = twist_to_base(theta, reference.rates) + feedback
+        if self._lateral_gain > 0.0:
+            forward = float(twist_to_base(float(reference.pose[2]), reference.rates)[0])
+            body[2] += self._lateral_gain * forward * float(error[1])
         z = np.zeros(self.n)
-        z[: self.n_base] = (twist_to_base(theta, reference.rates) + feedback)[list(self.base_axes)]
+        z[: self.n_base] = body[list(self.base_axes)]
+        if arm and reference.arm is not None and reference.arm.shape == (self.n_arm,):
+            z[self.n_base :] = self.params.lambda_p * (reference.arm - state.q_arm)
+        return z
         if arm and reference.arm is not None and reference.arm.shape == (self.n_arm,):
             z[self.n_base :] = self.params.lambda_p * (reference.arm - state.q_arm)
         return z
