@@ -4,6 +4,15 @@ Sorour §II–III: the proportional pose controller of eq (12), the augmented Ja
 eq (7), the limits of the whole command, and the arm compensation of eq (14). A subclass
 supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull, stance) -> (u_task, u_null,
 mode, ψ)``, the task part and the null-space part, which gives way first to the limits.
+Each part's change from its own share of the last command is bounded
+(:class:`~wmm_control.resolvers.limits.CommandLimits`); where the safety stage changes the base's
+reference, the change comes out of the null-space share first, the one that gives way first,
+as far as that share goes (never turning it against what was asked), and only the rest out of
+the task's. (Counted as the task's, a base out of task sharing's task but cut by the stage's
+rows of a base that lags its reference left the task a share to undo within the base's
+acceleration limit, and the one factor of the task's change held the arm's part back with it;
+counted as the null-space share's whole, a cut of a base in the task turned that share against
+the pull it was asked for.)
 
 A followed plan's base (:class:`~wmm_control.resolvers.interface.BaseReference` on the target,
 not in the paper): the base is pulled towards its planned pose by a secondary task in the null
@@ -599,7 +608,13 @@ class PoseServoResolver(Resolver):
             )
             if self._safety.changed:
                 base = self._safety.command[:nb].copy()
-                self._prev[:nb] = base  # the base reference sent: next period's acceleration bound
+                # the base reference sent: next period's acceleration bound; the stage's change
+                # comes out of the null-space share first, down to none of it, then out of the
+                # task's (module docstring)
+                share = self._prev_null[:nb]
+                task = self._prev[:nb] - share
+                share[:] = np.clip(base - task, np.minimum(share, 0.0), np.maximum(share, 0.0))
+                self._prev[:nb] = base
                 arm = replace(arm, command=self._safety.command[nb:])
         self._prev_arm, self._prev_arm_null = arm.command.copy(), arm.secondary.copy()
         return arm if whole is None else (arm, base)
