@@ -106,6 +106,7 @@ class GoalPlannerNode(Node):
         self._q_arm: np.ndarray | None = None
         self._sim_time = 0.0  # [s] the latest odometry's stamp: the time in lockstep
         self._last_tick: float | None = None
+        self._last_robot = 0.0  # [s] the latest odometry's stamp at the last period
         self._goal_msg: PoseStamped | None = None
         #: the goal (or hold) for the resolver not yet sent: it waits until the resolver listens
         self._goal_out: PoseStamped | None = None
@@ -196,9 +197,13 @@ class GoalPlannerNode(Node):
             self._tick(seconds(self._steady))
 
     def _tick(self, now: float) -> None:
-        """One period at ``now`` [s] (the steady clock, or the simulation's time in lockstep)."""
-        dt = self.p.period if self._last_tick is None else min(max(now - self._last_tick, 0.0), 1.0)
-        self._last_tick = now
+        """One period at ``now`` [s] (the steady clock, or the simulation's time in lockstep). The
+        plan's clock and its stall rule run on the robot's: the advance of the odometry's stamp
+        since the last period (in lockstep ``now`` itself), so a simulation slower than real time
+        is not taken for a robot that makes no progress."""
+        robot = self._sim_time
+        dt = self.p.period if self._last_tick is None else min(max(robot - self._last_robot, 0.0), 1.0)
+        self._last_tick, self._last_robot = now, robot
         fresh = self.odom_fresh.fresh(self._now())
         base = self._base if fresh else None
         q_arm = self._q_arm if self.joints_fresh.fresh(self._now()) else None
