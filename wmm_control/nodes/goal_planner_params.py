@@ -106,6 +106,14 @@ _SPECS = (
         hi=1.0,
         read_only=True,
     ),
+    Param(
+        'base_floor_lag',
+        'Lag of the base, in leads, at which base_floor has faded to nothing (whole up to one lead): '
+        'beyond it the plan\'s clock waits for the base (follower).',
+        lo=1.001,
+        hi=1000.0,
+        read_only=True,
+    ),
     Param('rate_slew', 'Most the clock\'s rate rises per second [1/s] (follower).', lo=1e-3, hi=1000.0, read_only=True),
     Param(
         'lookahead',

@@ -22,14 +22,25 @@ are taken:
 * with the measured end effector (``ee_position``, ``ee_rotation``), its lag behind the point
   in force at ``s``, ``e_e``.
 
-``r* = min(r(e_e), max(r(e_b), base_floor))`` with the end effector, ``r* = r(e_b)`` without.
+``r* = min(r(e_e), max(r(e_b), f(e_b)))`` with the end effector, ``r* = r(e_b)`` without,
+``f(e_b) = base_floor · clip((L − e_b) / (L − 1), 0, 1)`` with ``L = base_floor_lag``.
 So the point waits for the end effector, which every method servoes to it, and slows for the
-base down to ``base_floor`` of the pace, not to a stop: a method that moves the end effector
+base down to ``base_floor`` of the pace, not to a stop, while the base lags less than a lead:
+a method that moves the end effector
 partly with the arm (task sharing, or any whole-body one whose share of the base lags, as a
 steerable base's does while it re-steers) does not bring its base back onto the plan once the
 end effector is on its point, given the point alone, and a point that waited for it would wait
 for ever (with ``hold_base`` it is pulled back, but only in what the end effector's task leaves
-free). (Stopping
+free). Past a lead the floor fades, and at ``base_floor_lag`` leads the clock waits for the base
+whatever the end effector does: the arm cannot carry the point on without limit. A steerable
+base that stops to re-steer its wheels at a turn (robot A) fell 0.45 m behind while its clock crept
+on and the arm reached after the points until its elbow was straight and its first joint on its
+limit, a posture the arm's task never left again (task sharing, the planner's example in the
+README, direct engine: 65 s to the goal with one plan made again, 32 s with the fade). The fade
+is slow because the acceleration-level methods move the base as the end effector's point draws
+it on (AMP keeps the base still until the arm runs out of reach): with the clock stopped at two
+leads, robot A's `traditional` stalled three times where its base had fallen behind at a turn
+(`table_pillar` goal 18), and converged with the fade to three. (Stopping
 the clock, and so stalling and planning again, once the base lags two leads behind converged
 fewer runs: `panda_diff`'s base, which cannot move sideways, lags that far on most paths.) ``r`` rises
 towards ``r*`` by at most ``rate_slew`` per second (the point does not start at once) and falls
@@ -119,6 +130,9 @@ class FollowParams:
         slow_from: the fraction of the lead, in [0, 1), up to which the clock keeps full pace.
         base_floor: the pace, in [0, 1], the base's lag leaves the clock when the end effector
             is measured.
+        base_floor_lag: the base's lag, in leads (> 1), at which ``base_floor`` has faded to
+            nothing (whole up to one lead, linear in between): beyond it the clock waits for the
+            base whatever the end effector does.
         rate_slew: [1/s] the most the clock's rate rises per second.
         lookahead: [s] of the plan, ahead of its clock, searched for the pose the base has passed.
         stall_time: [s] without progress (module docstring) before the follower is stalled.
@@ -143,6 +157,7 @@ class FollowParams:
     base_lead_angle: float = 0.6
     slow_from: float = 0.5
     base_floor: float = 0.25
+    base_floor_lag: float = 3.0
     rate_slew: float = 2.0
     lookahead: float = 2.0
     stall_time: float = 5.0
@@ -180,6 +195,9 @@ class FollowParams:
             raise ConfigError(f'FollowParams.hold_base must be True or False, got {self.hold_base!r}')
         if not (isinstance(self.base_floor, (int, float)) and 0.0 <= self.base_floor <= 1.0):
             raise ConfigError(f'FollowParams.base_floor must be in [0, 1], got {self.base_floor!r}')
+        lag = self.base_floor_lag
+        if isinstance(lag, bool) or not (isinstance(lag, (int, float)) and math.isfinite(lag) and lag > 1.0):
+            raise ConfigError(f'FollowParams.base_floor_lag must be a finite number > 1 [leads], got {lag!r}')
 
 
 class FollowState(enum.Enum):
@@ -320,6 +338,12 @@ class PlanFollower:
     def _pace(self, lag: float, floor: float = 0.0) -> float:
         return min(max((1.0 - lag) / (1.0 - self.params.slow_from), floor), 1.0)
 
+    def _floor(self, base_lag: float) -> float:
+        """``base_floor``, faded out between one lead and ``base_floor_lag`` leads of ``base_lag``."""
+        p = self.params
+        fade = (p.base_floor_lag - base_lag) / (p.base_floor_lag - 1.0)
+        return p.base_floor * min(max(fade, 0.0), 1.0)
+
     def step(
         self,
         dt: float,
@@ -358,7 +382,7 @@ class PlanFollower:
         base_lag = float(self._lag(self.planned_pose(self._clock), base)[0])
         wanted = self._pace(base_lag)
         if ee is not None:
-            wanted = min(self._pace(self._ee_lag(self._index(self._clock), ee)), max(wanted, p.base_floor))
+            wanted = min(self._pace(self._ee_lag(self._index(self._clock), ee)), max(wanted, self._floor(base_lag)))
         self._rate = min(wanted, self._rate + p.rate_slew * dt)
         before = self.planned_pose(self._clock)
         clock = min(self._clock + self._rate * dt, end)
