@@ -28,8 +28,16 @@ is tracked as given.
 A followed plan's base (:class:`~wmm_control.resolvers.interface.BaseReference` on the target,
 not in the papers): eq (23)'s law on the base's planned pose,
 ``ξ̈* = ξ̈_plan + K_d (ξ̇_plan − ξ̇) + K_p (ξ_plan − ξ)`` (world rates; the position gains on x and
-y, the orientation gains on θ; a differential base takes its part along its heading,
-``u̇_b* = Tᵀ ξ̈*``), is ``task['base_follow']`` (None without a plan), which each method gives
+y, the orientation gains on θ), written as a law on the rates,
+``ξ̈* = ξ̈_plan + K_d (ξ̇* − ξ̇)`` with ``ξ̇* = ξ̇_plan + (K_p / K_d)(ξ_plan − ξ)``, whose position
+feedback is, on each of the base's axes (its own frame), no faster than ``√(2 a e)``: the speed
+from which the axis's acceleration limit ``a`` brakes it to rest over its error ``e``
+(:meth:`~wmm_control.resolvers.interface.BaseReference.pull`, the velocity-level methods' pull
+too). Below that speed it is eq (23)'s law as printed; without the cap robot B's base
+(0.025 m/s²) was asked for speeds it cannot brake from (out of AMP's task, 0.20 m past a
+planned pose 0.39 m away; ``test_follow_base.py``).
+A differential base takes its part along its heading, ``u̇_b* = Tᵀ ξ̈*``. The result
+is ``task['base_follow']`` (None without a plan), which each method gives
 the base in its own way (:mod:`~wmm_control.resolvers.amp`, :mod:`~wmm_control.resolvers.traditional`).
 The same law on the arm's joints towards the plan's arm posture (``BaseReference.arm``: the travel
 posture on the way, the stance's posture on the arm's way to it and in the final approach; the
@@ -126,6 +134,11 @@ class AccelerationResolver(Resolver):
         self._position = np.zeros(self.n)
         self._kp = np.array([params.kp] * 3 + [params.kp_rot] * 3)
         self._kd = np.array([params.kd] * 3 + [params.kd_rot] * 3)
+        # a followed plan's base (module docstring): K_d on (x, y, θ), and K_p / K_d, the gain of
+        # the rates the position feedback asks for
+        self._base_kd = self._kd[[0, 1, 5]]
+        self._base_gain = self._kp[[0, 1, 5]] / self._base_kd
+        self._base_acceleration = np.asarray(self.model.config.base.acceleration, dtype=float)
         self.reset()
 
     def reset(self) -> None:
@@ -199,8 +212,8 @@ class AccelerationResolver(Resolver):
         if target.base is not None:
             planned = target.base
             rates = to_world @ qd[:nb] if self._unicycle else qd[:3]
-            gains_p, gains_d = self._kp[[0, 1, 5]], self._kd[[0, 1, 5]]
-            world = planned.acceleration + gains_d * (planned.rates - rates) + gains_p * planned.error(state.base_pose)
+            wanted = twist_to_world(theta, planned.pull(state.base_pose, self._base_gain, self._base_acceleration))
+            world = planned.acceleration + self._base_kd * (wanted - rates)
             base_follow = to_world.T @ world if self._unicycle else world
             if planned.arm is not None and planned.arm.shape == (self.model.n_arm,):
                 arm_follow = self._kp[5] * (planned.arm - state.q_arm) - self._kd[5] * qd[nb:]

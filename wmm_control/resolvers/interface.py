@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ShapeError
-from wmm_control.geometry import matrix_from_rpy, wrap_angle
+from wmm_control.geometry import matrix_from_rpy, twist_to_base, wrap_angle
 
 if TYPE_CHECKING:
     from wmm_control.kinematics import KinematicModel
@@ -153,6 +153,30 @@ class BaseReference:
         out = self.pose - base
         out[2] = wrap_angle(float(out[2]))
         return out
+
+    def pull(self, base_pose: ArrayLike, gain: ArrayLike, acceleration: ArrayLike) -> np.ndarray:
+        """The rates that bring a base at ``base_pose`` onto the planned pose, in the base's own
+        frame (vx, vy, ω): the planned rates as feedforward plus, on each axis, the feedback
+        ``gain · e`` (``e`` :meth:`error` in the base's frame) no faster than ``√(2 a |e|)``, the
+        speed from which the axis's acceleration limit ``a`` brakes it to rest over its error. A
+        base that brakes over metres (robot B, 0.025 m/s²) is not asked for speeds it cannot
+        stop from, and comes onto the pose instead of running past it; an axis the base cannot
+        move (``a = 0``) gets no feedback.
+
+        Args:
+            base_pose: the base's pose (x, y, θ) in the world [m, m, rad]. Shape (3,).
+            gain: the feedback gain of each axis [1/s]. Scalar or shape (3,).
+            acceleration: the acceleration limit of each of the base's axes (vx, vy, ω) [m/s²,
+                m/s², rad/s²]. Shape (3,).
+
+        Returns:
+            (vx, vy, ω) [m/s, m/s, rad/s]. Shape (3,).
+        """
+        theta = float(np.asarray(base_pose, dtype=float)[2])
+        error = twist_to_base(theta, self.error(base_pose))
+        size = np.abs(error)
+        braking = np.sqrt(2.0 * np.asarray(acceleration, dtype=float) * size)
+        return twist_to_base(theta, self.rates) + np.copysign(np.minimum(np.asarray(gain) * size, braking), error)
 
 
 @dataclass(frozen=True)

@@ -235,8 +235,8 @@ class PoseServoResolver(Resolver):
         self._jmm_cols = np.array(self._base_cols + list(range(6, 6 + self.n_arm)))
         self.limits = CommandLimits.for_robot(config, params.dt)
         self._arm_limits = self.limits.subset(slice(self.n_base, None))
-        #: 2 a of the base's (vx, vy, ω): a followed plan's pull is no faster than braking allows
-        self._base_braking = 2.0 * np.asarray(config.base.acceleration, dtype=float)
+        #: a of the base's (vx, vy, ω): a followed plan's pull is no faster than braking allows
+        self._base_acceleration = np.asarray(config.base.acceleration, dtype=float)
         # the stage reads the configuration this method's update computes: one a cycle
         self.safety = SafetyStage.for_robot(config, params, kinematics=self.model)
         self._position = np.zeros(self.n)
@@ -390,9 +390,9 @@ class PoseServoResolver(Resolver):
         base's entries ``ξ̇_plan + λ_p (ξ_plan − ξ)`` in the base's frame (eq 12's law on the base's
         planned pose, its rates as feedforward) on the axes it follows, each axis's feedback no
         faster than ``√(2 a e)``, the speed from which its acceleration limit ``a`` brakes it to
-        rest over its error ``e``: a base that brakes over metres (robot B, 0.025 m/s²) is not
-        asked for speeds it cannot stop from, and comes onto the pose instead of running past it
-        (0.18 m past a pose 0.39 m away under the law alone). The arm's ``λ_p (q_a,plan − q_a)``
+        rest over its error ``e`` (:meth:`~wmm_control.resolvers.interface.BaseReference.pull`):
+        a base that brakes over metres (robot B, 0.025 m/s²) comes onto the pose instead of
+        running past it (0.18 m past a pose 0.39 m away under the law alone). The arm's ``λ_p (q_a,plan − q_a)``
         with ``arm`` and the plan's arm posture given (the travel posture, or the stance's), else
         zero.
 
@@ -405,19 +405,13 @@ class PoseServoResolver(Resolver):
         = 0``, critically damped at the top speed, overdamped below it. Without it the pull held the
         heading to the plan's and left a sideways offset as it was (``docs/methods.md``).
         Shape (n_b + n,)."""
-        theta = float(state.base_pose[2])
-        error = twist_to_base(theta, reference.error(state.base_pose))
-        size = np.abs(error)
-        feedback = np.copysign(np.minimum(self.params.lambda_p * size, np.sqrt(self._base_braking * size)), error)
-        body = twist_to_base(theta, reference.rates) + feedback
+        body = reference.pull(state.base_pose, self.params.lambda_p, self._base_acceleration)
         if self._lateral_gain > 0.0:
             forward = float(twist_to_base(float(reference.pose[2]), reference.rates)[0])
-            body[2] += self._lateral_gain * forward * float(error[1])
+            sideways = float(twist_to_base(float(state.base_pose[2]), reference.error(state.base_pose))[1])
+            body[2] += self._lateral_gain * forward * sideways
         z = np.zeros(self.n)
         z[: self.n_base] = body[list(self.base_axes)]
-        if arm and reference.arm is not None and reference.arm.shape == (self.n_arm,):
-            z[self.n_base :] = self.params.lambda_p * (reference.arm - state.q_arm)
-        return z
         if arm and reference.arm is not None and reference.arm.shape == (self.n_arm,):
             z[self.n_base :] = self.params.lambda_p * (reference.arm - state.q_arm)
         return z
