@@ -373,3 +373,29 @@ def test_amp_leaves_the_base_to_the_plans_way_when_the_arm_nears_a_singularity(p
         assert cmd.base_twist[0] > 0.0  # towards the planned pose, the arm holding the hand
     else:
         assert mode == 'base active (singularity)'
+
+
+@pytest.mark.parametrize('robot', ['mecanum', 'steerable'])
+def test_traditional_on_a_plan_leaves_the_task_to_the_arm_and_the_base_to_its_pull(robot):
+    """Following a plan, the traditional planner's arm alone takes the end effector's task where
+    it spans it, and the base follows its pull: the base at rest on its planned pose stays there
+    while the end effector is sent 5 cm up (without a plan the base takes its share, Xing's
+    whole-body J⁺). With the whole-body J⁺ on a plan, robot B's base took its share of the arm's
+    motion to the stance's posture, could not stop it at 0.025 m/s², and left the stance."""
+    cfg = load_robot(robot)
+    moved = {}
+    for planned in (False, True):
+        resolver = _traditional(cfg)
+        state = RobotState(cfg.start.base_pose, np.zeros(3), cfg.start.arm, np.zeros(len(cfg.start.arm)))
+        position, rotation = state.ee_placement(resolver.model, update=True)
+        base = BaseReference(np.array(cfg.start.base_pose, dtype=float)) if planned else None
+        target = PoseTarget(position + np.array((0.0, 0.0, 0.05)), rotation, base=base)
+        dt = resolver.params.dt
+        for _ in range(int(4.0 / dt)):
+            cmd = resolver.step(state, target)
+            pose = se2_integrate(state.base_pose, cmd.base_twist, dt)
+            state = RobotState(pose, cmd.base_twist, state.q_arm + dt * cmd.arm_velocity, cmd.arm_velocity)
+        error = np.linalg.norm(state.ee_placement(resolver.model, update=True)[0] - target.position)
+        moved[planned] = (np.linalg.norm(np.asarray(state.base_pose)[:2] - cfg.start.base_pose[:2]), error)
+    assert moved[False][0] > 2e-3  # the paper's method moves the base with the arm
+    assert moved[True][0] < 1e-4 and moved[True][1] < 5e-3
