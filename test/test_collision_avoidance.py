@@ -1,5 +1,6 @@
 """The arm kept off the robot's own body, off itself and off the floor: the distance model, the
-safety stage, and closed-loop runs judged on the simulator's own geometry."""
+safety stage, and closed-loop runs judged on the simulator's own geometry; a differential base's
+turn beside an obstacle."""
 
 import numpy as np
 import pytest
@@ -8,6 +9,7 @@ from sim_bridge.collision import SelfCollisionChecker
 from wmm_control.errors import ConfigError
 from wmm_control.experiments.randomized import CONTACT_DEPTH, run_goal, sample_goals
 from wmm_control.kinematics.collision import CollisionModel
+from wmm_control.kinematics.obstacles import parse_obstacles
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.safety import SafetyParams, SafetyStage
 from wmm_control.robot_config import load_robot, robot_names
@@ -165,6 +167,40 @@ def test_bad_damper_parameters_are_refused():
         make_resolver('pinv', 'mecanum', collision_influence=-1.0)
     with pytest.raises(ConfigError, match='collision_lookahead'):
         SafetyParams(collision_lookahead=0.05)
+
+
+def test_a_differential_base_beside_a_wall_turns_and_its_linear_approach_still_brakes_as_before():
+    """`panda_diff` with a wall along its side, its right wheel 0.23 m from it (within the
+    obstacle look-ahead, beyond the influence distance): the wheel's pair has its normal across
+    the heading, so the base's one linear axis cannot change that distance and only its turn
+    moves it. Counting the linear axes alone, nothing braked that pair and it was allowed no
+    approach at all: the stage cut the turn towards the wall to zero (the base stopped 0.28 rad
+    off its stance's heading beside the table, `table_pillar` goal 13). The turn brakes its own
+    share, and passes; the row without the turn keeps the linear axes' braking."""
+    robot = load_robot('panda_diff')
+    wall = parse_obstacles([{'name': 'wall', 'shape': 'box', 'size': [3.0, 0.2, 1.0], 'pose': [0.0, -0.6, 0.5]}], 't')
+    stage = SafetyStage.for_robot(robot, obstacles=wall)
+    q, pose, axes = np.array(robot.start.arm), np.zeros(3), (0, 2)
+    near, _, _ = stage.collision.within(q, stage.obstacle_lookahead, pose)
+    (wheel,) = [k for k, links in enumerate(near.links) if links == ('wheel_right_link', 'wall')]
+    j = near.base_jacobian[wheel]
+    assert 0.1 < near.distance[wheel] < stage.obstacle_lookahead and j[0] == pytest.approx(0.0, abs=1e-9)
+    assert j[2] > 0.01, 'a positive turn swings the wheel towards the wall'
+    box = np.concatenate((robot.base.velocity[list(axes)], robot.arm.velocity))
+    turn = np.concatenate(([0.0, 1.0], np.zeros(q.size)))
+    out = stage.filter(q, turn, -box, box, base_pose=pose, base_axes=axes, base_velocity=np.zeros(3))
+    np.testing.assert_allclose(out.command, turn, atol=1e-9)
+    # the wheel's allowed approach: the turn's braking, |j_ω| α, not the linear axis's (none)
+    pairs = stage.dampers.pairs(near, axes, np.eye(3))
+    k = int(np.flatnonzero(pairs.body & (np.abs(pairs.rows[:, 1] - j[2]) < 1e-12))[0])
+    alpha = robot.base.acceleration[2]
+    assert -pairs.bound[k] == pytest.approx(stage.dampers.allowed_approach(pairs.distance[k], abs(j[2]) * alpha))
+    # without the turn, the linear approach of every body pair brakes as the linear axes can
+    linear, slowest = stage.dampers.linear_braking(axes)
+    rows = stage.base_rows.without_turn(pairs)
+    body = np.flatnonzero(pairs.body & (pairs.base[:, 2] != 0.0))
+    expected = stage.dampers.allowed_approach(pairs.distance[body], np.abs(pairs.base[body, 0]) * slowest)
+    np.testing.assert_allclose(rows.h, expected, atol=1e-12)
 
 
 # ---------------------------------------------------------------- closed loop

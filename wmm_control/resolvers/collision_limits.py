@@ -30,9 +30,11 @@ keeps its approach within what braking at ``a_b`` can stop before ``d_s``:
 the stricter of the two where both hold. ``a_b`` is taken no larger than the deceleration the
 robot's acceleration limits can give that distance (``Σ_i |j_i| q̈_max,i`` over the arm's
 joints, plus ``|j_xy|`` times the slower of the base's linear axes: the pair's normal turns
-under a base that brakes, so both axes are not counted on at once): a Mecanum base that brakes
-at 0.025 m/s² is not counted on to stop at 1 m/s². The base's share counts whether or not its
-twist is part of the command: a twist given for the period (the base controller's answer, with
+under a base that brakes, so both axes are not counted on at once; for a pair of the base's own
+body, where the base tracks its reference, also ``|j_ω|`` times its turn's limit, the row
+without the turn's share below keeping its linear approach to the linear axes' braking): a
+Mecanum base that brakes at 0.025 m/s² is not counted on to stop at 1 m/s². The base's share
+counts whether or not its twist is part of the command: a twist given for the period (the base controller's answer, with
 only the arm left to choose) brakes from the next period on all the same, so a pair is allowed
 the same approach either way. With obstacles, whose distance the base's
 twist changes too, the look-ahead grows to the base's stopping distance from full speed
@@ -76,8 +78,9 @@ model of it, five kinds of row and one hold:
 has none of the above, and
 
 - ``base without turn`` (:meth:`BaseRows.without_turn`): for a pair of its own body (chassis,
-  wheels) and an obstacle, the row also holds without the turn's share: a turn that swings one
-  corner away for the moment cannot hide a linear approach faster than the base can stop.
+  wheels) and an obstacle, the row also holds without the turn's share, braked by the linear
+  axes alone: a turn that swings one corner away for the moment cannot hide a linear approach
+  faster than the base can stop.
 
 **Every base that turns while it drives** (its reference in its own frame):
 
@@ -151,6 +154,10 @@ class Pairs:
             world frame's rates. Shape (3, 3).
         kinds: ``(kind, pairs)`` in order: the robot against itself (``self``), the floor
             (``floor``), obstacles (``obstacle``); the pairs come in that order.
+        turn_braking: how much of each bound's approach is the braking of the base's turn [m/s]
+            (:meth:`VelocityDampers._allowed`; zero where it is not counted): ``bound +
+            turn_braking`` is the bound the base's linear approach alone meets
+            (:meth:`BaseRows.without_turn`). Shape (m,).
     """
 
     rows: np.ndarray
@@ -162,6 +169,7 @@ class Pairs:
     axes: tuple[int, ...]
     to_base: np.ndarray
     kinds: tuple[tuple[str, int], ...]
+    turn_braking: np.ndarray
 
     def on_base(
         self, base: np.ndarray, shift: ArrayLike = 0.0, which: np.ndarray | None = None
@@ -220,22 +228,26 @@ class VelocityDampers:
             base_full, rate, distance = base_full[order], rate[order], distance[order]
             moved, kind = moved[order], kind[order]
         rows = np.concatenate(((base_full @ to_base)[:, axes], rate), axis=1)
-        body = moved & ~rows[:, len(axes) :].any(axis=1)
+        arm = rows[:, len(axes) :]
+        body = moved & ~arm.any(axis=1)
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
             distance = distance - self.body_margin * body
-        bound = -self._allowed(distance, rows[:, len(axes) :], base_full, moved)
+        turning = self.lag == 0.0 and 2 in self.base_axes  # a tracking base's turn brakes its body's pairs
+        allowed = self._allowed(distance, arm, base_full, moved, body if turning else None)
+        turn = allowed - self._allowed(distance, arm, base_full, moved) if turning else np.zeros(len(distance))
+        bound = -allowed
         if base_twist is not None:
             bound = bound - base_full @ np.asarray(base_twist, dtype=float)
         counts = np.bincount(kind, minlength=3).tolist()
         kinds = tuple((name, count) for name, count in zip(_KINDS, counts) if count)
-        return Pairs(rows, bound, base_full, distance, moved, body, tuple(axes), to_base, kinds)
+        return Pairs(rows, bound, base_full, distance, moved, body, tuple(axes), to_base, kinds, turn)
 
     def constraints(self, pairs: Pairs) -> Constraint:
         """The dampers, one row per pair: ``self`` (the robot against itself), ``floor`` and
         ``obstacle``."""
         return Constraint(-pairs.rows, -pairs.bound, 'dampers', pairs.kinds)
 
-    def _allowed(self, distances, arm_rows, base_rows, moved) -> np.ndarray:
+    def _allowed(self, distances, arm_rows, base_rows, moved, turning=None) -> np.ndarray:
         """Each pair's fastest allowed approach [m/s], braking no harder than the acceleration
         limits can slow that distance: the arm's (``arm_rows``, over its joints) and the base's
         linear axes (``base_rows``, over (vx, vy, ω)), whether or not the base is part of the
@@ -244,8 +256,18 @@ class VelocityDampers:
         a pair the same approach. (Counting on the arm alone there, a pair the arm barely moves,
         its first links, was allowed no approach at all while the base drove at an obstacle
         within the look-ahead, and the stage wound the arm to cancel the base's approach at
-        them.) The base's turn rate is left out: turning swings the near point aside for a
-        moment, but does not stop a base that drives at an obstacle."""
+        them.) For a pair of the base's own body and an obstacle (``turning``, boolean per pair;
+        None: none), the turn brakes too, ``|j_ω|`` times its acceleration limit, where the base
+        tracks its reference (τ = 0):
+        turning swings the near point aside for a moment, but does not stop a base that drives
+        at an obstacle, and there the row without the turn's share
+        (:meth:`BaseRows.without_turn`) keeps the linear approach within what the linear axes
+        brake (the arm's pairs, which have no such row, count the arm and the linear axes). Left
+        out, a pair that only the turn moves (a differential base's wheel beside an obstacle, its
+        normal across the heading: ``j_x = 0``) had nothing to brake it and was allowed no
+        approach anywhere within the look-ahead: the base could not turn that way at all
+        (`panda_diff` stopped 0.28 rad off its stance's heading beside the table of
+        `table_pillar`, and task sharing's final approach from there stalled)."""
         lags = np.where(moved, self.lag, 0.0)
         if self.arm_acceleration is None:
             return np.asarray(self.allowed_approach(distances, lag=lags))
@@ -258,6 +280,8 @@ class VelocityDampers:
             # another face, changes under it)
             columns = [self.base_axes[k] for k in linear]
             reach = reach + np.linalg.norm(base_rows[:, columns], axis=1) * slowest
+        if turning is not None:
+            reach = reach + np.where(turning, np.abs(base_rows[:, 2]) * float(self.base_acceleration[2]), 0.0)
         return np.asarray(self.allowed_approach(distances, reach, lags))
 
     def linear_braking(self, axes) -> tuple[list[int], float]:
@@ -435,8 +459,9 @@ class BaseRows:
 
     def without_turn(self, pairs: Pairs) -> Constraint:
         """For each pair of the base's own body (chassis, wheels: no arm joint moves it) and an
-        obstacle whose distance the base's turn changes, the same row without the turn's share:
-        the base's linear approach brakes as the row counts on even when the turn stops. Without
+        obstacle whose distance the base's turn changes, the same row without the turn's share,
+        its bound without the turn's braking (:attr:`Pairs.turn_braking`): the base's linear
+        approach brakes as the linear axes can even when the turn stops. Without
         it, a turn that swings a corner away for the moment meets the row while the base drives
         on at the obstacle faster than its linear acceleration limits can stop (and the next
         corner swings in). The arm's pairs keep the turn: the arm brakes its own share fast."""
@@ -447,7 +472,8 @@ class BaseRows:
         if not turning.any():
             return Constraint.empty(n, _WITHOUT)
         linear = pairs.base[turning] * _LINEAR
-        return Constraint.from_lower(*pairs.on_base(linear @ pairs.to_base, which=turning), _WITHOUT)
+        rows = pairs.on_base(linear @ pairs.to_base, pairs.turn_braking[turning], which=turning)
+        return Constraint.from_lower(*rows, _WITHOUT)
 
     def turn_rate(self, pairs: Pairs, base_velocity) -> Constraint:
         """For each pair of the base's own body and an obstacle, a row on the turn rate: turning
