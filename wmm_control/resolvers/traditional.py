@@ -64,14 +64,13 @@ class TraditionalResolver(AccelerationResolver):
     def _accelerations(self, task):
         jac = task['jac']
         follow = task['base_follow']
-        j_pinv = np.linalg.pinv(jac, rcond=self.params.rcond)
-        if follow is not None:  # a plan followed: the arm's task where the arm alone spans it
-            nb = len(follow)
-            arm = jac[:, nb:]
-            spans = arm.shape[0] <= arm.shape[1] and np.linalg.svd(arm, compute_uv=False)[-1] > ARM_SPAN
-            if spans:
-                j_pinv = np.zeros_like(j_pinv)
-                j_pinv[nb:] = np.linalg.pinv(arm, rcond=self.params.rcond)
+        arm = jac[:, len(follow) :] if follow is not None else None
+        if arm is not None and arm.shape[0] <= arm.shape[1] and np.linalg.svd(arm, compute_uv=False)[-1] > ARM_SPAN:
+            # a plan followed and the arm alone spans the task: the arm's task, J⁺ zero on the base
+            j_pinv = np.zeros(jac.shape[::-1])
+            j_pinv[len(follow) :] = np.linalg.pinv(arm, rcond=self.params.rcond)
+        else:
+            j_pinv = np.linalg.pinv(jac, rcond=self.params.rcond)
         qdd = j_pinv @ (task['xdd'] - task['drift'])
         lo, hi = task['lower'], task['upper']
         if self.params.manipulability or follow is not None:
