@@ -174,3 +174,31 @@ def test_progress_that_stalls_is_planned_again_then_the_goal_goes_to_the_resolve
     assert any('progress stalled' in m and 'planning again' in m for m in said), said
     assert pursuit.state is PursuitState.APPROACH and forwarded
     assert any('after 1 plans made again: the goal goes to the resolver' in m for m in said), said
+
+
+def test_a_stall_at_the_stance_planned_again_gives_the_final_approach_with_the_stance_not_the_bare_goal(pursuit):
+    pursuit.new_goal('world', pose(BEHIND_TABLE, yaw=0.5 * np.pi))
+    settle(pursuit)
+    follower = pursuit.follower
+    handoff = follower.handoff
+    stance = handoff.base_poses[handoff.path_end]
+    for _ in range(20 * len(handoff.points)):  # the base keeps to the path; the arm never takes the stance's posture
+        k = min(int(follower.clock / handoff.dt), handoff.path_end)
+        pursuit.step(0.025, handoff.base_poses[k], handoff.points[k].base.arm)
+        if pursuit.state is not PursuitState.FOLLOWING:
+            break
+    assert pursuit.state is PursuitState.PLANNING and pursuit.replans == 1
+    steps = settle(pursuit, base=stance)
+    # the plan made again finds the goal within reach from the stance: the resolver gets it as
+    # the final approach, held at this stance with the posture found for it, not as a bare goal
+    # (which left task sharing's posture pull free to move the base from the stance)
+    assert pursuit.state is PursuitState.APPROACH and not any(s.forward_goal for s in steps)
+    approach = steps[-1].reference
+    assert approach is not None and approach.base is not None and approach.base.stance
+    np.testing.assert_allclose(approach.position, BEHIND_TABLE)
+    np.testing.assert_allclose(approach.base.pose, stance)
+    model = KinematicModel(ROBOT)
+    model.update(stance, approach.base.arm)
+    assert np.linalg.norm(model.ee_placement_world()[0] - BEHIND_TABLE) < 0.01  # the stance's posture reaches it
+    later = [pursuit.step(0.025, stance, Q_ARM) for _ in range(5)]
+    assert all(s.reference is None and not s.forward_goal for s in later), 'sent once: the resolver holds it'

@@ -8,7 +8,9 @@ logged, and the robot is held where it is. An accepted one is planned
 (:class:`PlanWorker`): the caller's period never waits for a plan. The plan decides:
 
 * **direct**: the best stance is where the base stands (the arm reaches the goal from here,
-  clear of the obstacles): the goal goes to the resolver unchanged, as without the planner;
+  clear of the obstacles): the goal goes to the resolver unchanged, as without the planner; a
+  plan made *again* that finds this (the follower stalled at or near its stance) gives the final
+  approach instead (below), from this stance, with ``hold_base``;
 * **following**: a base path to a stance elsewhere: its hand-off points
   (:class:`~wmm_control.planning.handoff.Handoff`, the arm's motion to the stance's posture at
   their end) are given one per period at the pace the robot keeps
@@ -321,6 +323,7 @@ class GoalPursuit:
         self._path: np.ndarray | None = None
         self._no_way_version = -1  # of the obstacles when the goal in force got no way
         self._planned_from: np.ndarray | None = None  # the base pose of the last plan asked for
+        self._approach: PoseTarget | None = None  # a final approach due at the next point given
 
     def close(self, timeout: float | None = None) -> None:
         """Stop the worker, waiting up to ``timeout`` [s] for a plan under way (None: until done)."""
@@ -376,7 +379,7 @@ class GoalPursuit:
         events: list[LogEvent] = []
         base = None if base_pose is None else np.asarray(base_pose, dtype=float)
         forward = self._take_results(events, base)
-        reference = None
+        reference, self._approach = self._approach, None
         arm = None if q_arm is None else np.asarray(q_arm, dtype=float)
         ee = self._end_effector(base, arm)
         if self.state is PursuitState.FOLLOWING and self.follower is not None and base is not None:
@@ -427,6 +430,7 @@ class GoalPursuit:
         pursuing something of ours, results of plans under way dropped."""
         self.state, self.reason = state, reason
         self.follower = None
+        self._approach = None
         self.progress = 0.0
         self._ticket += 1
         self.worker.wanted = self._ticket
@@ -498,6 +502,23 @@ class GoalPursuit:
         if plan.no_way is not None or plan.trajectory is None:
             self.no_way_kind = plan.no_way
             self._no_way(events, plan.reason or 'no plan')
+            return False
+        if result.here and self.replans > 0 and self.follow.hold_base and plan.stance is not None:
+            # made again where the base stands (a stall at the stance, as a rule): the final
+            # approach from this stance, held, as after a plan followed to its end
+            assert self.goal is not None
+            here = plan.stance
+            self.state, self.reason = PursuitState.APPROACH, ''
+            self._path = np.zeros((0, 3))
+            self._approach = PoseTarget.goal(self.goal.position, self.goal.rotation, here.base_pose, here.q_arm)
+            events.append(
+                LogEvent(
+                    'approach',
+                    f'planned again in {plan.planning_time:.3f} s: the goal is within reach from where the base '
+                    f'stands: it goes to the resolver as the last point, with the stance '
+                    f'{np.round(here.base_pose, 3).tolist()} as its base',
+                )
+            )
             return False
         if result.here:
             self.state, self.reason = PursuitState.DIRECT, ''
