@@ -33,7 +33,12 @@ the base's pull passes the null space whole: with the whole-body J⁺ the base t
 minimum-norm share of the arm's motion to the stance's posture, which robot B's base
 (0.025 m/s²) cannot stop once begun, and left the stance by 0.15–0.69 m before the final
 approach, which then swung it about the goal for the rest of the run (`mecanum`, `table_pillar`
-goals 17, 20, 28). The paper's runs follow no plan and are unchanged.
+goals 17, 20, 28). Where the arm's joints that its position limits leave free no longer span
+the task's rows, the base joins it (the whole-body J⁺, its joints held the same way): a
+differential base that comes to rest beside its stance cannot close that offset, and the arm
+alone may then need a joint past its limit (`panda_diff` goal 60: the base 3 cm beside the
+stance, whose posture is 0.06 rad from joint 6's limit; joints 7 and 2 came to rest on theirs,
+and the run stalled 15 mm and 0.03 rad off; now converged). The paper's runs follow no plan.
 """
 
 from dataclasses import dataclass
@@ -73,25 +78,39 @@ class TraditionalResolver(AccelerationResolver):
         jac = task['jac']
         n = jac.shape[1]
         follow = task['base_follow']
-        arm = jac[:, len(follow) :] if follow is not None else None
-        free = np.ones(n, dtype=bool)
-        if arm is not None and arm.shape[0] <= arm.shape[1] and np.linalg.svd(arm, compute_uv=False)[-1] > ARM_SPAN:
-            # a plan followed and the arm alone spans the task: the arm's task, J⁺ zero on the base
-            free[: len(follow)] = False
         rcond = self.params.rcond
-        # J⁺ over the joints free, a joint it drives past its braking bound held there (module docstring)
-        solved = saturate_in_null_space(
-            lambda cols: np.linalg.pinv(jac[:, cols], rcond=rcond),
-            jac,
-            task['xdd'],
-            task['drift'],
-            task['brake_lower'],
-            task['brake_upper'],
-            free,
-            np.zeros(n),
-            one_at_a_time=False,
-            scale=False,
-        )
+
+        def spans(cols: np.ndarray) -> bool:
+            part = jac[:, cols]
+            return part.shape[0] <= part.shape[1] and np.linalg.svd(part, compute_uv=False)[-1] > ARM_SPAN
+
+        def solve(free: np.ndarray):
+            # J⁺ over the joints free, a joint it drives past its braking bound held there (module docstring)
+            return saturate_in_null_space(
+                lambda cols: np.linalg.pinv(jac[:, cols], rcond=rcond),
+                jac,
+                task['xdd'],
+                task['drift'],
+                task['brake_lower'],
+                task['brake_upper'],
+                free,
+                np.zeros(n),
+                one_at_a_time=False,
+                scale=False,
+            )
+
+        whole = np.ones(n, dtype=bool)
+        arm = whole.copy()
+        if follow is not None:
+            arm[: len(follow)] = False
+        if follow is not None and spans(arm):
+            # a plan followed and the arm alone spans the task: the arm's task, J⁺ zero on the base,
+            # unless the arm's joints its limits leave free do not span it: then the base joins in
+            solved = solve(arm)
+            if not spans(solved.active):
+                solved = solve(whole)
+        else:
+            solved = solve(whole)
         qdd = solved.qdd
         j_pinv = np.zeros(jac.shape[::-1])
         if solved.pinv is not None:
