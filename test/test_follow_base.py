@@ -27,7 +27,7 @@ from wmm_control.planning.handoff import Handoff
 from wmm_control.planning.pursuit import GoalPursuit
 from wmm_control.planning.timing import TwistPiece, time_path
 from wmm_control.resolvers import make_resolver
-from wmm_control.resolvers.interface import BaseReference, PoseTarget, RobotState
+from wmm_control.resolvers.interface import BaseReference, PoseTarget, RobotState, SteeringParams
 from wmm_control.resolvers.period import ResolverSettings
 from wmm_control.robot_config import load_robot
 
@@ -224,25 +224,62 @@ def test_pinv_brings_its_base_onto_the_planned_pose_with_the_hand_still(robot):
     assert np.linalg.norm(error[:2]) < (0.005 if 1 in cfg.base.axes else 0.15 * math.sin(0.2) + 0.005)
 
 
+def _beside_a_straight_plan(method, offset, direction):
+    """`panda_diff` started ``offset`` [m] beside a plan that drives 3 m straight ahead
+    (``direction`` 1) or backs up 3 m (−1), the plan's points given one a period, as its clock
+    gives them at full pace, the base's motion integrated as commanded: (the planned base pose
+    less the base's at the plan's end (x, y, θ), the end effector's distance from its last
+    point [m])."""
+    cfg = load_robot('panda_diff')
+    path = [TwistPiece(np.zeros(3), np.array((3.0 * direction, 0.0, 0.0)))]
+    handoff = Handoff.of(KinematicModel(cfg), time_path(path, cfg.base, cfg.period), cfg.start.arm)
+    resolver = make_resolver(method, cfg, **resolver_parameters(METHOD_RUNS[method]))
+    q = np.array(cfg.start.arm, dtype=float)
+    state, dt = RobotState(np.array((0.0, offset, 0.0)), np.zeros(3), q, np.zeros_like(q)), resolver.params.dt
+    for point in handoff.points:
+        cmd = resolver.step(state, point)
+        pose = se2_integrate(state.base_pose, cmd.base_twist, dt)
+        state = RobotState(pose, cmd.base_twist, state.q_arm + dt * cmd.arm_velocity, cmd.arm_velocity)
+    hand = np.linalg.norm(state.ee_placement(resolver.model, update=True)[0] - point.position)
+    return point.base.error(state.base_pose), float(hand)
+
+
 @pytest.mark.parametrize('direction', [1.0, -1.0])
 def test_a_differential_base_is_steered_back_onto_the_plans_line(direction):
     """`panda_diff` (no sideways axis) starts 0.1 m beside a plan that drives 3 m straight ahead
     (or backs up 3 m): pinv's pull turns the base back onto the plan's line as it goes, the end
     effector on its points. Without the steering the offset stayed 0.1 m, and backing up, with the
     pull projected without the weighting, the base swung off the plan (0.5 m, 1.3 rad)."""
-    cfg = load_robot('panda_diff')
-    path = [TwistPiece(np.zeros(3), np.array((3.0 * direction, 0.0, 0.0)))]
-    handoff = Handoff.of(KinematicModel(cfg), time_path(path, cfg.base, cfg.period), cfg.start.arm)
-    resolver = make_resolver('pinv', cfg, **resolver_parameters(METHOD_RUNS['pinv']))
-    q = np.array(cfg.start.arm, dtype=float)
-    state, dt = RobotState(np.array((0.0, 0.1, 0.0)), np.zeros(3), q, np.zeros_like(q)), resolver.params.dt
-    for point in handoff.points:  # one a period, as the plan's clock gives them at full pace
-        cmd = resolver.step(state, point)
-        pose = se2_integrate(state.base_pose, cmd.base_twist, dt)
-        state = RobotState(pose, cmd.base_twist, state.q_arm + dt * cmd.arm_velocity, cmd.arm_velocity)
-    error = point.base.error(state.base_pose)
+    error, hand = _beside_a_straight_plan('pinv', 0.1, direction)
     assert abs(error[1]) < 0.03 and abs(error[0]) < 0.01 and abs(error[2]) < 0.02
-    assert np.linalg.norm(state.ee_placement(resolver.model, update=True)[0] - point.position) < 0.005
+    assert hand < 0.005
+
+
+@pytest.mark.parametrize('method', ['amp', 'traditional'])
+@pytest.mark.parametrize('direction', [1.0, -1.0])
+def test_the_acceleration_level_law_steers_a_differential_base_onto_the_plans_line(method, direction):
+    """The acceleration-level law on a followed plan's base gets the same steering (one
+    :meth:`~wmm_control.resolvers.interface.BaseReference.pull` for both levels): `panda_diff`
+    started 0.2 m beside a 3 m straight plan ends within 5 cm of its line, forward and backing
+    up (0.034 m; without the steering ``u̇_b* = Tᵀ ξ̈*`` dropped the sideways part and the offset
+    stayed 0.20 m), heading within 0.02 rad of the plan's, the end effector on its points."""
+    error, hand = _beside_a_straight_plan(method, 0.2, direction)
+    assert abs(error[1]) < 0.05 and abs(error[0]) < 0.01 and abs(error[2]) < 0.02
+    assert hand < 0.01
+
+
+def test_only_a_base_without_a_sideways_axis_is_steered():
+    """The steering gain: ``k_θ² / (4 ζ² v_max²)`` for a differential base, zero for the bases
+    that follow a sideways twist themselves."""
+    diff, critical, gentle = load_robot('panda_diff').base, SteeringParams(), SteeringParams(steering_damping=2.0)
+    assert critical.steering_gain(diff, 1.7) == pytest.approx(1.7**2 / (4.0 * float(diff.velocity[0]) ** 2))
+    assert gentle.steering_gain(diff, 1.7) == pytest.approx(critical.steering_gain(diff, 1.7) / 4.0)
+    for robot in ('steerable', 'mecanum'):
+        assert critical.steering_gain(load_robot(robot).base, 1.7) == 0.0
+    reference = BaseReference(np.zeros(3), rates=np.array((0.5, 0.0, 0.0)))
+    beside = np.array((0.0, 0.1, 0.0))  # the plan's line 0.1 m to the base's right
+    assert reference.pull(beside, 1.0, np.ones(3), 2.0)[2] == pytest.approx(2.0 * 0.5 * -0.1)
+    assert reference.pull(beside, 1.0, np.ones(3))[2] == 0.0
 
 
 class _HeldBase:

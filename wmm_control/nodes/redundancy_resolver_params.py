@@ -126,6 +126,14 @@ _SPECS = (
         hi=1.0,
         read_only=True,
     ),
+    Param(
+        'steering_damping',
+        "Damping ratio ζ [-] of a differential base's sideways offset from a followed plan's line, "
+        'steered out as it drives (Kanayama k_y = k_θ² / (4 ζ² v_max²)); larger: gentler.',
+        lo=1e-3,
+        hi=100.0,
+        read_only=True,
+    ),
     Param('sigma_min', 'σ_m,min: the base is activated below it (amp).', lo=0.0, hi=10.0, read_only=True),
     Param('singularity_avoidance', 'Activate the base near a singularity (amp).', read_only=True),
     Param(

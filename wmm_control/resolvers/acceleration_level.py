@@ -36,7 +36,12 @@ from which the axis's acceleration limit ``a`` brakes it to rest over its error 
 too). Below that speed it is eq (23)'s law as printed; without the cap robot B's base
 (0.025 m/s²) was asked for speeds it cannot brake from (out of AMP's task, 0.20 m past a
 planned pose 0.39 m away; ``test_follow_base.py``).
-A differential base takes its part along its heading, ``u̇_b* = Tᵀ ξ̈*``. The result
+A differential base takes its part along its heading, ``u̇_b* = Tᵀ ξ̈*``, which drops the
+sideways part: its turn rate in ``ξ̇*`` also steers it back onto the plan's line,
+``+ k_y v_r e_y`` (Kanayama's law, the velocity-level methods' too: one ``pull`` with
+:meth:`~wmm_control.resolvers.interface.SteeringParams.steering_gain`, ``k_θ`` the orientation
+rows' ``K_p / K_d``); without it a base 0.2 m beside a straight plan stayed 0.2 m beside it
+(``test_follow_base.py``). The result
 is ``task['base_follow']`` (None without a plan), which each method gives
 the base in its own way (:mod:`~wmm_control.resolvers.amp`, :mod:`~wmm_control.resolvers.traditional`).
 The same law on the arm's joints towards the plan's arm posture (``BaseReference.arm``: the travel
@@ -57,6 +62,7 @@ from wmm_control.errors import ConfigError
 from wmm_control.geometry import largest_step, rotation_2d, rotation_error, twist_to_base, twist_to_world
 from wmm_control.kinematics import KinematicModel
 from wmm_control.resolvers.interface import PoseTarget, Resolver, ResolverCommand, ResolverDiagnostics, RobotState
+from wmm_control.resolvers.interface import SteeringParams
 from wmm_control.resolvers.limits import CommandLimits
 from wmm_control.resolvers.pose_servo import _check_fields
 from wmm_control.resolvers.safety import SafetyParams, SafetyStage
@@ -69,9 +75,10 @@ TASK_ROWS = ('position', 'full')
 
 
 @dataclass(frozen=True)
-class AccelerationParams(SafetyParams):
-    """Parameters shared by the acceleration-level methods (Xing §4 defaults), and the safety
-    stage's (:class:`~wmm_control.resolvers.safety.SafetyParams`).
+class AccelerationParams(SafetyParams, SteeringParams):
+    """Parameters shared by the acceleration-level methods (Xing §4 defaults), the safety
+    stage's (:class:`~wmm_control.resolvers.safety.SafetyParams`) and a followed plan's base's
+    (:class:`~wmm_control.resolvers.interface.SteeringParams`).
 
     Attributes:
         dt: control period T [s].
@@ -139,6 +146,8 @@ class AccelerationResolver(Resolver):
         self._base_kd = self._kd[[0, 1, 5]]
         self._base_gain = self._kp[[0, 1, 5]] / self._base_kd
         self._base_acceleration = np.asarray(self.model.config.base.acceleration, dtype=float)
+        # k_y of a base without a sideways axis (0 for the others), on the heading's gain K_p / K_d
+        self._steering = params.steering_gain(self.model.config.base, self._base_gain[2])
         self.reset()
 
     def reset(self) -> None:
@@ -212,7 +221,9 @@ class AccelerationResolver(Resolver):
         if target.base is not None:
             planned = target.base
             rates = to_world @ qd[:nb] if self._unicycle else qd[:3]
-            wanted = twist_to_world(theta, planned.pull(state.base_pose, self._base_gain, self._base_acceleration))
+            wanted = twist_to_world(
+                theta, planned.pull(state.base_pose, self._base_gain, self._base_acceleration, self._steering)
+            )
             world = planned.acceleration + self._base_kd * (wanted - rates)
             base_follow = to_world.T @ world if self._unicycle else world
             if planned.arm is not None and planned.arm.shape == (self.model.n_arm,):

@@ -26,10 +26,12 @@ if TYPE_CHECKING:
     from wmm_control.kinematics import KinematicModel
     from wmm_control.kinematics.obstacles import Obstacle
     from wmm_control.resolvers.safety import SafetyStage
+    from wmm_control.robot_config import BaseSection
 
 __all__ = [
     'RobotState',
     'BaseReference',
+    'SteeringParams',
     'PoseTarget',
     'ResolverDiagnostics',
     'ResolverCommand',
@@ -47,6 +49,48 @@ def base_twist_of(values: ArrayLike, axes: Iterable[int]) -> np.ndarray:
     twist = np.zeros(3)
     twist[list(axes)] = values
     return twist
+
+
+@dataclass(frozen=True)
+class SteeringParams:
+    """How a method follows a plan's base (:class:`BaseReference`); every method's parameters
+    class derives from this one.
+
+    Attributes:
+        steering_damping: ζ of the steering of a base without a sideways axis back onto the
+            plan's line (:meth:`steering_gain`): the damping ratio of its sideways offset along a
+            straight plan at the base's top speed (1: critically damped there, overdamped
+            slower; larger: a gentler, slower steering) [-].
+    """
+
+    steering_damping: float = 1.0
+
+    def steering_gain(self, base: 'BaseSection', heading_gain: float) -> float:
+        """``k_y`` of the tracking law of a base that turns but cannot move sideways (a
+        differential base; Kanayama et al. 1990): its turn ``ω`` gets ``k_y v_r e_y``
+        (:meth:`BaseReference.pull`), ``v_r`` the plan's forward speed, ``e_y`` the planned
+        pose's sideways offset in the base's frame. With the heading held by
+        ``ω = ω_r + k_θ e_θ`` (``k_θ`` = ``heading_gain``), along a straight line at ``v_r`` the
+        offset obeys ``ë_y + k_θ ė_y + k_y v_r² e_y = 0``, and ``k_y = k_θ² / (4 ζ² v_max²)``
+        (ζ = ``steering_damping``, ``v_max`` the base's forward speed limit) makes its damping
+        ratio ζ at the top speed, more below it. Without it a pull that holds the heading to the
+        plan's leaves a sideways offset as it is.
+
+        Zero for a base that follows a sideways twist itself (steerable, Mecanum: the pull's
+        sideways part moves it there) or cannot drive and turn.
+
+        Args:
+            base: the robot's base (:attr:`~wmm_control.robot_config.RobotConfig.base`): the axes
+                it follows and their speed limits.
+            heading_gain: ``k_θ``, the gain of the pull's heading feedback [1/s].
+
+        Returns:
+            ``k_y`` [1/m²].
+        """
+        axes, speed = base.axes, float(base.velocity[0])
+        if 1 in axes or 0 not in axes or 2 not in axes or speed <= 0.0:
+            return 0.0
+        return (heading_gain / (2.0 * self.steering_damping * speed)) ** 2
 
 
 def _rotation(value, name):
@@ -154,20 +198,25 @@ class BaseReference:
         out[2] = wrap_angle(float(out[2]))
         return out
 
-    def pull(self, base_pose: ArrayLike, gain: ArrayLike, acceleration: ArrayLike) -> np.ndarray:
+    def pull(self, base_pose: ArrayLike, gain: ArrayLike, acceleration: ArrayLike, steering: float = 0.0) -> np.ndarray:
         """The rates that bring a base at ``base_pose`` onto the planned pose, in the base's own
         frame (vx, vy, ω): the planned rates as feedforward plus, on each axis, the feedback
         ``gain · e`` (``e`` :meth:`error` in the base's frame) no faster than ``√(2 a |e|)``, the
         speed from which the axis's acceleration limit ``a`` brakes it to rest over its error. A
         base that brakes over metres (robot B, 0.025 m/s²) is not asked for speeds it cannot
         stop from, and comes onto the pose instead of running past it; an axis the base cannot
-        move (``a = 0``) gets no feedback.
+        move (``a = 0``) gets no feedback. A base without a sideways axis is also steered back
+        onto the plan's line as it drives: ``ω += k_y v_r e_y`` (``steering`` = ``k_y``,
+        :meth:`SteeringParams.steering_gain`; ``v_r`` the plan's forward speed, its rates in the
+        planned pose's frame: negative backing up, zero turning in place or at rest; ``e_y`` the
+        sideways entry of ``e``).
 
         Args:
             base_pose: the base's pose (x, y, θ) in the world [m, m, rad]. Shape (3,).
             gain: the feedback gain of each axis [1/s]. Scalar or shape (3,).
             acceleration: the acceleration limit of each of the base's axes (vx, vy, ω) [m/s²,
                 m/s², rad/s²]. Shape (3,).
+            steering: ``k_y`` [1/m²]; 0 (a base that moves sideways itself): no steering.
 
         Returns:
             (vx, vy, ω) [m/s, m/s, rad/s]. Shape (3,).
@@ -176,7 +225,11 @@ class BaseReference:
         error = twist_to_base(theta, self.error(base_pose))
         size = np.abs(error)
         braking = np.sqrt(2.0 * np.asarray(acceleration, dtype=float) * size)
-        return twist_to_base(theta, self.rates) + np.copysign(np.minimum(np.asarray(gain) * size, braking), error)
+        out = twist_to_base(theta, self.rates) + np.copysign(np.minimum(np.asarray(gain) * size, braking), error)
+        if steering > 0.0:
+            forward = float(twist_to_base(float(self.pose[2]), self.rates)[0])
+            out[2] += steering * forward * float(error[1])
+        return out
 
 
 @dataclass(frozen=True)

@@ -62,7 +62,6 @@ from wmm_control.geometry import (
     rotation_z,
     rpy_from_matrix,
     rpy_rate_map,
-    twist_to_base,
     wrap_angle,
 )
 from wmm_control.resolvers.interface import (
@@ -72,6 +71,7 @@ from wmm_control.resolvers.interface import (
     ResolverCommand,
     ResolverDiagnostics,
     RobotState,
+    SteeringParams,
     base_twist_of,
 )
 from wmm_control.resolvers.limits import CommandLimits
@@ -93,9 +93,10 @@ _H_COLS = (0, 1, 5)  # columns of H J_b of the base twist (vx, vy, ω)
 
 
 @dataclass(frozen=True)
-class PoseServoParams(SafetyParams):
-    """Parameters shared by the velocity-level resolvers (Sorour Table I defaults), and the
-    safety stage's (:class:`~wmm_control.resolvers.safety.SafetyParams`).
+class PoseServoParams(SafetyParams, SteeringParams):
+    """Parameters shared by the velocity-level resolvers (Sorour Table I defaults), the safety
+    stage's (:class:`~wmm_control.resolvers.safety.SafetyParams`) and a followed plan's base's
+    (:class:`~wmm_control.resolvers.interface.SteeringParams`).
 
     Attributes:
         dt: control period t_s [s].
@@ -224,10 +225,8 @@ class PoseServoResolver(Resolver):
         config = self.model.config
         #: indices of (vx, vy, ω) the base can follow; u = (those, q̇_a)
         self.base_axes = config.base.axes
-        #: k_y of a base without a sideways axis (:meth:`base_pull`) [1/m²]
-        self._lateral_gain = 0.0
-        if 1 not in self.base_axes and 2 in self.base_axes and config.base.velocity[0] > 0.0:
-            self._lateral_gain = params.lambda_p**2 / (4.0 * float(config.base.velocity[0]) ** 2)
+        #: k_y of a base without a sideways axis, 0 for the others (:meth:`base_pull`) [1/m²]
+        self._steering = params.steering_gain(config.base, params.lambda_p)
         self.n_base = len(self.base_axes)
         self.n_arm = self.model.n_arm
         self.n = self.n_base + self.n_arm
@@ -397,19 +396,12 @@ class PoseServoResolver(Resolver):
         zero.
 
         A base without a sideways axis (differential) cannot follow the pull's sideways part; its
-        turn then also steers it back onto the plan's line (Kanayama et al. 1990's tracking law):
-        ``ω += k_y v_r e_y``, ``v_r`` the plan's forward speed (its rates in the planned pose's
-        frame: negative backing up, zero turning in place or at rest), ``e_y`` the planned pose's
-        sideways offset in the base's frame, ``k_y = λ_p² / (4 v_max²)`` (``v_max`` the base's
-        speed limit): along a straight line at v_r the offset obeys ``ë_y + λ_p ė_y + k_y v_r² e_y
-        = 0``, critically damped at the top speed, overdamped below it. Without it the pull held the
-        heading to the plan's and left a sideways offset as it was (``docs/methods.md``).
-        Shape (n_b + n,)."""
-        body = reference.pull(state.base_pose, self.params.lambda_p, self._base_acceleration)
-        if self._lateral_gain > 0.0:
-            forward = float(twist_to_base(float(reference.pose[2]), reference.rates)[0])
-            sideways = float(twist_to_base(float(state.base_pose[2]), reference.error(state.base_pose))[1])
-            body[2] += self._lateral_gain * forward * sideways
+        turn then also steers it back onto the plan's line (Kanayama et al. 1990's tracking law,
+        ``ω += k_y v_r e_y``,
+        :meth:`~wmm_control.resolvers.interface.SteeringParams.steering_gain` with ``k_θ = λ_p``).
+        Without it the pull held the heading to the plan's and left a sideways offset as it was
+        (``docs/methods.md``). Shape (n_b + n,)."""
+        body = reference.pull(state.base_pose, self.params.lambda_p, self._base_acceleration, self._steering)
         z = np.zeros(self.n)
         z[: self.n_base] = body[list(self.base_axes)]
         if arm and reference.arm is not None and reference.arm.shape == (self.n_arm,):
