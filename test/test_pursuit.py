@@ -202,3 +202,29 @@ def test_a_stall_at_the_stance_planned_again_gives_the_final_approach_with_the_s
     assert np.linalg.norm(model.ee_placement_world()[0] - BEHIND_TABLE) < 0.01  # the stance's posture reaches it
     later = [pursuit.step(0.025, stance, Q_ARM) for _ in range(5)]
     assert all(s.reference is None and not s.forward_goal for s in later), 'sent once: the resolver holds it'
+
+
+def test_the_first_plans_path_end_gives_the_runs_limit_and_a_plan_made_again_does_not_move_it(pursuit):
+    """A study's run (``wmm_randomized --plan``) counts its limit from when the base path of the
+    goal's first plan is planned to end: the time the plan came, on the clock of the periods
+    stepped, plus the path's timed duration; a plan made again does not move it, a new goal
+    starts afresh."""
+    assert pursuit.planned_end is None and pursuit.limit(90.0) == 90.0
+    pursuit.new_goal('world', pose(BEHIND_TABLE, yaw=0.5 * np.pi))
+    steps = settle(pursuit)
+    handoff = pursuit.follower.handoff
+    came = 0.025 * len(steps)  # the step that took the plan
+    assert pursuit.elapsed == pytest.approx(came)
+    assert pursuit.planned_end == pytest.approx(came + handoff.path_end * handoff.dt)
+    assert handoff.path_end * handoff.dt > 1.0 and handoff.path_end < len(handoff.points) - 1
+    assert pursuit.limit(90.0) == pytest.approx(90.0 + pursuit.planned_end)
+    first = pursuit.planned_end
+    for _ in range(400):  # the base never moves: stalled after 1 s, planned again
+        pursuit.step(0.025, START, Q_ARM)
+        if pursuit.state is not PursuitState.FOLLOWING:
+            break
+    settle(pursuit)
+    assert pursuit.replans == 1 and pursuit.planned_end == first
+    assert pursuit.account()['planned_end_s'] == first
+    pursuit.new_goal('world', pose(BEHIND_TABLE + np.array([0.0, 0.1, 0.0]), yaw=0.5 * np.pi))
+    assert pursuit.planned_end is None

@@ -24,6 +24,7 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.geometry import matrix_from_rpy
 from wmm_control.resolvers import ResolverDiagnostics
 from wmm_control.resolvers.progress import GoalProgress
+from wmm_control.robot_config import load_robot
 
 SUBSET_SEED = 1
 SUBSET_GOALS = 2
@@ -375,3 +376,24 @@ def test_the_cycle_time_is_the_control_cycle_alone():
     for rec in records:
         assert 0.004 <= rec.cycle_cpu_s <= rec.cycle_s + 1e-4
         assert rec.cycle_cpu_s < 0.05  # the simulator's step is not in it
+
+
+def test_a_planned_run_has_its_limit_after_its_first_plans_base_path():
+    """With ``plan`` the run's limit counts from when the base path of the goal's first plan is
+    planned to end: the drive to the stance (``doorway``: 11–13 m round the wall for robot A) is
+    not taken out of the time the final approach has. Without a plan the limit is ``duration``."""
+    cfg = load_robot('steerable')
+    goal = sample_goals(cfg, 1, seed=0, obstacles='table_pillar')[0]
+    planned = run_goal(cfg, 'pinv', goal, obstacles='table_pillar', duration=1.0, plan=True)
+    assert planned['planned_end_s'] > 2.0
+    assert planned['time_limit_s'] == pytest.approx(1.0 + planned['planned_end_s'])
+    assert planned['time_s'] == pytest.approx(planned['time_limit_s'], abs=0.05)
+    assert planned['outcome'] != 'converged'
+    direct = run_goal(cfg, 'pinv', goal, obstacles='table_pillar', duration=1.0)
+    assert direct['time_limit_s'] == 1.0 and direct['time_s'] == pytest.approx(1.0, abs=0.05)
+    # the nodes engine counts it on the goal_planner node's pursuit, once its plan comes from the
+    # node's thread (the simulation goes on meanwhile: 3 s, for the plan to come within them)
+    nodes = run_goal(cfg, 'pinv', goal, engine='nodes', obstacles='table_pillar', duration=3.0, plan=True)
+    assert nodes['planned_end_s'] > 2.0
+    assert nodes['time_limit_s'] == pytest.approx(3.0 + nodes['planned_end_s'])
+    assert nodes['time_s'] == pytest.approx(nodes['time_limit_s'], abs=0.1)

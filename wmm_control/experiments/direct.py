@@ -30,6 +30,7 @@ def run_scenario(
     until: Callable[[ResolverDiagnostics], bool] | None = None,
     pursuit: GoalPursuit | None = None,
     obstacle_changes: Sequence[tuple[float, Iterable[Obstacle]]] = (),
+    after_plan: bool = False,
 ) -> RunLog:
     """Run a whole scenario (goals or a trajectory) on ``world`` with no ROS in between.
 
@@ -51,6 +52,10 @@ def run_scenario(
             (:meth:`~wmm_control.planning.pursuit.GoalPursuit.follow_plan`) is followed from the start.
         obstacle_changes: ``(t, obstacles)`` pairs: from ``t`` [s] on, the obstacles are these,
             in the world, in the cycle and for the pursuit (an obstacle that moves).
+        after_plan: with ``pursuit``, the scenario's duration counts from when the base path of
+            the goal's first plan is planned to end
+            (:meth:`~wmm_control.planning.pursuit.GoalPursuit.limit`): the run lasts that much
+            longer; without, it lasts the scenario's duration.
 
     Returns:
         The frozen :class:`~wmm_control.experiments.metrics.RunLog`.
@@ -64,11 +69,17 @@ def run_scenario(
     changes = sorted(((float(t), tuple(obstacles)) for t, obstacles in obstacle_changes), key=lambda c: c[0])
     log = RunLog(method=resolver.name, label=label, joint_names=world.joint_names)
     reference = scenario.reference(resolver.model) if scenario.trajectory is not None else None
-    n = int(round(scenario.duration / world.dt))
+
+    def periods() -> int:  # the run's length in periods, asked each period (a plan may lengthen it)
+        length = pursuit.limit(scenario.duration) if after_plan and pursuit is not None else scenario.duration
+        return int(round(length / world.dt))
+
     t0 = time.perf_counter()
     submitted = None
+    done = 0
     with steady_heap():  # no full pass of the garbage collector walks the models mid-run
-        for _ in range(n):
+        while done < periods():
+            done += 1
             while changes and changes[0][0] <= world.time + 1e-9:
                 obstacles = changes.pop(0)[1]
                 world.set_obstacles(obstacles)

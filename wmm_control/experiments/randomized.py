@@ -74,7 +74,7 @@ from wmm_control.geometry import matrix_from_rpy, rotation_angle, rpy_from_matri
 from wmm_control.nodes.parameters import load_defaults
 from wmm_control.planning import GoalPlanner, NoWay
 from wmm_control.planning.no_way_check import NoWayCheck, Verdict, confirm_no_way
-from wmm_control.planning.pursuit import GoalPursuit
+from wmm_control.planning.pursuit import GoalPursuit, run_limit
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
 from wmm_control.resolvers.period import ResolverSettings
@@ -104,7 +104,8 @@ __all__ = [
 #: The robots, by name.
 ROBOTS = ('steerable', 'mecanum')
 #: Longest run per robot [s] (90 s for any other): robot B's base accelerates at 0.025 m/s² (Xing Table 1). Long
-#: enough for the slowest approach that never stalls (robot A: amp, 64 s; robot B: amp, 128 s).
+#: enough for the slowest approach that never stalls (robot A: amp, 64 s; robot B: amp, 128 s). A planned run
+#: (``--plan``) counts it from when its first plan's base path is planned to end (:func:`run_goal`).
 DURATION_S = {'steerable': 90.0, 'mecanum': 180.0, 'ur_mecanum': 90.0, 'panda_diff': 90.0}
 #: Drawn arm configurations stay this far inside the position limits [rad].
 ARM_MARGIN = 0.1
@@ -234,7 +235,8 @@ def _run_direct(robot, run, goal, duration, obstacles, plan=False):
             robot, load_obstacles(obstacles), settings.world_frame, settings.max_goal_distance, threaded=False
         )
     with SimWorld(robot, base_mode='kinematic') as world:
-        log = run_scenario(world, resolver, _scenario(robot, goal, duration, obstacles), until=done, pursuit=pursuit)
+        scenario = _scenario(robot, goal, duration, obstacles)
+        log = run_scenario(world, resolver, scenario, until=done, pursuit=pursuit, after_plan=True)
     status = {'goal_reached': progress.reached, 'first_stall_s': first_stall[0] if first_stall else None}
     if pursuit is None:
         return log, status
@@ -271,7 +273,7 @@ def _run_nodes(robot, run, goal, duration, obstacles, plan=False):
         )
         scenario = load_scenario(path)
         entry = dict(run, name=run['method'], feedback='ground_truth')
-        log = run_with_nodes(scenario, entry, planner=plan)
+        log = run_with_nodes(scenario, entry, planner=plan, after_plan=True)
     final = log.final_status or {}
     status = {'goal_reached': final.get('goal_reached', False), 'first_stall_s': log.first_stall_s}
     if not plan:
@@ -334,6 +336,10 @@ def run_goal(
     """One closed-loop run of ``method`` to ``goal`` from the robot's start state.
 
     ``params`` (resolver parameters) override those of :data:`METHOD_RUNS` and :data:`ROBOT_RUNS`.
+    ``duration``: the run's limit [s] (default :data:`DURATION_S`); with ``plan`` it counts from
+    when the base path of the goal's first plan is planned to end
+    (:func:`~wmm_control.planning.pursuit.run_limit`): a goal the base drives far to is given
+    the time of its drive on top.
     ``obstacles``: an obstacle file (name or path; '' for none), in the simulator and the
     controller. ``record``: a folder to write the run to (the module docstring says how).
     ``plan``: the planner plans the way to the goal first (as ``goal_planner`` does,
@@ -347,7 +353,8 @@ def run_goal(
     Returns:
         dict: ``robot``, ``method``, ``goal`` (index), ``outcome`` (``converged`` | ``reported`` |
         ``failed``, or ``no_way`` with ``plan``: the planner's reason in ``no_way_reason``, the
-        robot held still, or stopped where a plan from where it stalled found none), ``time_s`` (simulated), ``time_to_reach_s`` (first entry into the
+        robot held still, or stopped where a plan from where it stalled found none), ``time_s`` (simulated),
+        ``time_limit_s`` (the run's limit, ``duration`` with the plan's path on top), ``time_to_reach_s`` (first entry into the
         tolerance, null: never), ``final_position_error_m``, ``final_orientation_error_rad``,
         ``first_stall_s`` (when the goal was first reported stalled, null: never),
         ``limits_exceeded`` (:func:`~wmm_control.experiments.metrics.run_limit_report`),
@@ -360,7 +367,8 @@ def run_goal(
         still, else empty); with ``plan`` also ``planning_time_s`` (of every plan of the run),
         ``replans`` (the plans from where the robot stalled, at most :data:`MAX_REPLANS`),
         ``no_way`` (its kind, else None), ``no_way_reason``, ``no_way_from`` (the base pose the
-        plan that found no way was made from) and, for a ``no_way`` run, ``no_way_check``
+        plan that found no way was made from), ``planned_end_s`` (when the first plan's base path
+        is planned to end, None without a path to follow) and, for a ``no_way`` run, ``no_way_check``
         (:func:`no_way_check`: ``verdict`` confirmed | refuted | unchecked, ``evidence``, the
         stance that refutes it, ...).
     """
@@ -369,8 +377,11 @@ def run_goal(
     run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(cfg.name, {}).get(method, {}), **(params or {})}
     log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles, plan=plan)
     planning: dict = {}
+    limit = duration
     if plan:
-        planning = {k: status.pop(k) for k in ('planning_time_s', 'no_way', 'no_way_reason', 'no_way_from', 'replans')}
+        keys = ('planning_time_s', 'no_way', 'no_way_reason', 'no_way_from', 'replans', 'planned_end_s')
+        planning = {k: status.pop(k) for k in keys}
+        limit = run_limit(duration, planning['planned_end_s'])
         if log is None:
             log, status = _held(cfg, method, goal, '')
     if not len(log):  # the goal was refused: the robot held still
@@ -402,7 +413,7 @@ def run_goal(
         outcome = 'reported'
     else:
         outcome = 'failed'
-        why.append(f'neither reached nor ever reported stalled in {duration:g} s')
+        why.append(f'neither reached nor ever reported stalled in {limit:g} s')
     if why:
         outcome = 'failed'
     if outcome == 'no_way':
@@ -413,6 +424,7 @@ def run_goal(
         'goal': goal.index,
         'outcome': outcome,
         'time_s': float(log.t[-1] + dt),
+        'time_limit_s': limit,
         'time_to_reach_s': float(log.t[inside[0]]) if inside.size else None,
         'final_position_error_m': float(pos_err[-1]),
         'final_orientation_error_rad': float(ori_err[-1]),

@@ -173,6 +173,7 @@ def run_with_nodes(
     bag_path: str | Path | None = None,
     view_port: int | None = None,
     planner: bool = False,
+    after_plan: bool = False,
 ) -> RunLog:
     """Run one entry of ``scenario.runs`` with every node in this process.
 
@@ -190,6 +191,9 @@ def run_with_nodes(
         planner: run ``goal_planner`` between the goals and the resolver (the scenario's
             obstacles, the run's odometry); the goal counts as reached or stalled only once the
             planner has handed it to the resolver, and ``planning`` holds the planner's account.
+        after_plan: with ``planner``, the scenario's duration counts from when the base path of
+            the goal's first plan is planned to end, as
+            :func:`~wmm_control.experiments.direct.run_scenario`'s ``after_plan``.
 
     Returns:
         The frozen :class:`RunLog` (``wall_time_s`` set).
@@ -285,7 +289,13 @@ def run_with_nodes(
         limit = wall_timeout if wall_timeout is not None else 10.0 * scenario.duration + 30.0
         start = time.perf_counter()
         reported = 0.0
-        while recorder.last_t + 1e-9 < scenario.duration:
+
+        def length() -> float:  # [s] asked each time round (a plan may lengthen the run)
+            if after_plan and goal_planner is not None:
+                return goal_planner.pursuit.limit(scenario.duration)
+            return scenario.duration
+
+        while recorder.last_t + 1e-9 < length():
             executor.spin_once(timeout_sec=0.1)
             if progress is not None and recorder.last_t > reported:
                 progress(recorder.last_t - reported)

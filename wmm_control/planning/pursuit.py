@@ -67,7 +67,7 @@ from wmm_control.resolvers.interface import PoseTarget
 from wmm_control.resolvers.targets import LogEvent, LogThrottle, check_goal, goal_key, goal_text
 from wmm_control.robot_config import RobotConfig
 
-__all__ = ['GoalPursuit', 'PlanWorker', 'PursuitLog', 'PursuitState', 'PursuitStep', 'path_blocked']
+__all__ = ['GoalPursuit', 'PlanWorker', 'PursuitLog', 'PursuitState', 'PursuitStep', 'path_blocked', 'run_limit']
 
 
 class PursuitState(str, Enum):
@@ -155,6 +155,14 @@ class _Checked:
 class _Failed:
     ticket: int
     error: str
+
+
+def run_limit(duration: float, planned_end: float | None) -> float:
+    """[s] a run's limit that gives the robot ``duration`` [s] after the base path of the goal's
+    first plan is planned to end, at ``planned_end`` [s] (:attr:`GoalPursuit.planned_end`;
+    ``duration`` itself when None: no path to follow): a long way round is not taken out of the
+    time the final approach has."""
+    return duration + (planned_end or 0.0)
 
 
 def path_blocked(planner: GoalPlanner, poses: np.ndarray) -> str:
@@ -324,6 +332,12 @@ class GoalPursuit:
         self._no_way_version = -1  # of the obstacles when the goal in force got no way
         self._planned_from: np.ndarray | None = None  # the base pose of the last plan asked for
         self._approach: PoseTarget | None = None  # a final approach due at the next point given
+        #: [s] the time :meth:`step` has been told so far (the sum of its periods)
+        self.elapsed = 0.0
+        #: [s] when (on :attr:`elapsed`'s clock) the base path of the goal's first plan is planned
+        #: to end: the time it came plus the path's timed duration; None before it (or with no
+        #: path to follow: a goal sent straight, no way)
+        self.planned_end: float | None = None
 
     def close(self, timeout: float | None = None) -> None:
         """Stop the worker, waiting up to ``timeout`` [s] for a plan under way (None: until done)."""
@@ -346,6 +360,7 @@ class GoalPursuit:
         self.counters.goals += 1
         self.goal = PoseTarget(values[:3], matrix_from_quaternion(quat))
         self.replans = 0
+        self.planned_end = None
         self._plan_due = 'new goal'
         self._stop(PursuitState.PLANNING, '')
         return events + [LogEvent('accepted', f'new goal: {goal_text(values[:3], quat)}: planning')]
@@ -360,7 +375,8 @@ class GoalPursuit:
         self._key = goal_key(goal.position, quaternion_from_matrix(goal.rotation))
         self.counters.goals += 1
         self.replans = 0
-        self.follower = follower
+        self.planned_end = None
+        self._follow(follower)
         self._path = follower.remaining_poses()
         return [LogEvent('planned', f'following a plan given for the goal {np.round(goal.position, 3).tolist()}')]
 
@@ -377,6 +393,7 @@ class GoalPursuit:
         joints (None while they are not known, or stale: then no point is given, no plan started
         and no hold sent)."""
         events: list[LogEvent] = []
+        self.elapsed += dt
         base = None if base_pose is None else np.asarray(base_pose, dtype=float)
         forward = self._take_results(events, base)
         reference, self._approach = self._approach, None
@@ -495,6 +512,17 @@ class GoalPursuit:
                 forward = self._planned(events, result) or forward
         return forward
 
+    def _follow(self, follower: PlanFollower) -> None:
+        """Follow ``follower``'s plan from now on; the goal's first plan sets :attr:`planned_end`."""
+        self.follower = follower
+        if self.planned_end is None:
+            handoff = follower.handoff
+            self.planned_end = self.elapsed + handoff.path_end * handoff.dt
+
+    def limit(self, duration: float) -> float:
+        """[s] :func:`run_limit` of ``duration`` with this pursuit's :attr:`planned_end`."""
+        return run_limit(duration, self.planned_end)
+
     def _planned(self, events: list[LogEvent], result: _Planned) -> bool:
         plan = result.plan
         self.planning_time = plan.planning_time
@@ -532,7 +560,8 @@ class GoalPursuit:
             )
             return True
         assert result.handoff is not None and self.goal is not None
-        self.follower = PlanFollower(result.handoff, self.goal, self.follow)
+        follower = PlanFollower(result.handoff, self.goal, self.follow)
+        self._follow(follower)
         self.state, self.reason, self.progress = PursuitState.FOLLOWING, '', 0.0
         poses = plan.trajectory.poses
         self._path = poses
@@ -546,7 +575,7 @@ class GoalPursuit:
             )
         )
         if result.version != self.version:  # the obstacles changed while it was planned
-            self.worker.submit(_CheckJob(self._ticket, self.version, self.obstacles, self.follower.remaining_poses()))
+            self.worker.submit(_CheckJob(self._ticket, self.version, self.obstacles, follower.remaining_poses()))
         return False
 
     # ------------------------------------------------------------------ report
@@ -587,8 +616,8 @@ class GoalPursuit:
     def account(self) -> dict:
         """What the pursuit of a goal came to, for a study's row: ``planning_time_s`` (of every
         plan), ``plans``, ``replans``, ``no_way`` (its kind when the pursuit ended with no way,
-        else None), ``no_way_reason`` and ``no_way_from`` (the base pose (x, y, θ) the plan that
-        found no way was made from, else None)."""
+        else None), ``no_way_reason``, ``no_way_from`` (the base pose (x, y, θ) the plan that
+        found no way was made from, else None) and ``planned_end_s`` (:attr:`planned_end`)."""
         c = self.counters
         no_way = self.state is PursuitState.NO_WAY
         return {
@@ -598,4 +627,5 @@ class GoalPursuit:
             'no_way': (self.no_way_kind.value if self.no_way_kind else 'no_way') if no_way else None,
             'no_way_reason': self.reason if no_way else None,
             'no_way_from': self._planned_from.tolist() if no_way and self._planned_from is not None else None,
+            'planned_end_s': self.planned_end,
         }

@@ -53,7 +53,7 @@ class PinvResolver(PoseServoResolver):
         #: the activation on a followed plan's way: the arm alone does the task and makes up for the pull
         self._arm_only = np.concatenate((np.zeros(self.n_base), np.ones(self.n_arm)))
 
-    def _resolve(self, jac, p_ref, e_pos, state, pull, stance):
+    def _resolve(self, jac, p_ref, e_pos, state, pull, stance, plan_arm):  # the arm's posture is in ``pull``
         if pull is None or stance:
             task = self.solve_task(jac, p_ref, state.q_arm)
             null = None if pull is None else self.null_motion(jac, task, state.q_arm, pull)

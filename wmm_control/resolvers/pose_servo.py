@@ -2,8 +2,8 @@
 
 Sorour §II–III: the proportional pose controller of eq (12), the augmented Jacobian J_mm of
 eq (7), the limits of the whole command, and the arm compensation of eq (14). A subclass
-supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull, stance) -> (u_task, u_null,
-mode, ψ)``, the task part and the null-space part, which gives way first to the limits.
+supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull, stance, plan_arm) -> (u_task,
+u_null, mode, ψ)``, the task part and the null-space part, which gives way first to the limits.
 Each part's change from its own share of the last command is bounded
 (:class:`~wmm_control.resolvers.limits.CommandLimits`); where the safety stage changes the base's
 reference, the change comes out of the null-space share first, the one that gives way first,
@@ -499,10 +499,12 @@ class PoseServoResolver(Resolver):
 
     # ------------------------------------------------------------------ step
     @abstractmethod
-    def _resolve(self, jac, p_ref, e_pos, state, pull, stance):
+    def _resolve(self, jac, p_ref, e_pos, state, pull, stance, plan_arm):
         """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ)``;
         ``pull`` is :meth:`base_pull` of a followed plan's base, or None, for the null space,
-        ``stance`` that base's :attr:`~wmm_control.resolvers.interface.BaseReference.stance`."""
+        ``stance`` that base's :attr:`~wmm_control.resolvers.interface.BaseReference.stance`,
+        ``plan_arm`` its arm posture (:attr:`~wmm_control.resolvers.interface.BaseReference.arm`,
+        shape (n,)) or None."""
 
     def step(self, state: RobotState, target: PoseTarget) -> ResolverCommand:
         """One period: eq (12), the method's inversion, then the limits.
@@ -516,7 +518,10 @@ class PoseServoResolver(Resolver):
         jac, p_ref, e_pos, angle = self.task_reference(state, target)
         pull = None if target.base is None else self.base_pull(state, target.base, self.pulls_arm_to_plan)
         stance = target.base is not None and target.base.stance
-        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull, stance)
+        plan_arm = None if target.base is None else target.base.arm
+        if plan_arm is not None and plan_arm.shape != (self.n_arm,):
+            plan_arm = None
+        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull, stance, plan_arm)
         nb = self.n_base
         self._position[nb:] = state.q_arm
         lim = self.limits.apply(task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null)

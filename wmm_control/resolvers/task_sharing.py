@@ -21,7 +21,14 @@ Each period:
    the task follows the plan's pull whole, the arm making up for it); at the stance, in the
    final approach, it takes priority:
    the posture pull then moves the arm alone, in the null space of the task and the base
-   (:meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.secondary_motion`).
+   (:meth:`~wmm_control.resolvers.pose_servo.PoseServoResolver.secondary_motion`). While a plan
+   is followed, its arm posture (:attr:`~wmm_control.resolvers.interface.BaseReference.arm`: the
+   travel posture, the arm's motion to the stance's posture, the stance's at the final approach)
+   takes q_a,dex's place in ``z_dex`` (not in the paper): the posture the points were made with,
+   and the stance's, which reaches the goal within the limits and clear of the obstacles. Pulled
+   to q_a,dex, robot A's arm left the planned motion to the stance's posture for joints on their
+   limits (``doorway`` goals 1 and 5: joints 2, 6 and 7 at 2.09, 2.09 and −2.97 rad), from which
+   the final approach stalled 4 and 13 cm off.
 4. The whole command scaled into the limits (:mod:`wmm_control.resolvers.limits`).
 5. Eq (14) in :meth:`TaskSharingResolver.compensate`, when the base controller has answered
    with the feasible twist q̇_bf of this period: the arm takes over the base's predicted
@@ -124,15 +131,17 @@ class TaskSharingResolver(PoseServoResolver):
             self._psi += min(step, max(-step, target - self._psi))
         return self._psi, MODES[target]
 
-    def _resolve(self, jac, p_ref, e_pos, state, pull, stance):
+    def _resolve(self, jac, p_ref, e_pos, state, pull, stance, plan_arm):
         psi, mode = self._share(norm(e_pos))
         activation = np.empty(self.n)
         activation[: self.n_base] = 1.0 - psi
         activation[self.n_base :] = psi
         task = self.solve_task(jac, p_ref, state.q_arm, activation)
-        # eqs (9) and (13): λ_dex (I − J⁺J) z_dex, with a followed plan's base pull
+        # eqs (9) and (13): λ_dex (I − J⁺J) z_dex, with a followed plan's base pull; a followed
+        # plan's arm posture takes q_a,dex's place (module docstring)
+        posture = self.q_dex if plan_arm is None else plan_arm
         z = np.zeros(self.n)
-        z[self.n_base :] = self.params.lambda_dex * (self.q_dex - state.q_arm)
+        z[self.n_base :] = self.params.lambda_dex * (posture - state.q_arm)
         return task, self.secondary_motion(jac, task, state.q_arm, pull, z, stance, activation), mode, psi
 
     def compensate(self, command: ResolverCommand, feasible_twist: ArrayLike) -> ResolverCommand:
