@@ -75,7 +75,7 @@ from wmm_control.resolvers.interface import (
     base_twist_of,
 )
 from wmm_control.resolvers.limits import CommandLimits
-from wmm_control.resolvers.safety import SafetyParams, SafetyStage
+from wmm_control.resolvers.safety import SafetyParams, SafetyStage, task_weights
 from wmm_control.resolvers.sns import saturate_in_null_space
 from wmm_control.robot_config import RobotConfig
 
@@ -253,6 +253,7 @@ class PoseServoResolver(Resolver):
         self._arm_null = np.zeros(n_arm)  # ...and null-space part
         self._q_arm: np.ndarray | None = None
         self._jac: np.ndarray | None = None
+        self._weights: np.ndarray | None = None  # the safety stage's W: the method's sharing (step)
         self._safety = None  # the safety stage's answer on the last arm command
         self._base_pose: np.ndarray | None = None
         self._base_velocity: np.ndarray | None = None
@@ -508,9 +509,12 @@ class PoseServoResolver(Resolver):
     # ------------------------------------------------------------------ step
     @abstractmethod
     def _resolve(self, jac, p_ref, e_pos, state, pull, stance):
-        """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ)``;
-        ``pull`` is :meth:`base_pull` of a followed plan's base, or None, for the null space,
-        ``stance`` that base's :attr:`~wmm_control.resolvers.interface.BaseReference.stance`."""
+        """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ,
+        A)``, ``A`` the activation with which it shared the task (the diagonal of ``W⁻¹``, as
+        :func:`damped_pinv` takes it; None: every entry fully), which the safety stage keeps
+        (:func:`~wmm_control.resolvers.safety.task_weights`); ``pull`` is :meth:`base_pull` of a
+        followed plan's base, or None, for the null space, ``stance`` that base's
+        :attr:`~wmm_control.resolvers.interface.BaseReference.stance`."""
 
     def step(self, state: RobotState, target: PoseTarget) -> ResolverCommand:
         """One period: eq (12), the method's inversion, then the limits.
@@ -524,7 +528,8 @@ class PoseServoResolver(Resolver):
         jac, p_ref, e_pos, angle = self.task_reference(state, target)
         pull = None if target.base is None else self.base_pull(state, target.base, self.pulls_arm_to_plan)
         stance = target.base is not None and target.base.stance
-        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull, stance)
+        task, null, mode, psi, activation = self._resolve(jac, p_ref, e_pos, state, pull, stance)
+        self._weights = None if activation is None else task_weights(activation)
         nb = self.n_base
         self._position[nb:] = state.q_arm
         lim = self.limits.apply(task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null)
@@ -595,6 +600,7 @@ class PoseServoResolver(Resolver):
                 np.concatenate((base, arm.command)),
                 np.concatenate((whole.lower[:nb], arm.lower)),
                 np.concatenate((whole.upper[:nb], arm.upper)),
+                weights=self._weights,
                 base_pose=self._base_pose,
                 base_axes=self.base_axes,
                 base_velocity=self._base_velocity,
