@@ -262,9 +262,9 @@ class _HeldBase:
 
 
 def test_the_stages_hold_on_the_base_does_not_hold_back_the_end_effectors_task():
-    """A base reference the safety stage changed is a change of the share that gives way first,
-    the null space's: the task's share of the last command, from which its change this period is
-    bounded, stays what the limits gave it. Counted as the task's, the change was a share the task
+    """A base reference the safety stage changed is no share of the method's command: the task's
+    share of the last command, from which its change this period is bounded, stays what the
+    limits gave it. Counted as the task's, the change was a share the task
     had to undo within the base's acceleration limit, and the one factor of the task's change held
     the arm's part back with it (0.47 here; robot A's task sharing on its way round the table,
     its base changed by the stage in 80 % of the periods, had the task's change at 7 %, the end

@@ -368,7 +368,9 @@ class SafetyStage:
         method = np.asarray(command, dtype=float)
         box = Box(lower, upper)
         command = box.clip(method)  # the method's command, in the box (module docstring)
-        clipped = not np.array_equal(command, method)
+        clipped = bool((np.abs(command - method) > TOLERANCE).any())  # not a rounding's worth
+        if not clipped:
+            command = method
         p = self.params
         if not p.collision_avoidance:
             return SafetyResult(command, math.inf, '', 0, clipped)
