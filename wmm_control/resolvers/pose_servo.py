@@ -5,14 +5,14 @@ eq (7), the limits of the whole command, and the arm compensation of eq (14). A 
 supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull, stance) -> (u_task, u_null,
 mode, ψ)``, the task part and the null-space part, which gives way first to the limits.
 Each part's change from its own share of the last command is bounded
-(:class:`~wmm_control.resolvers.limits.CommandLimits`): the method's command, from the method's
-own last command. The safety stage then finds the command sent, nearest the method's, within
-the acceleration bounds of the command sent last period (:meth:`PoseServoResolver._finish_arm`):
-its change is no share of the method's command and is decided again each period, as the arm's
-always was. (Counted into the method's shares, the stage's change to the base was held by the
-limits from one period to the next, the task's change scaled down by one factor for the whole
-body; the arm's share still asked for the motion a row cut, the stage made it up with the base
-again on top of the last period's, and the base ran off at its full twist, ``docs/methods.md``.)
+(:class:`~wmm_control.resolvers.limits.CommandLimits`); where the safety stage changes the base's
+reference, the change comes out of the null-space share first, the one that gives way first,
+as far as that share goes (never turning it against what was asked), and only the rest out of
+the task's. (Counted as the task's, a base out of task sharing's task but cut by the stage's
+rows of a base that lags its reference left the task a share to undo within the base's
+acceleration limit, and the one factor of the task's change held the arm's part back with it;
+counted as the null-space share's whole, a cut of a base in the task turned that share against
+the pull it was asked for.)
 
 A followed plan's base (:class:`~wmm_control.resolvers.interface.BaseReference` on the target,
 not in the paper): the base is pulled towards its planned pose by a secondary task in the null
@@ -235,7 +235,6 @@ class PoseServoResolver(Resolver):
         self._jmm_cols = np.array(self._base_cols + list(range(6, 6 + self.n_arm)))
         self.limits = CommandLimits.for_robot(config, params.dt)
         self._arm_limits = self.limits.subset(slice(self.n_base, None))
-        self._base_limits = self.limits.subset(slice(0, self.n_base))
         #: a of the base's (vx, vy, ω): a followed plan's pull is no faster than braking allows
         self._base_acceleration = np.asarray(config.base.acceleration, dtype=float)
         # the stage reads the configuration this method's update computes: one a cycle
@@ -248,7 +247,6 @@ class PoseServoResolver(Resolver):
         self._prev = np.zeros(n)  # last nominal command (base reference, arm before eq 14)
         self._prev_null = np.zeros(n)  # its null-space share
         self._prev_arm = np.zeros(n_arm)  # last arm command sent
-        self._sent_base = np.zeros(self.n_base)  # last base reference sent (after the safety stage)
         self._prev_arm_null = np.zeros(n_arm)
         self._arm_before = (np.zeros(n_arm), np.zeros(n_arm))
         self._arm_task = np.zeros(n_arm)  # this period's arm command: task part...
@@ -573,11 +571,9 @@ class PoseServoResolver(Resolver):
         safety stage (:mod:`~wmm_control.resolvers.safety`) within the same bounds.
 
         With ``whole`` (the limited whole-body command, a :class:`LimitResult`) the stage
-        filters the base's reference with the arm, within the base's box too: its velocity limits
-        and its acceleration from the base reference sent last period, which the method's own
-        (``whole``, bounded from the method's last command) may lie outside of where the stage
-        changed that; the answer is ``(arm, base reference)``. Otherwise the base moves at
-        ``feasible_twist`` (the base controller's answer) and only the arm is left to choose.
+        filters the base's reference with the arm, within the base's box too, and the answer is
+        ``(arm, base reference)``; otherwise the base moves at ``feasible_twist`` (the base
+        controller's answer) and only the arm is left to choose.
         """
         before, before_null = self._arm_before
         arm = self._arm_limits.apply(
@@ -599,12 +595,11 @@ class PoseServoResolver(Resolver):
                 arm = replace(arm, command=self._safety.command)
         else:
             base = whole.command[:nb]
-            lower, upper, _ = self._base_limits.box(self._sent_base, self._sent_base)  # no position limits
             self._safety = self.safety.filter(
                 self._q_arm,
                 np.concatenate((base, arm.command)),
-                np.concatenate((lower, arm.lower)),
-                np.concatenate((upper, arm.upper)),
+                np.concatenate((whole.lower[:nb], arm.lower)),
+                np.concatenate((whole.upper[:nb], arm.upper)),
                 weights=self._weights,
                 base_pose=self._base_pose,
                 base_axes=self.base_axes,
@@ -613,8 +608,14 @@ class PoseServoResolver(Resolver):
             )
             if self._safety.changed:
                 base = self._safety.command[:nb].copy()
+                # the base reference sent: next period's acceleration bound; the stage's change
+                # comes out of the null-space share first, down to none of it, then out of the
+                # task's (module docstring)
+                share = self._prev_null[:nb]
+                task = self._prev[:nb] - share
+                share[:] = np.clip(base - task, np.minimum(share, 0.0), np.maximum(share, 0.0))
+                self._prev[:nb] = base
                 arm = replace(arm, command=self._safety.command[nb:])
-            self._sent_base = base.copy()
         self._prev_arm, self._prev_arm_null = arm.command.copy(), arm.secondary.copy()
         return arm if whole is None else (arm, base)
 

@@ -19,7 +19,10 @@ sends
 the entries (``μ`` = :data:`SELF_WEIGHT`): what changes least at the end effector, so that a
 damper is met in the task's null space where it can be (an elbow stops sinking towards a table
 while the end effector holds its goal) rather than by whatever entry is cheapest (the base
-backing away from the goal). Without ``J``, the nearest in ``W``.
+backing away from the goal). Without ``J``, the nearest in ``W``. ``W`` keeps the method's
+sharing of the task (:func:`task_weights`): an entry the method leaves out of the task changes
+only as far as the rows need it, not to make up the end effector's motion that a row cut from
+another.
 
 One QP through a maintained solver (:func:`~wmm_control.resolvers.constraints.nearest`,
 DAQP) over the command's entries takes every row that some command in the
@@ -30,14 +33,7 @@ high linear cost: the answer meets the rows as far as the box allows, and the st
 for it.
 
 When no pair is within the look-ahead, or the command already meets every row, it passes through
-unchanged: a method runs as its paper has it until the arm nears the body. The box is the one
-from the command sent last period, and the method's command may lie outside it where the stage
-changed that one (the velocity-level methods' command is bounded from their own last command, of
-which the stage's change is no share): it is then clipped into the box, and the QP's answer is
-the command nearest the method's own. The stage's change is so decided again each period, never
-carried over as the method's. ``W`` is the method's sharing of the task (:func:`task_weights`):
-an entry the method keeps out of the task changes only as far as the rows need it, not to make
-up the end effector's motion for another. The cycle's rows stay
+unchanged: a method runs as its paper has it until the arm nears the body. The cycle's rows stay
 with the answer (:attr:`SafetyResult.constraints`; :meth:`SafetyResult.binding` counts the rows
 of each limit that shape it), and :class:`SafetyCounts` counts, over a run, the cycles in which
 each limit shaped the command (the resolver's ``/diagnostics`` and the direct engine's run
@@ -330,10 +326,8 @@ class SafetyStage:
 
         Args:
             q_arm: arm joint positions. Shape (n_arm,).
-            command: the method's command: the base's twist on ``base_axes`` (if any), then
-                the arm's rates; outside ``[lower, upper]`` it is clipped into it (the changed
-                answer), and the QP's answer is the command nearest it there. Shape
-                (len(base_axes) + n_arm,).
+            command: the method's command within ``[lower, upper]``: the base's twist on
+                ``base_axes`` (if any), then the arm's rates. Shape (len(base_axes) + n_arm,).
             lower, upper: this period's box. Same shape.
             weights: the diagonal of W, the method's weighting of the entries (default
                 ones). Same shape.
@@ -365,15 +359,10 @@ class SafetyStage:
     def _filter(
         self, q_arm, command, lower, upper, weights, base_pose, axes, base_twist, base_velocity, world_rates, jacobian
     ) -> SafetyResult:
-        method = np.asarray(command, dtype=float)
-        box = Box(lower, upper)
-        command = box.clip(method)  # the method's command, in the box (module docstring)
-        clipped = bool((np.abs(command - method) > TOLERANCE).any())  # not a rounding's worth
-        if not clipped:
-            command = method
+        command = np.asarray(command, dtype=float)
         p = self.params
         if not p.collision_avoidance:
-            return SafetyResult(command, math.inf, '', 0, clipped)
+            return SafetyResult(command, math.inf, '', 0, False)
         d_b = p.collision_lookahead
         reach = self.obstacle_lookahead if self.collision.obstacles else d_b
         # a pair the base cannot move (no obstacle in it) is constrained within the arm's look-ahead only
@@ -383,16 +372,17 @@ class SafetyStage:
             near = near.select(keep)
         label = '/'.join(names) if names else ''
         if not len(near):
-            return SafetyResult(command, clearance, label, 0, clipped)
+            return SafetyResult(command, clearance, label, 0, False)
         # the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for world-frame rates
         to_base = rotation_z(base_pose[2]).T if world_rates else np.eye(3)
         pairs = self.dampers.pairs(near, axes, to_base, base_twist)
+        box = Box(lower, upper)
         command, box, held, base_rows = self.base_rows.constraints(
             pairs, command, box, base_velocity, base_twist, world_rates
         )
         rows = Constraint.stack((self.dampers.constraints(pairs), *base_rows), command.size, 'safety')
         if not rows.violated(command, TOLERANCE).any():
-            return SafetyResult(command, clearance, label, len(near), held or clipped, rows, held=held)
+            return SafetyResult(command, clearance, label, len(near), held, rows, held=held)
         weights = np.ones(command.size) if weights is None else np.asarray(weights, dtype=float)
         if jacobian is None:
             metric = np.diag(weights)
@@ -402,14 +392,12 @@ class SafetyStage:
         # a row on no entry the box leaves free (a base held on its path, and a pair no arm joint
         # moves) is what it is: its slack is its violation whatever the QP does, so it stays out;
         # so does a row that every command in the box meets (the box alone keeps it)
-        free = box.free()
-        movable = (rows.G[:, free] != 0.0).any(axis=1)
+        movable = (rows.G[:, box.free()] != 0.0).any(axis=1)
         use = movable & (box.greatest(rows.G) > rows.h + TOLERANCE)
-        solved, relaxed, multipliers = command, False, np.zeros(len(rows))
+        solved, relaxed, multipliers = box.clip(command), False, np.zeros(len(rows))
         if use.any():
-            # nearest the method's own command on the entries the box leaves free
-            solved, relaxed, multipliers[use] = nearest(np.where(free, method, command), metric, rows.select(use), box)
-        changed = held or not np.array_equal(solved, method)
+            solved, relaxed, multipliers[use] = nearest(command, metric, rows.select(use), box)
+        changed = held or not np.array_equal(solved, command)
         return SafetyResult(solved, clearance, label, len(near), changed, rows, relaxed, held, multipliers)
 
 
