@@ -20,7 +20,7 @@ from sim_bridge.world import SimWorld
 from wmm_control.experiments.direct import run_scenario
 from wmm_control.experiments.randomized import METHOD_RUNS, ROBOT_RUNS, RandomGoal, _scenario
 from wmm_control.experiments.scenario import resolver_parameters
-from wmm_control.geometry import rpy_from_matrix, se2_integrate, wrap_angle
+from wmm_control.geometry import matrix_from_rpy, rpy_from_matrix, se2_integrate, wrap_angle
 from wmm_control.kinematics import KinematicModel
 from wmm_control.planning.follow import FollowParams, FollowState, PlanFollower
 from wmm_control.planning.handoff import Handoff
@@ -468,3 +468,31 @@ def test_traditional_on_a_plan_leaves_the_task_to_the_arm_and_the_base_to_its_pu
         moved[planned] = (np.linalg.norm(np.asarray(state.base_pose)[:2] - cfg.start.base_pose[:2]), error)
     assert moved[False][0] > 2e-3  # the paper's method moves the base with the arm
     assert moved[True][0] < 1e-4 and moved[True][1] < 5e-3
+
+
+def test_the_safety_stage_does_not_drive_a_base_the_method_keeps_out_of_the_task():
+    """`ur_mecanum` at its stance, the plan's base reference on it (the arm's motion to the
+    stance's posture: pinv's arm alone does the task, the base follows the pull), the goal such
+    that the arm presses into its own row (arm_link_3/arm_link_5): the stage meets the row with
+    the arm, in the method's sharing of the task, and the base stays at its stance. With the
+    whole task metric the stage made up the arm's cut motion with the base, and each period's
+    change was the next period's previous command: the base reached 0.36 m/s and left the stance
+    by 0.4 m in 3 s."""
+    cfg = load_robot('ur_mecanum')
+    resolver = make_resolver('pinv', cfg)
+    base = np.array((2.545, 1.052, -1.75))
+    q = np.array((-0.5, -1.64, 1.43, -1.56, -0.93, 0.33))
+    goal = PoseTarget(
+        np.array((2.274, 0.817, 1.287)), matrix_from_rpy((0.373, 0.947, -0.918)), base=BaseReference(base.copy())
+    )
+    state, dt = RobotState(base, np.zeros(3), q, np.zeros_like(q)), resolver.params.dt
+    speeds, cut = [], 0
+    for _ in range(int(3.0 / dt)):
+        cmd = resolver.step(state, goal)
+        cut += cmd.diagnostics.collision_changed
+        speeds.append(np.abs(cmd.base_twist).max())
+        pose = np.array(se2_integrate(state.base_pose, cmd.base_twist, dt))
+        state = RobotState(pose, cmd.base_twist, state.q_arm + dt * cmd.arm_velocity, cmd.arm_velocity)
+    assert cut > 10  # the row shaped the arm's command
+    assert max(speeds) < 0.02
+    assert np.linalg.norm(goal.base.error(state.base_pose)[:2]) < 0.005

@@ -57,8 +57,9 @@ class PinvResolver(PoseServoResolver):
         if pull is None or stance:
             task = self.solve_task(jac, p_ref, state.q_arm)
             null = None if pull is None else self.null_motion(jac, task, state.q_arm, pull)
-            return task, null, 'whole_body', 1.0
+            return task, null, 'whole_body', 1.0, None
         # a followed plan's way (not in the paper; :meth:`base_pull`): the arm does the task, the
         # base follows the pull (module docstring)
         task = self.solve_task(jac, p_ref, state.q_arm, self._arm_only)
-        return task, self.null_motion(jac, task, state.q_arm, pull, self._arm_only), 'whole_body', 1.0
+        null = self.null_motion(jac, task, state.q_arm, pull, self._arm_only)
+        return task, null, 'whole_body', 1.0, self._arm_only

@@ -3,7 +3,8 @@
 Sorour §II–III: the proportional pose controller of eq (12), the augmented Jacobian J_mm of
 eq (7), the limits of the whole command, and the arm compensation of eq (14). A subclass
 supplies only the inversion: ``_resolve(jac, p_ref, e_pos, state, pull, stance, plan_arm) -> (u_task,
-u_null, mode, ψ)``, the task part and the null-space part, which gives way first to the limits.
+u_null, mode, ψ, A)``, the task part and the null-space part, which gives way first to the limits,
+and the activation ``A`` with which it shared the task, which the safety stage keeps.
 Each part's change from its own share of the last command is bounded
 (:class:`~wmm_control.resolvers.limits.CommandLimits`); where the safety stage changes the base's
 reference, the change comes out of the null-space share first, the one that gives way first,
@@ -75,7 +76,7 @@ from wmm_control.resolvers.interface import (
     base_twist_of,
 )
 from wmm_control.resolvers.limits import CommandLimits
-from wmm_control.resolvers.safety import SafetyParams, SafetyStage
+from wmm_control.resolvers.safety import SafetyParams, SafetyStage, task_weights
 from wmm_control.resolvers.sns import saturate_in_null_space
 from wmm_control.robot_config import RobotConfig
 
@@ -252,6 +253,7 @@ class PoseServoResolver(Resolver):
         self._arm_null = np.zeros(n_arm)  # ...and null-space part
         self._q_arm: np.ndarray | None = None
         self._jac: np.ndarray | None = None
+        self._weights: np.ndarray | None = None  # the safety stage's W: the method's sharing (step)
         self._safety = None  # the safety stage's answer on the last arm command
         self._base_pose: np.ndarray | None = None
         self._base_velocity: np.ndarray | None = None
@@ -500,11 +502,13 @@ class PoseServoResolver(Resolver):
     # ------------------------------------------------------------------ step
     @abstractmethod
     def _resolve(self, jac, p_ref, e_pos, state, pull, stance, plan_arm):
-        """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ)``;
-        ``pull`` is :meth:`base_pull` of a followed plan's base, or None, for the null space,
-        ``stance`` that base's :attr:`~wmm_control.resolvers.interface.BaseReference.stance`,
-        ``plan_arm`` its arm posture (:attr:`~wmm_control.resolvers.interface.BaseReference.arm`,
-        shape (n,)) or None."""
+        """The method's inversion: ``(u_task (n_b + n,), u_null (n_b + n,) or None, mode, ψ,
+        A)``, ``A`` the activation with which it shared the task (the diagonal of ``W⁻¹``, as
+        :func:`damped_pinv` takes it; None: every entry fully), which the safety stage keeps
+        (:func:`~wmm_control.resolvers.safety.task_weights`); ``pull`` is :meth:`base_pull` of a
+        followed plan's base, or None, for the null space, ``stance`` that base's
+        :attr:`~wmm_control.resolvers.interface.BaseReference.stance`, ``plan_arm`` its arm posture
+        (:attr:`~wmm_control.resolvers.interface.BaseReference.arm`, shape (n,)) or None."""
 
     def step(self, state: RobotState, target: PoseTarget) -> ResolverCommand:
         """One period: eq (12), the method's inversion, then the limits.
@@ -521,7 +525,8 @@ class PoseServoResolver(Resolver):
         plan_arm = None if target.base is None else target.base.arm
         if plan_arm is not None and plan_arm.shape != (self.n_arm,):
             plan_arm = None
-        task, null, mode, psi = self._resolve(jac, p_ref, e_pos, state, pull, stance, plan_arm)
+        task, null, mode, psi, activation = self._resolve(jac, p_ref, e_pos, state, pull, stance, plan_arm)
+        self._weights = None if activation is None else task_weights(activation)
         nb = self.n_base
         self._position[nb:] = state.q_arm
         lim = self.limits.apply(task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null)
@@ -592,6 +597,7 @@ class PoseServoResolver(Resolver):
                 np.concatenate((base, arm.command)),
                 np.concatenate((whole.lower[:nb], arm.lower)),
                 np.concatenate((whole.upper[:nb], arm.upper)),
+                weights=self._weights,
                 base_pose=self._base_pose,
                 base_axes=self.base_axes,
                 base_velocity=self._base_velocity,

@@ -19,7 +19,10 @@ sends
 the entries (``μ`` = :data:`SELF_WEIGHT`): what changes least at the end effector, so that a
 damper is met in the task's null space where it can be (an elbow stops sinking towards a table
 while the end effector holds its goal) rather than by whatever entry is cheapest (the base
-backing away from the goal). Without ``J``, the nearest in ``W``.
+backing away from the goal). Without ``J``, the nearest in ``W``. ``W`` keeps the method's
+sharing of the task (:func:`task_weights`): an entry the method leaves out of the task changes
+only as far as the rows need it, not to make up the end effector's motion that a row cut from
+another.
 
 One QP through a maintained solver (:func:`~wmm_control.resolvers.constraints.nearest`,
 DAQP) over the command's entries takes every row that some command in the
@@ -51,10 +54,41 @@ from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.resolvers.collision_limits import LIMITS, BaseRows, VelocityDampers
 from wmm_control.resolvers.constraints import TOLERANCE, Box, Constraint, nearest
 
-__all__ = ['SafetyCounts', 'SafetyParams', 'SafetyResult', 'SafetyStage', 'base_lag']
+__all__ = [
+    'OUT_OF_TASK_WEIGHT',
+    'SELF_WEIGHT',
+    'SafetyCounts',
+    'SafetyParams',
+    'SafetyResult',
+    'SafetyStage',
+    'base_lag',
+    'task_weights',
+]
 
 #: μ: the weight of the command's own change against the end effector's (with a task Jacobian).
 SELF_WEIGHT = 1e-2
+
+#: W of an entry its method keeps out of the task (activation 0, :func:`task_weights`): μ W = 100,
+#: a change of it costs a hundred times what it does at the end effector (|J_i|² ~ 1), so it
+#: changes only as far as the rows need it, never to make up the end effector's motion for another.
+OUT_OF_TASK_WEIGHT = 1e4
+
+
+def task_weights(activation) -> np.ndarray:
+    """W of a method that shares the task by the activation ``A`` (the diagonal of ``A = W⁻¹``,
+    Sorour eq 9: 1 an entry takes part fully, 0 not at all): ``1 / A``, and
+    :data:`OUT_OF_TASK_WEIGHT` where ``A`` is zero.
+
+    Passed to :meth:`SafetyStage.filter` as ``weights``: the stage's nearest command then keeps
+    the method's sharing. With W = ones, the stage met a row that cuts the arm with the base
+    that the method had kept out of the task (the arm's motion to the stance's posture, the base
+    held at the stance by the plan's pull): the base made up the end effector's motion the row
+    cut, that change was the next period's previous command, and period by period the base ran
+    off to its full twist (``docs/methods.md``, the safety stage)."""
+    a = np.asarray(activation, dtype=float)
+    out = np.full(a.shape, OUT_OF_TASK_WEIGHT)
+    np.divide(1.0, a, out=out, where=a > 0.0)
+    return np.minimum(out, OUT_OF_TASK_WEIGHT)
 
 
 @dataclass(frozen=True)

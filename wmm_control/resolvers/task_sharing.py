@@ -142,7 +142,7 @@ class TaskSharingResolver(PoseServoResolver):
         posture = self.q_dex if plan_arm is None else plan_arm
         z = np.zeros(self.n)
         z[self.n_base :] = self.params.lambda_dex * (posture - state.q_arm)
-        return task, self.secondary_motion(jac, task, state.q_arm, pull, z, stance, activation), mode, psi
+        return task, self.secondary_motion(jac, task, state.q_arm, pull, z, stance, activation), mode, psi, activation
 
     def compensate(self, command: ResolverCommand, feasible_twist: ArrayLike) -> ResolverCommand:
         """Eq (14): add ``J_a⁺ M_RPY H J_b (q̇_ref(b) − q̇_bf)`` to the arm command.
