@@ -203,6 +203,31 @@ def test_a_differential_base_beside_a_wall_turns_and_its_linear_approach_still_b
     np.testing.assert_allclose(rows.h, expected, atol=1e-12)
 
 
+def test_a_second_pass_over_the_same_pairs_gets_its_own_command_layout_and_the_current_lag():
+    """eq (14)'s compensation asks the stage again in the same period, over the arm alone and
+    with the base's twist given: it gets the rows of its own layout and the bounds moved by the
+    twist, as a stage asked for the first time would give them; and a lag set between the passes
+    (the running controller's) is the one the bounds brake with."""
+    robot = load_robot('panda_diff')
+    wall = parse_obstacles([{'name': 'wall', 'shape': 'box', 'size': [3.0, 0.2, 1.0], 'pose': [0.0, -0.6, 0.5]}], 't')
+    stage = SafetyStage.for_robot(robot, obstacles=wall)
+    q, pose, twist = np.array(robot.start.arm), np.zeros(3), np.array([0.3, 0.0, 0.4])
+    near, _, _ = stage.collision.within(q, stage.obstacle_lookahead, pose)
+    whole = stage.dampers.pairs(near, (0, 2), np.eye(3))
+    arm = stage.dampers.pairs(near, (), np.eye(3)).with_twist(twist)
+    fresh = SafetyStage.for_robot(robot, obstacles=wall).dampers.pairs(near, (), np.eye(3)).with_twist(twist)
+    assert whole.rows.shape[1] == q.size + 2 and arm.rows.shape[1] == q.size
+    np.testing.assert_array_equal(arm.rows, fresh.rows)
+    np.testing.assert_array_equal(arm.bound, fresh.bound)
+    assert np.abs(arm.bound - whole.bound).max() > 1e-3, "the base's twist moves the bounds of the pairs it moves"
+    stage.set_base_lag(0.5)
+    lagging = stage.dampers.pairs(near, (), np.eye(3))
+    moved = lagging.moved
+    assert moved.any() and (lagging.bound[moved] > whole.bound[moved] + 1e-6).all(), (
+        'a lagging base may approach slower'
+    )
+
+
 # ---------------------------------------------------------------- closed loop
 
 

@@ -98,7 +98,7 @@ discretised over the period, J̇'s share neglected).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -171,6 +171,13 @@ class Pairs:
     kinds: tuple[tuple[str, int], ...]
     turn_braking: np.ndarray
 
+    def with_twist(self, base_twist) -> Pairs:
+        """The same rows with the bounds moved by the share of ``base_twist`` (vx, vy, ω), the
+        base's twist when it is not part of the command; ``self`` for None."""
+        if base_twist is None:
+            return self
+        return replace(self, bound=self.bound - self.base @ np.asarray(base_twist, dtype=float))
+
     def on_base(
         self, base: np.ndarray, shift: ArrayLike = 0.0, which: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -214,12 +221,24 @@ class VelocityDampers:
         self.base_axes = tuple(int(k) for k in np.flatnonzero(np.asarray(base_acceleration) > 0.0))
         self.lag = lag
         self.body_margin = body_margin
+        self._last: tuple = (None, None)  # (near pairs, their bounds) of the last pairs()
 
-    def pairs(self, near: NearPairs, axes: tuple[int, ...], to_base: np.ndarray, base_twist=None) -> Pairs:
+    def pairs(self, near: NearPairs, axes: tuple[int, ...], to_base: np.ndarray) -> Pairs:
         """The rows and bounds of the pairs ``near`` over a command whose base entries are
         ``axes`` (through ``to_base``), the robot's own pairs first, then those with the floor,
-        then those with obstacles; ``base_twist`` (vx, vy, ω): the base's twist when it is not
-        part of the command, whose share moves the bounds."""
+        then those with obstacles (a base's twist outside the command: :meth:`Pairs.with_twist`).
+        The bounds do not depend on the command's entries: asked again about the same ``near``
+        (a method's second pass in one period, eq (14)'s compensation over the arm alone), they
+        are the first call's."""
+        if self._last[0] is not near:
+            self._last = (near, self._bounds(near))
+        base_full, rate, distance, moved, body, bound, kinds, turn = self._last[1]
+        rows = np.concatenate(((base_full @ to_base)[:, axes], rate), axis=1)
+        return Pairs(rows, bound, base_full, distance, moved, body, tuple(axes), to_base, kinds, turn)
+
+    def _bounds(self, near: NearPairs) -> tuple:
+        """What :meth:`pairs` gives that the command's entries leave as it is, in its order:
+        ``(base, rate, distance, moved, body, bound, kinds, turn_braking)``."""
         base_full, rate, distance = near.base_jacobian, near.rate_jacobian, near.distance
         moved = np.asarray(base_full.any(axis=1), dtype=bool)
         kind = 2 * moved + near.floor
@@ -227,20 +246,15 @@ class VelocityDampers:
             order = np.argsort(kind, kind='stable')
             base_full, rate, distance = base_full[order], rate[order], distance[order]
             moved, kind = moved[order], kind[order]
-        rows = np.concatenate(((base_full @ to_base)[:, axes], rate), axis=1)
-        arm = rows[:, len(axes) :]
-        body = moved & ~arm.any(axis=1)
+        body = moved & ~rate.any(axis=1)
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
             distance = distance - self.body_margin * body
         turning = self.lag == 0.0 and 2 in self.base_axes  # a tracking base's turn brakes its body's pairs
-        allowed = self._allowed(distance, arm, base_full, moved, body if turning else None)
-        turn = allowed - self._allowed(distance, arm, base_full, moved) if turning else np.zeros(len(distance))
-        bound = -allowed
-        if base_twist is not None:
-            bound = bound - base_full @ np.asarray(base_twist, dtype=float)
+        allowed = self._allowed(distance, rate, base_full, moved, body if turning else None)
+        turn = allowed - self._allowed(distance, rate, base_full, moved) if turning else np.zeros(len(distance))
         counts = np.bincount(kind, minlength=3).tolist()
         kinds = tuple((name, count) for name, count in zip(_KINDS, counts) if count)
-        return Pairs(rows, bound, base_full, distance, moved, body, tuple(axes), to_base, kinds, turn)
+        return base_full, rate, distance, moved, body, -allowed, kinds, turn
 
     def constraints(self, pairs: Pairs) -> Constraint:
         """The dampers, one row per pair: ``self`` (the robot against itself), ``floor`` and

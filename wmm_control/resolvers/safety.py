@@ -50,7 +50,7 @@ import numpy as np
 from wmm_control.base.contract import base_controller_class
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import rotation_z
-from wmm_control.kinematics.collision import CollisionModel
+from wmm_control.kinematics.collision import CollisionModel, NearPairs
 from wmm_control.resolvers.collision_limits import LIMITS, BaseRows, VelocityDampers
 from wmm_control.resolvers.constraints import TOLERANCE, Box, Constraint, nearest
 
@@ -274,6 +274,7 @@ class SafetyStage:
         self._base_acc = np.zeros(3) if base_acceleration is None else np.asarray(base_acceleration, dtype=float)
         self._base_velocity = None if base_velocity is None else np.asarray(base_velocity, dtype=float)
         self.last: SafetyResult | None = None
+        self._held_memo: tuple = (None, None)  # (near pairs, those held) of the last _held()
         self.set_base_lag(base_lag)
 
     def set_base_lag(self, base_lag: float) -> None:
@@ -367,15 +368,13 @@ class SafetyStage:
         reach = self.obstacle_lookahead if self.collision.obstacles else d_b
         # a pair the base cannot move (no obstacle in it) is constrained within the arm's look-ahead only
         near, clearance, names = self.collision.within(q_arm, reach, base_pose, robot_influence=d_b)
-        keep = near.base_jacobian.any(axis=1) | (near.distance < d_b)
-        if not keep.all():
-            near = near.select(keep)
         label = '/'.join(names) if names else ''
+        near = self._held(near)
         if not len(near):
             return SafetyResult(command, clearance, label, 0, False)
         # the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for world-frame rates
         to_base = rotation_z(base_pose[2]).T if world_rates else np.eye(3)
-        pairs = self.dampers.pairs(near, axes, to_base, base_twist)
+        pairs = self.dampers.pairs(near, axes, to_base).with_twist(base_twist)
         box = Box(lower, upper)
         command, box, held, base_rows = self.base_rows.constraints(
             pairs, command, box, base_velocity, base_twist, world_rates
@@ -399,6 +398,15 @@ class SafetyStage:
             solved, relaxed, multipliers[use] = nearest(command, metric, rows.select(use), box)
         changed = held or not np.array_equal(solved, command)
         return SafetyResult(solved, clearance, label, len(near), changed, rows, relaxed, held, multipliers)
+
+    def _held(self, near: NearPairs) -> NearPairs:
+        """The pairs of ``near`` the rows hold: a pair the base cannot move only within the
+        arm's look-ahead. The same ``near`` again (a second pass in one period) gets the same
+        answer, whose dampers' bounds are then the first pass's."""
+        if self._held_memo[0] is not near:
+            keep = near.base_jacobian.any(axis=1) | (near.distance < self.params.collision_lookahead)
+            self._held_memo = (near, near if keep.all() else near.select(keep))
+        return self._held_memo[1]
 
 
 def base_lag(robot) -> float:
