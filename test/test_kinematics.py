@@ -15,7 +15,8 @@ from wmm_control.geometry import (
     rpy_rate_map,
     wrap_angle,
 )
-from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics import KinematicModel, pinocchio_model
+from wmm_control.robot_config import load_robot
 
 N_STATES = 20
 _ROWS_OF = {'position': slice(0, 3), 'full': slice(0, 6)}
@@ -304,3 +305,32 @@ def test_a_failed_update_keeps_the_previous_state(steerable_model):
     with pytest.raises(NonFiniteError):
         steerable_model.update([np.nan, 0, 0], np.zeros(7))
     np.testing.assert_array_equal(steerable_model.ee_pose_world(), before)
+
+
+def test_one_pinocchio_model_per_urdf_text_and_options_each_user_with_its_own_data(tmp_path):
+    """Kinematic models of one URDF text, arm and held positions read one pinocchio model (the
+    same text at another path too), each with its own data; held positions of their own, another
+    root joint or the file rewritten give another model, and the shared one is the one a parse of
+    its own gives."""
+    cfg = load_robot('steerable')
+    a, b = KinematicModel(cfg), KinematicModel(cfg)
+    assert a.model is b.model and a.full_model is b.full_model and a.data is not b.data
+    root = pin.JointModelComposite()
+    for joint in (pin.JointModelPX(), pin.JointModelPY(), pin.JointModelRZ()):
+        root.addJoint(joint)
+    assert a.full_model == pin.buildModelFromUrdf(str(cfg.urdf_path), root)
+    text = cfg.urdf_path.read_text()
+    copy = tmp_path / 'copy.urdf'
+    copy.write_text(text)
+    args = (cfg.arm.joints, cfg.ee_frame, cfg.base_link)
+    assert KinematicModel.from_urdf(copy, *args, {}).model is a.model
+    held = KinematicModel.from_urdf(copy, *args, {'steer_fl_joint': 0.3})
+    assert held.full_model is a.full_model and held.model is not a.model and held.model != a.model
+    fixed = pinocchio_model(cfg.urdf_path, planar_root=False)
+    assert fixed.nq == a.full_model.nq - 3 and pinocchio_model(cfg.urdf_path) is a.full_model
+    limit = text.index('upper="2.967060"', text.index('<joint name="arm_joint_1"'))
+    copy.write_text(text[:limit] + 'upper="2.5"' + text[limit + len('upper="2.967060"') :])
+    rewritten = KinematicModel.from_urdf(copy, *args, {})
+    assert rewritten.full_model is not a.full_model and rewritten.model is not a.model
+    assert rewritten.model.upperPositionLimit[rewritten.model.joints[2].idx_q] == 2.5
+    assert a.model.upperPositionLimit[a.model.joints[2].idx_q] == 2.96706

@@ -1,6 +1,8 @@
 """One configuration a cycle: the collision model built on a method's kinematic model reads the
 joints' placements and Jacobians its update computed (no forward kinematics of its own), in the
-world frame where the floor and the obstacles stay where they were placed."""
+world frame where the floor and the obstacles stay where they were placed. One pinocchio model
+per robot in a process: the method's, the pursuit's and the planner's configurations read it,
+each with data of its own."""
 
 import numpy as np
 import pinocchio as pin
@@ -11,6 +13,8 @@ from wmm_control.geometry import twist_to_world
 from wmm_control.kinematics import KinematicModel
 from wmm_control.kinematics.collision import FLOOR, CollisionModel
 from wmm_control.kinematics.obstacles import parse_obstacles
+from wmm_control.planning import GoalPlanner
+from wmm_control.planning.pursuit import GoalPursuit
 from wmm_control.resolvers import PoseTarget, RobotState, make_resolver
 from wmm_control.robot_config import load_robot
 
@@ -160,3 +164,56 @@ def test_a_method_and_its_safety_stage_run_one_kinematics_pass_a_cycle(method, m
     expected, _, _ = alone.within(state.q_arm, np.inf, base)
     np.testing.assert_allclose(near.distance, expected.distance, atol=1e-7)
     np.testing.assert_allclose(near.base_jacobian, expected.base_jacobian, atol=1e-4)  # GJK's witness points
+
+
+def test_the_method_the_pursuit_and_the_planner_share_one_model_each_with_its_own_configuration():
+    """The method's, the pursuit's, the planner's and its clearances' kinematic models of one robot
+    read one pinocchio model (the planner's in its own thread), each with its own data: a
+    configuration set in one does not show in another."""
+    cfg = load_robot('mecanum')
+    resolver = make_resolver('pinv', cfg)
+    pursuit = GoalPursuit(cfg, OBSTACLES, 'world', 5.0, threaded=False)
+    planner = GoalPlanner(cfg, OBSTACLES)
+    users = [
+        resolver.model,
+        pursuit.model,
+        planner.model,
+        planner.clearance.collision.kinematics,
+        planner.travel.clearance.collision.kinematics,
+    ]
+    assert all(u.model is resolver.model.model and u.full_model is resolver.model.full_model for u in users)
+    assert len({id(u.data) for u in users}) == len(users)
+    rng = np.random.default_rng(3)
+    for user in users:
+        user.update(np.zeros(3), cfg.start.arm)
+    placements = [[m.homogeneous.copy() for m in u.data.oMi] for u in users]
+    q, base = _state(cfg, rng)
+    resolver.model.update(base, q)
+    moved = [m.homogeneous for m in resolver.model.data.oMi]
+    assert not np.allclose(moved[-1], placements[0][-1])
+    for user, before in zip(users[1:], placements[1:]):
+        assert np.array_equal(user.state, np.concatenate((np.zeros(3), cfg.start.arm)))
+        for m, old in zip(user.data.oMi, before):
+            np.testing.assert_array_equal(m.homogeneous, old)
+    # the planner's clearance answers at its own configuration, whatever the method's
+    planner.clearance(q, base)
+    np.testing.assert_array_equal(resolver.model.data.oMi[-1].homogeneous, moved[-1])
+
+
+def test_a_collision_model_s_obstacles_stay_in_its_own_geometry():
+    """Collision models of one robot share its pinocchio model; the obstacles and the floor one
+    of them adds go to its own geometry, not to the model nor to another's geometry."""
+    cfg = load_robot('mecanum')
+    plain = CollisionModel.from_robot(cfg)
+    frames, shapes, pairs = plain.model.nframes, len(plain.geom.geometryObjects), plain.pairs
+    q, base = _state(cfg, np.random.default_rng(4))
+    closest = plain.closest(q, base)
+    crowded = CollisionModel.from_robot(cfg, obstacles=OBSTACLES)
+    assert crowded.model is plain.model and crowded.geom is not plain.geom
+    assert NAMES <= {g.name for g in crowded.geom.geometryObjects}
+    again = CollisionModel.from_robot(cfg)
+    for model in (plain, again):
+        assert model.model.nframes == frames and len(model.geom.geometryObjects) == shapes
+        assert not NAMES & {g.name for g in model.geom.geometryObjects}
+        assert model.pairs == pairs
+        assert model.closest(q, base) == closest

@@ -5,7 +5,7 @@ import pinocchio as pin
 import pybullet as p
 import pytest
 
-from wmm_control.kinematics import build_pinocchio_model
+from wmm_control.kinematics import pinocchio_model
 from wmm_control.geometry import angles_to_pin_q
 from wmm_control.robot_config import load_robot
 
@@ -22,7 +22,7 @@ def bullet():
 @pytest.mark.parametrize('robot', ['steerable', 'mecanum'])
 def test_every_link_frame_agrees_at_random_configurations(bullet, robot):
     cfg = load_robot(robot)
-    model = build_pinocchio_model(cfg.urdf_path)
+    model = pinocchio_model(cfg.urdf_path)
     data = model.createData()
     body = p.loadURDF(str(cfg.urdf_path), flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=bullet)
     # PyBullet places the base by its inertial frame; the robot files keep it at the link origin.

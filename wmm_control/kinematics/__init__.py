@@ -1,5 +1,5 @@
 """ROS-free kinematics: the pinocchio model (rotations and planar poses: :mod:`wmm_control.geometry`)."""
 
-from wmm_control.kinematics.model import KinematicModel, build_pinocchio_model, N_BASE
+from wmm_control.kinematics.model import KinematicModel, pinocchio_model, N_BASE
 
-__all__ = ['KinematicModel', 'build_pinocchio_model', 'N_BASE']
+__all__ = ['KinematicModel', 'pinocchio_model', 'N_BASE']

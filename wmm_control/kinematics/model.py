@@ -27,7 +27,9 @@ Usage::
     ja = model.arm_jacobian_base()
 """
 
-from collections.abc import Iterable, Mapping
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Self
 
@@ -41,7 +43,7 @@ from wmm_control.geometry import continuous_to_q, rpy_from_matrix, rpy_rate_map,
 from wmm_control.robot_config import RobotConfig, held_joint_positions, load_robot
 from wmm_control.urdf import UrdfTree
 
-__all__ = ['KinematicModel', 'build_pinocchio_model', 'held_configuration', 'N_BASE']
+__all__ = ['KinematicModel', 'pinocchio_model', 'held_configuration', 'N_BASE']
 
 N_BASE = 3
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -53,20 +55,75 @@ _SKEW = np.array(
 )
 
 
-def build_pinocchio_model(urdf_path: str | Path) -> pin.Model:
-    """Load a URDF with a planar (x, y, θ) root joint made of PX, PY and RZ.
+def pinocchio_model(urdf_path: str | Path, planar_root: bool = True) -> pin.Model:
+    """The pinocchio model of a URDF, parsed once per process and shared by every caller.
 
-    The composite root keeps ``q`` and ``v`` equal to (x, y, θ) and their world-frame
-    rates, unlike pinocchio's planar joint (cos/sin in q, body-frame velocity).
+    With ``planar_root``, its root joint is a planar (x, y, θ) one made of PX, PY and RZ: the
+    composite keeps ``q`` and ``v`` equal to (x, y, θ) and their world-frame rates, unlike
+    pinocchio's planar joint (cos/sin in q, body-frame velocity); without, the URDF's root
+    link is fixed. Callers with the same URDF text and option get the same object (the process's
+    store of models: :func:`_shared`), so it is read-only: no caller edits its joints, limits
+    or frames, and each keeps its own ``pin.Data`` (``model.createData()``).
+
+    Raises:
+        ConfigError: the file cannot be read or pinocchio cannot load it.
     """
-    root = pin.JointModelComposite()
-    root.addJoint(pin.JointModelPX())
-    root.addJoint(pin.JointModelPY())
-    root.addJoint(pin.JointModelRZ())
+    return _parsed(urdf_path, planar_root)[1]
+
+
+def _parsed(urdf_path, planar_root):
+    """(the store's key, the model) of :func:`pinocchio_model`: the model is parsed from the
+    text the key holds, so that a URDF rewritten in the process is parsed again."""
     try:
-        return pin.buildModelFromUrdf(str(urdf_path), root)
-    except (RuntimeError, ValueError) as exc:
+        text = Path(urdf_path).read_text(encoding='utf-8')
+    except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f'pinocchio could not load {urdf_path}: {exc}') from exc
+
+    def parse():
+        try:
+            if not planar_root:
+                return pin.buildModelFromXML(text)
+            root = pin.JointModelComposite()
+            root.addJoint(pin.JointModelPX())
+            root.addJoint(pin.JointModelPY())
+            root.addJoint(pin.JointModelRZ())
+            return pin.buildModelFromXML(text, root)
+        except (RuntimeError, ValueError) as exc:
+            raise ConfigError(f'pinocchio could not load {urdf_path}: {exc}') from exc
+
+    key = ('urdf', text, bool(planar_root))
+    return key, _shared(key, parse)
+
+
+#: the most models the process keeps: the least recently asked for is dropped beyond it (its
+#: users keep it; the next user of its description gets a new parse)
+SHARED_MODELS = 32
+_store: OrderedDict[tuple, pin.Model] = OrderedDict()
+_store_lock = threading.Lock()
+
+
+def _shared(key: tuple, build: Callable[[], pin.Model]) -> pin.Model:
+    """The process's one model for ``key`` (the inputs that make it: a URDF's text and options,
+    a reduction's locked joints and positions), made by ``build()`` the first time, under a lock:
+    the planner builds its models in its own thread.
+
+    Sharing a ``pin.Model`` is safe because nothing in the package writes to one after it is
+    built: the kinematics, collision and planning code take it as pinocchio's algorithms do
+    (``const Model&``), each user with its own ``pin.Data`` and ``pin.GeometryData``, so two
+    threads read one model at once. A user that needs a changed model (other locked joints,
+    held positions) gets another entry; geometry a user adds (the floor, obstacles) goes to a
+    ``pin.GeometryModel`` of its own (:meth:`KinematicModel.reduce_geometry` returns a new one
+    each call), never to the shared model.
+    """
+    with _store_lock:
+        model = _store.get(key)
+        if model is None:
+            model = _store[key] = build()
+            if len(_store) > SHARED_MODELS:
+                _store.popitem(last=False)
+        else:
+            _store.move_to_end(key)
+        return model
 
 
 def held_configuration(model: pin.Model, held: Mapping[str, float]) -> np.ndarray:
@@ -88,6 +145,11 @@ def held_configuration(model: pin.Model, held: Mapping[str, float]) -> np.ndarra
 
 class KinematicModel:
     """Kinematics of one robot: base pose + n arm joints → end effector.
+
+    One configuration of the robot: every object of one robot in a process (a method's, the
+    planner's, the markers') reads the same pinocchio models, :attr:`full_model` and
+    :attr:`model` (:func:`pinocchio_model`, read-only), and keeps its own :attr:`data` and
+    state, so that each sets its own configuration, in its own thread.
 
     Args:
         robot: robot name (``'steerable'``/``'A'``, ``'mecanum'``/``'B'``), YAML path, or
@@ -133,7 +195,8 @@ class KinematicModel:
         return self
 
     def _build(self, urdf_path, arm_names, ee_frame, base_link, held):
-        self.full_model = build_pinocchio_model(urdf_path)
+        # the process's shared models (:func:`_shared`), ``data`` this object's own
+        full_key, self.full_model = _parsed(urdf_path, True)
         missing = [n for n in arm_names if not self.full_model.existJointName(n)]
         if missing:
             raise ConfigError(f'arm joints {missing} are not in {Path(urdf_path).name}')
@@ -141,8 +204,11 @@ class KinematicModel:
             self.full_model.getJointId(n) for n in self.full_model.names[1:] if n not in arm_names and n != 'root_joint'
         ]
         self._locked = locked
-        self._held_q = held_configuration(self.full_model, held)
-        self.model = pin.buildReducedModel(self.full_model, locked, self._held_q)
+        self._held_q = held_q = held_configuration(self.full_model, held)
+        self.model = _shared(
+            ('reduced', full_key, tuple(locked), held_q.tobytes()),
+            lambda: pin.buildReducedModel(self.full_model, locked, held_q),
+        )
         self.data = self.model.createData()
         names = list(self.model.names[2:])
         if names != list(arm_names):

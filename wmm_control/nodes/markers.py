@@ -25,6 +25,7 @@ from wmm_control.kinematics import KinematicModel
 from wmm_control.geometry import quaternion_from_matrix, se2_transform_points
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.nodes.conversions import set_pose
+from wmm_control.robot_config import RobotConfig
 from wmm_control.viewer.scene import Trail
 
 __all__ = ['MarkerSet', 'ResolverMarkers', 'MARKER_NAMESPACES']
@@ -113,15 +114,18 @@ class ResolverMarkers:
 
     The trail follows the end effector as the resolver last measured it: the measured pose
     with ground-truth feedback, else forward kinematics of the base pose and arm joints, on a
-    model of its own (apart from the resolver's).
+    configuration of its own (its own ``pin.Data`` on the robot's one pinocchio model, which
+    the resolver's shares: the markers' timer leaves the resolver's configuration as its cycle
+    left it).
 
     Args:
-        robot: the robot (a name or a robot YAML path).
+        robot: the robot (the resolver's :class:`~wmm_control.robot_config.RobotConfig`, a
+            name or a robot YAML path).
         frame: the world frame.
         workspace: the robot's :class:`~wmm_control.kinematics.workspace.Workspace` (footprint, floor).
     """
 
-    def __init__(self, robot: str, frame: str, workspace: Workspace) -> None:
+    def __init__(self, robot: str | RobotConfig, frame: str, workspace: Workspace) -> None:
         self.markers = MarkerSet(frame, workspace.footprint(), workspace.floor_z)
         self._model = KinematicModel(robot)
         self.trail = Trail(max_points=2000, min_step=0.005)

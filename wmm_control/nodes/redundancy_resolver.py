@@ -157,7 +157,7 @@ class RedundancyResolverNode(Node):
                 else None
             )
         if p.markers_period > 0:
-            self._markers = ResolverMarkers(p.robot, p.world_frame, self.workspace)
+            self._markers = ResolverMarkers(self.model.config, p.world_frame, self.workspace)
             self.pub_markers = self.create_publisher(MarkerArray, '~/markers', COMMAND_QOS)
             self.create_timer(p.markers_period, self._publish_markers, clock=self._steady)
         if 0.0 < p.max_state_wait <= p.compensation_timeout and self.resolver.uses_compensation:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from wmm_control.errors import ConfigError, NonFiniteError, UnknownFrameError
+from wmm_control.errors import NonFiniteError, UnknownFrameError
 from wmm_control.geometry import (
     continuous_from_q,
     set_joint_position,
@@ -29,7 +29,7 @@ from wmm_control.geometry import (
     quaternion_from_matrix,
     unit_quaternion,
 )
-from wmm_control.kinematics.model import held_configuration
+from wmm_control.kinematics.model import held_configuration, pinocchio_model
 from wmm_control.resources import load_geometry
 
 __all__ = [
@@ -184,10 +184,7 @@ class RobotScene:
         held: Mapping[str, float] | None = None,
     ) -> None:
         urdf = Path(urdf_path)
-        try:
-            self.model = pin.buildModelFromUrdf(str(urdf))
-        except (RuntimeError, ValueError) as exc:
-            raise ConfigError(f'pinocchio could not load {urdf}: {exc}') from exc
+        self.model = pinocchio_model(urdf, planar_root=False)  # shared, read-only; data of its own
         self.geometry = load_geometry(self.model, urdf, pin.GeometryType.VISUAL, package_dirs)
         self.data = self.model.createData()
         self.geometry_data = pin.GeometryData(self.geometry)
