@@ -16,8 +16,10 @@ runs the same two halves back to back:
    :meth:`~wmm_control.resolvers.Resolver.compensate`).
 
 Inputs come in as they do in the nodes, each checked as it comes: goals and trajectory points,
-odometry, the end effector's measured pose, obstacles. So both engines take and refuse the same
-inputs and answer with the same commands.
+odometry, the end effector's measured pose, obstacles; and the joint state each period is run
+for, checked as the nodes check ``/joint_states`` (:class:`~wmm_control.checks.JointCheck`):
+one that fails runs no period and sends nothing, as the nodes publish nothing for it. So both
+engines take and refuse the same inputs and answer with the same commands.
 """
 
 import gc
@@ -29,8 +31,10 @@ import numpy as np
 
 from wmm_control.base.contract import BaseController
 from wmm_control.base.period import BasePeriod, PeriodAnswer
+from wmm_control.checks import JointCheck
 from wmm_control.resolvers.interface import Resolver, ResolverCommand
 from wmm_control.resolvers.period import ResolverPeriod, ResolverSettings
+from wmm_control.resolvers.targets import LogEvent
 
 __all__ = ['Cycle', 'CycleResult', 'steady_heap']
 
@@ -60,18 +64,23 @@ class CycleResult:
 
     Attributes:
         command: the resolver's final command (compensated for the base's answer), or None
-            when the robot is held (zero arm rates, zero base reference).
-        arm_velocity: the arm rates sent [rad/s or m/s] (zero when held). Shape (n,).
-        base: the base controller's answer (rates per group, feasible twist; finite).
+            when the robot is held (zero arm rates, zero base reference) or the joint state
+            was rejected.
+        arm_velocity: the arm rates to send [rad/s or m/s] (zero when held). Shape (n,). None
+            when the joint state was rejected: nothing is sent.
+        base: the base controller's answer (rates per group, feasible twist; finite); None when
+            the joint state was rejected.
         events: what the period has to log (:class:`~wmm_control.resolvers.targets.LogEvent`).
         stale: '' or the input whose absence held the robot.
+        rejected: '' or why the joint state runs no period (the reason the nodes log).
     """
 
     command: ResolverCommand | None
-    arm_velocity: np.ndarray
-    base: PeriodAnswer
+    arm_velocity: np.ndarray | None
+    base: PeriodAnswer | None
     events: list
     stale: str
+    rejected: str = ''
 
 
 class Cycle:
@@ -107,16 +116,39 @@ class Cycle:
         resolver.set_base_lag(base_controller.lag)
         self.resolver_period = ResolverPeriod(resolver, period, settings)
         self.base_period = BasePeriod(base_controller, applied_rate_tolerance)
+        arm = resolver.model.config.arm
+        #: the checks of the arm's measured joints (the resolver node's)
+        self.arm_check = JointCheck(arm.joints, arm.velocity, (arm.position_lower, arm.position_upper))
 
-    def step(self, q_arm, dq_arm, base_positions: dict | None, base_rates: dict | None, now: float) -> CycleResult:
+    def step(
+        self,
+        q_arm,
+        dq_arm,
+        base_positions: dict | None,
+        base_rates: dict | None,
+        now: float,
+        resync: bool = False,
+    ) -> CycleResult:
         """One period: the arm's measured positions ``q_arm`` and rates ``dq_arm``, the base
         joints' measured positions and rates per command group (None when not measured: the
         base controller goes on from its own state), at ``now`` [s] of the caller's clock; the
-        odometry, end-effector pose and target as the inputs last gave them."""
-        plan = self.resolver_period.plan(np.asarray(q_arm, dtype=float), np.asarray(dq_arm, dtype=float), now)
+        odometry, end-effector pose and target as the inputs last gave them. ``resync``: the
+        measurements start, or come back after a gap; the resolver starts again from rest and
+        the base controller from the measured joints.
+
+        A joint state whose values fail the nodes' checks (non-finite, a glitch's rates or
+        positions) runs no period: the result's ``rejected`` says why, and nothing is to be sent."""
+        q, dq, why = self.arm_check.read(q_arm, dq_arm)
+        if q is None or dq is None:
+            return self._rejected(why)
+        if base_positions is not None:
+            base_positions, base_rates, why = self.base_period.check(base_positions, base_rates)
+            if why:
+                return self._rejected(why)
+        plan = self.resolver_period.plan(q, dq, now, resync)
         reference = np.zeros(3) if plan.command is None else plan.command.base_twist
         if base_positions is not None:
-            self.base_period.start(base_positions, base_rates, resync=False)
+            self.base_period.start(base_positions, base_rates, resync)
         answer = self.base_period.step(reference, base_positions)
         self.base_period.published(answer)
         command = plan.command
@@ -126,5 +158,10 @@ class Cycle:
             twist, checked = self.resolver_period.feasible_twist(answer.twist)
             events += checked
             command, _ = self.resolver_period.finish(twist)
-        arm = np.zeros(len(np.asarray(q_arm))) if command is None else command.arm_velocity
+        arm = np.zeros(len(q)) if command is None else command.arm_velocity
         return CycleResult(command, arm, answer, events, plan.stale)
+
+    @staticmethod
+    def _rejected(why: str) -> CycleResult:
+        event = LogEvent('joint_states rejected', f'rejected /joint_states {why}: no cycle')
+        return CycleResult(None, None, None, [event], '', why)
