@@ -4,8 +4,8 @@ Each period runs what the nodes run in lockstep, in the same order and with the 
 (:class:`wmm_control.cycle.Cycle`, Sorour Fig 4):
 
 1. the inputs as the nodes receive them: the odometry (or the ground-truth base pose), the
-   end effector's pose, the target, each checked as it comes, and the joint state (one the
-   nodes would reject runs no cycle: the world steps under the commands in force, as the
+   end effector's pose, the target, each checked as it comes, and the joint state (what the
+   nodes would not answer is not sent: the world steps under the commands in force, as the
    simulator does when no command answers a state);
 2. ``plan``: the resolver's arm command and base twist reference, or the robot held;
 3. ``base``: the base controller (:func:`wmm_control.base.make_base_controller`) answers that
@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from wmm_control.base import BaseController, make_base_controller
-from wmm_control.base.period import default_applied_rate_tolerance
+from wmm_control.base.period import node_default
 from wmm_control.cycle import Cycle
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import matrix_from_quaternion, quaternion_from_matrix, quaternion_from_yaw
@@ -57,9 +57,9 @@ class CycleRecord:
         command: the resolver's final command (``ResolverCommand``), or None when the robot
             was held (no target, or an input refused) or the joint state rejected.
         arm_velocity: the arm rates in force (zero when held; the last ones sent when the joint
-            state was rejected). Shape (n,).
+            state's arm joints were rejected). Shape (n,).
         feasible_twist: the base controller's answer q̇_bf (base frame; its last one when the
-            joint state was rejected). Shape (3,).
+            joint state's base joints were rejected). Shape (3,).
         base_velocity: the base twist actually executed in the period (base frame). Shape (3,).
         cycle_s: wall time (``time.perf_counter``) of the period's control cycle
             (:meth:`~wmm_control.cycle.Cycle.step`: the method with its safety stage, the base
@@ -120,7 +120,9 @@ class ClosedLoop:
         self.base = base_controller if base_controller is not None else make_base_controller(self.robot, world.dt)
         if settings is None:
             settings = ResolverSettings.defaults(ground_truth=feedback == 'ground_truth')
-        self.cycle = Cycle(resolver, self.base, world.dt, settings, default_applied_rate_tolerance(self.base.family))
+        self.cycle = Cycle(
+            resolver, self.base, world.dt, settings, node_default(self.base.family, 'applied_rate_tolerance')
+        )
         self.world_frame = settings.world_frame
         index = {n: i for i, n in enumerate(world.joint_names)}
         self._arm = [index[n] for n in self.robot.arm.joints]
@@ -209,12 +211,15 @@ class ClosedLoop:
         )
         cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
         self.events += result.events
-        if result.base is not None and result.arm_velocity is not None:  # else the commands in force stay
+        if not result.rejected:
             self._resync = False
+        if result.base is not None:  # else the commands in force stay
             for group, rates in result.base.rates.items():
                 w.set_command(group, rates)
+            self._twist = np.asarray(result.base.twist, dtype=float)
+        if result.arm_velocity is not None:
             w.set_command('arm', result.arm_velocity)
-            self._arm_sent, self._twist = result.arm_velocity, np.asarray(result.base.twist, dtype=float)
+            self._arm_sent = result.arm_velocity
         w.step()
         return CycleRecord(
             t=t,

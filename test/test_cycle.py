@@ -26,6 +26,7 @@ from wmm_control.nodes.redundancy_resolver import RedundancyResolverNode
 from wmm_control.nodes.sim_timing import LOCKSTEP_TOPIC
 from wmm_control.nodes.swmr_controller import SwmrControllerNode
 from wmm_control.resolvers import make_resolver, method_parameters
+from wmm_control.resolvers.period import ResolverSettings
 from wmm_control.robot_config import load_robot
 
 
@@ -142,27 +143,30 @@ BAD_GOALS = (
 )
 
 
-def _script():
+def _script(stale_periods):
     """Each period's inputs, in the order they come: ``(odometry, goal, joint state)``.
 
     ``odometry``: 'good', None (none comes) or a bad one (x NaN, twist infinite or a glitch's,
-    zero quaternion); ``goal``: None or (frame, pose); ``joint state``: 'good', 'nan' (every joint
-    NaN: both controllers refuse it) or 'drive inf' (a drive rate infinite: the drive joints
-    are left out, the steer joints are enough)."""
+    zero quaternion); ``goal``: None or (frame, pose); ``joint state``: 'good', 'nan' (every
+    joint NaN: both controllers refuse it), 'arm nan' (the resolver refuses it, the base
+    controller answers), 'steer nan' (the reverse: the steer joints are required) or
+    'drive inf' (a drive rate infinite: the drive joints are left out, the steer joints are
+    enough). ``stale_periods``: how many periods the odometry stops for."""
     periods = [('good', None, 'good'), ('good', ('world', GOOD_GOAL), 'good'), ('good', None, 'good')]
     for _, frame, pose in BAD_GOALS:  # each refused and the robot held, then the good goal taken again
         periods += [('good', (frame, pose), 'good'), ('good', None, 'good'), ('good', ('world', GOOD_GOAL), 'good')]
     periods += [('x nan', None, 'good'), ('twist inf', None, 'good'), ('twist glitch', None, 'good')]
     periods += [('zero quaternion', None, 'good')]
-    periods += [('good', None, 'nan'), ('good', None, 'good'), ('good', None, 'drive inf'), ('good', None, 'good')]
-    periods += [(None, None, 'good')] * 11  # no odometry for longer than state_timeout: held, stale
+    for joints in ('nan', 'arm nan', 'steer nan', 'drive inf'):
+        periods += [('good', None, joints), ('good', None, 'good')]
+    periods += [(None, None, 'good')] * stale_periods  # no odometry for longer than state_timeout: held, stale
     periods += [('good', None, 'good')] * 2
     return periods
 
 
 class _Plant:
     """The measured state of both engines' robot: the joints and the odometry integrated with
-    the last commands sent (the direct engine's; the test checks that the nodes sent the same)."""
+    the commands in force (the direct engine's; the test checks that the nodes sent the same)."""
 
     def __init__(self, config, groups, dt):
         self.dt = dt
@@ -189,19 +193,21 @@ class _Plant:
         q, dq = self.q.copy(), self.dq.copy()
         base = {g: v.copy() for g, v in self.base.items()}
         rates = {g: v.copy() for g, v in self.rates.items()}
-        if kind == 'nan':
-            q[:] = NAN
-            for g in base:
-                base[g][:] = NAN
-        elif kind == 'drive inf':
+        if kind in ('nan', 'arm nan'):
+            q[0] = NAN
+        if kind in ('nan', 'steer nan'):
+            base['steer'][:] = NAN
+        if kind == 'drive inf':
             rates['drive'][0] = INF
         return q, dq, base, rates
 
-    def sent(self, arm, rates, twist):
-        """The commands in force for the coming period."""
-        self.dq, self.rates, self.twist = np.asarray(arm, dtype=float), rates, np.asarray(twist, dtype=float)
-
-    def advance(self):
+    def step(self, arm, base):
+        """One period under ``arm`` rates and ``base`` (:class:`~wmm_control.base.period.PeriodAnswer`)
+        when they were sent, else the commands in force."""
+        if arm is not None:
+            self.dq = np.asarray(arm, dtype=float)
+        if base is not None:
+            self.rates, self.twist = base.rates, np.asarray(base.twist, dtype=float)
         self.q = self.q + self.dq * self.dt
         self.base = {g: self.base[g] + self.rates[g] * self.dt for g in self.base}
         self.pose = np.array(se2_integrate(self.pose, self.twist, self.dt))
@@ -210,35 +216,51 @@ class _Plant:
 class _NodeEngine:
     """The resolver and base controller nodes in one in-process executor, told that the simulator
     steps in lockstep: they age their inputs by the stamps of the joint states and await each
-    other's answers (no wall-clock timing decides anything). This side plays the simulator:
-    it publishes each input and spins until the nodes have taken it."""
+    other's answers. This side plays the simulator: it publishes each input and spins until the
+    nodes have taken it, and each joint state until the answers the direct engine gave came.
 
-    LOCKSTEP_TIMEOUT = 30.0  # [s] only a wait for an answer that never comes would last it
+    Every wait for an answer is ``WAIT`` s of wall time, and the joint-state watchdogs allow a
+    second more than that: only a wait for an answer that never comes (a controller whose
+    joints were refused) lasts it; no wall-clock timing decides anything."""
+
+    WAIT = 1.0  # [s]
 
     def __init__(self, ros, method):
         self.ros = ros
+        wait, timeout = self.WAIT, self.WAIT + 1.0
         self.resolver = ros.add(
             RedundancyResolverNode(
-                context=ros.context, parameter_overrides=overrides(method=method, markers_period=0.0)
+                context=ros.context,
+                parameter_overrides=overrides(
+                    method=method, markers_period=0.0, compensation_timeout=wait, state_timeout=timeout
+                ),
             )
         )
-        self.base = ros.add(SwmrControllerNode(context=ros.context))
+        self.base = ros.add(
+            SwmrControllerNode(
+                context=ros.context, parameter_overrides=overrides(reference_wait=wait, joint_state_timeout=timeout)
+            )
+        )
         probe = ros.probe('engines_probe')
         timing = probe.create_publisher(Float64, LOCKSTEP_TOPIC, LATCHED_QOS)
-        timing.publish(Float64(data=self.LOCKSTEP_TIMEOUT))
+        timing.publish(Float64(data=wait))
         self.pub_state = probe.create_publisher(JointState, '/joint_states', STATE_PUB_QOS)
         self.pub_odom = probe.create_publisher(Odometry, '/odom', STATE_PUB_QOS)
         self.pub_goal = probe.create_publisher(PoseStamped, '/goal_pose', COMMAND_QOS)
-        self.got = {g: [] for g in ('arm', 'steer', 'drive')}
-        for group, kept in self.got.items():
+        self.got = {g: [] for g in ('arm', 'steer', 'drive', 'reference')}
+        for group in ('arm', 'steer', 'drive'):
             probe.create_subscription(
                 Float64MultiArray,
                 f'/{group}_controller/commands',
-                lambda m, kept=kept: kept.append(np.array(m.data)),
+                lambda m, kept=self.got[group]: kept.append(np.array(m.data)),
                 50,
             )
-        self.references = []
-        probe.create_subscription(TwistStamped, '/base/reference', self.references.append, 50)
+        probe.create_subscription(
+            TwistStamped,
+            '/base/reference',
+            lambda m: self.got['reference'].append(np.array([m.twist.linear.x, m.twist.linear.y, m.twist.angular.z])),
+            50,
+        )
         # what each node was given and answered, recorded where the node hands it to the core
         self.events, self.reads = [], []
         self.resolver._log = lambda events: self.events.extend(events)
@@ -294,28 +316,27 @@ class _NodeEngine:
         p.x, p.y, p.z, o.x, o.y, o.z, o.w = (float(v) for v in pose)
         self.give('goal', lambda: self.pub_goal.publish(msg))
 
-    def state(self, q, dq, base, rates, stamp):
-        """Publish the joint state; (arm command, rates per group, base reference) the nodes
-        answered it with, or None when neither answered."""
+    def state(self, q, dq, base, rates, stamp, arm, base_answer):
+        """Publish the joint state and spin until the nodes took it and sent what the direct
+        engine sent for it (``arm``: an arm command and a base reference; ``base_answer``: rates
+        per group). Returns {topic: message} of what came; a message the direct engine did not
+        send shows as one too many, here or at the next state."""
         groups = self.base.groups
         msg = JointState(name=self.names)
         msg.header.stamp = stamp
         msg.position = [float(v) for v in np.concatenate([q, *(base[g] for g in groups)])]
         msg.velocity = [float(v) for v in np.concatenate([dq, *(rates[g] for g in groups)])]
         counts = {g: len(c) for g, c in self.got.items()}
-        refs, reads = len(self.references), len(self.reads)
+        expected = {'arm': arm, 'reference': arm, 'steer': base_answer, 'drive': base_answer}
+        reads = len(self.reads)
         self.pub_state.publish(msg)
         assert self.ros.spin_until(lambda: len(self.reads) >= reads + 2), 'the joint state never reached the nodes'
-        if any(self.reads[reads:]):
-            # refused: no answer can come (no timer runs meanwhile); the next state's answers are counted anew
-            return None
         assert self.ros.spin_until(
-            lambda: all(len(c) > counts[g] for g, c in self.got.items()) and len(self.references) > refs
-        ), 'the nodes never answered the joint state'
-        assert all(len(c) == counts[g] + 1 for g, c in self.got.items()), 'one answer per joint state'
-        twist = self.references[-1].twist
-        reference = np.array([twist.linear.x, twist.linear.y, twist.angular.z])
-        return self.got['arm'][-1], {g: self.got[g][-1] for g in groups}, reference
+            lambda: all(len(self.got[g]) >= counts[g] + want for g, want in expected.items()), timeout=10 * self.WAIT
+        ), f'the nodes did not answer the joint state: {[(g, len(c) - counts[g]) for g, c in self.got.items()]}'
+        came = {g: len(c) - counts[g] for g, c in self.got.items()}
+        assert came == {g: int(want) for g, want in expected.items()}, came
+        return {g: c[-1] for g, c in self.got.items() if came[g]}
 
 
 def _stamp(t):
@@ -324,29 +345,36 @@ def _stamp(t):
 
 def test_both_engines_answer_the_same_bad_inputs_with_the_same_commands():
     """Goals with a NaN field, in another frame, beyond max_goal_distance, with a zero or an
-    infinite quaternion; odometry with NaN, an infinite twist or a zero quaternion, and then none
-    for longer than state_timeout; joint states all NaN, or with an infinite drive rate: the
-    resolver and base controller nodes (in lockstep, one in-process executor) and the direct
-    engine's :class:`Cycle` take or refuse each alike, log the same events, hold the robot in the
-    same periods and answer every joint state with the same commands, none of them non-finite."""
+    infinite quaternion; odometry with NaN, an infinite twist, a glitch's twist or a zero
+    quaternion, and then none for longer than state_timeout; joint states with NaN in every
+    joint, in the arm's, in the steer joints', or an infinite drive rate: the resolver and base
+    controller nodes (in lockstep, one in-process executor) and the direct engine's
+    :class:`Cycle` take or refuse each alike, log the same events, hold the robot in the same
+    periods and answer every joint state with the same commands, none of them non-finite."""
     method = 'task_sharing'
     config = load_robot('steerable')
     ros = RosHarness(args=['--ros-args', '--disable-stdout-logs'])
     try:
         nodes = _NodeEngine(ros, method)
-        p = nodes.resolver.p
+        p, b = nodes.resolver.p, nodes.base.p
         resolver = make_resolver(
             method,
             config,
             dt=p.period,
             **{n: getattr(p, n) for n in method_parameters(method) if n != 'dt' and hasattr(p, n)},
         )
-        tolerance = nodes.base.p.applied_rate_tolerance
-        cycle = Cycle(resolver, make_base_controller(config, p.period), p.period, applied_rate_tolerance=tolerance)
+        cycle = Cycle(
+            resolver,
+            make_base_controller(config, p.period),
+            p.period,
+            ResolverSettings.defaults(state_timeout=p.state_timeout),
+            b.applied_rate_tolerance,
+            b.reference_timeout,
+        )
         rp = cycle.resolver_period
         plant = _Plant(config, cycle.base_controller.command_groups, p.period)
-        clock, resync, held, refused, moved, seen = 0.0, True, [], 0, 0, set()
-        for k, (odom, goal, joints) in enumerate(_script()):
+        clock, resync, held, refused, moved, seen = 0.0, True, [], [], 0, set()
+        for k, (odom, goal, joints) in enumerate(_script(int(p.state_timeout / p.period) + 3)):
             t = k * p.period
             events = []  # the direct engine's, in the order the node logs them
             nodes.events.clear()
@@ -359,56 +387,49 @@ def test_both_engines_answer_the_same_bad_inputs_with_the_same_commands():
                 nodes.goal(*goal, _stamp(t))
             q, dq, base, rates = plant.joints(joints)
             result = cycle.step(q, dq, base, rates, t, resync)
-            answer = nodes.state(q, dq, base, rates, _stamp(t))
+            arm_sent, base_sent = result.arm_velocity is not None, result.base is not None
+            answer = nodes.state(q, dq, base, rates, _stamp(t), arm_sent, base_sent)
             events += result.events
             kinds = [e.kind for e in events if e.kind != 'joint_states rejected']
             seen.update(kinds)
             assert [e.kind for e in nodes.events] == kinds, (k, nodes.events, events)
             if result.rejected:
-                refused += 1
-                assert answer is None, f'period {k}: the nodes answered a joint state the cycle refused'
+                refused.append((joints, arm_sent, base_sent))
                 assert result.rejected in nodes.reads[-2:], (result.rejected, nodes.reads[-2:])
-                plant.advance()  # the commands in force stay
-                continue
-            assert answer is not None, f'period {k}: the cycle answered a joint state the nodes refused'
-            clock, resync = t, False
-            arm, node_rates, reference = answer
-            direct_reference = np.zeros(3) if result.command is None else result.command.base_twist
-            for got in (
-                arm,
-                reference,
-                result.arm_velocity,
-                direct_reference,
-                *node_rates.values(),
-                *result.base.rates.values(),
-            ):
+            else:
+                clock, resync = t, False  # the resolver ages its inputs by the last state it took
+            if arm_sent:
+                clock = t
+                reference = np.zeros(3) if result.command is None else result.command.base_twist
+                np.testing.assert_allclose(answer['arm'], result.arm_velocity, atol=1e-9, err_msg=f'period {k}')
+                np.testing.assert_allclose(answer['reference'], reference, atol=1e-9, err_msg=f'period {k}')
+                if result.command is None:
+                    held.append((k, result.stale))
+                    assert not np.any(answer['arm']) and not np.any(answer['reference'])
+                elif np.any(answer['arm']) and np.any(answer['reference']):
+                    moved += 1
+            if base_sent:
+                for g, r in result.base.rates.items():
+                    np.testing.assert_allclose(answer[g], r, atol=1e-9, err_msg=f'period {k} {g}')
+            for got in answer.values():
                 assert np.all(np.isfinite(got)), f'period {k}: a non-finite command {got}'
-            np.testing.assert_allclose(arm, result.arm_velocity, atol=1e-9, err_msg=f'period {k}')
-            np.testing.assert_allclose(reference, direct_reference, atol=1e-9, err_msg=f'period {k}')
-            for g, r in result.base.rates.items():
-                np.testing.assert_allclose(node_rates[g], r, atol=1e-9, err_msg=f'period {k} {g}')
-            if result.command is None:
-                held.append((k, result.stale))
-                assert not np.any(arm) and not np.any(reference)
-            elif np.any(arm) and np.any(reference):
-                moved += 1
-            plant.sent(result.arm_velocity, result.base.rates, result.base.twist)
-            plant.advance()
+            plant.step(result.arm_velocity, result.base)
     finally:
         ros.close()
-    # every kind of bad input met: goals refused, odometry refused, a joint state refused, stale odometry
+    # every kind of bad input met: goals refused, odometry refused, joints refused, stale odometry
     assert {'odom non-finite', 'odom twist', 'odom zero quaternion'} <= seen
-    assert refused == 1 and rp.targets.rejected == len(BAD_GOALS)
+    assert refused == [('nan', False, False), ('arm nan', False, True), ('steer nan', True, False)]
+    assert rp.targets.rejected == len(BAD_GOALS) and rp.counters['compensation_dropped'] == 1
     assert len([h for h in held if h[1] == 'no fresh /odom']) >= 3
     assert len([h for h in held if h[1] == '']) >= len(BAD_GOALS) + 1  # no goal, and after each refused one
     assert moved >= len(BAD_GOALS) + 10  # towards the good goal between them, and on the last odometry
     assert nodes.resolver.counters == rp.counters
 
 
-def test_the_direct_engine_sends_nothing_for_a_joint_state_the_nodes_refuse(monkeypatch):
-    """A joint state with NaN runs no cycle in :class:`~sim_bridge.closed_loop.ClosedLoop`, as in
-    the nodes: no command is sent, the world steps under the commands in force, and the next
-    state is answered again."""
+def test_the_direct_engine_sends_what_the_nodes_send_for_refused_joints(monkeypatch):
+    """In :class:`~sim_bridge.closed_loop.ClosedLoop`, as in the nodes: a joint state with NaN
+    in the arm's joints sends the base's rates alone, one with NaN in every joint sends nothing;
+    the world steps under the commands in force, and the next state is answered again."""
     world = SimWorld('steerable')
     try:
         loop = ClosedLoop(world, make_resolver('task_sharing', 'steerable'))
@@ -416,17 +437,19 @@ def test_the_direct_engine_sends_nothing_for_a_joint_state_the_nodes_refuse(monk
         for _ in range(3):
             moving = loop.step()
         assert moving.command is not None and np.any(moving.arm_velocity)
-        sent = []
-        monkeypatch.setattr(world, 'set_command', lambda group, values: sent.append(group))
-        names, q, qd = world.joint_state()
-        q[loop._arm[0]] = NAN
-        monkeypatch.setattr(world, 'joint_state', lambda: (names, q, qd))
-        t = world.time
-        refused = loop.step()
-        assert world.time > t and sent == [] and refused.command is None
-        np.testing.assert_array_equal(refused.arm_velocity, moving.arm_velocity)  # still in force
-        assert loop.events[-1].kind == 'joint_states rejected' and 'non-finite' in loop.events[-1].message
-        monkeypatch.undo()
-        assert loop.step().command is not None
+        for bad, sends in ((loop._arm[:1], ['steer', 'drive']), (slice(None), [])):
+            sent = []
+            monkeypatch.setattr(world, 'set_command', lambda group, values, sent=sent: sent.append(group))
+            names, q, qd = world.joint_state()
+            q[bad] = NAN
+            monkeypatch.setattr(world, 'joint_state', lambda names=names, q=q, qd=qd: (names, q, qd))
+            t = world.time
+            refused = loop.step()
+            assert world.time > t and sent == sends and refused.command is None
+            np.testing.assert_array_equal(refused.arm_velocity, moving.arm_velocity)  # still in force
+            assert loop.events[-1].kind == 'joint_states rejected' and 'non-finite' in loop.events[-1].message
+            monkeypatch.undo()
+            moving = loop.step()
+            assert moving.command is not None
     finally:
         world.close()

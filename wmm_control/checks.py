@@ -110,26 +110,41 @@ class JointCheck:
                 np.asarray(position_limits[1], dtype=float) + self.POSITION_MARGIN,
             )
         )
+        # every check at once, for the usual state that passes them all (NaN fails a comparison)
+        n = len(self.joints)
+        self._lowest, self._highest = np.full(n, -self.MAX_POSITION), np.full(n, self.MAX_POSITION)
+        if self._bounds is not None:
+            self._lowest = np.maximum(self._lowest, self._bounds[0])
+            self._highest = np.minimum(self._highest, self._bounds[1])
+        self._fastest = np.full(n, np.finfo(float).max) if self._max_rate is None else self._max_rate
 
     def read(self, q: ArrayLike, dq: ArrayLike | None) -> tuple[np.ndarray, np.ndarray, str] | tuple[None, None, str]:
         """``(positions, rates, '')`` when ``q`` and ``dq`` (None: zero rates, the state has
         none) pass, else ``(None, None, reason)``."""
         q = np.asarray(q, dtype=float)
         dq = np.zeros(len(q)) if dq is None else np.asarray(dq, dtype=float)
+        if (
+            q.shape == self._lowest.shape
+            and dq.shape == q.shape
+            and (self._lowest <= q).all()
+            and (q <= self._highest).all()
+            and (np.abs(dq) <= self._fastest).all()
+        ):
+            return q, dq, ''
+        return None, None, self._reason(q, dq)
+
+    def _reason(self, q: np.ndarray, dq: np.ndarray) -> str:
+        """Why ``q`` and ``dq`` fail :meth:`read`'s checks."""
         if q.shape != (len(self.joints),) or dq.shape != q.shape:
-            return None, None, f'with {q.size} positions and {dq.size} rates for {len(self.joints)} joints'
+            return f'with {q.size} positions and {dq.size} rates for {len(self.joints)} joints'
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
-            return None, None, f'with non-finite values: positions {q.tolist()}, velocities {dq.tolist()}'
+            return f'with non-finite values: positions {q.tolist()}, velocities {dq.tolist()}'
         if self._max_rate is not None and np.any(np.abs(dq) > self._max_rate):
             bad = [self.joints[i] for i in np.flatnonzero(np.abs(dq) > self._max_rate)]
-            return (
-                None,
-                None,
-                f'with rates of {bad} beyond {PLAUSIBLE_FACTOR:g} times their limits (a measurement glitch?)',
-            )
+            return f'with rates of {bad} beyond {PLAUSIBLE_FACTOR:g} times their limits (a measurement glitch?)'
         if np.any(np.abs(q) > self.MAX_POSITION):
-            return None, None, f'with positions beyond {self.MAX_POSITION:g} rad: not joint angles'
-        if self._bounds is not None and (np.any(q < self._bounds[0]) or np.any(q > self._bounds[1])):
-            bad = [self.joints[i] for i in np.flatnonzero((q < self._bounds[0]) | (q > self._bounds[1]))]
-            return None, None, f'with positions of {bad} more than {self.POSITION_MARGIN} rad beyond their limits'
-        return q, dq, ''
+            return f'with positions beyond {self.MAX_POSITION:g} rad: not joint angles'
+        bounds = self._bounds
+        assert bounds is not None  # the only check left
+        bad = [self.joints[i] for i in np.flatnonzero((q < bounds[0]) | (q > bounds[1]))]
+        return f'with positions of {bad} more than {self.POSITION_MARGIN} rad beyond their limits'

@@ -19,7 +19,7 @@ from wmm_control.checks import JointCheck
 from wmm_control.base.contract import BaseCommand, BaseController
 from wmm_control.paths import load_defaults
 
-__all__ = ['BasePeriod', 'PeriodAnswer', 'NODE_NAMES', 'default_applied_rate_tolerance']
+__all__ = ['BasePeriod', 'PeriodAnswer', 'NODE_NAMES', 'node_default']
 
 #: The base controller node (and executable) of each base family; its parameter file
 #: (``config/<node>.yaml``) holds the tuning the direct engine takes too.
@@ -30,10 +30,11 @@ NODE_NAMES = {
 }
 
 
-def default_applied_rate_tolerance(family: str) -> float:
-    """The base controller node's default ``applied_rate_tolerance`` [rad/s] for ``family``."""
+def node_default(family: str, parameter: str) -> float:
+    """The default of the base controller node of ``family`` for ``parameter``
+    (``applied_rate_tolerance`` [rad/s], ``reference_timeout`` [s], …)."""
     name = NODE_NAMES[family]
-    return float(load_defaults(f'{name}.yaml', name)['applied_rate_tolerance'])
+    return float(load_defaults(f'{name}.yaml', name)[parameter])
 
 
 @dataclass(frozen=True)
