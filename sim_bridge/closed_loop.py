@@ -4,7 +4,9 @@ Each period runs what the nodes run in lockstep, in the same order and with the 
 (:class:`wmm_control.cycle.Cycle`, Sorour Fig 4):
 
 1. the inputs as the nodes receive them: the odometry (or the ground-truth base pose), the
-   end effector's pose, the target, each checked as it comes;
+   end effector's pose, the target, each checked as it comes, and the joint state (what the
+   nodes would not answer is not sent: the world steps under the commands in force, as the
+   simulator does when no command answers a state);
 2. ``plan``: the resolver's arm command and base twist reference, or the robot held;
 3. ``base``: the base controller (:func:`wmm_control.base.make_base_controller`) answers that
    reference at once, closed on the measured joints, with rates per command group and the
@@ -26,7 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from wmm_control.base import BaseController, make_base_controller
-from wmm_control.base.period import default_applied_rate_tolerance
+from wmm_control.base.period import node_default
 from wmm_control.cycle import Cycle
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import matrix_from_quaternion, quaternion_from_matrix, quaternion_from_yaw
@@ -53,9 +55,11 @@ class CycleRecord:
         ee_position: true end-effector position [m]. Shape (3,).
         ee_rotation: true end-effector orientation. Shape (3, 3).
         command: the resolver's final command (``ResolverCommand``), or None when the robot
-            was held (no target, or an input refused).
-        arm_velocity: the arm rates sent (zero when held). Shape (n,).
-        feasible_twist: the base controller's answer q̇_bf (base frame). Shape (3,).
+            was held (no target, or an input refused) or the joint state rejected.
+        arm_velocity: the arm rates in force (zero when held; the last ones sent when the joint
+            state's arm joints were rejected). Shape (n,).
+        feasible_twist: the base controller's answer q̇_bf (base frame; its last one when the
+            joint state's base joints were rejected). Shape (3,).
         base_velocity: the base twist actually executed in the period (base frame). Shape (3,).
         cycle_s: wall time (``time.perf_counter``) of the period's control cycle
             (:meth:`~wmm_control.cycle.Cycle.step`: the method with its safety stage, the base
@@ -116,13 +120,15 @@ class ClosedLoop:
         self.base = base_controller if base_controller is not None else make_base_controller(self.robot, world.dt)
         if settings is None:
             settings = ResolverSettings.defaults(ground_truth=feedback == 'ground_truth')
-        self.cycle = Cycle(resolver, self.base, world.dt, settings, default_applied_rate_tolerance(self.base.family))
+        self.cycle = Cycle(
+            resolver, self.base, world.dt, settings, node_default(self.base.family, 'applied_rate_tolerance')
+        )
         self.world_frame = settings.world_frame
         index = {n: i for i, n in enumerate(world.joint_names)}
         self._arm = [index[n] for n in self.robot.arm.joints]
         self._groups = {g: [index[n] for n in names] for g, names in self.base.command_groups.items()}
-        _, q, _ = world.joint_state()
-        self.base.reset(self._positions(q))
+        self._resync = True  # the first period starts from the measured joints, as the nodes' first
+        self._arm_sent, self._twist = np.zeros(self.robot.arm.n), np.zeros(3)  # the last answer in force
         #: the events of the inputs and periods so far (what a node would have logged)
         self.events: list = []
 
@@ -201,13 +207,19 @@ class ClosedLoop:
         _, q_all, qd_all = w.joint_state()
         wall, cpu = time.perf_counter(), time.thread_time()
         result = self.cycle.step(
-            q_all[self._arm], qd_all[self._arm], self._positions(q_all), self._positions(qd_all), t
+            q_all[self._arm], qd_all[self._arm], self._positions(q_all), self._positions(qd_all), t, self._resync
         )
         cpu, wall = time.thread_time() - cpu, time.perf_counter() - wall
         self.events += result.events
-        for group, rates in result.base.rates.items():
-            w.set_command(group, rates)
-        w.set_command('arm', result.arm_velocity)
+        if not result.rejected:
+            self._resync = False
+        if result.base is not None:  # else the commands in force stay
+            for group, rates in result.base.rates.items():
+                w.set_command(group, rates)
+            self._twist = np.asarray(result.base.twist, dtype=float)
+        if result.arm_velocity is not None:
+            w.set_command('arm', result.arm_velocity)
+            self._arm_sent = result.arm_velocity
         w.step()
         return CycleRecord(
             t=t,
@@ -217,8 +229,8 @@ class ClosedLoop:
             ee_position=ee_pos,
             ee_rotation=matrix_from_quaternion(ee_quat),
             command=result.command,
-            arm_velocity=result.arm_velocity,
-            feasible_twist=np.asarray(result.base.twist, dtype=float),
+            arm_velocity=self._arm_sent,
+            feasible_twist=self._twist,
             base_velocity=w.base_twist(),
             cycle_s=wall,
             cycle_cpu_s=cpu,

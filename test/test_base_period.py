@@ -15,6 +15,8 @@ class RecordingBase:
     """A base controller that answers with a set command and records its resets."""
 
     command_groups = {'steer': ('s1', 's2'), 'drive': ('d1', 'd2')}
+    required_groups = ('steer',)
+    rate_limits = {'steer': 1.0, 'drive': 10.0}
     resync_from_rates = False
 
     def __init__(self):
@@ -80,3 +82,19 @@ def test_a_real_controllers_answer_goes_out_as_it_gave_it(robot):
     assert answer.non_finite == '' and answer.twist is answer.command.feasible_twist
     for group, rates in answer.rates.items():
         assert rates is answer.command.rates[group]
+
+
+def test_a_joint_state_is_refused_on_a_required_group_and_goes_on_without_another():
+    """:meth:`BasePeriod.check`, what both engines run on a joint state's base joints: a required
+    group that fails its checks refuses the state; another one is left out, with the rates."""
+    period = BasePeriod(RecordingBase(), 0.1)
+    positions, rates, why = period.check(POSITIONS, APPLIED)
+    assert why == '' and set(positions) == {'steer', 'drive'} and rates is not None
+    bad_steer = dict(POSITIONS, steer=np.array([math.nan, 0.0]))
+    assert period.check(bad_steer, APPLIED) == ({}, None, period.check(bad_steer, None)[2])
+    assert 'non-finite' in period.check(bad_steer, APPLIED)[2]
+    glitch = dict(APPLIED, drive=np.array([0.0, 101.0]))  # beyond ten times the drive limit
+    positions, rates, why = period.check(POSITIONS, glitch)
+    assert why == '' and set(positions) == {'steer'} and rates is None
+    positions, rates, why = period.check({'drive': POSITIONS['drive']}, None)
+    assert positions == {} and 'steer' in why

@@ -57,6 +57,10 @@ def test_wrap_angle_lands_in_the_half_open_interval_and_differs_by_whole_turns(a
     assert wrap_angle(math.pi) == math.pi and wrap_angle(-math.pi) == math.pi
     assert wrap_angle(-math.pi / 2, math.pi) == math.pi / 2
     np.testing.assert_allclose(wrap_angle(np.array([3 * math.pi, -0.5])), [math.pi, -0.5])
+    # a scalar exactly, as math.remainder (the planners' headings and turns), an array to round-off
+    assert wrap_angle(angle) in (math.remainder(angle, 2 * math.pi), math.pi)
+    assert abs(math.remainder(wrap_angle(np.array([angle]))[0] - wrap_angle(angle), 2 * math.pi)) < 1e-11
+    assert wrap_angle(1e-17) == 1e-17 and wrap_angle(np.float64(-1e-17)) == -1e-17
 
 
 @settings(max_examples=100, deadline=None)

@@ -7,7 +7,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.errors import NonFiniteError, ShapeError
 
-__all__ = ['as_vector', 'as_finite_vector', 'Freshness', 'PLAUSIBLE_FACTOR']
+__all__ = ['as_vector', 'as_finite_vector', 'Freshness', 'JointCheck', 'PLAUSIBLE_FACTOR']
 
 #: A measured rate or twist beyond this many times its limit is taken for a glitch, not a
 #: measurement (joint states, odometry, the base's feasible twist).
@@ -70,3 +70,81 @@ class Freshness:
         """True when a message arrived within the timeout (and the clock did not jump back)."""
         age = self.age(now)
         return 0.0 <= age <= self.timeout
+
+
+class JointCheck:
+    """The checks of a measured joint state's values, for both engines: a state that fails them
+    runs no cycle (the nodes read the joints by name first,
+    :class:`~wmm_control.nodes.inputs.JointSelector`).
+
+    Rejected: non-finite positions or rates, rates beyond :data:`PLAUSIBLE_FACTOR` times their
+    limits, positions beyond :attr:`MAX_POSITION` or beyond their limits by more than
+    :attr:`POSITION_MARGIN`.
+
+    Args:
+        joints: the joint names, in the order of the values checked (named in the reasons).
+        velocity_limits: optional |q̇| limit per joint (or one for all) [rad/s].
+        position_limits: optional ``(lower, upper)`` per joint [rad].
+    """
+
+    POSITION_MARGIN = 0.5  # [rad]
+    MAX_POSITION = 1e9  # [rad] no joint angle is larger (a wheel at 12 rad/s needs 2.6 years)
+
+    def __init__(
+        self,
+        joints,
+        velocity_limits: ArrayLike | None = None,
+        position_limits: tuple[ArrayLike, ArrayLike] | None = None,
+    ) -> None:
+        self.joints = tuple(joints)
+        self._max_rate = (
+            None
+            if velocity_limits is None
+            else PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), len(self.joints))
+        )
+        self._bounds = (
+            None
+            if position_limits is None
+            else (
+                np.asarray(position_limits[0], dtype=float) - self.POSITION_MARGIN,
+                np.asarray(position_limits[1], dtype=float) + self.POSITION_MARGIN,
+            )
+        )
+        # every check at once, for the usual state that passes them all (NaN fails a comparison)
+        n = len(self.joints)
+        self._lowest, self._highest = np.full(n, -self.MAX_POSITION), np.full(n, self.MAX_POSITION)
+        if self._bounds is not None:
+            self._lowest = np.maximum(self._lowest, self._bounds[0])
+            self._highest = np.minimum(self._highest, self._bounds[1])
+        self._fastest = np.full(n, np.finfo(float).max) if self._max_rate is None else self._max_rate
+
+    def read(self, q: ArrayLike, dq: ArrayLike | None) -> tuple[np.ndarray, np.ndarray, str] | tuple[None, None, str]:
+        """``(positions, rates, '')`` when ``q`` and ``dq`` (None: zero rates, the state has
+        none) pass, else ``(None, None, reason)``."""
+        q = np.asarray(q, dtype=float)
+        dq = np.zeros(len(q)) if dq is None else np.asarray(dq, dtype=float)
+        if (
+            q.shape == self._lowest.shape
+            and dq.shape == q.shape
+            and (self._lowest <= q).all()
+            and (q <= self._highest).all()
+            and (np.abs(dq) <= self._fastest).all()
+        ):
+            return q, dq, ''
+        return None, None, self._reason(q, dq)
+
+    def _reason(self, q: np.ndarray, dq: np.ndarray) -> str:
+        """Why ``q`` and ``dq`` fail :meth:`read`'s checks."""
+        if q.shape != (len(self.joints),) or dq.shape != q.shape:
+            return f'with {q.size} positions and {dq.size} rates for {len(self.joints)} joints'
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
+            return f'with non-finite values: positions {q.tolist()}, velocities {dq.tolist()}'
+        if self._max_rate is not None and np.any(np.abs(dq) > self._max_rate):
+            bad = [self.joints[i] for i in np.flatnonzero(np.abs(dq) > self._max_rate)]
+            return f'with rates of {bad} beyond {PLAUSIBLE_FACTOR:g} times their limits (a measurement glitch?)'
+        if np.any(np.abs(q) > self.MAX_POSITION):
+            return f'with positions beyond {self.MAX_POSITION:g} rad: not joint angles'
+        bounds = self._bounds
+        assert bounds is not None  # the only check left
+        bad = [self.joints[i] for i in np.flatnonzero((q < bounds[0]) | (q > bounds[1]))]
+        return f'with positions of {bad} more than {self.POSITION_MARGIN} rad beyond their limits'

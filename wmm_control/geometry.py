@@ -73,11 +73,15 @@ def wrap_angle(angle: np.ndarray, period: float = ...) -> np.ndarray: ...
 def wrap_angle(angle: ArrayLike, period: float = 2.0 * math.pi) -> float | np.ndarray:
     """Wrap angles [rad] to (−period/2, period/2]: by default (−π, π]; ``period=π`` gives the
     difference to the nearer of a wheel heading's twins (β or β + π). A scalar gives a float,
-    an array an array."""
+    exactly (IEEE 754 remainder, ``math.remainder``, with −period/2 taken to +period/2); an
+    array an array, to round-off (numpy's floored remainder after a shift by period/2)."""
     half = 0.5 * period
-    wrapped = np.remainder(np.asarray(angle, dtype=float) + half, period) - half
-    wrapped = np.where(wrapped == -half, half, wrapped)
-    return float(wrapped) if np.ndim(wrapped) == 0 else wrapped
+    value = angle if isinstance(angle, (float, int)) else np.asarray(angle, dtype=float)  # np.float64 is a float
+    if isinstance(value, (float, int)) or value.ndim == 0:
+        wrapped = math.remainder(float(value), period)  # in [−half, half]
+        return half if wrapped == -half else wrapped
+    shifted = np.remainder(value + half, period) - half
+    return np.where(shifted == -half, half, shifted)
 
 
 # ---------------------------------------------------------------------- SE(2)

@@ -15,10 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmm_control.base.applied import unapplied_command
+from wmm_control.checks import JointCheck
 from wmm_control.base.contract import BaseCommand, BaseController
 from wmm_control.paths import load_defaults
 
-__all__ = ['BasePeriod', 'PeriodAnswer', 'NODE_NAMES', 'default_applied_rate_tolerance']
+__all__ = ['BasePeriod', 'PeriodAnswer', 'NODE_NAMES', 'node_default']
 
 #: The base controller node (and executable) of each base family; its parameter file
 #: (``config/<node>.yaml``) holds the tuning the direct engine takes too.
@@ -29,10 +30,11 @@ NODE_NAMES = {
 }
 
 
-def default_applied_rate_tolerance(family: str) -> float:
-    """The base controller node's default ``applied_rate_tolerance`` [rad/s] for ``family``."""
+def node_default(family: str, parameter: str) -> float:
+    """The default of the base controller node of ``family`` for ``parameter``
+    (``applied_rate_tolerance`` [rad/s], ``reference_timeout`` [s], …)."""
     name = NODE_NAMES[family]
-    return float(load_defaults(f'{name}.yaml', name)['applied_rate_tolerance'])
+    return float(load_defaults(f'{name}.yaml', name)[parameter])
 
 
 @dataclass(frozen=True)
@@ -66,8 +68,44 @@ class BasePeriod:
         self.base = base
         self.groups = tuple(base.command_groups)
         self.tolerance = float(applied_rate_tolerance)
+        #: the checks of each command group's measured joints (a glitch's rates)
+        self.checks = {g: JointCheck(joints, base.rate_limits[g]) for g, joints in base.command_groups.items()}
         self._last: np.ndarray | None = None  # the last published rates, all groups in a row
         self._dropped = False  # the last period's answer was not published
+
+    def measured(self, reads: dict, with_rates: bool) -> tuple[dict, dict | None, str]:
+        """The measured state a period closes on, from each command group's read
+        ``(positions, rates, reason)`` (positions None when the group could not be read, and
+        ``reason`` says why; :meth:`check` or the node's joint selectors).
+
+        Returns:
+            (positions, rates, '') per group, ``rates`` None without ``with_rates`` or when a
+            group is left out; or ({}, None, reason) when a required group could not be read:
+            the state runs no cycle. A group that is not required is left out.
+        """
+        positions: dict = {}
+        rates: dict | None = {} if with_rates else None
+        for group, (q, dq, reason) in reads.items():
+            if q is None:
+                if group in self.base.required_groups:
+                    return {}, None, reason
+                rates = None
+                continue
+            positions[group] = q
+            if rates is not None:
+                rates[group] = dq
+        return positions, rates, ''
+
+    def check(self, positions: dict, rates: dict | None) -> tuple[dict, dict | None, str]:
+        """:meth:`measured` of the groups' measured ``positions`` and ``rates`` (None: the state
+        has none), each checked (:attr:`checks`)."""
+        reads = {
+            g: check.read(positions[g], None if rates is None else rates.get(g))
+            if g in positions
+            else (None, None, f'without the {g} joints')
+            for g, check in self.checks.items()
+        }
+        return self.measured(reads, rates is not None)
 
     def start(self, positions: dict, rates: dict | None, resync: bool) -> str:
         """Where the period of a joint state starts from: the measured ``positions`` and ``rates``

@@ -5,7 +5,7 @@ Schema::
     scenario:
       name: sorour_table2
       description: ...
-      robot: steerable            # robot name, alias or YAML path
+      robot: steerable            # required: robot name, alias or YAML path
       frame: world                # frame of every goal pose
       duration: 65.0              # [s]
       obstacles: table_pillar     # optional: an obstacle file (config/obstacles/<name>.yaml, or a
@@ -155,6 +155,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     path = Path(text) if text.endswith(('.yaml', '.yml')) else config_path('scenarios', f'{text}.yaml')
     raw = read_yaml_section(path, 'scenario', 'scenario')
     where = path.name
+    robot = raw.get('robot')
+    if not isinstance(robot, str) or not robot:
+        raise ConfigError(f'{path}: scenario.robot is required (a robot name, alias or YAML path), got {robot!r}')
     duration = _number(raw.get('duration'), f'{where}.duration')
     if duration <= 0:
         raise ConfigError(f'{where}.duration must be > 0, got {duration}')
@@ -167,7 +170,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     common = dict(
         name=str(raw.get('name', path.stem)),
         description=str(raw.get('description', '')),
-        robot=str(raw.get('robot', 'steerable')),
+        robot=robot,
         frame=str(raw.get('frame', 'world')),
         duration=duration,
         path=path,

@@ -177,21 +177,14 @@ class BaseControllerNode(Node):
 
     def _measured(self, msg):
         """``(positions, rates)`` per group, or None (logged, counted) when a required group cannot
-        be read. ``rates`` is None unless the message has velocities for every group."""
-        positions = {}
-        rates = {} if len(msg.velocity) else None
-        for group, selector in self.selectors.items():
-            q, dq, reason = selector.read(msg)
-            if q is None:
-                if group in self.base.required_groups:
-                    self.counters['joint_states_rejected'] += 1
-                    self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped', throttle_duration_sec=1.0)
-                    return None
-                rates = None
-                continue
-            positions[group] = q
-            if rates is not None:
-                rates[group] = dq
+        be read (:meth:`~wmm_control.base.period.BasePeriod.measured`). ``rates`` is None unless
+        the message has velocities for every group."""
+        reads = {group: selector.read(msg) for group, selector in self.selectors.items()}
+        positions, rates, reason = self.period.measured(reads, bool(len(msg.velocity)))
+        if reason:
+            self.counters['joint_states_rejected'] += 1
+            self.get_logger().warn(f'rejected /joint_states {reason}: cycle skipped', throttle_duration_sec=1.0)
+            return None
         return positions, rates
 
     def _on_joint_states(self, msg):

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
-from wmm_control.checks import PLAUSIBLE_FACTOR, Freshness
+from wmm_control.checks import Freshness, JointCheck
 from wmm_control.nodes.conversions import parse_base_reference
 from wmm_control.nodes.sim_timing import SimTiming
 from wmm_control.nodes.stamps import StampGate, seconds
@@ -28,7 +28,8 @@ __all__ = ['JointSelector', 'BaseReference', 'JointStateWatchdog', 'DELIVERY_WIN
 
 
 class JointSelector:
-    """Reads named joints from ``sensor_msgs/JointState`` messages, whatever their order.
+    """Reads named joints from ``sensor_msgs/JointState`` messages, whatever their order, and
+    checks their values (:class:`~wmm_control.checks.JointCheck`, as the direct engine does).
 
     The index of each name layout is cached (senders use one or two layouts).
 
@@ -37,11 +38,8 @@ class JointSelector:
         velocity_limits: optional |q̇| limit per joint [rad/s]; a measured rate beyond
             ``PLAUSIBLE_FACTOR`` times it is taken for a glitch and the message is rejected.
         position_limits: optional ``(lower, upper)`` per joint [rad]; a position beyond them by
-            more than ``POSITION_MARGIN`` is rejected.
+            more than ``JointCheck.POSITION_MARGIN`` is rejected.
     """
-
-    POSITION_MARGIN = 0.5  # [rad]
-    MAX_POSITION = 1e9  # [rad] no joint angle is larger (a wheel at 12 rad/s needs 2.6 years)
 
     def __init__(
         self,
@@ -53,19 +51,8 @@ class JointSelector:
         self.joints = tuple(joints)
         self._cache: dict[tuple[str, ...], np.ndarray | str] = {}
         self._cache_size = cache_size
-        self._max_rate = (
-            None
-            if velocity_limits is None
-            else PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), len(self.joints))
-        )
-        self._bounds = (
-            None
-            if position_limits is None
-            else (
-                np.asarray(position_limits[0], dtype=float) - self.POSITION_MARGIN,
-                np.asarray(position_limits[1], dtype=float) + self.POSITION_MARGIN,
-            )
-        )
+        #: the checks of the values read
+        self.check = JointCheck(self.joints, velocity_limits, position_limits)
 
     def _layout(self, names):
         where = {}
@@ -102,29 +89,14 @@ class JointSelector:
     def read(self, msg: JointState) -> tuple[np.ndarray, np.ndarray, str] | tuple[None, None, str]:
         """``(positions, velocities, '')`` of the joints, or ``(None, None, reason)``.
 
-        Velocities are zero when the message has none. Non-finite values, and values beyond
-        the plausibility bounds given at construction, give a reason.
+        Velocities are zero when the message has none. Values that fail :attr:`check` give a
+        reason.
         """
         idx, reason = self.indices(msg)
         if idx is None:
             return None, None, reason
         q = np.asarray(msg.position, dtype=float)[idx]
-        dq = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else np.zeros(len(idx))
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
-            return None, None, f'with non-finite values: positions {q.tolist()}, velocities {dq.tolist()}'
-        if self._max_rate is not None and np.any(np.abs(dq) > self._max_rate):
-            bad = [self.joints[i] for i in np.flatnonzero(np.abs(dq) > self._max_rate)]
-            return (
-                None,
-                None,
-                (f'with rates of {bad} beyond {PLAUSIBLE_FACTOR:g} times their limits (a measurement glitch?)'),
-            )
-        if np.any(np.abs(q) > self.MAX_POSITION):
-            return None, None, f'with positions beyond {self.MAX_POSITION:g} rad: not joint angles'
-        if self._bounds is not None and (np.any(q < self._bounds[0]) or np.any(q > self._bounds[1])):
-            bad = [self.joints[i] for i in np.flatnonzero((q < self._bounds[0]) | (q > self._bounds[1]))]
-            return None, None, (f'with positions of {bad} more than {self.POSITION_MARGIN} rad beyond their limits')
-        return q, dq, ''
+        return self.check.read(q, np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else None)
 
 
 class BaseReference:

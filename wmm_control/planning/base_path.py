@@ -145,7 +145,7 @@ def _pose(state) -> tuple[float, float, float]:
 def _set(state, pose: Sequence[float] | np.ndarray) -> None:
     state.setX(float(pose[0]))
     state.setY(float(pose[1]))
-    state.setYaw(math.remainder(float(pose[2]), 2.0 * math.pi))
+    state.setYaw(wrap_angle(float(pose[2])))
 
 
 class _Motions(ob.MotionValidator):

@@ -29,6 +29,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
+from wmm_control.geometry import wrap_angle
 from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle
@@ -179,5 +180,5 @@ class Travel:
     def linear_sweep(self, a: Sequence[float], b: Sequence[float]) -> float:
         """[m] how far any point of the robot moves, at most, when the base goes from ``a`` to
         ``b`` (x, y, θ) along the straight line in (x, y) while θ turns the short way."""
-        dth = abs(math.remainder(float(b[2]) - float(a[2]), 2.0 * math.pi))
+        dth = abs(wrap_angle(float(b[2]) - float(a[2])))
         return math.hypot(float(b[0]) - float(a[0]), float(b[1]) - float(a[1])) + self.radius * dth

@@ -65,7 +65,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
-from wmm_control.geometry import rotation_2d
+from wmm_control.geometry import rotation_2d, wrap_angle
 from wmm_control.planning.outcome import NoWay
 from wmm_control.planning.planner import GoalPlanner
 from wmm_control.planning.stance import solve_arm_ik
@@ -247,7 +247,7 @@ def _grid(planner: GoalPlanner, goal: np.ndarray, params: CheckParams) -> list[n
         root = goal[:2] + offset
         for heading in headings:
             xy = root - rotation_2d(heading) @ stances.root[:2]
-            poses.append(np.array((xy[0], xy[1], math.remainder(heading, 2.0 * math.pi))))
+            poses.append(np.array((xy[0], xy[1], wrap_angle(heading))))
     return poses
 
 

@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from wmm_control.checks import as_finite_vector
-from wmm_control.geometry import pose_error_log, rotation_2d, scale_into_limits
+from wmm_control.geometry import pose_error_log, rotation_2d, scale_into_limits, wrap_angle
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.planning.clearance import Clearance, Travel
@@ -244,7 +244,7 @@ class StanceFinder:
                 for fraction in p.rings:
                     r = fraction * horizontal
                     root = goal_xy + r * np.array((math.cos(bearing), math.sin(bearing)))
-                    heading = math.remainder(bearing + math.pi + offset, 2.0 * math.pi)
+                    heading = wrap_angle(bearing + math.pi + offset)
                     base_xy = root - rotation_2d(heading) @ self.root[:2]
                     out.append(np.array((base_xy[0], base_xy[1], heading)))
         return out
