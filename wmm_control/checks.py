@@ -97,26 +97,21 @@ class JointCheck:
         position_limits: tuple[ArrayLike, ArrayLike] | None = None,
     ) -> None:
         self.joints = tuple(joints)
-        self._max_rate = (
-            None
-            if velocity_limits is None
-            else PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), len(self.joints))
-        )
-        self._bounds = (
-            None
-            if position_limits is None
-            else (
-                np.asarray(position_limits[0], dtype=float) - self.POSITION_MARGIN,
-                np.asarray(position_limits[1], dtype=float) + self.POSITION_MARGIN,
-            )
-        )
-        # every check at once, for the usual state that passes them all (NaN fails a comparison)
+        # every check as one bound per joint, for the usual state that passes them all (NaN
+        # fails a comparison): the positions within their limits and ±MAX_POSITION, the rates
+        # within PLAUSIBLE_FACTOR times theirs
         n = len(self.joints)
         self._lowest, self._highest = np.full(n, -self.MAX_POSITION), np.full(n, self.MAX_POSITION)
-        if self._bounds is not None:
-            self._lowest = np.maximum(self._lowest, self._bounds[0])
-            self._highest = np.minimum(self._highest, self._bounds[1])
-        self._fastest = np.full(n, np.finfo(float).max) if self._max_rate is None else self._max_rate
+        if position_limits is not None:
+            self._lowest = np.maximum(self._lowest, np.asarray(position_limits[0], dtype=float) - self.POSITION_MARGIN)
+            self._highest = np.minimum(
+                self._highest, np.asarray(position_limits[1], dtype=float) + self.POSITION_MARGIN
+            )
+        self._fastest = (
+            np.full(n, np.finfo(float).max)
+            if velocity_limits is None
+            else PLAUSIBLE_FACTOR * np.broadcast_to(np.asarray(velocity_limits, dtype=float), n)
+        )
 
     def read(self, q: ArrayLike, dq: ArrayLike | None) -> tuple[np.ndarray, np.ndarray, str] | tuple[None, None, str]:
         """``(positions, rates, '')`` when ``q`` and ``dq`` (None: zero rates, the state has
@@ -139,12 +134,10 @@ class JointCheck:
             return f'with {q.size} positions and {dq.size} rates for {len(self.joints)} joints'
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
             return f'with non-finite values: positions {q.tolist()}, velocities {dq.tolist()}'
-        if self._max_rate is not None and np.any(np.abs(dq) > self._max_rate):
-            bad = [self.joints[i] for i in np.flatnonzero(np.abs(dq) > self._max_rate)]
+        if np.any(np.abs(dq) > self._fastest):
+            bad = [self.joints[i] for i in np.flatnonzero(np.abs(dq) > self._fastest)]
             return f'with rates of {bad} beyond {PLAUSIBLE_FACTOR:g} times their limits (a measurement glitch?)'
         if np.any(np.abs(q) > self.MAX_POSITION):
             return f'with positions beyond {self.MAX_POSITION:g} rad: not joint angles'
-        bounds = self._bounds
-        assert bounds is not None  # the only check left
-        bad = [self.joints[i] for i in np.flatnonzero((q < bounds[0]) | (q > bounds[1]))]
+        bad = [self.joints[i] for i in np.flatnonzero((q < self._lowest) | (q > self._highest))]
         return f'with positions of {bad} more than {self.POSITION_MARGIN} rad beyond their limits'
