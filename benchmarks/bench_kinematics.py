@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.tasks import ManipulabilityTask
 
 N = 5000
 
@@ -50,11 +51,12 @@ def bench(model, full, rng):
 
 def bench_manipulability(model, rows, rng):
     times = []
+    task = ManipulabilityTask(model, rows)
     for _ in range(N):
         model.update(rng.uniform(-1, 1, 3), rng.uniform(-2, 2, 7))
         t0 = time.perf_counter()
-        model.manipulability_gradient(rows)
-        model.manipulability_hessian(rows)
+        task.gradient()
+        task.hessian()
         times.append(time.perf_counter() - t0)
     return percentiles(times[100:])
 

@@ -16,6 +16,7 @@ from wmm_control.geometry import (
     wrap_angle,
 )
 from wmm_control.kinematics import KinematicModel, pinocchio_model
+from wmm_control.kinematics.tasks import ManipulabilityTask
 from wmm_control.robot_config import load_robot
 
 N_STATES = 20
@@ -142,19 +143,20 @@ def test_jdot_qdot_matches_finite_differences(model):
 
 @pytest.mark.parametrize('rows', ['position', 'full'])
 def test_manipulability_gradient_and_hessian_match_finite_differences(model, rows):
+    task = ManipulabilityTask(model, rows)
     for base, q in random_states(model, N_STATES, seed=5):
         model.update(base, q)
-        grad = model.manipulability_gradient(rows)
-        hess = model.manipulability_hessian(rows)
+        grad = task.gradient()
+        hess = task.hessian()
         fd_grad = np.zeros(7)
         fd_hess = np.zeros((7, 7))
         for k in range(7):
             dq = np.zeros(7)
             dq[k] = EPS
             model.update(base, q + dq)
-            hp, gp = model.manipulability(rows), model.manipulability_gradient(rows)
+            hp, gp = task.value(), task.gradient()
             model.update(base, q - dq)
-            hm, gm = model.manipulability(rows), model.manipulability_gradient(rows)
+            hm, gm = task.value(), task.gradient()
             fd_grad[k] = (hp - hm) / (2 * EPS)
             fd_hess[:, k] = (gp - gm) / (2 * EPS)
         scale = max(1.0, np.abs(grad).max())
@@ -207,46 +209,49 @@ def test_manipulability_derivatives_match_the_full_second_derivative_form(model,
     b = 2 * np.einsum('ij,ljm,kim->lk', minv, d1, d1)  # 2 tr(M⁻¹ ∂_l J_m ∂_k J_mᵀ)
     c = np.einsum('ij,ljk,km,nmi->ln', minv, dm, minv, dm)
     grad, hess = h * g, h * (np.outer(g, g) + a + b - c)
-    np.testing.assert_allclose(model.manipulability_gradient(rows), grad, rtol=0, atol=1e-8 * np.abs(grad).max())
-    np.testing.assert_allclose(model.manipulability_hessian(rows), hess, rtol=0, atol=1e-6 * np.abs(hess).max())
+    task = ManipulabilityTask(model, rows)
+    np.testing.assert_allclose(task.gradient(), grad, rtol=0, atol=1e-8 * np.abs(grad).max())
+    np.testing.assert_allclose(task.hessian(), hess, rtol=0, atol=1e-6 * np.abs(hess).max())
 
 
 def test_manipulability_derivatives_are_fresh_copies_and_follow_update(steerable_model):
     model = steerable_model
+    task = ManipulabilityTask(model, 'full')
     model.update(*REFERENCE_STATE)
-    hess = model.manipulability_hessian('full')
-    grad = model.manipulability_gradient('full')
+    hess = task.hessian()
+    grad = task.gradient()
     grad_before = grad.copy()
     np.testing.assert_allclose(hess, hess.T, rtol=0, atol=1e-15 * np.abs(hess).max())
     hess[:] = 0.0
     grad[:] = 0.0
-    assert np.abs(model.manipulability_hessian('full')).max() > 0
-    assert np.abs(model.manipulability_gradient('full')).max() > 0
+    assert np.abs(task.hessian()).max() > 0
+    assert np.abs(task.gradient()).max() > 0
     model.update(np.zeros(3), model.config.arm.dexterous)
-    assert not np.allclose(model.manipulability_gradient('full'), grad_before)
+    assert not np.allclose(task.gradient(), grad_before)
     # Exactly singular J_m J_mᵀ (arm straight up): finite derivatives, those of det at the
     # singularity (zero there: joints 1, 3, 5, 7 share one axis, a rank drop of two), no error.
     model.update(np.zeros(3), np.zeros(7))
-    grad, hess = model.manipulability_gradient('full'), model.manipulability_hessian('full')
+    grad, hess = task.gradient(), task.hessian()
     assert np.all(np.isfinite(grad)) and np.all(np.isfinite(hess))
     fd = []
     for k in range(7):
         dq = np.zeros(7)
         dq[k] = 1e-6
         model.update(np.zeros(3), dq)
-        up = model.manipulability('full')
+        up = task.value()
         model.update(np.zeros(3), -dq)
-        fd.append((up - model.manipulability('full')) / 2e-6)
+        fd.append((up - task.value()) / 2e-6)
     np.testing.assert_allclose(grad, fd, atol=1e-9)
 
 
 def test_sigma_min_drops_to_zero_at_the_stretched_singularity(steerable_model):
     # The LWR arm straight up (q = 0) is singular: joints 1, 3, 5, 7 share one axis.
+    task = ManipulabilityTask(steerable_model, 'full')
     steerable_model.update(np.zeros(3), np.zeros(7))
-    assert steerable_model.sigma_min('full') < 1e-9
-    assert steerable_model.manipulability('full') < 1e-12
+    assert task.sigma_min() < 1e-9
+    assert task.value() < 1e-12
     steerable_model.update(np.zeros(3), steerable_model.config.arm.dexterous)
-    assert steerable_model.sigma_min('full') > 0.1
+    assert task.sigma_min() > 0.1
 
 
 def test_rpy_helpers_round_trip_and_omega_matches_definition():
@@ -290,7 +295,7 @@ def test_bad_input_raises_named_errors(steerable_model):
     with pytest.raises(UnknownFrameError, match='tool0'):
         KinematicModel('steerable', ee_frame='tool0')
     with pytest.raises(WmmError, match="rows must be 'position' or 'full'"):
-        steerable_model.manipulability('orientation')
+        ManipulabilityTask(steerable_model, 'orientation')
     fresh = KinematicModel('mecanum')
     with pytest.raises(WmmError, match='call update'):
         fresh.arm_jacobian_base()

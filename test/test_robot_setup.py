@@ -455,31 +455,34 @@ def test_manipulability_derivatives_hold_for_a_prismatic_joint_and_a_square_sing
     with a prismatic lift; and a six-joint arm (J_m square) at a wrist singularity gives finite
     derivatives instead of an error (AMP's tertiary objective runs there)."""
     from wmm_control.kinematics import KinematicModel
+    from wmm_control.kinematics.tasks import ManipulabilityTask
 
     urdf = write_urdf(tmp_path / 'lift.urdf', 'mecanum', arm_joints=8, prismatic_lift=True)
     robot_setup.init_robot(urdf, 'mecanum', 'arm_base_link', 'tool_link', tmp_path / 'lift.yaml')
     model = KinematicModel(tmp_path / 'lift.yaml')
     q = np.array([0.2, 0.3, -0.5, 0.8, 0.1, -0.7, 0.4, 0.2])
     for rows in ('position', 'full'):
+        task = ManipulabilityTask(model, rows)
         model.update(np.zeros(3), q)
-        grad, hess = model.manipulability_gradient(rows), model.manipulability_hessian(rows)
+        grad, hess = task.gradient(), task.hessian()
         fd_g, fd_h = np.zeros(8), np.zeros((8, 8))
         for k in range(8):
             dq = np.zeros(8)
             dq[k] = 1e-6
             model.update(np.zeros(3), q + dq)
-            hp, gp = model.manipulability(rows), model.manipulability_gradient(rows)
+            hp, gp = task.value(), task.gradient()
             model.update(np.zeros(3), q - dq)
-            hm, gm = model.manipulability(rows), model.manipulability_gradient(rows)
+            hm, gm = task.value(), task.gradient()
             fd_g[k], fd_h[:, k] = (hp - hm) / 2e-6, (gp - gm) / 2e-6
         np.testing.assert_allclose(grad, fd_g, rtol=1e-6, atol=1e-7 * np.abs(fd_g).max())
         np.testing.assert_allclose(hess, fd_h, rtol=1e-5, atol=1e-6 * np.abs(fd_h).max())
     ur = KinematicModel('ur_mecanum')
     ur.update(np.zeros(3), [0.0, -1.2, 1.5, -0.3, 1.0, 0.0])
     ur.update(np.zeros(3), [0.0, -1.2, 1.5, -0.3, 0.0, 0.0])  # q5 = 0: wrist axes 4 and 6 align
-    assert ur.manipulability('full') < 1e-12
-    assert np.all(np.isfinite(ur.manipulability_gradient('full')))
-    assert np.all(np.isfinite(ur.manipulability_hessian('full')))
+    wrist = ManipulabilityTask(ur, 'full')
+    assert wrist.value() < 1e-12
+    assert np.all(np.isfinite(wrist.gradient()))
+    assert np.all(np.isfinite(wrist.hessian()))
 
 
 @pytest.mark.parametrize('robot', ['ur_mecanum', 'panda_diff'])

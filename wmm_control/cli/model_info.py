@@ -97,10 +97,13 @@ def describe(model, base_pose, q_arm):
     ):
         err = np.linalg.norm(pose_w[:3] - cfg.start.ee_pose[:3])
         lines.append(f"paper's start EE pose:    {_fmt(cfg.start.ee_pose)}  (position error {err * 1e3:.3f} mm)")
+    from wmm_control.kinematics.tasks import ManipulabilityTask
+
+    position, full = ManipulabilityTask(model, 'position'), ManipulabilityTask(model, 'full')
     lines += [
-        f'manipulability det(J_m J_mᵀ), position rows: {model.manipulability("position"):.6f}',
-        f'manipulability det(J_m J_mᵀ), all six rows:  {model.manipulability("full"):.3e}',
-        f'σ_min(J_m) position rows: {model.sigma_min("position"):.4f}, all six rows: {model.sigma_min("full"):.4f}',
+        f'manipulability det(J_m J_mᵀ), position rows: {position.value():.6f}',
+        f'manipulability det(J_m J_mᵀ), all six rows:  {full.value():.3e}',
+        f'σ_min(J_m) position rows: {position.sigma_min():.4f}, all six rows: {full.sigma_min():.4f}',
     ]
     return '\n'.join(lines)
 

@@ -66,6 +66,7 @@ import yaml
 from wmm_control.cli.model_info import describe
 from wmm_control.errors import WmmError
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.tasks import ManipulabilityTask
 from wmm_control.kinematics.collision import (
     ALWAYS_FRACTION,
     CollisionModel,
@@ -242,7 +243,7 @@ def _choose_home(tree, arm_root, tool, base_link, ground, seed=0, pairs=None, pa
         if pos[2] < ground + TOOL_ABOVE_FLOOR:
             continue
         postures.append(q)
-        sigmas.append(model.sigma_min('full'))
+        sigmas.append(ManipulabilityTask(model, 'full').sigma_min())
         # exact below HOME_CLEARANCE, a lower bound above it
         distances.append(clearance._distances_within(clearance._configuration(q), HOME_CLEARANCE)[0])
     if postures:

@@ -16,8 +16,8 @@ Quantities (Sorour §II, Xing §2 and appendices A–B):
 * ``J_mm = M_RPY [H J_b, J_a]`` (eq 7), with ``M_RPY = blockdiag(I, Ω⁻¹)``, the RPY rates
   of the base-frame end-effector orientation. Shape (6, 6 + n);
 * ``J``: world-frame Jacobian over ``q`` (Xing eq 2) and ``J̇q̇`` (eq 4). Shapes (6, 3 + n), (6,);
-* manipulability ``det(J_m J_mᵀ)``, its gradient and Hessian over ``q_m``, and
-  ``σ_min(J_m)``; ``J_m`` is the arm Jacobian (position rows, or all six).
+* ``J_m``: the arm's columns of that world Jacobian (position rows, or all six), whose
+  manipulability the tasks measure (:mod:`wmm_control.kinematics.tasks`).
 
 Usage::
 
@@ -43,16 +43,12 @@ from wmm_control.geometry import continuous_to_q, rpy_from_matrix, rpy_rate_map,
 from wmm_control.robot_config import RobotConfig, held_joint_positions, load_robot
 from wmm_control.urdf import UrdfTree
 
-__all__ = ['KinematicModel', 'pinocchio_model', 'held_configuration', 'N_BASE']
+__all__ = ['KinematicModel', 'pinocchio_model', 'held_configuration', 'N_BASE', 'ARM_ROWS', 'arm_rows']
 
 N_BASE = 3
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-_ROWS = {'position': slice(0, 3), 'full': slice(0, 6)}
-_EYE = {3: np.eye(3), 6: np.eye(6)}
-# (w @ _SKEW).reshape(3, 3) is the cross-product matrix [w]×, row by row: (−ε_abc w_c)_ab.
-_SKEW = np.array(
-    [[0, 0, 0, 0, 0, -1, 0, 1, 0], [0, 0, 1, 0, 0, 0, -1, 0, 0], [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float
-)
+#: the rows of the arm Jacobian J_m: its position rows, or all six
+ARM_ROWS = {'position': slice(0, 3), 'full': slice(0, 6)}
 
 
 def pinocchio_model(urdf_path: str | Path, planar_root: bool = True) -> pin.Model:
@@ -235,10 +231,6 @@ class KinematicModel:
         #: how many times :meth:`update` has run: what was computed from ``data`` holds while it stays
         self.revision = 0
         self._jac = np.zeros((6, self.nv))
-        self._manip_cache = {}
-        self._upper = np.triu(np.ones((self.n_arm, self.n_arm)))  # [k ≤ i]
-        self._strict_upper = np.triu(np.ones((self.n_arm, self.n_arm)), 1)
-        self._sym_weight = 2.0 * self._strict_upper + np.eye(self.n_arm)
 
     # ------------------------------------------------------------------ frames
     @property
@@ -328,7 +320,6 @@ class KinematicModel:
         self._q_flat = flat
         self._bMee = None
         self._rpy_base = None
-        self._manip_cache = {}
         self._valid = True
         self.revision += 1
 
@@ -440,134 +431,11 @@ class KinematicModel:
         acc = pin.getFrameClassicalAcceleration(self.model, self.data, self._ee_id, _LWA)
         return np.concatenate((acc.linear, acc.angular))
 
-    # ------------------------------------------------------------------ manipulability
     def arm_jacobian_world(self, rows: str = 'position') -> np.ndarray:
         """Arm part J_m of the world Jacobian: 'position' (3, 7) or 'full' (6, 7) rows."""
-        picked = _rows(rows)  # the argument first: its error holds whatever the state
+        picked = arm_rows(rows)  # the argument first: its error holds whatever the state
         self._require()
         return self._jac[picked, N_BASE:].copy()
-
-    def sigma_min(self, rows: str = 'position') -> float:
-        """Smallest singular value of J_m (a distance-to-singularity measure)."""
-        return float(np.linalg.svd(self.arm_jacobian_world(rows), compute_uv=False)[-1])
-
-    def manipulability(self, rows: str = 'position') -> float:
-        """``det(J_m J_mᵀ)`` (Xing eq 10; Yoshikawa's measure squared)."""
-        jm = self.arm_jacobian_world(rows)
-        return float(np.linalg.det(jm @ jm.T))
-
-    def manipulability_gradient(self, rows: str = 'position') -> np.ndarray:
-        """∂H/∂q_m of ``H = det(J_m J_mᵀ)`` (Xing appendix A). Shape (n,).
-
-        ``∂H/∂q_k = H tr(M⁻¹ ∂M/∂q_k)`` with ``M = J_m J_mᵀ``; exact, in closed form (see
-        :meth:`_manipulability_derivatives`). Computed with the Hessian and kept until the
-        next :meth:`update`, so asking for both costs one evaluation.
-
-        Raises:
-            numpy.linalg.LinAlgError: ``M`` is singular.
-        """
-        return self._manipulability_derivatives(rows)[0].copy()
-
-    def manipulability_hessian(self, rows: str = 'position') -> np.ndarray:
-        """∂²H/∂q_m² of ``H = det(J_m J_mᵀ)`` (Xing appendix B). Shape (n, n), symmetric.
-
-        Exact, in closed form; shares one evaluation with :meth:`manipulability_gradient`.
-
-        Raises:
-            numpy.linalg.LinAlgError: ``M`` is singular.
-        """
-        return self._manipulability_derivatives(rows)[1].copy()
-
-    def _manipulability_derivatives(self, rows):
-        """(∇H (n,), ∇²H (n, n)) over q_m, from J_m alone; cached per ``rows`` until :meth:`update`.
-
-        Serial chain, world axes: column i of J_m is ``J_i = (v_i, w_i)``, with ``w_i`` the
-        joint axis and ``v_i = w_i × (p_e − p_i)`` for a revolute joint, ``(u_i, 0)`` for a
-        prismatic one along u_i. Moving a revolute joint k rotates the chain beyond it about
-        its axis (a prismatic one translates it, which w_k = 0 expresses in every term), so
-
-        * ``∂J_i/∂q_k = (w_k × v_i, w_k × w_i)`` for k ≤ i, ``(w_i × v_k, 0)`` for k > i;
-        * for l ≤ k: ``∂²J_i/∂q_l∂q_k = w_l × (w_k × J_i)`` (both halves) for k ≤ i,
-          ``(w_l × (w_i × v_k), 0)`` for l ≤ i < k, ``(w_i × (w_l × v_k), 0)`` for i < l.
-
-        With ``M = J_m J_mᵀ``, ``P = M⁻¹ J_m`` (columns ``(a_i, b_i)``, position rows then
-        angular ones) and ``⟨X, Y⟩ = tr(Xᵀ Y)``:
-
-        * ``g_k = tr(M⁻¹ ∂_k M) = 2⟨P, ∂_k J_m⟩`` and ``∇H = H g`` (appendix A);
-        * ``∇²H = H (g gᵀ + A + B − C)`` (appendix B), where
-          ``B_lk = 2⟨M⁻¹ ∂_l J_m, ∂_k J_m⟩``, ``C_lk = tr(M⁻¹ ∂_l M M⁻¹ ∂_k M)`` and
-          ``A_lk = 2⟨P, ∂²_lk J_m⟩``.
-
-        ``A`` never needs the (7, 7, 6, 7) second derivatives: expanding the triple
-        products, for l ≤ k,
-        ``A_lk / 2 = w_kᵀ S_k w_l − tr(S_k) w_l·w_k + (w_l·v_k)(c_k − c_l) + w_lᵀ R_l v_k
-        − Σ_{i<k} (w_l·w_i)(a_i·v_k)``, with ``S_k = Σ_{i≥k} (a_i v_iᵀ + b_i w_iᵀ)``,
-        ``R_l = Σ_{i<l} a_i w_iᵀ`` and ``c_l = tr R_l``: running sums of 3×3 matrices.
-
-        At an exact singularity of ``M`` the derivatives are those of det(M + εI), ε = 1e-12 tr M.
-        """
-        self._require()
-        cached = self._manip_cache.get(rows)
-        if cached is not None:
-            return cached
-        nr = _rows(rows).stop
-        n = self.n_arm
-        jac = self._jac[:, N_BASE:]  # (6, n): v rows, then w rows
-        jm = jac[:nr]
-        v, w = jac[:3], jac[3:]
-        wt = w.T
-        m = jm @ jm.T
-        h = np.linalg.det(m)
-        if h == 0.0:
-            # Exactly singular (a square arm Jacobian, e.g. six joints and six rows, at a
-            # singularity): the derivatives of det(M + εI), ε = 1e-12 tr M, the limit of which
-            # they approach; they point the way out of the singularity.
-            m = m + (1e-12 * max(np.trace(m), 1e-300)) * _EYE[nr]
-            h = np.linalg.det(m)
-        minv = np.linalg.inv(m)
-        p = minv @ jm
-        # ∂J_m/∂q_k as dj[k] (nr, n); z[k, :, i] = w_k × v_i (and × w_i for all six rows).
-        skew = (wt @ _SKEW).reshape(n, 3, 3)  # [w_k]×
-        upper = self._upper[:, None, :]  # [k ≤ i]
-        if nr == 3:
-            z = skew @ v
-            dj = np.where(upper > 0, z, z.transpose(2, 1, 0))
-            outer = p.T[:, :, None] * v.T[:, None, :]  # a_i v_iᵀ
-        else:
-            z = skew[:, None] @ jac.reshape(2, 3, n)
-            dj = np.empty((n, 2, 3, n))
-            np.copyto(dj[:, 0], np.where(upper > 0, z[:, 0], z[:, 0].transpose(2, 1, 0)))
-            np.multiply(z[:, 1], upper, out=dj[:, 1])
-            dj = dj.reshape(n, 6, n)
-            outer = p.reshape(2, 3, n).transpose(2, 1, 0) @ jac.reshape(2, 3, n).transpose(2, 0, 1)
-        djf = dj.reshape(n, -1)
-        g = 2.0 * (djf @ p.ravel())
-        y = minv @ dj  # M⁻¹ ∂J_k
-        half_b = y.reshape(n, -1) @ djf.T  # B / 2
-        mdm = y @ jm.T + p @ dj.transpose(0, 2, 1)  # M⁻¹ ∂M_k
-        c = mdm.reshape(n, -1) @ mdm.transpose(0, 2, 1).reshape(n, -1).T
-        # A, upper triangle (l ≤ k) of A / 2, terms in the order of the docstring.
-        s_k = outer[::-1].cumsum(0)[::-1]
-        a_v = p[:3]
-        aw = a_v.T[:, :, None] * wt[:, None, :]  # a_i w_iᵀ
-        r_l = aw.cumsum(0) - aw
-        c_l = r_l.trace(axis1=1, axis2=2)
-        ww = wt @ w
-        half = ((wt[:, None, :] @ s_k)[:, 0, :] @ w).T - ww * s_k.trace(axis1=1, axis2=2)
-        half += (wt @ v) * (c_l - c_l[:, None])
-        half += (wt[:, None, :] @ r_l)[:, 0, :] @ v
-        half -= ww @ ((a_v.T @ v) * self._strict_upper)
-        half *= self._sym_weight  # 2 above the diagonal, 1 on it
-        # T = that weighted triangle + (B − C) / 2: ∇²H = H (g gᵀ + T + Tᵀ), exactly symmetric.
-        half += half_b
-        c *= 0.5
-        half -= c
-        hess = half + half.T
-        hess += np.outer(g, g)
-        hess *= h
-        out = (h * g, hess)
-        self._manip_cache[rows] = out
-        return out
 
 
 def _checked(value, size, name):
@@ -578,8 +446,13 @@ def _checked(value, size, name):
     return arr
 
 
-def _rows(rows):
+def arm_rows(rows: str) -> slice:
+    """The slice of :data:`ARM_ROWS` named ``rows``.
+
+    Raises:
+        WmmError: an unknown name.
+    """
     try:
-        return _ROWS[rows]
+        return ARM_ROWS[rows]
     except KeyError as exc:
         raise WmmError(f"rows must be 'position' or 'full', got {rows!r}") from exc

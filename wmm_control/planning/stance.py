@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike
 from wmm_control.checks import as_finite_vector
 from wmm_control.geometry import pose_error_log, rotation_2d, scale_into_limits, wrap_angle
 from wmm_control.kinematics.model import KinematicModel
+from wmm_control.kinematics.tasks import ManipulabilityTask
 from wmm_control.kinematics.workspace import Workspace
 from wmm_control.planning.clearance import Clearance, Travel
 from wmm_control.planning.outcome import NoWay
@@ -183,6 +184,7 @@ class StanceFinder:
         self, model: KinematicModel, clearance: Clearance, travel: Travel, params: StanceParams | None = None
     ) -> None:
         self.model = model
+        self._manipulability = ManipulabilityTask(model, 'position')
         self.clearance = clearance
         self.travel = travel
         self.params = params or StanceParams()
@@ -283,7 +285,7 @@ class StanceFinder:
                 if obstacle < p.stance_margin or body < p.body_margin:
                     continue
                 self.model.update(base, q)
-                sigma = self.model.sigma_min('position')
+                sigma = self._manipulability.sigma_min()
                 score = sigma + p.clearance_weight * min(obstacle, p.clearance_cap)
                 found.append(Stance(base, q, pos_err, rot_err, obstacle, body, sigma, score))
                 if len(found) >= p.wanted:

@@ -6,7 +6,7 @@ base in world coordinates (robot B's base is holonomic, so J and J_v coincide). 
 differential base cannot move sideways: its rates are ``u_b = (v, ω)`` in its own frame,
 ``(ẋ_b, ẏ_b, θ̇_b) = T(θ) u_b`` with ``T = [[cos θ, 0], [sin θ, 0], [0, 1]]``, so its Jacobian
 columns are ``J_b T`` and its drift gains ``J_b Ṫ u_b`` (the nonholonomic model of the base;
-every step below is the same over u = (u_b, q̇_m)). Each period:
+every step below is the same over u = (u_b, q̇_m); :func:`~wmm_control.kinematics.tasks.base_rates`). Each period:
 
 1. ``ẍ = ẍ_d + K_d (ẋ_d − J q̇) + K_p e`` (eq 23) on the position rows (r = 3) or the whole
    pose (r = 6, orientation error ``log(R_d Rᵀ)``, world frame); ``J̇q̇`` from pinocchio.
@@ -59,8 +59,9 @@ from typing import ClassVar
 import numpy as np
 
 from wmm_control.errors import ConfigError
-from wmm_control.geometry import largest_step, rotation_2d, rotation_error, twist_to_base, twist_to_world
+from wmm_control.geometry import largest_step, twist_to_world
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.tasks import ManipulabilityTask, PoseTask, PostureTask, base_rates
 from wmm_control.resolvers.interface import PoseTarget, Resolver, ResolverCommand, ResolverDiagnostics, RobotState
 from wmm_control.resolvers.interface import SteeringParams
 from wmm_control.resolvers.limits import CommandLimits
@@ -133,10 +134,16 @@ class AccelerationResolver(Resolver):
         self.limits = CommandLimits.for_robot(self.model.config, params.dt)
         # the stage reads the configuration this method's update computes: one a cycle
         self.safety = SafetyStage.for_robot(self.model.config, params, kinematics=self.model)
-        # a base that follows (vx, ω) only moves as a unicycle: rates u_b = (v, ω)
-        self._unicycle = self.model.config.base.axes == (0, 2)
-        self.n_base = len(self.model.config.base.axes)
+        #: the base's entries of the command: world rates, or (v, ω) of a base that does not move sideways
+        self.base_rates = base_rates(self.model.config.base.axes)
+        self.n_base = self.base_rates.n
         self.n = self.n_base + self.model.n_arm
+        #: the end effector's pose task (world rows) and the manipulability objective's
+        self.pose_task = PoseTask(self.model)
+        self.manipulability_task = ManipulabilityTask(self.model, params.rows)
+        #: the followed plan's arm posture (``task['arm_follow']``)
+        self.posture_task = PostureTask(self.n_base, self.model.n_arm)
+        self._sigma_position = ManipulabilityTask(self.model, 'position')
         self._rows = slice(0, 3) if params.rows == 'position' else slice(0, 6)
         self._position = np.zeros(self.n)
         self._kp = np.array([params.kp] * 3 + [params.kp_rot] * 3)
@@ -146,6 +153,9 @@ class AccelerationResolver(Resolver):
         self._base_kd = self._kd[[0, 1, 5]]
         self._base_gain = self._kp[[0, 1, 5]] / self._base_kd
         self._base_acceleration = np.asarray(self.model.config.base.acceleration, dtype=float)
+        # the change a·T and the speed of each of the base's own axes (vx, vy, ω) in a period
+        self._base_step = self._base_acceleration * params.dt
+        self._base_speed = np.asarray(self.model.config.base.velocity, dtype=float)
         # k_y of a base without a sideways axis (0 for the others), on the heading's gain K_p / K_d
         self._steering = params.steering_gain(self.model.config.base, self._base_gain[2])
         self.reset()
@@ -185,49 +195,40 @@ class AccelerationResolver(Resolver):
             the plan's arm posture (n,) or None (module docstring).
         """
         p = self.params
-        model = self.model
         theta = state.base_pose[2]
         nb = self.n_base
+        rates = self.base_rates
         if self._qd is None:
-            v = state.base_twist
-            base = [v[0], v[2]] if self._unicycle else twist_to_world(theta, v)
-            self._qd = np.concatenate((base, state.dq_arm))
+            self._qd = np.concatenate((rates.of_twist(theta, state.base_twist), state.dq_arm))
             self._last_base = np.asarray(state.base_twist, dtype=float).copy()
         qd = self._qd
-        if self._unicycle:
-            axes = rotation_2d(theta)  # the base's x and y axes in the world (columns)
-            to_world = np.array([[axes[0, 0], 0.0], [axes[1, 0], 0.0], [0.0, 1.0]])  # (v, ω) ↦ (ẋ, ẏ, θ̇)
-            model.update(state.base_pose, state.q_arm, to_world @ qd[:nb], qd[nb:])
-        else:
-            model.update(state.base_pose, state.q_arm, qd[:3], qd[3:])
-        pos, rot = state.ee_placement(model)
+        self.model.update(state.base_pose, state.q_arm, rates.to_world(theta, qd[:nb]), qd[nb:])
+        pos, rot = state.ee_placement(self.model)
         ref = self._reference(target, pos, rot)
-        jac = model.jacobian_world()
-        drift = model.jdot_qdot()
-        if self._unicycle:  # columns J_b T over (v, ω); drift + J_b Ṫ u_b, Ṫ u_b = ω v (−sin θ, cos θ, 0)
-            drift = drift + jac[:, :2] @ (qd[1] * qd[0] * axes[:, 1])
-            jac = np.hstack((jac[:, :3] @ to_world, jac[:, 3:]))
-        err = np.concatenate((ref.position - pos, rotation_error(ref.rotation, rot)))
+        pose = self.pose_task
+        jac = pose.jacobian_world(rates, theta)
+        drift = pose.drift(rates, theta, qd[:nb])
+        err = np.concatenate(pose.error(pos, rot, ref.position, ref.rotation))
         xd = jac @ qd
         xdd = ref.acceleration + self._kd * (ref.velocity - xd) + self._kp * err
         rows = self._rows
         self._position[nb:] = state.q_arm
         lo_v, hi_v, _ = self.limits.box(self._position, qd)
         down, up = self.limits.braking_rates(self._position)
-        sigma = model.sigma_min(self.params.rows)
-        sigma_position = sigma if rows.stop == 3 else model.sigma_min('position')
-        target_err = np.concatenate((target.position - pos, rotation_error(target.rotation, rot)))
+        sigma = self.manipulability_task.sigma_min()
+        sigma_position = sigma if rows.stop == 3 else self._sigma_position.sigma_min()
+        e_target, e_rot_target = pose.error(pos, rot, target.position, target.rotation)
         base_follow = arm_follow = None
         if target.base is not None:
             planned = target.base
-            rates = to_world @ qd[:nb] if self._unicycle else qd[:3]
             wanted = twist_to_world(
                 theta, planned.pull(state.base_pose, self._base_gain, self._base_acceleration, self._steering)
             )
-            world = planned.acceleration + self._base_kd * (wanted - rates)
-            base_follow = to_world.T @ world if self._unicycle else world
+            world = planned.acceleration + self._base_kd * (wanted - rates.to_world(theta, qd[:nb]))
+            base_follow = rates.from_world(theta, world)
             if planned.arm is not None and planned.arm.shape == (self.model.n_arm,):
-                arm_follow = self._kp[5] * (planned.arm - state.q_arm) - self._kd[5] * qd[nb:]
+                posture = self.posture_task.error(state.q_arm, planned.arm)
+                arm_follow = self._kp[5] * posture - self._kd[5] * qd[nb:]
         return {
             'jac': jac[rows],
             'xdd': xdd[rows],
@@ -240,8 +241,8 @@ class AccelerationResolver(Resolver):
             'upper': (hi_v - qd) / p.dt,
             'brake_lower': (-down - qd) / p.dt,
             'brake_upper': (up - qd) / p.dt,
-            'position_error': float(np.linalg.norm(target_err[:3])),
-            'orientation_error': float(np.linalg.norm(target_err[3:])),
+            'position_error': float(np.linalg.norm(e_target)),
+            'orientation_error': float(np.linalg.norm(e_rot_target)),
             'sigma': sigma,
             'sigma_position': sigma_position,
             'base_follow': base_follow,
@@ -252,8 +253,7 @@ class AccelerationResolver(Resolver):
     def manipulability_acceleration(self, qd: np.ndarray) -> np.ndarray:
         """Eq (13): ``q̈_A = [0; γ1 ∇²H q̇_m + γ2 (γ1 ∇H − q̇_m)]``, H over the task's rows. Shape (n_b + n,)."""
         p = self.params
-        grad = self.model.manipulability_gradient(self.params.rows)
-        hess = self.model.manipulability_hessian(self.params.rows)
+        grad, hess = self.manipulability_task.derivatives()
         nb = self.n_base
         out = np.zeros(self.n)
         out[nb:] = p.gamma1 * hess @ qd[nb:] + p.gamma2 * (p.gamma1 * grad - qd[nb:])
@@ -284,7 +284,7 @@ class AccelerationResolver(Resolver):
             base_pose=state.base_pose,
             base_axes=self.model.config.base.axes,
             base_velocity=state.base_twist,
-            world_rates=not self._unicycle,
+            world_rates=self.base_rates.world,
             task_jacobian=task['jac'],
         )
         qd = safety.command.copy()
@@ -294,25 +294,9 @@ class AccelerationResolver(Resolver):
             collision_constraints=safety.active,
             collision_changed=safety.changed,
         )
-        if self._unicycle:  # (v, ω) is already the base frame's, within its bounds
-            base = np.array([qd[0], 0.0, qd[1]])
-            base[np.abs(base) < 1e-12] = 0.0
-            qd[:nb] = base[[0, 2]]
-            self._qd, self._last_base = qd, base
-            return self._command(qd, base, task, fields, t0)
-        theta = state.base_pose[2]
-        base = twist_to_base(theta, qd[:3])
-        # The bounds hold the world-frame rates; the base controller limits its own frame, which
-        # turns with the base. Keep the base-frame change within a·T too (a few 1e-5 m/s at most)
-        # and the integrator consistent with what is sent.
-        step = self.limits.acceleration[:3] * self.params.dt
-        base = self._last_base + np.clip(base - self._last_base, -step, step)
-        # The same for the velocity limits: two world-frame rates at their bound make up to √2
-        # times the limit on one base axis. Clipping each axis towards the box keeps the change
-        # within a·T (the last twist is inside the box).
-        np.clip(base, -self.limits.velocity[:3], self.limits.velocity[:3], out=base)
-        base[np.abs(base) < 1e-12] = 0.0
-        qd[:3] = twist_to_world(theta, base)
+        base, qd[:nb] = self.base_rates.twist(
+            state.base_pose[2], qd[:nb], self._last_base, self._base_step, self._base_speed
+        )
         self._qd, self._last_base = qd, base
         return self._command(qd, base, task, fields, t0)
 

@@ -55,15 +55,12 @@ from numpy.typing import ArrayLike
 
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
+from wmm_control.kinematics.tasks import PoseTask, PostureTask, twist_columns
 from wmm_control.geometry import (
     cap_norm,
     largest_step,
     norm,
-    rotation_error,
     rotation_z,
-    rpy_from_matrix,
-    rpy_rate_map,
-    wrap_angle,
 )
 from wmm_control.resolvers.interface import (
     BaseReference,
@@ -90,7 +87,6 @@ __all__ = [
 ]
 
 ORIENTATION_ERRORS = ('rpy', 'log')
-_H_COLS = (0, 1, 5)  # columns of H J_b of the base twist (vx, vy, ω)
 
 
 @dataclass(frozen=True)
@@ -231,8 +227,11 @@ class PoseServoResolver(Resolver):
         self.n_base = len(self.base_axes)
         self.n_arm = self.model.n_arm
         self.n = self.n_base + self.n_arm
-        self._base_cols = [_H_COLS[a] for a in self.base_axes]
-        self._jmm_cols = np.array(self._base_cols + list(range(6, 6 + self.n_arm)))
+        self._base_cols = twist_columns(self.base_axes)
+        #: the end effector's pose task (its error and Jacobian), in the method's orientation error
+        self.pose_task = PoseTask(self.model, params.orientation_error, params.rpy_damping)
+        #: the posture task of eq (13)'s pull and a followed plan's arm posture
+        self.posture_task = PostureTask(self.n_base, self.n_arm)
         self.limits = CommandLimits.for_robot(config, params.dt)
         self._arm_limits = self.limits.subset(slice(self.n_base, None))
         #: a of the base's (vx, vy, ω): a followed plan's pull is no faster than braking allows
@@ -268,29 +267,25 @@ class PoseServoResolver(Resolver):
             ``jac`` Shape (6, n_b + n) over u = (base axes, q̇_a): (vx, vy, ω), or (vx, ω) for a differential base; ``p_ref`` Shape (6,).
         """
         p = self.params
-        model = self.model
-        model.update(state.base_pose, state.q_arm)
-        pos, rot = state.ee_placement(model)
+        self.model.update(state.base_pose, state.q_arm)
+        pos, rot = state.ee_placement(self.model)
         b_r_w = rotation_z(state.base_pose[2]).T
-        e_pos = target.position - pos
-        e_rot = rotation_error(target.rotation, rot)
+        pose = self.pose_task
+        e_pos, e_rot = pose.error(pos, rot, target.position, target.rotation)
         angle = norm(e_rot)
         ff = target.velocity
+        jac = pose.jacobian_base(self._base_cols)
         p_ref = np.empty(6)
         # an absurdly far goal: keep only its direction
         p_ref[:3] = b_r_w @ (p.lambda_p * cap_norm(e_pos, p.max_linear_speed / p.lambda_p) + ff[:3])
         if p.orientation_error == 'rpy':
-            jac = model.jmm(p.rpy_damping)[:, self._jmm_cols]
-            e_ang = wrap_angle(rpy_from_matrix(target.rotation) - rpy_from_matrix(rot))
+            e_ang = pose.rpy_error(rot, target.rotation)
             if p.rotate_angular_error:
                 e_ang = b_r_w @ e_ang
             p_ref[3:] = p.lambda_p * e_ang
             if ff[3:].any():  # (a set-point's zero feedforward adds exactly nothing: skip Ω⁻¹)
-                p_ref[3:] += rpy_rate_map(model.ee_pose_base()[3:], p.rpy_damping)[3:, 3:] @ (b_r_w @ ff[3:])
+                p_ref[3:] += pose.rpy_rates(b_r_w @ ff[3:])
         else:
-            jac = np.empty((6, self.n))
-            jac[:, : self.n_base] = model.h_matrix()[:, self._base_cols]
-            jac[:, self.n_base :] = model.arm_jacobian_base()
             p_ref[3:] = b_r_w @ (p.lambda_p * e_rot + ff[3:])
         p_ref[:3] = cap_norm(p_ref[:3], p.max_linear_speed)
         p_ref[3:] = cap_norm(p_ref[3:], p.max_angular_speed)
@@ -404,10 +399,11 @@ class PoseServoResolver(Resolver):
         Without it the pull held the heading to the plan's and left a sideways offset as it was
         (``docs/methods.md``). Shape (n_b + n,)."""
         body = reference.pull(state.base_pose, self.params.lambda_p, self._base_acceleration, self._steering)
-        z = np.zeros(self.n)
-        z[: self.n_base] = body[list(self.base_axes)]
         if arm and reference.arm is not None and reference.arm.shape == (self.n_arm,):
-            z[self.n_base :] = self.params.lambda_p * (reference.arm - state.q_arm)
+            z = self.posture_task.pull(state.q_arm, reference.arm, self.params.lambda_p)
+        else:
+            z = np.zeros(self.n)
+        z[: self.n_base] = body[list(self.base_axes)]
         return z
 
     def null_motion(

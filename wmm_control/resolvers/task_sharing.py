@@ -140,8 +140,7 @@ class TaskSharingResolver(PoseServoResolver):
         # eqs (9) and (13): λ_dex (I − J⁺J) z_dex, with a followed plan's base pull; a followed
         # plan's arm posture takes q_a,dex's place (module docstring)
         posture = self.q_dex if plan_arm is None else plan_arm
-        z = np.zeros(self.n)
-        z[self.n_base :] = self.params.lambda_dex * (posture - state.q_arm)
+        z = self.posture_task.pull(state.q_arm, posture, self.params.lambda_dex)
         return task, self.secondary_motion(jac, task, state.q_arm, pull, z, stance, activation), mode, psi, activation
 
     def compensate(self, command: ResolverCommand, feasible_twist: ArrayLike) -> ResolverCommand:
