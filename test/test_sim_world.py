@@ -6,6 +6,7 @@ ground-truth end-effector pose against the kinematics core's FK to 1 mm / 1 mrad
 stores link poses in single precision, errors ≈ 1e-7 m).
 """
 
+import dataclasses
 import math
 import struct
 import zlib
@@ -18,7 +19,7 @@ from urdf_factory import SIX_MECANUM_WHEELS, SIX_ROLLER_ANGLES, write_mecanum_ro
 from wmm_control.base import MecanumKinematics
 from wmm_control.errors import ConfigError
 from wmm_control.kinematics import KinematicModel
-from wmm_control.robot_config import load_robot
+from wmm_control.robot_config import SteerableBase, load_robot
 
 DT = 0.025
 # Robot A geometry (SPEC / Sorour Table I), written out for hand computation.
@@ -281,6 +282,38 @@ def test_physics_runs_are_bit_identical():
             run(w, 0.5)
             poses.append(np.concatenate([w.base_pose(), w.joint_state()[1], w.odom_pose()]))
     np.testing.assert_array_equal(poses[0], poses[1])
+
+
+@pytest.mark.parametrize('mode', ['kinematic', 'physics'])
+def test_the_world_drives_a_base_by_its_rolling_model_whatever_its_groups_are_called(mode):
+    """Robot A's base with its command groups renamed: the world reads which joints steer (the
+    positions its twist reads) from the base's rolling model, not from a group's name, and runs
+    as robot A's (steering, then driving straight)."""
+
+    @dataclasses.dataclass(frozen=True)
+    class Renamed(SteerableBase):
+        @property
+        def command_groups(self) -> dict[str, tuple]:
+            return {'turn': self.steer_joints, 'roll': self.drive_joints}
+
+        @property
+        def rate_limits(self) -> dict[str, float]:
+            return {'turn': self.steer_rate_limit, 'roll': self.drive_rate_limit}
+
+    robot = load_robot('A')
+    base = Renamed(**{f.name: getattr(robot.base, f.name) for f in dataclasses.fields(robot.base)})
+    traces = []
+    for cfg, (steer, drive) in ((robot, ('steer', 'drive')), (dataclasses.replace(robot, base=base), ('turn', 'roll'))):
+        with SimWorld(cfg, base_mode=mode, start_base_pose=(0.0, 0.0, 0.0)) as w:
+            trace = []
+            for steer_rates, drive_rates in (([0.2, -0.1, 0.15, 0.05], [4.0, 5.0, 4.5, 5.5]), ([0.0] * 4, [5.0] * 4)):
+                assert w.set_command(steer, steer_rates).accepted and w.set_command(drive, drive_rates).accepted
+                for _ in range(10):
+                    w.step()
+                    trace.append(np.concatenate([w.joint_state()[1], w.base_pose(), w.odom_pose(), w.odom_twist()]))
+            traces.append(np.array(trace))
+    assert np.linalg.norm(traces[0][-1, 15:17]) > 0.05  # the base moved
+    np.testing.assert_allclose(traces[1], traces[0], rtol=0, atol=1e-12)
 
 
 # ----------------------------------------------------------------------------- physics base
