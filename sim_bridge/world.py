@@ -23,9 +23,10 @@ Base motion (``base_mode``)
     ``SteerableGeometry.twist_from_wheels``, least squares over rolling + no-side-slip;
     robot B: Xing eq. 16 ``MecanumKinematics.twist_from_wheels``) and the pose is
     integrated with the SE(2) exponential, the twist held constant in the base frame.
-    While robot A steers, the twist is re-evaluated at the midpoint of each of the
-    ``substeps`` sub-intervals (β changes within the period; batched by
-    ``SteerableGeometry.twists_from_wheels``); otherwise one exact
+    While a joint whose position the rolling model reads moves (robot A steering: the model's
+    ``steered`` joints), the twist is re-evaluated at the midpoint of each of the
+    ``substeps`` sub-intervals (β changes within the period; batched by the model's
+    ``twists_of_joints``); otherwise one exact
     exponential covers the period. The true twist then passes through the seeded slip
     model (:mod:`sim_bridge.slip`). Limits: no contact, no tipping, no wheel-lift; a wheel
     set that violates the no-side-slip condition (inconsistent ICR) is resolved by the
@@ -200,9 +201,9 @@ class SimWorld(OwnedClient):
             )
         cfg = self.robot
         base = cfg.base
-        # the rolling model of the base: with steer joints, it closes on their angles and rates
+        # the rolling model of the base: its twist of the base's joints (their positions it reads,
+        # ``steered``: the steer angles, and their rates)
         self._geom = base.rolling_model()
-        self._steerable = 'steer' in base.command_groups
         # wheels that drive through free rollers (Mecanum): the tyre model of physics mode
         self._roller = base.roller_axes.tolist()
         self._tyre = bool(self._roller)
@@ -215,6 +216,9 @@ class SimWorld(OwnedClient):
             self._slices[g] = slice(start, start + len(names))
             start += len(names)
         self._n = start
+        # the base's joints (after the arm's, in its command order) and of them the rolling ones
+        self._base = slice(self._slices['arm'].stop, self._n)
+        self._rolling = [self.joint_names.index(name) for name in base.rolling_joints]
         self.counters = {g: {'clamped': 0, 'rejected': 0, 'position_limited': 0} for g in self.command_groups}
         self._cmd = np.zeros(self._n)
 
@@ -533,22 +537,17 @@ class SimWorld(OwnedClient):
         Returns:
             (list of (twist, duration)), mean absolute rim speed [m/s].
         """
-        if self._steerable:
-            st, dr = self._slices['steer'], self._slices['drive']
-            beta0, beta_dot, phi_dot = self._q[st], vel[st], vel[dr]
-            rim = self._r_wheel * float(np.mean(np.abs(phi_dot)))
-            if not beta_dot.any():
-                key = (beta0.tobytes(), phi_dot.tobytes())
-                if self._twist_cache is None or self._twist_cache[0] != key:
-                    tw = tuple(self._geom.twist_from_wheels(beta0, beta_dot, phi_dot).tolist())
-                    self._twist_cache = (key, tw)
-                return [(self._twist_cache[1], self.dt)], rim
-            h = self._h
-            beta = beta0 + np.outer((np.arange(self.substeps) + 0.5) * h, beta_dot)
-            return [(tuple(tw), h) for tw in self._geom.twists_from_wheels(beta, beta_dot, phi_dot).tolist()], rim
-        w = vel[self._slices['wheel']]
-        rim = self._r_wheel * float(np.mean(np.abs(w)))
-        return [(tuple(self._geom.twist_from_wheels(w).tolist()), self.dt)], rim
+        geom, base = self._geom, self._base
+        q0, rates = self._q[base], vel[base]
+        rim = self._r_wheel * float(np.mean(np.abs(vel[self._rolling])))
+        if not rates[geom.steered].any():  # the positions the twist reads stay: one twist
+            key = (q0[geom.steered].tobytes(), rates.tobytes())
+            if self._twist_cache is None or self._twist_cache[0] != key:
+                self._twist_cache = (key, tuple(geom.twist_of_joints(q0, rates).tolist()))
+            return [(self._twist_cache[1], self.dt)], rim
+        h = self._h
+        positions = q0 + np.outer((np.arange(self.substeps) + 0.5) * h, rates)
+        return [(tuple(tw), h) for tw in geom.twists_of_joints(positions, rates).tolist()], rim
 
     def _step_kinematic(self):
         vel = self._cmd.copy()
@@ -592,11 +591,7 @@ class SimWorld(OwnedClient):
             states = p.getJointStates(body, self._idx, physicsClientId=cid)
             q = [s[0] for s in states]
             qd = [s[1] for s in states]
-            if self._steerable:
-                st, dr = self._slices['steer'], self._slices['drive']
-                tw = tuple(self._geom.twist_from_wheels(q[st], qd[st], qd[dr]).tolist())
-            else:
-                tw = tuple(self._geom.twist_from_wheels(qd[self._slices['wheel']]).tolist())
+            tw = tuple(self._geom.twist_of_joints(q[self._base], qd[self._base]).tolist())
             self._odom = se2_integrate(self._odom, tw, self._h)
             self._odom_twist = tw
 
@@ -626,7 +621,7 @@ class SimWorld(OwnedClient):
         xb, yb = matrix_from_quaternion(orn)[:, :2].T.tolist()  # the base's x and y axes
         states = p.getJointStates(
             body,
-            [self._idx[i] for i in range(self._slices['wheel'].start, self._slices['wheel'].stop)],
+            [self._idx[i] for i in self._rolling],
             physicsClientId=cid,
         )
         links = p.getLinkStates(body, self._wheel_links, physicsClientId=cid)

@@ -9,6 +9,7 @@ and all along the path, and the timed path stays within the base's limits and en
 import dataclasses
 import math
 import time
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -272,6 +273,38 @@ def test_a_holonomic_move_is_refused_to_a_differential_base():
     sideways = LinearPiece(np.zeros(3), np.array([0.0, 1.0, 0.0]))
     with pytest.raises(Exception, match='vy'):
         time_path([sideways], cfg.base, cfg.period)
+
+
+def test_the_path_space_follows_whether_the_base_moves_sideways():
+    """A base without a sideways axis plans Reeds–Shepp curves of ρ = v_max / ω_max, whatever its
+    family is called (here a differential one renamed); a base with one plans straight SE(2)
+    motions. A step to the side: the curves time within the base's limits (no vy), a straight
+    sideways motion would need vy."""
+    from wmm_control.planning.timing import LinearPiece, TwistPiece
+    from wmm_control.robot_config import DifferentialBase
+
+    @dataclasses.dataclass(frozen=True)
+    class Renamed(DifferentialBase):
+        family: ClassVar[str] = 'skid'
+
+    diff, holonomic = load_robot('panda_diff'), load_robot('mecanum')
+    renamed = Renamed(**{f.name: getattr(diff.base, f.name) for f in dataclasses.fields(diff.base)})
+    assert not renamed.sideways and renamed.path_turning_radius == diff.base.path_turning_radius == 0.75 / 3.0
+    assert holonomic.base.sideways and holonomic.base.path_turning_radius is None
+    goal = np.array([0.0, 1.0, 0.0])
+    for cfg, base in ((diff, renamed), (holonomic, holonomic.base)):
+        travel = Travel(Clearance.of_robot(cfg, (), body=False), KinematicModel(cfg), cfg.start.arm, margin=0.1)
+        planner = BasePathPlanner(base, travel, budget=BUDGET)
+        assert planner.rho == base.path_turning_radius
+        path = planner.plan(np.zeros(3), goal)
+        assert path.found, path.reason
+        traj = time_path(path.pieces, base, cfg.period)
+        np.testing.assert_allclose(traj.poses[-1], goal, rtol=0, atol=1e-6)
+        if base.sideways:
+            assert [type(piece) for piece in path.pieces] == [LinearPiece]
+        else:
+            assert len(path.pieces) > 1 and all(isinstance(piece, TwistPiece) for piece in path.pieces)
+            np.testing.assert_allclose(traj.twists[:, 1], 0.0, rtol=0, atol=1e-6)
 
 
 def test_a_straight_se2_piece_bounds_its_twist_and_the_twist_s_change_tightly():

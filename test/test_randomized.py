@@ -9,6 +9,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import yaml
 
 from sim_bridge.collision import SelfCollisionChecker
 from wmm_control.experiments.randomized import (
@@ -16,6 +17,7 @@ from wmm_control.experiments.randomized import (
     METHOD_RUNS,
     ROBOTS,
     RandomGoal,
+    run_duration,
     run_goal,
     sample_goals,
     summarize,
@@ -28,6 +30,32 @@ from wmm_control.robot_config import load_robot
 
 SUBSET_SEED = 1
 SUBSET_GOALS = 2
+
+
+def test_a_run_s_limit_comes_from_the_robot_s_base(tmp_path):
+    """The four shipped robots keep the limits they had by name (robot B's slow base 180 s, the
+    others 90 s); a robot the package has not seen, a copy of robot B with its base at half the
+    acceleration, gets a longer one, and a copy with robot A's quick base limits the floor."""
+    shipped = {name: run_duration(load_robot(name)) for name in ('steerable', 'mecanum', 'ur_mecanum', 'panda_diff')}
+    assert shipped == {'steerable': 90.0, 'mecanum': 180.0, 'ur_mecanum': 90.0, 'panda_diff': 90.0}
+    cfg = load_robot('mecanum')
+    limits = {}
+    for name, velocity, acceleration in (
+        ('slow_b', [0.25, 0.25, 1.0], [0.0125, 0.0125, 1.5]),
+        ('quick_b', [1.0, 1.0, 1.0], [1.0, 1.0, 1.5]),
+    ):
+        raw = yaml.safe_load(cfg.yaml_path.read_text())
+        raw['robot']['urdf'] = str(cfg.urdf_path)
+        raw['robot']['name'] = name
+        raw['robot']['base'].update(velocity=velocity, acceleration=acceleration)
+        path = tmp_path / f'{name}.yaml'
+        path.write_text(yaml.safe_dump(raw))
+        robot = load_robot(path)
+        assert robot.name == name
+        limits[name] = run_duration(robot)
+    # 5 m from rest to rest at 0.25 m/s and 0.0125 m/s²: 20 s at each end, no cruise
+    assert limits['slow_b'] == pytest.approx(6.0 * 40.0) and limits['slow_b'] > shipped['mecanum']
+    assert limits['quick_b'] == 90.0
 
 
 @pytest.fixture(scope='module', params=ROBOTS)

@@ -254,6 +254,28 @@ class BaseSection(ABC):
         return math.inf, math.inf
 
     @property
+    def sideways(self) -> bool:
+        """Whether the base can follow a sideways twist vy (vy is one of its :attr:`axes`)."""
+        return 1 in self.axes
+
+    @property
+    def path_turning_radius(self) -> float | None:
+        """ρ [m], the least radius a path of the base may turn on: None for a base that moves
+        sideways (its paths go straight from pose to pose while the heading turns: SE(2));
+        for one that cannot, v_max / ω_max, the radius on which it turns at both limits (its
+        paths are Reeds–Shepp curves of that radius, which it follows without sliding).
+
+        Raises:
+            ValueError: a base that moves neither sideways nor both forward and round.
+        """
+        if self.sideways:
+            return None
+        v, w = float(self.velocity[0]), float(self.velocity[2])
+        if not (v > 0.0 and w > 0.0):
+            raise ValueError(f'a base needs forward and turn rate limits > 0, got {v}, {w}')
+        return v / w
+
+    @property
     def joints(self) -> tuple:
         """Every wheel-side joint name, in command order (the groups one after the other)."""
         return tuple(name for names in self.command_groups.values() for name in names)

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, ClassVar, Self
 import numpy as np
 from numpy.typing import ArrayLike
 
+from wmm_control.base.fixed_axles import FixedAxles
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
 
@@ -28,7 +29,7 @@ __all__ = ['DifferentialKinematics']
 
 
 @dataclass(frozen=True)
-class DifferentialKinematics:
+class DifferentialKinematics(FixedAxles):
     """Wheel rates ↔ base twist of a differential-drive base.
 
     Attributes:

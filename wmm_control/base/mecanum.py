@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, ClassVar, Self
 import numpy as np
 from numpy.typing import ArrayLike
 
+from wmm_control.base.fixed_axles import FixedAxles
 from wmm_control.checks import as_finite_vector
 from wmm_control.errors import ConfigError
 from wmm_control.geometry import twist_to_world
@@ -46,7 +47,7 @@ _MIN_ROLLER_ANGLE = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
-class MecanumKinematics:
+class MecanumKinematics(FixedAxles):
     """Wheel rates ↔ base twist of a Mecanum base of N ≥ 3 wheels.
 
     Attributes:

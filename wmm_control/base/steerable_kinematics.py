@@ -165,6 +165,25 @@ class SteerableGeometry:
             np.asarray(beta_sets, dtype=float), np.asarray(beta_dot, dtype=float), np.asarray(phi_dot, dtype=float)
         )
 
+    # ------------------------------------------------------------------ the base's joints in command order
+    @property
+    def steered(self) -> slice:
+        """The joints, in the base's command order (steer, then drive), whose positions the
+        twist reads: the steer joints (:mod:`wmm_control.base.fixed_axles`)."""
+        return slice(0, self.n_wheels)
+
+    def twist_of_joints(self, positions, rates) -> np.ndarray:
+        """:meth:`twist_from_wheels` of the base's joints in command order: the positions (steer
+        angles, then the drive joints', not read) and rates (steer, then drive). Shape (3,)."""
+        n = self.n_wheels
+        return self.twist_from_wheels(positions[:n], rates[:n], rates[n:])
+
+    def twists_of_joints(self, position_sets, rates) -> np.ndarray:
+        """:meth:`twists_from_wheels` of several sets of the base's joint positions (rows, command
+        order) with the same rates. Shape (S, 3)."""
+        n = self.n_wheels
+        return self.twists_from_wheels(np.asarray(position_sets)[:, :n], rates[:n], rates[n:])
+
     def fit_twist(self, beta: np.ndarray, beta_dot: np.ndarray, phi_dot: np.ndarray) -> np.ndarray:
         """The least-squares twist of :meth:`twist_from_wheels`, without input checks.
 

@@ -75,6 +75,7 @@ from wmm_control.nodes.parameters import load_defaults
 from wmm_control.planning import GoalPlanner, NoWay
 from wmm_control.planning.no_way_check import NoWayCheck, Verdict, confirm_no_way
 from wmm_control.planning.pursuit import GoalPursuit, run_limit
+from wmm_control.planning.timing import rest_to_rest
 from wmm_control.resolvers import make_resolver
 from wmm_control.resolvers.interface import ResolverDiagnostics
 from wmm_control.resolvers.period import ResolverSettings
@@ -90,7 +91,10 @@ __all__ = [
     'ROBOTS',
     'METHOD_RUNS',
     'ROBOT_RUNS',
-    'DURATION_S',
+    'DURATION_FLOOR_S',
+    'DURATION_DISTANCE_M',
+    'DURATION_SLACK',
+    'run_duration',
     'ARM_MARGIN',
     'COLLISION_MARGIN',
     'CONTACT_DEPTH',
@@ -103,10 +107,14 @@ __all__ = [
 
 #: The robots, by name.
 ROBOTS = ('steerable', 'mecanum')
-#: Longest run per robot [s] (90 s for any other): robot B's base accelerates at 0.025 m/s² (Xing Table 1). Long
-#: enough for the slowest approach that never stalls (robot A: amp, 64 s; robot B: amp, 128 s). A planned run
-#: (``--plan``) counts it from when its first plan's base path is planned to end (:func:`run_goal`).
-DURATION_S = {'steerable': 90.0, 'mecanum': 180.0, 'ur_mecanum': 90.0, 'panda_diff': 90.0}
+#: The longest run [s] of a robot (:func:`run_duration`) is at least this: long enough for the slowest
+#: approach of robot A that never stalls (amp, 64 s), whose arm, not its base, sets the pace.
+DURATION_FLOOR_S = 90.0
+#: [m] :func:`run_duration` times the base's drive over this distance, from rest to rest
+DURATION_DISTANCE_M = 5.0
+#: :func:`run_duration` gives a run this many times that drive's time: robot B's base (0.25 m/s, 0.025 m/s²,
+#: Xing Table 1) drives 5 m in 30 s, its slowest approach that never stalls took 128 s (amp): 180 s
+DURATION_SLACK = 6.0
 #: Drawn arm configurations stay this far inside the position limits [rad].
 ARM_MARGIN = 0.1
 #: Clearance of a drawn configuration from the robot's body and the floor [m].
@@ -322,6 +330,22 @@ def run_contact(
     return depth, pair
 
 
+def run_duration(robot: RobotConfig) -> float:
+    """The longest run [s] of ``robot`` (a planned run counts it from when its first plan's base path
+    is planned to end, :func:`run_goal`): :data:`DURATION_SLACK` times the time its base needs to drive
+    :data:`DURATION_DISTANCE_M` from rest to rest along its slowest axis of translation, within that axis'
+    velocity and acceleration limits (:func:`~wmm_control.planning.timing.rest_to_rest`), and at least
+    :data:`DURATION_FLOOR_S`. Robot B (``mecanum``): 6 × 30 s = 180 s; the other shipped robots' bases
+    drive it in 6–15 s: 90 s."""
+    base = robot.base
+    drive = max(
+        rest_to_rest(DURATION_DISTANCE_M, float(base.velocity[k]), float(base.acceleration[k]))
+        for k in (0, 1)
+        if k in base.axes
+    )
+    return max(DURATION_FLOOR_S, DURATION_SLACK * drive)
+
+
 def run_goal(
     robot: str | Path | RobotConfig,
     method: str,
@@ -336,7 +360,7 @@ def run_goal(
     """One closed-loop run of ``method`` to ``goal`` from the robot's start state.
 
     ``params`` (resolver parameters) override those of :data:`METHOD_RUNS` and :data:`ROBOT_RUNS`.
-    ``duration``: the run's limit [s] (default :data:`DURATION_S`); with ``plan`` it counts from
+    ``duration``: the run's limit [s] (default :func:`run_duration`); with ``plan`` it counts from
     when the base path of the goal's first plan is planned to end
     (:func:`~wmm_control.planning.pursuit.run_limit`): a goal the base drives far to is given
     the time of its drive on top.
@@ -373,7 +397,7 @@ def run_goal(
         stance that refutes it, ...).
     """
     cfg = load_robot(robot)
-    duration = DURATION_S.get(cfg.name, 90.0) if duration is None else duration
+    duration = run_duration(cfg) if duration is None else duration
     run = {**METHOD_RUNS[method], **ROBOT_RUNS.get(cfg.name, {}).get(method, {}), **(params or {})}
     log, status = (_run_direct if engine == 'direct' else _run_nodes)(cfg, run, goal, duration, obstacles, plan=plan)
     planning: dict = {}

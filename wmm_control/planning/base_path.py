@@ -1,13 +1,15 @@
 """The way there: a base path clear of the obstacles, planned with OMPL (the ``ompl`` wheel).
 
 The state is the base pose (x, y, θ); the robot drives with its arm held in the travel posture
-(:class:`~wmm_control.planning.clearance.Travel`). The space follows the base's family:
+(:class:`~wmm_control.planning.clearance.Travel`). The space follows what the base can do
+(:attr:`~wmm_control.robot_config.BaseSection.path_turning_radius`):
 
-* a holonomic base (steerable, Mecanum) moves in SE(2): between two states (x, y) along the
-  straight line while θ turns the short way, at once;
-* a differential base moves on Reeds–Shepp curves (forward and backward, arcs of radius ρ and
-  straight lines): ρ = v_max / ω_max, the radius at which it turns at full speed on both limits
-  (0.25 m for ``panda_diff``); the base follows such a curve exactly, without sliding sideways.
+* a base that moves sideways (steerable, Mecanum) moves in SE(2): between two states (x, y)
+  along the straight line while θ turns the short way, at once;
+* one that cannot (differential) moves on Reeds–Shepp curves (forward and backward, arcs of
+  radius ρ and straight lines): ρ = v_max / ω_max, the radius at which it turns at full speed
+  on both limits (0.25 m for ``panda_diff``); the base follows such a curve exactly, without
+  sliding sideways.
 
 A state is valid when the robot is ``margin + step`` clear of every obstacle; a motion between two
 states is checked by conservative advancement (:meth:`Travel.motion_valid`): every pose along it,
@@ -74,7 +76,7 @@ from wmm_control.planning.outcome import NoWay
 from wmm_control.planning.timing import LinearPiece, Piece, TwistPiece
 from wmm_control.robot_config import BaseSection
 
-__all__ = ['BasePath', 'BasePathPlanner', 'turning_radius']
+__all__ = ['BasePath', 'BasePathPlanner']
 
 #: [m] added around the start, the goal, the obstacles and the robot for the sampled region
 PADDING = 1.0
@@ -97,14 +99,6 @@ ESCAPE_BEARINGS = 16
 #: and how far it then looks [m]
 ESCAPE_TURNS = (math.pi / 4, -math.pi / 4, math.pi / 2, -math.pi / 2, math.pi)
 ESCAPE_TURNING = (*ESCAPE, 0.75, 1.0)
-
-
-def turning_radius(base: BaseSection) -> float:
-    """ρ = v_max / ω_max [m] of a base that turns at both limits on that radius."""
-    v, w = float(base.velocity[0]), float(base.velocity[2])
-    if not (v > 0.0 and w > 0.0):
-        raise ValueError(f'a base needs forward and turn rate limits > 0, got {v}, {w}')
-    return v / w
 
 
 @dataclass(frozen=True)
@@ -206,7 +200,8 @@ class BasePathPlanner:
     """Base paths among the obstacles for one robot (module docstring).
 
     Args:
-        base: the robot's base section (its family chooses the space, its limits ρ).
+        base: the robot's base section: its :attr:`~wmm_control.robot_config.BaseSection.path_turning_radius`
+            chooses the space (and ρ).
         travel: the robot driving in its travel posture.
         budget: [s] the safety cap on each search's wall time: a search that reaches it
             (not its iterations) ends the plan with no path (module docstring).
@@ -240,7 +235,7 @@ class BasePathPlanner:
         self.attempts = int(attempts)
         self.simplify_rounds = int(simplify_rounds)
         self.iterations = int(iterations)
-        self.rho = turning_radius(base) if base.family == 'differential' else None
+        self.rho = base.path_turning_radius
 
     def _space(self, start: np.ndarray, goal: np.ndarray, obstacles: Sequence[Obstacle]):
         space = ob.SE2StateSpace() if self.rho is None else ob.ReedsSheppStateSpace(self.rho)

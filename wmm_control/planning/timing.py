@@ -41,7 +41,7 @@ from wmm_control.errors import WmmError
 from wmm_control.geometry import se2_integrate, se2_twist, twist_to_world, wrap_angle
 from wmm_control.robot_config import BaseSection
 
-__all__ = ['BaseTrajectory', 'LinearPiece', 'Piece', 'TwistPiece', 'joint_motion', 'time_path']
+__all__ = ['BaseTrajectory', 'LinearPiece', 'Piece', 'TwistPiece', 'joint_motion', 'rest_to_rest', 'time_path']
 
 #: steps of λ over which a piece's steered wheel headings are differenced (:func:`_steer_bounds`)
 STEER_SAMPLES = 256
@@ -179,6 +179,16 @@ def _profile(speed: float, accel: float) -> tuple[float, float]:
         return 2.0 * ramp, ramp
     ramp = speed / accel
     return 2.0 * ramp + (1.0 - speed * ramp) / speed, ramp
+
+
+def rest_to_rest(distance: float, speed: float, accel: float) -> float:
+    """[s] the least time to move ``distance`` [m or rad] from rest to rest within ``speed`` and
+    ``accel`` (the profile of :func:`_profile`: accelerate, cruise, brake; without the cruise
+    when there is no room for full speed): ``distance / speed + speed / accel``, or
+    ``2 √(distance / accel)``."""
+    if not (distance > 0.0 and speed > 0.0 and accel > 0.0):
+        raise ValueError(f'distance, speed and acceleration must be > 0, got {distance}, {speed}, {accel}')
+    return _profile(speed / distance, accel / distance)[0]
 
 
 def _lam(t: float, duration: float, ramp: float, accel: float) -> float:

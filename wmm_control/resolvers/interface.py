@@ -88,7 +88,7 @@ class SteeringParams:
             ``k_y`` [1/m²].
         """
         axes, speed = base.axes, float(base.velocity[0])
-        if 1 in axes or 0 not in axes or 2 not in axes or speed <= 0.0:
+        if base.sideways or 0 not in axes or 2 not in axes or speed <= 0.0:
             return 0.0
         return (heading_gain / (2.0 * self.steering_damping * speed)) ** 2
 
