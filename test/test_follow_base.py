@@ -496,3 +496,29 @@ def test_the_safety_stage_does_not_drive_a_base_the_method_keeps_out_of_the_task
     assert cut > 10  # the row shaped the arm's command
     assert max(speeds) < 0.02
     assert np.linalg.norm(goal.base.error(state.base_pose)[:2]) < 0.005
+
+
+def test_a_joint_the_rows_hold_does_not_freeze_the_whole_body_command_at_its_last_twist():
+    """`ur_mecanum`, pinv's whole-body approach to a goal from where `clutter` goal 3's plan left
+    it, the arm against its own row (arm_link_3/arm_link_5): the row holds a joint the method
+    keeps asking to move, so the limits' uniform factor on the change from last period falls to
+    1–3 % and the command stays what it was. The stage, nearest that frozen command, kept its
+    base part: the base ran at its full twist for seconds, 2.1 m off with the end effector 1.8 m
+    from the goal. Nearest what the method asked, each entry within its acceleration bound, the
+    base slows as it can and the goal is reached."""
+    cfg = load_robot('ur_mecanum')
+    resolver = make_resolver('pinv', cfg)
+    base = np.array((2.545, 1.052, -1.75))
+    q = np.array((-0.43, -1.63, 1.36, -2.05, -0.86, 1.05))
+    goal = PoseTarget(np.array((2.274, 0.817, 1.287)), matrix_from_rpy((0.373, 0.947, -0.918)))
+    state, dt = RobotState(base, np.zeros(3), q, np.zeros_like(q)), resolver.params.dt
+    cut, farthest = 0, 0.0
+    for _ in range(int(6.0 / dt)):
+        cmd = resolver.step(state, goal)
+        cut += cmd.diagnostics.collision_changed
+        pose = np.array(se2_integrate(state.base_pose, cmd.base_twist, dt))
+        state = RobotState(pose, cmd.base_twist, state.q_arm + dt * cmd.arm_velocity, cmd.arm_velocity)
+        farthest = max(farthest, float(np.linalg.norm(pose[:2] - base[:2])))
+    assert cut > 10  # the row shaped the command
+    assert farthest < 0.5
+    assert cmd.diagnostics.position_error < 0.01

@@ -67,6 +67,8 @@ class LimitResult:
             was asked).
         limited: indices whose bound set a factor below 1, or that were clipped or forced.
         lower, upper: the period's box, acceleration included. Shape (n,) each.
+        requested: the command within the braking and velocity bounds, before the acceleration
+            bound's uniform factors (the change the method asks for this period). Shape (n,).
     """
 
     command: np.ndarray
@@ -77,6 +79,7 @@ class LimitResult:
     limited: tuple
     lower: np.ndarray
     upper: np.ndarray
+    requested: np.ndarray
 
 
 class CommandLimits:
@@ -242,8 +245,10 @@ class CommandLimits:
         # 3. acceleration: the primary part's change first, the secondary part's in the room left;
         #    each part changes from its own share of the previous command (primary: u − u_s)
         lo_a, hi_a = previous - self._adt, previous + self._adt
-        d_p = (s_v * clipped if s_v < 1.0 else clipped) - (previous - prev_s)
-        d_s = (s_v * sec if s_v < 1.0 else sec) - prev_s
+        fast_p = s_v * clipped if s_v < 1.0 else clipped
+        fast_s = s_v * sec if s_v < 1.0 else sec
+        d_p = fast_p - (previous - prev_s)
+        d_s = fast_s - prev_s
         s_a = _largest_step(previous, d_p, lo_a, hi_a, limited, True)  # previous ∓ a dt holds previous
         mid = previous + (s_a * d_p if s_a < 1.0 else d_p)
         s_s = _largest_step(mid, d_s, lo_a, hi_a, limited)
@@ -270,6 +275,7 @@ class CommandLimits:
             limited=tuple(limited.nonzero()[0].tolist()),
             lower=lo,
             upper=hi,
+            requested=fast_p + fast_s,
         )
 
     def _braking(self, position):

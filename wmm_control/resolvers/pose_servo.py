@@ -598,6 +598,9 @@ class PoseServoResolver(Resolver):
                 base_axes=self.base_axes,
                 base_velocity=self._base_velocity,
                 task_jacobian=self._jac,
+                # the base's entries nearest what the method asked of the base, each within its
+                # acceleration bound (the safety stage's ``target``); the arm's as limited
+                target=np.concatenate((whole.requested[:nb], arm.command)),
             )
             if self._safety.changed:
                 base = self._safety.command[:nb].copy()

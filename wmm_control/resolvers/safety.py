@@ -322,6 +322,7 @@ class SafetyStage:
         base_velocity=None,
         world_rates=False,
         task_jacobian=None,
+        target=None,
     ) -> SafetyResult:
         """The command ``command`` at arm joints ``q_arm``, under the limits' rows and within the box.
 
@@ -341,12 +342,19 @@ class SafetyStage:
             world_rates: the command's base entries are the world frame's (ẋ, ẏ, θ̇) instead
                 of the base frame's (vx, vy, ω).
             task_jacobian: J, the end effector's task Jacobian over the command. Shape (r, n).
+            target: the command the answer is nearest to where a row cuts ``command``, within
+                the box (which holds each entry's acceleration bound) and the rows; None:
+                ``command``. The velocity-level methods give the base's entries as the method
+                asked for them before its limits scaled the change from last period uniformly
+                (:attr:`~wmm_control.resolvers.limits.LimitResult.requested`): a joint the rows
+                hold sets that factor near zero period after period, and the stage, nearest the
+                command so frozen, kept the base at the twist it had while the task's error
+                grew. Same shape as ``command``.
         """
         self.last = out = self._filter(
             q_arm,
             command,
-            lower,
-            upper,
+            Box(lower, upper),
             weights,
             base_pose,
             tuple(base_axes),
@@ -354,11 +362,12 @@ class SafetyStage:
             base_velocity,
             world_rates,
             task_jacobian,
+            target,
         )
         return out
 
     def _filter(
-        self, q_arm, command, lower, upper, weights, base_pose, axes, base_twist, base_velocity, world_rates, jacobian
+        self, q_arm, command, box, weights, base_pose, axes, base_twist, base_velocity, world_rates, jacobian, target
     ) -> SafetyResult:
         command = np.asarray(command, dtype=float)
         p = self.params
@@ -375,7 +384,6 @@ class SafetyStage:
         # the command's base entries as (vx, vy, ω): the identity, or R(θ)ᵀ for world-frame rates
         to_base = rotation_z(base_pose[2]).T if world_rates else np.eye(3)
         pairs = self.dampers.pairs(near, axes, to_base).with_twist(base_twist)
-        box = Box(lower, upper)
         command, box, held, base_rows = self.base_rows.constraints(
             pairs, command, box, base_velocity, base_twist, world_rates
         )
@@ -395,7 +403,8 @@ class SafetyStage:
         use = movable & (box.greatest(rows.G) > rows.h + TOLERANCE)
         solved, relaxed, multipliers = box.clip(command), False, np.zeros(len(rows))
         if use.any():
-            solved, relaxed, multipliers[use] = nearest(command, metric, rows.select(use), box)
+            goal = command if target is None else np.asarray(target, dtype=float)
+            solved, relaxed, multipliers[use] = nearest(goal, metric, rows.select(use), box)
         changed = held or not np.array_equal(solved, command)
         return SafetyResult(solved, clearance, label, len(near), changed, rows, relaxed, held, multipliers)
 
