@@ -22,6 +22,7 @@ import wmm_control.experiments.randomized as study
 from wmm_control.cli.experiment import main as experiment_main
 from wmm_control.cli.randomized import main as randomized_main, sweep_plot_path
 
+from same_runs import SAME, assert_same
 from test_experiment_jobs import NODES_SCENARIO, _without_timing as without
 
 pytest.importorskip('ray')
@@ -39,29 +40,6 @@ def _without_timing(value):
     return value
 
 
-#: [m, rad, s, -] two runs of one goal agree to this wherever they ran (round-off; another seed,
-#: goal or parameter moves them by far more)
-SAME = 1e-9
-
-
-def _assert_same(a, b, where='document'):
-    """``a`` and ``b`` alike: every float within :data:`SAME`, everything else (names, outcomes,
-    counts, keys) equal."""
-    if isinstance(a, dict) and isinstance(b, dict):
-        assert a.keys() == b.keys(), where
-        for key in a:
-            _assert_same(a[key], b[key], f'{where}.{key}')
-    elif isinstance(a, list) and isinstance(b, list):
-        assert len(a) == len(b), where
-        for i, (x, y) in enumerate(zip(a, b)):
-            _assert_same(x, y, f'{where}[{i}]')
-    elif isinstance(a, float) or isinstance(b, float):
-        assert not isinstance(a, bool) and not isinstance(b, bool), where
-        np.testing.assert_allclose(a, b, rtol=0, atol=SAME, err_msg=where)
-    else:
-        assert a == b, where
-
-
 def _study(argv, out, code=0):
     assert randomized_main([*argv, '--out', str(out)]) == code
     return json.loads(out.read_text())
@@ -76,8 +54,8 @@ def _keys(document):
 def test_two_documents_differ_by_a_number_beyond_round_off_or_by_any_name():
     run = {'robot': 'steerable', 'outcome': 'converged', 'goal': 0, 'final_position_error_m': 0.0012}
     document = {'runs': [run], 'summary': [{'runs': 1, 'converged': 1}]}
-    _assert_same(document, json.loads(json.dumps(document)))
-    _assert_same(document, {**document, 'runs': [{**run, 'final_position_error_m': 0.0012 + SAME / 2}]})
+    assert_same(document, json.loads(json.dumps(document)))
+    assert_same(document, {**document, 'runs': [{**run, 'final_position_error_m': 0.0012 + SAME / 2}]})
     for changed in (
         {**run, 'final_position_error_m': 0.0012 + 2 * SAME},
         {**run, 'outcome': 'failed'},
@@ -85,9 +63,9 @@ def test_two_documents_differ_by_a_number_beyond_round_off_or_by_any_name():
         {k: v for k, v in run.items() if k != 'goal'},
     ):
         with pytest.raises(AssertionError):
-            _assert_same(document, {**document, 'runs': [changed]})
+            assert_same(document, {**document, 'runs': [changed]})
     with pytest.raises(AssertionError):
-        _assert_same(document, {**document, 'runs': [run, run]})
+        assert_same(document, {**document, 'runs': [run, run]})
 
 
 def test_serial_two_jobs_and_a_local_ray_give_the_same_runs(tmp_path):
@@ -98,8 +76,8 @@ def test_serial_two_jobs_and_a_local_ray_give_the_same_runs(tmp_path):
     )
     assert [r['outcome'] for r in serial['runs']] == ['converged'] * 4
     assert [r['goal'] for r in serial['runs']] == [0, 1, 2, 3]
-    _assert_same(_without_timing(jobs), _without_timing(serial))
-    _assert_same(_without_timing(ray), _without_timing(serial))
+    assert_same(_without_timing(jobs), _without_timing(serial))
+    assert_same(_without_timing(ray), _without_timing(serial))
     # the recordings came back through Ray and were written here
     names = sorted(p.name for p in (tmp_path / 'rec_serial').iterdir())
     assert names == [f'steerable_pinv_{i}.npz' for i in range(4)]
@@ -132,7 +110,7 @@ def test_experiment_on_a_local_ray_gives_the_serial_metrics_and_recordings(tmp_p
             bag = out / f'rosbag2_{run}'
             assert (bag / 'metadata.yaml').is_file() and (bag / f'rosbag2_{run}.mcap').stat().st_size > 1000
     assert list(metrics['serial']['runs']) == ['pinv', 'ts']
-    _assert_same(metrics['ray'], metrics['serial'])
+    assert_same(metrics['ray'], metrics['serial'])
 
 
 def _free_port():
@@ -249,7 +227,7 @@ def test_a_worker_node_killed_mid_study_loses_no_run(two_nodes, tmp_path):
     serial = _study([*argv, '--jobs', '1'], tmp_path / 'serial.json')
     document = json.loads(out.read_text())
     assert sorted(_keys(document)) == sorted(_keys(serial)) and len(set(_keys(document))) == 4
-    _assert_same(_without_timing(document), _without_timing(serial))
+    assert_same(_without_timing(document), _without_timing(serial))
 
 
 SWEEP = ['--robots', 'steerable', '--methods', 'pinv', '--goals', '2', '--jobs', '1']
@@ -283,7 +261,7 @@ def test_a_sweep_runs_the_grid_and_resumes_only_what_is_missing(tmp_path, capfd,
     monkeypatch.setattr(study, 'run_goal', lambda *a, **k: calls.append((a[2].index, k['params'])) or run_goal(*a, **k))
     resumed = _study([*argv, '--resume'], out)
     assert calls == [(1, points[1])]
-    _assert_same(_without_timing(resumed), _without_timing(document))
+    assert_same(_without_timing(resumed), _without_timing(document))
 
 
 def test_a_run_that_raises_is_recorded_failed_with_its_error(tmp_path, monkeypatch):
