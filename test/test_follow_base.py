@@ -522,3 +522,19 @@ def test_a_joint_the_rows_hold_does_not_freeze_the_whole_body_command_at_its_las
     assert cut > 10  # the row shaped the command
     assert farthest < 0.5
     assert cmd.diagnostics.position_error < 0.01
+
+
+def test_amp_pulls_its_arm_to_the_plans_travel_posture_with_the_hand_still():
+    """AMP's tertiary objective on a plan holds the plan's arm posture too (``BaseReference.arm``),
+    projected by P_A as the manipulability gradient is: the arm started 0.3 rad off the travel
+    posture along its self-motion comes back onto it, the end effector still. With the
+    manipulability objective alone the arm wandered off the travel posture while robot A's base
+    lagged the plan, the end effector's points then drew the base off the plan, and the runs of
+    ten `doorway` goals of the randomized draw ran out of time on the way."""
+    cfg = load_robot('steerable')
+    resolver = make_resolver('amp', cfg, **resolver_parameters(METHOD_RUNS['amp']))
+    base, travel = np.array(cfg.start.base_pose, dtype=float), np.array(cfg.start.arm, dtype=float)
+    q = _along_self_motion(resolver.model, base, travel)
+    state, position = _hold_the_hand_with_the_plans_arm(resolver, base, q, travel)
+    assert np.max(np.abs(state.q_arm - travel)) < 0.02
+    assert np.linalg.norm(state.ee_placement(resolver.model, update=True)[0] - position) < 1e-3

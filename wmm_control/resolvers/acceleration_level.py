@@ -320,8 +320,10 @@ class AccelerationResolver(Resolver):
         """Eqs (10)–(11): ``β P_A q̈_A`` with ``P_A = [I − ((I − S) P_N)⁺] P_N``, β keeping the bounds.
 
         With ``follow``, a followed plan's base accelerations (``task['base_follow']``, less
-        the base's share of ``qdd``) join ``q̈_A`` (not in the paper); without manipulability
-        (``manipulability`` off) they are all of it.
+        the base's share of ``qdd``) join ``q̈_A`` (not in the paper), and with a plan's arm
+        posture its arm accelerations (``task['arm_follow']`` within the bounds, less the arm's
+        share of ``qdd``) do too; without manipulability (``manipulability`` off) they are all
+        of it.
 
         ``P_A`` is the orthogonal projector onto the motions that leave the task alone
         (``J x = 0``, the null space of ``P_N``) and move no joint outside the active set S
@@ -340,8 +342,11 @@ class AccelerationResolver(Resolver):
         """
         cols = np.flatnonzero(active)
         objective = self.manipulability_acceleration(task['qd']) if self.params.manipulability else np.zeros(self.n)
+        nb = self.n_base
         if follow:
-            objective[: self.n_base] += task['base_follow'] - qdd[: self.n_base]
+            objective[:nb] += task['base_follow'] - qdd[:nb]
+        if task['arm_follow'] is not None:
+            objective[nb:] += np.clip(task['arm_follow'], task['lower'][nb:], task['upper'][nb:]) - qdd[nb:]
         q_a = objective[cols]
         q_t = np.zeros(self.n)
         q_t[cols] = q_a - active_pinv @ (task['jac'][:, cols] @ q_a)

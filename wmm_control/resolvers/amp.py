@@ -23,7 +23,13 @@ the stop. With the base in the task (step 2) the same accelerations join the ter
 objective, projected by P_A: what the task leaves free brings the base back onto the plan.
 On the plan's way (not at the stance of its final approach) the singularity test of step 2
 does not activate the base: the arm nears a singularity there because the base lags the plan,
-and the base stays on the plan until the arm alone cannot do the task (α < 1).
+and the base stays on the plan until the arm alone cannot do the task (α < 1). The plan's arm
+posture (the travel posture, then the stance's) joins the tertiary objective as the traditional
+planner's does (eq 23's law on the arm's joints, ``task['arm_follow']``, within the bounds and
+less the arm's share of the task's solution), projected by P_A with the manipulability
+gradient: the arm stays near the posture the path was checked with while the base lags, instead
+of drifting towards higher manipulability until the end effector's points drew the base off the
+plan (robot A in `doorway`: ten of 100 runs out of time on the way, ``docs/randomized.md``).
 """
 
 from dataclasses import dataclass
