@@ -15,7 +15,7 @@ from wmm_control.planning.planner import GoalPlanner
 __all__ = ['PARAMS', 'PLANNER_PARAMS', 'FOLLOW_PARAMS']
 
 #: The parameters that are :class:`~wmm_control.planning.GoalPlanner`'s keyword arguments.
-PLANNER_PARAMS = ('travel_margin', 'budget', 'seed', 'stances_tried', 'fraction')
+PLANNER_PARAMS = ('travel_margin', 'narrow_margin', 'budget', 'seed', 'stances_tried', 'fraction')
 #: The parameters that are :class:`~wmm_control.planning.follow.FollowParams`' fields.
 FOLLOW_PARAMS = tuple(f.name for f in dataclasses.fields(FollowParams))
 
@@ -56,6 +56,15 @@ _SPECS = (
         'travel_margin',
         'Clearance [m] the base path keeps from every obstacle, arm in the travel posture (planner).',
         lo=1e-3,
+        hi=2.0,
+        read_only=True,
+    ),
+    Param(
+        'narrow_margin',
+        'Clearance [m] a base path may keep instead of travel_margin where one that keeps travel_margin is a '
+        'detour (longer than 1.5 times the straight way plus 1 m) and one that keeps this is a quarter shorter: '
+        'through a doorway; 0 = travel_margin only (planner).',
+        lo=0.0,
         hi=2.0,
         read_only=True,
     ),

@@ -58,6 +58,7 @@ travel changes).
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Sequence
@@ -86,6 +87,13 @@ _RS_PURE = 1e-7
 _RS_SPLIT = 1e-9
 #: RRT-Connect searches of one plan (module docstring)
 ATTEMPTS = 4
+#: [m] the clearance a path may keep where one with the travel margin is a detour (module docstring)
+NARROW_MARGIN = 0.07
+#: a path longer than this many times the straight way between its ends, plus ``DETOUR_SLACK``
+#: [m], is a detour, and one with ``NARROW_MARGIN`` that is shorter by ``NARROW_GAIN`` replaces it
+DETOUR_RATIO = 1.5
+DETOUR_SLACK = 1.0
+NARROW_GAIN = 0.25
 #: the most iterations of one RRT-Connect search (module docstring)
 ITERATIONS = 200
 #: [s] the safety cap on one search's wall time (module docstring)
@@ -125,6 +133,12 @@ class BasePath:
     def found(self) -> bool:
         """Whether there is a path."""
         return self.no_way is None
+
+    @property
+    def length(self) -> float:
+        """[m] the length of the polyline through the waypoints' positions (the way the base
+        drives in SE(2); a lower bound of a Reeds–Shepp path's)."""
+        return float(np.linalg.norm(np.diff(self.waypoints[:, :2], axis=0), axis=1).sum())
 
     @classmethod
     def none(cls, kind: NoWay, reason: str, began: float, planner: str = '') -> BasePath:
@@ -207,6 +221,8 @@ class BasePathPlanner:
             (not its iterations) ends the plan with no path (module docstring).
         seed: > 0, OMPL's random seed for every plan.
         attempts: RRT-Connect searches (each simplified); the shortest path is kept.
+        narrow_margin: [m] the clearance a path may keep instead of the travel margin where that
+            one is a detour (module docstring); 0: the travel margin only.
         simplify_rounds: rounds of vertex reduction after each search.
         iterations: the most iterations of each search (one sample drawn and each tree
             extended towards it); a search that ends without a path ends the searches.
@@ -221,6 +237,7 @@ class BasePathPlanner:
         attempts: int = ATTEMPTS,
         simplify_rounds: int = 15,
         iterations: int = ITERATIONS,
+        narrow_margin: float = NARROW_MARGIN,
     ) -> None:
         if not budget > 0.0:
             raise ValueError(f'the time budget must be > 0 [s], got {budget}')
@@ -236,6 +253,16 @@ class BasePathPlanner:
         self.simplify_rounds = int(simplify_rounds)
         self.iterations = int(iterations)
         self.rho = base.path_turning_radius
+        if not narrow_margin >= 0.0:
+            raise ValueError(f'the narrow margin must be >= 0 [m], got {narrow_margin}')
+        self.narrow_margin = float(narrow_margin)
+
+    @property
+    def least_margin(self) -> float:
+        """[m] the least clearance a path of this planner keeps from the obstacles: the travel
+        margin, or the narrow margin where it is smaller."""
+        margin = self.travel.margin
+        return min(margin, self.narrow_margin) if self.narrow_margin > 0.0 else margin
 
     def _space(self, start: np.ndarray, goal: np.ndarray, obstacles: Sequence[Obstacle]):
         space = ob.SE2StateSpace() if self.rho is None else ob.ReedsSheppStateSpace(self.rho)
@@ -269,7 +296,17 @@ class BasePathPlanner:
         level = ou.getLogLevel()
         try:
             ou.setLogLevel(ou.LOG_NONE)
-            return self._plan(start, goal, began)
+            path = self._plan(start, goal, began)
+            if not 0.0 < self.narrow_margin < travel.margin or not path.found:
+                return path
+            straight = float(np.linalg.norm(goal[:2] - start[:2]))
+            if path.length <= DETOUR_RATIO * straight + DETOUR_SLACK:
+                return path
+            # a detour: a way the travel margin leaves too narrow to find may be through a gap
+            narrow = copy.copy(self)
+            narrow.travel = travel.with_margin(self.narrow_margin)
+            other = narrow._plan(start, goal, began)
+            return other if other.found and other.length < (1.0 - NARROW_GAIN) * path.length else path
         finally:
             ou.setLogLevel(level)
 

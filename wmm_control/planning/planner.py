@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.kinematics.model import KinematicModel
 from wmm_control.kinematics.obstacles import Obstacle
-from wmm_control.planning.base_path import BUDGET, BasePath, BasePathPlanner
+from wmm_control.planning.base_path import BUDGET, NARROW_MARGIN, BasePath, BasePathPlanner
 from wmm_control.planning.clearance import Clearance, Travel
 from wmm_control.planning.outcome import NoWay
 from wmm_control.planning.stance import Stance, StanceFinder, StanceParams, StanceSearch
@@ -71,6 +71,10 @@ class GoalPlanner:
         seed: OMPL's seed (> 0).
         stances_tried: the most stances a plan tries a path to.
         fraction: of the base's limits the trajectory uses.
+        narrow_margin: [m] the clearance a base path may keep instead of ``travel_margin`` where
+            one that keeps that is a detour and one that keeps this is shorter (through a doorway
+            the travel margin leaves too narrow to find;
+            :class:`~wmm_control.planning.base_path.BasePathPlanner`); 0: ``travel_margin`` only.
     """
 
     def __init__(
@@ -85,6 +89,7 @@ class GoalPlanner:
         seed: int = 1,
         stances_tried: int = 3,
         fraction: float = 0.95,
+        narrow_margin: float = NARROW_MARGIN,
     ) -> None:
         self.robot = robot
         self.model = KinematicModel(robot)
@@ -95,7 +100,7 @@ class GoalPlanner:
             Clearance.of_robot(robot, obstacles, body=False), self.model, travel_posture, travel_margin, step
         )
         self.stances = StanceFinder(self.model, self.clearance, self.travel, stance)
-        self.paths = BasePathPlanner(robot.base, self.travel, budget, seed)
+        self.paths = BasePathPlanner(robot.base, self.travel, budget, seed, narrow_margin=narrow_margin)
         self.stances_tried = int(stances_tried)
         self.fraction = float(fraction)
 

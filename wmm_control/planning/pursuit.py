@@ -167,15 +167,17 @@ def run_limit(duration: float, planned_end: float | None) -> float:
 
 def path_blocked(planner: GoalPlanner, poses: np.ndarray) -> str:
     """Why the base poses (x, y, θ) ``poses`` of a path are no longer clear for ``planner`` (its
-    obstacles), '' when they are: the first pose nearer an obstacle than the travel margin, arm
-    in the travel posture (:class:`~wmm_control.planning.clearance.Travel`)."""
-    travel = planner.travel
+    obstacles), '' when they are: the first pose nearer an obstacle than the least margin a path
+    of the planner keeps (the travel margin, or the narrow one through a gap:
+    :attr:`~wmm_control.planning.base_path.BasePathPlanner.least_margin`), arm in the travel
+    posture (:class:`~wmm_control.planning.clearance.Travel`)."""
+    travel, margin = planner.travel, planner.paths.least_margin
     for pose in np.asarray(poses, dtype=float).reshape(-1, 3):
         d = travel.obstacle_clearance(pose)
-        if d < travel.margin:
+        if d < margin:
             return (
                 f'an obstacle is {d:.3f} m from the planned path at ({pose[0]:.2f}, {pose[1]:.2f}) m, '
-                f'within the travel margin {travel.margin:g} m'
+                f'within the margin {margin:g} m'
             )
     return ''
 
