@@ -64,7 +64,13 @@ def test_tertiary_projector_is_the_printed_one(rows):
         p_n = np.eye(10) - np.linalg.pinv(jac) @ jac
         # rcond: the exact zeros of (I − S) P_N come out at round-off, which pinv must not invert.
         p_a = (np.eye(10) - np.linalg.pinv(np.diag((~active).astype(float)) @ p_n, rcond=1e-10)) @ p_n
-        task = {'jac': jac, 'qd': np.zeros(10), 'lower': -1e9 * np.ones(10), 'upper': 1e9 * np.ones(10)}
+        task = {
+            'jac': jac,
+            'qd': np.zeros(10),
+            'lower': -1e9 * np.ones(10),
+            'upper': 1e9 * np.ones(10),
+            'arm_follow': None,  # no plan
+        }
         q_t, beta = resolver._tertiary(task, np.zeros(10), active, np.linalg.pinv(jac[:, active]))
         assert beta == 1.0
         np.testing.assert_allclose(q_t, p_a @ q_a, atol=1e-10)

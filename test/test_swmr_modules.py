@@ -147,3 +147,32 @@ def test_a_constant_reference_is_reached_within_the_settling_time(n, ref):
         assert np.linalg.norm(twist - ref) <= 0.01 * np.linalg.norm(ref), (twist, ref)
         np.testing.assert_allclose(twist, o.twist_feasible, atol=1e-9)  # wheels agree: no slip
         assert o.status == 'ok'
+
+
+def test_a_ctrl_c_that_osqp_keeps_during_a_solve_goes_back_to_the_process():
+    """OSQP listens for SIGINT while it solves and ends the solve with status ``sigint``, the
+    signal kept: the node's own handler never heard it, and a controller stopped with Ctrl-C in
+    the middle of a solve ran on until ``ros2 launch`` killed it. The solver hands it back."""
+    import signal
+    from types import SimpleNamespace
+
+    from osqp import SolverStatus
+
+    from wmm_control.base import OsqpIcrSolver
+
+    class Interrupted:
+        def update(self, **_):
+            pass
+
+        def solve(self, raise_error=False):
+            info = SimpleNamespace(iter=3, status_val=SolverStatus.OSQP_SIGINT.value)
+            return SimpleNamespace(x=np.full(2, np.nan), info=info)
+
+    heard = []
+    previous = signal.signal(signal.SIGINT, lambda *_: heard.append(True))
+    try:
+        _, status = OsqpIcrSolver(6)._run(Interrupted(), np.zeros(2), np.zeros((6, 2)), np.zeros(6), np.ones(6))
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert status is SolverStatus.OSQP_SIGINT
+    assert heard == [True]

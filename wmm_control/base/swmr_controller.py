@@ -66,6 +66,7 @@ Every per-wheel quantity is a numpy array over the N modules; the state (β, β�
 """
 
 import math
+import signal
 import time
 from dataclasses import dataclass, field, fields
 from typing import Any, NamedTuple, Self
@@ -444,7 +445,14 @@ class OsqpIcrSolver:
             self._upper[solver] = upper
         res = solver.solve(raise_error=False)  # the status is handled here
         self.last_iterations = int(res.info.iter)
-        return np.array(res.x, dtype=float), _STATUS[res.info.status_val]
+        status = _STATUS[res.info.status_val]
+        if status is SolverStatus.OSQP_SIGINT:
+            # OSQP listens for Ctrl-C while it solves and keeps it: the process's own handler
+            # (a node's shutdown) never heard it, and a node stopped with SIGINT ran on until it
+            # was killed. The period's answer is the failed solve's (a safe stop); the signal
+            # goes back to the process.
+            signal.raise_signal(signal.SIGINT)
+        return np.array(res.x, dtype=float), status
 
     def __call__(self, problem: IcrQp) -> QpResult:
         """Solve ``problem`` (its :attr:`~IcrQp.A`, :attr:`~IcrQp.l`, :attr:`~IcrQp.u` and
