@@ -162,7 +162,7 @@ def test_a_ctrl_c_that_osqp_keeps_during_a_solve_goes_back_to_the_process():
 
     class Interrupted:
         def update(self, **_):
-            pass
+            """The next solve's data: nothing to keep, the solve is interrupted whatever they are."""
 
         def solve(self, raise_error=False):
             info = SimpleNamespace(iter=3, status_val=SolverStatus.OSQP_SIGINT.value)
