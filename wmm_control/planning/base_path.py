@@ -42,6 +42,13 @@ max [s], with the shared budget → every search: ``mecanum`` 4.3 / 5.4 / 5.4 �
 69.9 → 49.7 s, 16.5 → 13.4 s, 10.7 → 8.0 s, 21.9 → 14.6 s (the searches dropped before were the
 ones that found shorter paths). Most of a plan's time is the simplification's motion checks.
 
+A path longer than ``DETOUR_RATIO`` (1.5) times the straight way between its ends plus
+``DETOUR_SLACK`` (1 m) is a detour: the planner searches again with ``narrow_margin`` (0.07 m;
+0 turns this off) in place of the travel margin, and keeps that path where it is ``NARROW_GAIN``
+(a quarter) shorter or more. A doorway whose lane at the travel margin is a few centimetres wide
+(robot A in ``doorway``: every plan went round a wall's end) is found so; 0.07 m is above what
+the safety stage holds a lagging base's body to (0.05 m).
+
 Reproducible: OMPL draws the seed of every random generator it makes from one sequence,
 which :func:`ompl.util.RNG.setSeed` restarts; each plan makes its planners and simplifiers anew
 after restarting it with ``seed``, so the same query with the same seed gives the same path,
