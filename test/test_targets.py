@@ -239,8 +239,12 @@ def test_a_plan_s_last_point_is_held_with_its_stance_and_judged_as_a_goal(target
     np.testing.assert_allclose(target.base.rates, 0.0)
     np.testing.assert_array_equal(target.base.arm, stance[3])  # the stance's posture kept
     # judged afresh: the approach (from 0.3 m, halving) is not a stall of the trajectory's lag
-    said = [(kinds(targets.judge(diag(0.3 * 0.5**k))), targets.progress.stalled) for k in range(10)]
-    assert not any(stalled for _, stalled in said) and [k for k, _ in said].count(['reached']) == 1
+    said = [(targets.judge(diag(0.3 * 0.5**k)), targets.progress.stalled) for k in range(10)]
+    assert not any(stalled for _, stalled in said) and [kinds(e) for e, _ in said].count(['reached']) == 1
+    # its arrival is told with the time since the trajectory began (40 cycles tracked, then 6)
+    assert [e[0].message for e, _ in said if kinds(e) == ['reached']] == [
+        'goal reached: 0.0094 m, 0.0000 rad away after 4.60 s (46 cycles)'
+    ]
     assert targets.progress.cycles == 10
     # a held trajectory without a planned base has none
     point(targets, 5.0)

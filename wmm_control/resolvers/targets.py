@@ -319,7 +319,7 @@ class TargetManager:
                 None if base is None else base.arm,
             )
             self.tracking = False
-            self._start()
+            self._start(since_start=True)
             return self.target, [LogEvent('held', '/ee_reference stopped: holding its last pose')]
         return self.target, []
 
@@ -400,12 +400,16 @@ class TargetManager:
             f'{100 * self.progress.min_progress_ratio:g} %, {1e3 * floor[0]:g} mm, {1e3 * floor[1]:g} mrad)'
         )
 
-    def _start(self) -> None:
-        """A new goal or trajectory: progress judged afresh, its reach and stall told anew."""
+    def _start(self, since_start: bool = False) -> None:
+        """A new goal or trajectory: progress judged afresh, its reach and stall told anew.
+        ``since_start``: a trajectory held at its last point keeps counting its time from the
+        trajectory's start, so the arrival it reports is the whole way's (a planned path's final
+        approach), not the last cycle's."""
         self.progress.start()
         self._stall_logged = False
         self._reached_logged = False
-        self._cycles = 0
+        if not since_start:
+            self._cycles = 0
 
 
 def _body_at(base, planned: BaseReference | None):
