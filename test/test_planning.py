@@ -427,3 +427,27 @@ def test_a_detour_round_a_wall_gives_way_to_a_path_through_the_doorway():
     narrow = GoalPlanner(cfg, doorway).travel.with_margin(0.07)
     for k, distance in _nearest_along(cfg, narrow, plan.trajectory, doorway):
         assert distance >= 0.07 - ENGINES, f'{distance} m from a wall at {plan.trajectory.poses[k]}'
+
+
+def test_a_robot_stopped_where_the_travel_margin_has_no_way_out_leaves_with_the_narrow_margin():
+    """Robot A stopped 5 cm beside `doorway`'s wall, past it (where a stalled run left it): no
+    pose within reach keeps the travel margin with a way out that comes no nearer, and the plan
+    was "no way" ('start_blocked'). With the narrow margin it leaves without coming nearer
+    (less the check step), then keeps 0.07 m from every obstacle (PyBullet's geometry)."""
+    from scipy.optimize import brentq
+
+    cfg = load_robot('steerable')
+    doorway = load_obstacles('doorway')
+    goal = sample_goals(cfg, 100, seed=0, obstacles='doorway')[45]
+    travel = GoalPlanner(cfg, doorway, budget=BUDGET).travel
+    x = brentq(lambda x: travel.obstacle_clearance([x, -3.21, -1.04]) - 0.05, 1.7, 2.6, xtol=1e-5)
+    where = goal.pose[:3], matrix_from_rpy(goal.pose[3:]), [x, -3.21, -1.04]
+    wide = GoalPlanner(cfg, doorway, budget=BUDGET, narrow_margin=0.0).plan(*where)
+    assert wide.no_way is NoWay.START_BLOCKED, wide.reason
+    plan = GoalPlanner(cfg, doorway, budget=BUDGET).plan(*where)
+    assert plan.no_way is None, plan.reason
+    traj = plan.trajectory
+    out = next(k for k, pose in enumerate(traj.poses) if np.allclose(pose, plan.path.waypoints[1]))
+    narrow = travel.with_margin(0.07)
+    for k, distance in _nearest_along(cfg, narrow, traj, doorway):
+        assert distance >= (0.05 - travel.step if k < out else 0.07) - ENGINES, (k, distance)

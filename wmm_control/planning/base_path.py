@@ -47,7 +47,10 @@ A path longer than ``DETOUR_RATIO`` (1.5) times the straight way between its end
 0 turns this off) in place of the travel margin, and keeps that path where it is ``NARROW_GAIN``
 (a quarter) shorter or more. A doorway whose lane at the travel margin is a few centimetres wide
 (robot A in ``doorway``: every plan went round a wall's end) is found so; 0.07 m is above what
-the safety stage holds a lagging base's body to (0.05 m).
+the safety stage holds a lagging base's body to (0.05 m). A robot that starts where the travel
+margin has no way out (:attr:`~wmm_control.planning.outcome.NoWay.START_BLOCKED`; stopped in such
+a gap, no pose within reach keeps the travel margin) is planned for with the narrow margin too,
+and that path is kept where there is one.
 
 Reproducible: OMPL draws the seed of every random generator it makes from one sequence,
 which :func:`ompl.util.RNG.setSeed` restarts; each plan makes its planners and simplifiers anew
@@ -304,14 +307,19 @@ class BasePathPlanner:
         try:
             ou.setLogLevel(ou.LOG_NONE)
             path = self._plan(start, goal, began)
-            if not 0.0 < self.narrow_margin < travel.margin or not path.found:
+            if not 0.0 < self.narrow_margin < travel.margin:
                 return path
-            straight = float(np.linalg.norm(goal[:2] - start[:2]))
-            if path.length <= DETOUR_RATIO * straight + DETOUR_SLACK:
-                return path
-            # a detour: a way the travel margin leaves too narrow to find may be through a gap
             narrow = copy.copy(self)
             narrow.travel = travel.with_margin(self.narrow_margin)
+            if path.no_way is NoWay.START_BLOCKED:
+                # stopped in a gap the travel margin finds no way out of (nowhere within it keeps
+                # that margin): the narrow margin may have one
+                other = narrow._plan(start, goal, began)
+                return other if other.found else path
+            straight = float(np.linalg.norm(goal[:2] - start[:2]))
+            if not path.found or path.length <= DETOUR_RATIO * straight + DETOUR_SLACK:
+                return path
+            # a detour: a way the travel margin leaves too narrow to find may be through a gap
             other = narrow._plan(start, goal, began)
             return other if other.found and other.length < (1.0 - NARROW_GAIN) * path.length else path
         finally:
