@@ -421,8 +421,8 @@ def test_a_detour_round_a_wall_gives_way_to_a_path_through_the_doorway():
     doorway = load_obstacles('doorway')
     goal = sample_goals(cfg, 1, seed=0, obstacles='doorway')[0]
     where = goal.pose[:3], matrix_from_rpy(goal.pose[3:]), cfg.start.base_pose
-    wide = GoalPlanner(cfg, doorway, budget=BUDGET, narrow_margin=0.0).plan(*where)
-    plan = GoalPlanner(cfg, doorway, budget=BUDGET).plan(*where)
+    wide = GoalPlanner(cfg, doorway, budget=BUDGET, narrow_margin=0.0, stances_tried=1).plan(*where)
+    plan = GoalPlanner(cfg, doorway, budget=BUDGET, stances_tried=1).plan(*where)
     assert wide.path.length > 8.0 and plan.path.length < 5.0, (wide.path.length, plan.path.length)
     narrow = GoalPlanner(cfg, doorway).travel.with_margin(0.07)
     for k, distance in _nearest_along(cfg, narrow, plan.trajectory, doorway):
@@ -451,3 +451,23 @@ def test_a_robot_stopped_where_the_travel_margin_has_no_way_out_leaves_with_the_
     narrow = travel.with_margin(0.07)
     for k, distance in _nearest_along(cfg, narrow, traj, doorway):
         assert distance >= (0.05 - travel.step if k < out else 0.07) - ENGINES, (k, distance)
+
+
+def test_where_the_best_stance_is_only_reached_round_a_wall_another_stance_is_taken():
+    """Robot A in `doorway`, goal 53: the best-scored stance stands just behind the wall's end,
+    and every path to it, at either margin, goes round the wall (more than 8 m); the next
+    stance is reached through the doorway. The plan takes the first stance whose path is not a
+    detour, and its path keeps the margins all along (PyBullet's geometry)."""
+    cfg = load_robot('steerable')
+    doorway = load_obstacles('doorway')
+    goal = sample_goals(cfg, 100, seed=0, obstacles='doorway')[53]
+    where = goal.pose[:3], matrix_from_rpy(goal.pose[3:]), cfg.start.base_pose
+    first = GoalPlanner(cfg, doorway, budget=BUDGET, stances_tried=1).plan(*where)
+    assert first.path.detour and first.path.length > 8.0, first.path.length
+    plan = GoalPlanner(cfg, doorway, budget=BUDGET).plan(*where)
+    assert plan.no_way is None and not plan.path.detour and plan.path.length < 4.0, plan.path.length
+    assert not np.allclose(plan.stance.base_pose, first.stance.base_pose)
+    assert plan.stance.base_pose.tolist() in [s.base_pose.tolist() for s in plan.search.stances[1:]]
+    narrow = GoalPlanner(cfg, doorway).travel.with_margin(0.07)
+    for k, distance in _nearest_along(cfg, narrow, plan.trajectory, doorway):
+        assert distance >= 0.07 - ENGINES, f'{distance} m from a wall at {plan.trajectory.poses[k]}'

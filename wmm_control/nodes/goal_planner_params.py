@@ -77,7 +77,13 @@ _SPECS = (
         read_only=True,
     ),
     Param('seed', 'Random seed of the path search, > 0 (planner).', lo=1, hi=2**31 - 1, read_only=True),
-    Param('stances_tried', 'The most stances a plan tries a path to (planner).', lo=1, hi=100, read_only=True),
+    Param(
+        'stances_tried',
+        'The most stances a plan tries a path to; the next when a path is a detour (planner).',
+        lo=1,
+        hi=100,
+        read_only=True,
+    ),
     Param(
         'fraction',
         'Fraction of the base\'s velocity and acceleration limits the planned trajectory uses (planner).',

@@ -3,7 +3,8 @@
 :class:`GoalPlanner` holds one robot among one set of obstacles; :meth:`GoalPlanner.plan` finds
 the stances for an end-effector goal (:mod:`~wmm_control.planning.stance`), plans the base's
 path to the best one from the robot's base pose (:mod:`~wmm_control.planning.base_path`; the
-next stance when there is no path to one), and times it (:mod:`~wmm_control.planning.timing`).
+next stance when there is no path to one, or when the path is a detour: the first path to a
+stance that is not a detour is kept, else the shortest), and times it (:mod:`~wmm_control.planning.timing`).
 The arm travels in the posture it is given (default: the robot's start posture;
 :meth:`GoalPlanner.set_travel_posture` changes it) and takes the
 stance's posture only once there, so the path is checked with the arm in the travel posture and
@@ -69,7 +70,8 @@ class GoalPlanner:
         budget: [s] the safety cap on the wall time of each base path search
             (:class:`~wmm_control.planning.base_path.BasePathPlanner`).
         seed: OMPL's seed (> 0).
-        stances_tried: the most stances a plan tries a path to.
+        stances_tried: the most stances a plan tries a path to (the next one is tried when there
+            is no path to a stance or its path is a detour).
         fraction: of the base's limits the trajectory uses.
         narrow_margin: [m] the clearance a base path may keep instead of ``travel_margin`` where
             one that keeps that is a detour and one that keeps this is shorter (through a doorway
@@ -87,7 +89,7 @@ class GoalPlanner:
         stance: StanceParams | None = None,
         budget: float = BUDGET,
         seed: int = 1,
-        stances_tried: int = 3,
+        stances_tried: int = 4,
         fraction: float = 0.95,
         narrow_margin: float = NARROW_MARGIN,
     ) -> None:
@@ -119,13 +121,19 @@ class GoalPlanner:
         if not search.stances:
             return Plan(None, None, None, search, search.no_way, search.reason, time.perf_counter() - began)
         path = None
+        chosen: tuple[Stance, BasePath] | None = None  # the shortest path found, and its stance
         for stance in search.stances[: self.stances_tried]:
             path = self.paths.plan(base_pose, stance.base_pose)
-            if path.found:
-                trajectory = time_path(path.pieces, self.robot.base, self.robot.period, self.fraction)
-                return Plan(stance, path, trajectory, search, None, '', time.perf_counter() - began)
+            if path.found and (chosen is None or path.length < chosen[1].length):
+                chosen = (stance, path)
+            if path.found and not path.detour:
+                break
             if path.no_way in (NoWay.START_BLOCKED, NoWay.TIMED_OUT):
                 break
+        if chosen is not None:
+            stance, path = chosen
+            trajectory = time_path(path.pieces, self.robot.base, self.robot.period, self.fraction)
+            return Plan(stance, path, trajectory, search, None, '', time.perf_counter() - began)
         assert path is not None
         return Plan(None, path, None, search, path.no_way, path.reason, time.perf_counter() - began)
 
