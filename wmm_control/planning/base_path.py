@@ -44,7 +44,7 @@ ones that found shorter paths). Most of a plan's time is the simplification's mo
 
 A path longer than ``DETOUR_RATIO`` (2) times the straight way between its ends plus
 ``DETOUR_SLACK`` (2 m) is a detour (going round a wall's end, not round a table: every first
-plan of ``table_pillar``'s goals, 4.6–6.8 m, is none): the planner searches again with ``narrow_margin`` (0.07 m;
+plan of ``table_pillar``'s goals, up to 7.5 m, is none): the planner searches again with ``narrow_margin`` (0.07 m;
 0 turns this off) in place of the travel margin, and keeps that path where it is ``NARROW_GAIN``
 (a quarter) shorter or more. A doorway whose lane at the travel margin is a few centimetres wide
 (robot A in ``doorway``: every plan went round a wall's end) is found so; 0.07 m is above what
