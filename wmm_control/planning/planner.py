@@ -4,7 +4,7 @@
 the stances for an end-effector goal (:mod:`~wmm_control.planning.stance`), plans the base's
 path to the best one from the robot's base pose (:mod:`~wmm_control.planning.base_path`; the
 next stance when there is no path to one, or when the path is a detour: the first path to a
-stance that is not a detour is kept, else the shortest), and times it (:mod:`~wmm_control.planning.timing`).
+stance that is not a detour is kept, else the best stance's), and times it (:mod:`~wmm_control.planning.timing`).
 The arm travels in the posture it is given (default: the robot's start posture;
 :meth:`GoalPlanner.set_travel_posture` changes it) and takes the
 stance's posture only once there, so the path is checked with the arm in the travel posture and
@@ -121,10 +121,10 @@ class GoalPlanner:
         if not search.stances:
             return Plan(None, None, None, search, search.no_way, search.reason, time.perf_counter() - began)
         path = None
-        chosen: tuple[Stance, BasePath] | None = None  # the shortest path found, and its stance
+        chosen: tuple[Stance, BasePath] | None = None  # the best stance with a path, and that path
         for stance in search.stances[: self.stances_tried]:
             path = self.paths.plan(base_pose, stance.base_pose)
-            if path.found and (chosen is None or path.length < chosen[1].length):
+            if path.found and (chosen is None or not path.detour):
                 chosen = (stance, path)
             if path.found and not path.detour:
                 break
