@@ -124,11 +124,12 @@ class GoalPlanner:
         chosen: tuple[Stance, BasePath] | None = None  # the best stance with a path, and that path
         for stance in search.stances[: self.stances_tried]:
             path = self.paths.plan(base_pose, stance.base_pose)
-            if path.found and (chosen is None or not path.detour):
-                chosen = (stance, path)
-            if path.found and not path.detour:
-                break
-            if path.no_way in (NoWay.START_BLOCKED, NoWay.TIMED_OUT):
+            if path.found:
+                if chosen is None or not path.detour:
+                    chosen = (stance, path)
+                if not path.detour:
+                    break
+            elif path.no_way in (NoWay.START_BLOCKED, NoWay.TIMED_OUT):
                 break
         if chosen is not None:
             stance, path = chosen

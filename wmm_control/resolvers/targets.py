@@ -319,7 +319,7 @@ class TargetManager:
                 None if base is None else base.arm,
             )
             self.tracking = False
-            self._start(since_start=True)
+            self._start(keep_clock=True)
             return self.target, [LogEvent('held', '/ee_reference stopped: holding its last pose')]
         return self.target, []
 
@@ -400,15 +400,15 @@ class TargetManager:
             f'{100 * self.progress.min_progress_ratio:g} %, {1e3 * floor[0]:g} mm, {1e3 * floor[1]:g} mrad)'
         )
 
-    def _start(self, since_start: bool = False) -> None:
+    def _start(self, keep_clock: bool = False) -> None:
         """A new goal or trajectory: progress judged afresh, its reach and stall told anew.
-        ``since_start``: a trajectory held at its last point keeps counting its time from the
+        ``keep_clock``: a trajectory held at its last point keeps counting its time from the
         trajectory's start, so the arrival it reports is the whole way's (a planned path's final
         approach), not the last cycle's."""
         self.progress.start()
         self._stall_logged = False
         self._reached_logged = False
-        if not since_start:
+        if not keep_clock:
             self._cycles = 0
 
 
