@@ -74,6 +74,7 @@ RESOLVER_ALWAYS = {
     'binding_self',
     'binding_floor',
     'binding_obstacle',
+    'binding_arm_stopping',
     'binding_base_along_path',
     'binding_base_between',
     'binding_base_after_turn',

@@ -110,6 +110,8 @@ def test_obstacle_distances_agree_with_the_simulator_and_their_rates_are_their_d
                 nearest[links] = min(nearest.get(links, np.inf), distance)
             for links, distance in nearest.items():
                 assert distance == pytest.approx(truth[links], abs=2e-3), links
+            # a joint's reach on a pair, whichever way its normal turns, bounds its rate along the normal
+            assert np.all(np.abs(mine.rate_jacobian) <= mine.lever + 1e-12)
             # ḋ = j q̇ + j_b (vx, vy, ω), the base's twist in its own frame
             qd, twist = rng.normal(size=q.size), rng.normal(size=3)
             world = twist_to_world(base[2], twist)
@@ -648,6 +650,36 @@ def test_a_base_spinning_on_a_diagonal_is_braked_before_an_obstacle_it_swings_ro
     want = np.concatenate(([-0.25, 0.19, -1.0], np.zeros(q.size)))
     closest = _drive(stage, [-0.4408, -0.3569, 0.1606], [-0.193, 0.135, -0.449], q, want, seconds=30.0)
     assert closest >= stage.params.collision_safety - 1e-3
+
+
+def test_a_wrist_spun_at_full_rate_near_a_wall_is_braked_before_its_turn_swings_the_gripper_into_it():
+    """Robot B's ``pinv`` on ``doorway`` goal 7 (a randomized run, under an earlier stance rule)
+    spun wrist joints 5–7 at about their full 3.14 rad/s 9.7 cm from the wall. Braking from
+    there, each turns about 1 rad, and the gripper's nearest point, 0.05–0.15 m from their
+    axes, swung round onto the wall at 0.3–0.44 m/s within 0.3 s: the rows on the distance's
+    first-order rate saw it too late, and the gripper went 2.8 cm in. That period's state:
+    the stage now brakes every wrist joint as hard as its box allows, where it let them speed
+    up to the full rate, and says the arm's stopping turn is what binds."""
+    robot = load_robot('mecanum')
+    stage = SafetyStage.for_robot(robot, obstacles=load_obstacles('doorway'))
+    q = np.array([-4.0935, -2.2, -27.2361, -2.5, -32.4044, -0.5359, -4.1634])
+    command = np.array([0.0335, -0.0101, 0.1659, 0.0956, 0.0101, 1.5201, 0.001, -3.015, -2.7607, -3.0261])
+    lower = np.array([0.033, -0.0114, 0.1385, 0.0709, -0.0, 1.5007, -0.0, -3.14, -3.0028, -3.14])
+    upper = np.array([0.0342, -0.0101, 0.2135, 0.2209, 0.0657, 1.6507, 0.075, -3.015, -2.7528, -3.015])
+    target = np.concatenate(([0.0004, -0.0035, 1.0], command[3:]))
+    out = stage.filter(
+        q,
+        command,
+        lower,
+        upper,
+        base_pose=np.array([2.016, 0.6118, 1.602]),
+        base_axes=(0, 1, 2),
+        base_velocity=np.array([0.0336, -0.0107, 0.176]),
+        target=target,
+    )
+    wrist = slice(7, 10)
+    np.testing.assert_allclose(out.command[wrist], upper[wrist], atol=1e-6)
+    assert out.binding()['arm stopping'] >= 1
 
 
 def test_a_slow_braking_base_does_not_turn_its_path_into_a_table_it_drives_past():

@@ -102,6 +102,10 @@ class NearPairs:
         base_jacobian: rows ``j_b`` [m/m, m/rad]: zero unless one of the two is fixed in the
             world (an obstacle). Shape (m, 3).
         floor: which pairs are with the floor. Shape (m,), boolean.
+        lever: how fast each arm joint moves the pair's two nearest points apart or together
+            in any direction, ``|v_b − v_a|`` per unit rate of the joint [m/rad or m/m]: the
+            reach of a joint's motion whatever way the pair's normal turns while it moves.
+            ``|rate_jacobian| ≤ lever`` entry by entry. Shape (m, n_arm).
     """
 
     distance: np.ndarray
@@ -110,6 +114,7 @@ class NearPairs:
     rate_jacobian: np.ndarray
     base_jacobian: np.ndarray
     floor: np.ndarray
+    lever: np.ndarray
 
     def __len__(self) -> int:
         return self.distance.size
@@ -124,6 +129,7 @@ class NearPairs:
             _frozen(self.rate_jacobian[index]),
             _frozen(self.base_jacobian[index]),
             _frozen(self.floor[index]),
+            _frozen(self.lever[index]),
         )
 
 
@@ -489,8 +495,15 @@ class CollisionModel:
         jacobians = self.kinematics.data.J[:, self._columns]
         along = (normals @ jacobians[:3] + np.cross(points, normals) @ jacobians[3:]).reshape(2, m, -1)
         sides, along = along[:, :, :N_BASE], along[:, :, N_BASE:]
-        along *= self._moved_by[self._pair_joints[near].T]  # only the arm joints that move p
+        moved_by = self._moved_by[self._pair_joints[near].T]  # only the arm joints that move p
+        along *= moved_by
         rates = along[1] - along[0]
+        # the whole of each point's velocity per arm joint, v₀ + ω × p, for the joints' reach
+        # whatever way the normal turns: |v_b − v_a|
+        arm = jacobians[:, N_BASE:]
+        velocity = (arm[:3].T + np.cross(arm[3:].T, points[:, None, :])).reshape(2, m, -1, 3)
+        velocity *= moved_by[..., None]
+        lever = np.linalg.norm(velocity[1] - velocity[0], axis=2)
         # the planar root's columns, over the world frame's (ẋ, ẏ, θ̇), move every point of the
         # robot; the floor and the obstacles stay put. Between two points of the robot they
         # cancel, and against the floor they are zero (the base moves parallel to it).
@@ -505,6 +518,7 @@ class CollisionModel:
             _frozen(rates),
             _frozen(base),
             _frozen(self._pair_floor[near]),
+            _frozen(lever),
         )
         return pairs, *closest
 
@@ -773,6 +787,7 @@ def _no_pairs(n_arm: int) -> NearPairs:
         _frozen(np.zeros((0, n_arm))),
         _frozen(np.zeros((0, 3))),
         _frozen(np.zeros(0, bool)),
+        _frozen(np.zeros((0, n_arm))),
     )
 
 

@@ -1,7 +1,8 @@
 """The safety stage's limits, each a :class:`~wmm_control.resolvers.constraints.Constraint` on
 the cycle's command: the velocity dampers that keep the arm off the robot's own body, off
 itself and off the floor, and the whole robot off obstacles (:class:`VelocityDampers`), and the
-rows of a base that lags its reference or turns (:class:`BaseRows`). The stage
+rows of a base that lags its reference or turns (:class:`BaseRows`), and the arm's stopping turn
+(:meth:`VelocityDampers.stopping`). The stage
 (:mod:`~wmm_control.resolvers.safety`) stacks them and sends the command nearest the method's
 under them.
 
@@ -41,6 +42,24 @@ twist changes too, the look-ahead grows to the base's stopping distance from ful
 (``d_s + v τ + v² / (2 min(a, a_b))``, ``v`` the norm of the linear axes' speed limits, since
 the base may drive on a diagonal, and ``a`` the deceleration its rows count on: the slower
 axis's limit, less the turn's share below) so that it brakes in time.
+
+**The arm's stopping turn** (:meth:`VelocityDampers.stopping`, ``arm stopping``, one row per
+pair an arm joint moves). The rows above bound the distance's rate at this configuration. A
+joint that turns fast curves its points' paths: a point at ``r`` from the joint's axis, turned
+by ``θ``, leaves its tangent by ``r (1 − cos θ) ≤ r θ² / 2``, towards the other shape as easily
+as away, and no row on ``ḋ`` sees it until the pair's normal has turned. Braking at its
+acceleration limit from ``q̇_i``, joint ``i`` still turns ``θ_i = q̇_i² / (2 q̈_max,i)``, so each
+pair keeps
+
+    Σ_i r_i θ_i² / 2 ≤ max(d, d_s) − d_s / 2,
+
+``r_i`` the speed joint ``i`` gives the pair's two nearest points apart, in any direction
+(:attr:`~wmm_control.kinematics.collision.NearPairs.lever`). The row is quartic and convex in
+``q̇``; over the period's box each ``q̇_i⁴`` is replaced by its chord, which lies above it there,
+so the linear row implies the quartic one within the box. At a few rad/s² a joint at 1 rad/s
+turns some 0.1 rad to stop, a few mm at ``r`` = 1 m: the row binds only on joints that turn fast
+near something (robot B's wrist spun at 3.14 rad/s 10 cm from a wall turns about 1 rad per
+joint to stop, and swung its gripper 2.8 cm into the wall before this row).
 
 **A base that lags its reference** (:class:`BaseRows`). The stage shapes the base's
 *reference*; a base whose twist follows its reference with a lag τ (a steerable base's ICR and
@@ -121,6 +140,8 @@ _PARTS = np.array(((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1,
 _LINEAR = np.array([1.0, 1.0, 0.0])
 #: The dampers' constraints, in the order of the pairs' kinds.
 _KINDS = ('self', 'floor', 'obstacle')
+#: The arm's stopping reach (:meth:`VelocityDampers.stopping`).
+_STOPPING = 'arm stopping'
 #: The base's constraints (:class:`BaseRows`).
 _ALONG, _BETWEEN, _AFTER, _WITHOUT, _TURN = (
     'base along path',
@@ -131,7 +152,7 @@ _ALONG, _BETWEEN, _AFTER, _WITHOUT, _TURN = (
 )
 #: The name of every limit's constraint (:attr:`~wmm_control.resolvers.constraints.Constraint.name`):
 #: what the safety stage's diagnostics count.
-LIMITS = (*_KINDS, _ALONG, _BETWEEN, _AFTER, _WITHOUT, _TURN)
+LIMITS = (*_KINDS, _STOPPING, _ALONG, _BETWEEN, _AFTER, _WITHOUT, _TURN)
 
 
 @dataclass(frozen=True)
@@ -158,6 +179,8 @@ class Pairs:
             (:meth:`VelocityDampers._allowed`; zero where it is not counted): ``bound +
             turn_braking`` is the bound the base's linear approach alone meets
             (:meth:`BaseRows.without_turn`). Shape (m,).
+        lever: each arm joint's reach on the pair, ``|v_b − v_a|`` per unit rate
+            (:attr:`~wmm_control.kinematics.collision.NearPairs.lever`). Shape (m, n_arm).
     """
 
     rows: np.ndarray
@@ -170,6 +193,7 @@ class Pairs:
     to_base: np.ndarray
     kinds: tuple[tuple[str, int], ...]
     turn_braking: np.ndarray
+    lever: np.ndarray
 
     def with_twist(self, base_twist) -> Pairs:
         """The same rows with the bounds moved by the share of ``base_twist`` (vx, vy, ω), the
@@ -232,19 +256,19 @@ class VelocityDampers:
         are the first call's."""
         if self._last[0] is not near:
             self._last = (near, self._bounds(near))
-        base_full, rate, distance, moved, body, bound, kinds, turn = self._last[1]
+        base_full, rate, distance, moved, body, bound, kinds, turn, lever = self._last[1]
         rows = np.concatenate(((base_full @ to_base)[:, axes], rate), axis=1)
-        return Pairs(rows, bound, base_full, distance, moved, body, tuple(axes), to_base, kinds, turn)
+        return Pairs(rows, bound, base_full, distance, moved, body, tuple(axes), to_base, kinds, turn, lever)
 
     def _bounds(self, near: NearPairs) -> tuple:
         """What :meth:`pairs` gives that the command's entries leave as it is, in its order:
-        ``(base, rate, distance, moved, body, bound, kinds, turn_braking)``."""
-        base_full, rate, distance = near.base_jacobian, near.rate_jacobian, near.distance
+        ``(base, rate, distance, moved, body, bound, kinds, turn_braking, lever)``."""
+        base_full, rate, distance, lever = near.base_jacobian, near.rate_jacobian, near.distance, near.lever
         moved = np.asarray(base_full.any(axis=1), dtype=bool)
         kind = 2 * moved + near.floor
         if (kind[1:] < kind[:-1]).any():
             order = np.argsort(kind, kind='stable')
-            base_full, rate, distance = base_full[order], rate[order], distance[order]
+            base_full, rate, distance, lever = base_full[order], rate[order], distance[order], lever[order]
             moved, kind = moved[order], kind[order]
         body = moved & ~rate.any(axis=1)
         if self.body_margin > 0.0:  # a lagging base's body keeps its margin: its pairs are as much nearer
@@ -254,12 +278,34 @@ class VelocityDampers:
         turn = allowed - self._allowed(distance, rate, base_full, moved) if turning else np.zeros(len(distance))
         counts = np.bincount(kind, minlength=3).tolist()
         kinds = tuple((name, count) for name, count in zip(_KINDS, counts) if count)
-        return base_full, rate, distance, moved, body, -allowed, kinds, turn
+        return base_full, rate, distance, moved, body, -allowed, kinds, turn, lever
 
     def constraints(self, pairs: Pairs) -> Constraint:
         """The dampers, one row per pair: ``self`` (the robot against itself), ``floor`` and
         ``obstacle``."""
         return Constraint(-pairs.rows, -pairs.bound, 'dampers', pairs.kinds)
+
+    def stopping(self, pairs: Pairs, box: Box) -> Constraint:
+        """``arm stopping``, one row per pair that an arm joint moves: what the turn of the
+        pair's points while the arm's joints brake adds to their approach (the module
+        docstring), within the room the pair has. The row is the chord of that quartic over
+        the period's box, a linear row that implies it there. No rows without the arm's
+        acceleration limits."""
+        nb = len(pairs.axes)
+        if self.arm_acceleration is None:
+            return Constraint.empty(pairs.rows.shape[1], _STOPPING)
+        lower, upper = box.lower[nb:], box.upper[nb:]
+        # r θ²/2 with θ = q̇² / (2 a): r q̇⁴ / (8 a²), and q̇⁴ ≤ l⁴ + s (q̇ − l) on [l, u], s the
+        # chord's slope (u + l)(u² + l²) (0 where the box holds the joint at l)
+        weight = pairs.lever / (8.0 * self.arm_acceleration**2)
+        slope = np.where(upper > lower, (upper + lower) * (upper**2 + lower**2), 0.0)
+        G = np.zeros((len(pairs.lever), nb + lower.size))
+        G[:, nb:] = weight * slope
+        safety = self.params.collision_safety
+        room = np.maximum(pairs.distance, safety) - 0.5 * safety
+        h = room - weight @ (lower**4 - slope * lower)
+        keep = pairs.lever.any(axis=1) & np.isfinite(G).all(axis=1) & np.isfinite(h)
+        return Constraint(G[keep], h[keep], _STOPPING)
 
     def _allowed(self, distances, arm_rows, base_rows, moved, turning=None) -> np.ndarray:
         """Each pair's fastest allowed approach [m/s], braking no harder than the acceleration

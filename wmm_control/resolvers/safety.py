@@ -387,7 +387,9 @@ class SafetyStage:
         command, box, held, base_rows = self.base_rows.constraints(
             pairs, command, box, base_velocity, base_twist, world_rates
         )
-        rows = Constraint.stack((self.dampers.constraints(pairs), *base_rows), command.size, 'safety')
+        rows = Constraint.stack(
+            (self.dampers.constraints(pairs), self.dampers.stopping(pairs, box), *base_rows), command.size, 'safety'
+        )
         if not rows.violated(command, TOLERANCE).any():
             return SafetyResult(command, clearance, label, len(near), held, rows, held=held)
         weights = np.ones(command.size) if weights is None else np.asarray(weights, dtype=float)
