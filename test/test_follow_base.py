@@ -157,6 +157,28 @@ def _arrival(errors, dt, within=0.01):
     return (far[-1] + 1) * dt if far.size else 0.0
 
 
+@pytest.mark.parametrize('method', ['pinv', 'amp'])
+def test_a_slow_braking_base_stops_at_the_plans_end_instead_of_running_past_it(method):
+    """Robot B (0.025 m/s²) on a 2.5 m straight plan timed within 95 % of its limits, the goal
+    at the plan's last point: the end effector's task draws the base on at its point's speed
+    plus what its lag asks, and the base ran 6–7 cm past the plan's end, which it could no longer
+    stop at (on ``doorway``, where the plan's clock had first waited for a lagging base, 0.2–0.45 m
+    past the stance, and the final approach from there failed). Braking within the room to where
+    its planned pose would come to rest
+    (:meth:`~wmm_control.resolvers.interface.BaseReference.braking_room`), it stops at the end."""
+    cfg = load_robot('mecanum')
+    pieces = [TwistPiece(np.zeros(3), np.array((2.5, 0.0, 0.0)))]
+    handoff = Handoff.of(KinematicModel(cfg), time_path(pieces, cfg.base, cfg.period), cfg.start.arm)
+    last = handoff.points[-1]
+    goal = RandomGoal(
+        0, handoff.base_poses[-1], cfg.start.arm, np.concatenate((last.position, rpy_from_matrix(last.rotation))), 1
+    )
+    lags, log, target, replans = _follow(cfg, handoff, goal, method, True)
+    x = np.asarray(log.base_pose)[:, 0]
+    assert x.max() - 2.5 < 0.01 and replans == 0
+    assert np.linalg.norm(np.asarray(log.ee_position)[-1] - target.position) < 0.01
+
+
 @pytest.mark.parametrize(
     ('robot', 'method', 'stance'),
     [

@@ -250,6 +250,31 @@ def test_braking_rate_is_the_largest_that_stops_in_time(distance, accel):
     assert covered(v + 1e-9 + 1e-9 * v) > distance
 
 
+@settings(max_examples=200, deadline=None)
+@given(st.floats(0.0, 2.0), st.floats(0.0, 0.3), st.floats(0.2, 5.0), st.floats(0.0, 1.0))
+def test_an_entry_given_room_keeps_within_it_and_its_acceleration_limit(room, speed, accel, shrink):
+    """An entry without position limits (a base's axis), at ``speed`` with ``room`` [m] left, its
+    room shrinking by what it covers and at once by ``shrink`` of it (its plan slowed): asked
+    for full speed, it never changes by more than a·dt a period, and from any speed within the
+    room's braking it stops within the room."""
+    lim = CommandLimits([1.0], [accel], [-np.inf], [np.inf], DT)
+    inf = np.array([np.inf])
+    within = speed <= lim.braking_rates([0.0], (inf, np.array([room])))[1][0]
+    room *= 1.0 - shrink if not within else 1.0
+    covered, v = 0.0, speed
+    for _ in range(2000):
+        out = lim.apply(np.array([1.0]), np.zeros(1), np.array([v]), room=(inf, np.array([room - covered])))
+        new = float(out.command[0])
+        assert abs(new - v) <= accel * DT * (1 + 1e-9)
+        v = new
+        covered += v * DT
+        if v == 0.0:
+            break
+    assert v == 0.0
+    if within:
+        assert covered <= room + 1e-12
+
+
 def test_a_joint_next_to_its_limit_cannot_pass_it_in_one_period(robot):
     """Within a·dt² of a limit the braking rate would cover more than the distance left in one
     period; the bound is then that distance over dt."""

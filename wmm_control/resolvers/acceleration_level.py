@@ -213,8 +213,9 @@ class AccelerationResolver(Resolver):
         xdd = ref.acceleration + self._kd * (ref.velocity - xd) + self._kp * err
         rows = self._rows
         self._position[nb:] = state.q_arm
-        lo_v, hi_v, _ = self.limits.box(self._position, qd)
-        down, up = self.limits.braking_rates(self._position)
+        room = None if target.base is None else self.base_room(state.base_pose, target.base, rates.world)
+        lo_v, hi_v, _ = self.limits.box(self._position, qd, room)
+        down, up = self.limits.braking_rates(self._position, room, qd)
         sigma = self.manipulability_task.sigma_min()
         sigma_position = sigma if rows.stop == 3 else self._sigma_position.sigma_min()
         e_target, e_rot_target = pose.error(pos, rot, target.position, target.rotation)

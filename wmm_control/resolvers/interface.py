@@ -198,6 +198,33 @@ class BaseReference:
         out[2] = wrap_angle(float(out[2]))
         return out
 
+    def braking_room(
+        self, base_pose: ArrayLike, acceleration: ArrayLike, world: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """How far a base at ``base_pose`` may still go on each axis (vx, vy, ω in its own frame,
+        or with ``world`` the world's (x, y, θ); down, up) [m, m, rad] and not pass where the
+        planned pose would come to rest, were it to brake now from its planned rates at
+        ``acceleration`` (on those axes): along the planned motion on an axis, the planned pose's offset from the base plus
+        its stopping distance ``v² / (2 a)``; against it, and on an axis it does not move on,
+        no end (inf). Braking within it (:meth:`~wmm_control.resolvers.limits.CommandLimits.box`
+        with ``room``), the base keeps behind the plan's own braking however its end effector's
+        task would draw it on: robot B's base (0.025 m/s²) caught up a lag at the speed the end
+        effector asked for and ran 0.2–0.45 m past the stance it could no longer stop at.
+
+        Returns:
+            ``(down, up)``, each of shape (3,), non-negative or inf.
+        """
+        theta = float(np.asarray(base_pose, dtype=float)[2])
+        offset, rates = self.error(base_pose), self.rates
+        if not world:
+            offset, rates = twist_to_base(theta, offset), twist_to_base(theta, rates)
+        a = np.asarray(acceleration, dtype=float)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            stop = np.where(a > 0.0, rates * rates / (2.0 * a), np.inf)
+        up = np.where(rates > 0.0, np.maximum(offset + stop, 0.0), np.inf)
+        down = np.where(rates < 0.0, np.maximum(stop - offset, 0.0), np.inf)
+        return down, up
+
     def pull(self, base_pose: ArrayLike, gain: ArrayLike, acceleration: ArrayLike, steering: float = 0.0) -> np.ndarray:
         """The rates that bring a base at ``base_pose`` onto the planned pose, in the base's own
         frame (vx, vy, ω): the planned rates as feedforward plus, on each axis, the feedback
@@ -395,6 +422,25 @@ class Resolver(ABC):
             ConfigError: ``lag`` is not finite and ≥ 0.
         """
         self.safety.set_base_lag(lag)
+
+    def base_room(
+        self, base_pose: ArrayLike, reference: BaseReference, world: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A followed plan's :meth:`BaseReference.braking_room` over the command's entries, as
+        :class:`~wmm_control.resolvers.limits.CommandLimits` takes it: the base's axes (its own
+        (vx, vy, ω), or with ``world`` the world's (x, y, θ), each linear one braking at the
+        slower linear axis's limit), then the arm's joints, which have no such end (inf)."""
+        base = self.model.config.base
+        acceleration = np.asarray(base.acceleration, dtype=float)
+        if world:
+            axes = [0, 1, 2]
+            linear = acceleration[[k for k in base.axes if k < 2]]
+            acceleration = np.array([linear.min(), linear.min(), acceleration[2]]) if linear.size else acceleration
+        else:
+            axes = list(base.axes)
+        down, up = reference.braking_room(base_pose, acceleration, world)
+        arm = np.full(self.model.n_arm, np.inf)
+        return np.concatenate((down[axes], arm)), np.concatenate((up[axes], arm))
 
     def compensate(self, command: ResolverCommand, feasible_twist: ArrayLike) -> ResolverCommand:
         """Finish ``command`` with the base controller's answer ``feasible_twist``.

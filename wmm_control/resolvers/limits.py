@@ -135,22 +135,29 @@ class CommandLimits:
         self._limit2 = np.concatenate((self.position_lower[bounded], self.position_upper[bounded]))
         self._sign2 = np.repeat((1.0, -1.0), bounded.size)
         self._rate_constants = _BrakingConstants.of(np.tile(self._adt[bounded], 2), self.dt)
+        self._room_constants = _BrakingConstants.of(np.tile(self._adt, 2), self.dt)
         self._last_braking: tuple[bytes, tuple[np.ndarray, ...]] = (b'', (self._zero,) * 5)
 
-    def braking_rates(self, position: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    def braking_rates(self, position: ArrayLike, room=None, previous=None) -> tuple[np.ndarray, np.ndarray]:
         """Largest rates towards the lower and upper position limits from which braking stops in time.
 
         Args:
             position: current positions (any value for entries without limits). Shape (n,).
+            room: ``(down, up)``, how far each entry may still move down and up this period,
+                beyond its position limits' own [unit] (inf: no end; a followed plan's base,
+                :meth:`~wmm_control.resolvers.interface.BaseReference.braking_room`), or None.
+                Shape (n,) each. An entry whose ``previous`` rate (shape (n,)) heads beyond what
+                its room allows brakes from it at its acceleration limit: a room that shrinks
+                at once (its plan slowed) never asks for more than the limit.
 
         Returns:
             (down, up): non-negative rate bounds [unit/s]; inf where there is no limit. Shape (n,) each.
         """
-        down, up = self._braking(as_vector(position, self.n, 'position'))[:2]
+        down, up = self._braking(as_vector(position, self.n, 'position'), room, previous)[:2]
         return down.copy(), up.copy()
 
-    def box(self, position: ArrayLike, previous: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """This period's interval for every entry.
+    def box(self, position: ArrayLike, previous: ArrayLike, room=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """This period's interval for every entry (``room``: as :meth:`braking_rates`'s).
 
         Velocity and braking bounds always contain zero. The acceleration interval around
         ``previous`` is intersected with them; where the two do not meet (a previous command
@@ -160,8 +167,8 @@ class CommandLimits:
         Returns:
             (lower, upper, forced): Shape (n,) each; ``forced`` flags the entries above.
         """
-        braking = self._braking(as_vector(position, self.n, 'position'))
         previous = as_vector(previous, self.n, 'previous command')
+        braking = self._braking(as_vector(position, self.n, 'position'), room, previous)
         lower, upper, forced = self._box(braking, previous, previous - self._adt, previous + self._adt)
         return lower, upper, np.zeros(self.n, dtype=bool) if forced is None else forced
 
@@ -193,7 +200,7 @@ class CommandLimits:
             self.dt,
         )
 
-    def apply(self, primary, position, previous, secondary=None, previous_secondary=None):
+    def apply(self, primary, position, previous, secondary=None, previous_secondary=None, room=None):
         """Bring ``primary + secondary`` into this period's bounds (see the module docstring).
 
         The arguments are arrays of shape (n,) (any sequence of n numbers is taken); their
@@ -210,6 +217,7 @@ class CommandLimits:
                 Shape (n,). Non-finite entries are treated as a request to stop.
             previous_secondary: the secondary share of ``previous`` (the result's
                 ``secondary``), default zero. Shape (n,).
+            room: ``(down, up)`` as :meth:`braking_rates`'s, or None.
 
         Returns:
             :class:`LimitResult`.
@@ -227,7 +235,7 @@ class CommandLimits:
                 f'CommandLimits.apply: expected shape {self._shape} for primary, position, previous, secondary '
                 f'and previous_secondary, got {[np.shape(a) for a in (primary, position, previous, secondary, prev_s)]}'
             )
-        braking = self._braking(position)
+        braking = self._braking(position, room, previous)
         neg_down, up = braking[2], braking[1]
         # 0. a non-finite entry is a request to stop
         limited = np.isfinite(primary)
@@ -278,11 +286,15 @@ class CommandLimits:
             requested=fast_p + fast_s,
         )
 
-    def _braking(self, position):
-        """:meth:`braking_rates` of a checked position vector, not to be modified: (down, up,
-        −down, and the velocity and braking interval ``max(−v, −down)``, ``min(v, up)``).
-        The last answer is kept: a resolver asks several times a period at one position."""
+    def _braking(self, position, room=None, previous=None):
+        """:meth:`braking_rates` of a checked position vector (and ``room``, ``previous``), not to be modified:
+        (down, up, −down, and the velocity and braking interval ``max(−v, −down)``,
+        ``min(v, up)``). The last answer is kept: a resolver asks several times a period at one
+        position."""
         key = position.tobytes()
+        if room is not None:
+            room = np.concatenate([np.asarray(r, dtype=float) for r in room])
+            key += room.tobytes() + (b'' if previous is None else np.asarray(previous, dtype=float).tobytes())
         if key == self._last_braking[0]:
             return self._last_braking[1]
         # distances to the limits, of the entries that have one (NaN passes through np.maximum)
@@ -294,6 +306,13 @@ class CommandLimits:
         i, k = self._bounded, self._bounded.size
         down, up = self._inf.copy(), self._inf.copy()
         down[i], up[i] = rates[:k], rates[k:]
+        if room is not None:  # and within the room given, braking all the same
+            room_rates = _braking_rate(np.maximum(room, 0.0), self._room_constants)
+            if previous is not None:  # from a rate beyond it, as hard as the acceleration limit allows
+                heading = np.concatenate((-previous, previous)) - self._room_constants.adt
+                np.maximum(room_rates, heading, out=room_rates)
+            np.minimum(down, room_rates[: self.n], out=down)
+            np.minimum(up, room_rates[self.n :], out=up)
         neg_down = -down
         braking = (down, up, neg_down, np.maximum(self._neg_velocity, neg_down), np.minimum(self.velocity, up))
         self._last_braking = (key, braking)

@@ -525,7 +525,10 @@ class PoseServoResolver(Resolver):
         self._weights = None if activation is None else task_weights(activation)
         nb = self.n_base
         self._position[nb:] = state.q_arm
-        lim = self.limits.apply(task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null)
+        room = None if target.base is None else self.base_room(state.base_pose, target.base)
+        lim = self.limits.apply(
+            task, self._position, self._prev, secondary=null, previous_secondary=self._prev_null, room=room
+        )
         self._prev, self._prev_null = lim.command.copy(), lim.secondary.copy()
         self._jac = jac
         self._q_arm = state.q_arm
