@@ -500,10 +500,13 @@ class CollisionModel:
         rates = along[1] - along[0]
         # the whole of each point's velocity per arm joint, v₀ + ω × p, for the joints' reach
         # whatever way the normal turns: |v_b − v_a|
-        arm = jacobians[:, N_BASE:]
-        velocity = (arm[:3].T + np.cross(arm[3:].T, points[:, None, :])).reshape(2, m, -1, 3)
-        velocity *= moved_by[..., None]
-        lever = np.linalg.norm(velocity[1] - velocity[0], axis=2)
+        (vx, vy, vz), (wx, wy, wz) = jacobians[:3, N_BASE:], jacobians[3:, N_BASE:]
+        px, py, pz = points[:, 0:1], points[:, 1:2], points[:, 2:3]
+        apart = []  # each component of v_b − v_a, v = v₀ + ω × p, over (m, n_arm): outer products
+        for v0, first, second in ((vx, wy * pz, wz * py), (vy, wz * px, wx * pz), (vz, wx * py, wy * px)):
+            component = ((v0 + first - second).reshape(2, m, -1)) * moved_by
+            apart.append(component[1] - component[0])
+        lever = np.sqrt(apart[0] ** 2 + apart[1] ** 2 + apart[2] ** 2)
         # the planar root's columns, over the world frame's (ẋ, ẏ, θ̇), move every point of the
         # robot; the floor and the obstacles stay put. Between two points of the robot they
         # cancel, and against the floor they are zero (the base moves parallel to it).
