@@ -425,12 +425,18 @@ class Resolver(ABC):
 
     def base_room(
         self, base_pose: ArrayLike, reference: BaseReference, world: bool = False
-    ) -> tuple[np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray] | None:
         """A followed plan's :meth:`BaseReference.braking_room` over the command's entries, as
-        :class:`~wmm_control.resolvers.limits.CommandLimits` takes it: the base's axes (its own
-        (vx, vy, ω), or with ``world`` the world's (x, y, θ), each linear one braking at the
-        slower linear axis's limit), then the arm's joints, which have no such end (inf)."""
+        :class:`~wmm_control.resolvers.limits.CommandLimits` takes it: the base's linear axes
+        (its own (vx, vy), or with ``world`` the world's (x, y), each braking at the slower
+        linear axis's limit); its turn and the arm's joints have no such end (inf). None for a
+        base without a sideways axis (differential): its path is the way its speed and turn go
+        together, and braking its speed alone bent the path (``panda_diff`` came to rest 6 cm
+        beside its stance's line, which it cannot close, and the final approach from there
+        failed)."""
         base = self.model.config.base
+        if not base.sideways:
+            return None
         acceleration = np.asarray(base.acceleration, dtype=float)
         if world:
             axes = [0, 1, 2]
@@ -439,6 +445,7 @@ class Resolver(ABC):
         else:
             axes = list(base.axes)
         down, up = reference.braking_room(base_pose, acceleration, world)
+        down[2] = up[2] = np.inf
         arm = np.full(self.model.n_arm, np.inf)
         return np.concatenate((down[axes], arm)), np.concatenate((up[axes], arm))
 
