@@ -310,6 +310,7 @@ class _HeldBase:
 
     def __init__(self, stage, n_base):
         self.stage, self.n_base = stage, n_base
+        self.base_lag = stage.base_lag
 
     def filter(self, q_arm, command, lower, upper, **kwargs):
         out = self.stage.filter(q_arm, command, lower, upper, **kwargs)
