@@ -4,6 +4,7 @@ turn beside an obstacle."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from sim_bridge.collision import SelfCollisionChecker
 from wmm_control.errors import ConfigError
@@ -11,6 +12,8 @@ from wmm_control.experiments.randomized import CONTACT_DEPTH, run_goal, sample_g
 from wmm_control.kinematics.collision import CollisionModel
 from wmm_control.kinematics.obstacles import parse_obstacles
 from wmm_control.resolvers import make_resolver
+from wmm_control.resolvers.collision_limits import Pairs, VelocityDampers
+from wmm_control.resolvers.constraints import Box
 from wmm_control.resolvers.safety import SafetyParams, SafetyStage
 from wmm_control.robot_config import load_robot, robot_names
 from wmm_control.urdf import UrdfTree
@@ -243,3 +246,48 @@ def test_goals_that_drove_robot_b_into_its_chassis_are_met_without_contact(index
     assert on['contact_depth_m'] <= CONTACT_DEPTH, on
     assert on['outcome'] in ('converged', 'reported'), on
     assert all(v == 0 for v in on['limits_exceeded'].values()), on['limits_exceeded']
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    pairs=st.integers(1, 6),
+    joints=st.integers(1, 7),
+)
+def test_the_arm_stopping_rows_keep_every_pairs_stopping_turn_within_its_room_over_the_whole_box(seed, pairs, joints):
+    """Wherever the kept ``arm stopping`` rows hold in the period's box, every pair's stopping
+    turn Σ r_i q̇_i⁴ / (8 a_i²) stays within its room max(d, d_s) − d_s / 2: a row dropped as one
+    that cannot bind (it holds at every corner of the box) leaves no command it should stop."""
+    rng = np.random.default_rng(seed)
+    params = SafetyParams()
+    acceleration = rng.uniform(0.5, 20.0, joints)
+    dampers = VelocityDampers(params, acceleration, np.ones(3), 0.0, 0.0)
+    lever = rng.uniform(0.0, 1.0, (pairs, joints)) * (rng.random((pairs, joints)) < 0.8)
+    distance = rng.uniform(-0.01, 0.2, pairs)
+    nb = 3
+    near = Pairs(
+        rows=np.zeros((pairs, nb + joints)),
+        bound=np.zeros(pairs),
+        base=np.zeros((pairs, 3)),
+        distance=distance,
+        moved=np.zeros(pairs, dtype=bool),
+        body=np.zeros(pairs, dtype=bool),
+        axes=(0, 1, 2),
+        to_base=np.eye(3),
+        kinds=(),
+        turn_braking=np.zeros(pairs),
+        lever=lever,
+    )
+    centre = rng.uniform(-3.0, 3.0, joints)
+    half = rng.uniform(0.0, 0.5, joints) * (rng.random(joints) < 0.9)
+    box = Box(np.concatenate((-np.ones(nb), centre - half)), np.concatenate((np.ones(nb), centre + half)))
+    rows = dampers.stopping(near, box)
+    safety = params.collision_safety
+    room = np.maximum(distance, safety) - 0.5 * safety
+    corners = np.array(np.meshgrid(*[(lo, hi) for lo, hi in zip(box.lower[nb:], box.upper[nb:])])).reshape(joints, -1).T
+    inside = box.lower[nb:] + rng.random((200, joints)) * (box.upper[nb:] - box.lower[nb:])
+    for arm in np.concatenate((corners, inside, 0.5 * (corners + centre))):
+        x = np.concatenate((np.zeros(nb), arm))
+        if np.all(rows.G @ x <= rows.h + 1e-12):
+            turn = lever @ (arm**4 / (8.0 * acceleration**2))
+            assert np.all(turn <= room + 1e-9), (turn - room, arm)

@@ -136,7 +136,7 @@ class CommandLimits:
         self._sign2 = np.repeat((1.0, -1.0), bounded.size)
         self._rate_constants = _BrakingConstants.of(np.tile(self._adt[bounded], 2), self.dt)
         self._room_constants = _BrakingConstants.of(np.tile(self._adt, 2), self.dt)
-        self._last_braking: tuple[bytes, tuple[np.ndarray, ...]] = (b'', (self._zero,) * 5)
+        self._last_braking: tuple[tuple, tuple[np.ndarray, ...]] = ((), (self._zero,) * 5)
 
     def braking_rates(self, position: ArrayLike, room=None, previous=None) -> tuple[np.ndarray, np.ndarray]:
         """Largest rates towards the lower and upper position limits from which braking stops in time.
@@ -291,10 +291,13 @@ class CommandLimits:
         (down, up, −down, and the velocity and braking interval ``max(−v, −down)``,
         ``min(v, up)``). The last answer is kept: a resolver asks several times a period at one
         position."""
-        key = position.tobytes()
         if room is not None:
             room = np.concatenate([np.asarray(r, dtype=float) for r in room])
-            key += room.tobytes() + (b'' if previous is None else np.asarray(previous, dtype=float).tobytes())
+        key = (
+            position.tobytes(),
+            None if room is None else room.tobytes(),
+            None if room is None or previous is None else np.asarray(previous, dtype=float).tobytes(),
+        )
         if key == self._last_braking[0]:
             return self._last_braking[1]
         # distances to the limits, of the entries that have one (NaN passes through np.maximum)
