@@ -19,9 +19,22 @@ centre may reach a goal clear of the obstacles only back over the base). A candi
 3. that posture keeps ``stance_margin`` from every obstacle and ``body_margin`` between the
    robot's own links and from the floor (the controller's pairs).
 
+Each stance also says whether the arm's way to it keeps those margins (``motion_clear``): the
+straight joint-space motion from the travel posture to the stance's, the base at the stance,
+which the hand-off gives after the path (:class:`~wmm_control.planning.handoff.Handoff`),
+checked every ``motion_step`` on the joint that moves most. A posture can be clear while the
+way to it is not: `ur_mecanum`'s arm travels folded, 24 mm from its own body, and the straight
+motion to many of its stances passes its forearm within 8–13 mm of its wrist (arm_link_3,
+arm_link_5), under the safety stage's d_s = 20 mm. The stage holds the pair at d_s, the motion
+stalls there, and the final approach from that posture, on another branch of the arm, failed
+(`doorway` goals 3, 5, 7, 35, 47, 72 and 98 of the randomized draw, lost by one or both
+velocity-level methods). Such a posture may have no way to it at all under the margins: for
+goal 7's, RRT-Connect over the arm's joint space (OMPL, 20 000 iterations, 60 s) found none.
+
 The robot's own base pose is the first candidate (without condition 1: the base is there
 already), and comes back first when it is a stance (a goal within reach needs no travel). The others are tried in order (heading offset first, then bearing,
-then ring) until ``wanted`` stances are found; they come back best first by ``σ_min +
+then ring) until ``wanted`` stances with a clear way are found (or ``most_kept`` stances in
+all); they come back those with a clear way first, each group best first by ``σ_min +
 clearance_weight · min(clearance, clearance_cap)``, σ_min the smallest singular value of the
 arm's position Jacobian [m/rad] (how far from a singularity the arm stands) and the clearance
 from the obstacles [m].
@@ -67,7 +80,10 @@ class StanceParams:
         rings: the rings' radii as fractions of the horizontal reach at the goal's height.
         bearings: how many bearings around the goal.
         heading_offsets: [rad] the base's heading from facing the goal.
-        wanted: stop when this many stances are found.
+        wanted: stop when this many stances with a clear way are found.
+        most_kept: stop when this many stances are found, clear way or not.
+        motion_step: [rad or m] the largest change of a joint between two checked postures of
+            the arm's way to the stance.
         restarts: passes over the candidates from other postures when one finds none.
         clearance_weight: [1/m · m/rad] of the clearance in the score.
         clearance_cap: [m] clearance beyond it adds nothing to the score.
@@ -85,6 +101,8 @@ class StanceParams:
     bearings: int = 16
     heading_offsets: tuple[float, ...] = (0.0, math.pi / 6, -math.pi / 6, math.pi / 3, -math.pi / 3, math.pi)
     wanted: int = 4
+    most_kept: int = 12
+    motion_step: float = 0.1
     restarts: int = 2
     clearance_weight: float = 1.0
     clearance_cap: float = 0.3
@@ -103,6 +121,8 @@ class Stance:
         body_clearance: [m] between the robot's own links and from the floor (capped likewise).
         sigma_min: [m/rad] smallest singular value of the arm's position Jacobian.
         score: higher is better.
+        motion_clear: the straight joint-space motion from the travel posture to ``q_arm``, the
+            base at ``base_pose``, keeps the stance's margins (module docstring).
     """
 
     base_pose: np.ndarray
@@ -113,6 +133,7 @@ class Stance:
     body_clearance: float
     sigma_min: float
     score: float
+    motion_clear: bool = True
 
 
 @dataclass(frozen=True)
@@ -251,6 +272,20 @@ class StanceFinder:
                     out.append(np.array((base_xy[0], base_xy[1], heading)))
         return out
 
+    def way_clear(self, q_arm: np.ndarray, base_pose: np.ndarray) -> bool:
+        """Whether the straight joint-space motion from the travel posture to ``q_arm``, the base
+        at ``base_pose``, keeps ``stance_margin`` from the obstacles and ``body_margin`` from the
+        body at every checked posture, ``motion_step`` apart on the joint that moves most (both
+        ends included)."""
+        p = self.params
+        start = np.asarray(self.travel.q_arm, dtype=float)
+        steps = int(math.ceil(float(np.max(np.abs(q_arm - start), initial=0.0)) / p.motion_step))
+        for s in np.linspace(0.0, 1.0, steps + 1):
+            obstacle, body = self.clearance(start + s * (q_arm - start), base_pose)
+            if obstacle < p.stance_margin or body < p.body_margin:
+                return False
+        return True
+
     def find(self, goal_position: ArrayLike, goal_rotation: ArrayLike, base_pose: ArrayLike) -> StanceSearch:
         """Stances for the goal (world position [m], rotation (3, 3)), best first (module docstring).
 
@@ -268,7 +303,7 @@ class StanceFinder:
         candidates = self.candidates(goal_position, as_finite_vector(base_pose, 3, 'base pose'))
         clear: dict[int, bool] = {}  # candidate → valid for travel, asked once
         found: list[Stance] = []
-        solved = 0
+        solved = clear_ways = 0
         for seed in self._seeds():
             for i, base in enumerate(candidates):
                 if i not in clear:  # the robot's own pose needs no travel there
@@ -287,15 +322,17 @@ class StanceFinder:
                 self.model.update(base, q)
                 sigma = self._manipulability.sigma_min()
                 score = sigma + p.clearance_weight * min(obstacle, p.clearance_cap)
-                found.append(Stance(base, q, pos_err, rot_err, obstacle, body, sigma, score))
-                if len(found) >= p.wanted:
+                way = self.way_clear(q, base)
+                found.append(Stance(base, q, pos_err, rot_err, obstacle, body, sigma, score, way))
+                clear_ways += way
+                if clear_ways >= p.wanted or len(found) >= p.most_kept:
                     break
             if found:
                 break
         tried, blocked = len(clear), sum(not ok for ok in clear.values())
         if found:
             here = found[0] if found[0].base_pose is candidates[0] else None
-            found.sort(key=lambda s: (s is not here, -s.score))
+            found.sort(key=lambda s: (s is not here, not s.motion_clear, -s.score))
             return StanceSearch(tuple(found), None, '', tried, solved)
         if blocked == tried:
             reason = 'no base pose around the goal is clear of the obstacles'
