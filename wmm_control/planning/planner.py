@@ -4,7 +4,8 @@
 the stances for an end-effector goal (:mod:`~wmm_control.planning.stance`), plans the base's
 path to the best one from the robot's base pose (:mod:`~wmm_control.planning.base_path`; the
 next stance when there is no path to one, or when the path is a detour: the first path to a
-stance that is not a detour is kept, else the best stance's), and times it (:mod:`~wmm_control.planning.timing`).
+stance that is not a detour is kept, else the best stance's; a stance the arm has a clear way
+to comes before one it has not, whatever its path), and times it (:mod:`~wmm_control.planning.timing`).
 The arm travels in the posture it is given (default: the robot's start posture;
 :meth:`GoalPlanner.set_travel_posture` changes it) and takes the
 stance's posture only once there, so the path is checked with the arm in the travel posture and
@@ -54,6 +55,12 @@ class Plan:
     no_way: NoWay | None
     reason: str
     planning_time: float
+
+
+def _rank(stance: Stance, path: BasePath) -> tuple[bool, bool]:
+    """Lower is better: a stance the arm has a clear way to (:attr:`Stance.motion_clear`) first,
+    then a path that is not a detour."""
+    return not stance.motion_clear, path.detour
 
 
 class GoalPlanner:
@@ -125,9 +132,9 @@ class GoalPlanner:
         for stance in search.stances[: self.stances_tried]:
             path = self.paths.plan(base_pose, stance.base_pose)
             if path.found:
-                if chosen is None or not path.detour:
+                if chosen is None or _rank(stance, path) < _rank(*chosen):
                     chosen = (stance, path)
-                if not path.detour:
+                if not path.detour:  # the stances after it have no clearer way for the arm
                     break
             elif path.no_way in (NoWay.START_BLOCKED, NoWay.TIMED_OUT):
                 break

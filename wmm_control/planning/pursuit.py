@@ -573,7 +573,13 @@ class GoalPursuit:
             LogEvent(
                 'planned',
                 f'planned in {plan.planning_time:.3f} s: the base drives {length:.2f} m to '
-                f'{np.round(stance, 3).tolist()} in {plan.trajectory.duration:.1f} s, then the goal',
+                f'{np.round(stance, 3).tolist()} in {plan.trajectory.duration:.1f} s, then the goal'
+                + (
+                    ''
+                    if plan.stance is None or plan.stance.motion_clear
+                    else "; the arm's straight way to the stance's posture passes within its margins "
+                    '(no stance with a clear way had a path): the safety stage may hold it there'
+                ),
             )
         )
         if result.version != self.version:  # the obstacles changed while it was planned
