@@ -420,8 +420,11 @@ def test_a_planned_run_has_its_limit_after_its_first_plans_base_path():
     direct = run_goal(cfg, 'pinv', goal, obstacles='table_pillar', duration=1.0)
     assert direct['time_limit_s'] == 1.0 and direct['time_s'] == pytest.approx(1.0, abs=0.05)
     # the nodes engine counts it on the goal_planner node's pursuit, once its plan comes from the
-    # node's thread (the simulation goes on meanwhile: 3 s, for the plan to come within them)
-    nodes = run_goal(cfg, 'pinv', goal, engine='nodes', obstacles='table_pillar', duration=3.0, plan=True)
+    # node's thread (the simulation goes on meanwhile, in lockstep several times faster than the
+    # wall clock, and the thread shares the process with four nodes: 6 s, for the plan to come
+    # within them on a loaded machine)
+    nodes = run_goal(cfg, 'pinv', goal, engine='nodes', obstacles='table_pillar', duration=6.0, plan=True)
+    assert nodes['planned_end_s'] is not None, 'the plan did not come within the run'
     assert nodes['planned_end_s'] > 2.0
-    assert nodes['time_limit_s'] == pytest.approx(3.0 + nodes['planned_end_s'])
+    assert nodes['time_limit_s'] == pytest.approx(6.0 + nodes['planned_end_s'])
     assert nodes['time_s'] == pytest.approx(nodes['time_limit_s'], abs=0.1)
