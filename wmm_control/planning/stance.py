@@ -275,12 +275,12 @@ class StanceFinder:
     def way_clear(self, q_arm: np.ndarray, base_pose: np.ndarray) -> bool:
         """Whether the straight joint-space motion from the travel posture to ``q_arm``, the base
         at ``base_pose``, keeps ``stance_margin`` from the obstacles and ``body_margin`` from the
-        body at every checked posture, ``motion_step`` apart on the joint that moves most (both
-        ends included)."""
+        body at every checked posture, ``motion_step`` apart on the joint that moves most (from
+        the travel posture on; ``q_arm`` itself is the stance's, which :meth:`find` has checked)."""
         p = self.params
         start = np.asarray(self.travel.q_arm, dtype=float)
         steps = int(math.ceil(float(np.max(np.abs(q_arm - start), initial=0.0)) / p.motion_step))
-        for s in np.linspace(0.0, 1.0, steps + 1):
+        for s in np.linspace(0.0, 1.0, steps + 1)[:-1]:
             obstacle, body = self.clearance(start + s * (q_arm - start), base_pose)
             if obstacle < p.stance_margin or body < p.body_margin:
                 return False
