@@ -192,6 +192,21 @@ def test_rows_that_conflict_within_the_box_are_met_as_far_as_it_allows():
     assert relaxed and x == pytest.approx([1.0, 0.0])
 
 
+@pytest.mark.parametrize('outvoting', [1, 5, 30])
+def test_a_row_the_box_can_meet_is_kept_however_many_rows_it_cannot_meet_pull_the_other_way(outvoting):
+    # x ≤ 0.1 can be met in the box x ∈ [0, 1]; x ≥ 2 (given `outvoting` times, as a link's
+    # several shapes each give a row) cannot. The rows the box has to break are met as far as
+    # the one it can keep allows: x = 0.1, whatever their number. One cost for every slack
+    # would send x to 1 as soon as the broken rows outnumber the kept one (the chassis of a
+    # base driven into an obstacle for an arm's swinging links).
+    G = np.array([[1.0, 0.0]] + [[-1.0, 0.0]] * outvoting)
+    h = np.array([0.1] + [-2.0] * outvoting)
+    x, relaxed, multipliers = nearest(np.array([0.5, 0.5]), np.eye(2), Constraint(G, h), Box(np.zeros(2), np.ones(2)))
+    assert relaxed
+    np.testing.assert_allclose(x, [0.1, 0.5], atol=1e-6)
+    assert (multipliers > 0.0).all(), 'the kept row and the broken ones all shape the answer'
+
+
 def _near_states(cfg, stage, count, rng):
     """Arm postures near the body (base far from the obstacles) and base poses near the table
     and the pillar, where some pair is within the look-ahead and none in contact."""

@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from wmm_control.errors import NonFiniteError, ShapeError
 
-__all__ = ['Constraint', 'Box', 'Nearest', 'nearest', 'SLACK_COST', 'SLACK_WEIGHT', 'TOLERANCE']
+__all__ = ['Constraint', 'Box', 'Nearest', 'nearest', 'MEETABLE_COST', 'SLACK_COST', 'SLACK_WEIGHT', 'TOLERANCE']
 
 #: DAQP's ``sense`` flag of a soft row (one it may break, at a cost).
 _SOFT = 8
@@ -33,6 +33,15 @@ _SOFT = 8
 #: convex.
 SLACK_COST = 1e3
 SLACK_WEIGHT = 1.0
+#: How many times :data:`SLACK_COST` the slack of a row costs where some command in the box meets
+#: that row on its own: a row the box has to break anyway (a pair that arrives faster than its
+#: acceleration limits can brake) is met as far as it can be, but never at the price of breaking
+#: a row the box could keep. With one cost for all, rows of one side outvoted the other: on
+#: ``ur_mecanum`` in ``clutter`` (goal 51, ``pinv``), eleven rows of the swinging arm's links that
+#: no command in the box met had the base driven at its acceleration limit towards a box that
+#: its chassis' one row asked it away from, while that row could still be met, and the chassis
+#: went 4.5 mm into the box before the base could brake.
+MEETABLE_COST = 100.0
 #: A row is taken as met (and, at equality, as binding) within this much.
 TOLERANCE = 1e-9
 
@@ -257,8 +266,9 @@ def nearest(target: ArrayLike, metric: ArrayLike, constraint: Constraint, box: B
     :mod:`qpsolvers`, which has no way to pass DAQP's soft rows. Where no command in the box
     meets every row, the same solver takes the problem again with every row soft (DAQP's
     ``sense`` flag): a slack ``s ≥ 0`` per row (``G x ≤ h + s``) at :data:`SLACK_COST` per unit
-    and :data:`SLACK_WEIGHT` quadratic, the box kept hard: the rows met as far as the box
-    allows, in one problem over ``x`` alone. Where that fails too (an empty box, a failed
+    (:data:`MEETABLE_COST` times that for a row some command in the box meets on its own) and
+    :data:`SLACK_WEIGHT` quadratic, the box kept hard: the rows met as far as the box allows,
+    those the box could keep first, in one problem over ``x`` alone. Where that fails too (an empty box, a failed
     solver), the point of the box nearest zero: stop as hard as the box allows (no row's
     multiplier then).
 
@@ -282,19 +292,22 @@ def nearest(target: ArrayLike, metric: ArrayLike, constraint: Constraint, box: B
     if flag > 0 and np.all(np.isfinite(x)):
         return Nearest(box.clip(x), False, _multipliers(info['lam'][n:]))
     sense[n:] = _SOFT
+    # a row some command in the box meets (its least value over the box within its bound)
+    meetable = -box.greatest(-constraint.G) <= constraint.h + TOLERANCE
+    cost = np.where(meetable, MEETABLE_COST * SLACK_COST, SLACK_COST)
     model = daqp.Model()
     model.setup(H, linear, constraint.G, upper, lower, sense)
-    model.soft_weights(rho_u=np.full(n + m, 1.0 / SLACK_WEIGHT), w_u=np.full(n + m, SLACK_COST))
+    model.soft_weights(rho_u=np.full(n + m, 1.0 / SLACK_WEIGHT), w_u=np.concatenate((np.full(n, SLACK_COST), cost)))
     x, _, flag, info = model.solve()
     if not (flag > 0 and np.all(np.isfinite(x))):
         return Nearest(box.clip(np.zeros(n)), True, np.zeros(m))
     x = box.clip(x)
-    # a broken row's multiplier is its slack's price, SLACK_COST + SLACK_WEIGHT s (the
+    # a broken row's multiplier is its slack's price, its cost + SLACK_WEIGHT s (the
     # stationarity of its penalty); DAQP may leave it out for a row whose slack no command in
     # the box changes
     broken = np.maximum(constraint.residual(x), 0.0)
     multipliers = _multipliers(info['lam'][n:])
-    return Nearest(x, True, np.where(broken > TOLERANCE, SLACK_COST + SLACK_WEIGHT * broken, multipliers))
+    return Nearest(x, True, np.where(broken > TOLERANCE, cost + SLACK_WEIGHT * broken, multipliers))
 
 
 def _multipliers(z) -> np.ndarray:
