@@ -224,6 +224,34 @@ def test_a_goal_the_arm_reaches_clear_only_back_over_the_base_gets_a_stance():
     assert abs(wrap_angle(search.stances[0].base_pose[2] - facing)) > math.pi / 2
 
 
+def test_a_stance_between_the_first_rings_among_boxes_is_found_by_the_second_pass():
+    """Robot A's clutter goal 92 sits 1.6 m high among boxes: 11 of the first pass's base poses
+    are clear for travel and the arm reaches the goal from none of them. The planner said "no
+    stance" and the check refuted it (a stance 0.70 of the reach out, between the rings at 0.6
+    and 0.75). The second pass finds stances: checked here on the simulator's geometry (PyBullet,
+    not the planner's distance model) and by forward kinematics."""
+    cfg = load_robot('steerable')
+    obstacles = load_obstacles('clutter')
+    planner = GoalPlanner(cfg, obstacles)
+    goal = sample_goals(cfg, 100, seed=0, obstacles='clutter')[92]
+    rotation = matrix_from_rpy(goal.pose[3:])
+    search = planner.stances.find(goal.pose[:3], rotation, cfg.start.base_pose)
+    assert search.no_way is None, search.reason
+    params = planner.stances.params
+    first = planner.stances.candidates(goal.pose[:3], cfg.start.base_pose)
+    model = KinematicModel(cfg)
+    names = {o.name for o in obstacles}
+    with SelfCollisionChecker(cfg, margin=params.stance_margin, obstacles=obstacles) as checker:
+        for stance in search.stances:
+            assert not any(np.allclose(stance.base_pose, c) for c in first), 'found by the second pass'
+            model.update(stance.base_pose, stance.q_arm)
+            position, orientation = model.ee_placement_world()
+            assert np.linalg.norm(position - goal.pose[:3]) <= params.position_tolerance
+            assert rotation_angle(rotation, orientation) <= params.orientation_tolerance
+            near = [d for _a, b, d in checker.collisions(stance.q_arm, stance.base_pose) if b in names]
+            assert min(near, default=math.inf) >= params.stance_margin - ENGINES
+
+
 @pytest.mark.parametrize('robot', ['steerable', 'panda_diff'])
 def test_a_robot_stopped_near_the_table_backs_away_then_keeps_the_margin(robot):
     """Where a reactive controller leaves it: facing the table 5 cm from it. The path first takes
