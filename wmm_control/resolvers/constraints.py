@@ -35,9 +35,9 @@ SLACK_COST = 1e3
 SLACK_WEIGHT = 1.0
 #: How many times :data:`SLACK_COST` the slack of a row costs where some command in the box meets
 #: that row on its own: a row the box has to break anyway (a pair that arrives faster than its
-#: acceleration limits can brake) is met as far as it can be, but never at the price of breaking
-#: a row the box could keep. With one cost for all, rows of one side outvoted the other: on
-#: ``ur_mecanum`` in ``clutter`` (goal 51, ``pinv``), eleven rows of the swinging arm's links that
+#: acceleration limits can brake) is met as far as it can be, but not at the price of breaking a
+#: row the box could keep (unless a hundred such rows pull against that one). With one cost for all, rows of one side outvoted the other: on
+#: ``ur_mecanum`` in ``clutter`` (goal 51, ``pinv``), up to eleven rows of the swinging arm's links that
 #: no command in the box met had the base driven at its acceleration limit towards a box that
 #: its chassis' one row asked it away from, while that row could still be met, and the chassis
 #: went 4.5 mm into the box before the base could brake.
