@@ -3,7 +3,8 @@ Prints figures, asserts nothing.
 
 For each robot, the goals ``wmm_randomized`` draws for an obstacle file (its ``goal_region``,
 seed 0), each planned from the robot's start pose with ``GoalPlanner``'s defaults: the wall
-time of the stance search, the base path, the timing and the whole plan (median, p99 and max
+time of the chosen base path, of the rest (the stance search and the paths searched to
+stances not taken) and of the whole plan (median, p99 and max
 [s]), how many goals got a plan (the others with their reason), whether the path was the
 straight motion or RRT-Connect's, the path's length, and the trajectory's duration.
 
@@ -55,7 +56,8 @@ def bench(robot, goals, obstacles):
     print(f'  whole plan [s] median / p99 / max: {figures(total_s)}')
     if path_s:
         print(
-            f'  stance search [s]: {figures(stance_s)}; base path (search + simplification + checks) [s]: {figures(path_s)}'
+            f'  the rest (stance search, paths to stances not taken) [s]: {figures(stance_s)}; '
+            f'base path (search + simplification + checks) [s]: {figures(path_s)}'
         )
     if lengths:
         print(
