@@ -314,7 +314,6 @@ class StanceFinder:
             return StanceSearch((), refused[0], refused[1], 0, 0)
         p = self.params
         base_pose = as_finite_vector(base_pose, 3, 'base pose')
-        here = base_pose
         found: list[Stance] = []
         tried = blocked = solved = 0
         for second in (False, True):
@@ -325,7 +324,7 @@ class StanceFinder:
             if found:
                 break
         if found:
-            here = found[0] if found[0].base_pose is here else None
+            here = found[0] if found[0].base_pose is base_pose else None  # the robot's own pose first
             found.sort(key=lambda s: (s is not here, not s.motion_clear, -s.score))
             return StanceSearch(tuple(found), None, '', tried, solved)
         if blocked == tried:
