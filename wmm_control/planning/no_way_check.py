@@ -25,7 +25,8 @@ kinematics and joint limits) but none of its sampling:
   ``body_margin`` of the robot's own links and the floor. The first base pose that counts
   refutes the verdict (with its pose, posture and clearances); none confirms it at that
   grid's resolution (a stance between the nodes, or reached only from other postures, may be
-  missed: "no stance" is a sampled verdict, its check another sample on other points, about as dense as the finder's two passes).
+  missed: "no stance" is a sampled verdict, its check another sample on other points, about as
+  dense as the finder's two passes).
 * **no path**, **timed out**: an occupancy grid of the base (``cell``) over the obstacles, the
   start and the goal's reach, its border clear of them all. A cell is *blocked* when at each
   of ``turns`` headings the robot at its centre, arm in the travel posture, is nearer an

@@ -32,19 +32,20 @@ velocity-level methods). Such a posture may have no way to it at all under the m
 goal 7's, RRT-Connect over the arm's joint space (OMPL, 20 000 iterations, 60 s) found none.
 
 The robot's own base pose is the first candidate (without condition 1: the base is there
-already), and comes back first when it is a stance (a goal within reach needs no travel). The others are tried in order (heading offset first, then bearing,
-then ring). When none of them gives a stance, a second pass samples between them: rings
-halfway between the first ones (``second_rings``) and the heading every 30° from facing the
-goal (``second_offsets``), the same bearings. Among boxes, few candidates are clear for travel
-and a stance may sit between two rings or at a heading the first pass leaves out: `clutter`
-goals 92 and 99 of robot A (11 and 5 clear candidates, none reaching) and 52 of `ur_mecanum`
-(8 reaching, none with the margins) were reported "no stance" and refuted by the check
-(:mod:`~wmm_control.planning.no_way_check`); the second pass finds stances for all three (the
-whole search 1–5 s on a loaded 2-core machine). A goal the first pass finds a stance for costs nothing more. Candidates are tried until ``wanted`` stances with a clear way are found (or ``most_kept`` stances in
-all); they come back those with a clear way first, each group best first by ``σ_min +
-clearance_weight · min(clearance, clearance_cap)``, σ_min the smallest singular value of the
-arm's position Jacobian [m/rad] (how far from a singularity the arm stands) and the clearance
-from the obstacles [m].
+already), and comes back first when it is a stance (a goal within reach needs no travel). The
+others are tried in order (heading offset first, then bearing, then ring). When none of them
+gives a stance, a second pass samples between them: rings halfway between the first ones
+(``second_rings``) and the heading every 30° from facing the goal (``second_offsets``), the same
+bearings. Among boxes, few candidates are clear for travel and a stance may sit between two
+rings or at a heading the first pass leaves out: `clutter` goals 92 and 99 of robot A (11 and 5
+clear candidates, none reaching) and 52 of `ur_mecanum` (8 reaching, none with the margins) were
+reported "no stance" and refuted by the check (:mod:`~wmm_control.planning.no_way_check`); the
+second pass finds stances for all three (the whole search 1–5 s on a loaded 2-core machine). A
+goal the first pass finds a stance for costs nothing more. Candidates are tried until ``wanted``
+stances with a clear way are found (or ``most_kept`` stances in all); they come back those with
+a clear way first, each group best first by ``σ_min + clearance_weight · min(clearance,
+clearance_cap)``, σ_min the smallest singular value of the arm's position Jacobian [m/rad] (how
+far from a singularity the arm stands) and the clearance from the obstacles [m].
 
 A goal gets no stance, with the reason (:class:`~wmm_control.planning.outcome.NoWay`), when it
 is nearer than ``stance_margin`` to an obstacle (or inside one), below the floor or above the

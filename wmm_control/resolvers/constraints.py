@@ -36,11 +36,11 @@ SLACK_WEIGHT = 1.0
 #: How many times :data:`SLACK_COST` the slack of a row costs where some command in the box meets
 #: that row on its own: a row the box has to break anyway (a pair that arrives faster than its
 #: acceleration limits can brake) is met as far as it can be, but not at the price of breaking a
-#: row the box could keep (unless a hundred such rows pull against that one). With one cost for all, rows of one side outvoted the other: on
-#: ``ur_mecanum`` in ``clutter`` (goal 51, ``pinv``), up to eleven rows of the swinging arm's links that
-#: no command in the box met had the base driven at its acceleration limit towards a box that
-#: its chassis' one row asked it away from, while that row could still be met, and the chassis
-#: went 4.5 mm into the box before the base could brake.
+#: row the box could keep (unless a hundred such rows pull against that one). With one cost for
+#: all, rows of one side outvoted the other: on ``ur_mecanum`` in ``clutter`` (goal 51, ``pinv``),
+#: up to eleven rows of the swinging arm's links that no command in the box met had the base driven
+#: at its acceleration limit towards a box that its chassis' one row asked it away from, while that
+#: row could still be met, and the chassis went 4.5 mm into the box before the base could brake.
 MEETABLE_COST = 100.0
 #: A row is taken as met (and, at equality, as binding) within this much.
 TOLERANCE = 1e-9
@@ -268,9 +268,9 @@ def nearest(target: ArrayLike, metric: ArrayLike, constraint: Constraint, box: B
     ``sense`` flag): a slack ``s ≥ 0`` per row (``G x ≤ h + s``) at :data:`SLACK_COST` per unit
     (:data:`MEETABLE_COST` times that for a row some command in the box meets on its own) and
     :data:`SLACK_WEIGHT` quadratic, the box kept hard: the rows met as far as the box allows,
-    those the box could keep first, in one problem over ``x`` alone. Where that fails too (an empty box, a failed
-    solver), the point of the box nearest zero: stop as hard as the box allows (no row's
-    multiplier then).
+    those the box could keep first, in one problem over ``x`` alone. Where that fails too (an
+    empty box, a failed solver), the point of the box nearest zero: stop as hard as the box
+    allows (no row's multiplier then).
 
     Returns:
         :class:`Nearest`: ``(command, relaxed, multipliers)``.
